@@ -1,20 +1,18 @@
 //! Scattering amplitudes S1(θ), S2(θ) of one or many spheres at many angles.
 //!
 //! # Method
-//! With c_n = (2n+1)/(n(n+1)) and τ_n = nμπ_n − (n+1)π_{n−1} (B&H Eq. 4.47), the amplitude sums
-//!   S1 = Σ c_n (a_n π_n + b_n τ_n),  S2 = Σ c_n (a_n τ_n + b_n π_n)
-//! regroup into sums over π_n alone:
-//!   S1 = Σ π_n A_n + μ Σ π_n B_n,  A_n = c_n a_n − c_{n+1}(n+2) b_{n+1},  B_n = n c_n b_n,
-//!   S2 = Σ π_n C_n + μ Σ π_n E_n,  C_n = c_n b_n − c_{n+1}(n+2) a_{n+1},  E_n = n c_n a_n.
-//! π_n depends only on (n, μ), not on the sphere, so for a batch of spheres the four sums are one
-//! matrix product Π·K: Π[angle, n] = π_n(μ), K[n, 8s + q] = the eight real parts of A, B, C, E of
-//! sphere s. The product runs through a blocked GEMM (ndarray → matrixmultiply, which picks
-//! AVX2/FMA kernels at run time), chunked over n so Π never exists whole.
+//! S1 = Σ c_n (a_n π_n + b_n τ_n), S2 = Σ c_n (a_n τ_n + b_n π_n), c_n = (2n+1)/(n(n+1))
+//! (B&H Eq. 4.74), with π_n by its upward recurrence and τ_n = nμπ_n − (n+1)π_{n−1} (Eq. 4.47).
+//! The kernel runs the recurrence for a block of 8 angles at once and keeps the four complex
+//! partial sums Σ c a π, Σ c b τ, Σ c b π, Σ c a τ in vector registers (8 fused multiply-adds
+//! per order and angle). The π/τ form is kept on purpose: regrouping the sums over π alone
+//! saves three operations per term but makes two sums of size ~x³ cancel to S(0) ~ x², which
+//! costs four digits at x = 1e5.
 //!
 //! # Symmetry
-//! π_n(−μ) = (−1)^{n−1} π_n(μ) (physics.md §2). Splitting each sum into odd-n and even-n parts,
-//! evaluated at ν = |μ|, gives both angles θ and 180° − θ from one pass:
-//!   Σ π_n(+ν) K_n = O + E,  Σ π_n(−ν) K_n = O − E.
+//! π_n(−μ) = (−1)^{n−1} π_n(μ), τ_n(−μ) = (−1)^n τ_n(μ) (physics.md §2). Each partial sum is split
+//! into odd-n and even-n parts evaluated at ν = |μ|, which gives θ and 180° − θ from one pass:
+//!   Σ π_n(±ν) K_n = O ± E,   Σ τ_n(±ν) K_n = ±O + E.
 //!
 //! # Determinism
 //! Work is split into fixed chunks of angles that do not depend on the thread count; every
@@ -22,16 +20,13 @@
 
 use std::collections::HashMap;
 
-use ndarray::{ArrayView2, ArrayViewMut2, ShapeBuilder, linalg::general_mat_mul, s};
 use num_complex::Complex64;
 use rayon::prelude::*;
 
-use crate::sphere::MieCoefficients;
+use crate::sphere::{MieCoefficients, Neumaier};
 
 /// Angles per work item; fixed so that results do not depend on the thread count.
 const ROW_CHUNK: usize = 64;
-/// Orders n per GEMM step (half odd, half even).
-const N_CHUNK: usize = 256;
 
 /// Requested cosines folded onto ν = |μ| so that each ± pair is evaluated once.
 #[derive(Debug, Clone)]
@@ -78,35 +73,23 @@ impl FoldedAngles {
     }
 }
 
-/// The real coefficient rows K_n = [A, B, C, E] (re, im each) of one sphere, n = 1..N.
+/// The coefficients c_n a_n and c_n b_n (re, im each) of one sphere, n = 1..N.
 #[derive(Debug, Clone)]
 pub struct SphereTerms {
-    rows: Vec<[f64; 8]>,
+    rows: Vec<[f64; 4]>,
 }
 
 impl SphereTerms {
-    /// Regroups a_n, b_n into the π-only coefficients A_n, B_n, C_n, E_n (module docs).
     pub fn new(coefficients: &MieCoefficients) -> Self {
-        let n_terms = coefficients.n_terms();
-        let (a, b) = (&coefficients.a, &coefficients.b);
-        let c = |n: f64| (2.0 * n + 1.0) / (n * (n + 1.0));
-        let rows = (0..n_terms)
-            .map(|i| {
+        let rows = coefficients
+            .a
+            .iter()
+            .zip(&coefficients.b)
+            .enumerate()
+            .map(|(i, (a, b))| {
                 let n = (i + 1) as f64;
-                let zero = Complex64::new(0.0, 0.0);
-                let (a_next, b_next) = if i + 1 < n_terms {
-                    (a[i + 1], b[i + 1])
-                } else {
-                    (zero, zero)
-                };
-                let shift = c(n + 1.0) * (n + 2.0);
-                let a_n = c(n) * a[i] - b_next * shift;
-                let b_n = b[i] * (n * c(n));
-                let c_n = c(n) * b[i] - a_next * shift;
-                let e_n = a[i] * (n * c(n));
-                [
-                    a_n.re, a_n.im, b_n.re, b_n.im, c_n.re, c_n.im, e_n.re, e_n.im,
-                ]
+                let c = (2.0 * n + 1.0) / (n * (n + 1.0));
+                [c * a.re, c * a.im, c * b.re, c * b.im]
             })
             .collect();
         Self { rows }
@@ -136,7 +119,7 @@ pub fn amplitudes(
     let folded: Vec<AmplitudePair> = for_each_pair(
         &terms,
         &angles.nu,
-        |rows| Vec::with_capacity(rows),
+        Vec::with_capacity,
         |acc, _row, _sphere, pair| acc.push(pair),
     )
     .into_iter()
@@ -192,28 +175,36 @@ where
     I: Fn(usize) -> T + Sync,
     V: Fn(&mut T, usize, usize, AmplitudePair) + Sync,
 {
-    // Longest series first, so the spheres still active at order n are a prefix.
-    let mut order: Vec<usize> = (0..spheres.len()).collect();
-    order.sort_by_key(|&s| std::cmp::Reverse(spheres[s].n_terms()));
-    let n_terms_sorted: Vec<usize> = order.iter().map(|&s| spheres[s].n_terms()).collect();
-    // slots[s]: position of sphere s in the sorted order.
-    let mut slots = vec![0usize; spheres.len()];
-    for (k, &s) in order.iter().enumerate() {
-        slots[s] = k;
-    }
-
+    let n_max = spheres.iter().map(SphereTerms::n_terms).max().unwrap_or(0);
+    // θ = 0° and 180° exactly (ν = 1) have closed forms; see `exact_forward_backward`.
+    let exact: Vec<AmplitudePair> = if nu.contains(&1.0) {
+        spheres.iter().map(exact_forward_backward).collect()
+    } else {
+        Vec::new()
+    };
+    let recurrence = recurrence_table(n_max);
     nu.par_chunks(ROW_CHUNK)
         .map(|rows| {
-            let sums = odd_even_sums(spheres, &order, &n_terms_sorted, rows);
             let mut acc = init(rows.len());
-            let width = 8 * spheres.len();
-            for (j, &v) in rows.iter().enumerate() {
-                // Visit in the caller's sphere order so accumulation order is fixed.
-                for s in 0..spheres.len() {
-                    let k = slots[s];
-                    let odd = &sums.odd[j * width + 8 * k..j * width + 8 * k + 8];
-                    let even = &sums.even[j * width + 8 * k..j * width + 8 * k + 8];
-                    visit(&mut acc, j, s, combine(odd, even, v));
+            let blocks: Vec<[f64; LANES]> = rows
+                .chunks(LANES)
+                .map(|c| {
+                    let mut b = [0.0; LANES];
+                    b[..c.len()].copy_from_slice(c);
+                    b
+                })
+                .collect();
+            for (s, sphere) in spheres.iter().enumerate() {
+                let sums = block_sums(&blocks, &sphere.rows, &recurrence);
+                for j in 0..rows.len() {
+                    if rows[j] == 1.0 {
+                        visit(&mut acc, j, s, exact[s]);
+                        continue;
+                    }
+                    let (b, l) = (j / LANES, j % LANES);
+                    let odd: [f64; 8] = std::array::from_fn(|q| sums[b].odd[q][l]);
+                    let even: [f64; 8] = std::array::from_fn(|q| sums[b].even[q][l]);
+                    visit(&mut acc, j, s, combine(&odd, &even));
                 }
             }
             acc
@@ -221,108 +212,300 @@ where
         .collect()
 }
 
-/// Row-major (rows × 8·spheres) odd-n and even-n sums for one chunk of angles.
-struct OddEvenSums {
-    odd: Vec<f64>,
-    even: Vec<f64>,
-}
-
-fn odd_even_sums(
-    spheres: &[SphereTerms],
-    order: &[usize],
-    n_terms_sorted: &[usize],
-    rows: &[f64],
-) -> OddEvenSums {
-    let j_len = rows.len();
-    let width = 8 * spheres.len();
-    let half = N_CHUNK / 2;
-    let n_max = n_terms_sorted.first().copied().unwrap_or(0);
-
-    let mut odd = vec![0.0; j_len * width];
-    let mut even = vec![0.0; j_len * width];
-    // Π blocks, column-major: element (j, k) at j + j_len·k.
-    let mut pi_odd = vec![0.0; j_len * half];
-    let mut pi_even = vec![0.0; j_len * half];
-    let mut k_odd = vec![0.0; half * width];
-    let mut k_even = vec![0.0; half * width];
-    // π_{n−2}, π_{n−1} per angle; π_0 = 0, and π_1 = 1 follows from the recurrence below.
-    let mut pi_prev2 = vec![0.0; j_len];
-    let mut pi_prev = vec![0.0; j_len];
-
-    let mut n0 = 1;
-    while n0 <= n_max {
-        let active = n_terms_sorted.iter().take_while(|&&n| n >= n0).count();
-        // Π for n = n0 .. n0 + N_CHUNK − 1 (n0 is odd).
-        for step in 0..N_CHUNK {
-            let n = n0 + step;
-            let dst = if step % 2 == 0 {
-                &mut pi_odd[(step / 2) * j_len..(step / 2 + 1) * j_len]
-            } else {
-                &mut pi_even[(step / 2) * j_len..(step / 2 + 1) * j_len]
-            };
-            if n == 1 {
-                dst.fill(1.0);
-            } else {
-                // π_n = ((2n−1)/(n−1)) μ π_{n−1} − (n/(n−1)) π_{n−2}
-                let nf = n as f64;
-                let r1 = (2.0 * nf - 1.0) / (nf - 1.0);
-                let r2 = nf / (nf - 1.0);
-                for j in 0..j_len {
-                    dst[j] = r1 * rows[j] * pi_prev[j] - r2 * pi_prev2[j];
-                }
-            }
-            pi_prev2.copy_from_slice(&pi_prev);
-            pi_prev.copy_from_slice(dst);
-        }
-        // K rows for the active spheres; orders past a sphere's N_stop are zero.
-        let w_active = 8 * active;
-        for step in 0..N_CHUNK {
-            let n = n0 + step;
-            let kk = step / 2;
-            let dst = if step % 2 == 0 {
-                &mut k_odd
-            } else {
-                &mut k_even
-            };
-            let row = &mut dst[kk * w_active..(kk + 1) * w_active];
-            for (k, &s) in order[..active].iter().enumerate() {
-                let cell = &mut row[8 * k..8 * k + 8];
-                match spheres[s].rows.get(n - 1) {
-                    Some(values) => cell.copy_from_slice(values),
-                    None => cell.fill(0.0),
-                }
-            }
-        }
-        for (pi, k, out) in [(&pi_odd, &k_odd, &mut odd), (&pi_even, &k_even, &mut even)] {
-            let a = ArrayView2::from_shape((j_len, half).f(), &pi[..]).expect("Π block shape");
-            let b = ArrayView2::from_shape((half, w_active), &k[..half * w_active])
-                .expect("K block shape");
-            let mut c =
-                ArrayViewMut2::from_shape((j_len, width), &mut out[..]).expect("sum block shape");
-            let mut c = c.slice_mut(s![.., ..w_active]);
-            general_mat_mul(1.0, &a, &b, 1.0, &mut c);
-        }
-        n0 += N_CHUNK;
+/// S1, S2 at θ = 0° and 180° from π_n(±1) = (±1)^{n−1} n(n+1)/2, τ_n(±1) = (±1)^n n(n+1)/2:
+///   S1(0°) = S2(0°) = Σ (2n+1)/2 (a_n + b_n),  S1(180°) = −S2(180°) = Σ (−1)^{n−1} (2n+1)/2 (a_n − b_n),
+/// summed with Neumaier compensation: the back-scatter sum cancels strongly (physics.md §2), and
+/// the recurrence at μ = ±1 accumulates 2e-9 relative error by x = 2e5.
+fn exact_forward_backward(sphere: &SphereTerms) -> AmplitudePair {
+    let mut fwd = [Neumaier::default(); 2];
+    let mut back = [Neumaier::default(); 2];
+    for (i, &[ca_re, ca_im, cb_re, cb_im]) in sphere.rows.iter().enumerate() {
+        let n = (i + 1) as f64;
+        let half = n * (n + 1.0) / 2.0; // π_n(1) = τ_n(1)
+        let sign = if i % 2 == 0 { 1.0 } else { -1.0 }; // (−1)^{n−1}
+        fwd[0].add(half * (ca_re + cb_re));
+        fwd[1].add(half * (ca_im + cb_im));
+        back[0].add(sign * half * (ca_re - cb_re));
+        back[1].add(sign * half * (ca_im - cb_im));
     }
-    OddEvenSums { odd, even }
+    let s_fwd = Complex64::new(fwd[0].sum(), fwd[1].sum());
+    let s_back = Complex64::new(back[0].sum(), back[1].sum());
+    AmplitudePair {
+        s1_plus: s_fwd,
+        s2_plus: s_fwd,
+        s1_minus: s_back,
+        s2_minus: -s_back,
+    }
 }
 
-/// Assembles S1, S2 at ±ν from the odd-n and even-n parts of the four sums (module docs).
-fn combine(odd: &[f64], even: &[f64], nu: f64) -> AmplitudePair {
+/// Angles evaluated together in one SIMD-friendly block.
+const LANES: usize = 8;
+
+/// [r1, r2, n, n+1] per order n (index n): π_n = r1 μ π_{n−1} − r2 π_{n−2} with
+/// r1 = (2n−1)/(n−1), r2 = n/(n−1) (r1, r2 unused for n < 2), and τ_n = n μ π_n − (n+1) π_{n−1}.
+fn recurrence_table(n_max: usize) -> Vec<[f64; 4]> {
+    (0..=n_max.max(1))
+        .map(|n| {
+            let nf = n as f64;
+            if n < 2 {
+                [0.0, 0.0, nf, nf + 1.0]
+            } else {
+                [(2.0 * nf - 1.0) / (nf - 1.0), nf / (nf - 1.0), nf, nf + 1.0]
+            }
+        })
+        .collect()
+}
+
+/// Odd-n and even-n sums of π_n K_n[q] for each lane of one block of angles.
+#[derive(Clone, Copy)]
+struct BlockSums {
+    odd: [[f64; LANES]; 8],
+    even: [[f64; LANES]; 8],
+}
+
+/// Running state of one block: the sums and π_{n−1}, π_{n−2}.
+#[derive(Clone, Copy)]
+struct BlockState {
+    sums: BlockSums,
+    pi_prev: [f64; LANES],
+    pi_prev2: [f64; LANES],
+}
+
+/// Orders per pass over the blocks: the sphere's K rows for one pass (64 B each) stay in cache
+/// while every block of the chunk consumes them.
+const N_CHUNK: usize = 2048;
+
+/// Runs the fused recurrence-and-accumulate kernel for every block, n-chunk by n-chunk.
+fn block_sums(
+    blocks: &[[f64; LANES]],
+    terms: &[[f64; 4]],
+    recurrence: &[[f64; 4]],
+) -> Vec<BlockSums> {
+    let zero = [[0.0; LANES]; 8];
+    let mut state: Vec<BlockState> = vec![
+        BlockState {
+            sums: BlockSums {
+                odd: zero,
+                even: zero
+            },
+            // Before n = 1: π_0 = 0 and a virtual π_{−1} = 0; π_1 = 1 is set explicitly.
+            pi_prev: [0.0; LANES],
+            pi_prev2: [0.0; LANES],
+        };
+        blocks.len()
+    ];
+    let mut n0 = 1;
+    while n0 <= terms.len() {
+        let n1 = (n0 + N_CHUNK).min(terms.len() + 1);
+        for (mu, st) in blocks.iter().zip(state.iter_mut()) {
+            #[cfg(target_arch = "x86_64")]
+            if std::arch::is_x86_feature_detected!("avx512f") {
+                // SAFETY: the CPU supports AVX-512F (checked at run time just above).
+                #[allow(unsafe_code)]
+                unsafe {
+                    avx512::run_orders(mu, st, n0, n1, terms, recurrence)
+                };
+                continue;
+            }
+            run_orders(mu, st, n0, n1, terms, recurrence);
+        }
+        n0 = n1;
+    }
+    state.into_iter().map(|s| s.sums).collect()
+}
+
+/// Advances one block from order n0 to n1 − 1.
+///
+/// The hot loop: per order, one recurrence step (π_n = r1 μ π_{n−1} − r2 π_{n−2}) and eight
+/// fused multiply-adds per lane into the odd-n or even-n sums. Orders go in (odd, even) pairs
+/// with the sums held in locals so they live in vector registers.
+#[inline]
+fn run_orders(
+    mu: &[f64; LANES],
+    st: &mut BlockState,
+    n0: usize,
+    n1: usize,
+    terms: &[[f64; 4]],
+    recurrence: &[[f64; 4]],
+) {
+    let mut odd = st.sums.odd;
+    let mut even = st.sums.even;
+    let mut p1 = st.pi_prev;
+    let mut p2 = st.pi_prev2;
+    let mut n = n0;
+    #[inline(always)]
+    fn step(
+        n: usize,
+        mu: &[f64; LANES],
+        p1: &mut [f64; LANES],
+        p2: &mut [f64; LANES],
+        sums: &mut [[f64; LANES]; 8],
+        terms: &[[f64; 4]],
+        recurrence: &[[f64; 4]],
+    ) {
+        let [r1, r2, nf, n1f] = recurrence[n];
+        let pi: [f64; LANES] = if n == 1 {
+            [1.0; LANES]
+        } else {
+            std::array::from_fn(|l| (r1 * mu[l]).mul_add(p1[l], -r2 * p2[l]))
+        };
+        // τ_n = n μ π_n − (n+1) π_{n−1}
+        let tau: [f64; LANES] = std::array::from_fn(|l| (nf * mu[l]).mul_add(pi[l], -n1f * p1[l]));
+        let [ca_re, ca_im, cb_re, cb_im] = terms[n - 1];
+        let pairs = [
+            (&pi, ca_re),
+            (&pi, ca_im),
+            (&tau, cb_re),
+            (&tau, cb_im),
+            (&pi, cb_re),
+            (&pi, cb_im),
+            (&tau, ca_re),
+            (&tau, ca_im),
+        ];
+        for (q, (v, k)) in pairs.into_iter().enumerate() {
+            for l in 0..LANES {
+                sums[q][l] = v[l].mul_add(k, sums[q][l]);
+            }
+        }
+        *p2 = *p1;
+        *p1 = pi;
+    }
+    if n < n1 && n.is_multiple_of(2) {
+        step(n, mu, &mut p1, &mut p2, &mut even, terms, recurrence);
+        n += 1;
+    }
+    while n + 1 < n1 {
+        step(n, mu, &mut p1, &mut p2, &mut odd, terms, recurrence);
+        step(n + 1, mu, &mut p1, &mut p2, &mut even, terms, recurrence);
+        n += 2;
+    }
+    if n < n1 {
+        step(n, mu, &mut p1, &mut p2, &mut odd, terms, recurrence);
+    }
+    st.sums.odd = odd;
+    st.sums.even = even;
+    st.pi_prev = p1;
+    st.pi_prev2 = p2;
+}
+
+/// The same kernel as [`run_orders`] written with explicit 512-bit AVX-512 operations.
+///
+/// Compilers tuned for recent Xeons prefer 256-bit vectors when auto-vectorizing; this kernel
+/// holds its 16 sums of 8 lanes in the 32 zmm registers instead, which measured 2.1× faster.
+/// Same operations in the same order as the portable version (FMA per term), so the two agree
+/// bit for bit.
+#[cfg(target_arch = "x86_64")]
+#[allow(unsafe_code)]
+mod avx512 {
+    use std::arch::x86_64::{
+        __m512d, _mm512_fmadd_pd, _mm512_loadu_pd, _mm512_mul_pd, _mm512_set1_pd, _mm512_storeu_pd,
+    };
+
+    use super::{BlockState, LANES};
+
+    const _: () = assert!(LANES == 8, "the AVX-512 kernel holds 8 lanes per register");
+
+    #[target_feature(enable = "avx512f")]
+    pub(super) unsafe fn run_orders(
+        mu: &[f64; LANES],
+        st: &mut BlockState,
+        n0: usize,
+        n1: usize,
+        terms: &[[f64; 4]],
+        recurrence: &[[f64; 4]],
+    ) {
+        // SAFETY (all loads and stores below): every pointer comes from a [f64; 8] array.
+        let load = |a: &[f64; LANES]| unsafe { _mm512_loadu_pd(a.as_ptr()) };
+        let mu_v = load(mu);
+        let mut odd: [__m512d; 8] = std::array::from_fn(|q| load(&st.sums.odd[q]));
+        let mut even: [__m512d; 8] = std::array::from_fn(|q| load(&st.sums.even[q]));
+        let mut p1 = load(&st.pi_prev);
+        let mut p2 = load(&st.pi_prev2);
+        #[inline(always)]
+        fn step(
+            n: usize,
+            mu: __m512d,
+            p1: &mut __m512d,
+            p2: &mut __m512d,
+            sums: &mut [__m512d; 8],
+            terms: &[[f64; 4]],
+            recurrence: &[[f64; 4]],
+        ) {
+            // SAFETY: only called from `run_orders`, which has AVX-512F enabled.
+            unsafe {
+                let [r1, r2, nf, n1f] = recurrence[n];
+                let pi = if n == 1 {
+                    _mm512_set1_pd(1.0)
+                } else {
+                    // π_n = (r1 μ) π_{n−1} + (−r2 π_{n−2})
+                    let r1_mu = _mm512_mul_pd(_mm512_set1_pd(r1), mu);
+                    let r2_p2 = _mm512_mul_pd(_mm512_set1_pd(-r2), *p2);
+                    _mm512_fmadd_pd(r1_mu, *p1, r2_p2)
+                };
+                // τ_n = (n μ) π_n + (−(n+1) π_{n−1})
+                let n_mu = _mm512_mul_pd(_mm512_set1_pd(nf), mu);
+                let n1_p1 = _mm512_mul_pd(_mm512_set1_pd(-n1f), *p1);
+                let tau = _mm512_fmadd_pd(n_mu, pi, n1_p1);
+                let [ca_re, ca_im, cb_re, cb_im] = terms[n - 1];
+                let pairs = [
+                    (pi, ca_re),
+                    (pi, ca_im),
+                    (tau, cb_re),
+                    (tau, cb_im),
+                    (pi, cb_re),
+                    (pi, cb_im),
+                    (tau, ca_re),
+                    (tau, ca_im),
+                ];
+                for (q, (v, k)) in pairs.into_iter().enumerate() {
+                    sums[q] = _mm512_fmadd_pd(v, _mm512_set1_pd(k), sums[q]);
+                }
+                *p2 = *p1;
+                *p1 = pi;
+            }
+        }
+        let mut n = n0;
+        if n < n1 && n.is_multiple_of(2) {
+            step(n, mu_v, &mut p1, &mut p2, &mut even, terms, recurrence);
+            n += 1;
+        }
+        while n + 1 < n1 {
+            step(n, mu_v, &mut p1, &mut p2, &mut odd, terms, recurrence);
+            step(n + 1, mu_v, &mut p1, &mut p2, &mut even, terms, recurrence);
+            n += 2;
+        }
+        if n < n1 {
+            step(n, mu_v, &mut p1, &mut p2, &mut odd, terms, recurrence);
+        }
+        let store =
+            |a: &mut [f64; LANES], v: __m512d| unsafe { _mm512_storeu_pd(a.as_mut_ptr(), v) };
+        for q in 0..8 {
+            store(&mut st.sums.odd[q], odd[q]);
+            store(&mut st.sums.even[q], even[q]);
+        }
+        store(&mut st.pi_prev, p1);
+        store(&mut st.pi_prev2, p2);
+    }
+}
+
+/// Assembles S1, S2 at ±ν from the odd-n and even-n parts of the partial sums
+/// [Σ c a π, Σ c b τ, Σ c b π, Σ c a τ] (re, im each; module docs).
+fn combine(odd: &[f64], even: &[f64]) -> AmplitudePair {
     let part = |q: usize| {
         (
             Complex64::new(odd[q], odd[q + 1]),
             Complex64::new(even[q], even[q + 1]),
         )
     };
-    let (a_o, a_e) = part(0);
-    let (b_o, b_e) = part(2);
-    let (c_o, c_e) = part(4);
-    let (e_o, e_e) = part(6);
+    let (ap_o, ap_e) = part(0); // Σ c a π
+    let (bt_o, bt_e) = part(2); // Σ c b τ
+    let (bp_o, bp_e) = part(4); // Σ c b π
+    let (at_o, at_e) = part(6); // Σ c a τ
     AmplitudePair {
-        s1_plus: (a_o + a_e) + (b_o + b_e) * nu,
-        s2_plus: (c_o + c_e) + (e_o + e_e) * nu,
-        s1_minus: (a_o - a_e) + (b_e - b_o) * nu,
-        s2_minus: (c_o - c_e) + (e_e - e_o) * nu,
+        s1_plus: (ap_o + ap_e) + (bt_o + bt_e),
+        s2_plus: (bp_o + bp_e) + (at_o + at_e),
+        // π flips sign for even n, τ for odd n.
+        s1_minus: (ap_o - ap_e) + (bt_e - bt_o),
+        s2_minus: (bp_o - bp_e) + (at_e - at_o),
     }
 }

@@ -3,7 +3,7 @@
 //! The flow: a refractive index ([`refractive`]) and a size give a [`Sphere`] (m, x); its
 //! [`MieCoefficients`] a_n, b_n give efficiencies ([`Efficiencies`]) and, through the batched
 //! kernel in [`amplitude`], the amplitudes S1, S2 at any angles. A size distribution
-//! ([`distribution`]) and a wavelength list turn many spheres into one [`ensemble::BulkPhase`]
+//! ([`distribution`]) and a wavelength list turn many spheres into one [`BulkPhase`]
 //! per wavelength: σ_ext, albedo, g and the phase function averaged inside the bins of an
 //! [`AngleGrid`] — the `PhaseFunction` that `tables/` consumes.
 //!
@@ -11,15 +11,21 @@
 //! x = 2πr/λ; phase functions are normalized ∫ p dΩ = 1 (1/sr); units live in names.
 
 pub mod amplitude;
+pub mod distribution;
+pub mod ensemble;
 pub mod error;
 pub mod grid;
 pub mod quadrature;
 pub mod reference;
+pub mod refractive;
 pub mod sphere;
 
 pub use amplitude::{FoldedAngles, SphereTerms, amplitudes};
+pub use distribution::{SizeDistribution, SizeQuadrature};
+pub use ensemble::{BulkPhase, BulkRequest, NodeCounts, bulk_phase};
 pub use error::MieError;
 pub use grid::AngleGrid;
+pub use refractive::Material;
 pub use sphere::{Efficiencies, MieCoefficients, Sphere};
 
 /// Normalized phase function p = (|S1|² + |S2|²) / (2π x² Q_sca) in 1/sr.

@@ -1,0 +1,262 @@
+//! Size-averaged ("bulk") optics of a sphere population at one or more wavelengths.
+//!
+//! For each wavelength λ and quadrature node r_i (number fraction w_i):
+//!   σ_ext = Σ w_i Q_ext,i π r_i²,  σ_sca likewise,  albedo = σ_sca/σ_ext,
+//!   g = Σ w_i σ_sca,i g_i / σ_sca,
+//!   p̄(θ) = Σ w_i σ_sca,i p_i(θ) / σ_sca = Σ w_i (|S1|²+|S2|²)_i / (2 k² σ_sca),  k = 2π/λ
+//! (intensities are averaged, not normalized phase functions; physics.md §2 and §6).
+//! The phase function is returned as bin averages on an [`AngleGrid`], integrated inside each bin
+//! with Gauss nodes (see [`crate::grid`]).
+//!
+//! # Node counts
+//! Two counts set the cost: sizes (nodes in ln r) and Gauss nodes per angular panel. With
+//! [`NodeCounts::Adaptive`] the size count doubles, then the nodes per panel double, until one
+//! doubling changes the result by less than the tolerance (rms relative change of the bins at
+//! θ ≥ 1°, and relative change of σ_ext and g); [`NodeCounts::Fixed`] runs one pass for timing.
+//! Bins near the forward direction (θ < 60/x_min rad, where diffraction rings of single sizes are
+//! still coherent) are cut into panels of width ≤ π/x_max so the diffraction peak is resolved.
+
+use num_complex::Complex64;
+use rayon::prelude::*;
+
+use crate::amplitude::{FoldedAngles, SphereTerms, weighted_intensity};
+use crate::distribution::{SizeDistribution, SizeQuadrature};
+use crate::error::MieError;
+use crate::grid::AngleGrid;
+use crate::refractive::Material;
+use crate::sphere::Sphere;
+
+/// How many quadrature nodes to use.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum NodeCounts {
+    /// Refine until one doubling changes the result by less than `tolerance`.
+    Adaptive { tolerance: f64, max_sizes: usize },
+    /// Exactly these counts.
+    Fixed {
+        sizes: usize,
+        nodes_per_panel: usize,
+    },
+}
+
+/// What to compute.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BulkRequest {
+    pub material: Material,
+    pub temperature_c: f64,
+    pub distribution: SizeDistribution,
+    pub wavelengths_nm: Vec<f64>,
+    pub grid: AngleGrid,
+    pub nodes: NodeCounts,
+    /// Mass fraction left outside the truncated size range.
+    pub tail_mass: f64,
+}
+
+/// Bulk optics at one wavelength: the phase-function value `tables/` consumes.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct BulkPhase {
+    pub wavelength_nm: f64,
+    pub m_re: f64,
+    pub m_im: f64,
+    /// Mean extinction cross-section per particle (m²).
+    pub sigma_ext_m2: f64,
+    /// Mean scattering cross-section per particle (m²).
+    pub sigma_sca_m2: f64,
+    pub albedo: f64,
+    pub g: f64,
+    pub theta_step_deg: f64,
+    /// Bin averages of p̄ (1/sr), bin k centred on θ_k = k Δθ.
+    pub bins: Vec<f64>,
+    /// Σ_k bins_k Ω_k − 1: the quadrature's energy closure (0 when exact).
+    pub energy_closure: f64,
+    pub sizes: usize,
+    pub nodes_per_panel: usize,
+    /// Last relative change seen by the adaptive refinement (0 for fixed counts).
+    pub last_change: f64,
+}
+
+/// Computes the bulk optics for every requested wavelength (in the given order).
+pub fn bulk_phase(request: &BulkRequest) -> Result<Vec<BulkPhase>, MieError> {
+    if request.wavelengths_nm.is_empty() {
+        return Err(MieError::Empty("wavelength list"));
+    }
+    let distribution = request.distribution.validated()?;
+    if !(request.tail_mass > 0.0 && request.tail_mass < 0.5) {
+        return Err(MieError::OutOfRange {
+            name: "tail mass fraction",
+            value: request.tail_mass,
+            range: "(0, 0.5)",
+        });
+    }
+    let indices: Vec<Complex64> = request
+        .wavelengths_nm
+        .iter()
+        .map(|&l| request.material.refractive_index(l, request.temperature_c))
+        .collect::<Result<_, _>>()?;
+    request
+        .wavelengths_nm
+        .iter()
+        .zip(indices)
+        .map(|(&lambda, m)| {
+            let one = |sizes: usize, nodes: usize| {
+                let q = distribution.quadrature(sizes, request.tail_mass);
+                bulk_at(m, lambda, &q, request.grid, nodes)
+            };
+            match request.nodes {
+                NodeCounts::Fixed {
+                    sizes,
+                    nodes_per_panel,
+                } => one(sizes, nodes_per_panel),
+                NodeCounts::Adaptive {
+                    tolerance,
+                    max_sizes,
+                } => adaptive(&one, &distribution, tolerance, max_sizes),
+            }
+        })
+        .collect()
+}
+
+/// Doubles sizes, then nodes per panel, until a doubling changes the result by < tolerance.
+fn adaptive(
+    one: &dyn Fn(usize, usize) -> Result<BulkPhase, MieError>,
+    distribution: &SizeDistribution,
+    tolerance: f64,
+    max_sizes: usize,
+) -> Result<BulkPhase, MieError> {
+    let mono = matches!(distribution, SizeDistribution::Monodisperse { .. });
+    let (mut sizes, mut nodes) = (if mono { 1 } else { 32 }, 2);
+    let mut current = one(sizes, nodes)?;
+    if !mono {
+        loop {
+            let next = one(2 * sizes, nodes)?;
+            let change = relative_change(&current, &next);
+            sizes *= 2;
+            current = BulkPhase {
+                last_change: change,
+                ..next
+            };
+            if change < tolerance {
+                break;
+            }
+            if 2 * sizes > max_sizes {
+                return Err(MieError::NotConverged {
+                    what: "size quadrature",
+                    tolerance,
+                    last_change: change,
+                });
+            }
+        }
+    }
+    loop {
+        let next = one(sizes, 2 * nodes)?;
+        let change = relative_change(&current, &next);
+        nodes *= 2;
+        current = BulkPhase {
+            last_change: change.max(current.last_change),
+            ..next
+        };
+        if change < tolerance {
+            return Ok(current);
+        }
+        if nodes >= 64 {
+            return Err(MieError::NotConverged {
+                what: "angular quadrature inside bins",
+                tolerance,
+                last_change: change,
+            });
+        }
+    }
+}
+
+/// rms relative change of bins at θ ≥ 1°, or of σ_ext and g, whichever is largest.
+pub fn relative_change(a: &BulkPhase, b: &BulkPhase) -> f64 {
+    let first = (1.0 / a.theta_step_deg).ceil() as usize;
+    let (mut sum, mut count) = (0.0, 0usize);
+    for k in first.min(a.bins.len())..a.bins.len() {
+        let r = (b.bins[k] - a.bins[k]) / b.bins[k].abs().max(f64::MIN_POSITIVE);
+        sum += r * r;
+        count += 1;
+    }
+    let rms = if count > 0 {
+        (sum / count as f64).sqrt()
+    } else {
+        0.0
+    };
+    rms.max(((b.sigma_ext_m2 - a.sigma_ext_m2) / b.sigma_ext_m2).abs())
+        .max((b.g - a.g).abs())
+}
+
+/// One pass at fixed node counts.
+pub fn bulk_at(
+    m: Complex64,
+    wavelength_nm: f64,
+    sizes: &SizeQuadrature,
+    grid: AngleGrid,
+    nodes_per_panel: usize,
+) -> Result<BulkPhase, MieError> {
+    let wavelength_um = wavelength_nm / 1000.0;
+    let k = 2.0 * std::f64::consts::PI / wavelength_um;
+    let spheres: Vec<Sphere> = sizes
+        .radius_um
+        .iter()
+        .map(|&r| Sphere::new(m, k * r))
+        .collect::<Result<_, _>>()?;
+    // Coefficients and efficiencies per size, in parallel; order is preserved.
+    let per_size: Vec<(SphereTerms, f64, f64, f64)> = spheres
+        .par_iter()
+        .zip(sizes.radius_um.par_iter())
+        .map(|(s, &r)| {
+            let c = s.coefficients();
+            let e = c.efficiencies();
+            let area = std::f64::consts::PI * r * r;
+            (SphereTerms::new(&c), e.q_ext * area, e.q_sca * area, e.g)
+        })
+        .collect();
+    let mut sigma_ext = 0.0;
+    let mut sigma_sca = 0.0;
+    let mut g_sca = 0.0;
+    for ((_, ext, sca, g), w) in per_size.iter().zip(&sizes.weight) {
+        sigma_ext += w * ext;
+        sigma_sca += w * sca;
+        g_sca += w * sca * g;
+    }
+    let x_min = spheres.iter().map(|s| s.x()).fold(f64::INFINITY, f64::min);
+    let x_max = spheres.iter().map(|s| s.x()).fold(0.0, f64::max);
+    let step_rad = grid.step_deg().to_radians();
+    let forward_panels = (step_rad * x_max / std::f64::consts::PI).ceil().max(1.0) as usize;
+    let forward_limit_deg = (60.0 / x_min).to_degrees();
+    let quadrature = grid.bin_quadrature(nodes_per_panel, |kbin| {
+        let (lo, _) = grid.bin_edges_deg(kbin);
+        if lo < forward_limit_deg || 180.0 - grid.bin_edges_deg(kbin).1 < forward_limit_deg {
+            forward_panels
+        } else {
+            1
+        }
+    });
+    let terms: Vec<SphereTerms> = per_size.into_iter().map(|(t, ..)| t).collect();
+    let intensity = weighted_intensity(&terms, &sizes.weight, &FoldedAngles::new(&quadrature.mu));
+    let scale = 1.0 / (2.0 * k * k * sigma_sca);
+    let node_phase: Vec<f64> = intensity.iter().map(|i| i * scale).collect();
+    let bins = quadrature.average(&node_phase);
+    let energy: f64 = bins
+        .iter()
+        .enumerate()
+        .map(|(kbin, v)| v * grid.bin_solid_angle(kbin))
+        .sum();
+    const UM2_TO_M2: f64 = 1e-12;
+    Ok(BulkPhase {
+        wavelength_nm,
+        m_re: m.re,
+        m_im: m.im,
+        sigma_ext_m2: sigma_ext * UM2_TO_M2,
+        sigma_sca_m2: sigma_sca * UM2_TO_M2,
+        albedo: sigma_sca / sigma_ext,
+        g: g_sca / sigma_sca,
+        theta_step_deg: grid.step_deg(),
+        bins,
+        energy_closure: energy - 1.0,
+        sizes: sizes.radius_um.len(),
+        nodes_per_panel,
+        last_change: 0.0,
+    })
+}

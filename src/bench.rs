@@ -1,0 +1,237 @@
+//! `photometeor bench mie`: the two Mie workloads of issue 2, timed here and (optionally) in
+//! miepython in the same run, so the speed ratio comes from one machine at one moment.
+//!
+//! Workloads (physics.md §2 "speed anchors"):
+//! - single sphere m = 1.333 + 1e-8i, x = 1e5, S1 and S2 at θ = 0, 0.18°, …, 180° (1001 angles);
+//! - rain: lognormal r_g = 500 µm, σ_g = 1.4, 100 radii log-spaced over r_g e^{±3 ln σ_g}
+//!   (end points included), λ = 650, 550, 450 nm with the water indices below, the
+//!   lognormal-weighted mean of |S1|² + |S2|² at the same 1001 angles, normalized per λ.
+
+use std::path::PathBuf;
+use std::process::Command;
+use std::time::Instant;
+
+use anyhow::{Context, Result, bail};
+use clap::{Args, Subcommand};
+use mie::amplitude::weighted_intensity;
+use mie::{AngleGrid, FoldedAngles, Sphere, SphereTerms, amplitudes};
+use num_complex::Complex64;
+use rayon::prelude::*;
+use serde_json::json;
+
+#[derive(Debug, Args)]
+pub struct BenchArgs {
+    #[command(subcommand)]
+    what: BenchWhat,
+}
+
+#[derive(Debug, Subcommand)]
+enum BenchWhat {
+    /// Single sphere at x = 1e5 and the 3-wavelength rain lognormal, 1001 angles each.
+    Mie(MieBench),
+}
+
+#[derive(Debug, Args)]
+struct MieBench {
+    /// Repetitions per workload; the best time is reported.
+    #[arg(long, default_value_t = 3)]
+    repeat: usize,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    threads: Option<usize>,
+    /// Also run scripts/bench_miepython.py with this Python and print the speed ratios.
+    #[arg(long)]
+    compare_miepython: bool,
+    /// Python interpreter for --compare-miepython.
+    #[arg(long, default_value = "python3")]
+    python: String,
+    /// Print JSON.
+    #[arg(long)]
+    json: bool,
+}
+
+/// Water at 650, 550, 450 nm (IAPWS 20 °C real part, Segelstein κ; physics.md §3).
+const RAIN_CASES: [(f64, f64, f64); 3] = [
+    (650.0, 1.3317, 1.67e-8),
+    (550.0, 1.3347, 2.46e-9),
+    (450.0, 1.3396, 8.07e-10),
+];
+
+pub fn run(args: BenchArgs) -> Result<()> {
+    let BenchWhat::Mie(b) = args.what;
+    let threads = b.threads.unwrap_or_else(rayon::current_num_threads);
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .context("building the thread pool")?;
+    let repeat = b.repeat.max(1);
+    let (single, rain, rain_phase) = pool.install(|| -> Result<_> {
+        let single = best_of(repeat, single_sphere)?;
+        let mut phase = Vec::new();
+        let rain = best_of(repeat, || {
+            phase = rain_lognormal()?;
+            Ok(())
+        })?;
+        Ok((single, rain, phase))
+    })?;
+    let mut report = json!({
+        "tool": "photometeor", "version": env!("CARGO_PKG_VERSION"), "threads": threads,
+        "single_x1e5_s": single, "rain_lognormal_s": rain,
+    });
+    if !b.json {
+        println!("photometeor ({threads} threads, best of {repeat}):");
+        println!("  single sphere x = 1e5, 1001 angles: {single:.4} s");
+        println!("  rain lognormal, 3 λ × 100 sizes, 1001 angles: {rain:.4} s");
+    }
+    if b.compare_miepython {
+        let py = run_miepython(&b.python, repeat)?;
+        let py_single = py["single_x1e5_s"]
+            .as_f64()
+            .context("miepython single time")?;
+        let py_rain = py["rain_lognormal_s"]
+            .as_f64()
+            .context("miepython rain time")?;
+        let worst = compare_phase(&rain_phase, &py["rain_phase"])?;
+        report["miepython"] = py.clone();
+        report["speedup_single"] = json!(py_single / single);
+        report["speedup_rain"] = json!(py_rain / rain);
+        report["rain_phase_max_rel_diff"] = json!(worst);
+        if !b.json {
+            println!(
+                "miepython {} (numba JIT, after warm-up, 1 thread):",
+                py["version"]
+            );
+            println!(
+                "  single sphere: {py_single:.4} s  → photometeor is {:.1}× faster",
+                py_single / single
+            );
+            println!(
+                "  rain lognormal: {py_rain:.4} s  → photometeor is {:.1}× faster",
+                py_rain / rain
+            );
+            println!("  same work check: rain phase functions agree to {worst:.2e} (max relative)");
+        }
+    }
+    if b.json {
+        println!("{}", serde_json::to_string(&report)?);
+    }
+    Ok(())
+}
+
+fn best_of(repeat: usize, mut f: impl FnMut() -> Result<()>) -> Result<f64> {
+    let mut best = f64::INFINITY;
+    for _ in 0..repeat {
+        let start = Instant::now();
+        f()?;
+        best = best.min(start.elapsed().as_secs_f64());
+    }
+    Ok(best)
+}
+
+fn grid_cosines() -> Vec<f64> {
+    AngleGrid::new(0.18).expect("0.18° divides 180°").cosines()
+}
+
+fn single_sphere() -> Result<()> {
+    let x = 1e5;
+    let c = Sphere::new(Complex64::new(1.333, 1e-8), x)?.coefficients();
+    let e = c.efficiencies();
+    let (s1, s2) = amplitudes(&c, &FoldedAngles::new(&grid_cosines()));
+    let p: f64 = s1
+        .iter()
+        .zip(&s2)
+        .map(|(&a, &b)| mie::phase_from_amplitudes(a, b, x, e.q_sca))
+        .sum();
+    if !p.is_finite() {
+        bail!("non-finite phase function in the single-sphere benchmark");
+    }
+    Ok(())
+}
+
+/// Returns the three normalized phase functions (1/sr) at the 1001 grid angles.
+fn rain_lognormal() -> Result<Vec<Vec<f64>>> {
+    let (r_g, sigma_g, sizes) = (500.0f64, 1.4f64, 100usize);
+    let s = sigma_g.ln();
+    let radii: Vec<f64> = (0..sizes)
+        .map(|i| (r_g.ln() - 3.0 * s + 6.0 * s * i as f64 / (sizes - 1) as f64).exp())
+        .collect();
+    // Number weight per log step: exp(−(ln r − ln r_g)²/(2 ln²σ_g)).
+    let weights: Vec<f64> = radii
+        .iter()
+        .map(|r| (-(r.ln() - r_g.ln()).powi(2) / (2.0 * s * s)).exp())
+        .collect();
+    let angles = FoldedAngles::new(&grid_cosines());
+    RAIN_CASES
+        .iter()
+        .map(|&(lambda_nm, n, kappa)| {
+            let k = 2.0 * std::f64::consts::PI / (lambda_nm / 1000.0);
+            let m = Complex64::new(n, kappa);
+            let per_size: Vec<(SphereTerms, f64)> = radii
+                .par_iter()
+                .map(|&r| -> Result<_> {
+                    let c = Sphere::new(m, k * r)?.coefficients();
+                    let q_sca = c.efficiencies().q_sca;
+                    Ok((SphereTerms::new(&c), q_sca * std::f64::consts::PI * r * r))
+                })
+                .collect::<Result<_>>()?;
+            let sigma_sca: f64 = per_size.iter().zip(&weights).map(|((_, s), w)| s * w).sum();
+            let terms: Vec<SphereTerms> = per_size.into_iter().map(|(t, _)| t).collect();
+            let intensity = weighted_intensity(&terms, &weights, &angles);
+            Ok(intensity
+                .iter()
+                .map(|i| i / (2.0 * k * k * sigma_sca))
+                .collect())
+        })
+        .collect()
+}
+
+fn run_miepython(python: &str, repeat: usize) -> Result<serde_json::Value> {
+    let script = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("scripts/bench_miepython.py");
+    let phase_file =
+        std::env::temp_dir().join(format!("photometeor-bench-{}.json", std::process::id()));
+    let mut cmd = Command::new(python);
+    cmd.arg(&script).arg("--phase-out").arg(&phase_file);
+    if repeat == 1 {
+        cmd.arg("--quick");
+    }
+    let out = cmd
+        .output()
+        .with_context(|| format!("running {python} {}", script.display()))?;
+    if !out.status.success() {
+        bail!(
+            "{} failed: {}",
+            script.display(),
+            String::from_utf8_lossy(&out.stderr)
+                .lines()
+                .last()
+                .unwrap_or("")
+        );
+    }
+    let mut value: serde_json::Value =
+        serde_json::from_slice(&out.stdout).context("parsing miepython benchmark JSON")?;
+    let phase: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(&phase_file).context("reading miepython rain phase functions")?,
+    )?;
+    let _ = std::fs::remove_file(&phase_file);
+    value["rain_phase"] = phase;
+    Ok(value)
+}
+
+/// Largest relative difference between our rain phase functions and miepython's.
+fn compare_phase(ours: &[Vec<f64>], theirs: &serde_json::Value) -> Result<f64> {
+    let rows = theirs
+        .get("phase")
+        .or_else(|| theirs.get("phases"))
+        .unwrap_or(theirs)
+        .as_array()
+        .context("miepython phase output: expected a list of 3 rows")?;
+    let mut worst: f64 = 0.0;
+    for (a, b) in ours.iter().zip(rows) {
+        let b = b.as_array().context("miepython phase row")?;
+        for (x, y) in a.iter().zip(b) {
+            let y = y.as_f64().context("miepython phase value")?;
+            worst = worst.max((x - y).abs() / y.abs());
+        }
+    }
+    Ok(worst)
+}

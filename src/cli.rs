@@ -1,0 +1,408 @@
+//! Argument definitions (clap derive) and the thin layer from arguments to library calls.
+
+use anyhow::{Context, Result, bail};
+use clap::{Args as ClapArgs, Parser, Subcommand};
+use mie::{
+    AngleGrid, BulkRequest, FoldedAngles, Material, NodeCounts, SizeDistribution, Sphere,
+    amplitudes, bulk_phase, phase_from_amplitudes,
+};
+use num_complex::Complex64;
+use serde_json::json;
+
+/// Phase functions of cloud droplets, raindrops, ice and snow, and the multiple-scattering
+/// tables real-time renderers need.
+///
+/// Conventions: θ is the scattering angle in degrees (0 = forward); refractive index
+/// m = n + iκ with κ ≥ 0 absorbing; size parameter x = 2πr/λ; phase functions in 1/sr,
+/// normalized so ∫ p dΩ = 1; radii in µm, wavelengths in nm (vacuum), cross-sections in m².
+#[derive(Debug, Parser)]
+#[command(name = "photometeor", version, about, long_about)]
+pub struct Args {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// One sphere: efficiencies, S1, S2 and the normalized phase function.
+    Mie(MieArgs),
+    /// A size distribution of water or ice spheres: σ_ext, albedo, g and the phase function
+    /// averaged inside the bins of a uniform θ grid, per wavelength.
+    Phase(PhaseArgs),
+    /// Time photometeor's Mie workloads (and miepython's, side by side, when available).
+    Bench(crate::bench::BenchArgs),
+}
+
+#[derive(Debug, ClapArgs)]
+struct MieArgs {
+    /// Refractive index relative to the medium, e.g. 1.333+1e-8i (κ ≥ 0 absorbs).
+    #[arg(long, allow_hyphen_values = true, conflicts_with_all = ["material"])]
+    m: Option<String>,
+    /// Size parameter x = 2πr/λ, in (0, 2e5].
+    #[arg(long, allow_hyphen_values = true, requires = "m")]
+    x: Option<f64>,
+    /// Material instead of --m: water (IAPWS R9-97 + Segelstein) or ice (Warren & Brandt 2008).
+    #[arg(long, value_enum, requires_all = ["radius_um", "wavelength_nm"])]
+    material: Option<MaterialArg>,
+    /// Sphere radius in µm (with --material).
+    #[arg(long, allow_hyphen_values = true)]
+    radius_um: Option<f64>,
+    /// Vacuum wavelength in nm (with --material).
+    #[arg(long, allow_hyphen_values = true)]
+    wavelength_nm: Option<f64>,
+    /// Water temperature in °C, [-12, 99] (default 20).
+    #[arg(long, default_value_t = 20.0, allow_hyphen_values = true)]
+    temperature_c: f64,
+    /// Scattering angles in degrees, comma-separated, each in [0, 180].
+    #[arg(
+        long,
+        value_delimiter = ',',
+        allow_hyphen_values = true,
+        conflicts_with = "angles_step_deg"
+    )]
+    angles_deg: Option<Vec<f64>>,
+    /// Full grid 0, D, 2D, …, 180 (D in degrees, dividing 180).
+    #[arg(long)]
+    angles_step_deg: Option<f64>,
+    /// Print one JSON object instead of a table.
+    #[arg(long)]
+    json: bool,
+}
+
+#[derive(Debug, Clone, Copy, clap::ValueEnum)]
+enum MaterialArg {
+    Water,
+    Ice,
+}
+
+impl From<MaterialArg> for Material {
+    fn from(m: MaterialArg) -> Self {
+        match m {
+            MaterialArg::Water => Material::Water,
+            MaterialArg::Ice => Material::Ice,
+        }
+    }
+}
+
+#[derive(Debug, ClapArgs)]
+struct PhaseArgs {
+    /// Particle material.
+    #[arg(long, value_enum, default_value = "water")]
+    material: MaterialArg,
+    /// Lognormal median radius r_g in µm (with --sigma-g).
+    #[arg(long, allow_hyphen_values = true, requires = "sigma_g")]
+    lognormal_median_um: Option<f64>,
+    /// Lognormal geometric standard deviation σ_g, in (1, 5].
+    #[arg(long, allow_hyphen_values = true)]
+    sigma_g: Option<f64>,
+    /// Effective radius in µm (with --v-eff): gamma distribution, or lognormal with --lognormal.
+    #[arg(long, allow_hyphen_values = true, requires = "v_eff")]
+    r_eff_um: Option<f64>,
+    /// Effective variance (with --r-eff-um).
+    #[arg(long, allow_hyphen_values = true)]
+    v_eff: Option<f64>,
+    /// Use a lognormal (instead of gamma) for --r-eff-um/--v-eff.
+    #[arg(long)]
+    lognormal: bool,
+    /// Marshall–Palmer raindrop spectrum for this rain rate in mm/h, [0.1, 500].
+    #[arg(long, allow_hyphen_values = true)]
+    marshall_palmer_mm_h: Option<f64>,
+    /// Vacuum wavelengths in nm, comma-separated.
+    #[arg(
+        long,
+        value_delimiter = ',',
+        allow_hyphen_values = true,
+        required = true
+    )]
+    wavelengths_nm: Vec<f64>,
+    /// Fixed number of sizes (nodes in ln r); default: adaptive to --tolerance.
+    #[arg(long)]
+    sizes: Option<usize>,
+    /// Fixed Gauss nodes per angular panel (with --sizes; default 4).
+    #[arg(long)]
+    nodes_per_panel: Option<usize>,
+    /// Adaptive refinement stops when one doubling changes the bins (rms, θ ≥ 1°), σ_ext or g
+    /// by less than this.
+    #[arg(long, default_value_t = 0.01)]
+    tolerance: f64,
+    /// Angle step of the output bins in degrees (must divide 180).
+    #[arg(long, default_value_t = AngleGrid::DEFAULT_STEP_DEG)]
+    angles_step_deg: f64,
+    /// Water temperature in °C.
+    #[arg(long, default_value_t = 20.0, allow_hyphen_values = true)]
+    temperature_c: f64,
+    /// Mass fraction of the distribution left outside the truncated size range.
+    #[arg(long, default_value_t = 1e-3)]
+    tail_mass: f64,
+    /// Print JSON instead of a summary.
+    #[arg(long)]
+    json: bool,
+}
+
+pub fn run(args: Args) -> Result<()> {
+    match args.command {
+        Command::Mie(a) => run_mie(a),
+        Command::Phase(a) => run_phase(a),
+        Command::Bench(a) => crate::bench::run(a),
+    }
+}
+
+/// Parses "1.333+1e-8i", "1.5-0.1j", "1.33": real part, then an optional signed imaginary part.
+pub fn parse_complex(text: &str) -> Result<Complex64> {
+    let t = text.trim();
+    let bad = || {
+        anyhow::anyhow!(
+            "refractive index m = {text:?} is not a complex number like 1.333+1e-8i (n + iκ, κ ≥ 0)"
+        )
+    };
+    let body = t.strip_suffix(['i', 'j']);
+    let Some(body) = body else {
+        return t
+            .parse::<f64>()
+            .map(|re| Complex64::new(re, 0.0))
+            .map_err(|_| bad());
+    };
+    // The sign that starts the imaginary part: the last + or − not at the start and not
+    // directly after an exponent marker.
+    let bytes = body.as_bytes();
+    let split = (1..bytes.len())
+        .rev()
+        .find(|&i| (bytes[i] == b'+' || bytes[i] == b'-') && !matches!(bytes[i - 1], b'e' | b'E'))
+        .ok_or_else(bad)?;
+    let re: f64 = body[..split].parse().map_err(|_| bad())?;
+    let im_text = &body[split..];
+    let im: f64 = if im_text == "+" || im_text == "-" {
+        format!("{im_text}1").parse().map_err(|_| bad())?
+    } else {
+        im_text.parse().map_err(|_| bad())?
+    };
+    Ok(Complex64::new(re, im))
+}
+
+fn angles_from(angles_deg: Option<Vec<f64>>, step: Option<f64>) -> Result<(Vec<f64>, Vec<f64>)> {
+    if let Some(step) = step {
+        let grid = AngleGrid::new(step)?;
+        return Ok((grid.thetas_deg(), grid.cosines()));
+    }
+    let angles = angles_deg.unwrap_or_else(|| vec![0.0, 90.0, 180.0]);
+    if angles.is_empty() {
+        bail!("angle list is empty; give at least one angle in [0, 180] degrees");
+    }
+    for &a in &angles {
+        if !(a.is_finite() && (0.0..=180.0).contains(&a)) {
+            bail!("scattering angle {a}° is outside the allowed range [0, 180] degrees");
+        }
+    }
+    // Fold exactly: θ > 90° uses −cos(180° − θ) so ± pairs are shared and 90° gives 0.
+    let mu = angles
+        .iter()
+        .map(|&a| {
+            if a == 90.0 {
+                0.0
+            } else if a > 90.0 {
+                -(180.0 - a).to_radians().cos()
+            } else {
+                a.to_radians().cos()
+            }
+        })
+        .collect();
+    Ok((angles, mu))
+}
+
+fn run_mie(a: MieArgs) -> Result<()> {
+    let (m, x) = match (&a.m, a.x, a.material) {
+        (Some(m), Some(x), None) => (parse_complex(m)?, x),
+        (Some(_), None, _) => bail!("--m needs --x (size parameter, in (0, 2e5])"),
+        (None, _, Some(material)) => {
+            let radius = a.radius_um.context("--material needs --radius-um")?;
+            let lambda = a
+                .wavelength_nm
+                .context("--material needs --wavelength-nm")?;
+            if !(radius.is_finite() && radius > 0.0) {
+                bail!("radius {radius} µm is outside the allowed range (0, ∞)");
+            }
+            let m = Material::from(material).refractive_index(lambda, a.temperature_c)?;
+            (m, 2.0 * std::f64::consts::PI * radius * 1000.0 / lambda)
+        }
+        _ => bail!("give either --m and --x, or --material with --radius-um and --wavelength-nm"),
+    };
+    let (angles, mu) = angles_from(a.angles_deg, a.angles_step_deg)?;
+    let sphere = Sphere::new(m, x)?;
+    let c = sphere.coefficients();
+    let e = c.efficiencies();
+    let (s1, s2) = amplitudes(&c, &FoldedAngles::new(&mu));
+    let phase: Vec<f64> = s1
+        .iter()
+        .zip(&s2)
+        .map(|(&a1, &a2)| phase_from_amplitudes(a1, a2, x, e.q_sca))
+        .collect();
+    if a.json {
+        let pairs = |s: &[Complex64]| s.iter().map(|c| [c.re, c.im]).collect::<Vec<_>>();
+        let out = json!({
+            "m_re": m.re, "m_im": m.im, "x": x, "n_terms": e.n_terms,
+            "qext": e.q_ext, "qsca": e.q_sca, "qabs": e.q_abs, "qback": e.q_back, "g": e.g,
+            "angles_deg": angles, "phase": phase, "s1": pairs(&s1), "s2": pairs(&s2),
+        });
+        println!("{}", serde_json::to_string(&out)?);
+    } else {
+        println!("m = {} + {}i, x = {x}, terms = {}", m.re, m.im, e.n_terms);
+        println!(
+            "Q_ext = {:.9e}  Q_sca = {:.9e}  Q_abs = {:.9e}  Q_back = {:.9e}  g = {:.9}",
+            e.q_ext, e.q_sca, e.q_abs, e.q_back, e.g
+        );
+        println!(
+            "{:>10}  {:>16}  {:>34}  {:>34}",
+            "θ (deg)", "p (1/sr)", "S1", "S2"
+        );
+        for k in 0..angles.len() {
+            println!(
+                "{:>10.4}  {:>16.9e}  {:>16.9e} {:>+16.9e}i  {:>16.9e} {:>+16.9e}i",
+                angles[k], phase[k], s1[k].re, s1[k].im, s2[k].re, s2[k].im
+            );
+        }
+    }
+    Ok(())
+}
+
+/// Chooses the size distribution from the mutually exclusive flag groups.
+fn distribution_from(a: &PhaseArgs) -> Result<SizeDistribution> {
+    let chosen = [
+        a.lognormal_median_um.is_some(),
+        a.r_eff_um.is_some(),
+        a.marshall_palmer_mm_h.is_some(),
+    ]
+    .iter()
+    .filter(|&&c| c)
+    .count();
+    if chosen != 1 {
+        bail!(
+            "choose exactly one size distribution: --lognormal-median-um with --sigma-g, \
+             --r-eff-um with --v-eff, or --marshall-palmer-mm-h"
+        );
+    }
+    let d = if let Some(median) = a.lognormal_median_um {
+        SizeDistribution::Lognormal {
+            median_radius_um: median,
+            sigma_g: a.sigma_g.context("--lognormal-median-um needs --sigma-g")?,
+        }
+    } else if let Some(r_eff) = a.r_eff_um {
+        let v_eff = a.v_eff.context("--r-eff-um needs --v-eff")?;
+        if a.lognormal {
+            SizeDistribution::lognormal_from_effective(r_eff, v_eff)?
+        } else {
+            SizeDistribution::Gamma {
+                r_eff_um: r_eff,
+                v_eff,
+            }
+        }
+    } else {
+        SizeDistribution::MarshallPalmer {
+            rain_rate_mm_h: a.marshall_palmer_mm_h.unwrap_or_default(),
+        }
+    };
+    Ok(d.validated()?)
+}
+
+fn run_phase(a: PhaseArgs) -> Result<()> {
+    if a.wavelengths_nm.is_empty() {
+        bail!("wavelength list is empty; give at least one wavelength in nm");
+    }
+    let distribution = distribution_from(&a)?;
+    let nodes = match (a.sizes, a.nodes_per_panel) {
+        (Some(sizes), nodes) => {
+            if sizes == 0 {
+                bail!("--sizes 0 is outside the allowed range [1, ∞)");
+            }
+            NodeCounts::Fixed {
+                sizes,
+                nodes_per_panel: nodes.unwrap_or(4).max(1),
+            }
+        }
+        (None, Some(_)) => bail!("--nodes-per-panel needs --sizes (fixed node counts)"),
+        (None, None) => {
+            if !(a.tolerance > 0.0 && a.tolerance < 1.0) {
+                bail!(
+                    "--tolerance {} is outside the allowed range (0, 1)",
+                    a.tolerance
+                );
+            }
+            NodeCounts::Adaptive {
+                tolerance: a.tolerance,
+                max_sizes: 1 << 14,
+            }
+        }
+    };
+    let request = BulkRequest {
+        material: a.material.into(),
+        temperature_c: a.temperature_c,
+        distribution,
+        wavelengths_nm: a.wavelengths_nm.clone(),
+        grid: AngleGrid::new(a.angles_step_deg)?,
+        nodes,
+        tail_mass: a.tail_mass,
+    };
+    let result = bulk_phase(&request)?;
+    if a.json {
+        let out = json!({
+            "material": request.material,
+            "temperature_c": request.temperature_c,
+            "distribution": request.distribution,
+            "theta_step_deg": request.grid.step_deg(),
+            "angles_deg": request.grid.thetas_deg(),
+            "node_counts": request.nodes,
+            "tail_mass": request.tail_mass,
+            "wavelengths": result,
+        });
+        println!("{}", serde_json::to_string(&out)?);
+    } else {
+        println!(
+            "{} {}, {} bins of {}°",
+            request.material.name(),
+            request.distribution.describe(),
+            request.grid.len(),
+            request.grid.step_deg()
+        );
+        println!(
+            "{:>8} {:>22} {:>13} {:>10} {:>9} {:>6} {:>6} {:>11}",
+            "λ (nm)", "m", "σ_ext (m²)", "albedo", "g", "sizes", "nodes", "energy-1"
+        );
+        for r in &result {
+            println!(
+                "{:>8} {:>22} {:>13.6e} {:>10.8} {:>9.6} {:>6} {:>6} {:>11.2e}",
+                r.wavelength_nm,
+                format!("{:.5}+{:.3e}i", r.m_re, r.m_im),
+                r.sigma_ext_m2,
+                r.albedo,
+                r.g,
+                r.sizes,
+                r.nodes_per_panel,
+                r.energy_closure
+            );
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn parses_complex_indices() {
+        assert_eq!(
+            parse_complex("1.333+1e-8i").unwrap(),
+            Complex64::new(1.333, 1e-8)
+        );
+        assert_eq!(
+            parse_complex("1.5-0.1j").unwrap(),
+            Complex64::new(1.5, -0.1)
+        );
+        assert_eq!(parse_complex("1.33").unwrap(), Complex64::new(1.33, 0.0));
+        assert_eq!(
+            parse_complex("1e0+1E-3i").unwrap(),
+            Complex64::new(1.0, 1e-3)
+        );
+        assert!(parse_complex("1.3+xi").is_err());
+        assert!(parse_complex("abc").is_err());
+    }
+}
