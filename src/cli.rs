@@ -54,13 +54,8 @@ struct MieArgs {
     #[arg(long, default_value_t = 20.0, allow_hyphen_values = true)]
     temperature_c: f64,
     /// Scattering angles in degrees, comma-separated, each in [0, 180].
-    #[arg(
-        long,
-        value_delimiter = ',',
-        allow_hyphen_values = true,
-        conflicts_with = "angles_step_deg"
-    )]
-    angles_deg: Option<Vec<f64>>,
+    #[arg(long, allow_hyphen_values = true, conflicts_with = "angles_step_deg")]
+    angles_deg: Option<String>,
     /// Full grid 0, D, 2D, …, 180 (D in degrees, dividing 180).
     #[arg(long)]
     angles_step_deg: Option<f64>,
@@ -107,14 +102,9 @@ struct PhaseArgs {
     /// Marshall–Palmer raindrop spectrum for this rain rate in mm/h, [0.1, 500].
     #[arg(long, allow_hyphen_values = true)]
     marshall_palmer_mm_h: Option<f64>,
-    /// Vacuum wavelengths in nm, comma-separated.
-    #[arg(
-        long,
-        value_delimiter = ',',
-        allow_hyphen_values = true,
-        required = true
-    )]
-    wavelengths_nm: Vec<f64>,
+    /// Vacuum wavelengths in nm, comma-separated (water: 200–1100 nm).
+    #[arg(long, allow_hyphen_values = true, required = true)]
+    wavelengths_nm: String,
     /// Fixed number of sizes (nodes in ln r); default: adaptive to --tolerance.
     #[arg(long)]
     sizes: Option<usize>,
@@ -179,15 +169,35 @@ pub fn parse_complex(text: &str) -> Result<Complex64> {
     Ok(Complex64::new(re, im))
 }
 
-fn angles_from(angles_deg: Option<Vec<f64>>, step: Option<f64>) -> Result<(Vec<f64>, Vec<f64>)> {
+/// Parses a comma-separated list of numbers; `what` names the list in errors.
+pub fn parse_list(what: &str, text: &str, allowed: &str) -> Result<Vec<f64>> {
+    let items: Vec<&str> = text
+        .split(',')
+        .map(str::trim)
+        .filter(|t| !t.is_empty())
+        .collect();
+    if items.is_empty() {
+        bail!("{what} list is empty; give at least one value in {allowed}");
+    }
+    items
+        .iter()
+        .map(|t| {
+            t.parse::<f64>().map_err(|_| {
+                anyhow::anyhow!("{what} {t:?} is not a number; allowed range {allowed}")
+            })
+        })
+        .collect()
+}
+
+fn angles_from(angles_deg: Option<String>, step: Option<f64>) -> Result<(Vec<f64>, Vec<f64>)> {
     if let Some(step) = step {
         let grid = AngleGrid::new(step)?;
         return Ok((grid.thetas_deg(), grid.cosines()));
     }
-    let angles = angles_deg.unwrap_or_else(|| vec![0.0, 90.0, 180.0]);
-    if angles.is_empty() {
-        bail!("angle list is empty; give at least one angle in [0, 180] degrees");
-    }
+    let angles = match angles_deg {
+        Some(text) => parse_list("scattering angle", &text, "[0, 180] degrees")?,
+        None => vec![0.0, 90.0, 180.0],
+    };
     for &a in &angles {
         if !(a.is_finite() && (0.0..=180.0).contains(&a)) {
             bail!("scattering angle {a}° is outside the allowed range [0, 180] degrees");
@@ -304,9 +314,7 @@ fn distribution_from(a: &PhaseArgs) -> Result<SizeDistribution> {
 }
 
 fn run_phase(a: PhaseArgs) -> Result<()> {
-    if a.wavelengths_nm.is_empty() {
-        bail!("wavelength list is empty; give at least one wavelength in nm");
-    }
+    let wavelengths_nm = parse_list("wavelength (nm)", &a.wavelengths_nm, "[200, 1100] nm")?;
     let distribution = distribution_from(&a)?;
     let nodes = match (a.sizes, a.nodes_per_panel) {
         (Some(sizes), nodes) => {
@@ -336,7 +344,7 @@ fn run_phase(a: PhaseArgs) -> Result<()> {
         material: a.material.into(),
         temperature_c: a.temperature_c,
         distribution,
-        wavelengths_nm: a.wavelengths_nm.clone(),
+        wavelengths_nm,
         grid: AngleGrid::new(a.angles_step_deg)?,
         nodes,
         tail_mass: a.tail_mass,
