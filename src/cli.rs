@@ -121,6 +121,9 @@ struct PhaseArgs {
     /// Water temperature in °C.
     #[arg(long, default_value_t = 20.0, allow_hyphen_values = true)]
     temperature_c: f64,
+    /// Also report p̄ at these angles (degrees, comma-separated, in [0, 180]) as point values.
+    #[arg(long, allow_hyphen_values = true)]
+    angles_deg: Option<String>,
     /// Mass fraction of the distribution left outside the truncated size range.
     #[arg(long, default_value_t = 1e-3)]
     tail_mass: f64,
@@ -340,6 +343,10 @@ fn run_phase(a: PhaseArgs) -> Result<()> {
             }
         }
     };
+    let (point_angles_deg, point_cosines) = match &a.angles_deg {
+        Some(text) => angles_from(Some(text.clone()), None)?,
+        None => (Vec::new(), Vec::new()),
+    };
     let request = BulkRequest {
         material: a.material.into(),
         temperature_c: a.temperature_c,
@@ -348,6 +355,7 @@ fn run_phase(a: PhaseArgs) -> Result<()> {
         grid: AngleGrid::new(a.angles_step_deg)?,
         nodes,
         tail_mass: a.tail_mass,
+        point_cosines,
     };
     let result = bulk_phase(&request)?;
     if a.json {
@@ -357,6 +365,7 @@ fn run_phase(a: PhaseArgs) -> Result<()> {
             "distribution": request.distribution,
             "theta_step_deg": request.grid.step_deg(),
             "angles_deg": request.grid.thetas_deg(),
+            "point_angles_deg": point_angles_deg,
             "node_counts": request.nodes,
             "tail_mass": request.tail_mass,
             "wavelengths": result,
@@ -386,6 +395,16 @@ fn run_phase(a: PhaseArgs) -> Result<()> {
                 r.nodes_per_panel,
                 r.energy_closure
             );
+        }
+        if !point_angles_deg.is_empty() {
+            println!("p̄ (1/sr) at the requested angles:");
+            for (k, theta) in point_angles_deg.iter().enumerate() {
+                let values: Vec<String> = result
+                    .iter()
+                    .map(|r| format!("{:>14.6e}", r.points[k]))
+                    .collect();
+                println!("{theta:>10.4}° {}", values.join(" "));
+            }
         }
     }
     Ok(())

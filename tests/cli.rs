@@ -307,3 +307,37 @@ fn bin_averages_integrate_inside_bins_not_point_samples() {
         .fold(0.0, f64::max);
     assert!(worst < 1e-5, "worst {worst}");
 }
+
+#[test]
+fn phase_point_values_agree_with_bins_where_the_function_is_smooth() {
+    let v = json_of(&photometeor(
+        &[
+            "phase",
+            "--r-eff-um",
+            "10",
+            "--v-eff",
+            "0.1",
+            "--wavelengths-nm",
+            "550",
+            "--sizes",
+            "64",
+            "--angles-deg",
+            "9.9,59.94,140.04",
+            "--json",
+        ],
+        None,
+    ));
+    assert_eq!(v["point_angles_deg"].as_array().unwrap().len(), 3);
+    let row = &v["wavelengths"][0];
+    // Grid angles θ_k = k·0.18° for k = 55, 333, 778.
+    for (i, theta) in [9.9f64, 59.94, 140.04].iter().enumerate() {
+        let point = row["points"][i].as_f64().unwrap();
+        let k = (theta / 0.18).round() as usize;
+        let bin = row["bins"][k].as_f64().unwrap();
+        // A 0.18° bin average of a smooth cloud phase function is its centre value to O(Δθ²).
+        assert!(
+            ((point - bin) / bin).abs() < 2e-3,
+            "θ = {theta}: {point} vs {bin}"
+        );
+    }
+}

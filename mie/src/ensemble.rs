@@ -50,6 +50,8 @@ pub struct BulkRequest {
     pub nodes: NodeCounts,
     /// Mass fraction left outside the truncated size range.
     pub tail_mass: f64,
+    /// Cosines at which point values of p̄ are wanted besides the bins (may be empty).
+    pub point_cosines: Vec<f64>,
 }
 
 /// Bulk optics at one wavelength: the phase-function value `tables/` consumes.
@@ -67,6 +69,8 @@ pub struct BulkPhase {
     pub theta_step_deg: f64,
     /// Bin averages of p̄ (1/sr), bin k centred on θ_k = k Δθ.
     pub bins: Vec<f64>,
+    /// p̄ (1/sr) at the requested point cosines, in their order.
+    pub points: Vec<f64>,
     /// Σ_k bins_k Ω_k − 1: the quadrature's energy closure (0 when exact).
     pub energy_closure: f64,
     pub sizes: usize,
@@ -100,7 +104,7 @@ pub fn bulk_phase(request: &BulkRequest) -> Result<Vec<BulkPhase>, MieError> {
         .map(|(&lambda, m)| {
             let one = |sizes: usize, nodes: usize| {
                 let q = distribution.quadrature(sizes, request.tail_mass);
-                bulk_at(m, lambda, &q, request.grid, nodes)
+                bulk_at(m, lambda, &q, request.grid, nodes, &request.point_cosines)
             };
             match request.nodes {
                 NodeCounts::Fixed {
@@ -193,6 +197,7 @@ pub fn bulk_at(
     sizes: &SizeQuadrature,
     grid: AngleGrid,
     nodes_per_panel: usize,
+    point_cosines: &[f64],
 ) -> Result<BulkPhase, MieError> {
     let wavelength_um = wavelength_nm / 1000.0;
     let k = 2.0 * std::f64::consts::PI / wavelength_um;
@@ -238,6 +243,14 @@ pub fn bulk_at(
     let scale = 1.0 / (2.0 * k * k * sigma_sca);
     let node_phase: Vec<f64> = intensity.iter().map(|i| i * scale).collect();
     let bins = quadrature.average(&node_phase);
+    let points = if point_cosines.is_empty() {
+        Vec::new()
+    } else {
+        weighted_intensity(&terms, &sizes.weight, &FoldedAngles::new(point_cosines))
+            .iter()
+            .map(|i| i * scale)
+            .collect()
+    };
     let energy: f64 = bins
         .iter()
         .enumerate()
@@ -254,6 +267,7 @@ pub fn bulk_at(
         g: g_sca / sigma_sca,
         theta_step_deg: grid.step_deg(),
         bins,
+        points,
         energy_closure: energy - 1.0,
         sizes: sizes.radius_um.len(),
         nodes_per_panel,
