@@ -1,0 +1,430 @@
+//! Ams_n, the distribution of light after n scattering events, and the forward fractions F_n
+//! (Riley et al. 2004 §4.2, Eqs. 21–23), from the bin averages of one phase function.
+//!
+//! # Method
+//! Ams_n = δ ∗ P ∗ … ∗ P (n times) is, by Funk–Hecke, the zonal function with Legendre
+//! coefficients χ_l^n. A raindrop's diffraction peak (~0.006° wide) or an ice crystal's delta
+//! transmission cannot be expanded at 0.18°, so the energy of bin 0 above the level of bin 1 is
+//! split off as an exact forward delta of weight f:
+//!
+//!   P = f δ + (1 − f) Q,   Q = the remaining bins, normalized (piecewise constant in μ),
+//!   Ams_n = Σ_j C(n, j) f^{n−j} (1 − f)^j Q^{∗j}.
+//!
+//! The j = 0 term (f^n δ) goes into bin 0 exactly and the j = 1 term is Q's bins exactly, so
+//! Ams_1 reproduces the input bins to rounding. The j ≥ 2 terms are convolutions of the
+//! piecewise-constant Q, which are continuous; they are summed as one Legendre series whose
+//! coefficient for degree l is
+//!
+//!   c_{n,l} = (f + (1 − f) χ_l)^n − f^n − n f^{n−1} (1 − f) χ_l,   χ_l = χ_l(Q),
+//!
+//! and whose bin averages use the exact bin integrals W_lk of P_l ([`BinIntegrals`]), so every
+//! row is a true bin average of its series. Because Σ_k W_lk = 2δ_l0, each row's energy
+//! Σ_k Ams_n,k Ω_k is 1 to rounding whatever the truncation degree L.
+//!
+//! # Resolution and truncation
+//! Q is known only as bin averages. Read as a piecewise-constant function its Legendre spectrum
+//! does not decay: the steps between bins put peaks near l = 2π m/Δθ (every 2000 degrees at
+//! 0.18°), so no truncation of the j ≥ 2 series is safe. Q's coefficients are therefore blurred
+//! with the spherical heat kernel, χ_l → χ_l exp(−l(l+1) s²/2) with s = Δθ/2 (0.09° at the
+//! default grid): a Gaussian blur of half a bin. The heat kernel is a positive convolution, so
+//! the blurred Q^{∗j} stay ≥ 0 and cannot ring; the series is cut where the blur factor falls
+//! below 1e-17 (l ≈ 8.7/s, 5600 at 0.18°), which leaves nothing to truncate. The j = 0, 1 terms
+//! are not blurred. The effect on the j ≥ 2 terms is a smoothing by 0.09°·√j, below the table's
+//! resolution; the tests measure it against an exactly known case.
+//!
+//! # Forward fractions
+//! F_n = ∫_{μ>0} Ams_n dΩ (Eq. 23) from the same split: f^n + n f^{n−1}(1 − f) F(Q) +
+//! Σ_l (2l+1)/2 c_{n,l} ∫_0^1 P_l dμ, with ∫_0^1 P_l dμ = P'_l(0)/(l(l+1)) for l ≥ 1.
+
+use crate::grid::ThetaGrid;
+use crate::legendre::bins::BinIntegrals;
+
+/// Settings of the Ams_n computation.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AmsSettings {
+    /// Number of scattering orders N (rows Ams_1..Ams_N).
+    pub n_max: usize,
+    /// Gaussian blur s applied to Q in the j ≥ 2 terms, as a fraction of Δθ (default 0.5).
+    pub blur_bins: f64,
+}
+
+impl Default for AmsSettings {
+    fn default() -> Self {
+        Self {
+            n_max: 26,
+            blur_bins: 0.5,
+        }
+    }
+}
+
+/// Ams_1..Ams_N as bin averages (1/sr), with the forward fractions.
+#[derive(Debug, Clone, PartialEq)]
+pub struct AmsTable {
+    /// rows[n − 1][k] = bin average of Ams_n over bin k.
+    pub rows: Vec<Vec<f64>>,
+    /// F_1..F_N.
+    pub forward_fraction: Vec<f64>,
+    /// f: the energy fraction of the single-scattering forward delta (bin 0 above bin 1).
+    pub forward_peak_fraction: f64,
+    /// Σ_k v_k Ω_k − 1 of the input before it was renormalized.
+    pub input_energy_error: f64,
+    /// Legendre degree at which the series stops (blur factor < 1e-17 beyond).
+    pub l_max: usize,
+}
+
+/// Computes Ams_n and F_n for n = 1..N from bin averages `bins` (1/sr) on `grid`.
+pub fn ams_table(grid: &ThetaGrid, bins: &[f64], settings: AmsSettings) -> AmsTable {
+    assert_eq!(bins.len(), grid.len(), "one value per bin");
+    let k_len = grid.len();
+    let omega = grid.bin_solid_angles();
+    let d_mu = grid.bin_mu_widths();
+    let energy: f64 = bins.iter().zip(&omega).map(|(v, o)| v * o).sum();
+    let v: Vec<f64> = bins.iter().map(|b| b / energy).collect();
+
+    // Split the forward delta: energy of bin 0 above the level of bin 1.
+    let f = if k_len > 1 && v[0] > v[1] {
+        (v[0] - v[1]) * omega[0]
+    } else {
+        0.0
+    };
+    let mut q = v.clone();
+    if f > 0.0 {
+        q[0] = v[1];
+    }
+    let q_norm = 1.0 - f;
+    for x in q.iter_mut() {
+        *x /= q_norm;
+    }
+
+    // χ_l(Q) = 2π Σ_k q_k W_lk, blurred by the heat kernel (module docs).
+    let n_max = settings.n_max;
+    let s_rad = (settings.blur_bins * grid.step_deg()).to_radians();
+    // exp(−l(l+1)s²/2) < 1e-17 ⇔ l(l+1) > 2·39.1/s²
+    let l_max = ((78.2f64).sqrt() / s_rad).ceil() as usize;
+    let mut chi = Vec::with_capacity(l_max + 1);
+    let mut w = BinIntegrals::new(grid);
+    for l in 0..=l_max {
+        if l > 0 {
+            w.advance();
+        }
+        let lf = l as f64;
+        let blur = (-0.5 * lf * (lf + 1.0) * s_rad * s_rad).exp();
+        chi.push(2.0 * std::f64::consts::PI * dot(&q, w.values()) * blur);
+    }
+
+    // Rows: exact j = 0, 1 terms plus the j ≥ 2 series.
+    let mut rows = vec![vec![0.0; k_len]; n_max];
+    let mut w = BinIntegrals::new(grid);
+    for (l, &chi_l) in chi.iter().enumerate() {
+        if l > 0 {
+            w.advance();
+        }
+        let weight = (2.0 * l as f64 + 1.0) / (4.0 * std::f64::consts::PI);
+        for (i, row) in rows.iter_mut().enumerate() {
+            let c = higher_order_coefficient(f, chi_l, i + 1);
+            if c == 0.0 {
+                continue;
+            }
+            let s = weight * c;
+            for (r, (wl, dm)) in row.iter_mut().zip(w.values().iter().zip(&d_mu)) {
+                *r += s * wl / dm;
+            }
+        }
+    }
+    let f_q = forward_hemisphere(grid, &q);
+    let p_prime_0 = legendre_derivatives_at_zero(l_max);
+    let mut forward_fraction = Vec::with_capacity(n_max);
+    for (i, row) in rows.iter_mut().enumerate() {
+        let n = (i + 1) as f64;
+        let single = n * f.powi(i as i32) * (1.0 - f);
+        for (r, qk) in row.iter_mut().zip(&q) {
+            *r += single * qk;
+        }
+        row[0] += f.powi(i as i32 + 1) / omega[0];
+        // F_n from the coefficients (module docs).
+        let mut fwd = f.powi(i as i32 + 1) + single * f_q;
+        for l in 1..=l_max {
+            let c = higher_order_coefficient(f, chi[l], i + 1);
+            let half_integral = p_prime_0[l] / (l as f64 * (l as f64 + 1.0));
+            fwd += (2.0 * l as f64 + 1.0) / 2.0 * c * half_integral;
+        }
+        // l = 0: c_{n,0} = 1 − f^n − n f^{n−1}(1−f), ∫_0^1 P_0 = 1, weight 1/2.
+        fwd += 0.5 * higher_order_coefficient(f, chi[0], i + 1);
+        forward_fraction.push(fwd);
+    }
+    AmsTable {
+        rows,
+        forward_fraction,
+        forward_peak_fraction: f,
+        input_energy_error: energy - 1.0,
+        l_max,
+    }
+}
+
+/// c_{n,l} = (f + (1−f)χ)^n − f^n − n f^{n−1}(1−f)χ: the j ≥ 2 part of the binomial expansion.
+fn higher_order_coefficient(f: f64, chi: f64, n: usize) -> f64 {
+    if n < 2 {
+        return 0.0;
+    }
+    let a = (1.0 - f) * chi;
+    if f == 0.0 {
+        return a.powi(n as i32);
+    }
+    // Σ_{j=2}^{n} C(n,j) f^{n−j} a^j, summed directly (no cancellation against the j < 2 terms).
+    let mut sum = 0.0;
+    let mut binom = n as f64 * (n as f64 - 1.0) / 2.0; // C(n, 2)
+    for j in 2..=n {
+        sum += binom * f.powi((n - j) as i32) * a.powi(j as i32);
+        binom *= (n - j) as f64 / (j + 1) as f64;
+    }
+    sum
+}
+
+/// ∫_{μ>0} of a piecewise-constant bin function (1/sr): 2π Σ q_k Δμ_k over the forward
+/// hemisphere, the bin straddling 90° counted by its μ ≥ 0 part.
+fn forward_hemisphere(grid: &ThetaGrid, q: &[f64]) -> f64 {
+    let edges = grid.edge_theta_rad();
+    let half = std::f64::consts::FRAC_PI_2;
+    let mut sum = 0.0;
+    for k in 0..q.len() {
+        let (a, b) = (edges[k], edges[k + 1]);
+        if b <= half {
+            sum += q[k] * (a.cos() - b.cos());
+        } else if a < half {
+            sum += q[k] * a.cos();
+        }
+    }
+    2.0 * std::f64::consts::PI * sum
+}
+
+/// P'_l(0) for l = 0..=l_max, from P'_l(0) = l P_{l−1}(0) and P_l(0) by Bonnet's recurrence.
+fn legendre_derivatives_at_zero(l_max: usize) -> Vec<f64> {
+    let mut p = vec![0.0; l_max + 2];
+    p[0] = 1.0;
+    for l in 1..=l_max {
+        // (l+1) P_{l+1}(0) = −l P_{l−1}(0)
+        p[l + 1] = -(l as f64) * p[l - 1] / (l as f64 + 1.0);
+    }
+    (0..=l_max)
+        .map(|l| if l == 0 { 0.0 } else { l as f64 * p[l - 1] })
+        .collect()
+}
+
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
+}
+
+/// n_iso(ε): the smallest n ≤ n_cap with max_k |4π Ams_n(θ_k) − 1| < ε, found by bisection on
+/// n (the deviation falls monotonically for the phase functions met here), or None.
+pub fn isotropic_order(
+    grid: &ThetaGrid,
+    bins: &[f64],
+    epsilon: f64,
+    n_cap: usize,
+) -> Option<usize> {
+    let deviation = |n: usize| {
+        let t = ams_table(
+            grid,
+            bins,
+            AmsSettings {
+                n_max: n,
+                ..AmsSettings::default()
+            },
+        );
+        t.rows[n - 1]
+            .iter()
+            .map(|v| (4.0 * std::f64::consts::PI * v - 1.0).abs())
+            .fold(0.0, f64::max)
+    };
+    if deviation(n_cap) >= epsilon {
+        return None;
+    }
+    let (mut lo, mut hi) = (0usize, n_cap); // deviation(lo) ≥ ε (or lo = 0), deviation(hi) < ε
+    while hi - lo > 1 {
+        let mid = (lo + hi) / 2;
+        if deviation(mid) < epsilon {
+            hi = mid;
+        } else {
+            lo = mid;
+        }
+    }
+    Some(hi)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Henyey–Greenstein bin averages on a grid, by fine midpoint integration in μ.
+    fn hg_bins(grid: &ThetaGrid, g: f64) -> Vec<f64> {
+        let edges = grid.edge_theta_rad();
+        (0..grid.len())
+            .map(|k| {
+                let (a, b) = (edges[k].cos(), edges[k + 1].cos());
+                // ∫ p dμ in closed form: p = (1−g²)/(4π (1+g²−2gμ)^{3/2})
+                let prim = |mu: f64| {
+                    (1.0 - g * g)
+                        / (4.0 * std::f64::consts::PI * g * (1.0 + g * g - 2.0 * g * mu).sqrt())
+                };
+                (prim(a) - prim(b)) / (a - b)
+            })
+            .collect()
+    }
+
+    #[test]
+    fn rows_conserve_energy_do_not_ring_and_tend_to_isotropy() {
+        let grid = ThetaGrid::new(0.18).unwrap();
+        let bins = hg_bins(&grid, 0.85);
+        let t = ams_table(&grid, &bins, AmsSettings::default());
+        let omega = grid.bin_solid_angles();
+        for (i, row) in t.rows.iter().enumerate() {
+            let e: f64 = row.iter().zip(&omega).map(|(v, o)| v * o).sum();
+            assert!((e - 1.0).abs() < 1e-9, "n = {}: energy {e}", i + 1);
+            let max = row.iter().cloned().fold(0.0, f64::max);
+            let min = row.iter().cloned().fold(f64::INFINITY, f64::min);
+            assert!(min > -1e-6 * max, "n = {}: min {min}, max {max}", i + 1);
+        }
+        // Ams_1 is the input.
+        for (a, b) in t.rows[0].iter().zip(&bins) {
+            assert!((a - b).abs() <= 1e-12 * b.abs().max(1e-3));
+        }
+        // F_n falls toward 1/2; Ams_26 is close to isotropic for g = 0.85 only at 1e-1 level.
+        for w in t.forward_fraction.windows(2) {
+            assert!(w[1] < w[0]);
+        }
+        assert!(t.forward_fraction.last().unwrap() > &0.5);
+    }
+
+    #[test]
+    fn funk_hecke_for_henyey_greenstein() {
+        // HG convolved with itself n times is HG with g^n... only in coefficient space:
+        // χ_l^(n) = g^{nl}. Check the bin average of Ams_2 against bins of HG(g²)?
+        // Not exact (HG ∗ HG ≠ HG(g²)); instead check g_n = χ_1^n through the first moment.
+        let grid = ThetaGrid::new(0.18).unwrap();
+        let g = 0.7;
+        let bins = hg_bins(&grid, g);
+        let t = ams_table(&grid, &bins, AmsSettings::default());
+        let edges = grid.edge_theta_rad();
+        for (i, row) in t.rows.iter().enumerate().take(6) {
+            // ⟨μ⟩ = 2π Σ v_k ∫_bin μ dμ
+            let mean: f64 = row
+                .iter()
+                .enumerate()
+                .map(|(k, v)| {
+                    let (a, b) = (edges[k].cos(), edges[k + 1].cos());
+                    v * std::f64::consts::PI * (a * a - b * b)
+                })
+                .sum();
+            let expected = bins_g(&grid, &bins).powi(i as i32 + 1);
+            // The half-bin blur of the j ≥ 2 terms lowers χ_1 by 1 − e^{−s²} = 2.5e-6 per
+            // factor (s = 0.09°): measured deviation ≤ 3.3e-6 at n = 2 … 6 (exact at n = 1).
+            eprintln!(
+                "n = {}: ⟨μ⟩ {mean} vs g^n {expected}: {:.2e}",
+                i + 1,
+                mean - expected
+            );
+            assert!(
+                (mean - expected).abs() < 4e-6,
+                "n = {}: {mean} vs {expected}",
+                i + 1
+            );
+        }
+    }
+
+    fn bins_g(grid: &ThetaGrid, bins: &[f64]) -> f64 {
+        let edges = grid.edge_theta_rad();
+        bins.iter()
+            .enumerate()
+            .map(|(k, v)| {
+                let (a, b) = (edges[k].cos(), edges[k + 1].cos());
+                v * std::f64::consts::PI * (a * a - b * b)
+            })
+            .sum()
+    }
+
+    #[test]
+    fn henyey_greenstein_rows_match_the_exact_series() {
+        // HG has χ_l = g^l, so Ams_n has χ_l = g^{nl}: its exact bin averages follow from the
+        // series with the exact bin integrals. Ours start from HG's bins instead.
+        let grid = ThetaGrid::new(0.18).unwrap();
+        let g: f64 = 0.85;
+        let bins = hg_bins(&grid, g);
+        let t = ams_table(&grid, &bins, AmsSettings::default());
+        let d_mu = grid.bin_mu_widths();
+        let first = (1.0 / grid.step_deg()).ceil() as usize;
+        for n in [2usize, 4, 8, 26] {
+            let mut exact = vec![0.0; grid.len()];
+            let mut w = BinIntegrals::new(&grid);
+            let gn = g.powi(n as i32);
+            let mut l: i32 = 0;
+            while gn.powi(l) > 1e-18 {
+                if l > 0 {
+                    w.advance();
+                }
+                let c = (2.0 * l as f64 + 1.0) / (4.0 * std::f64::consts::PI) * gn.powi(l);
+                for (e, (wl, dm)) in exact.iter_mut().zip(w.values().iter().zip(&d_mu)) {
+                    *e += c * wl / dm;
+                }
+                l += 1;
+            }
+            let worst = t.rows[n - 1][first..]
+                .iter()
+                .zip(&exact[first..])
+                .map(|(a, b)| ((a - b) / b).abs())
+                .fold(0.0, f64::max);
+            eprintln!("HG g = 0.85, n = {n}: worst relative error for θ ≥ 1°: {worst:.2e}");
+            // Measured 2.3e-4 (n = 2) falling to 4.8e-6 (n = 26): the half-bin blur and the
+            // bin-0 split near the peak.
+            assert!(worst < 3e-4, "n = {n}: {worst:e}");
+        }
+    }
+
+    #[test]
+    fn large_orders_become_isotropic() {
+        let grid = ThetaGrid::new(1.0).unwrap();
+        let bins = hg_bins(&grid, 0.85);
+        let t = ams_table(
+            &grid,
+            &bins,
+            AmsSettings {
+                n_max: 200,
+                ..AmsSettings::default()
+            },
+        );
+        let dev = |n: usize| {
+            t.rows[n - 1]
+                .iter()
+                .map(|v| (4.0 * std::f64::consts::PI * v - 1.0).abs())
+                .fold(0.0, f64::max)
+        };
+        assert!(dev(200) < 1e-12, "{}", dev(200));
+        assert!(dev(50) < dev(20) && dev(20) < dev(5));
+        assert!((t.forward_fraction[199] - 0.5).abs() < 1e-12);
+    }
+
+    #[test]
+    fn forward_fractions_match_the_bins() {
+        let grid = ThetaGrid::new(0.18).unwrap();
+        let mut bins = hg_bins(&grid, 0.9);
+        // A sharp forward peak in bin 0, as rain has.
+        let omega = grid.bin_solid_angles();
+        bins[0] += 0.4 / omega[0];
+        let t = ams_table(&grid, &bins, AmsSettings::default());
+        assert!(t.forward_peak_fraction > 0.25);
+        let edges = grid.edge_theta_rad();
+        for (i, row) in t.rows.iter().enumerate() {
+            let from_bins = forward_hemisphere(&grid, row);
+            let _ = &edges;
+            // The coefficients integrate the series over the μ > 0 half of the bin at 90°;
+            // the bins can only take half its average: measured ≤ 4.2e-7 (issue 3 asks 1e-4).
+            assert!(
+                (from_bins - t.forward_fraction[i]).abs() < 5e-7,
+                "n = {}: {from_bins} vs {}",
+                i + 1,
+                t.forward_fraction[i]
+            );
+            let e: f64 = row.iter().zip(&omega).map(|(v, o)| v * o).sum();
+            assert!((e - 1.0).abs() < 1e-9);
+        }
+    }
+}
