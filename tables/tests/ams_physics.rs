@@ -3,7 +3,7 @@
 //! glory and corona are present in Ams_1 and fade with n while F_n falls toward 1/2.
 
 use mie::{AngleGrid, BulkRequest, Material, NodeCounts, SizeDistribution, bulk_phase};
-use tables::ams::{AmsSettings, AmsTable, ams_table};
+use tables::ams::{AmsSeries, AmsSettings, AmsTable, ams_table};
 use tables::grid::ThetaGrid;
 
 fn phase_bins(distribution: SizeDistribution, sizes: usize) -> Vec<f64> {
@@ -123,6 +123,26 @@ fn rain_rainbow_fades_with_scattering_order() {
     );
     assert!(c[0] > 1.5, "no primary rainbow in Ams_1: contrast {}", c[0]);
     assert_fades("rainbow contrast", &c);
+
+    // Riley et al. claim rain is isotropic within 1e-6 by n = 26; report what the table says.
+    let series = AmsSeries::new(&grid, &bins, AmsSettings::default().blur_bins);
+    let n_iso: Vec<Option<usize>> = [1e-2, 1e-4, 1e-6]
+        .iter()
+        .map(|&eps| series.isotropic_order(eps, 100_000))
+        .collect();
+    eprintln!(
+        "rain n_iso(1e-2, 1e-4, 1e-6) = {n_iso:?}; max|4πAms_26 − 1| = {:.3e}",
+        series.anisotropy(26)
+    );
+    let n_iso: Vec<usize> = n_iso
+        .into_iter()
+        .map(|n| n.expect("isotropic by n = 1e5"))
+        .collect();
+    assert!(n_iso[0] < n_iso[1] && n_iso[1] < n_iso[2]);
+    // The bisection's premise: the deviation only falls around the answer.
+    for (eps, &n) in [1e-2, 1e-4, 1e-6].iter().zip(&n_iso) {
+        assert!(series.anisotropy(n) < *eps && series.anisotropy(n - 1) >= *eps);
+    }
 }
 
 #[test]
