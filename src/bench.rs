@@ -29,6 +29,27 @@ pub struct BenchArgs {
 enum BenchWhat {
     /// Single sphere at x = 1e5 and the 3-wavelength rain lognormal, 1001 angles each.
     Mie(MieBench),
+    /// Bake a scene (default: the embedded one) at each preset into a fresh directory, then
+    /// again unchanged: wall time, re-bake speed-up and peak memory, each bake its own process.
+    Bake(BakeBench),
+}
+
+#[derive(Debug, Args)]
+struct BakeBench {
+    /// Scene file (TOML); default: the embedded default scene.
+    scene: Option<PathBuf>,
+    /// Presets to time, comma-separated.
+    #[arg(long, default_value = "draft,standard")]
+    presets: String,
+    /// Worker threads per bake (default: all cores).
+    #[arg(long)]
+    jobs: Option<usize>,
+    /// Keep the bakes in this directory (one subdirectory per preset) instead of a temporary one.
+    #[arg(long)]
+    keep: Option<PathBuf>,
+    /// Print JSON.
+    #[arg(long)]
+    json: bool,
 }
 
 #[derive(Debug, Args)]
@@ -58,7 +79,10 @@ const RAIN_CASES: [(f64, f64, f64); 3] = [
 ];
 
 pub fn run(args: BenchArgs) -> Result<()> {
-    let BenchWhat::Mie(b) = args.what;
+    let b = match args.what {
+        BenchWhat::Mie(b) => b,
+        BenchWhat::Bake(b) => return bench_bake(b),
+    };
     let threads = b.threads.unwrap_or_else(rayon::current_num_threads);
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
@@ -234,4 +258,102 @@ fn compare_phase(ours: &[Vec<f64>], theirs: &serde_json::Value) -> Result<f64> {
         }
     }
     Ok(worst)
+}
+
+/// One `photometeor bake … --json` in a child process; its JSON summary.
+fn bake_once(
+    scene: &Option<PathBuf>,
+    out: &std::path::Path,
+    preset: &str,
+    jobs: Option<usize>,
+) -> Result<(f64, serde_json::Value)> {
+    let exe = std::env::current_exe().context("locating the photometeor executable")?;
+    let mut cmd = Command::new(exe);
+    cmd.arg("bake");
+    if let Some(s) = scene {
+        cmd.arg(s);
+    }
+    cmd.arg("--out")
+        .arg(out)
+        .args(["--quality", preset, "--quiet", "--json"]);
+    if let Some(j) = jobs {
+        cmd.args(["--jobs", &j.to_string()]);
+    }
+    let start = Instant::now();
+    let output = cmd.output().context("running photometeor bake")?;
+    let wall = start.elapsed().as_secs_f64();
+    if !output.status.success() {
+        bail!(
+            "photometeor bake --quality {preset} failed: {}",
+            String::from_utf8_lossy(&output.stderr).trim()
+        );
+    }
+    let report = serde_json::from_slice(&output.stdout).context("reading the bake summary")?;
+    Ok((wall, report))
+}
+
+fn bench_bake(b: BakeBench) -> Result<()> {
+    let temp;
+    let root = match &b.keep {
+        Some(dir) => dir.clone(),
+        None => {
+            temp = tempfile::tempdir().context("creating a temporary directory")?;
+            temp.path().to_path_buf()
+        }
+    };
+    let mut rows = Vec::new();
+    for preset in b
+        .presets
+        .split(',')
+        .map(str::trim)
+        .filter(|p| !p.is_empty())
+    {
+        if !["draft", "standard", "reference"].contains(&preset) {
+            bail!("preset {preset:?} is not one of draft, standard, reference");
+        }
+        let out = root.join(preset);
+        if out.exists() {
+            std::fs::remove_dir_all(&out).with_context(|| format!("clearing {}", out.display()))?;
+        }
+        let (first, report) = bake_once(&b.scene, &out, preset, b.jobs)?;
+        let (again, report_again) = bake_once(&b.scene, &out, preset, b.jobs)?;
+        let bytes: u64 = std::fs::read_dir(&out)?
+            .filter_map(|e| e.ok())
+            .filter(|e| e.path().extension().is_some_and(|x| x == "exr"))
+            .filter_map(|e| e.metadata().ok().map(|m| m.len()))
+            .sum();
+        rows.push(json!({
+            "preset": preset,
+            "first_s": first,
+            "rebake_s": again,
+            "rebake_speedup": first / again,
+            "peak_rss_mib": report["peak_rss_mib"],
+            "computed": report["computed"],
+            "rebake_cached": report_again["cached"],
+            "rebake_computed": report_again["computed"],
+            "exr_bytes": bytes,
+        }));
+    }
+    let threads = b.jobs.unwrap_or_else(rayon::current_num_threads);
+    if b.json {
+        println!("{}", json!({ "threads": threads, "presets": rows }));
+        return Ok(());
+    }
+    println!("bake benchmark ({threads} threads; wall time of each process):");
+    println!(
+        "  {:<10} {:>10} {:>10} {:>10} {:>12} {:>10}",
+        "preset", "first s", "re-bake s", "speed-up", "peak MiB", "EXR KiB"
+    );
+    for r in &rows {
+        println!(
+            "  {:<10} {:>10.2} {:>10.3} {:>10.0} {:>12.0} {:>10.0}",
+            r["preset"].as_str().unwrap_or(""),
+            r["first_s"].as_f64().unwrap_or(f64::NAN),
+            r["rebake_s"].as_f64().unwrap_or(f64::NAN),
+            r["rebake_speedup"].as_f64().unwrap_or(f64::NAN),
+            r["peak_rss_mib"].as_f64().unwrap_or(f64::NAN),
+            r["exr_bytes"].as_u64().unwrap_or(0) as f64 / 1024.0
+        );
+    }
+    Ok(())
 }

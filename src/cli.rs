@@ -29,8 +29,63 @@ enum Command {
     /// A size distribution of water or ice spheres: σ_ext, albedo, g and the phase function
     /// averaged inside the bins of a uniform θ grid, per wavelength.
     Phase(PhaseArgs),
+    /// Bake a scene's multiple-scattering tables: one EXR per field (rows Ams_1..Ams_N, columns
+    /// θ_k = k·Δθ, channels R, G, B in 1/sr) and manifest.json. Unchanged fields come from the
+    /// cache in DIR/.cache.
+    Bake(BakeArgs),
+    /// Summarize a bake directory (fields, sizes, F_i, n_iso, g, σ_ext, albedo).
+    Inspect(InspectArgs),
+    /// Compare two bakes of the same scene: rms and max relative error of Ams_1 and of all
+    /// rows (bins θ ≥ --min-angle-deg), and the largest F_i difference, per field and channel.
+    Compare(CompareArgs),
     /// Time photometeor's Mie workloads (and miepython's, side by side, when available).
     Bench(crate::bench::BenchArgs),
+}
+
+#[derive(Debug, ClapArgs)]
+struct BakeArgs {
+    /// Scene file (TOML); default: the embedded default scene (cloud, rain, ice, snow).
+    scene: Option<std::path::PathBuf>,
+    /// Output directory (created if missing).
+    #[arg(long, default_value = "photometeor-tables")]
+    out: std::path::PathBuf,
+    /// Accuracy preset, overriding the scene's: draft (≤ 5 % rms error of Ams_1 against
+    /// reference), standard (≤ 1 %), reference.
+    #[arg(long, value_parser = ["draft", "standard", "reference"])]
+    quality: Option<String>,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    jobs: Option<usize>,
+    /// No progress bars or summary.
+    #[arg(long)]
+    quiet: bool,
+    /// Print the summary as JSON (fields computed and cached, seconds, peak memory).
+    #[arg(long)]
+    json: bool,
+}
+
+#[derive(Debug, ClapArgs)]
+struct CompareArgs {
+    /// The bake to judge.
+    dir: std::path::PathBuf,
+    /// The bake taken as truth (e.g. a `--quality reference` bake of the same scene).
+    reference: std::path::PathBuf,
+    /// Smallest scattering angle of the error statistics, in degrees (the forward bins hold
+    /// the unresolved diffraction peak).
+    #[arg(long, default_value_t = 1.0)]
+    min_angle_deg: f64,
+    /// Print JSON.
+    #[arg(long)]
+    json: bool,
+}
+
+#[derive(Debug, ClapArgs)]
+struct InspectArgs {
+    /// A bake directory (holding manifest.json).
+    dir: std::path::PathBuf,
+    /// Print JSON.
+    #[arg(long)]
+    json: bool,
 }
 
 #[derive(Debug, ClapArgs)]
@@ -137,7 +192,119 @@ pub fn run(args: Args) -> Result<()> {
         Command::Mie(a) => run_mie(a),
         Command::Phase(a) => run_phase(a),
         Command::Bench(a) => crate::bench::run(a),
+        Command::Bake(a) => run_bake(a),
+        Command::Inspect(a) => run_inspect(a),
+        Command::Compare(a) => run_compare(a),
     }
+}
+
+fn run_bake(a: BakeArgs) -> Result<()> {
+    use tables::scene::{DEFAULT_SCENE, Quality, Scene};
+    let scene = match &a.scene {
+        Some(path) => Scene::from_file(path)?,
+        None => Scene::parse(DEFAULT_SCENE, "default scene")?,
+    };
+    let quality = match a.quality.as_deref() {
+        Some(q) => Quality::parse(q).context("quality preset")?,
+        None => scene.quality,
+    };
+    if a.jobs == Some(0) {
+        bail!("--jobs 0 is outside the allowed range [1, ∞)");
+    }
+    let plan = tables::bake::BakePlan {
+        scene,
+        out_dir: a.out.clone(),
+        quality,
+        knobs: quality.knobs(),
+        quiet: a.quiet || std::env::var_os("CI").is_some(),
+    };
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(a.jobs.unwrap_or(0))
+        .build()
+        .context("building the thread pool")?;
+    let report = pool.install(|| tables::bake::run(&plan))?;
+    if a.json {
+        println!("{}", serde_json::to_string(&report)?);
+    } else if !a.quiet {
+        println!(
+            "baked {} into {} in {:.1} s (computed: {:?}, from cache: {:?}, not yet available: {:?}); peak memory {}",
+            plan.scene.name,
+            plan.out_dir.display(),
+            report.seconds,
+            report.computed,
+            report.cached,
+            report.unavailable,
+            report
+                .peak_rss_mib
+                .map_or("unknown".to_string(), |m| format!("{m:.0} MiB"))
+        );
+    }
+    Ok(())
+}
+
+fn run_compare(a: CompareArgs) -> Result<()> {
+    let report = tables::bake::compare(&a.dir, &a.reference, a.min_angle_deg)?;
+    if a.json {
+        println!("{}", serde_json::to_string(&report)?);
+        return Ok(());
+    }
+    println!(
+        "{} against {} (θ ≥ {}°):",
+        a.dir.display(),
+        a.reference.display(),
+        a.min_angle_deg
+    );
+    println!(
+        "  {:<10} {:>2}  {:>12} {:>12} {:>12} {:>12} {:>10}",
+        "field", "ch", "rms Ams_1", "max Ams_1", "rms all n", "max all n", "max |ΔF_i|"
+    );
+    for f in &report.fields {
+        println!(
+            "  {:<10} {:>2}  {:>12.3e} {:>12.3e} {:>12.3e} {:>12.3e} {:>10.2e}",
+            f.field,
+            f.channel,
+            f.rms_rel_ams1,
+            f.max_rel_ams1,
+            f.rms_rel_all,
+            f.max_rel_all,
+            f.max_abs_forward_fraction
+        );
+    }
+    Ok(())
+}
+
+fn run_inspect(a: InspectArgs) -> Result<()> {
+    let manifest = tables::manifest::read_manifest(&a.dir)?;
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&manifest)?);
+        return Ok(());
+    }
+    println!(
+        "{}: schema {}, {} {}, Δθ = {}°, {} angles",
+        a.dir.display(),
+        manifest.schema,
+        manifest.tool,
+        manifest.tool_version,
+        manifest.theta_step_deg,
+        manifest.angle_count
+    );
+    for f in &manifest.fields {
+        println!(
+            "  {:<10} {:<5} {:<14} N = {:<4} g = {:.4}/{:.4}/{:.4}  σ_ext = {:.3e} m²  F_1 = {:.4}  F_N = {:.4}  n_iso(1e-6) = {:?}",
+            f.name,
+            f.kind,
+            f.file,
+            f.n_max,
+            f.g.r,
+            f.g.g,
+            f.g.b,
+            f.sigma_ext_m2.g,
+            f.forward_fraction.g[0],
+            f.forward_fraction.g[f.n_max - 1],
+            f.n_isotropic.g.get("1e-6").copied().flatten()
+        );
+    }
+    Ok(())
 }
 
 /// Parses "1.333+1e-8i", "1.5-0.1j", "1.33": real part, then an optional signed imaginary part.

@@ -190,6 +190,10 @@ pub fn relative_change(a: &BulkPhase, b: &BulkPhase) -> f64 {
         .max((b.g - a.g).abs())
 }
 
+/// Sizes whose Mie coefficients are held at once by [`bulk_at`] (64 raindrops at x ≈ 2e4 hold
+/// ~50 MB).
+const SIZE_CHUNK: usize = 64;
+
 /// One pass at fixed node counts.
 pub fn bulk_at(
     m: Complex64,
@@ -206,25 +210,6 @@ pub fn bulk_at(
         .iter()
         .map(|&r| Sphere::new(m, k * r))
         .collect::<Result<_, _>>()?;
-    // Coefficients and efficiencies per size, in parallel; order is preserved.
-    let per_size: Vec<(SphereTerms, f64, f64, f64)> = spheres
-        .par_iter()
-        .zip(sizes.radius_um.par_iter())
-        .map(|(s, &r)| {
-            let c = s.coefficients();
-            let e = c.efficiencies();
-            let area = std::f64::consts::PI * r * r;
-            (SphereTerms::new(&c), e.q_ext * area, e.q_sca * area, e.g)
-        })
-        .collect();
-    let mut sigma_ext = 0.0;
-    let mut sigma_sca = 0.0;
-    let mut g_sca = 0.0;
-    for ((_, ext, sca, g), w) in per_size.iter().zip(&sizes.weight) {
-        sigma_ext += w * ext;
-        sigma_sca += w * sca;
-        g_sca += w * sca * g;
-    }
     let x_min = spheres.iter().map(|s| s.x()).fold(f64::INFINITY, f64::min);
     let x_max = spheres.iter().map(|s| s.x()).fold(0.0, f64::max);
     let step_rad = grid.step_deg().to_radians();
@@ -238,19 +223,58 @@ pub fn bulk_at(
             1
         }
     });
-    let terms: Vec<SphereTerms> = per_size.into_iter().map(|(t, ..)| t).collect();
-    let intensity = weighted_intensity(&terms, &sizes.weight, &FoldedAngles::new(&quadrature.mu));
+    let node_angles = FoldedAngles::new(&quadrature.mu);
+    let point_angles = FoldedAngles::new(point_cosines);
+    // Sizes in fixed chunks, so memory stays bounded (a chunk's coefficients, not all sizes')
+    // and the summation order does not depend on the thread count.
+    let mut sigma_ext = 0.0;
+    let mut sigma_sca = 0.0;
+    let mut g_sca = 0.0;
+    let mut intensity = vec![0.0; quadrature.mu.len()];
+    let mut point_intensity = vec![0.0; point_cosines.len()];
+    for (chunk, (radii, weights)) in spheres.chunks(SIZE_CHUNK).zip(
+        sizes
+            .radius_um
+            .chunks(SIZE_CHUNK)
+            .zip(sizes.weight.chunks(SIZE_CHUNK)),
+    ) {
+        // Coefficients and efficiencies per size, in parallel; order is preserved.
+        let per_size: Vec<(SphereTerms, f64, f64, f64)> = chunk
+            .par_iter()
+            .zip(radii.par_iter())
+            .map(|(s, &r)| {
+                let c = s.coefficients();
+                let e = c.efficiencies();
+                let area = std::f64::consts::PI * r * r;
+                (SphereTerms::new(&c), e.q_ext * area, e.q_sca * area, e.g)
+            })
+            .collect();
+        for ((_, ext, sca, g), w) in per_size.iter().zip(weights) {
+            sigma_ext += w * ext;
+            sigma_sca += w * sca;
+            g_sca += w * sca * g;
+        }
+        let terms: Vec<SphereTerms> = per_size.into_iter().map(|(t, ..)| t).collect();
+        for (acc, v) in intensity
+            .iter_mut()
+            .zip(weighted_intensity(&terms, weights, &node_angles))
+        {
+            *acc += v;
+        }
+        if !point_cosines.is_empty() {
+            for (acc, v) in
+                point_intensity
+                    .iter_mut()
+                    .zip(weighted_intensity(&terms, weights, &point_angles))
+            {
+                *acc += v;
+            }
+        }
+    }
     let scale = 1.0 / (2.0 * k * k * sigma_sca);
     let node_phase: Vec<f64> = intensity.iter().map(|i| i * scale).collect();
     let bins = quadrature.average(&node_phase);
-    let points = if point_cosines.is_empty() {
-        Vec::new()
-    } else {
-        weighted_intensity(&terms, &sizes.weight, &FoldedAngles::new(point_cosines))
-            .iter()
-            .map(|i| i * scale)
-            .collect()
-    };
+    let points: Vec<f64> = point_intensity.iter().map(|i| i * scale).collect();
     let energy: f64 = bins
         .iter()
         .enumerate()

@@ -83,6 +83,8 @@ pub struct AmsSeries {
     q: Vec<f64>,
     /// χ_l(Q) blurred, l = 0..=l_max.
     chi: Vec<f64>,
+    /// max_{l' ≥ l} |χ_l'|: bounds what the series beyond l can still add.
+    chi_tail: Vec<f64>,
     input_energy_error: f64,
 }
 
@@ -120,11 +122,16 @@ impl AmsSeries {
             let blur = (-0.5 * lf * (lf + 1.0) * s_rad * s_rad).exp();
             chi.push(2.0 * std::f64::consts::PI * dot(&q, w.values()) * blur);
         }
+        let mut chi_tail = chi.iter().map(|c| c.abs()).collect::<Vec<_>>();
+        for l in (0..chi_tail.len().saturating_sub(1)).rev() {
+            chi_tail[l] = chi_tail[l].max(chi_tail[l + 1]);
+        }
         Self {
             grid: grid.clone(),
             f,
             q,
             chi,
+            chi_tail,
             input_energy_error: energy - 1.0,
         }
     }
@@ -139,82 +146,223 @@ impl AmsSeries {
         self.chi.len() - 1
     }
 
+    /// The theta grid the series lives on.
+    pub fn grid(&self) -> &ThetaGrid {
+        &self.grid
+    }
+
     /// Bin averages of Ams_n for each n in `orders` (n ≥ 1), in one pass over l.
     pub fn rows(&self, orders: &[usize]) -> Vec<Vec<f64>> {
-        let k_len = self.grid.len();
-        let omega0 = self.grid.bin_solid_angles()[0];
-        let d_mu = self.grid.bin_mu_widths();
-        let f = self.f;
-        let mut rows = vec![vec![0.0; k_len]; orders.len()];
-        let mut w = BinIntegrals::new(&self.grid);
-        for (l, &chi_l) in self.chi.iter().enumerate() {
-            if l > 0 {
-                w.advance();
-            }
-            let weight = (2.0 * l as f64 + 1.0) / (4.0 * std::f64::consts::PI);
-            for (row, &n) in rows.iter_mut().zip(orders) {
-                let c = higher_order_coefficient(f, chi_l, n);
-                if c == 0.0 {
-                    continue;
-                }
-                let s = weight * c;
-                for (r, (wl, dm)) in row.iter_mut().zip(w.values().iter().zip(&d_mu)) {
-                    *r += s * wl / dm;
-                }
-            }
-        }
-        for (row, &n) in rows.iter_mut().zip(orders) {
-            // j = 1: n f^{n−1}(1 − f) Q exactly; j = 0: f^n δ in bin 0.
-            let single = n as f64 * f.powi(n as i32 - 1) * (1.0 - f);
-            for (r, qk) in row.iter_mut().zip(&self.q) {
-                *r += single * qk;
-            }
-            row[0] += f.powi(n as i32) / omega0;
-        }
-        rows
+        mixture_rows(&[(1.0, self)], orders)
     }
 
     /// F_n = ∫_{μ>0} Ams_n dΩ from the coefficients (module docs).
     pub fn forward_fraction(&self, n: usize) -> f64 {
-        let f = self.f;
-        let single = n as f64 * f.powi(n as i32 - 1) * (1.0 - f);
-        let mut fwd = f.powi(n as i32) + single * forward_hemisphere(&self.grid, &self.q);
-        // l = 0: ∫_0^1 P_0 = 1, weight 1/2.
-        fwd += 0.5 * higher_order_coefficient(f, self.chi[0], n);
-        let p_prime_0 = legendre_derivatives_at_zero(self.l_max());
-        for l in 1..self.chi.len() {
-            let c = higher_order_coefficient(f, self.chi[l], n);
-            let half_integral = p_prime_0[l] / (l as f64 * (l as f64 + 1.0));
-            fwd += (2.0 * l as f64 + 1.0) / 2.0 * c * half_integral;
-        }
-        fwd
+        mixture_forward_fraction(&[(1.0, self)], n)
     }
 
     /// max_k |4π Ams_n(θ_k) − 1|: how far row n is from isotropic.
     pub fn anisotropy(&self, n: usize) -> f64 {
-        self.rows(&[n])[0]
-            .iter()
-            .map(|v| (4.0 * std::f64::consts::PI * v - 1.0).abs())
-            .fold(0.0, f64::max)
+        anisotropy(&[(1.0, self)], n)
     }
 
     /// n_iso(ε): the smallest n ≤ n_cap with max_k |4π Ams_n − 1| < ε, by bisection on n
     /// (the deviation falls monotonically for the phase functions met here), or None.
     pub fn isotropic_order(&self, epsilon: f64, n_cap: usize) -> Option<usize> {
-        if self.anisotropy(n_cap) >= epsilon {
-            return None;
+        isotropic_order(&[(1.0, self)], epsilon, n_cap)
+    }
+}
+
+/// Ams_n of light that keeps its wavelength while it scatters: Σ_j a_j Ams_n[P_j] with
+/// Σ_j a_j = 1, a_j ≥ 0. This is how an RGB channel mixes its wavelengths (each wavelength's
+/// light scatters n times with its own phase function), not (Σ_j a_j P_j)^{∗n}. The mixing is
+/// done in coefficient space: one Legendre series per row whatever the number of wavelengths.
+#[derive(Debug, Clone, PartialEq)]
+pub struct AmsMixture {
+    parts: Vec<(f64, AmsSeries)>,
+}
+
+impl AmsMixture {
+    /// `parts` = (weight, series) on one grid; weights ≥ 0, normalized here to sum to 1.
+    pub fn new(parts: Vec<(f64, AmsSeries)>) -> Self {
+        assert!(!parts.is_empty(), "a mixture needs at least one part");
+        assert!(
+            parts
+                .iter()
+                .all(|(a, s)| *a >= 0.0 && s.grid == parts[0].1.grid),
+            "mixture weights must be ≥ 0 and the parts share one grid"
+        );
+        let total: f64 = parts.iter().map(|(a, _)| a).sum();
+        assert!(total > 0.0, "mixture weights sum to 0");
+        Self {
+            parts: parts.into_iter().map(|(a, s)| (a / total, s)).collect(),
         }
-        let (mut lo, mut hi) = (0usize, n_cap); // anisotropy(hi) < ε; lo fails (or is 0)
-        while hi - lo > 1 {
-            let mid = (lo + hi) / 2;
-            if self.anisotropy(mid) < epsilon {
-                hi = mid;
-            } else {
-                lo = mid;
+    }
+
+    fn refs(&self) -> Vec<(f64, &AmsSeries)> {
+        self.parts.iter().map(|(a, s)| (*a, s)).collect()
+    }
+
+    /// Bin averages of Ams_n for each n in `orders` (n ≥ 1).
+    pub fn rows(&self, orders: &[usize]) -> Vec<Vec<f64>> {
+        mixture_rows(&self.refs(), orders)
+    }
+
+    /// F_n = Σ_j a_j F_n[P_j].
+    pub fn forward_fraction(&self, n: usize) -> f64 {
+        mixture_forward_fraction(&self.refs(), n)
+    }
+
+    /// Energy of row n held by the exact forward delta: Σ_j a_j f_j^n.
+    pub fn forward_peak_fraction(&self, n: usize) -> f64 {
+        self.parts.iter().map(|(a, s)| a * s.f.powi(n as i32)).sum()
+    }
+
+    /// Highest Legendre degree among the parts.
+    pub fn l_max(&self) -> usize {
+        self.parts.iter().map(|(_, s)| s.l_max()).max().unwrap_or(0)
+    }
+
+    /// max_k |4π Ams_n(θ_k) − 1|.
+    pub fn anisotropy(&self, n: usize) -> f64 {
+        anisotropy(&self.refs(), n)
+    }
+
+    /// n_iso(ε), as [`AmsSeries::isotropic_order`].
+    pub fn isotropic_order(&self, epsilon: f64, n_cap: usize) -> Option<usize> {
+        isotropic_order(&self.refs(), epsilon, n_cap)
+    }
+}
+
+/// Rows of Σ_j a_j Ams_n[P_j]: the j ≥ 2 coefficients are mixed per degree l and summed as one
+/// series; the exact single-scattering and delta terms are added per part.
+fn mixture_rows(parts: &[(f64, &AmsSeries)], orders: &[usize]) -> Vec<Vec<f64>> {
+    let grid = &parts[0].1.grid;
+    let k_len = grid.len();
+    let omega0 = grid.bin_solid_angles()[0];
+    let inv_d_mu: Vec<f64> = grid.bin_mu_widths().iter().map(|d| 1.0 / d).collect();
+    let l_max = parts.iter().map(|(_, s)| s.l_max()).max().unwrap_or(0);
+    let n_top = orders.iter().copied().max().unwrap_or(0);
+    let powers: Vec<Vec<f64>> = parts.iter().map(|(_, s)| powers_of(s.f, n_top)).collect();
+    let mut rows = vec![vec![0.0; k_len]; orders.len()];
+    let mut w = BinIntegrals::new(grid);
+    let mut w_over_dmu = vec![0.0; k_len];
+    let mut coefficients = vec![0.0; orders.len()];
+    // Σ_{l' ≥ l} (2l'+1)/(4π) |c_{n,l'}| |bin average of P_l'| ≤ B_l (L+1)²/(4π), with
+    // B_l = Σ_j a_j c_n(f_j, max_{l' ≥ l} |χ_l'|) (c_n grows with |χ|): below 1e-17 nothing
+    // beyond l can change a row (values ~ 1/(4π)), so the sum stops there. High orders, whose
+    // χ_l^n vanish early, cost a fraction of a full pass.
+    let tail_scale = ((l_max + 1) as f64).powi(2) / (4.0 * std::f64::consts::PI);
+    for l in 0..=l_max {
+        if l % 32 == 0 && l > 0 {
+            let bound: f64 = parts
+                .iter()
+                .zip(&powers)
+                .map(|((a, s), f_pow)| {
+                    let m = s.chi_tail.get(l).copied().unwrap_or(0.0);
+                    orders
+                        .iter()
+                        .map(|&n| a * higher_order_coefficient(s.f, f_pow, m, n))
+                        .fold(0.0, f64::max)
+                })
+                .sum();
+            if bound * tail_scale < 1e-17 {
+                break;
             }
         }
-        Some(hi)
+        if l > 0 {
+            w.advance();
+        }
+        let weight = (2.0 * l as f64 + 1.0) / (4.0 * std::f64::consts::PI);
+        coefficients.iter_mut().for_each(|c| *c = 0.0);
+        for ((a, s), f_pow) in parts.iter().zip(&powers) {
+            let Some(&chi_l) = s.chi.get(l) else { continue };
+            for (c, &n) in coefficients.iter_mut().zip(orders) {
+                *c += a * higher_order_coefficient(s.f, f_pow, chi_l, n);
+            }
+        }
+        if coefficients.iter().all(|&c| c == 0.0) {
+            continue;
+        }
+        for ((x, wl), inv) in w_over_dmu.iter_mut().zip(w.values()).zip(&inv_d_mu) {
+            *x = wl * inv;
+        }
+        for (row, &c) in rows.iter_mut().zip(&coefficients) {
+            if c == 0.0 {
+                continue;
+            }
+            let s = weight * c;
+            for (r, x) in row.iter_mut().zip(&w_over_dmu) {
+                *r += s * x;
+            }
+        }
     }
+    for (row, &n) in rows.iter_mut().zip(orders) {
+        for (a, s) in parts {
+            // j = 1: n f^{n−1}(1 − f) Q exactly; j = 0: f^n δ in bin 0.
+            let single = a * n as f64 * s.f.powi(n as i32 - 1) * (1.0 - s.f);
+            for (r, qk) in row.iter_mut().zip(&s.q) {
+                *r += single * qk;
+            }
+            row[0] += a * s.f.powi(n as i32) / omega0;
+        }
+    }
+    rows
+}
+
+fn mixture_forward_fraction(parts: &[(f64, &AmsSeries)], n: usize) -> f64 {
+    let mut total = 0.0;
+    for (a, s) in parts {
+        let f = s.f;
+        let f_pow = powers_of(f, n);
+        let single = n as f64 * f.powi(n as i32 - 1) * (1.0 - f);
+        let mut fwd = f.powi(n as i32) + single * forward_hemisphere(&s.grid, &s.q);
+        // l = 0: ∫_0^1 P_0 = 1, weight 1/2.
+        fwd += 0.5 * higher_order_coefficient(f, &f_pow, s.chi[0], n);
+        let p_prime_0 = legendre_derivatives_at_zero(s.l_max());
+        for l in 1..s.chi.len() {
+            let c = higher_order_coefficient(f, &f_pow, s.chi[l], n);
+            let half_integral = p_prime_0[l] / (l as f64 * (l as f64 + 1.0));
+            fwd += (2.0 * l as f64 + 1.0) / 2.0 * c * half_integral;
+        }
+        total += a * fwd;
+    }
+    total
+}
+
+fn anisotropy(parts: &[(f64, &AmsSeries)], n: usize) -> f64 {
+    mixture_rows(parts, &[n])[0]
+        .iter()
+        .map(|v| (4.0 * std::f64::consts::PI * v - 1.0).abs())
+        .fold(0.0, f64::max)
+}
+
+fn isotropic_order(parts: &[(f64, &AmsSeries)], epsilon: f64, n_cap: usize) -> Option<usize> {
+    if anisotropy(parts, n_cap) >= epsilon {
+        return None;
+    }
+    let (mut lo, mut hi) = (0usize, n_cap); // anisotropy(hi) < ε; lo fails (or is 0)
+    while hi - lo > 1 {
+        let mid = (lo + hi) / 2;
+        if anisotropy(parts, mid) < epsilon {
+            hi = mid;
+        } else {
+            lo = mid;
+        }
+    }
+    Some(hi)
+}
+
+/// f^0..=f^n (only up to degree 64 are used by the direct sum).
+fn powers_of(f: f64, n: usize) -> Vec<f64> {
+    let top = n.min(64);
+    let mut p = Vec::with_capacity(top + 1);
+    let mut x = 1.0;
+    for _ in 0..=top {
+        p.push(x);
+        x *= f;
+    }
+    p
 }
 
 /// Computes Ams_n and F_n for n = 1..N from bin averages `bins` (1/sr) on `grid`.
@@ -231,7 +379,8 @@ pub fn ams_table(grid: &ThetaGrid, bins: &[f64], settings: AmsSettings) -> AmsTa
 }
 
 /// c_{n,l} = (f + (1−f)χ)^n − f^n − n f^{n−1}(1−f)χ: the j ≥ 2 part of the binomial expansion.
-fn higher_order_coefficient(f: f64, chi: f64, n: usize) -> f64 {
+/// `f_pow` holds f^0..f^min(n, 64).
+fn higher_order_coefficient(f: f64, f_pow: &[f64], chi: f64, n: usize) -> f64 {
     if n < 2 {
         return 0.0;
     }
@@ -247,9 +396,11 @@ fn higher_order_coefficient(f: f64, chi: f64, n: usize) -> f64 {
     // Σ_{j=2}^{n} C(n,j) f^{n−j} a^j, summed directly (no cancellation against the j < 2 terms).
     let mut sum = 0.0;
     let mut binom = n as f64 * (n as f64 - 1.0) / 2.0; // C(n, 2)
+    let mut a_pow = a * a;
     for j in 2..=n {
-        sum += binom * f.powi((n - j) as i32) * a.powi(j as i32);
+        sum += binom * f_pow[n - j] * a_pow;
         binom *= (n - j) as f64 / (j + 1) as f64;
+        a_pow *= a;
     }
     sum
 }

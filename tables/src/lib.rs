@@ -6,9 +6,18 @@
 //! - [`legendre`]: exact bin integrals of P_l, χ_l from bin averages and bin averages from
 //!   χ_l, and a fast Legendre ↔ point-value transform (Chebyshev conversion + DCT via rustfft)
 //!   with its slow reference.
-//!
-//! Work in progress (issue 3): Ams_n, F_i, spectral → RGB and the bake follow.
+//! - [`ams`]: Ams_n and F_n by a forward-delta split and a blurred Legendre series, n_iso(ε),
+//!   and the per-wavelength mixture an RGB channel is.
+//! - [`spectral`]: the wavelengths of a bake and their CIE × solar → linear sRGB weights.
+//! - [`exr_io`], [`manifest`]: the EXR contract and `manifest.json`, read and written.
+//! - [`scene`], [`bake`]: TOML scenes (only what a scene names is modelled) and the cached,
+//!   atomic bake of their tables.
 
 pub mod ams;
+pub mod bake;
+pub mod exr_io;
 pub mod grid;
 pub mod legendre;
+pub mod manifest;
+pub mod scene;
+pub mod spectral;

@@ -1,0 +1,400 @@
+//! Scene files: what a scene contains, so that only that is modelled.
+//!
+//! A scene is TOML with one `[scene]` table and any number of `[[field]]` tables:
+//!
+//! ```toml
+//! [scene]
+//! name = "default"
+//! spectral = "spectral"     # or "rgb3" (Riley's 650/515/440 nm)
+//! wavelengths = 31          # spectral samples over [wavelength_min_nm, wavelength_max_nm]
+//! theta_step_deg = 0.18     # must divide 180
+//! n_max = 26                # scattering orders Ams_1..Ams_N, or:
+//! # max_optical_depth = 10  # N = ⌈τ + 4√τ + 4⌉ (the Poisson tail of the scatter count)
+//! quality = "standard"      # draft | standard | reference
+//!
+//! [[field]]
+//! name = "cloud"            # user name: the EXR is <name>.exr
+//! kind = "cloud"            # cloud | rain (water spheres), ice | snow (crystals)
+//! temperature_c = 10
+//! distribution = { kind = "gamma", r_eff_um = 10, v_eff = 0.1 }
+//! ```
+//!
+//! Errors name the key and its line; nothing is written before the whole scene is valid.
+
+use std::path::Path;
+
+use anyhow::{Result, anyhow, bail};
+use mie::SizeDistribution;
+use serde::{Deserialize, Serialize};
+use toml::Spanned;
+
+/// The scene `photometeor bake` uses when none is given: all four kinds.
+pub const DEFAULT_SCENE: &str = include_str!("../../data/scenes/default.toml");
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SceneFile {
+    scene: Spanned<Header>,
+    #[serde(rename = "field", default)]
+    fields: Vec<Spanned<FieldFile>>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Header {
+    name: String,
+    #[serde(default)]
+    spectral: Option<String>,
+    #[serde(default)]
+    wavelengths: Option<usize>,
+    #[serde(default)]
+    wavelength_min_nm: Option<f64>,
+    #[serde(default)]
+    wavelength_max_nm: Option<f64>,
+    #[serde(default)]
+    theta_step_deg: Option<f64>,
+    #[serde(default)]
+    n_max: Option<usize>,
+    #[serde(default)]
+    max_optical_depth: Option<f64>,
+    #[serde(default)]
+    quality: Option<String>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct FieldFile {
+    name: String,
+    kind: FieldKind,
+    #[serde(default)]
+    temperature_c: Option<f64>,
+    #[serde(default)]
+    distribution: Option<SizeDistribution>,
+    /// Crystal habit (ice, snow): accepted for forward compatibility, modelled in issue 4.
+    #[serde(default)]
+    habit: Option<String>,
+    #[serde(default)]
+    aspect_ratio: Option<f64>,
+    #[serde(default)]
+    max_dimension_um: Option<f64>,
+    #[serde(default)]
+    roughness: Option<f64>,
+}
+
+/// What a particle field is made of.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum FieldKind {
+    Cloud,
+    Rain,
+    Ice,
+    Snow,
+}
+
+/// How the spectrum is sampled.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[serde(tag = "mode", rename_all = "lowercase")]
+pub enum Spectral {
+    /// Riley et al. 2004's three wavelengths: 650, 515, 440 nm.
+    Rgb3,
+    /// `count` uniform samples over [min_nm, max_nm], weighted by CIE 1931 × sunlight.
+    Spectral {
+        count: usize,
+        min_nm: f64,
+        max_nm: f64,
+    },
+}
+
+/// Accuracy presets; their node counts are set from the measured speed/accuracy trade.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Quality {
+    Draft,
+    Standard,
+    Reference,
+}
+
+impl Quality {
+    pub fn parse(text: &str) -> Option<Self> {
+        match text {
+            "draft" => Some(Self::Draft),
+            "standard" => Some(Self::Standard),
+            "reference" => Some(Self::Reference),
+            _ => None,
+        }
+    }
+}
+
+/// One validated particle field.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Field {
+    pub name: String,
+    pub kind: FieldKind,
+    pub temperature_c: f64,
+    /// Size distribution of spheres (cloud, rain).
+    pub distribution: Option<SizeDistribution>,
+    /// Crystal description kept verbatim for ice and snow (not yet modelled).
+    pub crystal: Option<serde_json::Value>,
+}
+
+/// A validated scene: plain data.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Scene {
+    pub name: String,
+    pub spectral: Spectral,
+    pub theta_step_deg: f64,
+    pub n_max: usize,
+    pub quality: Quality,
+    pub fields: Vec<Field>,
+}
+
+/// 1-based line of byte offset `at` in `text`.
+fn line_of(text: &str, at: usize) -> usize {
+    text[..at.min(text.len())].matches('\n').count() + 1
+}
+
+/// Line of `key =` in the table that starts at the span (up to the next table header), or
+/// the span's first line.
+fn key_line(text: &str, span: std::ops::Range<usize>, key: &str) -> usize {
+    let body = &text[span.start.min(text.len())..];
+    let found = body.lines().scan(span.start, |offset, line| {
+        let here = *offset;
+        *offset += line.len() + 1;
+        Some((here, line))
+    });
+    for (i, (offset, line)) in found.enumerate() {
+        if i > 0 && line.trim_start().starts_with('[') {
+            break;
+        }
+        let t = line.trim_start();
+        if t.starts_with(key) && t[key.len()..].trim_start().starts_with('=') {
+            return line_of(text, offset);
+        }
+    }
+    line_of(text, span.start)
+}
+
+impl Scene {
+    /// Reads and validates a scene file.
+    pub fn from_file(path: &Path) -> Result<Self> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| anyhow!("reading scene {}: {e}", path.display()))?;
+        Self::parse(&text, &path.display().to_string())
+    }
+
+    /// Parses and validates scene text; `origin` names it in errors.
+    pub fn parse(text: &str, origin: &str) -> Result<Self> {
+        let file: SceneFile = toml::from_str(text).map_err(|e| {
+            let line = e.span().map(|s| line_of(text, s.start)).unwrap_or(0);
+            anyhow!("{origin} line {line}: {}", e.message())
+        })?;
+        let header_span = file.scene.span();
+        let header = file.scene.into_inner();
+        let at = |key: &str| format!("{origin} line {}", key_line(text, header_span.clone(), key));
+
+        let theta_step_deg = header.theta_step_deg.unwrap_or(0.18);
+        if mie::AngleGrid::new(theta_step_deg).is_err() {
+            bail!(
+                "{}: theta_step_deg = {theta_step_deg} must divide 180° and lie in [0.001, 30]",
+                at("theta_step_deg")
+            );
+        }
+        let n_max = match (header.n_max, header.max_optical_depth) {
+            (Some(_), Some(_)) => bail!(
+                "{}: give n_max or max_optical_depth, not both",
+                at("max_optical_depth")
+            ),
+            (Some(n), None) => {
+                if !(1..=10_000).contains(&n) {
+                    bail!(
+                        "{}: n_max = {n} is outside the allowed range [1, 10000]",
+                        at("n_max")
+                    );
+                }
+                n
+            }
+            (None, Some(tau)) => {
+                if !(tau.is_finite() && tau > 0.0 && tau <= 5000.0) {
+                    bail!(
+                        "{}: max_optical_depth = {tau} is outside the allowed range (0, 5000]",
+                        at("max_optical_depth")
+                    );
+                }
+                (tau + 4.0 * tau.sqrt() + 4.0).ceil() as usize
+            }
+            (None, None) => 26,
+        };
+        let spectral = match header.spectral.as_deref().unwrap_or("spectral") {
+            "rgb3" => Spectral::Rgb3,
+            "spectral" => {
+                let count = header.wavelengths.unwrap_or(31);
+                let (min_nm, max_nm) = (
+                    header.wavelength_min_nm.unwrap_or(400.0),
+                    header.wavelength_max_nm.unwrap_or(700.0),
+                );
+                if !(3..=1000).contains(&count) {
+                    bail!(
+                        "{}: wavelengths = {count} is outside the allowed range [3, 1000]",
+                        at("wavelengths")
+                    );
+                }
+                if !(min_nm >= 360.0 && max_nm <= 830.0 && min_nm < max_nm) {
+                    bail!(
+                        "{}: wavelength range [{min_nm}, {max_nm}] nm must lie within the CIE table [360, 830] nm",
+                        at("wavelength_min_nm")
+                    );
+                }
+                Spectral::Spectral {
+                    count,
+                    min_nm,
+                    max_nm,
+                }
+            }
+            other => bail!(
+                "{}: spectral = {other:?} is not one of \"spectral\", \"rgb3\"",
+                at("spectral")
+            ),
+        };
+        let quality = match header.quality.as_deref() {
+            None => Quality::Standard,
+            Some(q) => Quality::parse(q).ok_or_else(|| {
+                anyhow!(
+                    "{}: quality = {q:?} is not one of draft, standard, reference",
+                    at("quality")
+                )
+            })?,
+        };
+
+        let mut fields: Vec<Field> = Vec::new();
+        for spanned in file.fields {
+            let span = spanned.span();
+            let f = spanned.into_inner();
+            let at = |key: &str| format!("{origin} line {}", key_line(text, span.clone(), key));
+            if f.name.is_empty()
+                || !f
+                    .name
+                    .chars()
+                    .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
+            {
+                bail!(
+                    "{}: field name {:?} must be non-empty ASCII letters, digits, '_' or '-' (it names the EXR file)",
+                    at("name"),
+                    f.name
+                );
+            }
+            if fields.iter().any(|g| g.name == f.name) {
+                bail!("{}: field name {:?} is used twice", at("name"), f.name);
+            }
+            let temperature_c = f.temperature_c.unwrap_or(match f.kind {
+                FieldKind::Cloud | FieldKind::Rain => 10.0,
+                FieldKind::Ice | FieldKind::Snow => -20.0,
+            });
+            let (distribution, crystal) = match f.kind {
+                FieldKind::Cloud | FieldKind::Rain => {
+                    let d = f.distribution.ok_or_else(|| {
+                        anyhow!(
+                            "{}: field {:?} ({:?}) needs a distribution",
+                            at("kind"),
+                            f.name,
+                            f.kind
+                        )
+                    })?;
+                    let d = d.validated().map_err(|e| {
+                        anyhow!(
+                            "{}: field {:?}: distribution: {e}",
+                            at("distribution"),
+                            f.name
+                        )
+                    })?;
+                    if mie::refractive::water_density_kg_m3(temperature_c).is_err() {
+                        bail!(
+                            "{}: temperature_c = {temperature_c} is outside the allowed range [-12, 99] °C for liquid water",
+                            at("temperature_c")
+                        );
+                    }
+                    (Some(d), None)
+                }
+                FieldKind::Ice | FieldKind::Snow => (
+                    None,
+                    Some(serde_json::json!({
+                        "habit": f.habit, "aspect_ratio": f.aspect_ratio,
+                        "max_dimension_um": f.max_dimension_um, "roughness": f.roughness,
+                    })),
+                ),
+            };
+            fields.push(Field {
+                name: f.name,
+                kind: f.kind,
+                temperature_c,
+                distribution,
+                crystal,
+            });
+        }
+        if fields.is_empty() {
+            bail!("{origin}: the scene has no [[field]]; nothing to bake");
+        }
+        Ok(Scene {
+            name: header.name,
+            spectral,
+            theta_step_deg,
+            n_max,
+            quality,
+            fields,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn default_scene_parses_with_all_four_kinds() {
+        let s = Scene::parse(DEFAULT_SCENE, "default").unwrap();
+        let kinds: Vec<FieldKind> = s.fields.iter().map(|f| f.kind).collect();
+        for k in [
+            FieldKind::Cloud,
+            FieldKind::Rain,
+            FieldKind::Ice,
+            FieldKind::Snow,
+        ] {
+            assert!(kinds.contains(&k), "{k:?} missing");
+        }
+        assert_eq!(s.n_max, 26);
+        assert_eq!(s.theta_step_deg, 0.18);
+    }
+
+    fn error_of(text: &str) -> String {
+        format!("{:#}", Scene::parse(text, "s.toml").unwrap_err())
+    }
+
+    const HEAD: &str = "[scene]\nname = \"t\"\n";
+    const RAIN: &str = "[[field]]\nname = \"rain\"\nkind = \"rain\"\ndistribution = { kind = \"lognormal\", median_radius_um = 500, sigma_g = 1.4 }\n";
+
+    #[test]
+    fn malformed_scenes_name_the_key_and_line() {
+        let e = error_of(&format!("{HEAD}colour = 3\n{RAIN}"));
+        assert!(e.contains("line 3") && e.contains("colour"), "{e}");
+        let e = error_of(&format!(
+            "{HEAD}{}",
+            RAIN.replace("median_radius_um = 500", "median_radius_um = -5")
+        ));
+        assert!(
+            e.contains("line 6") && e.contains("-5") && e.contains("(0, ∞)"),
+            "{e}"
+        );
+        let e = error_of(&format!("{HEAD}n_max = 0\n{RAIN}"));
+        assert!(e.contains("line 3") && e.contains("n_max = 0"), "{e}");
+        let e = error_of(&format!("{HEAD}theta_step_deg = 0.7\n{RAIN}"));
+        assert!(
+            e.contains("line 3") && e.contains("theta_step_deg = 0.7"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn optical_depth_sets_the_number_of_orders() {
+        let s = Scene::parse(&format!("{HEAD}max_optical_depth = 16\n{RAIN}"), "s").unwrap();
+        assert_eq!(s.n_max, 36); // 16 + 4·4 + 4
+    }
+}

@@ -1,0 +1,282 @@
+//! `photometeor bake` end to end: the no-argument bake of the embedded default scene read by the
+//! OpenEXR reference library, its invariants and optical features, `inspect` and `compare`, and
+//! malformed scenes that must leave the output directory untouched.
+
+use std::fs;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+use std::sync::OnceLock;
+
+use tables::exr_io::{FieldImage, read_field_exr};
+use tables::manifest::{Manifest, read_manifest};
+
+fn photometeor(args: &[&str], cwd: &Path) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_photometeor"))
+        .args(args)
+        .current_dir(cwd)
+        .output()
+        .expect("running photometeor")
+}
+
+struct DefaultBake {
+    out: PathBuf,
+    stderr: String,
+    manifest: Manifest,
+}
+
+/// `photometeor bake` with no arguments, run once in a fresh directory.
+fn default_bake() -> &'static DefaultBake {
+    static BAKE: OnceLock<DefaultBake> = OnceLock::new();
+    BAKE.get_or_init(|| {
+        let cwd = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("default-bake");
+        let _ = fs::remove_dir_all(&cwd);
+        fs::create_dir_all(&cwd).unwrap();
+        let out = photometeor(&["bake"], &cwd);
+        let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+        assert!(out.status.success(), "photometeor bake failed:\n{stderr}");
+        let dir = cwd.join("photometeor-tables");
+        let manifest = read_manifest(&dir).unwrap();
+        DefaultBake {
+            out: dir,
+            stderr,
+            manifest,
+        }
+    })
+}
+
+fn image(name: &str) -> FieldImage {
+    read_field_exr(default_bake().out.join(format!("{name}.exr"))).unwrap()
+}
+
+#[test]
+fn no_argument_bake_writes_drops_and_says_crystals_are_not_yet_available() {
+    let bake = default_bake();
+    let names: Vec<&str> = bake
+        .manifest
+        .fields
+        .iter()
+        .map(|f| f.name.as_str())
+        .collect();
+    assert_eq!(names, ["cloud", "rain"]);
+    for kind in ["ice", "snow"] {
+        assert!(
+            bake.stderr.contains(&format!("field \"{kind}\""))
+                && bake.stderr.contains("not yet available"),
+            "{}",
+            bake.stderr
+        );
+        assert!(!bake.out.join(format!("{kind}.exr")).exists());
+    }
+    for f in &bake.manifest.fields {
+        assert_eq!(f.n_max, 26);
+        assert_eq!(f.quality["preset"], "standard");
+        assert_eq!(f.content_hash.len(), 64);
+        for eps in ["1e-2", "1e-4", "1e-6"] {
+            for c in f.n_isotropic.as_array() {
+                assert!(
+                    c[eps].is_some_and(|n| n > 26),
+                    "{}: n_iso({eps}) {c:?}",
+                    f.name
+                );
+            }
+        }
+    }
+    assert_eq!(bake.manifest.angle_count, 1001);
+}
+
+#[test]
+fn openexr_reference_library_reads_the_default_bake_and_its_invariants_hold() {
+    let script = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/check_bake_openexr.py");
+    let out = Command::new("python3")
+        .arg(&script)
+        .arg(&default_bake().out)
+        .output()
+        .unwrap_or_else(|e| panic!("cannot run python3 ({e})"));
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success() && stdout.starts_with("OK"),
+        "{}\n{stdout}\n{}\n(needs `python3 -m pip install OpenEXR numpy`)",
+        script.display(),
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+#[test]
+fn forward_fractions_fall_monotonically_toward_one_half() {
+    for f in &default_bake().manifest.fields {
+        for (c, values) in f.forward_fraction.as_array().into_iter().enumerate() {
+            assert!(
+                values.iter().all(|&v| v > 0.5),
+                "{} {c}: {values:?}",
+                f.name
+            );
+            for w in values.windows(2) {
+                assert!(w[1] < w[0], "{} {c}: F_i must fall: {values:?}", f.name);
+            }
+            let (first, last) = (values[0] - 0.5, values[values.len() - 1] - 0.5);
+            assert!(
+                last < 0.1 * first,
+                "{} {c}: F_N − ½ = {last}, F_1 − ½ = {first}",
+                f.name
+            );
+        }
+    }
+}
+
+/// Index range of θ ∈ [a°, b°] on the 0.18° grid.
+fn bins(a: f64, b: f64) -> std::ops::RangeInclusive<usize> {
+    (a / 0.18).ceil() as usize..=(b / 0.18).floor() as usize
+}
+
+fn max_in(row: &[f64], r: std::ops::RangeInclusive<usize>) -> (usize, f64) {
+    r.map(|k| (k, row[k]))
+        .fold((0, f64::NEG_INFINITY), |m, x| if x.1 > m.1 { x } else { m })
+}
+
+fn min_in(row: &[f64], r: std::ops::RangeInclusive<usize>) -> f64 {
+    r.map(|k| row[k]).fold(f64::INFINITY, f64::min)
+}
+
+#[test]
+fn rain_rainbow_is_red_outside_and_fades_with_order() {
+    let rain = image("rain");
+    let mut peak_bin = [0; 3];
+    for c in 0..3 {
+        // Primary bow: maximum at θ ≈ 138° (42° from the antisolar point); Alexander's dark
+        // band lies between it and the secondary bow (≈ 129°).
+        let contrast: Vec<f64> = rain.rows[c]
+            .iter()
+            .map(|row| max_in(row, bins(136.0, 142.0)).1 / min_in(row, bins(130.0, 135.0)))
+            .collect();
+        let (k, _) = max_in(&rain.rows[c][0], bins(136.0, 142.0));
+        peak_bin[c] = k;
+        let theta = k as f64 * 0.18;
+        assert!(
+            (137.0..=140.0).contains(&theta),
+            "channel {c}: primary bow at {theta}°"
+        );
+        assert!(contrast[0] > 10.0, "channel {c}: bow contrast {contrast:?}");
+        for w in contrast[..8].windows(2) {
+            assert!(w[1] < w[0], "channel {c}: bow must fade: {contrast:?}");
+        }
+        assert!(
+            contrast[25] < 1.01,
+            "channel {c}: bow gone by n = 26: {contrast:?}"
+        );
+    }
+    // Red is deviated least: smaller scattering angle, larger radius about the antisolar point.
+    assert!(
+        peak_bin[0] < peak_bin[1] && peak_bin[1] < peak_bin[2],
+        "{peak_bin:?}"
+    );
+}
+
+#[test]
+fn cloud_glory_is_present_and_fades_with_order() {
+    let cloud = image("cloud");
+    for c in 0..3 {
+        let contrast: Vec<f64> = cloud.rows[c]
+            .iter()
+            .map(|row| row[1000] / min_in(row, bins(170.0, 178.0)))
+            .collect();
+        assert!(
+            contrast[0] > 2.0,
+            "channel {c}: glory contrast {contrast:?}"
+        );
+        for w in contrast[..8].windows(2) {
+            assert!(w[1] < w[0], "channel {c}: glory must fade: {contrast:?}");
+        }
+    }
+}
+
+#[test]
+fn inspect_and_compare_read_the_bake() {
+    let dir = default_bake().out.to_str().unwrap().to_string();
+    let out = photometeor(&["inspect", &dir], Path::new("."));
+    assert!(out.status.success());
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        text.contains("cloud") && text.contains("rain") && text.contains("1001 angles"),
+        "{text}"
+    );
+    let out = photometeor(&["inspect", &dir, "--json"], Path::new("."));
+    let parsed: Manifest = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(parsed, default_bake().manifest);
+    let out = photometeor(&["compare", &dir, &dir, "--json"], Path::new("."));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    for f in v["fields"].as_array().unwrap() {
+        assert_eq!(f["rms_rel_ams1"], 0.0);
+        assert_eq!(f["max_abs_forward_fraction"], 0.0);
+    }
+}
+
+const GOOD: &str = "[scene]\nname = \"t\"\nspectral = \"rgb3\"\nquality = \"draft\"\n\n[[field]]\nname = \"rain\"\nkind = \"rain\"\ndistribution = { kind = \"lognormal\", median_radius_um = 500, sigma_g = 1.4 }\n";
+
+fn listing(dir: &Path) -> Vec<(String, Vec<u8>)> {
+    let mut v: Vec<(String, Vec<u8>)> = fs::read_dir(dir)
+        .unwrap()
+        .map(|e| {
+            let e = e.unwrap();
+            let bytes = if e.path().is_file() {
+                fs::read(e.path()).unwrap()
+            } else {
+                Vec::new()
+            };
+            (e.file_name().to_string_lossy().into_owned(), bytes)
+        })
+        .collect();
+    v.sort();
+    v
+}
+
+#[test]
+fn malformed_scenes_name_key_and_line_and_leave_the_output_untouched() {
+    let cases = [
+        // (scene, words the message must hold)
+        (
+            GOOD.replace("quality = \"draft\"", "quality = \"draft\"\ncolour = 3"),
+            vec!["line 5", "colour"],
+        ),
+        (
+            GOOD.replace("median_radius_um = 500", "median_radius_um = -500"),
+            vec!["line 9", "-500"],
+        ),
+        (
+            GOOD.replace("quality = \"draft\"", "quality = \"draft\"\nn_max = 0"),
+            vec!["line 5", "n_max = 0"],
+        ),
+        (
+            GOOD.replace(
+                "quality = \"draft\"",
+                "quality = \"draft\"\ntheta_step_deg = 0.7",
+            ),
+            vec!["line 5", "theta_step_deg = 0.7", "divide 180"],
+        ),
+    ];
+    for (scene, words) in cases {
+        let tmp = tempfile::tempdir().unwrap();
+        let out_dir = tmp.path().join("tables");
+        fs::create_dir(&out_dir).unwrap();
+        fs::write(out_dir.join("manifest.json"), b"{\"previous\": true}").unwrap();
+        fs::write(out_dir.join("rain.exr"), b"previous table").unwrap();
+        let before = listing(&out_dir);
+        let scene_path = tmp.path().join("scene.toml");
+        fs::write(&scene_path, &scene).unwrap();
+        let out = photometeor(
+            &[
+                "bake",
+                scene_path.to_str().unwrap(),
+                "--out",
+                out_dir.to_str().unwrap(),
+            ],
+            tmp.path(),
+        );
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{scene}");
+        assert_eq!(stderr.trim().lines().count(), 1, "one line: {stderr}");
+        for w in words {
+            assert!(stderr.contains(w), "{w:?} missing in: {stderr}");
+        }
+        assert_eq!(listing(&out_dir), before, "output changed for:\n{scene}");
+    }
+}
