@@ -29,9 +29,24 @@ pub struct BenchArgs {
 enum BenchWhat {
     /// Single sphere at x = 1e5 and the 3-wavelength rain lognormal, 1001 angles each.
     Mie(MieBench),
+    /// Geometric-optics ray tracing of ice prisms: rays per second on 1 thread and on all.
+    Crystal(CrystalBench),
     /// Bake a scene (default: the embedded one) at each preset into a fresh directory, then
     /// again unchanged: wall time, re-bake speed-up and peak memory, each bake its own process.
     Bake(BakeBench),
+}
+
+#[derive(Debug, Args)]
+struct CrystalBench {
+    /// Rays per run.
+    #[arg(long, default_value_t = 2_000_000)]
+    rays: u64,
+    /// Macke distortion δ of the prism (0 = pristine).
+    #[arg(long, default_value_t = 0.0)]
+    roughness: f64,
+    /// Aspect ratio L/(2a) of the prism.
+    #[arg(long, default_value_t = 1.0)]
+    aspect_ratio: f64,
 }
 
 #[derive(Debug, Args)]
@@ -82,6 +97,7 @@ pub fn run(args: BenchArgs) -> Result<()> {
     let b = match args.what {
         BenchWhat::Mie(b) => b,
         BenchWhat::Bake(b) => return bench_bake(b),
+        BenchWhat::Crystal(c) => return bench_crystal(c),
     };
     let threads = b.threads.unwrap_or_else(rayon::current_num_threads);
     let pool = rayon::ThreadPoolBuilder::new()
@@ -353,6 +369,42 @@ fn bench_bake(b: BakeBench) -> Result<()> {
             r["rebake_speedup"].as_f64().unwrap_or(f64::NAN),
             r["peak_rss_mib"].as_f64().unwrap_or(f64::NAN),
             r["exr_bytes"].as_u64().unwrap_or(0) as f64 / 1024.0
+        );
+    }
+    Ok(())
+}
+
+fn bench_crystal(c: CrystalBench) -> Result<()> {
+    use mie::crystal::{Prism, TraceSettings, trace};
+    let prism = Prism::new(c.aspect_ratio, 100.0);
+    let grid = AngleGrid::new(0.18).expect("0.18° divides 180°");
+    let n_ice = mie::Material::Ice.refractive_index(550.0, -20.0)?.re;
+    let all = rayon::current_num_threads();
+    for threads in [1, all] {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .context("building the thread pool")?;
+        let start = Instant::now();
+        let t = pool.install(|| {
+            trace(
+                &prism,
+                n_ice,
+                0.0,
+                grid,
+                TraceSettings::new(c.rays, 1, c.roughness),
+            )
+        });
+        let seconds = start.elapsed().as_secs_f64();
+        let rate = t.rays_hit as f64 / seconds;
+        println!(
+            "{threads} thread(s): {} rays in {seconds:.2} s = {:.3} M rays/s ({:.3} M rays/s per thread); g_GO {:.4}, delta {:.3}, lost {:.1e}",
+            t.rays_hit,
+            rate / 1e6,
+            rate / 1e6 / threads as f64,
+            t.g,
+            t.delta,
+            t.lost
         );
     }
     Ok(())

@@ -227,13 +227,12 @@ fn run_bake(a: BakeArgs) -> Result<()> {
         println!("{}", serde_json::to_string(&report)?);
     } else if !a.quiet {
         println!(
-            "baked {} into {} in {:.1} s (computed: {:?}, from cache: {:?}, not yet available: {:?}); peak memory {}",
+            "baked {} into {} in {:.1} s (computed: {:?}, from cache: {:?}); peak memory {}",
             plan.scene.name,
             plan.out_dir.display(),
             report.seconds,
             report.computed,
             report.cached,
-            report.unavailable,
             report
                 .peak_rss_mib
                 .map_or("unknown".to_string(), |m| format!("{m:.0} MiB"))

@@ -49,7 +49,7 @@ fn image(name: &str) -> FieldImage {
 }
 
 #[test]
-fn no_argument_bake_writes_drops_and_says_crystals_are_not_yet_available() {
+fn no_argument_bake_writes_all_four_fields() {
     let bake = default_bake();
     let names: Vec<&str> = bake
         .manifest
@@ -57,31 +57,26 @@ fn no_argument_bake_writes_drops_and_says_crystals_are_not_yet_available() {
         .iter()
         .map(|f| f.name.as_str())
         .collect();
-    assert_eq!(names, ["cloud", "rain"]);
-    for kind in ["ice", "snow"] {
-        assert!(
-            bake.stderr.contains(&format!("field \"{kind}\""))
-                && bake.stderr.contains("not yet available"),
-            "{}",
-            bake.stderr
-        );
-        assert!(!bake.out.join(format!("{kind}.exr")).exists());
-    }
+    assert_eq!(names, ["cloud", "rain", "ice", "snow"], "{}", bake.stderr);
     for f in &bake.manifest.fields {
+        assert!(bake.out.join(&f.file).is_file());
         assert_eq!(f.n_max, 26);
         assert_eq!(f.quality["preset"], "standard");
         assert_eq!(f.content_hash.len(), 64);
-        for eps in ["1e-2", "1e-4", "1e-6"] {
-            for c in f.n_isotropic.as_array() {
-                assert!(
-                    c[eps].is_some_and(|n| n > 26),
-                    "{}: n_iso({eps}) {c:?}",
-                    f.name
-                );
-            }
+        for c in f.n_isotropic.as_array() {
+            let n: Vec<u32> = ["1e-2", "1e-4", "1e-6"]
+                .iter()
+                .map(|eps| c[*eps].unwrap_or_else(|| panic!("{}: n_iso({eps}) missing", f.name)))
+                .collect();
+            assert!(n[0] <= n[1] && n[1] <= n[2], "{}: {n:?}", f.name);
         }
     }
     assert_eq!(bake.manifest.angle_count, 1001);
+    // Snow: featureless and g within VD14's range for strongly distorted crystals.
+    let snow = &bake.manifest.fields[3];
+    for g in [snow.g.r, snow.g.g, snow.g.b] {
+        assert!((0.70..=0.80).contains(&g), "snow g {g}");
+    }
 }
 
 #[test]
@@ -169,6 +164,35 @@ fn rain_rainbow_is_red_outside_and_fades_with_order() {
         peak_bin[0] < peak_bin[1] && peak_bin[1] < peak_bin[2],
         "{peak_bin:?}"
     );
+}
+
+#[test]
+fn ice_has_22_and_46_degree_halos_red_inside() {
+    let ice = image("ice");
+    for (lo, hi) in [(20.5, 24.0), (44.0, 49.0)] {
+        let mut peaks = [0; 3];
+        for (c, peak) in peaks.iter_mut().enumerate() {
+            let row = &ice.rows[c][0];
+            let (k, v) = max_in(row, bins(lo, hi));
+            assert!(
+                v > row[k - 1] && v > row[k + 1],
+                "channel {c}: no local maximum in {lo}–{hi}°"
+            );
+            // Stands well above the light 1° inside it (the halo's dark inner side).
+            assert!(
+                v > 2.0 * row[k - 6],
+                "channel {c}: halo at {}° too weak",
+                k as f64 * 0.18
+            );
+            *peak = k;
+        }
+        assert!(
+            peaks[0] < peaks[2],
+            "{lo}–{hi}°: red {} not inside blue {}",
+            peaks[0],
+            peaks[2]
+        );
+    }
 }
 
 #[test]

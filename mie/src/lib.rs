@@ -7,10 +7,14 @@
 //! per wavelength: σ_ext, albedo, g and the phase function averaged inside the bins of an
 //! [`AngleGrid`] — the `PhaseFunction` that `tables/` consumes.
 //!
+//! Ice crystals and snow come from [`crystal`]: geometric-optics ray tracing of hexagonal prisms
+//! plus Fraunhofer diffraction, yielding the same bin-averaged phase-function value.
+//!
 //! Conventions (physics.md §1): θ = 0 is forward, μ = cos θ; m = n + iκ with κ ≥ 0;
 //! x = 2πr/λ; phase functions are normalized ∫ p dΩ = 1 (1/sr); units live in names.
 
 pub mod amplitude;
+pub mod crystal;
 pub mod distribution;
 pub mod ensemble;
 pub mod error;

@@ -14,16 +14,17 @@ use crate::manifest::{FieldEntry, Manifest, PerChannel, write_manifest};
 use crate::spectral::{ChannelWeights, SpectralMode};
 use anyhow::{Context, Result, bail};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use mie::crystal::crystal_phase;
 use mie::ensemble::bulk_at;
 use mie::{AngleGrid, Material};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 
-use crate::scene::{Field, FieldKind, Quality, Scene, Spectral};
+use crate::scene::{Field, Quality, Scene, Spectral};
 
 /// Version of everything that changes a baked number; part of every cache key.
-const COMPUTE_VERSION: u32 = 1;
+const COMPUTE_VERSION: u32 = 2;
 /// n_iso is searched up to this order.
 const N_ISO_CAP: usize = 100_000;
 /// The ε of the n_iso report.
@@ -40,20 +41,23 @@ pub struct Knobs {
     pub tail_mass: f64,
     /// Heat-kernel blur of the j ≥ 2 Ams terms, in bins.
     pub blur_bins: f64,
+    /// Geometric-optics rays per wavelength for ice and snow.
+    pub rays: u64,
 }
 
 impl Quality {
     pub fn knobs(self) -> Knobs {
-        let (sizes, nodes_per_panel) = match self {
-            Quality::Draft => (32, 2),
-            Quality::Standard => (400, 2),
-            Quality::Reference => (4096, 2),
+        let (sizes, nodes_per_panel, rays) = match self {
+            Quality::Draft => (32, 2, 40_000),
+            Quality::Standard => (400, 2, 600_000),
+            Quality::Reference => (4096, 2, 6_000_000),
         };
         Knobs {
             sizes,
             nodes_per_panel,
             tail_mass: 1e-3,
             blur_bins: 0.5,
+            rays,
         }
     }
 }
@@ -105,7 +109,6 @@ pub struct BakeReport {
     pub quality: Quality,
     pub computed: Vec<String>,
     pub cached: Vec<String>,
-    pub unavailable: Vec<String>,
     pub seconds: f64,
     /// Peak resident memory of this process (Linux `VmHWM`), MiB.
     pub peak_rss_mib: Option<f64>,
@@ -162,7 +165,6 @@ pub fn run(plan: &BakePlan) -> Result<BakeReport> {
         quality: plan.quality,
         computed: Vec::new(),
         cached: Vec::new(),
-        unavailable: Vec::new(),
         seconds: 0.0,
         peak_rss_mib: None,
     };
@@ -170,15 +172,6 @@ pub fn run(plan: &BakePlan) -> Result<BakeReport> {
     // failing field leaves the previous bake as it was.
     let mut done = Vec::new();
     for field in &plan.scene.fields {
-        if matches!(field.kind, FieldKind::Ice | FieldKind::Snow) {
-            let msg = format!(
-                "field {:?} ({:?}): ice crystals and snow are not yet available (geometric-optics ray tracing, issue 4); no table written",
-                field.name, field.kind
-            );
-            eprintln!("warning: {msg}");
-            report.unavailable.push(field.name.clone());
-            continue;
-        }
         let hash = content_hash(plan, field);
         let cache_file = plan.out_dir.join(".cache").join(format!("{hash}.bin"));
         let result = match read_cache(&cache_file) {
@@ -291,9 +284,6 @@ pub fn compute_field(
     grid: &ThetaGrid,
 ) -> Result<FieldResult> {
     let start = Instant::now();
-    let Some(distribution) = field.distribution else {
-        bail!("field {:?} has no size distribution", field.name);
-    };
     let angle_grid = AngleGrid::new(plan.scene.theta_step_deg)?;
     let knobs = plan.knobs;
     let lambdas = &weights.wavelengths_nm;
@@ -312,21 +302,40 @@ pub fn compute_field(
         p.set_prefix(field.name.clone());
         p
     };
-    progress.set_message("Mie per wavelength");
     let j_len = lambdas.len();
     let mut per_wavelength = Vec::with_capacity(j_len);
-    for (j, &lambda) in lambdas.iter().enumerate() {
-        let m = Material::Water.refractive_index(lambda, field.temperature_c)?;
-        let q = knobs.size_quadrature(&distribution, j, j_len);
-        per_wavelength.push(bulk_at(
-            m,
-            lambda,
-            &q,
-            angle_grid,
-            knobs.nodes_per_panel,
-            &[],
-        )?);
-        progress.inc(1);
+    match (field.distribution, field.crystal) {
+        (Some(distribution), _) => {
+            progress.set_message("Mie per wavelength");
+            for (j, &lambda) in lambdas.iter().enumerate() {
+                let m = Material::Water.refractive_index(lambda, field.temperature_c)?;
+                let q = knobs.size_quadrature(&distribution, j, j_len);
+                let b = bulk_at(m, lambda, &q, angle_grid, knobs.nodes_per_panel, &[])?;
+                per_wavelength.push(Spectrum {
+                    bins: b.bins,
+                    sigma_ext_m2: b.sigma_ext_m2,
+                    sigma_sca_m2: b.sigma_sca_m2,
+                    g: b.g,
+                });
+                progress.inc(1);
+            }
+        }
+        (None, Some(crystal)) => {
+            progress.set_message("ray tracing per wavelength");
+            for (j, &lambda) in lambdas.iter().enumerate() {
+                // Each wavelength its own random stream: a channel averages J independent traces.
+                let seed = CRYSTAL_SEED ^ (j as u64);
+                let p = crystal_phase(&crystal, lambda, angle_grid, knobs.rays, seed)?;
+                per_wavelength.push(Spectrum {
+                    bins: p.bins,
+                    sigma_ext_m2: p.sigma_ext_m2,
+                    sigma_sca_m2: p.sigma_sca_m2,
+                    g: p.g,
+                });
+                progress.inc(1);
+            }
+        }
+        (None, None) => bail!("field {:?} has neither sizes nor crystals", field.name),
     }
     // Channel c mixes wavelength j with a_cj = w_cj σ_sca,j / Σ_j w_cj σ_sca,j (the scattered
     // light's spectrum); every row is Σ_j a_cj Ams_n[P_j], light keeping its wavelength.
@@ -373,6 +382,17 @@ pub fn compute_field(
     Ok(result)
 }
 
+/// One wavelength's phase-function value, from either producer.
+struct Spectrum {
+    bins: Vec<f64>,
+    sigma_ext_m2: f64,
+    sigma_sca_m2: f64,
+    g: f64,
+}
+
+/// Seed of the crystal traces (wavelength j uses CRYSTAL_SEED ^ j).
+const CRYSTAL_SEED: u64 = 0x7068_6f74_6f6d_6574;
+
 /// One channel's tables.
 struct ChannelResult {
     rows: Vec<Vec<f64>>,
@@ -389,7 +409,7 @@ struct ChannelResult {
 /// Σ_j a_j Ams_n[P_j] (light keeps its wavelength while it scatters).
 fn channel_tables(
     w: &[f64],
-    per_wavelength: &[mie::ensemble::BulkPhase],
+    per_wavelength: &[Spectrum],
     series: &[AmsSeries],
     orders: &[usize],
 ) -> ChannelResult {

@@ -15,6 +15,8 @@
 //! [[field]]
 //! name = "cloud"            # user name: the EXR is <name>.exr
 //! kind = "cloud"            # cloud | rain (water spheres), ice | snow (crystals)
+//! # crystals instead of a distribution: habit = "plate" | "column" | "aggregate",
+//! # aspect_ratio (L/2a), max_dimension_um (median), dimension_sigma_g, roughness (Macke δ)
 //! temperature_c = 10
 //! distribution = { kind = "gamma", r_eff_um = 10, v_eff = 0.1 }
 //! ```
@@ -70,13 +72,15 @@ struct FieldFile {
     temperature_c: Option<f64>,
     #[serde(default)]
     distribution: Option<SizeDistribution>,
-    /// Crystal habit (ice, snow): accepted for forward compatibility, modelled in issue 4.
+    /// Crystal habit (ice, snow): plate | column | aggregate; sets the default aspect ratio.
     #[serde(default)]
     habit: Option<String>,
     #[serde(default)]
     aspect_ratio: Option<f64>,
     #[serde(default)]
     max_dimension_um: Option<f64>,
+    #[serde(default)]
+    dimension_sigma_g: Option<f64>,
     #[serde(default)]
     roughness: Option<f64>,
 }
@@ -133,8 +137,8 @@ pub struct Field {
     pub temperature_c: f64,
     /// Size distribution of spheres (cloud, rain).
     pub distribution: Option<SizeDistribution>,
-    /// Crystal description kept verbatim for ice and snow (not yet modelled).
-    pub crystal: Option<serde_json::Value>,
+    /// Crystal population (ice, snow).
+    pub crystal: Option<mie::crystal::CrystalField>,
 }
 
 /// A validated scene: plain data.
@@ -314,13 +318,50 @@ impl Scene {
                     }
                     (Some(d), None)
                 }
-                FieldKind::Ice | FieldKind::Snow => (
-                    None,
-                    Some(serde_json::json!({
-                        "habit": f.habit, "aspect_ratio": f.aspect_ratio,
-                        "max_dimension_um": f.max_dimension_um, "roughness": f.roughness,
-                    })),
-                ),
+                FieldKind::Ice | FieldKind::Snow => {
+                    if f.distribution.is_some() {
+                        bail!(
+                            "{}: field {:?} ({:?}): crystals take habit, aspect_ratio, max_dimension_um, dimension_sigma_g and roughness, not a sphere distribution",
+                            at("distribution"),
+                            f.name,
+                            f.kind
+                        );
+                    }
+                    let snow = f.kind == FieldKind::Snow;
+                    let habit =
+                        f.habit
+                            .as_deref()
+                            .unwrap_or(if snow { "aggregate" } else { "column" });
+                    let default_ar = match habit {
+                        "plate" => 0.2,
+                        "column" => 2.0,
+                        "aggregate" => 1.0,
+                        other => bail!(
+                            "{}: habit = {other:?} is not one of \"plate\", \"column\", \"aggregate\"",
+                            at("habit")
+                        ),
+                    };
+                    let crystal = mie::crystal::CrystalField {
+                        aspect_ratio: f.aspect_ratio.unwrap_or(default_ar),
+                        max_dimension_um: f.max_dimension_um.unwrap_or(if snow {
+                            2000.0
+                        } else {
+                            100.0
+                        }),
+                        sigma_g: f.dimension_sigma_g.unwrap_or(1.5),
+                        roughness: f.roughness.unwrap_or(if snow { 0.7 } else { 0.0 }),
+                    };
+                    let crystal = crystal.validated().map_err(|e| {
+                        let key = match e.to_string() {
+                            t if t.starts_with("aspect") => "aspect_ratio",
+                            t if t.starts_with("maximum") => "max_dimension_um",
+                            t if t.starts_with("σ_g") => "dimension_sigma_g",
+                            _ => "roughness",
+                        };
+                        anyhow!("{}: field {:?}: {key}: {e}", at(key), f.name)
+                    })?;
+                    (None, Some(crystal))
+                }
             };
             fields.push(Field {
                 name: f.name,

@@ -1,0 +1,298 @@
+//! Ice crystals and snow (issue 4): invariants of the tracer, asymmetry parameters against van
+//! Diedenhoven et al. 2014 (VD14, physics.md §5), halo peak angles against prism minimum
+//! deviation, snow's featureless phase function, energy bookkeeping, determinism.
+
+use mie::crystal::{CrystalField, Prism, TraceSettings, crystal_phase, trace};
+use mie::{AngleGrid, Material};
+
+fn grid(step: f64) -> AngleGrid {
+    AngleGrid::new(step).unwrap()
+}
+
+#[test]
+fn mean_projected_area_is_a_quarter_of_the_surface() {
+    // Cauchy's theorem, from the hit fraction of rays aimed at the bounding disc.
+    for ar in [0.1, 1.0, 10.0] {
+        let prism = Prism::new(ar, 100.0);
+        let t = trace(
+            &prism,
+            1.311,
+            0.0,
+            grid(1.0),
+            TraceSettings::new(4_000_000, 7, 0.0),
+        );
+        let want = prism.surface_area() / 4.0;
+        let rel = t.projected_area / want - 1.0;
+        println!("AR {ar}: mean projected area / (S/4) − 1 = {rel:.2e}");
+        // Binomial noise of the hit fraction: ~3e-4 relative at these counts.
+        assert!(rel.abs() < 1e-3, "AR {ar}: projected area off by {rel:.2e}");
+    }
+}
+
+/// Hemispherical (Lambertian-weighted) unpolarized Fresnel reflectance, computed here by
+/// midpoint quadrature in cos i: ∫₀¹ R(μ) 2μ dμ.
+fn hemispherical_reflectance(n: f64) -> f64 {
+    let steps = 200_000;
+    (0..steps)
+        .map(|i| {
+            let mu = (i as f64 + 0.5) / steps as f64;
+            let sin_t = (1.0 - mu * mu).sqrt() / n;
+            let cos_t = (1.0 - sin_t * sin_t).sqrt();
+            let rs = (mu - n * cos_t) / (mu + n * cos_t);
+            let rp = (n * mu - cos_t) / (n * mu + cos_t);
+            0.5 * (rs * rs + rp * rp) * 2.0 * mu / steps as f64
+        })
+        .sum()
+}
+
+#[test]
+fn external_reflection_share_is_the_hemispherical_fresnel_reflectance() {
+    let quadrature = hemispherical_reflectance(1.311);
+    assert!((quadrature - 0.0629).abs() < 5e-4, "{quadrature}");
+    for ar in [0.25, 4.0] {
+        let t = trace(
+            &Prism::new(ar, 100.0),
+            1.311,
+            0.0,
+            grid(1.0),
+            TraceSettings::new(2_000_000, 3, 0.0),
+        );
+        println!(
+            "AR {ar}: external reflection {:.5} (hemispherical Fresnel {quadrature:.5})",
+            t.external_reflection
+        );
+        assert!(
+            (t.external_reflection - 0.0629).abs() < 1e-3,
+            "AR {ar}: {}",
+            t.external_reflection
+        );
+    }
+}
+
+/// VD14's geometric-optics asymmetry parameter for pristine prisms (physics.md §5).
+const VD14_G_GO: [(f64, f64); 5] = [
+    (0.1, 0.825),
+    (0.25, 0.709),
+    (1.0, 0.549),
+    (4.0, 0.699),
+    (10.0, 0.754),
+];
+
+#[test]
+fn pristine_geometric_optics_asymmetry_matches_vd14() {
+    let n = Material::Ice.refractive_index(550.0, -20.0).unwrap().re;
+    for (ar, want) in VD14_G_GO {
+        let t = trace(
+            &Prism::new(ar, 100.0),
+            n,
+            0.0,
+            grid(0.5),
+            TraceSettings::new(1_000_000, 11, 0.0),
+        );
+        println!(
+            "AR {ar}: g_GO {:.4} ± {:.4} (VD14 {want}); delta {:.3}, lost {:.1e}",
+            t.g, t.g_std_error, t.delta, t.lost
+        );
+        assert!(
+            (t.g - want).abs() < 0.01,
+            "AR {ar}: g_GO {} vs VD14 {want}",
+            t.g
+        );
+        assert!(t.lost < 1e-4, "AR {ar}: lost {}", t.lost);
+    }
+}
+
+/// VD14's total g (large-crystal limit, ½(1 + g_GO)) with roughness δ (physics.md §5).
+const VD14_ROUGH: [(f64, [f64; 3]); 3] = [
+    (0.25, [0.853, 0.842, 0.761]),
+    (1.0, [0.773, 0.767, 0.705]),
+    (4.0, [0.848, 0.840, 0.767]),
+];
+
+/// Roughness smooths the crystal and lowers g, as in VD14. Our Macke-type tilt (uniform in
+/// [0, δ·90°]) does not reproduce VD14's δ scale within 0.015 at every aspect ratio (issue 4
+/// keeps that item open); the printed table is the measured comparison.
+#[test]
+fn roughness_lowers_the_asymmetry_parameter() {
+    let n = Material::Ice.refractive_index(550.0, -20.0).unwrap().re;
+    for (ar, vd14) in VD14_ROUGH {
+        let g: Vec<f64> = [0.0, 0.3, 0.7]
+            .into_iter()
+            .map(|delta| {
+                let t = trace(
+                    &Prism::new(ar, 100.0),
+                    n,
+                    0.0,
+                    grid(0.5),
+                    TraceSettings::new(500_000, 5, delta),
+                );
+                // Tilted facets end the delta transmission (what remains exactly forward are
+                // rare grazing reflections, weight ≈ 1 each).
+                if delta > 0.0 {
+                    assert!(t.delta < 1e-4, "δ {delta}: delta share {}", t.delta);
+                } else {
+                    assert!(t.delta > 0.1, "pristine: delta share {}", t.delta);
+                }
+                0.5 * (1.0 + t.g)
+            })
+            .collect();
+        println!("AR {ar}: g_total δ = 0, 0.3, 0.7: {g:.4?}; VD14 {vd14:?}");
+        assert!(g[0] > g[1] && g[1] > g[2], "AR {ar}: {g:?}");
+        assert!(
+            (g[0] - vd14[0]).abs() < 0.01,
+            "AR {ar}: pristine {} vs {}",
+            g[0],
+            vd14[0]
+        );
+    }
+}
+
+/// Prism minimum deviation D = 2 asin(n sin(A/2)) − A.
+fn minimum_deviation_deg(n: f64, apex_deg: f64) -> f64 {
+    let a = apex_deg.to_radians();
+    (2.0 * (n * (a / 2.0).sin()).asin() - a).to_degrees()
+}
+
+/// Index of the largest bin of `bins` for θ in [lo, hi] on a grid of `step`.
+fn peak_deg(bins: &[f64], step: f64, lo: f64, hi: f64) -> f64 {
+    let (a, b) = ((lo / step).ceil() as usize, (hi / step).floor() as usize);
+    let k = (a..=b)
+        .max_by(|&i, &j| bins[i].total_cmp(&bins[j]))
+        .unwrap();
+    k as f64 * step
+}
+
+#[test]
+fn halo_maxima_sit_just_outside_minimum_deviation() {
+    // 0.05° bins; 22° halo from columns (60° prisms), 46° halo from plates (90° prisms).
+    for lambda in [450.0, 550.0, 650.0] {
+        let n = Material::Ice.refractive_index(lambda, -20.0).unwrap().re;
+        for (ar, apex, window) in [(2.0, 60.0, (20.0, 25.0)), (0.25, 90.0, (43.0, 50.0))] {
+            let t = trace(
+                &Prism::new(ar, 100.0),
+                n,
+                0.0,
+                grid(0.05),
+                TraceSettings::new(4_000_000, 17, 0.0),
+            );
+            // Energy per bin → per solid angle, as the halo's brightness.
+            let g = grid(0.05);
+            let radiance: Vec<f64> = t
+                .bin_energy
+                .iter()
+                .enumerate()
+                .map(|(k, e)| e / g.bin_solid_angle(k))
+                .collect();
+            let d_min = minimum_deviation_deg(n, apex);
+            let peak = peak_deg(&radiance, 0.05, window.0, window.1);
+            println!("{lambda} nm, {apex}° prism: D_min {d_min:.3}°, histogram maximum {peak:.3}°");
+            let outside = peak - d_min;
+            assert!(
+                (-0.025..=0.15 + 0.025).contains(&outside),
+                "{lambda} nm, {apex}°: maximum {peak}° vs D_min {d_min}° (bin half-width 0.025°)"
+            );
+        }
+    }
+}
+
+#[test]
+fn snow_is_featureless_with_g_between_0_70_and_0_80() {
+    let snow = CrystalField {
+        aspect_ratio: 1.0,
+        max_dimension_um: 2000.0,
+        sigma_g: 1.5,
+        roughness: 0.7,
+    };
+    let p = crystal_phase(&snow, 550.0, grid(0.18), 2_000_000, 23).unwrap();
+    println!(
+        "snow: g {:.4} ± {:.4}, albedo {}",
+        p.g, p.g_std_error, p.albedo
+    );
+    assert!((0.70..=0.80).contains(&p.g), "snow g {}", p.g);
+    // No local maximum between 10° and 60° that stands above the noise: compare each bin with
+    // the mean of its neighbours 1° away on both sides, in units of the bin's standard error.
+    let (a, b) = ((10.0 / 0.18) as usize, (60.0 / 0.18) as usize);
+    let mut worst: f64 = 0.0;
+    for k in a..=b {
+        let around = 0.5 * (p.bins[k - 6] + p.bins[k + 6]);
+        let se = p.bins_std_error[k].max(1e-300);
+        worst = worst.max((p.bins[k] - around) / se);
+    }
+    assert!(
+        worst < 5.0,
+        "a bump of {worst:.1} standard errors between 10° and 60°"
+    );
+    // …whereas pristine columns show the 22° halo far above it.
+    let pristine = CrystalField {
+        roughness: 0.0,
+        aspect_ratio: 2.0,
+        ..snow
+    };
+    let q = crystal_phase(&pristine, 550.0, grid(0.18), 2_000_000, 23).unwrap();
+    let k = (22.2 / 0.18f64).round() as usize;
+    let bump = (q.bins[k] - 0.5 * (q.bins[k - 6] + q.bins[k + 6])) / q.bins_std_error[k];
+    assert!(
+        bump > 20.0,
+        "pristine 22° halo only {bump:.1} standard errors"
+    );
+}
+
+#[test]
+fn energy_is_accounted_for_and_phase_functions_integrate_to_one() {
+    let g = grid(0.18);
+    for (ar, delta) in [(0.1, 0.0), (1.0, 0.0), (10.0, 0.0), (1.0, 0.7)] {
+        let field = CrystalField {
+            aspect_ratio: ar,
+            max_dimension_um: 100.0,
+            sigma_g: 1.4,
+            roughness: delta,
+        };
+        let p = crystal_phase(&field, 550.0, g, 400_000, 3).unwrap();
+        let integral: f64 = p
+            .bins
+            .iter()
+            .enumerate()
+            .map(|(k, v)| v * g.bin_solid_angle(k))
+            .sum();
+        assert!(
+            (integral - 1.0).abs() < 1e-6,
+            "AR {ar} δ {delta}: ∫p = {integral}"
+        );
+        println!(
+            "AR {ar} δ {delta}: ∫p − 1 = {:.1e}, lost {:.1e}",
+            integral - 1.0,
+            p.trace.lost
+        );
+        assert!(
+            p.trace.lost < 1e-4,
+            "AR {ar} δ {delta}: lost {}",
+            p.trace.lost
+        );
+        let balance = p.trace.external_reflection + p.trace.absorbed + p.trace.lost;
+        assert!(balance < 1.0 && p.albedo <= 1.0 && p.albedo > 0.99, "{p:?}");
+        // Diffraction is half of the extinction.
+        assert!((p.sigma_ext_m2 / p.sigma_sca_m2 * p.albedo - 1.0).abs() < 1e-12);
+        assert!(p.bins.iter().all(|&v| v >= 0.0));
+    }
+}
+
+#[test]
+fn result_is_identical_for_any_thread_count() {
+    let prism = Prism::new(0.5, 50.0);
+    let run = |threads: usize| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap()
+            .install(|| {
+                trace(
+                    &prism,
+                    1.31,
+                    1e-4,
+                    grid(0.18),
+                    TraceSettings::new(100_000, 9, 0.3),
+                )
+            })
+    };
+    assert_eq!(run(1), run(2));
+}
