@@ -322,10 +322,11 @@ pub fn compute_field(
         }
         (None, Some(crystal)) => {
             progress.set_message("ray tracing per wavelength");
+            let rays = ray_allocation(weights, knobs.rays);
             for (j, &lambda) in lambdas.iter().enumerate() {
                 // Each wavelength its own random stream: a channel averages J independent traces.
                 let seed = CRYSTAL_SEED ^ (j as u64);
-                let p = crystal_phase(&crystal, lambda, angle_grid, knobs.rays, seed)?;
+                let p = crystal_phase(&crystal, lambda, angle_grid, rays[j], seed)?;
                 per_wavelength.push(Spectrum {
                     bins: p.bins,
                     sigma_ext_m2: p.sigma_ext_m2,
@@ -388,6 +389,25 @@ struct Spectrum {
     sigma_ext_m2: f64,
     sigma_sca_m2: f64,
     g: f64,
+}
+
+/// Rays per wavelength for crystals: `per_wavelength` × J in all, shared in proportion to the
+/// largest weight any channel gives the wavelength (at least a tenth of the mean each). A
+/// channel's noise is Σ_j a_j² / n_j, smallest for n_j ∝ a_j: wavelengths a channel leans on get
+/// the rays, those at the spectrum's ends (weights ~10⁻³) few.
+pub fn ray_allocation(weights: &ChannelWeights, per_wavelength: u64) -> Vec<u64> {
+    let j_len = weights.wavelengths_nm.len();
+    let floor = per_wavelength / 10;
+    let total = per_wavelength * j_len as u64;
+    let importance: Vec<f64> = (0..j_len)
+        .map(|j| (0..3).map(|c| weights.weights[c][j]).fold(0.0, f64::max))
+        .collect();
+    let sum: f64 = importance.iter().sum();
+    let spare = total.saturating_sub(floor * j_len as u64) as f64;
+    importance
+        .iter()
+        .map(|m| floor + (spare * m / sum).round() as u64)
+        .collect()
 }
 
 /// Seed of the crystal traces (wavelength j uses CRYSTAL_SEED ^ j).
