@@ -18,8 +18,8 @@ pub struct TraceSettings {
     /// Rays that hit the crystal (misses are drawn again and counted for the projected area).
     pub rays: u64,
     pub seed: u64,
-    /// Macke's distortion δ ∈ [0, 1]: each interaction tilts the facet normal by an angle
-    /// uniform in [0, δ·90°] about a uniform azimuth. 0 = pristine.
+    /// Macke's distortion δ ∈ [0, 1]: every ray meets its own distorted crystal, each facet
+    /// normal tilted by an angle uniform in [0, δ·90°] about a uniform azimuth. 0 = pristine.
     pub roughness: f64,
     /// A path stops after this many interactions; its weight is reported as lost.
     pub max_interactions: u32,
@@ -120,34 +120,36 @@ fn fresnel(cos_i: f64, eta: f64) -> (f64, f64) {
     (0.5 * (rs * rs + rp * rp), cos_t)
 }
 
-/// The surface normal the ray sees at a face with outward normal `outward`, pointing against
-/// the incoming ray: the true one, or (rough) tilted by an angle uniform in [0, δ·90°] about a
-/// uniform azimuth. A tilt the ray would meet from behind (d·m ≥ 0) is drawn again; the
-/// reflected and refracted directions are then taken as they come, even where a strong tilt
-/// sends one to the other side of the true face (an internally reflected ray that points out
-/// meets the same face again at once; a transmitted one leaves).
-fn local_normal(rng: &mut Rng, outward: Vec3, d: Vec3, roughness: f64, from_outside: bool) -> Vec3 {
-    let n = if from_outside {
-        outward
-    } else {
-        scale(-1.0, outward)
-    };
-    if roughness <= 0.0 {
-        return n;
-    }
-    let (e1, e2) = basis(n);
-    loop {
-        let tilt = roughness * std::f64::consts::FRAC_PI_2 * rng.uniform();
-        let phi = 2.0 * std::f64::consts::PI * rng.uniform();
-        let (s, c) = tilt.sin_cos();
-        let m = add_scaled(
-            add_scaled(scale(c, n), s * phi.cos(), e1),
-            s * phi.sin(),
-            e2,
-        );
-        if dot(d, m) < 0.0 {
-            return m;
+/// The facet normals of one distorted crystal: each face's outward normal tilted by an angle
+/// uniform in [0, δ·90°] about a uniform azimuth (the true normals when δ = 0).
+fn distorted_normals(rng: &mut Rng, prism: &Prism, roughness: f64) -> [Vec3; 8] {
+    let mut normals = prism.faces.map(|f| f.normal);
+    if roughness > 0.0 {
+        for n in normals.iter_mut() {
+            let (e1, e2) = basis(*n);
+            let tilt = roughness * std::f64::consts::FRAC_PI_2 * rng.uniform();
+            let phi = 2.0 * std::f64::consts::PI * rng.uniform();
+            let (s, c) = tilt.sin_cos();
+            *n = add_scaled(
+                add_scaled(scale(c, *n), s * phi.cos(), e1),
+                s * phi.sin(),
+                e2,
+            );
         }
+    }
+    normals
+}
+
+/// The normal a ray meets at face `face` (outward normal `tilted`, true normal `true_normal`),
+/// turned against the ray: the tilted one, or the true one where the ray would meet the tilted
+/// facet from behind.
+fn facing(tilted: Vec3, true_normal: Vec3, d: Vec3, from_outside: bool) -> Vec3 {
+    let sign = if from_outside { 1.0 } else { -1.0 };
+    let m = scale(sign, tilted);
+    if dot(d, m) < 0.0 {
+        m
+    } else {
+        scale(sign, true_normal)
     }
 }
 
@@ -281,10 +283,11 @@ fn trace_one(
         }
     };
     tally.hits += 1;
+    let normals = distorted_normals(rng, prism, s.roughness);
 
     // External interaction.
     let eta_in = 1.0 / n_re;
-    let m = local_normal(rng, prism.faces[face].normal, d_in, s.roughness, true);
+    let m = facing(normals[face], prism.faces[face].normal, d_in, true);
     let cos_i = -dot(d_in, m);
     let (refl, cos_t) = fresnel(cos_i, eta_in);
     let reflected = add_scaled(d_in, 2.0 * cos_i, m);
@@ -303,7 +306,7 @@ fn trace_one(
             tally.absorbed += w - kept;
             w = kept;
         }
-        let m = local_normal(rng, prism.faces[f].normal, d, s.roughness, false);
+        let m = facing(normals[f], prism.faces[f].normal, d, false);
         let cos_i = -dot(d, m);
         let (refl, cos_t) = fresnel(cos_i, eta_out);
         if refl < 1.0 {
