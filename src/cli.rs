@@ -38,8 +38,23 @@ enum Command {
     /// Compare two bakes of the same scene: rms and max relative error of Ams_1 and of all
     /// rows (bins θ ≥ --min-angle-deg), and the largest F_i difference, per field and channel.
     Compare(CompareArgs),
+    /// Check a bake against theory from the fields' own refractive index and sizes: rainbow
+    /// angles (Descartes + Airy shift), Alexander's dark band, supernumeraries, glory, first
+    /// corona ring (Fraunhofer), 22°/46° halos (prism minimum deviation), snow without halos.
+    /// Angles in degrees (scattering angle, 0 = forward). Exits 1 when a check fails.
+    Validate(ValidateArgs),
     /// Time photometeor's Mie workloads (and miepython's, side by side, when available).
     Bench(crate::bench::BenchArgs),
+}
+
+#[derive(Debug, ClapArgs)]
+struct ValidateArgs {
+    /// Bake directory (holding manifest.json).
+    #[arg(default_value = "photometeor-tables")]
+    dir: std::path::PathBuf,
+    /// Print the checks as JSON instead of a table.
+    #[arg(long)]
+    json: bool,
 }
 
 #[derive(Debug, ClapArgs)]
@@ -196,7 +211,55 @@ pub fn run(args: Args) -> Result<()> {
         Command::Bake(a) => run_bake(a),
         Command::Inspect(a) => run_inspect(a),
         Command::Compare(a) => run_compare(a),
+        Command::Validate(a) => run_validate(a),
     }
+}
+
+fn run_validate(a: ValidateArgs) -> Result<()> {
+    use tables::validate::{Status, validate};
+    let report = validate(&a.dir)?;
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        let num = |v: Option<f64>| v.map_or("—".to_string(), |v| format!("{v:.3}"));
+        println!(
+            "{:<8} {:<3} {:<58} {:>9} {:>9} {:>7} {:<5} status",
+            "field", "ch", "check", "measured", "expected", "± tol", "unit"
+        );
+        for c in &report.checks {
+            let status = match c.status {
+                Status::Pass => "pass",
+                Status::Fail => "FAIL",
+                Status::Info => "info",
+            };
+            let tol = c.tolerance.filter(|t| t.is_finite());
+            println!(
+                "{:<8} {:<3} {:<58} {:>9} {:>9} {:>7} {:<5} {status}  {}",
+                c.field,
+                c.channel,
+                c.name,
+                num(c.measured),
+                num(c.expected),
+                num(tol),
+                c.unit,
+                c.note
+            );
+        }
+    }
+    let failures = report.failures();
+    if !failures.is_empty() {
+        let names: Vec<String> = failures
+            .iter()
+            .map(|c| format!("{} {} {}", c.field, c.channel, c.name))
+            .collect();
+        eprintln!(
+            "validate: {} check(s) failed: {}",
+            failures.len(),
+            names.join("; ")
+        );
+        std::process::exit(1);
+    }
+    Ok(())
 }
 
 fn run_bake(a: BakeArgs) -> Result<()> {

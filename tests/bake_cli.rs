@@ -234,6 +234,102 @@ fn inspect_and_compare_read_the_bake() {
     }
 }
 
+#[test]
+fn validate_passes_on_the_default_bake() {
+    let dir = default_bake().out.to_str().unwrap().to_string();
+    let out = photometeor(&["validate", &dir, "--json"], Path::new("."));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let checks = v["checks"].as_array().unwrap();
+    let passed = |field: &str, name: &str| {
+        checks
+            .iter()
+            .filter(|c| c["field"] == field && c["name"] == name && c["status"] == "pass")
+            .count()
+    };
+    // Every phenomenon the default scene must show is judged, per channel, and passes.
+    assert_eq!(passed("rain", "primary rainbow"), 3);
+    assert_eq!(passed("rain", "secondary rainbow"), 3);
+    assert_eq!(passed("rain", "Alexander's dark band contrast"), 3);
+    assert_eq!(passed("cloud", "glory enhancement"), 3);
+    assert_eq!(passed("ice", "22° halo"), 3);
+    assert_eq!(passed("ice", "46° halo"), 3);
+    assert_eq!(passed("snow", "featureless 10–60° (no halo)"), 3);
+}
+
+const SPHERES: &str = "[scene]\nname = \"v\"\nspectral = \"rgb3\"\nn_max = 4\nquality = \"draft\"\n\n[[field]]\nname = \"cloud\"\nkind = \"cloud\"\ndistribution = { kind = \"gamma\", r_eff_um = 8, v_eff = 0.02 }\n\n[[field]]\nname = \"rain\"\nkind = \"rain\"\nMATERIAL\ndistribution = { kind = \"lognormal\", median_radius_um = 500, sigma_g = 1.4 }\n";
+
+/// Bakes SPHERES with the rain drops made of `material` into `name` under the test's tmp dir.
+fn bake_spheres(name: &str, material: &str) -> PathBuf {
+    let root = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(name);
+    let _ = fs::remove_dir_all(&root);
+    fs::create_dir_all(&root).unwrap();
+    let scene = root.join("scene.toml");
+    fs::write(
+        &scene,
+        SPHERES.replace("MATERIAL", &format!("material = \"{material}\"")),
+    )
+    .unwrap();
+    let out_dir = root.join("tables");
+    let out = photometeor(
+        &[
+            "bake",
+            scene.to_str().unwrap(),
+            "--out",
+            out_dir.to_str().unwrap(),
+            "--quiet",
+        ],
+        Path::new("."),
+    );
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out_dir
+}
+
+/// A narrow cloud shows its corona ring where Fraunhofer theory puts it; ice spheres validate
+/// against the ice index; and a rain table computed with the ice index but labelled water (the
+/// manifest of a water bake) fails, naming the rainbow checks.
+#[test]
+fn validate_judges_the_corona_and_fails_on_a_table_with_the_wrong_index() {
+    let water = bake_spheres("validate-water", "water");
+    let ice = bake_spheres("validate-ice", "ice");
+    for dir in [&water, &ice] {
+        let out = photometeor(&["validate", dir.to_str().unwrap()], Path::new("."));
+        let text = String::from_utf8_lossy(&out.stdout);
+        assert!(
+            out.status.success(),
+            "{text}\n{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        assert_eq!(
+            text.lines()
+                .filter(|l| l.contains("first corona ring") && l.contains(" pass "))
+                .count(),
+            3,
+            "{text}"
+        );
+    }
+    // Water's manifest, ice's rain table.
+    fs::copy(ice.join("rain.exr"), water.join("rain.exr")).unwrap();
+    let out = photometeor(&["validate", water.to_str().unwrap()], Path::new("."));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    for c in ["R", "G", "B"] {
+        assert!(
+            stderr.contains(&format!("rain {c} primary rainbow")),
+            "{stderr}"
+        );
+    }
+    assert!(
+        !stderr.contains("cloud"),
+        "the cloud table is right: {stderr}"
+    );
+}
+
 const GOOD: &str = "[scene]\nname = \"t\"\nspectral = \"rgb3\"\nquality = \"draft\"\n\n[[field]]\nname = \"rain\"\nkind = \"rain\"\ndistribution = { kind = \"lognormal\", median_radius_um = 500, sigma_g = 1.4 }\n";
 
 fn listing(dir: &Path) -> Vec<(String, Vec<u8>)> {

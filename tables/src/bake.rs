@@ -14,9 +14,9 @@ use crate::manifest::{FieldEntry, Manifest, PerChannel, write_manifest};
 use crate::spectral::{ChannelWeights, SpectralMode};
 use anyhow::{Context, Result, bail};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use mie::AngleGrid;
 use mie::crystal::crystal_phase;
 use mie::ensemble::bulk_at;
-use mie::{AngleGrid, Material};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
@@ -308,7 +308,9 @@ pub fn compute_field(
         (Some(distribution), _) => {
             progress.set_message("Mie per wavelength");
             for (j, &lambda) in lambdas.iter().enumerate() {
-                let m = Material::Water.refractive_index(lambda, field.temperature_c)?;
+                let m = field
+                    .material
+                    .refractive_index(lambda, field.temperature_c)?;
                 let q = knobs.size_quadrature(&distribution, j, j_len);
                 let b = bulk_at(m, lambda, &q, angle_grid, knobs.nodes_per_panel, &[])?;
                 per_wavelength.push(Spectrum {

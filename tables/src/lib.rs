@@ -21,3 +21,4 @@ pub mod legendre;
 pub mod manifest;
 pub mod scene;
 pub mod spectral;
+pub mod validate;

@@ -26,7 +26,7 @@
 use std::path::Path;
 
 use anyhow::{Result, anyhow, bail};
-use mie::SizeDistribution;
+use mie::{Material, SizeDistribution};
 use serde::{Deserialize, Serialize};
 use toml::Spanned;
 
@@ -72,6 +72,9 @@ struct FieldFile {
     temperature_c: Option<f64>,
     #[serde(default)]
     distribution: Option<SizeDistribution>,
+    /// Sphere material (cloud, rain): water (default) or ice (frozen drops).
+    #[serde(default)]
+    material: Option<mie::refractive::Material>,
     /// Crystal habit (ice, snow): plate | column | aggregate; sets the default aspect ratio.
     #[serde(default)]
     habit: Option<String>,
@@ -135,6 +138,8 @@ pub struct Field {
     pub name: String,
     pub kind: FieldKind,
     pub temperature_c: f64,
+    /// What the particles are made of: spheres of water (default) or ice; crystals are ice.
+    pub material: mie::refractive::Material,
     /// Size distribution of spheres (cloud, rain).
     pub distribution: Option<SizeDistribution>,
     /// Crystal population (ice, snow).
@@ -293,6 +298,18 @@ impl Scene {
                 FieldKind::Cloud | FieldKind::Rain => 10.0,
                 FieldKind::Ice | FieldKind::Snow => -20.0,
             });
+            let material = f.material.unwrap_or(match f.kind {
+                FieldKind::Cloud | FieldKind::Rain => Material::Water,
+                FieldKind::Ice | FieldKind::Snow => Material::Ice,
+            });
+            if material == Material::Water && matches!(f.kind, FieldKind::Ice | FieldKind::Snow) {
+                bail!(
+                    "{}: field {:?} ({:?}): crystals are ice; material = \"water\" is only for cloud and rain",
+                    at("material"),
+                    f.name,
+                    f.kind
+                );
+            }
             let (distribution, crystal) = match f.kind {
                 FieldKind::Cloud | FieldKind::Rain => {
                     let d = f.distribution.ok_or_else(|| {
@@ -310,7 +327,9 @@ impl Scene {
                             f.name
                         )
                     })?;
-                    if mie::refractive::water_density_kg_m3(temperature_c).is_err() {
+                    if material == Material::Water
+                        && mie::refractive::water_density_kg_m3(temperature_c).is_err()
+                    {
                         bail!(
                             "{}: temperature_c = {temperature_c} is outside the allowed range [-12, 99] °C for liquid water",
                             at("temperature_c")
@@ -367,6 +386,7 @@ impl Scene {
                 name: f.name,
                 kind: f.kind,
                 temperature_c,
+                material,
                 distribution,
                 crystal,
             });
