@@ -4,7 +4,9 @@
 //! - Lognormal: n(r) ∝ r⁻¹ exp[−(ln r − ln r_g)² / (2 ln²σ_g)]; r_eff = r_g exp(2.5 ln²σ_g),
 //!   v_eff = exp(ln²σ_g) − 1.
 //! - Gamma (Hansen 1971): n(r) ∝ r^{(1−3v)/v} exp(−r/(a v)), a = r_eff, v = v_eff ∈ (0, 0.5).
-//! - Marshall–Palmer (1948): N(D) = N₀ e^{−ΛD}, Λ = 4.1 R^{−0.21} mm⁻¹ (R in mm/h), D = 2r.
+//! - Marshall–Palmer (1948): N(D) = N₀ e^{−ΛD}, Λ = 4.1 R^{−0.21} mm⁻¹ (R in mm/h), D = 2r, cut
+//!   at D = 8 mm: larger drops break up (Pruppacher & Klett 1997, ch. 10), and the exponential
+//!   would otherwise put drops beyond the solver's x ≤ 2·10⁵ at high rain rates.
 //!
 //! # Quadrature
 //! The distribution is truncated where the mass (∝ r³ n) outside [r_lo, r_hi] is `tail_mass`
@@ -14,6 +16,9 @@
 //! rule does as well as any higher-order rule; the error is measured, not assumed.
 
 use crate::error::MieError;
+
+/// Largest raindrop radius of the Marshall–Palmer spectrum (D = 8 mm; module docs).
+pub const MARSHALL_PALMER_MAX_RADIUS_UM: f64 = 4000.0;
 
 /// A distribution of sphere radii.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -109,7 +114,11 @@ impl SizeDistribution {
             Self::MarshallPalmer { rain_rate_mm_h } => {
                 let lambda_per_mm = 4.1 * rain_rate_mm_h.powf(-0.21);
                 // D = 2r, r in µm → D in mm = 2r/1000
-                r * (-lambda_per_mm * 2.0 * r / 1000.0).exp()
+                if r > MARSHALL_PALMER_MAX_RADIUS_UM {
+                    0.0
+                } else {
+                    r * (-lambda_per_mm * 2.0 * r / 1000.0).exp()
+                }
             }
             Self::Monodisperse { .. } => 0.0,
         }
@@ -132,7 +141,10 @@ impl SizeDistribution {
             Self::MarshallPalmer { rain_rate_mm_h } => {
                 let lambda_per_mm = 4.1 * rain_rate_mm_h.powf(-0.21);
                 let scale_um = 1000.0 / (2.0 * lambda_per_mm);
-                ((scale_um * 1e-4).ln(), (scale_um * 60.0).ln())
+                (
+                    (scale_um * 1e-4).ln(),
+                    (scale_um * 60.0).min(MARSHALL_PALMER_MAX_RADIUS_UM).ln(),
+                )
             }
             Self::Monodisperse { radius_um } => (radius_um.ln(), radius_um.ln()),
         }

@@ -143,3 +143,35 @@ fn out_of_range_inputs_are_refused_with_the_range() {
         assert!(e.contains(needle), "{m}, {x}: {e}");
     }
 }
+
+/// θ exactly 0° and 180° (μ = ±1, where π_n and τ_n take their limiting values): S1 = S2
+/// forward and S1 = −S2 backward (symmetry of a sphere), and the same values as the direct
+/// series of `mie::reference` (its own π_n, τ_n recurrence), across the whole x range.
+#[test]
+fn exactly_forward_and_backward() {
+    let mut worst: f64 = 0.0;
+    for &x in XS.iter().chain(&[1e5, 2e5]) {
+        for &(n, kappa) in &[(1.333, 1e-8), (1.0001, 0.0), (1.5, 10.0)] {
+            let c = Sphere::new(Complex64::new(n, kappa), x)
+                .unwrap()
+                .coefficients();
+            let (s1, s2) = amplitudes(&c, &FoldedAngles::new(&[1.0, -1.0]));
+            let scale = s1[0].norm().max(s1[1].norm()).max(1e-300);
+            let fwd = (s1[0] - s2[0]).norm() / s1[0].norm().max(1e-300);
+            let back = (s1[1] + s2[1]).norm() / scale;
+            let (d1, d2) = mie::reference::amplitudes_direct(&c, -1.0);
+            let direct = ((s1[1] - d1).norm() + (s2[1] - d2).norm()) / scale;
+            assert!(
+                fwd < 1e-12 && back < 1e-9 && direct < 1e-9,
+                "x {x}, m {n}+{kappa}i: forward {fwd:e}, backward {back:e}, direct {direct:e}"
+            );
+            assert!(
+                s1.iter()
+                    .chain(&s2)
+                    .all(|s| s.re.is_finite() && s.im.is_finite())
+            );
+            worst = worst.max(fwd).max(back).max(direct);
+        }
+    }
+    eprintln!("θ = 0°, 180°: worst relative deviation {worst:.1e}");
+}

@@ -157,8 +157,6 @@ pub fn run(plan: &BakePlan) -> Result<BakeReport> {
     let weights = ChannelWeights::new(&spectral_mode(&plan.scene.spectral))
         .context("building the RGB channel weights")?;
     let grid = ThetaGrid::new(plan.scene.theta_step_deg)?;
-    std::fs::create_dir_all(plan.out_dir.join(".cache"))
-        .with_context(|| format!("creating {}", plan.out_dir.display()))?;
     let mut report = BakeReport {
         scene: plan.scene.name.clone(),
         out_dir: plan.out_dir.clone(),
@@ -171,6 +169,7 @@ pub fn run(plan: &BakePlan) -> Result<BakeReport> {
     // Compute (or read from the cache) every field first; only then touch the tables, so a
     // failing field leaves the previous bake as it was.
     let mut done = Vec::new();
+    let mut fresh = Vec::new();
     for field in &plan.scene.fields {
         let hash = content_hash(plan, field);
         let cache_file = plan.out_dir.join(".cache").join(format!("{hash}.bin"));
@@ -181,12 +180,21 @@ pub fn run(plan: &BakePlan) -> Result<BakeReport> {
             }
             None => {
                 let r = compute_field(plan, field, &weights, &grid)?;
-                write_cache(&cache_file, &r)?;
                 report.computed.push(field.name.clone());
+                fresh.push(done.len());
                 r
             }
         };
         done.push((field, hash, result));
+    }
+    std::fs::create_dir_all(plan.out_dir.join(".cache"))
+        .with_context(|| format!("creating {}", plan.out_dir.display()))?;
+    for &i in &fresh {
+        let (_, hash, result) = &done[i];
+        write_cache(
+            &plan.out_dir.join(".cache").join(format!("{hash}.bin")),
+            result,
+        )?;
     }
     let previous = crate::manifest::read_manifest(&plan.out_dir).ok();
     let mut entries = Vec::new();
@@ -312,7 +320,15 @@ pub fn compute_field(
                     .material
                     .refractive_index(lambda, field.temperature_c)?;
                 let q = knobs.size_quadrature(&distribution, j, j_len);
-                let b = bulk_at(m, lambda, &q, angle_grid, knobs.nodes_per_panel, &[])?;
+                let b = bulk_at(m, lambda, &q, angle_grid, knobs.nodes_per_panel, &[])
+                    .with_context(|| {
+                        format!(
+                            "field {:?} at {lambda} nm (radii {:.3}–{:.0} µm after truncating 1e-3 of the mass)",
+                            field.name,
+                            q.radius_um.first().copied().unwrap_or(f64::NAN),
+                            q.radius_um.last().copied().unwrap_or(f64::NAN)
+                        )
+                    })?;
                 per_wavelength.push(Spectrum {
                     bins: b.bins,
                     sigma_ext_m2: b.sigma_ext_m2,
