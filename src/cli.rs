@@ -43,6 +43,15 @@ enum Command {
     /// corona ring (Fraunhofer), 22°/46° halos (prism minimum deviation), snow without halos.
     /// Angles in degrees (scattering angle, 0 = forward). Exits 1 when a check fails.
     Validate(ValidateArgs),
+    /// Draw a bake (PNG and SVG): Ams_1 per channel on a log scale (phase function, 1/sr,
+    /// against scattering angle in degrees) with an optional reference bake overlaid, zooms on
+    /// rainbows/glory/corona/halos, the Ams_n family, F_n against n, sRGB colour strips for
+    /// n = 1, 2, 4, 8; and the Pareto front of a `tradeoff` run.
+    Plot(crate::plot::PlotArgs),
+    /// Measure the speed/accuracy trade: vary each bake knob alone from `standard`, bake and
+    /// time each variant, compare it with a reference-quality bake (relative errors of Ams_n
+    /// for θ ≥ 1°, |ΔF_i|, peak-angle shifts in degrees) and write a table and tradeoff.json.
+    Tradeoff(crate::tradeoff::TradeoffArgs),
     /// Time photometeor's Mie workloads (and miepython's, side by side, when available).
     Bench(crate::bench::BenchArgs),
 }
@@ -212,6 +221,8 @@ pub fn run(args: Args) -> Result<()> {
         Command::Inspect(a) => run_inspect(a),
         Command::Compare(a) => run_compare(a),
         Command::Validate(a) => run_validate(a),
+        Command::Tradeoff(a) => crate::tradeoff::run_tradeoff(a),
+        Command::Plot(a) => crate::plot::run_plot(a),
     }
 }
 

@@ -3,6 +3,8 @@
 
 mod bench;
 mod cli;
+mod plot;
+mod tradeoff;
 
 use std::process::ExitCode;
 

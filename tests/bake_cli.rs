@@ -258,6 +258,119 @@ fn validate_passes_on_the_default_bake() {
     assert_eq!(passed("snow", "featureless 10–60° (no halo)"), 3);
 }
 
+#[test]
+fn plot_draws_every_picture_of_the_default_bake_as_png_and_svg() {
+    let dir = default_bake().out.to_str().unwrap().to_string();
+    let out = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("plots");
+    let _ = fs::remove_dir_all(&out);
+    let run = photometeor(
+        &[
+            "plot",
+            &dir,
+            "--out",
+            out.to_str().unwrap(),
+            "--reference",
+            &dir,
+        ],
+        Path::new("."),
+    );
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let mut names = vec!["forward_fraction".to_string()];
+    for (field, zooms) in [
+        ("cloud", &["corona", "glory", "fogbow"][..]),
+        ("rain", &["rainbows"][..]),
+        ("ice", &["halos"][..]),
+        ("snow", &["no_halos"][..]),
+    ] {
+        names.push(format!("{field}_phase"));
+        names.push(format!("{field}_ams_family"));
+        names.extend(zooms.iter().map(|z| format!("{field}_zoom_{z}")));
+        let strip = fs::read(out.join(format!("{field}_colours.png"))).unwrap();
+        assert_eq!(&strip[1..4], b"PNG", "{field} colour strip");
+    }
+    for name in names {
+        let png = fs::read(out.join(format!("{name}.png"))).unwrap();
+        assert_eq!(&png[1..4], b"PNG", "{name}.png");
+        assert!(png.len() > 10_000, "{name}.png is {} bytes", png.len());
+        let svg = fs::read_to_string(out.join(format!("{name}.svg"))).unwrap();
+        assert!(
+            svg.contains("<svg") && svg.contains("<polyline"),
+            "{name}.svg"
+        );
+    }
+}
+
+/// A quick trade on a small scene: every variant is baked, timed and compared; errors fall as
+/// sizes rise, and the presets' rows are there.
+#[test]
+fn tradeoff_measures_each_knob_against_a_reference() {
+    let root = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("tradeoff");
+    let _ = fs::remove_dir_all(&root);
+    fs::create_dir_all(&root).unwrap();
+    let scene = root.join("scene.toml");
+    fs::write(
+        &scene,
+        "[scene]\nname = \"t\"\nspectral = \"rgb3\"\nn_max = 4\n\n[[field]]\nname = \"cloud\"\nkind = \"cloud\"\ndistribution = { kind = \"gamma\", r_eff_um = 8, v_eff = 0.02 }\n",
+    )
+    .unwrap();
+    let out_dir = root.join("work");
+    let run = photometeor(
+        &[
+            "tradeoff",
+            scene.to_str().unwrap(),
+            "--out",
+            out_dir.to_str().unwrap(),
+            "--quick",
+        ],
+        Path::new("."),
+    );
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let v: serde_json::Value =
+        serde_json::from_slice(&fs::read(out_dir.join("tradeoff.json")).unwrap()).unwrap();
+    let rows = v["rows"].as_array().unwrap();
+    let row = |knob: &str, value: &str| {
+        rows.iter()
+            .find(|r| r["knob"] == knob && r["value"] == value)
+            .unwrap_or_else(|| panic!("no row {knob} = {value}: {rows:?}"))
+    };
+    let err = |r: &serde_json::Value| r["rms_rel_ams1"].as_f64().unwrap();
+    let (draft, standard) = (row("preset", "draft"), row("preset", "standard"));
+    assert!(err(standard) < err(draft), "{draft} {standard}");
+    assert!(err(row("sizes per λ", "100")) > err(standard));
+    for r in rows {
+        assert!(r["seconds"].as_f64().unwrap() > 0.0);
+        assert!(r["max_peak_shift_deg"].as_f64().unwrap() < 0.2, "{r}");
+    }
+    let text = String::from_utf8_lossy(&run.stdout);
+    assert!(text.starts_with("| fields | knob |"), "{text}");
+    let plots = root.join("plots");
+    let run = photometeor(
+        &[
+            "plot",
+            "--tradeoff",
+            out_dir.join("tradeoff.json").to_str().unwrap(),
+            "--out",
+            plots.to_str().unwrap(),
+        ],
+        Path::new("."),
+    );
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    assert!(plots.join("tradeoff_pareto.png").exists());
+    assert!(plots.join("tradeoff_pareto.svg").exists());
+}
+
 const SPHERES: &str = "[scene]\nname = \"v\"\nspectral = \"rgb3\"\nn_max = 4\nquality = \"draft\"\n\n[[field]]\nname = \"cloud\"\nkind = \"cloud\"\ndistribution = { kind = \"gamma\", r_eff_um = 8, v_eff = 0.02 }\n\n[[field]]\nname = \"rain\"\nkind = \"rain\"\nMATERIAL\ndistribution = { kind = \"lognormal\", median_radius_um = 500, sigma_g = 1.4 }\n";
 
 /// Bakes SPHERES with the rain drops made of `material` into `name` under the test's tmp dir.
