@@ -1,0 +1,199 @@
+//! Loading and checking a bake directory.
+//!
+//! # Checks (each failure names the file and the check)
+//! - `manifest.json`: schema version, grid (K = 180°/Δθ + 1), per-field shapes (by
+//!   `tables::manifest::read_manifest`);
+//! - each selected field's EXR: a complete OpenEXR file following the contract (by
+//!   `tables::exr_io::read_field_exr`), then against its manifest entry: the field name
+//!   attribute, Δθ, N and K, and F_1..F_N equal to the manifest's per channel;
+//! - every row Ams_n, per channel, integrates to 1 over the sphere within [`NORMALIZATION_TOLERANCE`]
+//!   (the texels are 32-bit floats) and has no value below −10⁻⁶ of its maximum;
+//! - F_n lies in [½, 1] and does not rise with n.
+
+use std::path::{Path, PathBuf};
+
+use tables::exr_io::read_field_exr;
+use tables::grid::ThetaGrid;
+use tables::manifest::read_manifest;
+use thiserror::Error;
+
+/// |∫ Ams_n dΩ − 1| allowed: 32-bit texels summed over ≤ 18001 bins stay below 10⁻⁵.
+pub const NORMALIZATION_TOLERANCE: f64 = 1e-5;
+
+/// A bake directory that cannot be used, naming the file and the failed check.
+#[derive(Debug, Error)]
+#[error("{}: {check}", file.display())]
+pub struct LoadError {
+    /// The file that failed (manifest.json or a field's EXR).
+    pub file: PathBuf,
+    /// What was checked and what was found.
+    pub check: String,
+}
+
+/// One field's tables, as loaded and checked.
+#[derive(Debug, Clone)]
+pub struct FieldTable {
+    pub name: String,
+    /// cloud | rain | ice | snow
+    pub kind: String,
+    /// N: rows Ams_1..Ams_N.
+    pub n_max: usize,
+    /// `rows[c][n − 1][k]`: channel c ∈ {R, G, B}, Ams_n at θ_k = k·Δθ (1/sr).
+    pub rows: [Vec<Vec<f64>>; 3],
+    /// F_1..F_N per channel.
+    pub forward_fraction: [Vec<f64>; 3],
+    /// Mean scattering cross-section per particle, per channel (m²): σ_ext · albedo, the
+    /// weight of this field in a spatial mix.
+    pub sigma_sca_m2: [f64; 3],
+}
+
+/// A checked bake: the grid and the selected fields, in the manifest's order.
+#[derive(Debug, Clone)]
+pub struct Tables {
+    pub dir: PathBuf,
+    pub theta_step_deg: f64,
+    /// K, samples per row.
+    pub angle_count: usize,
+    pub fields: Vec<FieldTable>,
+}
+
+impl Tables {
+    /// Loads and checks every field of the bake in `dir`.
+    pub fn open(dir: impl AsRef<Path>) -> Result<Self, LoadError> {
+        Self::open_fields(dir, None)
+    }
+
+    /// Loads and checks only the fields a scene uses (`None`: all). A name the bake does not
+    /// have is an error listing those it has.
+    pub fn open_fields(dir: impl AsRef<Path>, names: Option<&[&str]>) -> Result<Self, LoadError> {
+        let dir = dir.as_ref();
+        let manifest_file = dir.join(tables::manifest::MANIFEST_FILE);
+        let manifest = read_manifest(dir).map_err(|e| LoadError {
+            file: manifest_file.clone(),
+            check: strip_path(&e.to_string(), &manifest_file),
+        })?;
+        if let Some(names) = names {
+            for n in names {
+                if !manifest.fields.iter().any(|f| f.name == *n) {
+                    let have: Vec<&str> = manifest.fields.iter().map(|f| f.name.as_str()).collect();
+                    return Err(LoadError {
+                        file: manifest_file,
+                        check: format!("the scene uses field {n:?}, the bake has {have:?}"),
+                    });
+                }
+            }
+        }
+        let grid = ThetaGrid::new(manifest.theta_step_deg).map_err(|e| LoadError {
+            file: manifest_file.clone(),
+            check: e.to_string(),
+        })?;
+        let omega = grid.bin_solid_angles();
+        let mut fields = Vec::new();
+        for entry in &manifest.fields {
+            if names.is_some_and(|n| !n.contains(&entry.name.as_str())) {
+                continue;
+            }
+            let file = dir.join(&entry.file);
+            let fail = |check: String| LoadError {
+                file: file.clone(),
+                check,
+            };
+            let image =
+                read_field_exr(&file).map_err(|e| fail(strip_path(&e.to_string(), &file)))?;
+            if image.field != entry.name {
+                return Err(fail(format!(
+                    "field attribute {:?}, but manifest.json lists this file for field {:?}",
+                    image.field, entry.name
+                )));
+            }
+            if image.theta_step_deg != manifest.theta_step_deg {
+                return Err(fail(format!(
+                    "Δθ = {}°, manifest.json says {}°",
+                    image.theta_step_deg, manifest.theta_step_deg
+                )));
+            }
+            if image.n_max() != entry.n_max || image.angle_count() != manifest.angle_count {
+                return Err(fail(format!(
+                    "{} rows × {} angles, manifest.json says N = {} × K = {}",
+                    image.n_max(),
+                    image.angle_count(),
+                    entry.n_max,
+                    manifest.angle_count
+                )));
+            }
+            let manifest_f = entry.forward_fraction.as_array();
+            for (c, ch) in ["R", "G", "B"].into_iter().enumerate() {
+                let f = &image.forward_fraction[c];
+                if let Some(i) = (0..f.len()).find(|&i| f[i] != manifest_f[c][i]) {
+                    return Err(fail(format!(
+                        "F_{}.{ch} = {} in the EXR header, {} in manifest.json",
+                        i + 1,
+                        f[i],
+                        manifest_f[c][i]
+                    )));
+                }
+                if let Some(i) = (0..f.len()).find(|&i| !(0.5 - 1e-9..=1.0).contains(&f[i])) {
+                    return Err(fail(format!(
+                        "F_{}.{ch} = {} is outside [0.5, 1]",
+                        i + 1,
+                        f[i]
+                    )));
+                }
+                if let Some(i) = (1..f.len()).find(|&i| f[i] > f[i - 1] + 1e-12) {
+                    return Err(fail(format!(
+                        "F_{}.{ch} = {} exceeds F_{} = {}: forward fractions must not rise with n",
+                        i + 1,
+                        f[i],
+                        i,
+                        f[i - 1]
+                    )));
+                }
+                for (r, row) in image.rows[c].iter().enumerate() {
+                    let integral: f64 = row.iter().zip(&omega).map(|(v, o)| v * o).sum();
+                    if (integral - 1.0).abs() > NORMALIZATION_TOLERANCE {
+                        return Err(fail(format!(
+                            "Ams_{}.{ch} integrates to {integral} over the sphere, expected 1 ± {NORMALIZATION_TOLERANCE}",
+                            r + 1
+                        )));
+                    }
+                    let max = row.iter().copied().fold(0.0, f64::max);
+                    if let Some(k) = row.iter().position(|&v| v < -1e-6 * max) {
+                        return Err(fail(format!(
+                            "Ams_{}.{ch} at θ = {}° is {}, a phase function cannot be negative",
+                            r + 1,
+                            k as f64 * manifest.theta_step_deg,
+                            row[k]
+                        )));
+                    }
+                }
+            }
+            let ext = entry.sigma_ext_m2.as_array();
+            let alb = entry.albedo.as_array();
+            fields.push(FieldTable {
+                name: entry.name.clone(),
+                kind: entry.kind.clone(),
+                n_max: entry.n_max,
+                rows: image.rows,
+                forward_fraction: image.forward_fraction,
+                sigma_sca_m2: [ext[0] * alb[0], ext[1] * alb[1], ext[2] * alb[2]],
+            });
+        }
+        Ok(Self {
+            dir: dir.to_path_buf(),
+            theta_step_deg: manifest.theta_step_deg,
+            angle_count: manifest.angle_count,
+            fields,
+        })
+    }
+
+    /// The field called `name`.
+    pub fn field(&self, name: &str) -> Option<&FieldTable> {
+        self.fields.iter().find(|f| f.name == name)
+    }
+}
+
+/// The error text without its leading "path: " (the [`LoadError`] names the file itself).
+fn strip_path(text: &str, path: &Path) -> String {
+    let prefix = format!("{}: ", path.display());
+    text.strip_prefix(&prefix).unwrap_or(text).to_string()
+}
