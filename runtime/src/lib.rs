@@ -5,8 +5,9 @@
 //! specified to: `ams(field, n, cos θ)` linear in θ and in fractional n, `forward_fraction(field,
 //! n)`, and the spatial mix of several fields (Riley et al. 2004 Eq. 6).
 //!
-//! GPU upload, the WGSL module and the renderer are not written yet.
+//! [`gpu`] uploads the tables with the WGSL module; the renderer is not written yet.
 
+pub mod gpu;
 pub mod load;
 pub mod sample;
 

@@ -1,0 +1,470 @@
+//! Uploading checked tables to a wgpu device, with the WGSL sampling functions ([`WGSL`]).
+//!
+//! # Layout (bind group 0, built once, labelled)
+//! - binding 0, `ams_table`: `texture_2d_array<f32>`, width K, height N_max (the largest N of
+//!   the selected fields), one layer per field in [`Tables::fields`] order; texel (k, r) of
+//!   layer i is Ams_{r+1}(θ_k) of field i as RGBA (A = 0). A field with fewer orders repeats
+//!   its last row. Format `Rgba32Float`, or `Rgba16Float` when [`TexelFormat::Auto`] finds every
+//!   value inside the half-float normal range (6.1·10⁻⁵ … 65504; a forward bin of large drops
+//!   at fine Δθ exceeds it). Sampled with `textureLoad` and interpolated in the shader, so it works on every
+//!   backend, with or without `FLOAT32_FILTERABLE`.
+//! - binding 1, `ams_forward_fraction`: storage `array<vec4<f32>>`, F_n of field i at
+//!   index i·N_max + n − 1.
+//! - binding 2, `ams_field_info`: storage `array<vec4<f32>>`, (N, σ_sca R, G, B) per field.
+//! - binding 3, `ams_params`: uniform (K, N_max, field count, 1/Δθ in 1/rad).
+//!
+//! The WGSL functions (`ams`, `forward_fraction`, `ams_mix`) are specified by
+//! [`crate::sample`], their CPU reference.
+
+use std::time::Instant;
+
+use thiserror::Error;
+use wgpu::util::DeviceExt;
+
+use crate::load::Tables;
+
+/// The sampling functions; a shader includes this text and binds [`GpuTables::bind_group`] as
+/// group 0.
+pub const WGSL: &str = include_str!("tables.wgsl");
+
+/// Smallest normal and largest finite half-float.
+const F16_MIN_NORMAL: f64 = 6.103_515_625e-5;
+const F16_MAX: f64 = 65504.0;
+
+/// Why the GPU path cannot run.
+#[derive(Debug, Error)]
+pub enum GpuError {
+    #[error("no GPU adapter found (any backend; set WGPU_BACKEND to choose one): {0}")]
+    NoAdapter(String),
+    #[error("the adapter refused a device: {0}")]
+    Device(String),
+    #[error("{what} = {value} exceeds this device's limit {limit}")]
+    Limit {
+        what: &'static str,
+        value: u64,
+        limit: u64,
+    },
+    #[error("reading back from the GPU failed: {0}")]
+    Readback(String),
+}
+
+/// A headless device.
+pub struct Gpu {
+    pub adapter: wgpu::Adapter,
+    pub device: wgpu::Device,
+    pub queue: wgpu::Queue,
+}
+
+impl Gpu {
+    /// The first adapter of any enabled backend (WGPU_BACKEND, WGPU_ADAPTER_NAME respected).
+    pub fn new() -> Result<Self, GpuError> {
+        let instance =
+            wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+        let adapter = pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
+            power_preference: wgpu::PowerPreference::HighPerformance,
+            ..Default::default()
+        }))
+        .map_err(|e| GpuError::NoAdapter(e.to_string()))?;
+        let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+            label: Some("photometeor device"),
+            required_features: wgpu::Features::empty(),
+            required_limits: adapter.limits(),
+            ..Default::default()
+        }))
+        .map_err(|e| GpuError::Device(e.to_string()))?;
+        Ok(Self {
+            adapter,
+            device,
+            queue,
+        })
+    }
+
+    /// "name (backend, device type)".
+    pub fn describe(&self) -> String {
+        let i = self.adapter.get_info();
+        format!("{} ({:?}, {:?})", i.name, i.backend, i.device_type)
+    }
+}
+
+/// Texel format of the Ams texture.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum TexelFormat {
+    /// Half floats where every value fits, else 32-bit.
+    Auto,
+    F32,
+}
+
+/// Tables resident on the GPU.
+pub struct GpuTables {
+    pub texture: wgpu::Texture,
+    pub format: wgpu::TextureFormat,
+    pub forward_fraction: wgpu::Buffer,
+    pub field_info: wgpu::Buffer,
+    pub params: wgpu::Buffer,
+    pub layout: wgpu::BindGroupLayout,
+    pub bind_group: wgpu::BindGroup,
+    /// Rows per layer (the largest N).
+    pub n_stride: usize,
+    /// Wall time of building and uploading, including a wait for the queue (s).
+    pub upload_seconds: f64,
+}
+
+/// Whether every texel lies in the half-float normal range (or is 0).
+pub fn fits_half(tables: &Tables) -> bool {
+    tables.fields.iter().all(|f| {
+        f.rows
+            .iter()
+            .flatten()
+            .flatten()
+            .all(|&v| v == 0.0 || (F16_MIN_NORMAL..=F16_MAX).contains(&v.abs()))
+    })
+}
+
+impl GpuTables {
+    /// Uploads every field of `tables`.
+    pub fn upload(gpu: &Gpu, tables: &Tables, format: TexelFormat) -> Result<Self, GpuError> {
+        let start = Instant::now();
+        let device = &gpu.device;
+        let limits = device.limits();
+        let k_len = tables.angle_count;
+        let n_stride = tables.fields.iter().map(|f| f.n_max).max().unwrap_or(1);
+        let layers = tables.fields.len().max(1);
+        for (what, value, limit) in [
+            ("angle count K", k_len, limits.max_texture_dimension_2d),
+            ("orders N", n_stride, limits.max_texture_dimension_2d),
+            ("fields", layers, limits.max_texture_array_layers),
+        ] {
+            if value as u64 > limit as u64 {
+                return Err(GpuError::Limit {
+                    what,
+                    value: value as u64,
+                    limit: limit as u64,
+                });
+            }
+        }
+        let half = format == TexelFormat::Auto && fits_half(tables);
+        let texel_format = if half {
+            wgpu::TextureFormat::Rgba16Float
+        } else {
+            wgpu::TextureFormat::Rgba32Float
+        };
+        let texture = device.create_texture(&wgpu::TextureDescriptor {
+            label: Some("photometeor Ams_n table array"),
+            size: wgpu::Extent3d {
+                width: k_len as u32,
+                height: n_stride as u32,
+                depth_or_array_layers: layers as u32,
+            },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format: texel_format,
+            usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+            view_formats: &[],
+        });
+        let texel_bytes = if half { 8 } else { 16 };
+        for (i, f) in tables.fields.iter().enumerate() {
+            let mut bytes = Vec::with_capacity(k_len * n_stride * texel_bytes);
+            for r in 0..n_stride {
+                let row = r.min(f.n_max - 1);
+                for k in 0..k_len {
+                    let texel = [f.rows[0][row][k], f.rows[1][row][k], f.rows[2][row][k], 0.0];
+                    for v in texel {
+                        if half {
+                            bytes.extend_from_slice(&half::f16::from_f64(v).to_le_bytes());
+                        } else {
+                            bytes.extend_from_slice(&(v as f32).to_le_bytes());
+                        }
+                    }
+                }
+            }
+            gpu.queue.write_texture(
+                wgpu::TexelCopyTextureInfo {
+                    texture: &texture,
+                    mip_level: 0,
+                    origin: wgpu::Origin3d {
+                        x: 0,
+                        y: 0,
+                        z: i as u32,
+                    },
+                    aspect: wgpu::TextureAspect::All,
+                },
+                &bytes,
+                wgpu::TexelCopyBufferLayout {
+                    offset: 0,
+                    bytes_per_row: Some((k_len * texel_bytes) as u32),
+                    rows_per_image: Some(n_stride as u32),
+                },
+                wgpu::Extent3d {
+                    width: k_len as u32,
+                    height: n_stride as u32,
+                    depth_or_array_layers: 1,
+                },
+            );
+        }
+        let mut ff = Vec::with_capacity(layers * n_stride * 4);
+        let mut info = Vec::with_capacity(layers * 4);
+        for f in &tables.fields {
+            for n in 0..n_stride {
+                let r = n.min(f.n_max - 1);
+                for c in 0..3 {
+                    ff.push(f.forward_fraction[c][r] as f32);
+                }
+                ff.push(0.0);
+            }
+            info.push(f.n_max as f32);
+            info.extend(f.sigma_sca_m2.iter().map(|&s| s as f32));
+        }
+        if tables.fields.is_empty() {
+            ff.extend([0.0f32; 4]);
+            info.extend([1.0f32, 0.0, 0.0, 0.0]);
+        }
+        let storage = |label: &str, data: &[f32]| {
+            device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some(label),
+                contents: bytemuck::cast_slice(data),
+                usage: wgpu::BufferUsages::STORAGE,
+            })
+        };
+        let forward_fraction = storage("photometeor F_n", &ff);
+        let field_info = storage("photometeor field info", &info);
+        let inv_step = 1.0 / tables.theta_step_deg.to_radians();
+        let params_words: [u32; 8] = [
+            k_len as u32,
+            n_stride as u32,
+            tables.fields.len() as u32,
+            0,
+            (inv_step as f32).to_bits(),
+            0,
+            0,
+            0,
+        ];
+        let params = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("photometeor table params"),
+            contents: bytemuck::cast_slice(&params_words),
+            usage: wgpu::BufferUsages::UNIFORM,
+        });
+        let layout = Self::bind_group_layout(device);
+        let view = texture.create_view(&wgpu::TextureViewDescriptor {
+            label: Some("photometeor Ams_n table view"),
+            dimension: Some(wgpu::TextureViewDimension::D2Array),
+            ..Default::default()
+        });
+        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("photometeor tables"),
+            layout: &layout,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: wgpu::BindingResource::TextureView(&view),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: forward_fraction.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: field_info.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 3,
+                    resource: params.as_entire_binding(),
+                },
+            ],
+        });
+        gpu.queue.submit([]);
+        device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map_err(|e| GpuError::Device(e.to_string()))?;
+        Ok(Self {
+            texture,
+            format: texel_format,
+            forward_fraction,
+            field_info,
+            params,
+            layout,
+            bind_group,
+            n_stride,
+            upload_seconds: start.elapsed().as_secs_f64(),
+        })
+    }
+
+    /// The layout of bind group 0 (module docs), visible to compute and fragment stages.
+    pub fn bind_group_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
+        let visibility = wgpu::ShaderStages::COMPUTE | wgpu::ShaderStages::FRAGMENT;
+        let storage = |binding| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility,
+            ty: wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Storage { read_only: true },
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
+            count: None,
+        };
+        device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("photometeor tables layout"),
+            entries: &[
+                wgpu::BindGroupLayoutEntry {
+                    binding: 0,
+                    visibility,
+                    ty: wgpu::BindingType::Texture {
+                        sample_type: wgpu::TextureSampleType::Float { filterable: false },
+                        view_dimension: wgpu::TextureViewDimension::D2Array,
+                        multisampled: false,
+                    },
+                    count: None,
+                },
+                storage(1),
+                storage(2),
+                wgpu::BindGroupLayoutEntry {
+                    binding: 3,
+                    visibility,
+                    ty: wgpu::BindingType::Buffer {
+                        ty: wgpu::BufferBindingType::Uniform,
+                        has_dynamic_offset: false,
+                        min_binding_size: None,
+                    },
+                    count: None,
+                },
+            ],
+        })
+    }
+}
+
+/// One query of [`evaluate`]: `ams(field, n, cos θ)` and `forward_fraction(field, n)`.
+#[derive(Debug, Clone, Copy)]
+pub struct Query {
+    pub field: u32,
+    pub n: f32,
+    pub cos_theta: f32,
+}
+
+/// Evaluates `ams` and `forward_fraction` for each query in a compute shader and reads the
+/// results back: [Ams R, G, B, F_n G] per query. Used by the tests and `photometeor` checks.
+pub fn evaluate(
+    gpu: &Gpu,
+    tables: &GpuTables,
+    queries: &[Query],
+) -> Result<Vec<[f32; 4]>, GpuError> {
+    let device = &gpu.device;
+    let source = format!(
+        "{WGSL}\n{}",
+        r#"
+@group(1) @binding(0) var<storage, read> queries: array<vec4<f32>>;
+@group(1) @binding(1) var<storage, read_write> results: array<vec4<f32>>;
+
+@compute @workgroup_size(64)
+fn evaluate_queries(@builtin(global_invocation_id) id: vec3<u32>) {
+    let i = id.x;
+    if (i >= arrayLength(&queries)) {
+        return;
+    }
+    let q = queries[i];
+    let field = u32(q.x);
+    results[i] = vec4<f32>(ams(field, q.y, q.z), forward_fraction(field, q.y).g);
+}
+"#
+    );
+    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        label: Some("photometeor table queries"),
+        source: wgpu::ShaderSource::Wgsl(source.into()),
+    });
+    let io_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some("photometeor query io"),
+        entries: &[0u32, 1].map(|binding| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: wgpu::ShaderStages::COMPUTE,
+            ty: wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Storage {
+                    read_only: binding == 0,
+                },
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
+            count: None,
+        }),
+    });
+    let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+        label: Some("photometeor query pipeline layout"),
+        bind_group_layouts: &[Some(&tables.layout), Some(&io_layout)],
+        immediate_size: 0,
+    });
+    let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+        label: Some("photometeor query pipeline"),
+        layout: Some(&pipeline_layout),
+        module: &module,
+        entry_point: Some("evaluate_queries"),
+        compilation_options: Default::default(),
+        cache: None,
+    });
+    let data: Vec<f32> = queries
+        .iter()
+        .flat_map(|q| [q.field as f32, q.n, q.cos_theta, 0.0])
+        .collect();
+    let query_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some("photometeor queries"),
+        contents: bytemuck::cast_slice(&data),
+        usage: wgpu::BufferUsages::STORAGE,
+    });
+    let size = (queries.len() * 16) as u64;
+    let results = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("photometeor query results"),
+        size,
+        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+        mapped_at_creation: false,
+    });
+    let readback = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("photometeor query readback"),
+        size,
+        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    let io = device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some("photometeor query io"),
+        layout: &io_layout,
+        entries: &[
+            wgpu::BindGroupEntry {
+                binding: 0,
+                resource: query_buffer.as_entire_binding(),
+            },
+            wgpu::BindGroupEntry {
+                binding: 1,
+                resource: results.as_entire_binding(),
+            },
+        ],
+    });
+    let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+        label: Some("photometeor queries"),
+    });
+    {
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some("photometeor queries"),
+            timestamp_writes: None,
+        });
+        pass.set_pipeline(&pipeline);
+        pass.set_bind_group(0, &tables.bind_group, &[]);
+        pass.set_bind_group(1, &io, &[]);
+        pass.dispatch_workgroups(queries.len().div_ceil(64) as u32, 1, 1);
+    }
+    encoder.copy_buffer_to_buffer(&results, 0, &readback, 0, size);
+    gpu.queue.submit([encoder.finish()]);
+    let (tx, rx) = std::sync::mpsc::channel();
+    readback.map_async(wgpu::MapMode::Read, .., move |r| {
+        let _ = tx.send(r);
+    });
+    device
+        .poll(wgpu::PollType::wait_indefinitely())
+        .map_err(|e| GpuError::Readback(e.to_string()))?;
+    rx.recv()
+        .map_err(|e| GpuError::Readback(e.to_string()))?
+        .map_err(|e| GpuError::Readback(e.to_string()))?;
+    let view = readback
+        .get_mapped_range(..)
+        .map_err(|e| GpuError::Readback(e.to_string()))?;
+    let floats: &[f32] = bytemuck::cast_slice(&view);
+    Ok(floats
+        .chunks_exact(4)
+        .map(|c| [c[0], c[1], c[2], c[3]])
+        .collect())
+}
