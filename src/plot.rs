@@ -38,7 +38,7 @@ const FAMILY_COLOURS: [RGBColor; 6] = [
     RGBColor(214, 39, 40),
 ];
 
-/// One curve of a line plot.
+/// One curve of a plot: a line, or dots where `width` is 0.
 struct Series {
     label: String,
     colour: RGBColor,
@@ -46,12 +46,13 @@ struct Series {
     points: Vec<(f64, f64)>,
 }
 
-/// A line plot with a linear x axis and a log or linear y axis.
+/// A plot whose axes are each linear or logarithmic.
 struct LinePlot {
     title: String,
     x_label: String,
     y_label: String,
     x_range: (f64, f64),
+    log_x: bool,
     log_y: bool,
     series: Vec<Series>,
 }
@@ -126,6 +127,7 @@ fn plot_bake(dir: &Path, reference: Option<&Path>, out: &Path) -> Result<Vec<Pat
                 x_label: "scattering angle θ (°)".into(),
                 y_label: "Ams₁ = phase function (1/sr)".into(),
                 x_range: (a, b),
+                log_x: false,
                 log_y: true,
                 series,
             }
@@ -165,6 +167,7 @@ fn plot_bake(dir: &Path, reference: Option<&Path>, out: &Path) -> Result<Vec<Pat
                 x_label: "scattering angle θ (°)".into(),
                 y_label: "Ams_n (1/sr)".into(),
                 x_range: (0.0, 180.0),
+                log_x: false,
                 log_y: true,
                 series: orders
                     .iter()
@@ -205,6 +208,7 @@ fn plot_bake(dir: &Path, reference: Option<&Path>, out: &Path) -> Result<Vec<Pat
             x_label: "scattering order n".into(),
             y_label: "F_n".into(),
             x_range: (1.0, n_max as f64),
+            log_x: false,
             log_y: false,
             series: forward,
         },
@@ -280,7 +284,7 @@ fn plot_tradeoff(path: &Path, out: &Path) -> Result<Vec<PathBuf>> {
         .as_array()
         .ok_or_else(|| anyhow!("{}: no rows", path.display()))?;
     let mut series = Vec::new();
-    let mut x_max: f64 = 1.0;
+    let (mut x_min, mut x_max) = (f64::INFINITY, 1.0f64);
     for (g, group) in ["drops", "crystals"].into_iter().enumerate() {
         let mut pts: Vec<(f64, f64)> = rows
             .iter()
@@ -291,6 +295,7 @@ fn plot_tradeoff(path: &Path, out: &Path) -> Result<Vec<PathBuf>> {
             continue;
         }
         pts.sort_by(|a, b| a.0.total_cmp(&b.0));
+        x_min = x_min.min(pts[0].0 / 1.5);
         x_max = x_max.max(pts.last().unwrap().0 * 1.2);
         // Pareto front: points no faster-or-equal point beats in error.
         let mut front = Vec::new();
@@ -314,7 +319,19 @@ fn plot_tradeoff(path: &Path, out: &Path) -> Result<Vec<PathBuf>> {
             points: front,
         });
     }
-    save_scatter(&series, x_max, out, "tradeoff_pareto")
+    save(
+        &LinePlot {
+            title: "speed/accuracy: bake time against rms error of Ams₁".into(),
+            x_label: "bake time on this machine (s)".into(),
+            y_label: "rms relative error of Ams₁, θ ≥ 1° (%)".into(),
+            x_range: (x_min.min(x_max / 10.0), x_max),
+            log_x: true,
+            log_y: true,
+            series,
+        },
+        out,
+        "tradeoff_pareto",
+    )
 }
 
 /// Writes `plot` as `<name>.png` and `<name>.svg` under `out`.
@@ -350,158 +367,59 @@ fn y_bounds(plot: &LinePlot) -> (f64, f64) {
     }
 }
 
+/// A coordinate on a log axis is drawn as its log10 on a linear one.
+fn axis(v: f64, log: bool) -> f64 {
+    if log { v.log10() } else { v }
+}
+
 fn draw<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, plot: &LinePlot) -> Result<()>
 where
     DB::ErrorType: 'static,
 {
     let err = |e: DrawingAreaErrorKind<DB::ErrorType>| anyhow!("{e:?}");
     root.fill(&WHITE).map_err(err)?;
+    let (lx, ly) = (plot.log_x, plot.log_y);
     let (y0, y1) = y_bounds(plot);
     let (x0, x1) = plot.x_range;
-    let mut builder = ChartBuilder::on(&root);
-    builder
+    let mut chart = ChartBuilder::on(&root)
         .caption(&plot.title, ("sans-serif", 22))
         .margin(12)
         .x_label_area_size(45)
-        .y_label_area_size(70);
-    let series_style = |s: &Series| ShapeStyle::from(&s.colour).stroke_width(s.width);
-    if plot.log_y {
-        let mut chart = builder
-            .build_cartesian_2d(x0..x1, (y0..y1).log_scale())
-            .map_err(err)?;
-        chart
-            .configure_mesh()
-            .x_desc(&plot.x_label)
-            .y_desc(&plot.y_label)
-            .y_label_formatter(&|v| format!("{v:.0e}"))
-            .draw()
-            .map_err(err)?;
-        for s in &plot.series {
-            let drawn = chart
-                .draw_series(LineSeries::new(s.points.iter().copied(), series_style(s)))
-                .map_err(err)?;
-            if !s.label.is_empty() {
-                let style = series_style(s);
-                drawn
-                    .label(&s.label)
-                    .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], style));
-            }
-        }
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .draw()
-            .map_err(err)?;
-    } else {
-        let mut chart = builder.build_cartesian_2d(x0..x1, y0..y1).map_err(err)?;
-        chart
-            .configure_mesh()
-            .x_desc(&plot.x_label)
-            .y_desc(&plot.y_label)
-            .draw()
-            .map_err(err)?;
-        for s in &plot.series {
-            let drawn = chart
-                .draw_series(LineSeries::new(s.points.iter().copied(), series_style(s)))
-                .map_err(err)?;
-            if !s.label.is_empty() {
-                let style = series_style(s);
-                drawn
-                    .label(&s.label)
-                    .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], style));
-            }
-        }
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .draw()
-            .map_err(err)?;
+        .y_label_area_size(70)
+        .build_cartesian_2d(axis(x0, lx)..axis(x1, lx), axis(y0, ly)..axis(y1, ly))
+        .map_err(err)?;
+    let decade = |v: &f64| format!("{:.1e}", 10f64.powf(*v));
+    let mut mesh = chart.configure_mesh();
+    mesh.x_desc(&plot.x_label).y_desc(&plot.y_label);
+    if lx {
+        mesh.x_label_formatter(&decade);
     }
+    if ly {
+        mesh.y_label_formatter(&decade);
+    }
+    mesh.draw().map_err(err)?;
+    for s in &plot.series {
+        let points = s.points.iter().map(|&(x, y)| (axis(x, lx), axis(y, ly)));
+        let colour = s.colour;
+        let style = ShapeStyle::from(&colour).stroke_width(s.width.max(1));
+        let drawn = if s.width == 0 {
+            chart.draw_series(points.map(|p| Circle::new(p, 5, colour.filled())))
+        } else {
+            chart.draw_series(LineSeries::new(points, style))
+        }
+        .map_err(err)?;
+        if !s.label.is_empty() {
+            drawn
+                .label(&s.label)
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], style));
+        }
+    }
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .draw()
+        .map_err(err)?;
     root.present().map_err(err)?;
     Ok(())
-}
-
-/// Time against error on log–log axes: points (width 0) and lines.
-fn save_scatter(series: &[Series], x_max: f64, out: &Path, name: &str) -> Result<Vec<PathBuf>> {
-    fn draw_scatter<DB: DrawingBackend>(
-        root: DrawingArea<DB, Shift>,
-        series: &[Series],
-        x_max: f64,
-    ) -> Result<()>
-    where
-        DB::ErrorType: 'static,
-    {
-        let err = |e: DrawingAreaErrorKind<DB::ErrorType>| anyhow!("{e:?}");
-        root.fill(&WHITE).map_err(err)?;
-        let ys = series.iter().flat_map(|s| s.points.iter().map(|p| p.1));
-        let (lo, hi) = ys.fold((f64::INFINITY, 0.0f64), |(a, b), y| (a.min(y), b.max(y)));
-        let x_min = series
-            .iter()
-            .flat_map(|s| s.points.iter().map(|p| p.0))
-            .fold(f64::INFINITY, f64::min);
-        let mut chart = ChartBuilder::on(&root)
-            .caption(
-                "speed/accuracy: bake time against rms error of Ams₁",
-                ("sans-serif", 22),
-            )
-            .margin(12)
-            .x_label_area_size(45)
-            .y_label_area_size(70)
-            .build_cartesian_2d(
-                ((x_min / 1.5).max(1e-3)..x_max).log_scale(),
-                ((lo / 1.5).max(1e-4)..hi * 1.5).log_scale(),
-            )
-            .map_err(err)?;
-        chart
-            .configure_mesh()
-            .x_desc("bake time on this machine (s)")
-            .y_desc("rms relative error of Ams₁, θ ≥ 1° (%)")
-            .draw()
-            .map_err(err)?;
-        for s in series {
-            let colour = s.colour;
-            let drawn = if s.width == 0 {
-                chart
-                    .draw_series(
-                        s.points
-                            .iter()
-                            .map(move |&p| Circle::new(p, 5, colour.filled())),
-                    )
-                    .map_err(err)?
-            } else {
-                chart
-                    .draw_series(LineSeries::new(
-                        s.points.iter().copied(),
-                        ShapeStyle::from(&colour).stroke_width(s.width),
-                    ))
-                    .map_err(err)?
-            };
-            drawn.label(&s.label).legend(move |(x, y)| {
-                PathElement::new(vec![(x, y), (x + 20, y)], colour.stroke_width(2))
-            });
-        }
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .draw()
-            .map_err(err)?;
-        root.present().map_err(err)?;
-        Ok(())
-    }
-    let png = out.join(format!("{name}.png"));
-    let svg = out.join(format!("{name}.svg"));
-    draw_scatter(
-        BitMapBackend::new(&png, (960, 540)).into_drawing_area(),
-        series,
-        x_max,
-    )?;
-    draw_scatter(
-        SVGBackend::new(&svg, (960, 540)).into_drawing_area(),
-        series,
-        x_max,
-    )?;
-    Ok(vec![png, svg])
 }

@@ -41,6 +41,22 @@ pub struct SizeQuadrature {
     pub weight: Vec<f64>,
 }
 
+impl SizeQuadrature {
+    /// Σ w r^p (µm^p): the p-th moment of the number distribution.
+    pub fn moment(&self, p: i32) -> f64 {
+        self.radius_um
+            .iter()
+            .zip(&self.weight)
+            .map(|(r, w)| w * r.powi(p))
+            .sum()
+    }
+
+    /// Effective radius r_eff = ⟨r³⟩/⟨r²⟩ (µm).
+    pub fn effective_radius_um(&self) -> f64 {
+        self.moment(3) / self.moment(2)
+    }
+}
+
 impl SizeDistribution {
     /// Lognormal from effective radius and variance: ln²σ_g = ln(1 + v_eff), r_g = r_eff e^{−2.5 ln²σ_g}.
     pub fn lognormal_from_effective(r_eff_um: f64, v_eff: f64) -> Result<Self, MieError> {
@@ -251,21 +267,8 @@ mod tests {
     #[test]
     fn lognormal_effective_radius_round_trips() {
         let d = SizeDistribution::lognormal_from_effective(10.0, 0.1).unwrap();
-        let q = d.quadrature(4000, 1e-9);
-        // r_eff = ⟨r³⟩/⟨r²⟩
-        let m3: f64 = q
-            .radius_um
-            .iter()
-            .zip(&q.weight)
-            .map(|(r, w)| w * r.powi(3))
-            .sum();
-        let m2: f64 = q
-            .radius_um
-            .iter()
-            .zip(&q.weight)
-            .map(|(r, w)| w * r.powi(2))
-            .sum();
-        assert!((m3 / m2 - 10.0).abs() < 1e-3, "{}", m3 / m2);
+        let r_eff = d.quadrature(4000, 1e-9).effective_radius_um();
+        assert!((r_eff - 10.0).abs() < 1e-3, "{r_eff}");
     }
 
     #[test]
@@ -275,14 +278,7 @@ mod tests {
             v_eff: 0.1,
         };
         let q = d.quadrature(4000, 1e-10);
-        let moment = |k: i32| -> f64 {
-            q.radius_um
-                .iter()
-                .zip(&q.weight)
-                .map(|(r, w)| w * r.powi(k))
-                .sum()
-        };
-        let r_eff = moment(3) / moment(2);
+        let r_eff = q.effective_radius_um();
         // v_eff = ⟨(r − r_eff)² r²⟩ / (r_eff² ⟨r²⟩)
         let v: f64 = q
             .radius_um
@@ -290,7 +286,7 @@ mod tests {
             .zip(&q.weight)
             .map(|(r, w)| w * (r - r_eff).powi(2) * r * r)
             .sum::<f64>()
-            / (r_eff * r_eff * moment(2));
+            / (r_eff * r_eff * q.moment(2));
         assert!((r_eff - 12.0).abs() < 1e-3, "{r_eff}");
         assert!((v - 0.1).abs() < 1e-4, "{v}");
     }

@@ -11,13 +11,8 @@ use serde_json::Value;
 
 const CURVES: &str = include_str!("../../data/reference/mieplot_curves.json");
 
-fn floats(v: &Value) -> Vec<f64> {
-    v.as_array()
-        .unwrap()
-        .iter()
-        .map(|x| x.as_f64().unwrap())
-        .collect()
-}
+mod common;
+use common::floats;
 
 /// rms and max relative difference of `ours` against `theirs` over bins with θ in [a, b).
 fn stats(ours: &[f64], theirs: &[f64], a: f64, b: f64) -> (f64, f64) {

@@ -16,13 +16,8 @@ fn rel(a: f64, b: f64) -> f64 {
     (a - b).abs() / b.abs()
 }
 
-fn floats(v: &Value) -> Vec<f64> {
-    v.as_array()
-        .unwrap()
-        .iter()
-        .map(|x| x.as_f64().unwrap())
-        .collect()
-}
+mod common;
+use common::floats;
 
 /// cos θ with θ > 90° folded as −cos(180° − θ), as the CLI and grids do.
 fn cosine(theta_deg: f64) -> f64 {

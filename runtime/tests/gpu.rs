@@ -7,8 +7,8 @@ use std::path::PathBuf;
 use runtime::Tables;
 use runtime::gpu::{Gpu, GpuTables, Query, TexelFormat, evaluate};
 use runtime::sample::{ams, forward_fraction};
-use tables::bake::{BakePlan, run};
-use tables::scene::Scene;
+
+mod common;
 
 fn gpu() -> Option<Gpu> {
     match Gpu::new() {
@@ -27,22 +27,9 @@ fn gpu() -> Option<Gpu> {
 }
 
 fn bake(fields: &str) -> (tempfile::TempDir, PathBuf) {
-    let tmp = tempfile::tempdir().unwrap();
-    let dir = tmp.path().join("tables");
-    let text = format!(
+    common::bake(&format!(
         "[scene]\nname = \"gpu\"\nspectral = \"rgb3\"\nn_max = 6\nquality = \"draft\"\n\n{fields}"
-    );
-    let scene = Scene::parse(&text, "test").unwrap();
-    let quality = scene.quality;
-    run(&BakePlan {
-        scene,
-        out_dir: dir.clone(),
-        quality,
-        knobs: quality.knobs(),
-        quiet: true,
-    })
-    .unwrap();
-    (tmp, dir)
+    ))
 }
 
 const CLOUD: &str = "[[field]]\nname = \"cloud\"\nkind = \"cloud\"\ndistribution = { kind = \"gamma\", r_eff_um = 10, v_eff = 0.1 }\n";

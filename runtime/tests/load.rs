@@ -6,9 +6,9 @@ use std::path::{Path, PathBuf};
 
 use runtime::Tables;
 use runtime::sample::{ams, forward_fraction, mix};
-use tables::bake::{BakePlan, run};
 use tables::exr_io::{read_field_exr, write_field_exr};
-use tables::scene::Scene;
+
+mod common;
 
 const SCENE: &str = r#"
 [scene]
@@ -30,19 +30,7 @@ distribution = { kind = "lognormal", median_radius_um = 500, sigma_g = 1.4 }
 
 /// A fresh bake of SCENE in its own temporary directory.
 fn bake() -> (tempfile::TempDir, PathBuf) {
-    let tmp = tempfile::tempdir().unwrap();
-    let dir = tmp.path().join("tables");
-    let scene = Scene::parse(SCENE, "test").unwrap();
-    let quality = scene.quality;
-    run(&BakePlan {
-        scene,
-        out_dir: dir.clone(),
-        quality,
-        knobs: quality.knobs(),
-        quiet: true,
-    })
-    .unwrap();
-    (tmp, dir)
+    common::bake(SCENE)
 }
 
 fn error_of(dir: &Path) -> String {

@@ -305,31 +305,14 @@ pub fn minimum_deviation_deg(n: f64, apex_deg: f64) -> f64 {
     (2.0 * (n * (a / 2.0).sin()).asin() - a).to_degrees()
 }
 
-/// r_eff = ⟨r³⟩/⟨r²⟩ (µm) and the quadrature of the distribution.
-fn effective_radius(d: &SizeDistribution) -> (f64, mie::distribution::SizeQuadrature) {
-    let q = d.quadrature(256, 1e-4);
-    let m3: f64 = q
-        .radius_um
-        .iter()
-        .zip(&q.weight)
-        .map(|(r, w)| w * r.powi(3))
-        .sum();
-    let m2: f64 = q
-        .radius_um
-        .iter()
-        .zip(&q.weight)
-        .map(|(r, w)| w * r * r)
-        .sum();
-    (m3 / m2, q)
-}
-
 fn spheres(
     ctx: &FieldContext,
     n_of: &dyn Fn(f64) -> f64,
     d: &SizeDistribution,
     checks: &mut Vec<Check>,
 ) -> Result<()> {
-    let (r_eff, q) = effective_radius(d);
+    let q = d.quadrature(256, 1e-4);
+    let r_eff = q.effective_radius_um();
     let x_of = |lambda: f64| 2.0 * std::f64::consts::PI * r_eff * 1000.0 / lambda;
     let x_min = ctx
         .spectra
