@@ -34,6 +34,42 @@ enum BenchWhat {
     /// Bake a scene (default: the embedded one) at each preset into a fresh directory, then
     /// again unchanged: wall time, re-bake speed-up and peak memory, each bake its own process.
     Bake(BakeBench),
+    /// Frame time of `photometeor render` on the GPU adapter (and of the CPU reference), at
+    /// one base setting and varying slices and resolution one at a time; table upload time.
+    Render(RenderBench),
+}
+
+#[derive(Debug, Args)]
+struct RenderBench {
+    /// Scene file (TOML with [render], [camera], [sun], [[volume]]); default: the embedded
+    /// rainbow scene.
+    scene: Option<std::path::PathBuf>,
+    /// Bake preset for the tables (frame time does not depend on it).
+    #[arg(long, default_value = "draft")]
+    quality: String,
+    /// Bake directory (default: photometeor-tables-<scene name>).
+    #[arg(long)]
+    tables: Option<std::path::PathBuf>,
+    /// Base setting: width = height (pixels) and slices.
+    #[arg(long, default_value_t = 512)]
+    size: usize,
+    #[arg(long, default_value_t = 256)]
+    slices: usize,
+    /// Image sizes (width = height) to time at the base slice count, comma-separated.
+    #[arg(long, value_delimiter = ',', default_value = "128,256,512,1024")]
+    sizes: Vec<usize>,
+    /// Slice counts to time at the base size, comma-separated.
+    #[arg(long, value_delimiter = ',', default_value = "64,128,256,512")]
+    slice_counts: Vec<usize>,
+    /// Frames per setting; the best is reported.
+    #[arg(long, default_value_t = 2)]
+    repeat: usize,
+    /// Also time the CPU reference renderer at each setting.
+    #[arg(long)]
+    cpu: bool,
+    /// Print JSON.
+    #[arg(long)]
+    json: bool,
 }
 
 #[derive(Debug, Args)]
@@ -98,6 +134,7 @@ pub fn run(args: BenchArgs) -> Result<()> {
         BenchWhat::Mie(b) => b,
         BenchWhat::Bake(b) => return bench_bake(b),
         BenchWhat::Crystal(c) => return bench_crystal(c),
+        BenchWhat::Render(r) => return bench_render(r),
     };
     let threads = b.threads.unwrap_or_else(rayon::current_num_threads);
     let pool = rayon::ThreadPoolBuilder::new()
@@ -405,6 +442,90 @@ fn bench_crystal(c: CrystalBench) -> Result<()> {
             t.g,
             t.delta,
             t.lost
+        );
+    }
+    Ok(())
+}
+
+fn bench_render(b: RenderBench) -> Result<()> {
+    use runtime::gpu::{Gpu, GpuTables, TexelFormat};
+    use runtime::render::{cpu, gpu::Renderer};
+    let (scene, tables) =
+        crate::render::prepare(b.scene.as_deref(), b.tables, Some(&b.quality), true, |_| {})?;
+    let gpu =
+        Gpu::new().context("no GPU adapter (on Debian: apt-get install mesa-vulkan-drivers)")?;
+    let uploaded = GpuTables::upload(&gpu, &tables, TexelFormat::Auto)?;
+    let renderer = Renderer::new(&gpu, &uploaded);
+    let base = scene.frame(&tables).map_err(|e| anyhow::anyhow!(e))?;
+    let mut settings: Vec<(usize, usize)> = vec![(b.size, b.slices)];
+    settings.extend(b.slice_counts.iter().map(|&s| (b.size, s)));
+    settings.extend(b.sizes.iter().map(|&n| (n, b.slices)));
+    let mut seen = std::collections::HashSet::new();
+    settings.retain(|s| seen.insert(*s));
+    let mut rows = Vec::new();
+    for &(size, slices) in &settings {
+        let mut frame = base.clone();
+        frame.width = size;
+        frame.height = size;
+        frame.slices = slices;
+        let mut best = f64::INFINITY;
+        let mut readback = f64::INFINITY;
+        for _ in 0..b.repeat.max(1) {
+            let (_, t) = renderer.render(&gpu, &tables, &uploaded, &frame)?;
+            best = best.min(t.frame);
+            readback = readback.min(t.readback);
+        }
+        let cpu_s = if b.cpu {
+            let start = Instant::now();
+            cpu::render(&tables, &frame)?;
+            Some(start.elapsed().as_secs_f64())
+        } else {
+            None
+        };
+        rows.push(json!({
+            "width": size, "height": size, "slices": slices,
+            "light_resolution": frame.light_resolution,
+            "frame_ms": best * 1e3, "readback_ms": readback * 1e3,
+            "cpu_reference_ms": cpu_s.map(|s| s * 1e3),
+        }));
+    }
+    let report = json!({
+        "adapter": gpu.describe(),
+        "tables_upload_ms": uploaded.upload_seconds * 1e3,
+        "texel_format": format!("{:?}", uploaded.format),
+        "grid": base.grid.dims,
+        "threads": rayon::current_num_threads(),
+        "frames": rows,
+    });
+    if b.json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+        return Ok(());
+    }
+    println!(
+        "{}: tables upload {:.1} ms ({:?}), grid {:?}, best of {}",
+        gpu.describe(),
+        uploaded.upload_seconds * 1e3,
+        uploaded.format,
+        base.grid.dims,
+        b.repeat.max(1)
+    );
+    let base_ms = rows[0]["frame_ms"].as_f64().unwrap_or(f64::NAN);
+    println!(
+        "{:>6} {:>6} {:>7} {:>10} {:>9} {:>13}",
+        "size", "slices", "light", "frame ms", "× base", "CPU ref ms"
+    );
+    for r in &rows {
+        let ms = r["frame_ms"].as_f64().unwrap_or(f64::NAN);
+        println!(
+            "{:>6} {:>6} {:>7} {:>10.1} {:>9.2} {:>13}",
+            r["width"].as_u64().unwrap_or(0),
+            r["slices"].as_u64().unwrap_or(0),
+            r["light_resolution"].as_u64().unwrap_or(0),
+            ms,
+            ms / base_ms,
+            r["cpu_reference_ms"]
+                .as_f64()
+                .map_or("—".into(), |v| format!("{v:.1}"))
         );
     }
     Ok(())

@@ -52,6 +52,11 @@ enum Command {
     /// time each variant, compare it with a reference-quality bake (relative errors of Ams_n
     /// for θ ≥ 1°, |ΔF_i|, peak-angle shifts in degrees) and write a table and tradeoff.json.
     Tradeoff(crate::tradeoff::TradeoffArgs),
+    /// Render a scene headless (Riley et al. 2004 §4–5): bake the fields its volumes use, then
+    /// slice the volumes with a light buffer and an eye buffer on the GPU (wgpu; --cpu for the
+    /// reference renderer), with the analytic sky and aerial perspective. Writes an HDR EXR
+    /// (radiance per unit solar irradiance, 1/sr) and optionally a tone-mapped PNG.
+    Render(crate::render::RenderArgs),
     /// Time photometeor's Mie workloads (and miepython's, side by side, when available).
     Bench(crate::bench::BenchArgs),
 }
@@ -217,6 +222,7 @@ pub fn run(args: Args) -> Result<()> {
         Command::Mie(a) => run_mie(a),
         Command::Phase(a) => run_phase(a),
         Command::Bench(a) => crate::bench::run(a),
+        Command::Render(a) => crate::render::run_render(a),
         Command::Bake(a) => run_bake(a),
         Command::Inspect(a) => run_inspect(a),
         Command::Compare(a) => run_compare(a),

@@ -4,6 +4,7 @@
 mod bench;
 mod cli;
 mod plot;
+mod render;
 mod tradeoff;
 
 use std::process::ExitCode;

@@ -5,10 +5,12 @@
 //! specified to: `ams(field, n, cos θ)` linear in θ and in fractional n, `forward_fraction(field,
 //! n)`, and the spatial mix of several fields (Riley et al. 2004 Eq. 6).
 //!
-//! [`gpu`] uploads the tables with the WGSL module; the renderer is not written yet.
+//! [`gpu`] uploads the tables with the WGSL module; [`render`] renders Riley's model with them,
+//! on the GPU and as a CPU reference.
 
 pub mod gpu;
 pub mod load;
+pub mod render;
 pub mod sample;
 
 pub use load::{FieldTable, LoadError, Tables};

@@ -45,6 +45,11 @@ pub struct FieldTable {
     /// Mean scattering cross-section per particle, per channel (m²): σ_ext · albedo, the
     /// weight of this field in a spatial mix.
     pub sigma_sca_m2: [f64; 3],
+    /// Mean extinction cross-section per particle, per channel (m²): number density times
+    /// this is β_ext (Riley et al. 2004 Eq. 2).
+    pub sigma_ext_m2: [f64; 3],
+    /// Single-scattering albedo per channel.
+    pub albedo: [f64; 3],
 }
 
 /// A checked bake: the grid and the selected fields, in the manifest's order.
@@ -167,8 +172,8 @@ impl Tables {
                     }
                 }
             }
-            let ext = entry.sigma_ext_m2.as_array();
-            let alb = entry.albedo.as_array();
+            let ext = entry.sigma_ext_m2.as_array().map(|&v| v);
+            let alb = entry.albedo.as_array().map(|&v| v);
             fields.push(FieldTable {
                 name: entry.name.clone(),
                 kind: entry.kind.clone(),
@@ -176,6 +181,8 @@ impl Tables {
                 rows: image.rows,
                 forward_fraction: image.forward_fraction,
                 sigma_sca_m2: [ext[0] * alb[0], ext[1] * alb[1], ext[2] * alb[2]],
+                sigma_ext_m2: ext,
+                albedo: alb,
             });
         }
         Ok(Self {

@@ -10,21 +10,7 @@ use runtime::sample::{ams, forward_fraction};
 
 mod common;
 
-fn gpu() -> Option<Gpu> {
-    match Gpu::new() {
-        Ok(g) => {
-            eprintln!("adapter: {}", g.describe());
-            Some(g)
-        }
-        Err(e) if std::env::var("REQUIRE_GPU").as_deref() == Ok("1") => {
-            panic!("REQUIRE_GPU=1 but {e}")
-        }
-        Err(e) => {
-            eprintln!("skipped, {e}");
-            None
-        }
-    }
-}
+use common::gpu;
 
 fn bake(fields: &str) -> (tempfile::TempDir, PathBuf) {
     common::bake(&format!(

@@ -22,6 +22,8 @@
 //! ```
 //!
 //! Errors name the key and its line; nothing is written before the whole scene is valid.
+//! The tables `[render]`, `[camera]`, `[sun]`, `[sky]` and `[[volume]]` belong to the renderer
+//! (`photometeor render`, `runtime::render::scene`) and are passed over here.
 
 use std::path::Path;
 
@@ -39,6 +41,17 @@ struct SceneFile {
     scene: Spanned<Header>,
     #[serde(rename = "field", default)]
     fields: Vec<Spanned<FieldFile>>,
+    // The renderer's tables (`runtime::render::scene`), checked there, not by the bake.
+    #[serde(default, rename = "render")]
+    _render: Option<toml::Value>,
+    #[serde(default, rename = "camera")]
+    _camera: Option<toml::Value>,
+    #[serde(default, rename = "sun")]
+    _sun: Option<toml::Value>,
+    #[serde(default, rename = "sky")]
+    _sky: Option<toml::Value>,
+    #[serde(default, rename = "volume")]
+    _volume: Option<toml::Value>,
 }
 
 #[derive(Debug, Deserialize)]

@@ -21,3 +21,21 @@ pub fn bake(text: &str) -> (tempfile::TempDir, PathBuf) {
     .unwrap();
     (tmp, dir)
 }
+
+/// A headless device, or None with a notice; with `REQUIRE_GPU=1` a missing adapter fails.
+#[allow(dead_code)]
+pub fn gpu() -> Option<runtime::gpu::Gpu> {
+    match runtime::gpu::Gpu::new() {
+        Ok(g) => {
+            eprintln!("adapter: {}", g.describe());
+            Some(g)
+        }
+        Err(e) if std::env::var("REQUIRE_GPU").as_deref() == Ok("1") => {
+            panic!("REQUIRE_GPU=1 but {e}")
+        }
+        Err(e) => {
+            eprintln!("skipped, {e}");
+            None
+        }
+    }
+}

@@ -1,0 +1,227 @@
+//! `photometeor render` end to end: the rainbow scene of data/scenes rendered on the GPU
+//! (lavapipe in CI), the bow's radius about the antisolar point measured from the written EXR
+//! and compared with the primary peak of the table the render used; and bad scenes refused
+//! with the value and its range, nothing written.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use runtime::Tables;
+use runtime::render::RenderScene;
+
+fn photometeor(args: &[&str], cwd: &Path) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_photometeor"))
+        .args(args)
+        .current_dir(cwd)
+        .output()
+        .expect("running photometeor")
+}
+
+fn workdir(name: &str) -> PathBuf {
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(name);
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn scene_path(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("data/scenes")
+        .join(name)
+}
+
+/// R, G, B, A planes of an EXR written by `photometeor render`, read with the `exr` crate.
+fn read_rgba(path: &Path) -> (usize, usize, [Vec<f32>; 4]) {
+    use exr::prelude::*;
+    let image = read()
+        .no_deep_data()
+        .largest_resolution_level()
+        .all_channels()
+        .first_valid_layer()
+        .all_attributes()
+        .from_file(path)
+        .unwrap();
+    let size = image.layer_data.size;
+    let plane = |name: &str| -> Vec<f32> {
+        let c = image
+            .layer_data
+            .channel_data
+            .list
+            .iter()
+            .find(|c| c.name.to_string() == name)
+            .unwrap_or_else(|| panic!("channel {name}"));
+        c.sample_data.values_as_f32().collect()
+    };
+    (
+        size.0,
+        size.1,
+        [plane("R"), plane("G"), plane("B"), plane("A")],
+    )
+}
+
+fn gpu_required() -> bool {
+    std::env::var("REQUIRE_GPU").as_deref() == Ok("1")
+}
+
+#[test]
+fn rainbow_radius_in_the_render_matches_the_tables_primary_peak_red_outside() {
+    let cwd = workdir("render-rainbow");
+    let scene = scene_path("rainbow.toml");
+    let args = [
+        "render",
+        scene.to_str().unwrap(),
+        "--quality",
+        "draft",
+        "--tables",
+        "tables",
+        "--out",
+        "rainbow.exr",
+        "--png",
+        "rainbow.png",
+        "--width",
+        "400",
+        "--height",
+        "400",
+        "--slices",
+        "128",
+    ];
+    let out = photometeor(&args, &cwd);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    if !out.status.success() && stderr.contains("no GPU adapter") && !gpu_required() {
+        eprintln!("skipped, no adapter:\n{stderr}");
+        return;
+    }
+    assert!(out.status.success(), "render failed:\n{stderr}");
+    assert!(cwd.join("rainbow.png").exists());
+
+    // The table's primary bow: the largest Ams_1 between 130° and 145°, per channel.
+    let tables = Tables::open(cwd.join("tables")).unwrap();
+    let rain = tables.field("rain").unwrap();
+    let step = tables.theta_step_deg;
+    let table_radius: Vec<f64> = (0..3)
+        .map(|c| {
+            let row = &rain.rows[c][0];
+            let k = (130.0 / step) as usize..=(145.0 / step) as usize;
+            let peak = k.max_by(|&a, &b| row[a].total_cmp(&row[b])).unwrap();
+            180.0 - peak as f64 * step
+        })
+        .collect();
+
+    // The image: each pixel's angle ψ from the antisolar point (the direction the sunlight
+    // travels), radiance averaged in 0.1° rings over pixels that see the rain.
+    let (w, h, planes) = read_rgba(&cwd.join("rainbow.exr"));
+    assert_eq!((w, h), (400, 400));
+    let render = RenderScene::from_file(&scene).unwrap();
+    let mut frame = render.frame(&tables).unwrap();
+    frame.width = w;
+    frame.height = h;
+    let setup = frame.setup().unwrap();
+    let bin = 0.1;
+    let (lo, hi) = (36.0, 48.0);
+    let nbins = ((hi - lo) / bin) as usize;
+    let mut sums = vec![[0.0f64; 3]; nbins];
+    let mut counts = vec![0usize; nbins];
+    for j in 0..h {
+        for i in 0..w {
+            let p = i + w * j;
+            if planes[3][p] > 0.95 {
+                continue;
+            }
+            let d = setup.ray(i, j, w, h);
+            let psi = runtime::render::dot(d, setup.light)
+                .clamp(-1.0, 1.0)
+                .acos()
+                .to_degrees();
+            if psi < lo || psi >= hi {
+                continue;
+            }
+            let b = ((psi - lo) / bin) as usize;
+            counts[b] += 1;
+            for c in 0..3 {
+                sums[b][c] += planes[c][p] as f64;
+            }
+        }
+    }
+    assert!(
+        counts.iter().all(|&n| n > 20),
+        "rings too sparse: {counts:?}"
+    );
+    let image_radius: Vec<f64> = (0..3)
+        .map(|c| {
+            let mean: Vec<f64> = (0..nbins).map(|b| sums[b][c] / counts[b] as f64).collect();
+            let b = (1..nbins - 1)
+                .max_by(|&a, &b| mean[a].total_cmp(&mean[b]))
+                .unwrap();
+            // Parabola through the peak bin and its neighbours.
+            let (y0, y1, y2) = (mean[b - 1], mean[b], mean[b + 1]);
+            let shift = 0.5 * (y0 - y2) / (y0 - 2.0 * y1 + y2);
+            lo + (b as f64 + 0.5 + shift) * bin
+        })
+        .collect();
+    eprintln!("bow radius: image {image_radius:?}, table {table_radius:?} (R, G, B, degrees)");
+    for c in 0..3 {
+        assert!(
+            (image_radius[c] - table_radius[c]).abs() < 0.5,
+            "channel {c}: image {:.2}°, table {:.2}°",
+            image_radius[c],
+            table_radius[c]
+        );
+    }
+    assert!(
+        image_radius[0] > image_radius[2],
+        "red ({:.2}°) must lie outside blue ({:.2}°)",
+        image_radius[0],
+        image_radius[2]
+    );
+}
+
+#[test]
+fn bad_render_scenes_name_the_value_and_its_range_and_write_nothing() {
+    let cwd = workdir("render-bad");
+    let base = std::fs::read_to_string(scene_path("rainbow.toml")).unwrap();
+    let cases = [
+        (
+            "elevation_deg = 12",
+            "elevation_deg = -5",
+            "elevation_deg = -5",
+        ),
+        ("shape = \"rain_shaft\"", "shape = \"torus\"", "\"torus\""),
+        (
+            "number_density_per_m3 = 80",
+            "number_density_per_m3 = -1",
+            "number_density_per_m3 = -1",
+        ),
+        ("fov_deg = 75", "fov_deg = 180", "fov_deg = 180"),
+        ("field = \"rain\"", "field = \"hail\"", "\"hail\""),
+    ];
+    for (from, to, named) in cases {
+        assert!(base.contains(from), "{from}");
+        let scene = cwd.join("bad.toml");
+        std::fs::write(&scene, base.replace(from, to)).unwrap();
+        let out = photometeor(
+            &[
+                "render",
+                "bad.toml",
+                "--quality",
+                "draft",
+                "--tables",
+                "tables",
+                "--out",
+                "bad.exr",
+                "--cpu",
+                "--width",
+                "8",
+                "--height",
+                "8",
+            ],
+            &cwd,
+        );
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{to}: accepted");
+        assert!(
+            stderr.contains(named),
+            "{to}: message does not name it:\n{stderr}"
+        );
+        assert!(!cwd.join("bad.exr").exists(), "{to}: an image was written");
+    }
+}
