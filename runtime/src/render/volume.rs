@@ -464,3 +464,80 @@ pub fn rasterize(
         data,
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn shaft(seed: u64) -> Volume {
+        Volume {
+            field: "rain".into(),
+            number_density_per_m3: 100.0,
+            shape: Shape::RainShaft {
+                center_m: [0.0, 0.0, 5000.0],
+                radius_m: 1000.0,
+                bottom_m: 0.0,
+                top_m: 2000.0,
+            },
+            seed,
+        }
+    }
+
+    fn cumulus() -> Volume {
+        Volume {
+            field: "cloud".into(),
+            number_density_per_m3: 1e7,
+            shape: Shape::Cumulus {
+                center_m: [0.0, 2000.0, 5000.0],
+                radius_m: 1500.0,
+                height_m: 1500.0,
+            },
+            seed: 2,
+        }
+    }
+
+    #[test]
+    fn rasterizing_is_deterministic_and_follows_the_seed() {
+        let index = |f: &str| usize::from(f == "cloud");
+        let a = rasterize(&[shaft(1), cumulus()], 40, index).unwrap();
+        let b = rasterize(&[shaft(1), cumulus()], 40, index).unwrap();
+        let c = rasterize(&[shaft(9), cumulus()], 40, index).unwrap();
+        assert_eq!(a, b);
+        assert_ne!(a, c);
+        // Joint bounds; both channels filled, peaks at most the volumes' densities.
+        assert_eq!(a.min_m, [-1500.0, 0.0, 3500.0]);
+        assert_eq!(a.max_m, [1500.0, 2750.0, 6500.0]);
+        let peak = a.max_density();
+        assert!(peak[0] > 50.0 && peak[0] <= 100.0 * 1.0001, "{peak:?}");
+        assert!(peak[1] > 5e6 && peak[1] <= 1e7 * 1.0001, "{peak:?}");
+        assert_eq!((peak[2], peak[3]), (0.0, 0.0));
+        // Nothing outside the box.
+        assert_eq!(a.sample([0.0, 3000.0, 5000.0]), [0.0; MAX_FIELDS]);
+    }
+
+    #[test]
+    fn grid_files_are_checked_and_sampled_trilinearly() {
+        let dir = std::env::temp_dir().join(format!("photometeor-grid-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let file = dir.join("g.f32");
+        // 2 × 1 × 1 voxels: 0 and 4; the midpoint between the voxel centres samples 2.
+        let bytes: Vec<u8> = [0f32, 4.0].iter().flat_map(|v| v.to_le_bytes()).collect();
+        std::fs::write(&file, &bytes).unwrap();
+        let g = read_grid(&file, [2, 1, 1], [0.0; 3], [2.0, 1.0, 1.0]).unwrap();
+        assert!((g.sample([1.0, 0.5, 0.5])[0] - 2.0).abs() < 1e-12);
+        assert!((g.sample([0.25, 0.5, 0.5])[0] - 0.0).abs() < 1e-12);
+        let short = read_grid(&file, [3, 1, 1], [0.0; 3], [1.0; 3]).unwrap_err();
+        assert!(
+            short.contains("8 bytes") && short.contains("need 12"),
+            "{short}"
+        );
+        let bad: Vec<u8> = [1f32, -2.0].iter().flat_map(|v| v.to_le_bytes()).collect();
+        std::fs::write(&file, &bad).unwrap();
+        let negative = read_grid(&file, [2, 1, 1], [0.0; 3], [1.0; 3]).unwrap_err();
+        assert!(
+            negative.contains("-2") && negative.contains("index 1"),
+            "{negative}"
+        );
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}
