@@ -24,7 +24,7 @@ use sha2::{Digest, Sha256};
 use crate::scene::{Field, Quality, Scene, Spectral};
 
 /// Version of everything that changes a baked number; part of every cache key.
-const COMPUTE_VERSION: u32 = 4;
+const COMPUTE_VERSION: u32 = 5;
 /// n_iso is searched up to this order.
 const N_ISO_CAP: usize = 100_000;
 /// The ε of the n_iso report.

@@ -140,16 +140,14 @@ fn distorted_normals(rng: &mut Rng, prism: &Prism, roughness: f64) -> [Vec3; 8] 
     normals
 }
 
-/// The normal a ray meets at face `face` (outward normal `tilted`, true normal `true_normal`),
-/// turned against the ray: the tilted one, or the true one where the ray would meet the tilted
-/// facet from behind.
-fn facing(tilted: Vec3, true_normal: Vec3, d: Vec3, from_outside: bool) -> Vec3 {
-    let sign = if from_outside { 1.0 } else { -1.0 };
-    let m = scale(sign, tilted);
-    if dot(d, m) < 0.0 {
-        m
+/// The normal an entering ray meets at a facet (outward normal `tilted`, true normal
+/// `true_normal`): the tilted one, or the true one where the ray would meet the tilted facet
+/// from behind.
+fn entry_normal(tilted: Vec3, true_normal: Vec3, d: Vec3) -> Vec3 {
+    if dot(d, tilted) < 0.0 {
+        tilted
     } else {
-        scale(sign, true_normal)
+        true_normal
     }
 }
 
@@ -287,7 +285,7 @@ fn trace_one(
 
     // External interaction.
     let eta_in = 1.0 / n_re;
-    let m = facing(normals[face], prism.faces[face].normal, d_in, true);
+    let m = entry_normal(normals[face], prism.faces[face].normal, d_in);
     let cos_i = -dot(d_in, m);
     let (refl, cos_t) = fresnel(cos_i, eta_in);
     let reflected = add_scaled(d_in, 2.0 * cos_i, m);
@@ -306,9 +304,19 @@ fn trace_one(
             tally.absorbed += w - kept;
             w = kept;
         }
-        let m = facing(normals[f], prism.faces[f].normal, d, false);
+        // Turned against the ray. A tilted surface facing back at the ray cannot be crossed:
+        // total reflection about the true normal, which keeps the ray inside.
+        let (m, blocked) = if dot(d, normals[f]) > 0.0 {
+            (scale(-1.0, normals[f]), false)
+        } else {
+            (scale(-1.0, prism.faces[f].normal), true)
+        };
         let cos_i = -dot(d, m);
-        let (refl, cos_t) = fresnel(cos_i, eta_out);
+        let (refl, cos_t) = if blocked {
+            (1.0, 0.0)
+        } else {
+            fresnel(cos_i, eta_out)
+        };
         if refl < 1.0 {
             let out = normalize(add_scaled(scale(eta_out, d), eta_out * cos_i - cos_t, m));
             emit(tally, d_in, out, w * (1.0 - refl), step);
