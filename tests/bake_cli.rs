@@ -4,19 +4,15 @@
 
 use std::fs;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Command;
 use std::sync::OnceLock;
 
 use tables::exr_io::{FieldImage, read_field_exr};
 use tables::manifest::{Manifest, read_manifest};
 
-fn photometeor(args: &[&str], cwd: &Path) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_photometeor"))
-        .args(args)
-        .current_dir(cwd)
-        .output()
-        .expect("running photometeor")
-}
+mod common;
+
+use common::photometeor;
 
 struct DefaultBake {
     out: PathBuf,

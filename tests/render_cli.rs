@@ -4,18 +4,13 @@
 //! with the value and its range, nothing written.
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
 
 use runtime::Tables;
 use runtime::render::RenderScene;
 
-fn photometeor(args: &[&str], cwd: &Path) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_photometeor"))
-        .args(args)
-        .current_dir(cwd)
-        .output()
-        .expect("running photometeor")
-}
+mod common;
+
+use common::photometeor;
 
 fn workdir(name: &str) -> PathBuf {
     let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(name);

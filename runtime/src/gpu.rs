@@ -414,12 +414,6 @@ fn evaluate_queries(@builtin(global_invocation_id) id: vec3<u32>) {
         usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
         mapped_at_creation: false,
     });
-    let readback = device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("photometeor query readback"),
-        size,
-        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-        mapped_at_creation: false,
-    });
     let io = device.create_bind_group(&wgpu::BindGroupDescriptor {
         label: Some("photometeor query io"),
         layout: &io_layout,
@@ -447,7 +441,24 @@ fn evaluate_queries(@builtin(global_invocation_id) id: vec3<u32>) {
         pass.set_bind_group(1, &io, &[]);
         pass.dispatch_workgroups(queries.len().div_ceil(64) as u32, 1, 1);
     }
-    encoder.copy_buffer_to_buffer(&results, 0, &readback, 0, size);
+    gpu.queue.submit([encoder.finish()]);
+    read_back(gpu, &results, size)
+}
+
+/// Copies `size` bytes of `source` (a `COPY_SRC` buffer) into a mappable buffer, waits, and
+/// returns them as RGBA f32 quadruples.
+pub fn read_back(gpu: &Gpu, source: &wgpu::Buffer, size: u64) -> Result<Vec<[f32; 4]>, GpuError> {
+    let device = &gpu.device;
+    let readback = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("photometeor readback"),
+        size,
+        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+        label: Some("photometeor readback"),
+    });
+    encoder.copy_buffer_to_buffer(source, 0, &readback, 0, size);
     gpu.queue.submit([encoder.finish()]);
     let (tx, rx) = std::sync::mpsc::channel();
     readback.map_async(wgpu::MapMode::Read, .., move |r| {

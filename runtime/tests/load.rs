@@ -10,27 +10,9 @@ use tables::exr_io::{read_field_exr, write_field_exr};
 
 mod common;
 
-const SCENE: &str = r#"
-[scene]
-name = "runtime-test"
-spectral = "rgb3"
-n_max = 4
-quality = "draft"
-
-[[field]]
-name = "cloud"
-kind = "cloud"
-distribution = { kind = "gamma", r_eff_um = 10, v_eff = 0.1 }
-
-[[field]]
-name = "rain"
-kind = "rain"
-distribution = { kind = "lognormal", median_radius_um = 500, sigma_g = 1.4 }
-"#;
-
-/// A fresh bake of SCENE in its own temporary directory.
+/// A fresh bake of the cloud-and-rain scene in its own temporary directory.
 fn bake() -> (tempfile::TempDir, PathBuf) {
-    common::bake(SCENE)
+    common::bake(&common::cloud_and_rain("runtime-test", 4))
 }
 
 fn error_of(dir: &Path) -> String {

@@ -16,28 +16,14 @@ mod common;
 
 use common::{bake, gpu};
 
-const FIELDS: &str = r#"
-[scene]
-name = "render"
-spectral = "rgb3"
-n_max = 8
-quality = "draft"
-
-[[field]]
-name = "cloud"
-kind = "cloud"
-distribution = { kind = "gamma", r_eff_um = 10, v_eff = 0.1 }
-
-[[field]]
-name = "rain"
-kind = "rain"
-distribution = { kind = "lognormal", median_radius_um = 500, sigma_g = 1.4 }
-"#;
+fn fields() -> String {
+    common::cloud_and_rain("render", 8)
+}
 
 /// A cumulus of cloud beside a shaft of rain, 6 km ahead, with the sun where asked.
 fn two_field_frame(tables: &Tables, elevation: f64, azimuth: f64) -> Frame {
     let text = format!(
-        r#"{FIELDS}
+        r#"{}
 [render]
 width = 72
 height = 54
@@ -70,7 +56,8 @@ number_density_per_m3 = 300
 center_m = [800, 0, 6000]
 radius_m = 1000
 top_m = 2000
-"#
+"#,
+        fields()
     );
     let scene = RenderScene::parse(&text, "test", Path::new(".")).unwrap();
     scene.frame(tables).unwrap()
@@ -79,7 +66,7 @@ top_m = 2000
 #[test]
 fn gpu_render_matches_the_cpu_reference_in_both_compositing_orders() {
     let Some(gpu) = gpu() else { return };
-    let (_tmp, dir) = bake(FIELDS);
+    let (_tmp, dir) = bake(&fields());
     let tables = Tables::open(&dir).unwrap();
     let uploaded = GpuTables::upload(&gpu, &tables, TexelFormat::F32).unwrap();
     let renderer = Renderer::new(&gpu, &uploaded);
@@ -124,7 +111,7 @@ fn gpu_render_matches_the_cpu_reference_in_both_compositing_orders() {
 
 #[test]
 fn thin_uniform_box_gives_single_scattering() {
-    let (tmp, dir) = bake(FIELDS);
+    let (tmp, dir) = bake(&fields());
     let tables = Tables::open(&dir).unwrap();
     let cloud = tables.field("cloud").unwrap();
     // τ = 1e-3 across the 1 km box in green.
@@ -133,7 +120,7 @@ fn thin_uniform_box_gives_single_scattering() {
     let ones: Vec<u8> = (0..64).flat_map(|_| 1f32.to_le_bytes()).collect();
     std::fs::write(&grid_file, ones).unwrap();
     let text = format!(
-        r#"{FIELDS}
+        r#"{}
 [render]
 width = 32
 height = 32
@@ -160,7 +147,8 @@ file = "ones.f32"
 dims = [4, 4, 4]
 min_m = [-500, 1000, 4500]
 max_m = [500, 2000, 5500]
-"#
+"#,
+        fields()
     );
     let scene = RenderScene::parse(&text, "thin", tmp.path()).unwrap();
     let frame = scene.frame(&tables).unwrap();

@@ -10,7 +10,7 @@ use std::time::Instant;
 use wgpu::util::DeviceExt;
 
 use super::{Frame, FrameError, Image, MAX_FIELDS, SUN_DIAMETER_DEG};
-use crate::gpu::{Gpu, GpuError, GpuTables, WGSL};
+use crate::gpu::{Gpu, GpuError, GpuTables, WGSL, read_back};
 use crate::load::Tables;
 
 /// The renderer's WGSL (after [`WGSL`]).
@@ -209,12 +209,6 @@ impl Renderer {
             image_size,
             wgpu::BufferUsages::COPY_SRC,
         );
-        let readback = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("photometeor image readback"),
-            size: image_size,
-            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
         let stride = limits.min_uniform_buffer_offset_alignment.max(16) as usize;
         let mut slices = vec![0u8; stride * frame.slices];
         for k in 0..frame.slices {
@@ -303,31 +297,13 @@ impl Renderer {
         let frame_time = start.elapsed().as_secs_f64();
 
         let start = Instant::now();
-        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
-            label: Some("photometeor readback"),
-        });
-        encoder.copy_buffer_to_buffer(&image, 0, &readback, 0, image_size);
-        gpu.queue.submit([encoder.finish()]);
-        let (tx, rx) = std::sync::mpsc::channel();
-        readback.map_async(wgpu::MapMode::Read, .., move |r| {
-            let _ = tx.send(r);
-        });
-        wait()?;
-        rx.recv()
-            .map_err(|e| GpuError::Readback(e.to_string()))?
-            .map_err(|e| GpuError::Readback(e.to_string()))?;
-        let view = readback
-            .get_mapped_range(..)
-            .map_err(|e| GpuError::Readback(e.to_string()))?;
-        let floats: &[f32] = bytemuck::cast_slice(&view);
+        let texels = read_back(gpu, &image, image_size)?;
         let out = Image {
             width: w,
             height: h,
-            rgb: floats.chunks_exact(4).map(|c| [c[0], c[1], c[2]]).collect(),
-            transparency: floats.chunks_exact(4).map(|c| c[3]).collect(),
+            rgb: texels.iter().map(|c| [c[0], c[1], c[2]]).collect(),
+            transparency: texels.iter().map(|c| c[3]).collect(),
         };
-        drop(view);
-        readback.unmap();
         let readback_time = start.elapsed().as_secs_f64();
         Ok((
             out,

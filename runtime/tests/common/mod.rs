@@ -5,6 +5,30 @@ use std::path::PathBuf;
 use tables::bake::{BakePlan, run};
 use tables::scene::Scene;
 
+/// A draft rgb3 scene of a cloud (gamma, r_eff 10 µm) and rain (lognormal, 0.5 mm) with N orders.
+#[allow(dead_code)]
+pub fn cloud_and_rain(name: &str, n_max: usize) -> String {
+    format!(
+        r#"
+[scene]
+name = "{name}"
+spectral = "rgb3"
+n_max = {n_max}
+quality = "draft"
+
+[[field]]
+name = "cloud"
+kind = "cloud"
+distribution = {{ kind = "gamma", r_eff_um = 10, v_eff = 0.1 }}
+
+[[field]]
+name = "rain"
+kind = "rain"
+distribution = {{ kind = "lognormal", median_radius_um = 500, sigma_g = 1.4 }}
+"#
+    )
+}
+
 /// Bakes the scene `text` into `<tmp>/tables`; keep the `TempDir` alive while using the path.
 pub fn bake(text: &str) -> (tempfile::TempDir, PathBuf) {
     let tmp = tempfile::tempdir().unwrap();
