@@ -280,11 +280,8 @@ fn run_validate(a: ValidateArgs) -> Result<()> {
 }
 
 fn run_bake(a: BakeArgs) -> Result<()> {
-    use tables::scene::{DEFAULT_SCENE, Quality, Scene};
-    let scene = match &a.scene {
-        Some(path) => Scene::from_file(path)?,
-        None => Scene::parse(DEFAULT_SCENE, "default scene")?,
-    };
+    use tables::scene::{Quality, Scene};
+    let scene = Scene::from_file_or_default(a.scene.as_deref())?;
     let quality = match a.quality.as_deref() {
         Some(q) => Quality::parse(q).context("quality preset")?,
         None => scene.quality,
@@ -292,13 +289,7 @@ fn run_bake(a: BakeArgs) -> Result<()> {
     if a.jobs == Some(0) {
         bail!("--jobs 0 is outside the allowed range [1, ∞)");
     }
-    let plan = tables::bake::BakePlan {
-        scene,
-        out_dir: a.out.clone(),
-        quality,
-        knobs: quality.knobs(),
-        quiet: a.quiet || std::env::var_os("CI").is_some(),
-    };
+    let plan = tables::bake::BakePlan::for_preset(scene, a.out.clone(), quality, a.quiet);
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(a.jobs.unwrap_or(0))
         .build()

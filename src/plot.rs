@@ -254,12 +254,7 @@ fn colour_strips(image: &FieldImage, step: f64, out: &Path, name: &str) -> Resul
                     .map(|r| {
                         let x = (r[k] / scale).max(0.0);
                         let t = (2.0 * x / (1.0 + x)).min(1.0);
-                        let e = if t <= 0.003_130_8 {
-                            12.92 * t
-                        } else {
-                            1.055 * t.powf(1.0 / 2.4) - 0.055
-                        };
-                        (255.0 * e).round() as u8
+                        (255.0 * runtime::render::image::srgb_encode(t)).round() as u8
                     })
                     .collect();
                 let colour = RGBColor(rgb[0], rgb[1], rgb[2]);

@@ -99,14 +99,12 @@ pub fn prepare(
     };
     let dir =
         tables_dir.unwrap_or_else(|| PathBuf::from(format!("photometeor-tables-{}", scene.name)));
-    let plan = tables::bake::BakePlan {
+    tables::bake::run(&tables::bake::BakePlan::for_preset(
         scene,
-        out_dir: dir.clone(),
+        dir.clone(),
         quality,
-        knobs: quality.knobs(),
-        quiet: quiet || std::env::var_os("CI").is_some(),
-    };
-    tables::bake::run(&plan)?;
+        quiet,
+    ))?;
     let names: Vec<&str> = used.iter().map(String::as_str).collect();
     let tables = Tables::open_fields(&dir, Some(&names))?;
     Ok((render, tables))

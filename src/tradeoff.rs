@@ -13,7 +13,7 @@ use anyhow::{Context, Result, bail};
 use clap::Args as ClapArgs;
 use serde::Serialize;
 use tables::bake::{BakePlan, Knobs, compare, run};
-use tables::scene::{DEFAULT_SCENE, FieldKind, Quality, Scene, Spectral};
+use tables::scene::{FieldKind, Quality, Scene, Spectral};
 use tables::validate::validate;
 
 #[derive(Debug, ClapArgs)]
@@ -57,10 +57,7 @@ struct Variant {
 }
 
 pub fn run_tradeoff(a: TradeoffArgs) -> Result<()> {
-    let scene = match &a.scene {
-        Some(path) => Scene::from_file(path)?,
-        None => Scene::parse(DEFAULT_SCENE, "default scene")?,
-    };
+    let scene = Scene::from_file_or_default(a.scene.as_deref())?;
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
     let reference = match &a.reference {
         Some(r) => r.clone(),
@@ -193,7 +190,7 @@ pub fn run_tradeoff(a: TradeoffArgs) -> Result<()> {
                     .find(|r| r.field == c.field && r.channel == c.channel && r.name == c.name)?;
                 Some((c.measured? - r.measured?).abs())
             })
-            .fold(None, |m: Option<f64>, d| Some(m.map_or(d, |m| m.max(d))));
+            .reduce(f64::max);
         rows.push(Row {
             knob: v.knob.into(),
             value: v.value.clone(),

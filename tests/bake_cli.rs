@@ -12,7 +12,7 @@ use tables::manifest::{Manifest, read_manifest};
 
 mod common;
 
-use common::photometeor;
+use common::{photometeor, workdir};
 
 struct DefaultBake {
     out: PathBuf,
@@ -24,9 +24,7 @@ struct DefaultBake {
 fn default_bake() -> &'static DefaultBake {
     static BAKE: OnceLock<DefaultBake> = OnceLock::new();
     BAKE.get_or_init(|| {
-        let cwd = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("default-bake");
-        let _ = fs::remove_dir_all(&cwd);
-        fs::create_dir_all(&cwd).unwrap();
+        let cwd = workdir("default-bake");
         let out = photometeor(&["bake"], &cwd);
         let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
         assert!(out.status.success(), "photometeor bake failed:\n{stderr}");
@@ -304,9 +302,7 @@ fn plot_draws_every_picture_of_the_default_bake_as_png_and_svg() {
 /// sizes rise, and the presets' rows are there.
 #[test]
 fn tradeoff_measures_each_knob_against_a_reference() {
-    let root = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("tradeoff");
-    let _ = fs::remove_dir_all(&root);
-    fs::create_dir_all(&root).unwrap();
+    let root = workdir("tradeoff");
     let scene = root.join("scene.toml");
     fs::write(
         &scene,
@@ -371,9 +367,7 @@ const SPHERES: &str = "[scene]\nname = \"v\"\nspectral = \"rgb3\"\nn_max = 4\nqu
 
 /// Bakes SPHERES with the rain drops made of `material` into `name` under the test's tmp dir.
 fn bake_spheres(name: &str, material: &str) -> PathBuf {
-    let root = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(name);
-    let _ = fs::remove_dir_all(&root);
-    fs::create_dir_all(&root).unwrap();
+    let root = workdir(name);
     let scene = root.join("scene.toml");
     fs::write(
         &scene,

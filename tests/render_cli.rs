@@ -10,14 +10,7 @@ use runtime::render::RenderScene;
 
 mod common;
 
-use common::photometeor;
-
-fn workdir(name: &str) -> PathBuf {
-    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(name);
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
+use common::{photometeor, workdir};
 
 fn scene_path(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -123,7 +116,7 @@ fn rainbow_radius_in_the_render_matches_the_tables_primary_peak_red_outside() {
                 continue;
             }
             let d = setup.ray(i, j, w, h);
-            let psi = runtime::render::dot(d, setup.light)
+            let psi = mie::crystal::geometry::dot(d, setup.light)
                 .clamp(-1.0, 1.0)
                 .acos()
                 .to_degrees();

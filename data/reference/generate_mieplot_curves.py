@@ -410,6 +410,14 @@ def sphere_case(r_um, wl_nm, m_re, m_im, fails):
     return case
 
 
+def radii_doublings(label, n_max):
+    """j with n_max = (N_RADII_START - 1)·2^j + 1; anything else is refused."""
+    jmax = round(math.log2(max(n_max - 1, 1) / (N_RADII_START - 1)))
+    if jmax < 0 or (N_RADII_START - 1) * 2 ** jmax + 1 != n_max:
+        raise SystemExit(f"{label}: max radii must be 64*2^j + 1, got {n_max}")
+    return jmax
+
+
 def lognormal_case(label, r_g, s_g, n_max, wl_nm, m_re, m_im, fails, warnings):
     """Trapezoid in ln r on nested uniform grids (65, 129, 257, ... radii).
 
@@ -422,10 +430,8 @@ def lognormal_case(label, r_g, s_g, n_max, wl_nm, m_re, m_im, fails, warnings):
     name = f"{label}_lognormal_{wl_nm:.0f}nm"
     ln_s = math.log(s_g)
     lo, hi = math.log(r_g) - TRUNC_SIGMAS * ln_s, math.log(r_g) + TRUNC_SIGMAS * ln_s
-    jmax = round(math.log2((n_max - 1) / (N_RADII_START - 1)))
-    if (N_RADII_START - 1) * 2 ** jmax + 1 != n_max:
-        raise SystemExit(f"{label}: max radii must be 64*2^j + 1, got {n_max}")
-    nfine = (N_RADII_START - 1) * 2 ** jmax + 1
+    jmax = radii_doublings(label, n_max)
+    nfine = n_max
     check_every = (nfine - 1) // 16
     st = {"ang": 0.0, "kern": 0.0, "kern_max": 0.0, "nodes_max": 0, "spole_max": 0}
     U = {"I": np.zeros(K), "F": np.zeros(K), "Imu": 0.0, "csca": 0.0, "cext": 0.0, "area": 0.0,
@@ -559,6 +565,7 @@ def main():
         if l not in caps:
             raise SystemExit(f"unknown distribution {l}")
         caps[l] = int(n)
+        radii_doublings(l, caps[l])  # refuse a bad cap now, not hours into the run
     fails = []
     warnings = []
     cases = []

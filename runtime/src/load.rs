@@ -88,10 +88,7 @@ impl Tables {
                 }
             }
         }
-        let grid = ThetaGrid::new(manifest.theta_step_deg).map_err(|e| LoadError {
-            file: manifest_file.clone(),
-            check: e.to_string(),
-        })?;
+        let grid = ThetaGrid::new(manifest.theta_step_deg).expect("checked by read_manifest");
         let omega = grid.bin_solid_angles();
         let mut fields = Vec::new();
         for entry in &manifest.fields {
@@ -117,13 +114,12 @@ impl Tables {
                     image.theta_step_deg, manifest.theta_step_deg
                 )));
             }
-            if image.n_max() != entry.n_max || image.angle_count() != manifest.angle_count {
+            // The angle count follows from Δθ, which read_field_exr and read_manifest check.
+            if image.n_max() != entry.n_max {
                 return Err(fail(format!(
-                    "{} rows × {} angles, manifest.json says N = {} × K = {}",
+                    "{} rows, manifest.json says N = {}",
                     image.n_max(),
-                    image.angle_count(),
-                    entry.n_max,
-                    manifest.angle_count
+                    entry.n_max
                 )));
             }
             let manifest_f = entry.forward_fraction.as_array();

@@ -8,7 +8,8 @@
 //!   n < 1 are single scattering, Ams_1.
 //! - [`forward_fraction`]`(field, n)`: F_n, linear in fractional n, with the same ends.
 //! - [`mix`]: several fields in one place (Riley et al. 2004 Eq. 6), each weighted by its
-//!   number density times its scattering cross-section, per channel.
+//!   number density times its scattering cross-section, per channel; [`forward_fraction_mix`]
+//!   the same for F_n.
 
 use crate::load::FieldTable;
 
@@ -49,6 +50,30 @@ pub fn forward_fraction(field: &FieldTable, n: f64) -> [f64; 3] {
     })
 }
 
+/// Σ_i ρ_i σ_sca,i v_i / Σ_i ρ_i σ_sca,i per channel over the fields present (ρ_i > 0), with
+/// v_i = `value(field i)`; `empty` where nothing scatters.
+fn weighted(
+    fields: &[&FieldTable],
+    densities: &[f64],
+    empty: f64,
+    value: impl Fn(&FieldTable) -> [f64; 3],
+) -> [f64; 3] {
+    let mut num = [0.0; 3];
+    let mut den = [0.0; 3];
+    for (f, &rho) in fields.iter().zip(densities) {
+        if rho <= 0.0 {
+            continue;
+        }
+        let v = value(f);
+        for c in 0..3 {
+            let w = rho * f.sigma_sca_m2[c];
+            num[c] += w * v[c];
+            den[c] += w;
+        }
+    }
+    std::array::from_fn(|c| if den[c] > 0.0 { num[c] / den[c] } else { empty })
+}
+
 /// Phase function of a mixture of fields at one place: Σ_i ρ_i σ_sca,i P_i / Σ_i ρ_i σ_sca,i
 /// per channel, with ρ_i the number density of field i (any common unit) and P_i its
 /// `ams(…, n, cos θ)`. All densities zero gives zero (nothing scatters there), never NaN.
@@ -59,18 +84,12 @@ pub fn mix(
     n: f64,
     cos_theta: f64,
 ) -> [f64; 3] {
-    let mut num = [0.0; 3];
-    let mut den = [0.0; 3];
-    for (f, &rho) in fields.iter().zip(densities) {
-        if rho <= 0.0 {
-            continue;
-        }
-        let p = ams(f, theta_step_deg, n, cos_theta);
-        for c in 0..3 {
-            let w = rho * f.sigma_sca_m2[c];
-            num[c] += w * p[c];
-            den[c] += w;
-        }
-    }
-    std::array::from_fn(|c| if den[c] > 0.0 { num[c] / den[c] } else { 0.0 })
+    weighted(fields, densities, 0.0, |f| {
+        ams(f, theta_step_deg, n, cos_theta)
+    })
+}
+
+/// F_n of a mixture, weighted like [`mix`]; 1 where nothing scatters (no light is lost there).
+pub fn forward_fraction_mix(fields: &[&FieldTable], densities: &[f64], n: f64) -> [f64; 3] {
+    weighted(fields, densities, 1.0, |f| forward_fraction(f, n))
 }

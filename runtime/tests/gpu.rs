@@ -10,21 +10,15 @@ use runtime::sample::{ams, forward_fraction};
 
 mod common;
 
-use common::gpu;
+use common::{CLOUD, RAIN, gpu};
 
 fn bake(fields: &str) -> (tempfile::TempDir, PathBuf) {
-    common::bake(&format!(
-        "[scene]\nname = \"gpu\"\nspectral = \"rgb3\"\nn_max = 6\nquality = \"draft\"\n\n{fields}"
-    ))
+    common::bake(&common::scene("gpu", 6, fields))
 }
-
-const CLOUD: &str = "[[field]]\nname = \"cloud\"\nkind = \"cloud\"\ndistribution = { kind = \"gamma\", r_eff_um = 10, v_eff = 0.1 }\n";
-const RAIN: &str = "[[field]]\nname = \"rain\"\nkind = \"rain\"\ndistribution = { kind = \"lognormal\", median_radius_um = 500, sigma_g = 1.4 }\n";
 
 /// Queries over every field, fractional and out-of-range orders, and angles from exactly 0° to
 /// exactly 180°; the CPU reference is evaluated at the same f32 inputs.
-fn compare(gpu: &Gpu, tables: &Tables, format: TexelFormat, rel_tol: f64) -> f64 {
-    let uploaded = GpuTables::upload(gpu, tables, format).unwrap();
+fn compare(gpu: &Gpu, tables: &Tables, uploaded: &GpuTables, rel_tol: f64) -> f64 {
     eprintln!(
         "upload {:.1} ms, {:?}",
         1e3 * uploaded.upload_seconds,
@@ -43,7 +37,7 @@ fn compare(gpu: &Gpu, tables: &Tables, format: TexelFormat, rel_tol: f64) -> f64
             }
         }
     }
-    let got = evaluate(gpu, &uploaded, &queries).unwrap();
+    let got = evaluate(gpu, uploaded, &queries).unwrap();
     let mut worst: f64 = 0.0;
     let mut worst_at = String::new();
     for (q, g) in queries.iter().zip(&got) {
@@ -81,7 +75,8 @@ fn wgsl_sampling_matches_the_cpu_reference_in_f32() {
     let (_tmp, dir) = bake(&format!("{CLOUD}\n{RAIN}"));
     let tables = Tables::open(&dir).unwrap();
     // 32-bit texels and f32 arithmetic (acos, interpolation) against f64.
-    compare(&gpu, &tables, TexelFormat::F32, 1e-4);
+    let uploaded = GpuTables::upload(&gpu, &tables, TexelFormat::F32).unwrap();
+    compare(&gpu, &tables, &uploaded, 1e-4);
 }
 
 #[test]
@@ -93,5 +88,5 @@ fn half_floats_where_the_values_fit() {
     let uploaded = GpuTables::upload(&gpu, &tables, TexelFormat::Auto).unwrap();
     assert_eq!(uploaded.format, wgpu::TextureFormat::Rgba16Float);
     // Half floats keep 11 significant bits: 2⁻¹¹ ≈ 4.9e-4 relative per texel.
-    compare(&gpu, &tables, TexelFormat::Auto, 1e-3);
+    compare(&gpu, &tables, &uploaded, 1e-3);
 }

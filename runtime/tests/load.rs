@@ -3,6 +3,7 @@
 
 use std::fs;
 use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
 
 use runtime::Tables;
 use runtime::sample::{ams, forward_fraction, mix};
@@ -10,9 +11,26 @@ use tables::exr_io::{read_field_exr, write_field_exr};
 
 mod common;
 
-/// A fresh bake of the cloud-and-rain scene in its own temporary directory.
+/// The cloud-and-rain scene, baked once for the whole file.
+fn baked() -> &'static Path {
+    static BAKE: OnceLock<(tempfile::TempDir, PathBuf)> = OnceLock::new();
+    &BAKE
+        .get_or_init(|| common::bake(&common::cloud_and_rain("runtime-test", 4)))
+        .1
+}
+
+/// A fresh copy of that bake (its files, not the cache) in its own temporary directory.
 fn bake() -> (tempfile::TempDir, PathBuf) {
-    common::bake(&common::cloud_and_rain("runtime-test", 4))
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("tables");
+    fs::create_dir(&dir).unwrap();
+    for entry in fs::read_dir(baked()).unwrap() {
+        let path = entry.unwrap().path();
+        if path.is_file() {
+            fs::copy(&path, dir.join(path.file_name().unwrap())).unwrap();
+        }
+    }
+    (tmp, dir)
 }
 
 fn error_of(dir: &Path) -> String {

@@ -5,11 +5,12 @@
 
 use std::path::Path;
 
+use mie::crystal::geometry::dot;
 use runtime::Tables;
 use runtime::gpu::{GpuTables, TexelFormat};
 use runtime::render::cpu::{self, box_span};
 use runtime::render::gpu::Renderer;
-use runtime::render::{Frame, RenderScene, dot};
+use runtime::render::{Frame, RenderScene};
 use runtime::sample;
 
 mod common;

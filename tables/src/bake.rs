@@ -87,6 +87,20 @@ pub struct BakePlan {
     pub quiet: bool,
 }
 
+impl BakePlan {
+    /// A bake at `quality`'s preset knobs; progress bars are off when `quiet` or in CI (the
+    /// `CI` environment variable set).
+    pub fn for_preset(scene: Scene, out_dir: PathBuf, quality: Quality, quiet: bool) -> Self {
+        Self {
+            scene,
+            out_dir,
+            quality,
+            knobs: quality.knobs(),
+            quiet: quiet || std::env::var_os("CI").is_some(),
+        }
+    }
+}
+
 /// What one field's bake produced; also the cache record.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct FieldResult {
@@ -181,7 +195,7 @@ pub fn run(plan: &BakePlan) -> Result<BakeReport> {
             None => {
                 let r = compute_field(plan, field, &weights, &grid)?;
                 report.computed.push(field.name.clone());
-                fresh.push(done.len());
+                fresh.push((done.len(), cache_file));
                 r
             }
         };
@@ -189,12 +203,8 @@ pub fn run(plan: &BakePlan) -> Result<BakeReport> {
     }
     std::fs::create_dir_all(plan.out_dir.join(".cache"))
         .with_context(|| format!("creating {}", plan.out_dir.display()))?;
-    for &i in &fresh {
-        let (_, hash, result) = &done[i];
-        write_cache(
-            &plan.out_dir.join(".cache").join(format!("{hash}.bin")),
-            result,
-        )?;
+    for (i, cache_file) in &fresh {
+        write_cache(cache_file, &done[*i].2)?;
     }
     let previous = crate::manifest::read_manifest(&plan.out_dir).ok();
     let mut entries = Vec::new();
@@ -324,10 +334,11 @@ pub fn compute_field(
                 let b = bulk_at(m, lambda, &q, angle_grid, nodes, &[])
                     .with_context(|| {
                         format!(
-                            "field {:?} at {lambda} nm (radii {:.3}–{:.0} µm after truncating 1e-3 of the mass)",
+                            "field {:?} at {lambda} nm (radii {:.3}–{:.0} µm after truncating {:e} of the mass)",
                             field.name,
                             q.radius_um.first().copied().unwrap_or(f64::NAN),
-                            q.radius_um.last().copied().unwrap_or(f64::NAN)
+                            q.radius_um.last().copied().unwrap_or(f64::NAN),
+                            knobs.tail_mass
                         )
                     })?;
                 per_wavelength.push(Spectrum {

@@ -197,6 +197,14 @@ fn key_line(text: &str, span: std::ops::Range<usize>, key: &str) -> usize {
 }
 
 impl Scene {
+    /// The scene file at `path`, or the embedded default scene.
+    pub fn from_file_or_default(path: Option<&Path>) -> Result<Self> {
+        match path {
+            Some(p) => Self::from_file(p),
+            None => Self::parse(DEFAULT_SCENE, "default scene"),
+        }
+    }
+
     /// Reads and validates a scene file.
     pub fn from_file(path: &Path) -> Result<Self> {
         let text = std::fs::read_to_string(path)

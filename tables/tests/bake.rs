@@ -7,11 +7,14 @@ use std::path::Path;
 
 use mie::ensemble::bulk_at;
 use mie::{AngleGrid, Material};
-use tables::bake::{BakePlan, BakeReport, run};
+use tables::bake::{BakeReport, run};
 use tables::exr_io::read_field_exr;
 use tables::grid::ThetaGrid;
-use tables::scene::Scene;
 use tables::spectral::RGB3_WAVELENGTHS_NM;
+
+mod common;
+
+use common::plan;
 
 const SCENE: &str = r#"
 [scene]
@@ -32,26 +35,14 @@ kind = "rain"
 distribution = { kind = "lognormal", median_radius_um = 500, sigma_g = 1.4 }
 "#;
 
-fn plan(text: &str, out: &Path) -> BakePlan {
-    let scene = Scene::parse(text, "test scene").unwrap();
-    let quality = scene.quality;
-    BakePlan {
-        scene,
-        out_dir: out.to_path_buf(),
-        quality,
-        knobs: quality.knobs(),
-        quiet: true,
-    }
-}
-
 fn bake(text: &str, out: &Path) -> BakeReport {
-    run(&plan(text, out)).unwrap()
+    run(&plan(text, out).unwrap()).unwrap()
 }
 
 #[test]
 fn ams1_is_the_single_scattering_bin_average_computed_independently() {
     let dir = tempfile::tempdir().unwrap();
-    let plan = plan(SCENE, dir.path());
+    let plan = plan(SCENE, dir.path()).unwrap();
     run(&plan).unwrap();
     let grid = ThetaGrid::new(0.18).unwrap();
     let omega = grid.bin_solid_angles();

@@ -5,24 +5,13 @@
 //! sphere, is non-negative (to the Legendre series' ripple), and whose F_i lie in [½, 1] and do
 //! not rise with n. Each test prints its measured worst deviation.
 
-use std::path::Path;
-
-use tables::bake::{BakePlan, run};
+use tables::bake::run;
 use tables::exr_io::read_field_exr;
 use tables::grid::ThetaGrid;
-use tables::scene::Scene;
 
-fn plan(text: &str, out: &Path) -> anyhow::Result<BakePlan> {
-    let scene = Scene::parse(text, "test scene")?;
-    let quality = scene.quality;
-    Ok(BakePlan {
-        scene,
-        out_dir: out.to_path_buf(),
-        quality,
-        knobs: quality.knobs(),
-        quiet: true,
-    })
-}
+mod common;
+
+use common::plan;
 
 /// Worst |∫ row dΩ − 1|, worst negative value relative to the row's maximum, over every row
 /// and channel of every field; F_i checked in [½, 1] and non-increasing.

@@ -15,6 +15,18 @@ pub fn scale(s: f64, a: Vec3) -> Vec3 {
     [s * a[0], s * a[1], s * a[2]]
 }
 
+pub fn sub(a: Vec3, b: Vec3) -> Vec3 {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
+pub fn cross(a: Vec3, b: Vec3) -> Vec3 {
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
+}
+
 pub fn normalize(a: Vec3) -> Vec3 {
     scale(1.0 / dot(a, a).sqrt(), a)
 }
@@ -27,12 +39,7 @@ pub fn basis(d: Vec3) -> (Vec3, Vec3) {
         [0.0, 1.0, 0.0]
     };
     let e1 = normalize(add_scaled(helper, -dot(helper, d), d));
-    let e2 = [
-        d[1] * e1[2] - d[2] * e1[1],
-        d[2] * e1[0] - d[0] * e1[2],
-        d[0] * e1[1] - d[1] * e1[0],
-    ];
-    (e1, e2)
+    (e1, cross(d, e1))
 }
 
 /// One face: the plane n·p = offset with outward unit normal n.

@@ -306,16 +306,12 @@ fn trace_one(
         }
         // Turned against the ray. A tilted surface facing back at the ray cannot be crossed:
         // total reflection about the true normal, which keeps the ray inside.
-        let (m, blocked) = if dot(d, normals[f]) > 0.0 {
-            (scale(-1.0, normals[f]), false)
+        let (m, cos_i, (refl, cos_t)) = if dot(d, normals[f]) > 0.0 {
+            let cos_i = dot(d, normals[f]);
+            (scale(-1.0, normals[f]), cos_i, fresnel(cos_i, eta_out))
         } else {
-            (scale(-1.0, prism.faces[f].normal), true)
-        };
-        let cos_i = -dot(d, m);
-        let (refl, cos_t) = if blocked {
-            (1.0, 0.0)
-        } else {
-            fresnel(cos_i, eta_out)
+            let m = scale(-1.0, prism.faces[f].normal);
+            (m, -dot(d, m), (1.0, 0.0))
         };
         if refl < 1.0 {
             let out = normalize(add_scaled(scale(eta_out, d), eta_out * cos_i - cos_t, m));

@@ -3,7 +3,9 @@
 
 use rayon::prelude::*;
 
-use super::{Frame, FrameError, Image, MAX_FIELDS, SUN_DIAMETER_DEG, Setup, Vec3, add, dot, scale};
+use mie::crystal::geometry::{Vec3, add_scaled, dot, scale};
+
+use super::{Frame, FrameError, Image, MAX_FIELDS, SUN_DIAMETER_DEG, Setup};
 use crate::load::{FieldTable, Tables};
 use crate::sample;
 
@@ -26,24 +28,6 @@ pub fn coefficients(fields: &[&FieldTable], rho: &[f64; MAX_FIELDS]) -> ([f64; 3
         }
     }
     (ext, sca)
-}
-
-/// F_n of the mixture, weighted like Eq. 6 (ρ σ_sca per field and channel).
-pub fn forward_fraction_mix(fields: &[&FieldTable], rho: &[f64; MAX_FIELDS], n: f64) -> [f64; 3] {
-    let mut num = [0.0; 3];
-    let mut den = [0.0; 3];
-    for (f, &r) in fields.iter().zip(rho) {
-        if r <= 0.0 {
-            continue;
-        }
-        let ff = sample::forward_fraction(f, n);
-        for c in 0..3 {
-            let w = r * f.sigma_sca_m2[c];
-            num[c] += w * ff[c];
-            den[c] += w;
-        }
-    }
-    std::array::from_fn(|c| if den[c] > 0.0 { num[c] / den[c] } else { 1.0 })
 }
 
 /// Checks that the tables can serve the frame's grid.
@@ -94,18 +78,16 @@ pub fn box_span(grid_min: Vec3, grid_max: Vec3, origin: Vec3, d: Vec3) -> Option
 impl Setup {
     /// The point where the light texel (a, b)'s ray meets slice plane value `c`.
     pub fn light_point(&self, a: usize, b: usize, c: f64) -> Vec3 {
-        let q = add(
+        let q = add_scaled(
             scale(
-                self.light_u,
                 self.light_origin[0] + (a as f64 + 0.5) * self.light_texel[0],
+                self.light_u,
             ),
-            scale(
-                self.light_w,
-                self.light_origin[1] + (b as f64 + 0.5) * self.light_texel[1],
-            ),
+            self.light_origin[1] + (b as f64 + 0.5) * self.light_texel[1],
+            self.light_w,
         );
         let t = (c - dot(self.half, q)) / dot(self.half, self.light);
-        add(q, scale(self.light, t))
+        add_scaled(q, t, self.light)
     }
 
     /// Continuous light-buffer coordinates of `p` (texel centres at integers).
@@ -180,7 +162,7 @@ pub fn render(tables: &Tables, frame: &Frame) -> Result<Image, FrameError> {
             if t <= 0.0 {
                 return;
             }
-            let p = add(setup.eye, scale(d, t));
+            let p = add_scaled(setup.eye, t, d);
             let rho = frame.grid.sample(p);
             let (ext, sca) = coefficients(&fields, &rho);
             if ext.iter().all(|&e| e <= 0.0) {
@@ -225,7 +207,7 @@ pub fn render(tables: &Tables, frame: &Frame) -> Result<Image, FrameError> {
                 return;
             }
             let tau: [f64; 3] = ext.map(|e| e * thickness);
-            let f = forward_fraction_mix(&fields, &rho, texel.n + 1.0 + tau[1]);
+            let f = sample::forward_fraction_mix(&fields, &rho, texel.n + 1.0 + tau[1]);
             for ch in 0..3 {
                 if ext[ch] <= 0.0 {
                     continue;

@@ -186,10 +186,9 @@ impl Renderer {
             contents: bytemuck::cast_slice(&params),
             usage: wgpu::BufferUsages::UNIFORM,
         });
-        let density_data: Vec<f32> = frame.grid.data.iter().flatten().copied().collect();
         let density = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("photometeor densities"),
-            contents: bytemuck::cast_slice(&density_data),
+            contents: bytemuck::cast_slice(&frame.grid.data),
             usage: wgpu::BufferUsages::STORAGE,
         });
         let storage = |label: &str, size: u64, extra: wgpu::BufferUsages| {

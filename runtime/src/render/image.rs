@@ -25,6 +25,15 @@ pub enum WriteError {
     },
 }
 
+/// The sRGB transfer curve (IEC 61966-2-1) of a linear value in [0, 1].
+pub fn srgb_encode(linear: f64) -> f64 {
+    if linear <= 0.003_130_8 {
+        12.92 * linear
+    } else {
+        1.055 * linear.powf(1.0 / 2.4) - 0.055
+    }
+}
+
 fn write_bytes(path: &Path, bytes: &[u8]) -> Result<(), WriteError> {
     tables::exr_io::write_file_atomically(path, bytes).map_err(|(op, source)| WriteError::Io {
         path: path.display().to_string(),
@@ -95,12 +104,7 @@ impl Image {
     pub fn to_srgb8(&self, exposure: f64) -> Vec<u8> {
         let encode = |l: f32| {
             let v = 1.0 - (-(exposure * l.max(0.0) as f64)).exp();
-            let s = if v <= 0.003_130_8 {
-                12.92 * v
-            } else {
-                1.055 * v.powf(1.0 / 2.4) - 0.055
-            };
-            (s * 255.0).round().clamp(0.0, 255.0) as u8
+            (srgb_encode(v) * 255.0).round().clamp(0.0, 255.0) as u8
         };
         self.rgb.iter().flat_map(|p| p.map(encode)).collect()
     }

@@ -39,36 +39,13 @@ pub use scene::RenderScene;
 pub use sky::Atmosphere;
 pub use volume::DensityGrid;
 
+use mie::crystal::geometry::{Vec3, add_scaled, basis, cross, dot, normalize, scale, sub};
+
 /// Up to this many fields take part in one render (one RGBA texel per voxel).
 pub const MAX_FIELDS: usize = 4;
 
 /// Angular diameter of the sun disk (Riley et al. 2004 §4.2.4), degrees.
 pub const SUN_DIAMETER_DEG: f64 = 0.5;
-
-pub type Vec3 = [f64; 3];
-
-pub fn dot(a: Vec3, b: Vec3) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-pub fn add(a: Vec3, b: Vec3) -> Vec3 {
-    [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
-}
-pub fn sub(a: Vec3, b: Vec3) -> Vec3 {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-pub fn scale(a: Vec3, s: f64) -> Vec3 {
-    [a[0] * s, a[1] * s, a[2] * s]
-}
-pub fn cross(a: Vec3, b: Vec3) -> Vec3 {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
-pub fn normalize(a: Vec3) -> Vec3 {
-    scale(a, 1.0 / dot(a, a).sqrt())
-}
 
 /// A pinhole camera; y is up, metres, sea level at y = 0.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -205,10 +182,10 @@ impl Frame {
         let right = normalize(right);
         let up = cross(right, forward);
 
-        let light = scale(self.sun.direction(), -1.0);
+        let light = scale(-1.0, self.sun.direction());
         let front_to_back = dot(forward, light) >= 0.0;
         let half = if front_to_back {
-            normalize(add(forward, light))
+            normalize(add_scaled(forward, 1.0, light))
         } else {
             normalize(sub(light, forward))
         };
@@ -224,13 +201,7 @@ impl Frame {
         let (h_lo, h_hi) = along(half);
         let slice_step = (h_hi - h_lo) / self.slices as f64;
         // Light-buffer axes: any orthonormal pair ⟂ l.
-        let seed = if light[1].abs() < 0.9 {
-            [0.0, 1.0, 0.0]
-        } else {
-            [1.0, 0.0, 0.0]
-        };
-        let light_u = normalize(cross(seed, light));
-        let light_w = cross(light, light_u);
+        let (light_u, light_w) = basis(light);
         let (u_lo, u_hi) = along(light_u);
         let (w_lo, w_hi) = along(light_w);
         let res = self.light_resolution as f64;
@@ -259,9 +230,10 @@ impl Setup {
     pub fn ray(&self, i: usize, j: usize, width: usize, height: usize) -> Vec3 {
         let sx = (2.0 * (i as f64 + 0.5) / width as f64 - 1.0) * self.tan_half_fov_y * self.aspect;
         let sy = (1.0 - 2.0 * (j as f64 + 0.5) / height as f64) * self.tan_half_fov_y;
-        normalize(add(
-            self.forward,
-            add(scale(self.right, sx), scale(self.up, sy)),
+        normalize(add_scaled(
+            add_scaled(self.forward, sx, self.right),
+            sy,
+            self.up,
         ))
     }
 }

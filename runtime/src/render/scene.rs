@@ -47,8 +47,10 @@ use std::path::Path;
 
 use serde::Deserialize;
 
-use super::volume::{Shape, Volume, rasterize};
-use super::{Atmosphere, Camera, Frame, Sun, Vec3};
+use super::volume::{Shape, Volume, joint_bounds, rasterize};
+use mie::crystal::geometry::Vec3;
+
+use super::{Atmosphere, Camera, Frame, Sun};
 use crate::load::Tables;
 
 #[derive(Debug, Default, Deserialize)]
@@ -231,15 +233,7 @@ impl RenderScene {
     /// The frame's parameters checked (sizes, camera, sun) before anything is baked: a frame
     /// over the volumes' bounds without rasterizing them.
     pub fn check(&self) -> Result<(), String> {
-        let mut lo = [f64::INFINITY; 3];
-        let mut hi = [f64::NEG_INFINITY; 3];
-        for v in &self.volumes {
-            let (a, b) = v.bounds();
-            for i in 0..3 {
-                lo[i] = lo[i].min(a[i]);
-                hi[i] = hi[i].max(b[i]);
-            }
-        }
+        let (lo, hi) = joint_bounds(&self.volumes);
         let grid = super::DensityGrid {
             min_m: lo,
             max_m: hi,

@@ -4,7 +4,9 @@
 
 use std::path::{Path, PathBuf};
 
-use super::{MAX_FIELDS, Vec3, dot, sub};
+use mie::crystal::geometry::{Vec3, dot, sub};
+
+use super::MAX_FIELDS;
 
 /// Number densities on a regular grid; voxel (x, y, z) is centred at
 /// min + (i + ½)·(max − min)/dims and holds one value per field (channel = field index in the
@@ -405,6 +407,20 @@ fn read_grid(
     })
 }
 
+/// The box holding every volume.
+pub fn joint_bounds(volumes: &[Volume]) -> (Vec3, Vec3) {
+    let mut lo = [f64::INFINITY; 3];
+    let mut hi = [f64::NEG_INFINITY; 3];
+    for v in volumes {
+        let (a, b) = v.bounds();
+        for i in 0..3 {
+            lo[i] = lo[i].min(a[i]);
+            hi[i] = hi[i].max(b[i]);
+        }
+    }
+    (lo, hi)
+}
+
 /// Rasterizes `volumes` into one grid over their joint bounds, `resolution` voxels along the
 /// longest side; `field_index` maps a field name to its channel.
 pub fn rasterize(
@@ -415,15 +431,7 @@ pub fn rasterize(
     if volumes.is_empty() {
         return Err("the scene has no [[volume]]".into());
     }
-    let mut lo = [f64::INFINITY; 3];
-    let mut hi = [f64::NEG_INFINITY; 3];
-    for v in volumes {
-        let (a, b) = v.bounds();
-        for i in 0..3 {
-            lo[i] = lo[i].min(a[i]);
-            hi[i] = hi[i].max(b[i]);
-        }
-    }
+    let (lo, hi) = joint_bounds(volumes);
     let extent = [hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]];
     let longest = extent.iter().cloned().fold(0.0, f64::max);
     let dims = extent.map(|e| ((resolution as f64 * e / longest).round() as usize).max(2));

@@ -5,28 +5,36 @@ use std::path::PathBuf;
 use tables::bake::{BakePlan, run};
 use tables::scene::Scene;
 
-/// A draft rgb3 scene of a cloud (gamma, r_eff 10 µm) and rain (lognormal, 0.5 mm) with N orders.
+/// A cloud field: gamma distribution, r_eff 10 µm.
 #[allow(dead_code)]
-pub fn cloud_and_rain(name: &str, n_max: usize) -> String {
-    format!(
-        r#"
-[scene]
-name = "{name}"
-spectral = "rgb3"
-n_max = {n_max}
-quality = "draft"
-
+pub const CLOUD: &str = r#"
 [[field]]
 name = "cloud"
 kind = "cloud"
-distribution = {{ kind = "gamma", r_eff_um = 10, v_eff = 0.1 }}
+distribution = { kind = "gamma", r_eff_um = 10, v_eff = 0.1 }
+"#;
 
+/// A rain field: lognormal, median radius 0.5 mm.
+#[allow(dead_code)]
+pub const RAIN: &str = r#"
 [[field]]
 name = "rain"
 kind = "rain"
-distribution = {{ kind = "lognormal", median_radius_um = 500, sigma_g = 1.4 }}
-"#
+distribution = { kind = "lognormal", median_radius_um = 500, sigma_g = 1.4 }
+"#;
+
+/// A draft rgb3 scene with N orders and the given `[[field]]` tables.
+#[allow(dead_code)]
+pub fn scene(name: &str, n_max: usize, fields: &str) -> String {
+    format!(
+        "[scene]\nname = \"{name}\"\nspectral = \"rgb3\"\nn_max = {n_max}\nquality = \"draft\"\n{fields}"
     )
+}
+
+/// [`scene`] of [`CLOUD`] and [`RAIN`].
+#[allow(dead_code)]
+pub fn cloud_and_rain(name: &str, n_max: usize) -> String {
+    scene(name, n_max, &format!("{CLOUD}{RAIN}"))
 }
 
 /// Bakes the scene `text` into `<tmp>/tables`; keep the `TempDir` alive while using the path.

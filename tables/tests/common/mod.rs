@@ -1,5 +1,5 @@
-//! Shared helpers for the integration tests: a seeded LCG and exact bin averages of analytic
-//! phase functions.
+//! Shared helpers for the integration tests: a seeded LCG, exact bin averages of analytic
+//! phase functions, and a quiet bake plan at a scene's own preset.
 
 #![allow(dead_code)]
 
@@ -71,4 +71,16 @@ pub fn max_abs_diff(x: &[f64], y: &[f64]) -> f64 {
 /// max_i |x_i|.
 pub fn max_abs(x: &[f64]) -> f64 {
     x.iter().map(|a| a.abs()).fold(0.0, f64::max)
+}
+
+/// A quiet bake of the scene `text` into `out` at the scene's own preset.
+pub fn plan(text: &str, out: &std::path::Path) -> anyhow::Result<tables::bake::BakePlan> {
+    let scene = tables::scene::Scene::parse(text, "test scene")?;
+    let quality = scene.quality;
+    Ok(tables::bake::BakePlan::for_preset(
+        scene,
+        out.to_path_buf(),
+        quality,
+        true,
+    ))
 }
