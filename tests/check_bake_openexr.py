@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Check a whole photometeor bake with the OpenEXR reference library (issue 3, "done when").
+"""Check a whole photometeor bake with the OpenEXR reference library, independently of our reader.
 
 Usage: python3 tests/check_bake_openexr.py BAKE_DIR
 

@@ -89,7 +89,7 @@ fn mie_by_material_and_full_grid() {
     assert_eq!(v["angles_deg"].as_array().unwrap().len(), 1001);
     let x = v["x"].as_f64().unwrap();
     assert!((x - 2.0 * std::f64::consts::PI * 10.0 / 0.55).abs() < 1e-9);
-    // IAPWS 20 °C at 550 nm is 1.3347 (physics.md §3)
+    // IAPWS 20 °C at 550 nm is 1.3347 (docs/physics.md §3)
     assert!((v["m_re"].as_f64().unwrap() - 1.3347).abs() < 1e-4);
 }
 

@@ -5,8 +5,8 @@
 
 use std::path::{Path, PathBuf};
 
+use render::RenderScene;
 use runtime::Tables;
-use runtime::render::RenderScene;
 
 mod common;
 
@@ -88,7 +88,7 @@ fn rainbow_radius_in_the_render_matches_the_tables_primary_peak_red_outside() {
     let step = tables.theta_step_deg;
     let table_radius: Vec<f64> = (0..3)
         .map(|c| {
-            let row = &rain.rows[c][0];
+            let row = rain.image.row(c, 0).to_vec();
             let k = (130.0 / step) as usize..=(145.0 / step) as usize;
             let peak = k.max_by(|&a, &b| row[a].total_cmp(&row[b])).unwrap();
             180.0 - peak as f64 * step
@@ -116,10 +116,7 @@ fn rainbow_radius_in_the_render_matches_the_tables_primary_peak_red_outside() {
                 continue;
             }
             let d = setup.ray(i, j, w, h);
-            let psi = mie::crystal::geometry::dot(d, setup.light)
-                .clamp(-1.0, 1.0)
-                .acos()
-                .to_degrees();
+            let psi = d.dot(setup.light).clamp(-1.0, 1.0).acos().to_degrees();
             if psi < lo || psi >= hi {
                 continue;
             }
@@ -212,4 +209,61 @@ fn bad_render_scenes_name_the_value_and_its_range_and_write_nothing() {
         );
         assert!(!cwd.join("bad.exr").exists(), "{to}: an image was written");
     }
+}
+
+#[test]
+fn render_without_tables_bakes_under_the_cache_directory_and_keeps_other_fields() {
+    let cwd = workdir("render-cache-dir");
+    let cache = cwd.join("xdg-cache");
+    // A scene whose name would climb out of any directory it named.
+    let text = std::fs::read_to_string(scene_path("rainbow.toml"))
+        .unwrap()
+        .replacen("name = \"rainbow\"", "name = \"x/../../victim\"", 1);
+    assert!(
+        text.contains("x/../../victim"),
+        "the scene's name line moved"
+    );
+    std::fs::write(cwd.join("scene.toml"), text).unwrap();
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_photometeor"))
+        .args([
+            "render",
+            "scene.toml",
+            "--quality",
+            "draft",
+            "--out",
+            "out.exr",
+            "--cpu",
+            "--width",
+            "8",
+            "--height",
+            "8",
+            "--slices",
+            "8",
+            "--quiet",
+        ])
+        .current_dir(&cwd)
+        .env("XDG_CACHE_HOME", &cache)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    // Nothing but the scene, the image and the cache root appeared in the working directory.
+    let mut entries: Vec<String> = std::fs::read_dir(&cwd)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    entries.sort();
+    assert_eq!(entries, ["out.exr", "scene.toml", "xdg-cache"]);
+    let tables_root = cache.join("photometeor").join("tables");
+    let dirs: Vec<PathBuf> = std::fs::read_dir(&tables_root)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    assert_eq!(dirs.len(), 1, "{dirs:?}");
+    let name = dirs[0].file_name().unwrap().to_string_lossy().into_owned();
+    assert!(name.starts_with("x_____victim-"), "{name}");
+    assert!(Tables::open(&dirs[0]).unwrap().field("rain").is_some());
 }

@@ -48,7 +48,7 @@ Checks run for every case (results stored per case under "checks")
   recurrence started from 0 far above max(N, |mx|), psi/chi by upward recurrence,
   written here in numba) at the case's angles: relative differences of
   qext, qsca, qback, g and of S1, S2;
-* Wiscombe MIEV0 published values (physics.md table) where a case coincides.
+* Wiscombe MIEV0 published values (docs/physics.md table) where a case coincides.
 A case whose checks fail the tolerances in ``TOL`` is dropped and listed in "notes".
 
 Run:  python3 data/reference/generate_mie_reference.py [--gl-1e5]
@@ -87,7 +87,7 @@ SPARSE_ANGLES = [0.0, 0.18, 0.5, 1.0, 2.0, 5.0] + [float(a) for a in range(10, 1
     175.0, 178.0, 179.0, 179.82, 180.0]
 FULL_ANGLES = [round(0.18 * i, 2) for i in range(1001)]  # 0, 0.18, ..., 180 exactly
 
-# Wiscombe MIEV0 test values (physics.md §2; Wiscombe sign m = n - i k, here in ours)
+# Wiscombe MIEV0 test values (docs/physics.md §2; Wiscombe sign m = n - i k, here in ours)
 WISCOMBE = {
     (0.75, 0.0, 10.0): (2.232265e00, 2.232265e00, 2.001164e00),
     (0.75, 0.0, 1000.0): (1.997908e00, 1.997908e00, 1.688121e00),
@@ -126,7 +126,7 @@ def n_stop(x):
 def _bh_coefficients(m, x, nstop):
     y = m * x
     ay = abs(y)
-    # downward D_n from D = 0, started far above max(N, |mx|) (physics.md §2)
+    # downward D_n from D = 0, started far above max(N, |mx|) (docs/physics.md §2)
     nmx = int(max(float(nstop), ay) + 30.0 + 12.0 * ay ** (1.0 / 3.0))
     d = np.zeros(nmx + 1, dtype=np.complex128)
     for n in range(nmx, 1, -1):

@@ -10,7 +10,7 @@
 //! costs four digits at x = 1e5.
 //!
 //! # Symmetry
-//! π_n(−μ) = (−1)^{n−1} π_n(μ), τ_n(−μ) = (−1)^n τ_n(μ) (physics.md §2). Each partial sum is split
+//! π_n(−μ) = (−1)^{n−1} π_n(μ), τ_n(−μ) = (−1)^n τ_n(μ) (docs/physics.md §2). Each partial sum is split
 //! into odd-n and even-n parts evaluated at ν = |μ|, which gives θ and 180° − θ from one pass:
 //!   Σ π_n(±ν) K_n = O ± E,   Σ τ_n(±ν) K_n = ±O + E.
 //!
@@ -28,6 +28,19 @@ use crate::sphere::{MieCoefficients, Neumaier};
 /// Angles per work item; fixed so that results do not depend on the thread count.
 const ROW_CHUNK: usize = 64;
 
+/// cos θ of a scattering angle in degrees, folded so that angles mirrored about 90° give
+/// cosines of exactly opposite sign: θ > 90° uses −cos(180° − θ), and 90° gives 0 exactly (not
+/// 6e-17). [`FoldedAngles`] then evaluates each ± pair once.
+pub fn exact_cosine_deg(theta_deg: f64) -> f64 {
+    if theta_deg == 90.0 {
+        0.0
+    } else if theta_deg > 90.0 {
+        -(180.0 - theta_deg).to_radians().cos()
+    } else {
+        theta_deg.to_radians().cos()
+    }
+}
+
 /// Requested cosines folded onto ν = |μ| so that each ± pair is evaluated once.
 #[derive(Debug, Clone)]
 pub struct FoldedAngles {
@@ -39,7 +52,7 @@ pub struct FoldedAngles {
 
 impl FoldedAngles {
     /// Folds the cosines `mu`. Pairs are shared only where −μ equals μ' exactly, so build
-    /// symmetric grids with [`crate::grid::symmetric_cosines`].
+    /// them with [`exact_cosine_deg`] or [`crate::ThetaGrid::cosines`].
     pub fn new(mu: &[f64]) -> Self {
         let mut index: HashMap<u64, usize> = HashMap::new();
         let mut nu = Vec::new();
@@ -80,6 +93,7 @@ pub struct SphereTerms {
 }
 
 impl SphereTerms {
+    /// Scales a_n, b_n of `coefficients` by c_n = (2n+1)/(n(n+1)).
     pub fn new(coefficients: &MieCoefficients) -> Self {
         let rows = coefficients
             .a
@@ -104,9 +118,13 @@ impl SphereTerms {
 /// S1 and S2 at ν and at −ν for one sphere and one folded angle.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct AmplitudePair {
+    /// S1 at μ = +ν (θ ≤ 90°).
     pub s1_plus: Complex64,
+    /// S2 at μ = +ν (θ ≤ 90°).
     pub s2_plus: Complex64,
+    /// S1 at μ = −ν (180° − θ).
     pub s1_minus: Complex64,
+    /// S2 at μ = −ν (180° − θ).
     pub s2_minus: Complex64,
 }
 
@@ -214,7 +232,7 @@ where
 
 /// S1, S2 at θ = 0° and 180° from π_n(±1) = (±1)^{n−1} n(n+1)/2, τ_n(±1) = (±1)^n n(n+1)/2:
 ///   S1(0°) = S2(0°) = Σ (2n+1)/2 (a_n + b_n),  S1(180°) = −S2(180°) = Σ (−1)^{n−1} (2n+1)/2 (a_n − b_n),
-/// summed with Neumaier compensation: the back-scatter sum cancels strongly (physics.md §2), and
+/// summed with Neumaier compensation: the back-scatter sum cancels strongly (docs/physics.md §2), and
 /// the recurrence at μ = ±1 accumulates 2e-9 relative error by x = 2e5.
 fn exact_forward_backward(sphere: &SphereTerms) -> AmplitudePair {
     let mut fwd = [Neumaier::default(); 2];

@@ -2,7 +2,7 @@
 //! the phase-function value `tables/` bakes (bin averages, forward-peak fractions, σ_ext,
 //! albedo, g), beside the Mie path of [`crate::ensemble`].
 //!
-//! # Model (physics.md §5; Macke et al. 1996, Takano & Liou 1989)
+//! # Model (docs/physics.md §5; Macke et al. 1996, Takano & Liou 1989)
 //! - **Crystal**: a hexagonal prism of aspect ratio AR = L/(2a) (plates AR < 1, columns AR > 1)
 //!   and maximum dimension D = max(2a, L); D follows a lognormal distribution (median D_g,
 //!   geometric width σ_g; σ_g = 1 is one size).
@@ -49,7 +49,8 @@ pub use trace::{TraceResult, TraceSettings, trace};
 
 use crate::distribution::SizeDistribution;
 use crate::error::MieError;
-use crate::grid::AngleGrid;
+use crate::grid::ThetaGrid;
+use crate::phase::{CrystalOrigin, Origin, PhaseFunction};
 use crate::refractive::Material;
 
 /// A population of ice crystals.
@@ -116,38 +117,20 @@ impl CrystalField {
     }
 }
 
-/// The phase-function value of a crystal population at one wavelength.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct CrystalPhase {
-    pub wavelength_nm: f64,
-    pub m_re: f64,
-    pub m_im: f64,
-    /// Per particle (m²).
-    pub sigma_ext_m2: f64,
-    pub sigma_sca_m2: f64,
-    pub albedo: f64,
-    pub g: f64,
-    pub g_std_error: f64,
-    pub theta_step_deg: f64,
-    /// Bin averages (1/sr), ∫ = 1, the delta transmission and the diffraction peak in bin 0.
-    pub bins: Vec<f64>,
-    /// Standard error of each bin (1/sr), from the ray statistics.
-    pub bins_std_error: Vec<f64>,
-    /// Shares of the scattered energy: delta transmission, diffraction.
-    pub delta_fraction: f64,
-    pub diffraction_fraction: f64,
-    /// The geometric-optics trace behind it.
-    pub trace: TraceSummary,
-}
-
 /// The energy bookkeeping of the trace, without the histogram.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct TraceSummary {
+    /// Rays that hit the crystal.
     pub rays: u64,
+    /// Energy fraction reflected at the first (external) interaction.
     pub external_reflection: f64,
+    /// Energy fraction leaving exactly forward through parallel faces (delta transmission).
     pub delta: f64,
+    /// Energy fraction absorbed inside the crystal.
     pub absorbed: f64,
+    /// Energy fraction of paths stopped by the interaction or weight cut-off.
     pub lost: f64,
+    /// Asymmetry parameter g of the geometric-optics part alone (delta included).
     pub g_geometric: f64,
 }
 
@@ -159,7 +142,7 @@ fn encircled_energy(u: f64) -> f64 {
 
 /// Energy fraction of the diffraction of a circle with size parameter x in each bin of `grid`
 /// (forward hemisphere, normalized there).
-fn diffraction_bin_energy(x: f64, grid: AngleGrid) -> Vec<f64> {
+fn diffraction_bin_energy(x: f64, grid: ThetaGrid) -> Vec<f64> {
     let total = encircled_energy(x);
     (0..grid.len())
         .map(|k| {
@@ -175,10 +158,10 @@ fn diffraction_bin_energy(x: f64, grid: AngleGrid) -> Vec<f64> {
 pub fn crystal_phase(
     field: &CrystalField,
     wavelength_nm: f64,
-    grid: AngleGrid,
+    grid: ThetaGrid,
     rays: u64,
     seed: u64,
-) -> Result<CrystalPhase, MieError> {
+) -> Result<PhaseFunction, MieError> {
     let field = field.validated()?;
     let m = Material::Ice.refractive_index(wavelength_nm, -20.0)?;
     let wavelength_um = wavelength_nm / 1000.0;
@@ -228,7 +211,11 @@ pub fn crystal_phase(
     let mut bins = Vec::with_capacity(k_len);
     let mut bins_std_error = Vec::with_capacity(k_len);
     for k in 0..k_len {
-        let omega = grid.bin_solid_angle(k);
+        // Ω_k as the cosine difference, not `ThetaGrid::bin_solid_angles` (which avoids its
+        // ~1e-13 relative cancellation): the crystal tables of compute version 5 were made
+        // this way, and the next change of the crystal tracer's numbers moves both together.
+        let (lo, hi) = grid.bin_edges_deg(k);
+        let omega = 2.0 * std::f64::consts::PI * (lo.to_radians().cos() - hi.to_radians().cos());
         let mut go = t.bin_energy[k] / go_scattered;
         if k == 0 {
             go += t.delta / go_scattered;
@@ -237,7 +224,7 @@ pub fn crystal_phase(
         bins_std_error.push(f_go * t.bin_energy_std_error[k] / go_scattered / omega);
     }
     const UM2_TO_M2: f64 = 1e-12;
-    Ok(CrystalPhase {
+    Ok(PhaseFunction {
         wavelength_nm,
         m_re: m.re,
         m_im: m.im,
@@ -245,19 +232,22 @@ pub fn crystal_phase(
         sigma_sca_m2: sigma_sca * UM2_TO_M2,
         albedo: sigma_sca / (2.0 * mean_area),
         g: f_diff * g_diffraction + f_go * t.g,
-        g_std_error: f_go * t.g_std_error,
-        theta_step_deg: grid.step_deg(),
+        grid,
         bins,
-        bins_std_error,
-        delta_fraction: f_go * t.delta / go_scattered,
-        diffraction_fraction: f_diff,
-        trace: TraceSummary {
-            rays: t.rays_hit,
-            external_reflection: t.external_reflection,
-            delta: t.delta,
-            absorbed: t.absorbed,
-            lost: t.lost,
-            g_geometric: t.g,
-        },
+        forward_delta_fraction: f_go * t.delta / go_scattered,
+        points: Vec::new(),
+        origin: Origin::Crystal(CrystalOrigin {
+            g_std_error: f_go * t.g_std_error,
+            bins_std_error,
+            diffraction_fraction: f_diff,
+            trace: TraceSummary {
+                rays: t.rays_hit,
+                external_reflection: t.external_reflection,
+                delta: t.delta,
+                absorbed: t.absorbed,
+                lost: t.lost,
+                g_geometric: t.g,
+            },
+        }),
     })
 }

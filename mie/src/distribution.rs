@@ -1,4 +1,4 @@
-//! Size distributions of spheres and their quadrature in ln r (physics.md §6).
+//! Size distributions of spheres and their quadrature in ln r (docs/physics.md §6).
 //!
 //! # Definitions (number per unit radius, unnormalized)
 //! - Lognormal: n(r) ∝ r⁻¹ exp[−(ln r − ln r_g)² / (2 ln²σ_g)]; r_eff = r_g exp(2.5 ln²σ_g),
@@ -25,23 +25,72 @@ pub const MARSHALL_PALMER_MAX_RADIUS_UM: f64 = 4000.0;
 #[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
 pub enum SizeDistribution {
     /// Lognormal by median (geometric mean) radius r_g and geometric standard deviation σ_g.
-    Lognormal { median_radius_um: f64, sigma_g: f64 },
+    Lognormal {
+        /// Median radius r_g, µm (> 0).
+        median_radius_um: f64,
+        /// Geometric standard deviation σ_g, in (1, 5].
+        sigma_g: f64,
+    },
     /// Hansen's gamma distribution by effective radius and effective variance.
-    Gamma { r_eff_um: f64, v_eff: f64 },
+    Gamma {
+        /// Effective radius r_eff = ⟨r³⟩/⟨r²⟩, µm (> 0).
+        r_eff_um: f64,
+        /// Effective variance v_eff, in (0, 0.5).
+        v_eff: f64,
+    },
     /// Marshall–Palmer exponential raindrop spectrum by rain rate (mm/h).
-    MarshallPalmer { rain_rate_mm_h: f64 },
+    MarshallPalmer {
+        /// Rain rate R, mm/h, in [0.1, 500].
+        rain_rate_mm_h: f64,
+    },
     /// A single radius.
-    Monodisperse { radius_um: f64 },
+    Monodisperse {
+        /// Radius, µm (> 0).
+        radius_um: f64,
+    },
 }
 
 /// Radii (µm) and number-fraction weights summing to 1.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SizeQuadrature {
+    /// Node radii, µm.
     pub radius_um: Vec<f64>,
+    /// Number fraction at each node (sums to 1).
     pub weight: Vec<f64>,
 }
 
 impl SizeQuadrature {
+    /// A lognormal (median `median_radius_um`, geometric width `sigma_g`) on `sizes` ≥ 2 radii
+    /// log-spaced over r_g e^{±half_width·ln σ_g}, end points included, each weighted by the
+    /// lognormal density per log step, exp(−(ln r − ln r_g)²/(2 ln²σ_g)), normalized to sum 1.
+    /// A plain rule that other codes (and benchmarks run side by side with them) reproduce
+    /// exactly; [`SizeDistribution::quadrature`] is the accurate one.
+    pub fn lognormal_log_spaced(
+        median_radius_um: f64,
+        sigma_g: f64,
+        sizes: usize,
+        half_width: f64,
+    ) -> Self {
+        let s = sigma_g.ln();
+        let last = sizes.max(2) - 1;
+        let radius_um: Vec<f64> = (0..=last)
+            .map(|i| {
+                (median_radius_um.ln() - half_width * s
+                    + 2.0 * half_width * s * i as f64 / last as f64)
+                    .exp()
+            })
+            .collect();
+        let density: Vec<f64> = radius_um
+            .iter()
+            .map(|r| (-(r.ln() - median_radius_um.ln()).powi(2) / (2.0 * s * s)).exp())
+            .collect();
+        let total: f64 = density.iter().sum();
+        Self {
+            radius_um,
+            weight: density.iter().map(|d| d / total).collect(),
+        }
+    }
+
     /// Σ w r^p (µm^p): the p-th moment of the number distribution.
     pub fn moment(&self, p: i32) -> f64 {
         self.radius_um

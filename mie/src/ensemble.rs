@@ -4,9 +4,9 @@
 //!   σ_ext = Σ w_i Q_ext,i π r_i²,  σ_sca likewise,  albedo = σ_sca/σ_ext,
 //!   g = Σ w_i σ_sca,i g_i / σ_sca,
 //!   p̄(θ) = Σ w_i σ_sca,i p_i(θ) / σ_sca = Σ w_i (|S1|²+|S2|²)_i / (2 k² σ_sca),  k = 2π/λ
-//! (intensities are averaged, not normalized phase functions; physics.md §2 and §6).
-//! The phase function is returned as bin averages on an [`AngleGrid`], integrated inside each bin
-//! with Gauss nodes (see [`crate::grid`]).
+//! (intensities are averaged, not normalized phase functions; docs/physics.md §2 and §6).
+//! The result is one [`PhaseFunction`] per wavelength: bin averages on a [`ThetaGrid`], integrated
+//! inside each bin with Gauss nodes (see [`crate::grid`]).
 //!
 //! # Node counts
 //! Two counts set the cost: sizes (nodes in ln r) and Gauss nodes per angular panel. With
@@ -22,7 +22,8 @@ use rayon::prelude::*;
 use crate::amplitude::{FoldedAngles, SphereTerms, weighted_intensity};
 use crate::distribution::{SizeDistribution, SizeQuadrature};
 use crate::error::MieError;
-use crate::grid::AngleGrid;
+use crate::grid::{ThetaGrid, bin_quadrature};
+use crate::phase::{MieOrigin, Origin, PhaseFunction};
 use crate::refractive::Material;
 use crate::sphere::Sphere;
 
@@ -31,10 +32,17 @@ use crate::sphere::Sphere;
 #[serde(rename_all = "snake_case")]
 pub enum NodeCounts {
     /// Refine until one doubling changes the result by less than `tolerance`.
-    Adaptive { tolerance: f64, max_sizes: usize },
+    Adaptive {
+        /// Relative change per doubling accepted (rms of bins at θ ≥ 1°; σ_ext; g).
+        tolerance: f64,
+        /// Most size nodes allowed before the refinement gives up with `NotConverged`.
+        max_sizes: usize,
+    },
     /// Exactly these counts.
     Fixed {
+        /// Size nodes in ln r.
         sizes: usize,
+        /// Gauss nodes per angular panel.
         nodes_per_panel: usize,
     },
 }
@@ -42,11 +50,17 @@ pub enum NodeCounts {
 /// What to compute.
 #[derive(Debug, Clone, PartialEq)]
 pub struct BulkRequest {
+    /// Particle material.
     pub material: Material,
+    /// Temperature, °C (water only: −12…99; ignored for ice).
     pub temperature_c: f64,
+    /// Size distribution of the spheres.
     pub distribution: SizeDistribution,
+    /// Vacuum wavelengths λ, nm (not empty).
     pub wavelengths_nm: Vec<f64>,
-    pub grid: AngleGrid,
+    /// Angular bins of the output phase functions.
+    pub grid: ThetaGrid,
+    /// Size and angular quadrature node counts.
     pub nodes: NodeCounts,
     /// Mass fraction left outside the truncated size range.
     pub tail_mass: f64,
@@ -54,33 +68,8 @@ pub struct BulkRequest {
     pub point_cosines: Vec<f64>,
 }
 
-/// Bulk optics at one wavelength: the phase-function value `tables/` consumes.
-#[derive(Debug, Clone, PartialEq, serde::Serialize)]
-pub struct BulkPhase {
-    pub wavelength_nm: f64,
-    pub m_re: f64,
-    pub m_im: f64,
-    /// Mean extinction cross-section per particle (m²).
-    pub sigma_ext_m2: f64,
-    /// Mean scattering cross-section per particle (m²).
-    pub sigma_sca_m2: f64,
-    pub albedo: f64,
-    pub g: f64,
-    pub theta_step_deg: f64,
-    /// Bin averages of p̄ (1/sr), bin k centred on θ_k = k Δθ.
-    pub bins: Vec<f64>,
-    /// p̄ (1/sr) at the requested point cosines, in their order.
-    pub points: Vec<f64>,
-    /// Σ_k bins_k Ω_k − 1: the quadrature's energy closure (0 when exact).
-    pub energy_closure: f64,
-    pub sizes: usize,
-    pub nodes_per_panel: usize,
-    /// Last relative change seen by the adaptive refinement (0 for fixed counts).
-    pub last_change: f64,
-}
-
 /// Computes the bulk optics for every requested wavelength (in the given order).
-pub fn bulk_phase(request: &BulkRequest) -> Result<Vec<BulkPhase>, MieError> {
+pub fn bulk_phase(request: &BulkRequest) -> Result<Vec<PhaseFunction>, MieError> {
     if request.wavelengths_nm.is_empty() {
         return Err(MieError::Empty("wavelength list"));
     }
@@ -122,11 +111,11 @@ pub fn bulk_phase(request: &BulkRequest) -> Result<Vec<BulkPhase>, MieError> {
 
 /// Doubles sizes, then nodes per panel, until a doubling changes the result by < tolerance.
 fn adaptive(
-    one: &dyn Fn(usize, usize) -> Result<BulkPhase, MieError>,
+    one: &dyn Fn(usize, usize) -> Result<PhaseFunction, MieError>,
     distribution: &SizeDistribution,
     tolerance: f64,
     max_sizes: usize,
-) -> Result<BulkPhase, MieError> {
+) -> Result<PhaseFunction, MieError> {
     let mono = matches!(distribution, SizeDistribution::Monodisperse { .. });
     let (mut sizes, mut nodes) = (if mono { 1 } else { 32 }, 2);
     let mut current = one(sizes, nodes)?;
@@ -135,10 +124,7 @@ fn adaptive(
             let next = one(2 * sizes, nodes)?;
             let change = relative_change(&current, &next);
             sizes *= 2;
-            current = BulkPhase {
-                last_change: change,
-                ..next
-            };
+            current = with_last_change(next, change);
             if change < tolerance {
                 break;
             }
@@ -155,10 +141,7 @@ fn adaptive(
         let next = one(sizes, 2 * nodes)?;
         let change = relative_change(&current, &next);
         nodes *= 2;
-        current = BulkPhase {
-            last_change: change.max(current.last_change),
-            ..next
-        };
+        current = with_last_change(next, change.max(last_change(&current)));
         if change < tolerance {
             return Ok(current);
         }
@@ -172,9 +155,20 @@ fn adaptive(
     }
 }
 
+fn last_change(p: &PhaseFunction) -> f64 {
+    p.mie().map_or(0.0, |m| m.last_change)
+}
+
+fn with_last_change(mut p: PhaseFunction, change: f64) -> PhaseFunction {
+    if let Origin::Mie(m) = &mut p.origin {
+        m.last_change = change;
+    }
+    p
+}
+
 /// rms relative change of bins at θ ≥ 1°, or of σ_ext and g, whichever is largest.
-pub fn relative_change(a: &BulkPhase, b: &BulkPhase) -> f64 {
-    let first = (1.0 / a.theta_step_deg).ceil() as usize;
+pub fn relative_change(a: &PhaseFunction, b: &PhaseFunction) -> f64 {
+    let first = (1.0 / a.grid.step_deg()).ceil() as usize;
     let (mut sum, mut count) = (0.0, 0usize);
     for k in first.min(a.bins.len())..a.bins.len() {
         let r = (b.bins[k] - a.bins[k]) / b.bins[k].abs().max(f64::MIN_POSITIVE);
@@ -199,10 +193,10 @@ pub fn bulk_at(
     m: Complex64,
     wavelength_nm: f64,
     sizes: &SizeQuadrature,
-    grid: AngleGrid,
+    grid: ThetaGrid,
     nodes_per_panel: usize,
     point_cosines: &[f64],
-) -> Result<BulkPhase, MieError> {
+) -> Result<PhaseFunction, MieError> {
     let wavelength_um = wavelength_nm / 1000.0;
     let k = 2.0 * std::f64::consts::PI / wavelength_um;
     let spheres: Vec<Sphere> = sizes
@@ -215,7 +209,7 @@ pub fn bulk_at(
     let step_rad = grid.step_deg().to_radians();
     let forward_panels = (step_rad * x_max / std::f64::consts::PI).ceil().max(1.0) as usize;
     let forward_limit_deg = (60.0 / x_min).to_degrees();
-    let quadrature = grid.bin_quadrature(nodes_per_panel, |kbin| {
+    let quadrature = bin_quadrature(&grid, nodes_per_panel, |kbin| {
         let (lo, _) = grid.bin_edges_deg(kbin);
         if lo < forward_limit_deg || 180.0 - grid.bin_edges_deg(kbin).1 < forward_limit_deg {
             forward_panels
@@ -277,11 +271,11 @@ pub fn bulk_at(
     let points: Vec<f64> = point_intensity.iter().map(|i| i * scale).collect();
     let energy: f64 = bins
         .iter()
-        .enumerate()
-        .map(|(kbin, v)| v * grid.bin_solid_angle(kbin))
+        .zip(grid.bin_solid_angles())
+        .map(|(v, omega)| v * omega)
         .sum();
     const UM2_TO_M2: f64 = 1e-12;
-    Ok(BulkPhase {
+    Ok(PhaseFunction {
         wavelength_nm,
         m_re: m.re,
         m_im: m.im,
@@ -289,12 +283,15 @@ pub fn bulk_at(
         sigma_sca_m2: sigma_sca * UM2_TO_M2,
         albedo: sigma_sca / sigma_ext,
         g: g_sca / sigma_sca,
-        theta_step_deg: grid.step_deg(),
+        grid,
         bins,
+        forward_delta_fraction: 0.0,
         points,
-        energy_closure: energy - 1.0,
-        sizes: sizes.radius_um.len(),
-        nodes_per_panel,
-        last_change: 0.0,
+        origin: Origin::Mie(MieOrigin {
+            energy_closure: energy - 1.0,
+            sizes: sizes.radius_um.len(),
+            nodes_per_panel,
+            last_change: 0.0,
+        }),
     })
 }

@@ -8,8 +8,11 @@ pub enum MieError {
     /// A real-valued input lies outside the range the solver is validated for.
     #[error("{name} = {value} is outside the allowed range {range}")]
     OutOfRange {
+        /// Name of the input, with its unit where it has one.
         name: &'static str,
+        /// The value given.
         value: f64,
+        /// The allowed range, as text.
         range: &'static str,
     },
     /// The absorbing part of the refractive index was negative.
@@ -25,9 +28,13 @@ pub enum MieError {
         "{material} refractive index: wavelength {wavelength_nm} nm is outside the tabulated range [{min_nm}, {max_nm}] nm"
     )]
     WavelengthOutOfTable {
+        /// The material and its data source.
         material: &'static str,
+        /// The wavelength asked for, nm.
         wavelength_nm: f64,
+        /// Shortest tabulated wavelength, nm.
         min_nm: f64,
+        /// Longest tabulated wavelength, nm.
         max_nm: f64,
     },
     /// A list that must not be empty was.
@@ -38,10 +45,25 @@ pub enum MieError {
         "{what} did not converge to tolerance {tolerance} within the node limit (last change {last_change})"
     )]
     NotConverged {
+        /// The quadrature that was refined.
         what: &'static str,
+        /// The requested tolerance on the relative change.
         tolerance: f64,
+        /// The relative change of the last doubling.
         last_change: f64,
     },
+}
+
+impl From<grid::GridError> for MieError {
+    fn from(e: grid::GridError) -> Self {
+        match e {
+            grid::GridError::BadStep { step_deg, range } => MieError::OutOfRange {
+                name: "angle step Δθ (degrees)",
+                value: step_deg,
+                range,
+            },
+        }
+    }
 }
 
 /// Returns `Ok(value)` when `value` is finite and inside `[lo, hi]`.

@@ -1,17 +1,22 @@
-//! Single-particle optics for photometeor.
+//! Single-particle optics for photometeor: Mie spheres (water drops, ice spheres) and ice
+//! crystals and snow by geometric-optics ray tracing, each returned as one [`PhaseFunction`]
+//! per wavelength.
 //!
 //! The flow: a refractive index ([`refractive`]) and a size give a [`Sphere`] (m, x); its
 //! [`MieCoefficients`] a_n, b_n give efficiencies ([`Efficiencies`]) and, through the batched
 //! kernel in [`amplitude`], the amplitudes S1, S2 at any angles. A size distribution
-//! ([`distribution`]) and a wavelength list turn many spheres into one [`BulkPhase`]
-//! per wavelength: σ_ext, albedo, g and the phase function averaged inside the bins of an
-//! [`AngleGrid`] — the `PhaseFunction` that `tables/` consumes.
+//! ([`distribution`]) and a wavelength list turn many spheres into one [`PhaseFunction`] per
+//! wavelength ([`ensemble`]): σ_ext, σ_sca, albedo, g and the phase function averaged inside
+//! the bins of a [`ThetaGrid`] — what `photometeor-tables` consumes.
 //!
 //! Ice crystals and snow come from [`crystal`]: geometric-optics ray tracing of hexagonal prisms
-//! plus Fraunhofer diffraction, yielding the same bin-averaged phase-function value.
+//! plus Fraunhofer diffraction, yielding the same [`PhaseFunction`]. Closed forms that need no
+//! Mie sum (size parameter, rainbow and halo angles) are in [`theory`].
 //!
-//! Conventions (physics.md §1): θ = 0 is forward, μ = cos θ; m = n + iκ with κ ≥ 0;
+//! Conventions (docs/physics.md §1): θ = 0 is forward, μ = cos θ; m = n + iκ with κ ≥ 0;
 //! x = 2πr/λ; phase functions are normalized ∫ p dΩ = 1 (1/sr); units live in names.
+
+#![warn(missing_docs)]
 
 pub mod amplitude;
 pub mod crystal;
@@ -19,18 +24,22 @@ pub mod distribution;
 pub mod ensemble;
 pub mod error;
 pub mod grid;
+pub mod phase;
 pub mod quadrature;
 pub mod reference;
 pub mod refractive;
 pub mod sphere;
+pub mod theory;
 
-pub use amplitude::{FoldedAngles, SphereTerms, amplitudes};
+pub use amplitude::{FoldedAngles, SphereTerms, amplitudes, exact_cosine_deg};
 pub use distribution::{SizeDistribution, SizeQuadrature};
-pub use ensemble::{BulkPhase, BulkRequest, NodeCounts, bulk_phase};
+pub use ensemble::{BulkRequest, NodeCounts, bulk_phase};
 pub use error::MieError;
-pub use grid::AngleGrid;
+pub use grid::{GridError, ThetaGrid};
+pub use phase::{CrystalOrigin, MieOrigin, Origin, PhaseFunction};
 pub use refractive::Material;
 pub use sphere::{Efficiencies, MieCoefficients, Sphere};
+pub use theory::size_parameter;
 
 /// Normalized phase function p = (|S1|² + |S2|²) / (2π x² Q_sca) in 1/sr.
 pub fn phase_from_amplitudes(

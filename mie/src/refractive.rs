@@ -1,4 +1,4 @@
-//! Refractive indices m = n + iκ of liquid water and ice (physics.md §3).
+//! Refractive indices m = n + iκ of liquid water and ice (docs/physics.md §3).
 //!
 //! - Water, real part: IAPWS R9-97 (Harvey et al. 1998, J. Phys. Chem. Ref. Data 27, 761),
 //!   a function of wavelength, temperature and density; the density at 1 atm comes from the
@@ -19,10 +19,9 @@ use num_complex::Complex64;
 
 use crate::error::MieError;
 
-const SEGELSTEIN_CSV: &str = include_str!("../../data/refractive_index/water_segelstein1981.csv");
-const WARREN_BRANDT_CSV: &str =
-    include_str!("../../data/refractive_index/ice_warren_brandt2008.csv");
-const DENSITY_CSV: &str = include_str!("../../data/water/density_1atm.csv");
+const SEGELSTEIN_CSV: &str = include_str!("../data/refractive_index/water_segelstein1981.csv");
+const WARREN_BRANDT_CSV: &str = include_str!("../data/refractive_index/ice_warren_brandt2008.csv");
+const DENSITY_CSV: &str = include_str!("../data/water/density_1atm.csv");
 
 /// Water IAPWS R9-97 validity in wavelength (nm).
 pub const WATER_WAVELENGTH_NM: (f64, f64) = (200.0, 1100.0);
@@ -31,7 +30,9 @@ pub const WATER_WAVELENGTH_NM: (f64, f64) = (200.0, 1100.0);
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Material {
+    /// Liquid water: IAPWS R9-97 n (200–1100 nm, −12…99 °C), Segelstein 1981 κ.
     Water,
+    /// Ice Ih at −7 °C: Warren & Brandt 2008.
     Ice,
 }
 
@@ -48,6 +49,7 @@ impl Material {
         }
     }
 
+    /// Lower-case name, "water" or "ice".
     pub fn name(self) -> &'static str {
         match self {
             Material::Water => "water",
@@ -240,7 +242,7 @@ mod tests {
 
     #[test]
     fn iapws_check_values() {
-        // IAPWS R9-97 Table 3 check values (physics.md §3).
+        // IAPWS R9-97 Table 3 check values (docs/physics.md §3).
         for (t, rho, lambda_um, n) in [
             (298.15, 997.047435, 0.5893, 1.33285819),
             (298.15, 997.047435, 0.2265, 1.39277824),
@@ -256,7 +258,7 @@ mod tests {
 
     #[test]
     fn water_at_20c_matches_physics_table() {
-        // physics.md §3: n (IAPWS, 20 °C) to 4 decimals and Segelstein κ to 3 digits.
+        // docs/physics.md §3: n (IAPWS, 20 °C) to 4 decimals and Segelstein κ to 3 digits.
         let rows = [
             (400.0, 1.3436, 1.58e-9),
             (450.0, 1.3396, 8.07e-10),

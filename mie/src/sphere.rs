@@ -97,9 +97,13 @@ pub fn n_stop(x: f64) -> usize {
 /// Mie coefficients of one sphere; `a[0]` is a_1.
 #[derive(Debug, Clone, PartialEq)]
 pub struct MieCoefficients {
+    /// Relative refractive index m = n + iκ.
     pub m: Complex64,
+    /// Size parameter x = 2πr/λ.
     pub x: f64,
+    /// Electric coefficients a_n, n = 1..N_stop.
     pub a: Vec<Complex64>,
+    /// Magnetic coefficients b_n, n = 1..N_stop.
     pub b: Vec<Complex64>,
     /// True when a_n, b_n come from Wiscombe's small-particle expansions.
     pub small_particle: bool,
@@ -108,13 +112,17 @@ pub struct MieCoefficients {
 /// Efficiencies and asymmetry parameter of one sphere.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct Efficiencies {
+    /// Extinction efficiency Q_ext = σ_ext / (πr²).
     pub q_ext: f64,
+    /// Scattering efficiency Q_sca = σ_sca / (πr²).
     pub q_sca: f64,
+    /// Absorption efficiency Q_abs = Q_ext − Q_sca.
     pub q_abs: f64,
     /// Radar convention: 4 |S1(180°)|² / x².
     pub q_back: f64,
     /// Asymmetry parameter ⟨cos θ⟩.
     pub g: f64,
+    /// Number of terms N_stop summed.
     pub n_terms: usize,
 }
 

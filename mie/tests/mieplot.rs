@@ -5,7 +5,7 @@
 //! 550 and 450 nm, each with the refractive index the generator used.
 
 use mie::ensemble::bulk_at;
-use mie::{AngleGrid, SizeDistribution, SizeQuadrature};
+use mie::{SizeDistribution, SizeQuadrature, ThetaGrid};
 use num_complex::Complex64;
 use serde_json::Value;
 
@@ -34,7 +34,7 @@ fn case_m(c: &Value) -> Complex64 {
 #[test]
 fn single_spheres_match_the_reference_bin_averages() {
     let data: Value = serde_json::from_str(CURVES).unwrap();
-    let grid = AngleGrid::new(0.18).unwrap();
+    let grid = ThetaGrid::new(0.18).unwrap();
     let mut worst: f64 = 0.0;
     for c in data["cases"].as_array().unwrap() {
         if c["kind"] != "sphere" {
@@ -73,7 +73,7 @@ fn single_spheres_match_the_reference_bin_averages() {
 #[test]
 fn lognormal_distributions_match_the_reference_bin_averages() {
     let data: Value = serde_json::from_str(CURVES).unwrap();
-    let grid = AngleGrid::new(0.18).unwrap();
+    let grid = ThetaGrid::new(0.18).unwrap();
     for c in data["cases"].as_array().unwrap() {
         if c["kind"] != "lognormal" {
             continue;

@@ -112,10 +112,9 @@ pub struct GpuTables {
 /// Whether every texel lies in the half-float normal range (or is 0).
 pub fn fits_half(tables: &Tables) -> bool {
     tables.fields.iter().all(|f| {
-        f.rows
+        f.image
+            .ams
             .iter()
-            .flatten()
-            .flatten()
             .all(|&v| v == 0.0 || (F16_MIN_NORMAL..=F16_MAX).contains(&v.abs()))
     })
 }
@@ -127,7 +126,7 @@ impl GpuTables {
         let device = &gpu.device;
         let limits = device.limits();
         let k_len = tables.angle_count;
-        let n_stride = tables.fields.iter().map(|f| f.n_max).max().unwrap_or(1);
+        let n_stride = tables.fields.iter().map(|f| f.n_max()).max().unwrap_or(1);
         let layers = tables.fields.len().max(1);
         for (what, value, limit) in [
             ("angle count K", k_len, limits.max_texture_dimension_2d),
@@ -166,9 +165,10 @@ impl GpuTables {
         for (i, f) in tables.fields.iter().enumerate() {
             let mut bytes = Vec::with_capacity(k_len * n_stride * texel_bytes);
             for r in 0..n_stride {
-                let row = r.min(f.n_max - 1);
+                let row = r.min(f.n_max() - 1);
                 for k in 0..k_len {
-                    let texel = [f.rows[0][row][k], f.rows[1][row][k], f.rows[2][row][k], 0.0];
+                    let ams = &f.image.ams;
+                    let texel = [ams[[0, row, k]], ams[[1, row, k]], ams[[2, row, k]], 0.0];
                     for v in texel {
                         if half {
                             bytes.extend_from_slice(&half::f16::from_f64(v).to_le_bytes());
@@ -206,13 +206,13 @@ impl GpuTables {
         let mut info = Vec::with_capacity(layers * 4);
         for f in &tables.fields {
             for n in 0..n_stride {
-                let r = n.min(f.n_max - 1);
+                let r = n.min(f.n_max() - 1);
                 for c in 0..3 {
-                    ff.push(f.forward_fraction[c][r] as f32);
+                    ff.push(f.image.forward_fraction[[c, r]] as f32);
                 }
                 ff.push(0.0);
             }
-            info.push(f.n_max as f32);
+            info.push(f.n_max() as f32);
             info.extend(f.sigma_sca_m2.iter().map(|&s| s as f32));
         }
         if tables.fields.is_empty() {

@@ -2,9 +2,9 @@
 //!
 //! # Checks (each failure names the file and the check)
 //! - `manifest.json`: schema version, grid (K = 180°/Δθ + 1), per-field shapes (by
-//!   `tables::manifest::read_manifest`);
+//!   `format::read_manifest`);
 //! - each selected field's EXR: a complete OpenEXR file following the contract (by
-//!   `tables::exr_io::read_field_exr`), then against its manifest entry: the field name
+//!   `format::read_field_exr`), then against its manifest entry: the field name
 //!   attribute, Δθ, N and K, and F_1..F_N equal to the manifest's per channel;
 //! - every row Ams_n, per channel, integrates to 1 over the sphere within [`NORMALIZATION_TOLERANCE`]
 //!   (the texels are 32-bit floats) and has no value below −10⁻⁶ of its maximum;
@@ -12,9 +12,9 @@
 
 use std::path::{Path, PathBuf};
 
-use tables::exr_io::read_field_exr;
-use tables::grid::ThetaGrid;
-use tables::manifest::read_manifest;
+use format::{FieldImage, read_field_exr, read_manifest};
+use grid::ThetaGrid;
+use ndarray::Axis;
 use thiserror::Error;
 
 /// |∫ Ams_n dΩ − 1| allowed: 32-bit texels summed over ≤ 18001 bins stay below 10⁻⁵.
@@ -30,18 +30,17 @@ pub struct LoadError {
     pub check: String,
 }
 
-/// One field's tables, as loaded and checked.
+/// One field's tables, as loaded and checked: its RGB tables and the optics a renderer mixes
+/// them with.
 #[derive(Debug, Clone)]
 pub struct FieldTable {
+    /// The field's name in the scene.
     pub name: String,
     /// cloud | rain | ice | snow
     pub kind: String,
-    /// N: rows Ams_1..Ams_N.
-    pub n_max: usize,
-    /// `rows[c][n − 1][k]`: channel c ∈ {R, G, B}, Ams_n at θ_k = k·Δθ (1/sr).
-    pub rows: [Vec<Vec<f64>>; 3],
-    /// F_1..F_N per channel.
-    pub forward_fraction: [Vec<f64>; 3],
+    /// Ams_n (`image.ams[[c, n − 1, k]]`, channel c ∈ {R, G, B}, θ_k = k·Δθ, 1/sr) and F_n
+    /// (`image.forward_fraction[[c, n − 1]]`).
+    pub image: FieldImage,
     /// Mean scattering cross-section per particle, per channel (m²): σ_ext · albedo, the
     /// weight of this field in a spatial mix.
     pub sigma_sca_m2: [f64; 3],
@@ -52,13 +51,23 @@ pub struct FieldTable {
     pub albedo: [f64; 3],
 }
 
+impl FieldTable {
+    /// N, the number of rows Ams_1..Ams_N.
+    pub fn n_max(&self) -> usize {
+        self.image.n_max()
+    }
+}
+
 /// A checked bake: the grid and the selected fields, in the manifest's order.
 #[derive(Debug, Clone)]
 pub struct Tables {
+    /// The bake directory.
     pub dir: PathBuf,
+    /// Δθ in degrees.
     pub theta_step_deg: f64,
     /// K, samples per row.
     pub angle_count: usize,
+    /// The selected fields.
     pub fields: Vec<FieldTable>,
 }
 
@@ -72,7 +81,7 @@ impl Tables {
     /// have is an error listing those it has.
     pub fn open_fields(dir: impl AsRef<Path>, names: Option<&[&str]>) -> Result<Self, LoadError> {
         let dir = dir.as_ref();
-        let manifest_file = dir.join(tables::manifest::MANIFEST_FILE);
+        let manifest_file = dir.join(format::MANIFEST_FILE);
         let manifest = read_manifest(dir).map_err(|e| LoadError {
             file: manifest_file.clone(),
             check: strip_path(&e.to_string(), &manifest_file),
@@ -124,7 +133,7 @@ impl Tables {
             }
             let manifest_f = entry.forward_fraction.as_array();
             for (c, ch) in ["R", "G", "B"].into_iter().enumerate() {
-                let f = &image.forward_fraction[c];
+                let f = image.forward_fractions(c);
                 if let Some(i) = (0..f.len()).find(|&i| f[i] != manifest_f[c][i]) {
                     return Err(fail(format!(
                         "F_{}.{ch} = {} in the EXR header, {} in manifest.json",
@@ -149,7 +158,7 @@ impl Tables {
                         f[i - 1]
                     )));
                 }
-                for (r, row) in image.rows[c].iter().enumerate() {
+                for (r, row) in image.ams.index_axis(Axis(0), c).outer_iter().enumerate() {
                     let integral: f64 = row.iter().zip(&omega).map(|(v, o)| v * o).sum();
                     if (integral - 1.0).abs() > NORMALIZATION_TOLERANCE {
                         return Err(fail(format!(
@@ -173,9 +182,7 @@ impl Tables {
             fields.push(FieldTable {
                 name: entry.name.clone(),
                 kind: entry.kind.clone(),
-                n_max: entry.n_max,
-                rows: image.rows,
-                forward_fraction: image.forward_fraction,
+                image,
                 sigma_sca_m2: [ext[0] * alb[0], ext[1] * alb[1], ext[2] * alb[2]],
                 sigma_ext_m2: ext,
                 albedo: alb,

@@ -16,27 +16,25 @@ use crate::load::FieldTable;
 /// Row r and weight of row r + 1 for a fractional order n.
 fn order(field: &FieldTable, n: f64) -> (usize, usize, f64) {
     let n = if n.is_finite() { n } else { 1.0 };
-    let top = field.n_max as f64;
+    let top = field.n_max() as f64;
     let n = n.clamp(1.0, top);
     let lo = n.floor();
     let r0 = lo as usize - 1;
-    let r1 = (r0 + 1).min(field.n_max - 1);
+    let r1 = (r0 + 1).min(field.n_max() - 1);
     (r0, r1, n - lo)
 }
 
 /// Ams_n(θ) per channel R, G, B (1/sr), linear in θ and in n.
 pub fn ams(field: &FieldTable, theta_step_deg: f64, n: f64, cos_theta: f64) -> [f64; 3] {
-    let k_len = field.rows[0][0].len();
+    let ams = &field.image.ams;
+    let k_len = field.image.angle_count();
     let theta = cos_theta.clamp(-1.0, 1.0).acos().to_degrees();
     let u = (theta / theta_step_deg).min((k_len - 1) as f64);
     let k0 = (u.floor() as usize).min(k_len - 2);
     let t = u - k0 as f64;
     let (r0, r1, s) = order(field, n);
     std::array::from_fn(|c| {
-        let at = |r: usize| {
-            let row = &field.rows[c][r];
-            row[k0] * (1.0 - t) + row[k0 + 1] * t
-        };
+        let at = |r: usize| ams[[c, r, k0]] * (1.0 - t) + ams[[c, r, k0 + 1]] * t;
         at(r0) * (1.0 - s) + at(r1) * s
     })
 }
@@ -45,8 +43,8 @@ pub fn ams(field: &FieldTable, theta_step_deg: f64, n: f64, cos_theta: f64) -> [
 pub fn forward_fraction(field: &FieldTable, n: f64) -> [f64; 3] {
     let (r0, r1, s) = order(field, n);
     std::array::from_fn(|c| {
-        let f = &field.forward_fraction[c];
-        f[r0] * (1.0 - s) + f[r1] * s
+        let f = &field.image.forward_fraction;
+        f[[c, r0]] * (1.0 - s) + f[[c, r1]] * s
     })
 }
 

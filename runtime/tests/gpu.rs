@@ -43,7 +43,7 @@ fn compare(gpu: &Gpu, tables: &Tables, uploaded: &GpuTables, rel_tol: f64) -> f6
     for (q, g) in queries.iter().zip(&got) {
         let f = &tables.fields[q.field as usize];
         let want = ams(f, tables.theta_step_deg, q.n as f64, q.cos_theta as f64);
-        let scale = f.rows[1][0].iter().copied().fold(0.0, f64::max);
+        let scale = f.image.row(1, 0).iter().copied().fold(0.0, f64::max);
         for c in 0..3 {
             let err = (g[c] as f64 - want[c]).abs() / (want[c].abs() + 1e-7 * scale);
             if err > worst {

@@ -5,9 +5,9 @@ use std::fs;
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
+use format::{read_field_exr, write_field_exr};
 use runtime::Tables;
 use runtime::sample::{ams, forward_fraction, mix};
-use tables::exr_io::{read_field_exr, write_field_exr};
 
 mod common;
 
@@ -49,7 +49,7 @@ fn opens_a_bake_and_selects_fields() {
     assert_eq!(all.angle_count, 1001);
     let rain = Tables::open_fields(&dir, Some(&["rain"])).unwrap();
     assert_eq!(rain.fields.len(), 1);
-    assert_eq!(rain.fields[0].n_max, 4);
+    assert_eq!(rain.fields[0].n_max(), 4);
     let e = Tables::open_fields(&dir, Some(&["hail"]))
         .unwrap_err()
         .to_string();
@@ -70,17 +70,21 @@ fn sampling_is_linear_in_angle_and_order() {
         for k in [0usize, 1, 500, 767, 1000] {
             let theta = k as f64 * step;
             let at = ams(rain, step, 2.0, cos(theta))[c];
-            assert!((at - rain.rows[c][1][k]).abs() <= 1e-9 * rain.rows[c][1][k].abs().max(1e-12));
+            assert!(
+                (at - rain.image.ams[[c, 1, k]]).abs()
+                    <= 1e-9 * rain.image.ams[[c, 1, k]].abs().max(1e-12)
+            );
         }
         let k = 767;
         let mid = ams(rain, step, 1.0, cos((k as f64 + 0.5) * step))[c];
-        let want = 0.5 * (rain.rows[c][0][k] + rain.rows[c][0][k + 1]);
+        let want = 0.5 * (rain.image.ams[[c, 0, k]] + rain.image.ams[[c, 0, k + 1]]);
         assert!((mid - want).abs() < 1e-6 * want, "{mid} vs {want}");
         let half_order = ams(rain, step, 1.5, cos(k as f64 * step))[c];
-        let want = 0.5 * (rain.rows[c][0][k] + rain.rows[c][1][k]);
+        let want = 0.5 * (rain.image.ams[[c, 0, k]] + rain.image.ams[[c, 1, k]]);
         assert!((half_order - want).abs() < 1e-9 * want);
         let f = forward_fraction(rain, 2.25)[c];
-        let want = 0.75 * rain.forward_fraction[c][1] + 0.25 * rain.forward_fraction[c][2];
+        let want =
+            0.75 * rain.image.forward_fraction[[c, 1]] + 0.25 * rain.image.forward_fraction[[c, 2]];
         assert!((f - want).abs() < 1e-12);
     }
     // Beyond N the last row; below 1 the first.
@@ -182,7 +186,7 @@ fn corrupt_truncated_and_mismatched_files_name_the_file_and_the_check() {
             "a row not normalized",
             |d| {
                 let mut image = read_field_exr(d.join("rain.exr")).unwrap();
-                for v in image.rows[2][3].iter_mut() {
+                for v in image.ams.slice_mut(ndarray::s![2, 3, ..]) {
                     *v *= 1.001;
                 }
                 write_field_exr(d.join("rain.exr"), &image).unwrap();

@@ -50,7 +50,6 @@ pub mod bins;
 pub mod fast;
 pub mod reference;
 
-pub use crate::grid::{GridError, ThetaGrid};
 pub use bins::{
     BinIntegrals, bin_averages_from_coefficients, bin_integrals, coefficients_from_bin_rows,
     coefficients_from_bins,
@@ -59,6 +58,7 @@ pub use fast::{
     chebyshev_to_legendre, coefficients_from_cosine_grid, evaluate_on_cosine_grid,
     legendre_to_chebyshev,
 };
+pub use grid::{GridError, ThetaGrid};
 
 use thiserror::Error;
 

@@ -1,24 +1,49 @@
-//! Multiple-scattering tables (Riley et al. 2004 §4.2): a phase function given as bin averages
-//! on a uniform θ grid → Legendre coefficients χ_l → Ams_n (χ_l^n, Funk–Hecke) and F_i.
+//! Multiple-scattering tables (Riley et al. 2004 §4.2): one [`mie::PhaseFunction`] per
+//! wavelength → Legendre coefficients χ_l → Ams_n (χ_l^n, Funk–Hecke) and F_n → RGB channels.
 //!
-//! - [`grid`]: [`grid::ThetaGrid`], the uniform θ grid (K = 180°/Δθ + 1 bins), its edges and
-//!   bin solid angles.
-//! - [`legendre`]: exact bin integrals of P_l, χ_l from bin averages and bin averages from
-//!   χ_l, and a fast Legendre ↔ point-value transform (Chebyshev conversion + DCT via rustfft)
-//!   with its slow reference.
-//! - [`ams`]: Ams_n and F_n by a forward-delta split and a blurred Legendre series, n_iso(ε),
-//!   and the per-wavelength mixture an RGB channel is.
+//! - [`legendre`]: exact bin integrals of P_l on the [`grid::ThetaGrid`], χ_l from bin averages
+//!   and bin averages from χ_l, and a fast Legendre ↔ point-value transform (Chebyshev
+//!   conversion + DCT via rustfft) with its slow reference.
+//! - [`ams`]: [`ams::AmsSeries`] (Ams_n and F_n of one phase function by a forward-delta split
+//!   and a blurred Legendre series, n_iso(ε)) and [`ams::AmsMixture`], the per-wavelength
+//!   mixture an RGB channel is.
 //! - [`spectral`]: the wavelengths of a bake and their CIE × solar → linear sRGB weights.
-//! - [`exr_io`], [`manifest`]: the EXR contract and `manifest.json`, read and written.
-//! - [`scene`], [`bake`]: TOML scenes (only what a scene names is modelled) and the cached,
-//!   atomic bake of their tables.
+//!
+//! The file format of a bake is `photometeor-format`; scenes, the bake planner and its cache
+//! are `photometeor-bake`.
+
+#![warn(missing_docs)]
 
 pub mod ams;
-pub mod bake;
-pub mod exr_io;
-pub mod grid;
 pub mod legendre;
-pub mod manifest;
-pub mod scene;
 pub mod spectral;
-pub mod validate;
+
+use thiserror::Error;
+
+/// What the table layer refuses.
+#[derive(Debug, Clone, PartialEq, Error)]
+pub enum TablesError {
+    /// A mixture of no phase functions.
+    #[error("a mixture of Ams tables needs at least one part")]
+    EmptyMixture,
+    /// A mixture weight that is negative or not finite (or a zero total).
+    #[error(
+        "mixture weight {weight} of part {index} is outside the allowed range: finite, ≥ 0, with a positive sum"
+    )]
+    MixtureWeight {
+        /// The part.
+        index: usize,
+        /// Its weight (or the total, for a zero sum).
+        weight: f64,
+    },
+    /// Parts of a mixture on different θ grids.
+    #[error("mixture part {index} has Δθ = {step_deg}°, expected the first part's {expected_deg}°")]
+    GridMismatch {
+        /// The part.
+        index: usize,
+        /// Its grid step.
+        step_deg: f64,
+        /// The first part's step.
+        expected_deg: f64,
+    },
+}

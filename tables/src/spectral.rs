@@ -1,4 +1,4 @@
-//! Spectral → RGB (issue 3 item 4): which wavelengths a bake computes and how much each one
+//! Spectral → RGB: which wavelengths a bake computes and how much each one
 //! contributes to the linear sRGB channels R, G and B.
 //!
 //! # Spectral mode
@@ -36,9 +36,9 @@ use std::sync::OnceLock;
 use serde_json::{Value, json};
 use thiserror::Error;
 
-const CMF_CSV: &str = include_str!("../../data/color/cie1931_2deg_cmf.csv");
-const SOLAR_CSV: &str = include_str!("../../data/color/solar_astm_g173_extraterrestrial.csv");
-const D65_CSV: &str = include_str!("../../data/color/cie_d65.csv");
+const CMF_CSV: &str = include_str!("../data/color/cie1931_2deg_cmf.csv");
+const SOLAR_CSV: &str = include_str!("../data/color/solar_astm_g173_extraterrestrial.csv");
+const D65_CSV: &str = include_str!("../data/color/cie_d65.csv");
 
 /// XYZ → linear sRGB (Rec.709 primaries, D65 white), IEC 61966-2-1:1999 Eq. (F.7)
 /// (the standard's four-decimal matrix).
@@ -54,36 +54,54 @@ pub const RGB3_WAVELENGTHS_NM: [f64; 3] = [650.0, 515.0, 440.0];
 /// Wavelength range of the colour-matching table (nm); spectral modes must lie inside it.
 pub const CMF_RANGE_NM: (f64, f64) = (360.0, 830.0);
 
-/// Which wavelengths a bake samples.
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// Which wavelengths a bake samples (serialized as `{"mode": "rgb3"}` or
+/// `{"mode": "spectral", "count": …, "min_nm": …, "max_nm": …}`).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+#[serde(tag = "mode", rename_all = "lowercase")]
 pub enum SpectralMode {
-    /// Riley's 650/515/440 nm, one per channel.
+    /// Riley et al. 2004's three wavelengths, 650/515/440 nm, one per channel.
     Rgb3,
     /// `count` interval midpoints over [min_nm, max_nm], mixed to RGB with CIE × solar weights.
     Spectral {
+        /// Number of wavelengths, [3, 1000].
         count: usize,
+        /// Lower end of the range (nm), ≥ 360.
         min_nm: f64,
+        /// Upper end of the range (nm), ≤ 830.
         max_nm: f64,
     },
 }
 
+/// A spectral mode that cannot be turned into channel weights.
 #[derive(Debug, Clone, PartialEq, Error)]
 pub enum SpectralError {
+    /// The wavelength count is outside [3, 1000].
     #[error("wavelength count {0} is out of range: need 3 ≤ count ≤ 1000")]
     Count(usize),
+    /// The range is not within the CIE table [360, 830] nm with min < max.
     #[error(
         "wavelength range [{min}, {max}] nm is invalid: need {} ≤ min < max ≤ {} nm",
         CMF_RANGE_NM.0,
         CMF_RANGE_NM.1
     )]
-    Range { min: f64, max: f64 },
+    Range {
+        /// Lower end given, nm.
+        min: f64,
+        /// Upper end given, nm.
+        max: f64,
+    },
+    /// A channel gets no positive weight from the sampled wavelengths.
     #[error(
         "channel {channel} has no positive weight over [{min}, {max}] nm with {count} wavelengths"
     )]
     EmptyChannel {
+        /// The channel: "R", "G" or "B".
         channel: &'static str,
+        /// Lower end of the range, nm.
         min: f64,
+        /// Upper end of the range, nm.
         max: f64,
+        /// Number of wavelengths.
         count: usize,
     },
 }
@@ -91,6 +109,7 @@ pub enum SpectralError {
 /// The wavelengths of a bake and each channel's normalized weights over them.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ChannelWeights {
+    /// The spectral mode these weights were built for.
     pub mode: SpectralMode,
     /// The wavelengths to compute (nm).
     pub wavelengths_nm: Vec<f64>,
@@ -101,6 +120,7 @@ pub struct ChannelWeights {
 }
 
 impl ChannelWeights {
+    /// Wavelengths and normalized channel weights of `mode`, or why they cannot be built.
     pub fn new(mode: &SpectralMode) -> Result<Self, SpectralError> {
         match *mode {
             SpectralMode::Rgb3 => Ok(Self {

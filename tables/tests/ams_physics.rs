@@ -2,9 +2,13 @@
 //! energy and does not ring, Ams_1 is the single-scattering phase function, and the rainbow,
 //! glory and corona are present in Ams_1 and fade with n while F_n falls toward 1/2.
 
-use mie::{AngleGrid, BulkRequest, Material, NodeCounts, SizeDistribution, bulk_phase};
+use mie::{BulkRequest, Material, NodeCounts, SizeDistribution, bulk_phase};
 use tables::ams::{AmsSeries, AmsSettings, AmsTable, ams_table};
-use tables::grid::ThetaGrid;
+use tables::legendre::ThetaGrid;
+
+mod common;
+
+use common::nested;
 
 fn phase_bins(distribution: SizeDistribution, sizes: usize) -> Vec<f64> {
     let request = BulkRequest {
@@ -12,7 +16,7 @@ fn phase_bins(distribution: SizeDistribution, sizes: usize) -> Vec<f64> {
         temperature_c: 20.0,
         distribution,
         wavelengths_nm: vec![550.0],
-        grid: AngleGrid::new(0.18).unwrap(),
+        grid: ThetaGrid::new(0.18).unwrap(),
         nodes: NodeCounts::Fixed {
             sizes,
             nodes_per_panel: 4,
@@ -70,7 +74,7 @@ fn assert_fades(what: &str, c: &[f64]) {
 fn check_invariants(name: &str, grid: &ThetaGrid, bins: &[f64], t: &AmsTable) {
     let omega = grid.bin_solid_angles();
     let energy_in: f64 = bins.iter().zip(&omega).map(|(v, o)| v * o).sum();
-    for (i, row) in t.rows.iter().enumerate() {
+    for (i, row) in nested(&t.rows).iter().enumerate() {
         let e: f64 = row.iter().zip(&omega).map(|(v, o)| v * o).sum();
         assert!((e - 1.0).abs() < 1e-6, "{name} n = {}: energy {e}", i + 1);
         let max = row.iter().cloned().fold(0.0, f64::max);
@@ -85,9 +89,9 @@ fn check_invariants(name: &str, grid: &ThetaGrid, bins: &[f64], t: &AmsTable) {
     for k in index(1.0)..bins.len() {
         let expected = bins[k] / energy_in;
         assert!(
-            (t.rows[0][k] - expected).abs() <= 1e-3 * expected,
+            (nested(&t.rows)[0][k] - expected).abs() <= 1e-3 * expected,
             "{name} bin {k}: {} vs {expected}",
-            t.rows[0][k]
+            nested(&t.rows)[0][k]
         );
     }
     for w in t.forward_fraction.windows(2) {
@@ -116,7 +120,7 @@ fn rain_rainbow_fades_with_scattering_order() {
     );
     // Primary bow (Descartes 138.17° at 550 nm) over Alexander's dark band.
     let contrast = |row: &[f64]| max_in(row, 137.0, 141.0) / min_in(row, 130.5, 136.0);
-    let c: Vec<f64> = t.rows.iter().map(|r| contrast(r)).collect();
+    let c: Vec<f64> = nested(&t.rows).iter().map(|r| contrast(r)).collect();
     eprintln!(
         "rainbow contrast n = 1, 2, 4, 26: {:.3} {:.3} {:.3} {:.3}",
         c[0], c[1], c[3], c[25]
@@ -162,7 +166,7 @@ fn cloud_glory_and_corona_fade_with_scattering_order() {
     // Corona: Ams_1's first dark ring (x sin θ = 3.83 → ≈ 1.9° for r = 10 µm at 550 nm) and the
     // bright ring after it (x sin θ = 5.14 → ≈ 2.6°), located in Ams_1; contrast = bright/dark
     // at those two angles in every row.
-    let first = &t.rows[0];
+    let first = &nested(&t.rows)[0];
     let dark = (index(1.0)..index(4.0))
         .find(|&k| first[k] < first[k - 1] && first[k] < first[k + 1])
         .expect("a first dark corona ring in Ams_1");
@@ -185,14 +189,14 @@ fn cloud_glory_and_corona_fade_with_scattering_order() {
             _ => 0.0,
         }
     };
-    let g: Vec<f64> = t.rows.iter().map(|r| glory(r)).collect();
-    let c: Vec<f64> = t.rows.iter().map(|r| corona(r)).collect();
+    let g: Vec<f64> = nested(&t.rows).iter().map(|r| glory(r)).collect();
+    let c: Vec<f64> = nested(&t.rows).iter().map(|r| corona(r)).collect();
     eprintln!("glory n = 1, 2, 26: {:.3} {:.3} {:.3}", g[0], g[1], g[25]);
     eprintln!("corona n = 1, 2, 26: {:.3} {:.3} {:.3}", c[0], c[1], c[25]);
     assert!(g[0] > 1.5, "no glory in Ams_1: {}", g[0]);
     assert!(c[0] > 0.05, "no corona ring in Ams_1: depth {}", c[0]);
     assert_fades("glory contrast", &g);
-    for n in 1..t.rows.len() {
+    for n in 1..nested(&t.rows).len() {
         assert!(c[n] <= c[n - 1], "corona depth rises at n = {}", n + 1);
     }
 }

@@ -1,52 +1,22 @@
 //! Hexagonal prisms as convex polyhedra: eight planes, their areas, and ray intersection.
 
-/// A 3-vector.
-pub type Vec3 = [f64; 3];
-
-pub fn dot(a: Vec3, b: Vec3) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
-pub fn add_scaled(a: Vec3, s: f64, b: Vec3) -> Vec3 {
-    [a[0] + s * b[0], a[1] + s * b[1], a[2] + s * b[2]]
-}
-
-pub fn scale(s: f64, a: Vec3) -> Vec3 {
-    [s * a[0], s * a[1], s * a[2]]
-}
-
-pub fn sub(a: Vec3, b: Vec3) -> Vec3 {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-
-pub fn cross(a: Vec3, b: Vec3) -> Vec3 {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
-
-pub fn normalize(a: Vec3) -> Vec3 {
-    scale(1.0 / dot(a, a).sqrt(), a)
-}
+use glam::DVec3;
 
 /// Two unit vectors completing `d` (unit) to an orthonormal basis.
-pub fn basis(d: Vec3) -> (Vec3, Vec3) {
-    let helper = if d[0].abs() < 0.9 {
-        [1.0, 0.0, 0.0]
-    } else {
-        [0.0, 1.0, 0.0]
-    };
-    let e1 = normalize(add_scaled(helper, -dot(helper, d), d));
-    (e1, cross(d, e1))
+pub fn basis(d: DVec3) -> (DVec3, DVec3) {
+    let helper = if d.x.abs() < 0.9 { DVec3::X } else { DVec3::Y };
+    let e1 = (helper + -helper.dot(d) * d).normalize();
+    (e1, d.cross(e1))
 }
 
 /// One face: the plane n·p = offset with outward unit normal n.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Face {
-    pub normal: Vec3,
+    /// Outward unit normal n.
+    pub normal: DVec3,
+    /// Plane offset: distance of the face from the centre along n.
     pub offset: f64,
+    /// Face area (square of the prism's length unit).
     pub area: f64,
 }
 
@@ -55,8 +25,11 @@ pub struct Face {
 /// AR > 1 columns.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Prism {
+    /// Hexagon side a (unit of `max_dimension`, µm in [`crate::crystal`]).
     pub side: f64,
+    /// Prism length L along the c-axis (unit of `side`).
     pub length: f64,
+    /// The six prism faces, then the basal faces +z and −z.
     pub faces: [Face; 8],
 }
 
@@ -71,26 +44,26 @@ impl Prism {
         let length = 2.0 * side * aspect_ratio;
         let apothem = side * 3f64.sqrt() / 2.0;
         let mut faces = [Face {
-            normal: [0.0; 3],
+            normal: DVec3::ZERO,
             offset: 0.0,
             area: 0.0,
         }; 8];
         for (i, face) in faces.iter_mut().take(6).enumerate() {
             let phi = (30.0 + 60.0 * i as f64).to_radians();
             *face = Face {
-                normal: [phi.cos(), phi.sin(), 0.0],
+                normal: DVec3::new(phi.cos(), phi.sin(), 0.0),
                 offset: apothem,
                 area: side * length,
             };
         }
         let basal = 1.5 * 3f64.sqrt() * side * side;
         faces[6] = Face {
-            normal: [0.0, 0.0, 1.0],
+            normal: DVec3::Z,
             offset: length / 2.0,
             area: basal,
         };
         faces[7] = Face {
-            normal: [0.0, 0.0, -1.0],
+            normal: DVec3::NEG_Z,
             offset: length / 2.0,
             area: basal,
         };
@@ -107,11 +80,11 @@ impl Prism {
     }
 
     /// Projected area seen along unit direction d: ½ Σ A_f |n_f·d| (exact for a convex body).
-    pub fn projected_area(&self, d: Vec3) -> f64 {
+    pub fn projected_area(&self, d: DVec3) -> f64 {
         0.5 * self
             .faces
             .iter()
-            .map(|f| f.area * dot(f.normal, d).abs())
+            .map(|f| f.area * f.normal.dot(d).abs())
             .sum::<f64>()
     }
 
@@ -121,13 +94,13 @@ impl Prism {
     }
 
     /// Entry of a ray p + t d from outside: (t, face index), or None if it misses.
-    pub fn enter(&self, p: Vec3, d: Vec3) -> Option<(f64, usize)> {
+    pub fn enter(&self, p: DVec3, d: DVec3) -> Option<(f64, usize)> {
         let mut t_in = f64::NEG_INFINITY;
         let mut t_out = f64::INFINITY;
         let mut face_in = usize::MAX;
         for (i, f) in self.faces.iter().enumerate() {
-            let nd = dot(f.normal, d);
-            let gap = f.offset - dot(f.normal, p);
+            let nd = f.normal.dot(d);
+            let gap = f.offset - f.normal.dot(p);
             if nd < 0.0 {
                 let t = gap / nd;
                 if t > t_in {
@@ -144,12 +117,12 @@ impl Prism {
     }
 
     /// Exit of a ray p + t d from inside: (t ≥ 0, face index).
-    pub fn exit(&self, p: Vec3, d: Vec3) -> (f64, usize) {
+    pub fn exit(&self, p: DVec3, d: DVec3) -> (f64, usize) {
         let mut best = (f64::INFINITY, 0);
         for (i, f) in self.faces.iter().enumerate() {
-            let nd = dot(f.normal, d);
+            let nd = f.normal.dot(d);
             if nd > 0.0 {
-                let t = ((f.offset - dot(f.normal, p)) / nd).max(0.0);
+                let t = ((f.offset - f.normal.dot(p)) / nd).max(0.0);
                 if t < best.0 {
                     best = (t, i);
                 }

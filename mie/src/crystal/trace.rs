@@ -5,8 +5,10 @@ use rand_xoshiro::Xoshiro256PlusPlus;
 use rand_xoshiro::rand_core::{RngCore, SeedableRng};
 use rayon::prelude::*;
 
-use super::geometry::{Prism, Vec3, add_scaled, basis, dot, normalize, scale};
-use crate::grid::AngleGrid;
+use glam::DVec3;
+
+use super::geometry::{Prism, basis};
+use crate::grid::ThetaGrid;
 
 /// Rays per chunk: each chunk has its own random stream, and chunks are summed in order, so the
 /// result does not depend on the thread count.
@@ -17,6 +19,7 @@ const CHUNK_RAYS: u64 = 1 << 14;
 pub struct TraceSettings {
     /// Rays that hit the crystal (misses are drawn again and counted for the projected area).
     pub rays: u64,
+    /// Seed of the random streams; chunk c uses its own stream derived from it.
     pub seed: u64,
     /// Macke's distortion δ ∈ [0, 1]: every ray meets its own distorted crystal, each facet
     /// normal tilted by an angle uniform in [0, δ·90°] about a uniform azimuth. 0 = pristine.
@@ -28,6 +31,7 @@ pub struct TraceSettings {
 }
 
 impl TraceSettings {
+    /// Settings with at most 1000 interactions per path and a weight cut-off of 1e-7.
     pub fn new(rays: u64, seed: u64, roughness: f64) -> Self {
         Self {
             rays,
@@ -43,6 +47,7 @@ impl TraceSettings {
 /// Fractions are of the energy of the rays that hit the crystal.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct TraceResult {
+    /// Bin width of the θ grid, degrees.
     pub theta_step_deg: f64,
     /// Energy fraction scattered into bin k (delta transmission excluded).
     pub bin_energy: Vec<f64>,
@@ -52,13 +57,17 @@ pub struct TraceResult {
     pub delta: f64,
     /// Energy reflected at the first (external) interaction.
     pub external_reflection: f64,
+    /// Energy absorbed inside the crystal.
     pub absorbed: f64,
     /// Energy of paths stopped by `max_interactions` or `min_weight`.
     pub lost: f64,
     /// Asymmetry parameter of the scattered geometric-optics light (delta included, cos θ = 1).
     pub g: f64,
+    /// Standard error of g, from the spread between chunks (NaN with one chunk).
     pub g_std_error: f64,
+    /// Rays that hit the crystal.
     pub rays_hit: u64,
+    /// Rays cast in all, misses included.
     pub rays_cast: u64,
     /// Mean projected area from the hit fraction: π R² hits / cast (same unit² as the prism).
     pub projected_area: f64,
@@ -122,7 +131,7 @@ fn fresnel(cos_i: f64, eta: f64) -> (f64, f64) {
 
 /// The facet normals of one distorted crystal: each face's outward normal tilted by an angle
 /// uniform in [0, δ·90°] about a uniform azimuth (the true normals when δ = 0).
-fn distorted_normals(rng: &mut Rng, prism: &Prism, roughness: f64) -> [Vec3; 8] {
+fn distorted_normals(rng: &mut Rng, prism: &Prism, roughness: f64) -> [DVec3; 8] {
     let mut normals = prism.faces.map(|f| f.normal);
     if roughness > 0.0 {
         for n in normals.iter_mut() {
@@ -130,11 +139,7 @@ fn distorted_normals(rng: &mut Rng, prism: &Prism, roughness: f64) -> [Vec3; 8] 
             let tilt = roughness * std::f64::consts::FRAC_PI_2 * rng.uniform();
             let phi = 2.0 * std::f64::consts::PI * rng.uniform();
             let (s, c) = tilt.sin_cos();
-            *n = add_scaled(
-                add_scaled(scale(c, *n), s * phi.cos(), e1),
-                s * phi.sin(),
-                e2,
-            );
+            *n = c * *n + s * phi.cos() * e1 + s * phi.sin() * e2;
         }
     }
     normals
@@ -143,8 +148,8 @@ fn distorted_normals(rng: &mut Rng, prism: &Prism, roughness: f64) -> [Vec3; 8] 
 /// The normal an entering ray meets at a facet (outward normal `tilted`, true normal
 /// `true_normal`): the tilted one, or the true one where the ray would meet the tilted facet
 /// from behind.
-fn entry_normal(tilted: Vec3, true_normal: Vec3, d: Vec3) -> Vec3 {
-    if dot(d, tilted) < 0.0 {
+fn entry_normal(tilted: DVec3, true_normal: DVec3, d: DVec3) -> DVec3 {
+    if d.dot(tilted) < 0.0 {
         tilted
     } else {
         true_normal
@@ -157,7 +162,7 @@ pub fn trace(
     prism: &Prism,
     n_re: f64,
     alpha: f64,
-    grid: AngleGrid,
+    grid: ThetaGrid,
     settings: TraceSettings,
 ) -> TraceResult {
     let k_len = grid.len();
@@ -239,8 +244,8 @@ fn bin_of(theta_deg: f64, step: f64, k_len: usize) -> usize {
     ((theta_deg / step + 0.5).floor() as usize).min(k_len - 1)
 }
 
-fn emit(tally: &mut Tally, d_in: Vec3, d_out: Vec3, w: f64, step: f64) {
-    let c = dot(d_in, d_out).clamp(-1.0, 1.0);
+fn emit(tally: &mut Tally, d_in: DVec3, d_out: DVec3, w: f64, step: f64) {
+    let c = d_in.dot(d_out).clamp(-1.0, 1.0);
     tally.cos_sum += w * c;
     if c > 1.0 - 1e-12 {
         tally.delta += w;
@@ -266,18 +271,14 @@ fn trace_one(
         let z = 1.0 - 2.0 * rng.uniform();
         let phi = 2.0 * std::f64::consts::PI * rng.uniform();
         let rho = (1.0 - z * z).max(0.0).sqrt();
-        let d = [rho * phi.cos(), rho * phi.sin(), z];
+        let d = DVec3::new(rho * phi.cos(), rho * phi.sin(), z);
         let (e1, e2) = basis(d);
         let r = radius * rng.uniform().sqrt();
         let psi = 2.0 * std::f64::consts::PI * rng.uniform();
-        let start = add_scaled(
-            add_scaled(scale(-2.0 * radius, d), r * psi.cos(), e1),
-            r * psi.sin(),
-            e2,
-        );
+        let start = -2.0 * radius * d + r * psi.cos() * e1 + r * psi.sin() * e2;
         tally.cast += 1;
         if let Some((t, f)) = prism.enter(start, d) {
-            break (d, add_scaled(start, t, d), f);
+            break (d, start + t * d, f);
         }
     };
     tally.hits += 1;
@@ -286,19 +287,19 @@ fn trace_one(
     // External interaction.
     let eta_in = 1.0 / n_re;
     let m = entry_normal(normals[face], prism.faces[face].normal, d_in);
-    let cos_i = -dot(d_in, m);
+    let cos_i = -d_in.dot(m);
     let (refl, cos_t) = fresnel(cos_i, eta_in);
-    let reflected = add_scaled(d_in, 2.0 * cos_i, m);
-    emit(tally, d_in, normalize(reflected), refl, step);
+    let reflected = d_in + 2.0 * cos_i * m;
+    emit(tally, d_in, reflected.normalize(), refl, step);
     tally.external += refl;
     let mut w = 1.0 - refl;
-    let mut d = normalize(add_scaled(scale(eta_in, d_in), eta_in * cos_i - cos_t, m));
+    let mut d = (eta_in * d_in + (eta_in * cos_i - cos_t) * m).normalize();
 
     // Internal path: at each face the transmitted part leaves, the reflected part goes on.
     let eta_out = n_re;
     for _ in 0..s.max_interactions {
         let (t, f) = prism.exit(p, d);
-        p = add_scaled(p, t, d);
+        p += t * d;
         if alpha > 0.0 {
             let kept = w * (-alpha * t).exp();
             tally.absorbed += w - kept;
@@ -306,19 +307,19 @@ fn trace_one(
         }
         // Turned against the ray. A tilted surface facing back at the ray cannot be crossed:
         // total reflection about the true normal, which keeps the ray inside.
-        let (m, cos_i, (refl, cos_t)) = if dot(d, normals[f]) > 0.0 {
-            let cos_i = dot(d, normals[f]);
-            (scale(-1.0, normals[f]), cos_i, fresnel(cos_i, eta_out))
+        let (m, cos_i, (refl, cos_t)) = if d.dot(normals[f]) > 0.0 {
+            let cos_i = d.dot(normals[f]);
+            (-normals[f], cos_i, fresnel(cos_i, eta_out))
         } else {
-            let m = scale(-1.0, prism.faces[f].normal);
-            (m, -dot(d, m), (1.0, 0.0))
+            let m = -prism.faces[f].normal;
+            (m, -d.dot(m), (1.0, 0.0))
         };
         if refl < 1.0 {
-            let out = normalize(add_scaled(scale(eta_out, d), eta_out * cos_i - cos_t, m));
+            let out = (eta_out * d + (eta_out * cos_i - cos_t) * m).normalize();
             emit(tally, d_in, out, w * (1.0 - refl), step);
         }
         w *= refl;
-        d = normalize(add_scaled(d, 2.0 * cos_i, m));
+        d = (d + 2.0 * cos_i * m).normalize();
         if w < s.min_weight {
             tally.lost += w;
             return;

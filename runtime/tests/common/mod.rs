@@ -1,9 +1,9 @@
-//! Shared by the runtime's integration tests: a fresh bake in a temporary directory.
+//! Shared by the runtime's and the renderers' integration tests: a fresh bake in a temporary
+//! directory, and a GPU that must exist when `REQUIRE_GPU=1`.
 
 use std::path::PathBuf;
 
-use tables::bake::{BakePlan, run};
-use tables::scene::Scene;
+use bake::{BakePlan, Scene, Silent, run};
 
 /// A cloud field: gamma distribution, r_eff 10 µm.
 #[allow(dead_code)]
@@ -43,14 +43,7 @@ pub fn bake(text: &str) -> (tempfile::TempDir, PathBuf) {
     let dir = tmp.path().join("tables");
     let scene = Scene::parse(text, "test").unwrap();
     let quality = scene.quality;
-    run(&BakePlan {
-        scene,
-        out_dir: dir.clone(),
-        quality,
-        knobs: quality.knobs(),
-        quiet: true,
-    })
-    .unwrap();
+    run(&BakePlan::for_preset(scene, dir.clone(), quality), &Silent).unwrap();
     (tmp, dir)
 }
 

@@ -32,7 +32,7 @@
 //!   is still computed to absolute rounding, with no special case.
 
 use super::LegendreError;
-use crate::grid::ThetaGrid;
+use grid::ThetaGrid;
 
 /// Streams W_lk = ∫_bin k P_l(μ) dμ for l = 0, 1, 2, … over all K bins of a grid, one degree
 /// at a time, in O(K) memory.

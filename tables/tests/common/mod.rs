@@ -1,10 +1,10 @@
-//! Shared helpers for the integration tests: a seeded LCG, exact bin averages of analytic
-//! phase functions, and a quiet bake plan at a scene's own preset.
+//! Shared helpers for the integration tests: a seeded LCG and exact bin averages of analytic
+//! phase functions.
 
 #![allow(dead_code)]
 
 use std::f64::consts::PI;
-use tables::grid::ThetaGrid;
+use tables::legendre::ThetaGrid;
 
 /// Knuth's MMIX 64-bit LCG; `uniform` takes the top 53 bits.
 pub struct Lcg(u64);
@@ -73,14 +73,7 @@ pub fn max_abs(x: &[f64]) -> f64 {
     x.iter().map(|a| a.abs()).fold(0.0, f64::max)
 }
 
-/// A quiet bake of the scene `text` into `out` at the scene's own preset.
-pub fn plan(text: &str, out: &std::path::Path) -> anyhow::Result<tables::bake::BakePlan> {
-    let scene = tables::scene::Scene::parse(text, "test scene")?;
-    let quality = scene.quality;
-    Ok(tables::bake::BakePlan::for_preset(
-        scene,
-        out.to_path_buf(),
-        quality,
-        true,
-    ))
+/// The rows of an (N, K) table as nested vectors.
+pub fn nested(a: &ndarray::Array2<f64>) -> Vec<Vec<f64>> {
+    a.outer_iter().map(|r| r.to_vec()).collect()
 }

@@ -1,0 +1,130 @@
+//! Writing frames: HDR OpenEXR (R, G, B radiance and A = the volume's transparency, 32-bit
+//! float) and a tone-mapped sRGB PNG. Both are encoded in memory and written atomically, so a
+//! failure leaves no half-written file.
+
+use std::io::Cursor;
+use std::path::Path;
+
+use exr::prelude::{
+    AnyChannel, AnyChannels, Blocks, Compression, Encoding, FlatSamples, Layer, LayerAttributes,
+    LineOrder, SmallVec, Vec2, WritableImage,
+};
+
+use crate::Image;
+
+/// Why a frame could not be written.
+#[derive(Debug, thiserror::Error)]
+pub enum WriteError {
+    #[error("{path}: encoding failed: {message}")]
+    Encode { path: String, message: String },
+    #[error("{path}: {op}: {source}")]
+    Io {
+        path: String,
+        op: &'static str,
+        source: std::io::Error,
+    },
+}
+
+/// The sRGB transfer curve (IEC 61966-2-1) of a linear value in [0, 1].
+pub fn srgb_encode(linear: f64) -> f64 {
+    if linear <= 0.003_130_8 {
+        12.92 * linear
+    } else {
+        1.055 * linear.powf(1.0 / 2.4) - 0.055
+    }
+}
+
+fn write_bytes(path: &Path, bytes: &[u8]) -> Result<(), WriteError> {
+    format::write_file_atomically(path, bytes).map_err(|(op, source)| WriteError::Io {
+        path: path.display().to_string(),
+        op,
+        source,
+    })
+}
+
+impl Image {
+    /// Writes R, G, B (linear radiance per unit solar irradiance, 1/sr) and A (transparency).
+    pub fn write_exr(&self, path: &Path) -> Result<(), WriteError> {
+        let channel = |name: &str, values: Vec<f32>| {
+            let mut c = AnyChannel::new(name, FlatSamples::F32(values));
+            c.quantize_linearly = false;
+            c
+        };
+        let plane = |c: usize| self.rgb.iter().map(|p| p[c]).collect::<Vec<f32>>();
+        let mut list: SmallVec<[AnyChannel<FlatSamples>; 4]> = SmallVec::new();
+        for (name, values) in [
+            ("R", plane(0)),
+            ("G", plane(1)),
+            ("B", plane(2)),
+            ("A", self.transparency.clone()),
+        ] {
+            list.push(channel(name, values));
+        }
+        let channels = AnyChannels::sort(list);
+        let layer = Layer::new(
+            Vec2(self.width, self.height),
+            LayerAttributes::named("photometeor render"),
+            Encoding {
+                compression: Compression::ZIP16,
+                blocks: Blocks::ScanLines,
+                line_order: LineOrder::Increasing,
+            },
+            channels,
+        );
+        let mut bytes = Vec::new();
+        exr::prelude::Image::from_layer(layer)
+            .write()
+            .non_parallel()
+            .to_buffered(Cursor::new(&mut bytes))
+            .map_err(|e| WriteError::Encode {
+                path: path.display().to_string(),
+                message: e.to_string(),
+            })?;
+        write_bytes(path, &bytes)
+    }
+
+    /// Luminance (Rec. 709 weights) of each pixel.
+    pub fn luminance(&self) -> Vec<f64> {
+        self.rgb
+            .iter()
+            .map(|p| 0.2126 * p[0] as f64 + 0.7152 * p[1] as f64 + 0.0722 * p[2] as f64)
+            .collect()
+    }
+
+    /// The exposure [`Image::write_png`] uses when none is given: the 97th percentile of
+    /// luminance maps to 1 − e^{−1.5} ≈ 0.78 before the sRGB curve.
+    pub fn auto_exposure(&self) -> f64 {
+        let mut lum = self.luminance();
+        lum.sort_by(f64::total_cmp);
+        let p = lum[((lum.len() - 1) as f64 * 0.97) as usize];
+        if p > 0.0 { 1.5 / p } else { 1.0 }
+    }
+
+    /// 8-bit sRGB: v = 1 − e^{−exposure·L} per channel, then the sRGB transfer curve.
+    pub fn to_srgb8(&self, exposure: f64) -> Vec<u8> {
+        let encode = |l: f32| {
+            let v = 1.0 - (-(exposure * l.max(0.0) as f64)).exp();
+            (srgb_encode(v) * 255.0).round().clamp(0.0, 255.0) as u8
+        };
+        self.rgb.iter().flat_map(|p| p.map(encode)).collect()
+    }
+
+    pub fn write_png(&self, path: &Path, exposure: f64) -> Result<(), WriteError> {
+        let mut bytes = Vec::new();
+        let encode_err = |e: png::EncodingError| WriteError::Encode {
+            path: path.display().to_string(),
+            message: e.to_string(),
+        };
+        {
+            let mut encoder = png::Encoder::new(&mut bytes, self.width as u32, self.height as u32);
+            encoder.set_color(png::ColorType::Rgb);
+            encoder.set_depth(png::BitDepth::Eight);
+            encoder.set_source_srgb(png::SrgbRenderingIntent::Perceptual);
+            let mut writer = encoder.write_header().map_err(encode_err)?;
+            writer
+                .write_image_data(&self.to_srgb8(exposure))
+                .map_err(encode_err)?;
+        }
+        write_bytes(path, &bytes)
+    }
+}

@@ -1,0 +1,317 @@
+//! The renderer on wgpu compute shaders (`render.wgsl` after the tables' WGSL): one `clear`,
+//! then per slice an `eye_slice` and a `light_slice` dispatch (each dispatch sees the previous
+//! one's writes), then `composite`. The slice plane comes from a uniform array read with a
+//! dynamic offset. Bind group 1 (labelled, its layout built once per [`Renderer`]):
+//! params uniform, densities (`array<vec4<f32>>`, one channel per field), light buffer
+//! (I rgb, n), eye buffer (L, T pairs), image (rgb, T_vol), slice uniform.
+
+use std::time::Instant;
+
+use wgpu::util::DeviceExt;
+
+use runtime::Tables;
+use runtime::gpu::{Gpu, GpuError, GpuTables, WGSL, read_back};
+
+use crate::{Frame, FrameError, Image, MAX_FIELDS, SUN_DIAMETER_DEG};
+
+/// The renderer's WGSL (after [`WGSL`]).
+pub const RENDER_WGSL: &str = include_str!("render.wgsl");
+
+/// Why a GPU render failed.
+#[derive(Debug, thiserror::Error)]
+pub enum RenderError {
+    #[error(transparent)]
+    Frame(#[from] FrameError),
+    #[error(transparent)]
+    Gpu(#[from] GpuError),
+}
+
+/// Wall times of one GPU frame (s).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Timings {
+    /// Density grid and buffers created and uploaded.
+    pub upload: f64,
+    /// Every pass recorded, submitted and waited for: the frame time.
+    pub frame: f64,
+    /// Image copied back and mapped.
+    pub readback: f64,
+}
+
+/// Pipelines and layouts, built once.
+pub struct Renderer {
+    layout: wgpu::BindGroupLayout,
+    clear: wgpu::ComputePipeline,
+    eye: wgpu::ComputePipeline,
+    light: wgpu::ComputePipeline,
+    composite: wgpu::ComputePipeline,
+}
+
+fn entry(binding: u32, ty: wgpu::BufferBindingType, dynamic: bool) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Buffer {
+            ty,
+            has_dynamic_offset: dynamic,
+            min_binding_size: None,
+        },
+        count: None,
+    }
+}
+
+fn v4(v: glam::DVec3, w: f64) -> [f32; 4] {
+    [v[0] as f32, v[1] as f32, v[2] as f32, w as f32]
+}
+
+impl Renderer {
+    pub fn new(gpu: &Gpu, tables: &GpuTables) -> Self {
+        let device = &gpu.device;
+        use wgpu::BufferBindingType::{Storage, Uniform};
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("photometeor render layout"),
+            entries: &[
+                entry(0, Uniform, false),
+                entry(1, Storage { read_only: true }, false),
+                entry(2, Storage { read_only: false }, false),
+                entry(3, Storage { read_only: false }, false),
+                entry(4, Storage { read_only: false }, false),
+                entry(5, Uniform, true),
+            ],
+        });
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("photometeor render"),
+            source: wgpu::ShaderSource::Wgsl(format!("{WGSL}\n{RENDER_WGSL}").into()),
+        });
+        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("photometeor render pipeline layout"),
+            bind_group_layouts: &[Some(&tables.layout), Some(&layout)],
+            immediate_size: 0,
+        });
+        let pipeline = |name: &str| {
+            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some(name),
+                layout: Some(&pipeline_layout),
+                module: &module,
+                entry_point: Some(name),
+                compilation_options: Default::default(),
+                cache: None,
+            })
+        };
+        Self {
+            clear: pipeline("clear"),
+            eye: pipeline("eye_slice"),
+            light: pipeline("light_slice"),
+            composite: pipeline("composite"),
+            layout,
+        }
+    }
+
+    /// Renders `frame` with `tables` (on the GPU as `gpu_tables`; field i = grid channel i).
+    pub fn render(
+        &self,
+        gpu: &Gpu,
+        tables: &Tables,
+        gpu_tables: &GpuTables,
+        frame: &Frame,
+    ) -> Result<(Image, Timings), RenderError> {
+        let setup = frame.setup()?;
+        super::cpu::check_fields(tables, frame)?;
+        let device = &gpu.device;
+        let limits = device.limits();
+        let start = Instant::now();
+        let (w, h, res) = (frame.width, frame.height, frame.light_resolution);
+        let voxels = frame.grid.data.len();
+        for (what, bytes) in [
+            ("density grid bytes", 16 * voxels as u64),
+            ("eye buffer bytes", 32 * (w * h) as u64),
+            ("light buffer bytes", 16 * (res * res) as u64),
+        ] {
+            let limit = limits.max_storage_buffer_binding_size;
+            if bytes > limit {
+                return Err(GpuError::Limit {
+                    what,
+                    value: bytes,
+                    limit,
+                }
+                .into());
+            }
+        }
+
+        let mut params: Vec<[f32; 4]> = Vec::new();
+        let sun_dir = frame.sun.direction();
+        let cos_disk = (SUN_DIAMETER_DEG / 2.0).to_radians().cos();
+        params.push(v4(setup.eye, if setup.front_to_back { 1.0 } else { 0.0 }));
+        params.push(v4(setup.forward, setup.tan_half_fov_y));
+        params.push(v4(setup.right, setup.aspect));
+        params.push(v4(setup.up, frame.xi));
+        params.push(v4(setup.light, setup.slice_step));
+        params.push(v4(setup.half, 0.0));
+        params.push(v4(setup.light_u, setup.light_origin[0]));
+        params.push(v4(setup.light_w, setup.light_origin[1]));
+        params.push([
+            setup.light_texel[0] as f32,
+            setup.light_texel[1] as f32,
+            sun_dir[1] as f32,
+            0.0,
+        ]);
+        params.push(v4(frame.grid.min_m, 0.0));
+        params.push(v4(frame.grid.max_m, 0.0));
+        let [nx, ny, nz] = frame.grid.dims;
+        let uints = |v: [u32; 4]| v.map(f32::from_bits);
+        params.push(uints([
+            nx as u32,
+            ny as u32,
+            nz as u32,
+            tables.fields.len() as u32,
+        ]));
+        params.push(uints([w as u32, h as u32, res as u32, 0]));
+        for i in 0..MAX_FIELDS {
+            params.push(
+                tables
+                    .fields
+                    .get(i)
+                    .map_or([0.0; 4], |f| v4(f.sigma_ext_m2.into(), 0.0)),
+            );
+        }
+        params.push(v4(
+            frame.atmosphere.beta_sea_level_per_m.into(),
+            1.0 / frame.atmosphere.scale_height_m,
+        ));
+        params.push(v4(sun_dir, cos_disk));
+        params.push(v4(
+            frame.sun.irradiance.into(),
+            std::f64::consts::TAU * (1.0 - cos_disk),
+        ));
+        let params = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("photometeor render params"),
+            contents: bytemuck::cast_slice(&params),
+            usage: wgpu::BufferUsages::UNIFORM,
+        });
+        let density = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("photometeor densities"),
+            contents: bytemuck::cast_slice(&frame.grid.data),
+            usage: wgpu::BufferUsages::STORAGE,
+        });
+        let storage = |label: &str, size: u64, extra: wgpu::BufferUsages| {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size,
+                usage: wgpu::BufferUsages::STORAGE | extra,
+                mapped_at_creation: false,
+            })
+        };
+        let none = wgpu::BufferUsages::empty();
+        let light_buffer = storage("photometeor light buffer", 16 * (res * res) as u64, none);
+        let eye_buffer = storage("photometeor eye buffer", 32 * (w * h) as u64, none);
+        let image_size = 16 * (w * h) as u64;
+        let image = storage(
+            "photometeor image",
+            image_size,
+            wgpu::BufferUsages::COPY_SRC,
+        );
+        let stride = limits.min_uniform_buffer_offset_alignment.max(16) as usize;
+        let mut slices = vec![0u8; stride * frame.slices];
+        for k in 0..frame.slices {
+            let plane = (setup.slice_start + k as f64 * setup.slice_step) as f32;
+            let entry = &mut slices[k * stride..k * stride + 16];
+            entry[..4].copy_from_slice(&plane.to_le_bytes());
+            entry[4..8].copy_from_slice(&(k as u32).to_le_bytes());
+        }
+        let slice_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("photometeor slices"),
+            contents: &slices,
+            usage: wgpu::BufferUsages::UNIFORM,
+        });
+        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("photometeor render bindings"),
+            layout: &self.layout,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: params.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: density.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: light_buffer.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 3,
+                    resource: eye_buffer.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 4,
+                    resource: image.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 5,
+                    resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                        buffer: &slice_buffer,
+                        offset: 0,
+                        size: wgpu::BufferSize::new(16),
+                    }),
+                },
+            ],
+        });
+        let wait = || {
+            device
+                .poll(wgpu::PollType::wait_indefinitely())
+                .map_err(|e| GpuError::Readback(e.to_string()))
+        };
+        gpu.queue.submit([]);
+        wait()?;
+        let upload = start.elapsed().as_secs_f64();
+
+        let start = Instant::now();
+        let groups = |x: usize, y: usize| (x.div_ceil(8) as u32, y.div_ceil(8) as u32);
+        let (ix, iy) = groups(w, h);
+        let (lx, ly) = groups(res, res);
+        let (cx, cy) = groups(w.max(res), h.max(res));
+        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+            label: Some("photometeor frame"),
+        });
+        {
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("photometeor slices"),
+                timestamp_writes: None,
+            });
+            pass.set_bind_group(0, &gpu_tables.bind_group, &[]);
+            pass.set_bind_group(1, &bind_group, &[0]);
+            pass.set_pipeline(&self.clear);
+            pass.dispatch_workgroups(cx, cy, 1);
+            for k in 0..frame.slices {
+                pass.set_bind_group(1, &bind_group, &[(k * stride) as u32]);
+                pass.set_pipeline(&self.eye);
+                pass.dispatch_workgroups(ix, iy, 1);
+                pass.set_pipeline(&self.light);
+                pass.dispatch_workgroups(lx, ly, 1);
+            }
+            pass.set_pipeline(&self.composite);
+            pass.dispatch_workgroups(ix, iy, 1);
+        }
+        gpu.queue.submit([encoder.finish()]);
+        wait()?;
+        let frame_time = start.elapsed().as_secs_f64();
+
+        let start = Instant::now();
+        let texels = read_back(gpu, &image, image_size)?;
+        let out = Image {
+            width: w,
+            height: h,
+            rgb: texels.iter().map(|c| [c[0], c[1], c[2]]).collect(),
+            transparency: texels.iter().map(|c| c[3]).collect(),
+        };
+        let readback_time = start.elapsed().as_secs_f64();
+        Ok((
+            out,
+            Timings {
+                upload,
+                frame: frame_time,
+                readback: readback_time,
+            },
+        ))
+    }
+}

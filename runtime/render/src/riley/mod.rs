@@ -1,0 +1,178 @@
+//! Riley et al. 2004 §4–5: half-angle slicing (Kniss et al.) of a density grid with a
+//! light buffer and an eye buffer, the multiple-scattering tables for the angular spread of
+//! sunlight, and the analytic sky in front of and behind the volume.
+//!
+//! # The model, as [`cpu::render`] (the reference) and [`gpu::Renderer`] compute it
+//! Slices are planes h·x = c_k, k = 0..S−1, spaced Δ = (extent of the box along h)/S, with h
+//! halfway between the view direction v and the light's direction of travel l (h ∝ v + l when
+//! v·l ≥ 0: the eye composites front to back; h ∝ l − v otherwise: back to front). Light always
+//! crosses the slices in order, so one pass serves both buffers. Per slice k:
+//!
+//! 1. **Eye** (Eq. 26): each pixel's ray meets slice k at p; with the light buffer's (I, n)
+//!    there (bilinear), the slab of thickness Δ_e = Δ/|h·d| adds
+//!    I · S_atm(p_y) · (Ams_{n+1}(θ) + ξ) · α (1 − e^{−β_ext Δ_e}) per channel, θ the
+//!    angle between the sunlight and the ray towards the eye, Ams the spatial mix of the fields
+//!    (Eq. 6) and α = β_sca/β_ext (Eq. 3). α(1 − e^{−β_ext Δ_e}) is Riley's β_sca Δ to first
+//!    order and never exceeds the slab's albedo for thick slabs.
+//! 2. **Light** (Eqs. 21, 25): each light-buffer texel's ray (along l) meets slice k; with
+//!    τ = β_ext Δ_l, Δ_l = Δ/(h·l): I ← I e^{−τ} + I (1 − e^{−τ}) (α F_{n+1+τ})^τ, n ← n + α τ
+//!    (the expected scatter count, Eq. 21/22; green channel, as Riley's single alpha). F is the
+//!    fields' mix weighted like Eq. 6 and linear in fractional n (Riley floored it because his
+//!    hardware could not interpolate float textures).
+//!
+//! S_atm (Eq. 12) is the sunlight left at height p_y by the atmosphere. Per pixel, with the
+//! ray's distance K_mid to the middle of the box and T_vol the volume's transparency:
+//! L = Sky(0, K_mid) + T_air(K_mid) L_vol + T_vol (Sky(0, K_end) − Sky(0, K_mid)) + T_vol sun,
+//! where Sky is [`crate::sky::Atmosphere::inscatter`] (Eqs. 11–15), K_end the ground (black) or ∞,
+//! and "sun" the disk of 0.5° (Riley §4.2.4) attenuated by the whole atmosphere.
+//!
+//! Units: radiance per unit solar irradiance outside the atmosphere (1/sr) per channel.
+
+pub mod cpu;
+pub mod gpu;
+
+use glam::DVec3;
+
+use crate::{Frame, FrameError};
+
+/// Two unit vectors completing the unit vector `d` to an orthonormal basis (d, e1, e2).
+pub fn basis(d: DVec3) -> (DVec3, DVec3) {
+    let helper = if d.x.abs() < 0.9 { DVec3::X } else { DVec3::Y };
+    let e1 = (helper - helper.dot(d) * d).normalize();
+    (e1, d.cross(e1))
+}
+
+/// The derived geometry both renderers use (module docs).
+#[derive(Debug, Clone, Copy)]
+pub struct Setup {
+    pub eye: DVec3,
+    pub forward: DVec3,
+    pub right: DVec3,
+    pub up: DVec3,
+    pub tan_half_fov_y: f64,
+    pub aspect: f64,
+    /// Direction the sunlight travels (−sun direction).
+    pub light: DVec3,
+    pub half: DVec3,
+    pub front_to_back: bool,
+    /// Plane value of the first slice's centre, and the spacing Δ along h.
+    pub slice_start: f64,
+    pub slice_step: f64,
+    /// Light-buffer axes (⟂ l), origin (u, w of texel (0, 0)'s corner) and texel size.
+    pub light_u: DVec3,
+    pub light_w: DVec3,
+    pub light_origin: [f64; 2],
+    pub light_texel: [f64; 2],
+}
+
+impl Frame {
+    /// Checks the parameters and derives the slicing geometry.
+    pub fn setup(&self) -> Result<Setup, FrameError> {
+        let bad = |s: String| Err(FrameError(s));
+        if !(1..=8192).contains(&self.width) || !(1..=8192).contains(&self.height) {
+            return bad(format!(
+                "image size {}×{} is outside the allowed range 1…8192 pixels per side",
+                self.width, self.height
+            ));
+        }
+        if !(1..=4096).contains(&self.slices) {
+            return bad(format!(
+                "slices = {} is outside the allowed range [1, 4096]",
+                self.slices
+            ));
+        }
+        if !(2..=4096).contains(&self.light_resolution) {
+            return bad(format!(
+                "light_resolution = {} is outside the allowed range [2, 4096]",
+                self.light_resolution
+            ));
+        }
+        let fov = self.camera.fov_deg;
+        if !(fov > 0.0 && fov < 170.0) {
+            return bad(format!(
+                "camera fov_deg = {fov} is outside the allowed range (0, 170) degrees"
+            ));
+        }
+        let e = self.sun.elevation_deg;
+        if !(e > 0.0 && e <= 90.0) {
+            return bad(format!(
+                "sun elevation_deg = {e} is outside the allowed range (0, 90]: the sky model \
+                 (Riley et al. 2004 Eq. 12) needs the sun above the horizon"
+            ));
+        }
+        if self.camera.position_m.y < 0.0 {
+            return bad(format!(
+                "camera height {} m is below sea level (y ≥ 0 required)",
+                self.camera.position_m.y
+            ));
+        }
+        if self.grid.contains(self.camera.position_m) {
+            return bad(format!(
+                "the camera at {:?} m is inside the volumes' box {:?}…{:?} m; half-angle \
+                 slicing needs it outside",
+                self.camera.position_m, self.grid.min_m, self.grid.max_m
+            ));
+        }
+        let forward = (self.camera.look_at_m - self.camera.position_m);
+        if forward.dot(forward) == 0.0 {
+            return bad("camera look_at_m equals position_m".into());
+        }
+        let forward = forward.normalize();
+        let mut right = forward.cross(DVec3::Y);
+        if right.dot(right) < 1e-12 {
+            right = DVec3::X;
+        }
+        let right = right.normalize();
+        let up = right.cross(forward);
+
+        let light = -self.sun.direction();
+        let front_to_back = forward.dot(light) >= 0.0;
+        let half = if front_to_back {
+            (forward + light).normalize()
+        } else {
+            (light - forward).normalize()
+        };
+        let corners = self.grid.corners();
+        let along = |axis: DVec3| {
+            corners
+                .iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &c| {
+                    let v = axis.dot(c);
+                    (lo.min(v), hi.max(v))
+                })
+        };
+        let (h_lo, h_hi) = along(half);
+        let slice_step = (h_hi - h_lo) / self.slices as f64;
+        // Light-buffer axes: any orthonormal pair ⟂ l.
+        let (light_u, light_w) = basis(light);
+        let (u_lo, u_hi) = along(light_u);
+        let (w_lo, w_hi) = along(light_w);
+        let res = self.light_resolution as f64;
+        Ok(Setup {
+            eye: self.camera.position_m,
+            forward,
+            right,
+            up,
+            tan_half_fov_y: (fov.to_radians() / 2.0).tan(),
+            aspect: self.width as f64 / self.height as f64,
+            light,
+            half,
+            front_to_back,
+            slice_start: h_lo + 0.5 * slice_step,
+            slice_step,
+            light_u,
+            light_w,
+            light_origin: [u_lo, w_lo],
+            light_texel: [(u_hi - u_lo) / res, (w_hi - w_lo) / res],
+        })
+    }
+}
+
+impl Setup {
+    /// Unit ray direction through the centre of pixel (i, j), row j = 0 at the top.
+    pub fn ray(&self, i: usize, j: usize, width: usize, height: usize) -> DVec3 {
+        let sx = (2.0 * (i as f64 + 0.5) / width as f64 - 1.0) * self.tan_half_fov_y * self.aspect;
+        let sy = (1.0 - 2.0 * (j as f64 + 0.5) / height as f64) * self.tan_half_fov_y;
+        ((self.forward + sx * self.right) + sy * self.up).normalize()
+    }
+}

@@ -1,0 +1,372 @@
+//! The render part of a scene file: the same TOML as the bake's `[scene]`/`[[field]]`, plus
+//!
+//! ```toml
+//! [render]
+//! width = 512               # pixels
+//! height = 512
+//! slices = 256              # half-angle slices through the volumes' box
+//! light_resolution = 512    # light-buffer texels per side
+//! grid_resolution = 128     # voxels along the box's longest side
+//! xi = 0.0                  # Riley's ξ (1/sr), back-scattered light in the eye pass
+//! exposure = 0.0            # PNG exposure; 0 or absent: automatic
+//!
+//! [camera]
+//! position_m = [0, 2, 0]    # metres, y up, sea level y = 0
+//! look_at_m = [0, 600, 5000]
+//! fov_deg = 60              # vertical
+//!
+//! [sun]
+//! elevation_deg = 20        # (0, 90]
+//! azimuth_deg = 180         # from +z towards +x
+//! irradiance = [1, 1, 1]    # outside the atmosphere, per channel (the image's unit)
+//!
+//! [sky]
+//! enabled = true            # analytic sky and aerial perspective (Riley Eqs. 11–15)
+//! beta_sea_level_per_m = [5.8e-6, 1.35e-5, 3.31e-5]
+//! scale_height_m = 8000
+//!
+//! [[volume]]
+//! field = "rain"            # a [[field]] of the scene
+//! shape = "rain_shaft"      # cumulus | cirrus | rain_shaft | grid
+//! number_density_per_m3 = 1000   # peak; β_ext = density · σ_ext (Riley Eq. 2)
+//! center_m = [0, 0, 6000]
+//! radius_m = 2500           # cumulus, rain_shaft
+//! height_m = 1500           # cumulus
+//! bottom_m = 0              # rain_shaft
+//! top_m = 2500              # rain_shaft
+//! size_m = 8000             # cirrus: side of the square sheet
+//! thickness_m = 800         # cirrus
+//! file = "density.f32"      # grid: raw little-endian f32, x fastest, relative to the scene
+//! dims = [64, 32, 64]       # grid
+//! min_m = [0, 0, 0]         # grid box
+//! max_m = [1000, 500, 1000]
+//! seed = 1
+//! ```
+
+use std::path::Path;
+
+use serde::Deserialize;
+
+use glam::DVec3;
+
+use crate::volume::{Shape, Volume, joint_bounds, rasterize};
+
+use crate::{Atmosphere, Camera, Frame, Sun};
+use runtime::Tables;
+
+#[derive(Debug, Default, Deserialize)]
+struct File {
+    #[serde(default)]
+    render: Option<RenderKeys>,
+    #[serde(default)]
+    camera: Option<CameraKeys>,
+    #[serde(default)]
+    sun: Option<SunKeys>,
+    #[serde(default)]
+    sky: Option<SkyKeys>,
+    #[serde(default, rename = "volume")]
+    volumes: Vec<VolumeKeys>,
+}
+
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RenderKeys {
+    width: Option<usize>,
+    height: Option<usize>,
+    slices: Option<usize>,
+    light_resolution: Option<usize>,
+    grid_resolution: Option<usize>,
+    xi: Option<f64>,
+    exposure: Option<f64>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct CameraKeys {
+    position_m: [f64; 3],
+    look_at_m: [f64; 3],
+    fov_deg: Option<f64>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SunKeys {
+    elevation_deg: f64,
+    azimuth_deg: f64,
+    irradiance: Option<[f64; 3]>,
+}
+
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SkyKeys {
+    enabled: Option<bool>,
+    beta_sea_level_per_m: Option<[f64; 3]>,
+    scale_height_m: Option<f64>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct VolumeKeys {
+    field: String,
+    shape: String,
+    number_density_per_m3: f64,
+    center_m: Option<[f64; 3]>,
+    radius_m: Option<f64>,
+    height_m: Option<f64>,
+    bottom_m: Option<f64>,
+    top_m: Option<f64>,
+    size_m: Option<f64>,
+    thickness_m: Option<f64>,
+    file: Option<String>,
+    dims: Option<[usize; 3]>,
+    min_m: Option<[f64; 3]>,
+    max_m: Option<[f64; 3]>,
+    seed: Option<u64>,
+}
+
+/// What a render needs from a scene file.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RenderScene {
+    pub width: usize,
+    pub height: usize,
+    pub slices: usize,
+    pub light_resolution: usize,
+    pub grid_resolution: usize,
+    pub xi: f64,
+    /// None: automatic.
+    pub exposure: Option<f64>,
+    pub camera: Camera,
+    pub sun: Sun,
+    pub atmosphere: Atmosphere,
+    pub volumes: Vec<Volume>,
+}
+
+fn positive(what: &str, v: f64) -> Result<f64, String> {
+    if v.is_finite() && v > 0.0 {
+        Ok(v)
+    } else {
+        Err(format!("{what} = {v} must be finite and > 0"))
+    }
+}
+
+impl RenderScene {
+    /// Parses the render tables of a scene; `origin` names it in errors, `base` resolves grid
+    /// files. A scene without `[camera]`, `[sun]` or `[[volume]]` cannot be rendered.
+    pub fn parse(text: &str, origin: &str, base: &Path) -> Result<Self, String> {
+        let file: File = toml::from_str(text).map_err(|e| format!("{origin}: {}", e.message()))?;
+        let err = |m: String| format!("{origin}: {m}");
+        let render = file.render.unwrap_or_default();
+        let camera = file
+            .camera
+            .ok_or_else(|| err("no [camera] table (position_m, look_at_m, fov_deg)".into()))?;
+        let sun = file
+            .sun
+            .ok_or_else(|| err("no [sun] table (elevation_deg, azimuth_deg)".into()))?;
+        let sky = file.sky.unwrap_or_default();
+        let mut atmosphere = Atmosphere::default();
+        if let Some(b) = sky.beta_sea_level_per_m {
+            if b.iter().any(|v| !(v.is_finite() && *v >= 0.0)) {
+                return Err(err(format!(
+                    "[sky] beta_sea_level_per_m = {b:?} must be ≥ 0 (1/m)"
+                )));
+            }
+            atmosphere.beta_sea_level_per_m = b;
+        }
+        if let Some(h) = sky.scale_height_m {
+            atmosphere.scale_height_m = positive("[sky] scale_height_m", h).map_err(err)?;
+        }
+        if sky.enabled == Some(false) {
+            atmosphere.beta_sea_level_per_m = [0.0; 3];
+        }
+        let irradiance = sun.irradiance.unwrap_or([1.0; 3]);
+        if irradiance.iter().any(|v| !(v.is_finite() && *v >= 0.0)) {
+            return Err(err(format!(
+                "[sun] irradiance = {irradiance:?} must be ≥ 0"
+            )));
+        }
+        let xi = render.xi.unwrap_or(0.0);
+        if !(xi.is_finite() && xi >= 0.0) {
+            return Err(err(format!("[render] xi = {xi} must be ≥ 0 (1/sr)")));
+        }
+        let exposure = match render.exposure {
+            None => None,
+            Some(0.0) => None,
+            Some(e) => Some(positive("[render] exposure", e).map_err(err)?),
+        };
+        let grid_resolution = render.grid_resolution.unwrap_or(128);
+        if !(2..=512).contains(&grid_resolution) {
+            return Err(err(format!(
+                "[render] grid_resolution = {grid_resolution} is outside the allowed range [2, 512]"
+            )));
+        }
+        if file.volumes.is_empty() {
+            return Err(err("no [[volume]] table: nothing to render".into()));
+        }
+        let volumes = file
+            .volumes
+            .into_iter()
+            .enumerate()
+            .map(|(i, v)| volume(v, base).map_err(|m| err(format!("[[volume]] {}: {m}", i + 1))))
+            .collect::<Result<Vec<_>, _>>()?;
+        Ok(Self {
+            width: render.width.unwrap_or(512),
+            height: render.height.unwrap_or(512),
+            slices: render.slices.unwrap_or(256),
+            light_resolution: render.light_resolution.unwrap_or(512),
+            grid_resolution,
+            xi,
+            exposure,
+            camera: Camera {
+                position_m: DVec3::from_array(camera.position_m),
+                look_at_m: DVec3::from_array(camera.look_at_m),
+                fov_deg: camera.fov_deg.unwrap_or(60.0),
+            },
+            sun: Sun {
+                elevation_deg: sun.elevation_deg,
+                azimuth_deg: sun.azimuth_deg,
+                irradiance,
+            },
+            atmosphere,
+            volumes,
+        })
+    }
+
+    /// The frame's parameters checked (sizes, camera, sun) before anything is baked: a frame
+    /// over the volumes' bounds without rasterizing them.
+    pub fn check(&self) -> Result<(), String> {
+        let (lo, hi) = joint_bounds(&self.volumes);
+        let grid = super::DensityGrid {
+            min_m: lo,
+            max_m: hi,
+            dims: [1, 1, 1],
+            data: vec![[0.0; super::MAX_FIELDS]],
+        };
+        self.frame_with(grid).setup().map(|_| ()).map_err(|e| e.0)
+    }
+
+    fn frame_with(&self, grid: super::DensityGrid) -> Frame {
+        Frame {
+            camera: self.camera,
+            sun: self.sun,
+            atmosphere: self.atmosphere,
+            xi: self.xi,
+            width: self.width,
+            height: self.height,
+            slices: self.slices,
+            light_resolution: self.light_resolution,
+            grid,
+        }
+    }
+
+    /// Reads a scene file.
+    pub fn from_file(path: &Path) -> Result<Self, String> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| format!("reading {}: {e}", path.display()))?;
+        let base = path.parent().unwrap_or(Path::new("."));
+        Self::parse(&text, &path.display().to_string(), base)
+    }
+
+    /// The fields the volumes use, in order of first use.
+    pub fn fields(&self) -> Vec<String> {
+        let mut names: Vec<String> = Vec::new();
+        for v in &self.volumes {
+            if !names.contains(&v.field) {
+                names.push(v.field.clone());
+            }
+        }
+        names
+    }
+
+    /// The frame: volumes rasterized with channel i = `tables.fields[i]`.
+    pub fn frame(&self, tables: &Tables) -> Result<Frame, String> {
+        for name in self.fields() {
+            if tables.field(&name).is_none() {
+                return Err(format!(
+                    "a volume uses field {name:?}, which the tables do not hold"
+                ));
+            }
+        }
+        let index = |name: &str| {
+            tables
+                .fields
+                .iter()
+                .position(|f| f.name == name)
+                .expect("checked above")
+        };
+        let grid = rasterize(&self.volumes, self.grid_resolution, index)?;
+        Ok(self.frame_with(grid))
+    }
+}
+
+fn volume(v: VolumeKeys, base: &Path) -> Result<Volume, String> {
+    let need = |what: &str, x: Option<f64>| -> Result<f64, String> {
+        let x = x.ok_or_else(|| format!("shape {:?} needs {what}", v.shape))?;
+        positive(what, x)
+    };
+    let center = |c: Option<[f64; 3]>| {
+        c.filter(|c| c.iter().all(|x| x.is_finite()))
+            .map(DVec3::from_array)
+            .ok_or_else(|| format!("shape {:?} needs a finite center_m = [x, y, z]", v.shape))
+    };
+    let density = v.number_density_per_m3;
+    if !(density.is_finite() && density > 0.0) {
+        return Err(format!(
+            "number_density_per_m3 = {density} must be finite and > 0 (particles per m³)"
+        ));
+    }
+    let shape = match v.shape.as_str() {
+        "cumulus" => Shape::Cumulus {
+            center_m: center(v.center_m)?,
+            radius_m: need("radius_m", v.radius_m)?,
+            height_m: need("height_m", v.height_m)?,
+        },
+        "cirrus" => Shape::Cirrus {
+            center_m: center(v.center_m)?,
+            size_m: need("size_m", v.size_m)?,
+            thickness_m: need("thickness_m", v.thickness_m)?,
+        },
+        "rain_shaft" => {
+            let bottom = v.bottom_m.unwrap_or(0.0);
+            let top = need("top_m", v.top_m)?;
+            if !(bottom.is_finite() && bottom < top) {
+                return Err(format!("bottom_m = {bottom} must be below top_m = {top}"));
+            }
+            Shape::RainShaft {
+                center_m: center(v.center_m)?,
+                radius_m: need("radius_m", v.radius_m)?,
+                bottom_m: bottom,
+                top_m: top,
+            }
+        }
+        "grid" => {
+            let file = v.file.ok_or("shape \"grid\" needs file")?;
+            let dims = v.dims.ok_or("shape \"grid\" needs dims = [nx, ny, nz]")?;
+            let (lo, hi) = (
+                v.min_m.ok_or("shape \"grid\" needs min_m")?,
+                v.max_m.ok_or("shape \"grid\" needs max_m")?,
+            );
+            if (0..3).any(|a| !(lo[a].is_finite() && hi[a].is_finite() && lo[a] < hi[a])) {
+                return Err(format!(
+                    "min_m = {lo:?} must lie below max_m = {hi:?} on every axis"
+                ));
+            }
+            Shape::Grid {
+                file: base.join(file),
+                dims,
+                min_m: DVec3::from_array(lo),
+                max_m: DVec3::from_array(hi),
+            }
+        }
+        other => {
+            return Err(format!(
+                "shape = {other:?} is not one of cumulus, cirrus, rain_shaft, grid"
+            ));
+        }
+    };
+    Ok(Volume {
+        field: v.field,
+        number_density_per_m3: density,
+        shape,
+        seed: v.seed.unwrap_or(1),
+    })
+}

@@ -1,0 +1,528 @@
+//! `photometeor bench`: the Mie workloads timed here and (optionally) in miepython in the same
+//! run, so the speed ratio comes from one machine at one moment; crystal rays per second; bake
+//! time and re-bake speed-up; render frame times.
+//!
+//! Mie workloads (docs/physics.md §2 "speed anchors"):
+//! - single sphere m = 1.333 + 1e-8i, x = 1e5, S1 and S2 at θ = 0, 0.18°, …, 180° (1001 angles);
+//! - rain: lognormal r_g = 500 µm, σ_g = 1.4, 100 radii log-spaced over r_g e^{±3 ln σ_g}
+//!   (end points included), λ = 650, 550, 450 nm with the water indices below, the
+//!   lognormal-weighted mean of |S1|² + |S2|² at the same 1001 angles, normalized per λ.
+
+use std::path::PathBuf;
+use std::process::Command;
+use std::time::Instant;
+
+use anyhow::{Context, Result, bail};
+use clap::{Args, Subcommand};
+use mie::amplitude::weighted_intensity;
+use mie::{FoldedAngles, SizeQuadrature, Sphere, SphereTerms, ThetaGrid, amplitudes};
+use num_complex::Complex64;
+use rayon::prelude::*;
+use serde_json::json;
+
+#[derive(Debug, Args)]
+pub struct BenchArgs {
+    #[command(subcommand)]
+    what: BenchWhat,
+}
+
+#[derive(Debug, Subcommand)]
+enum BenchWhat {
+    /// Single sphere at x = 1e5 and the 3-wavelength rain lognormal, 1001 angles each.
+    Mie(MieBench),
+    /// Geometric-optics ray tracing of ice prisms: rays per second on 1 thread and on all.
+    Crystal(CrystalBench),
+    /// Bake a scene (default: the embedded one) at each preset into a fresh directory, then
+    /// again unchanged: wall time, re-bake speed-up and peak memory, each bake its own process.
+    Bake(BakeBench),
+    /// Frame time of `photometeor render` on the GPU adapter (and of the CPU reference), at
+    /// one base setting and varying slices and resolution one at a time; table upload time.
+    Render(RenderBench),
+}
+
+#[derive(Debug, Args)]
+struct RenderBench {
+    /// Scene file (TOML with [render], [camera], [sun], [[volume]]); default: the embedded
+    /// rainbow scene.
+    scene: Option<std::path::PathBuf>,
+    /// Bake preset for the tables (frame time does not depend on it).
+    #[arg(long, default_value = "draft")]
+    quality: String,
+    /// Bake directory (default: photometeor-tables-<scene name>).
+    #[arg(long)]
+    tables: Option<std::path::PathBuf>,
+    /// Base setting: width = height (pixels) and slices.
+    #[arg(long, default_value_t = 512)]
+    size: usize,
+    #[arg(long, default_value_t = 256)]
+    slices: usize,
+    /// Image sizes (width = height) to time at the base slice count, comma-separated.
+    #[arg(long, value_delimiter = ',', default_value = "128,256,512,1024")]
+    sizes: Vec<usize>,
+    /// Slice counts to time at the base size, comma-separated.
+    #[arg(long, value_delimiter = ',', default_value = "64,128,256,512")]
+    slice_counts: Vec<usize>,
+    /// Frames per setting; the best is reported.
+    #[arg(long, default_value_t = 2)]
+    repeat: usize,
+    /// Also time the CPU reference renderer at each setting.
+    #[arg(long)]
+    cpu: bool,
+    /// Print JSON.
+    #[arg(long)]
+    json: bool,
+}
+
+#[derive(Debug, Args)]
+struct CrystalBench {
+    /// Rays per run.
+    #[arg(long, default_value_t = 2_000_000)]
+    rays: u64,
+    /// Macke distortion δ of the prism (0 = pristine).
+    #[arg(long, default_value_t = 0.0)]
+    roughness: f64,
+    /// Aspect ratio L/(2a) of the prism.
+    #[arg(long, default_value_t = 1.0)]
+    aspect_ratio: f64,
+}
+
+#[derive(Debug, Args)]
+struct BakeBench {
+    /// Scene file (TOML); default: the embedded default scene.
+    scene: Option<PathBuf>,
+    /// Presets to time, comma-separated.
+    #[arg(long, default_value = "draft,standard")]
+    presets: String,
+    /// Worker threads per bake (default: all cores).
+    #[arg(long)]
+    jobs: Option<usize>,
+    /// Keep the bakes in this directory (one subdirectory per preset) instead of a temporary one.
+    #[arg(long)]
+    keep: Option<PathBuf>,
+    /// Print JSON.
+    #[arg(long)]
+    json: bool,
+}
+
+#[derive(Debug, Args)]
+struct MieBench {
+    /// Repetitions per workload; the best time is reported.
+    #[arg(long, default_value_t = 3)]
+    repeat: usize,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    threads: Option<usize>,
+    /// Also run scripts/bench_miepython.py with this Python and print the speed ratios.
+    #[arg(long)]
+    compare_miepython: bool,
+    /// Python interpreter for --compare-miepython.
+    #[arg(long, default_value = "python3")]
+    python: String,
+    /// Print JSON.
+    #[arg(long)]
+    json: bool,
+}
+
+/// Water at 650, 550, 450 nm (IAPWS 20 °C real part, Segelstein κ; docs/physics.md §3).
+const RAIN_CASES: [(f64, f64, f64); 3] = [
+    (650.0, 1.3317, 1.67e-8),
+    (550.0, 1.3347, 2.46e-9),
+    (450.0, 1.3396, 8.07e-10),
+];
+
+pub fn run(args: BenchArgs) -> Result<()> {
+    let b = match args.what {
+        BenchWhat::Mie(b) => b,
+        BenchWhat::Bake(b) => return bench_bake(b),
+        BenchWhat::Crystal(c) => return bench_crystal(c),
+        BenchWhat::Render(r) => return bench_render(r),
+    };
+    let threads = b.threads.unwrap_or_else(rayon::current_num_threads);
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .context("building the thread pool")?;
+    let repeat = b.repeat.max(1);
+    let (single, rain, rain_phase) = pool.install(|| -> Result<_> {
+        let single = best_of(repeat, single_sphere)?;
+        let mut phase = Vec::new();
+        let rain = best_of(repeat, || {
+            phase = rain_lognormal()?;
+            Ok(())
+        })?;
+        Ok((single, rain, phase))
+    })?;
+    let mut report = json!({
+        "tool": "photometeor", "version": env!("CARGO_PKG_VERSION"), "threads": threads,
+        "single_x1e5_s": single, "rain_lognormal_s": rain,
+    });
+    if !b.json {
+        println!("photometeor ({threads} threads, best of {repeat}):");
+        println!("  single sphere x = 1e5, 1001 angles: {single:.4} s");
+        println!("  rain lognormal, 3 λ × 100 sizes, 1001 angles: {rain:.4} s");
+    }
+    if b.compare_miepython {
+        let py = run_miepython(&b.python, repeat)?;
+        let py_single = py["single_x1e5_s"]
+            .as_f64()
+            .context("miepython single time")?;
+        let py_rain = py["rain_lognormal_s"]
+            .as_f64()
+            .context("miepython rain time")?;
+        let worst = compare_phase(&rain_phase, &py["rain_phase"])?;
+        report["miepython"] = py.clone();
+        report["speedup_single"] = json!(py_single / single);
+        report["speedup_rain"] = json!(py_rain / rain);
+        report["rain_phase_max_rel_diff"] = json!(worst);
+        if !b.json {
+            println!(
+                "miepython {} (numba JIT, after warm-up, 1 thread):",
+                py["version"]
+            );
+            println!(
+                "  single sphere: {py_single:.4} s  → photometeor is {:.1}× faster",
+                py_single / single
+            );
+            println!(
+                "  rain lognormal: {py_rain:.4} s  → photometeor is {:.1}× faster",
+                py_rain / rain
+            );
+            println!("  same work check: rain phase functions agree to {worst:.2e} (max relative)");
+        }
+    }
+    if b.json {
+        println!("{}", serde_json::to_string(&report)?);
+    }
+    Ok(())
+}
+
+fn best_of(repeat: usize, mut f: impl FnMut() -> Result<()>) -> Result<f64> {
+    let mut best = f64::INFINITY;
+    for _ in 0..repeat {
+        let start = Instant::now();
+        f()?;
+        best = best.min(start.elapsed().as_secs_f64());
+    }
+    Ok(best)
+}
+
+fn grid_cosines() -> Vec<f64> {
+    ThetaGrid::new(0.18).expect("0.18° divides 180°").cosines()
+}
+
+fn single_sphere() -> Result<()> {
+    let x = 1e5;
+    let c = Sphere::new(Complex64::new(1.333, 1e-8), x)?.coefficients();
+    let e = c.efficiencies();
+    let (s1, s2) = amplitudes(&c, &FoldedAngles::new(&grid_cosines()));
+    let p: f64 = s1
+        .iter()
+        .zip(&s2)
+        .map(|(&a, &b)| mie::phase_from_amplitudes(a, b, x, e.q_sca))
+        .sum();
+    if !p.is_finite() {
+        bail!("non-finite phase function in the single-sphere benchmark");
+    }
+    Ok(())
+}
+
+/// Returns the three normalized phase functions (1/sr) at the 1001 grid angles.
+fn rain_lognormal() -> Result<Vec<Vec<f64>>> {
+    // The rule scripts/bench_miepython.py uses: 100 radii log-spaced over r_g e^{±3 ln σ_g}.
+    let SizeQuadrature {
+        radius_um: radii,
+        weight: weights,
+    } = SizeQuadrature::lognormal_log_spaced(500.0, 1.4, 100, 3.0);
+    let angles = FoldedAngles::new(&grid_cosines());
+    RAIN_CASES
+        .iter()
+        .map(|&(lambda_nm, n, kappa)| {
+            let k = 2.0 * std::f64::consts::PI / (lambda_nm / 1000.0);
+            let m = Complex64::new(n, kappa);
+            let per_size: Vec<(SphereTerms, f64)> = radii
+                .par_iter()
+                .map(|&r| -> Result<_> {
+                    let c = Sphere::new(m, k * r)?.coefficients();
+                    let q_sca = c.efficiencies().q_sca;
+                    Ok((SphereTerms::new(&c), q_sca * std::f64::consts::PI * r * r))
+                })
+                .collect::<Result<_>>()?;
+            let sigma_sca: f64 = per_size.iter().zip(&weights).map(|((_, s), w)| s * w).sum();
+            let terms: Vec<SphereTerms> = per_size.into_iter().map(|(t, _)| t).collect();
+            let intensity = weighted_intensity(&terms, &weights, &angles);
+            Ok(intensity
+                .iter()
+                .map(|i| i / (2.0 * k * k * sigma_sca))
+                .collect())
+        })
+        .collect()
+}
+
+fn run_miepython(python: &str, repeat: usize) -> Result<serde_json::Value> {
+    let script = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("scripts/bench_miepython.py");
+    let phase_file =
+        std::env::temp_dir().join(format!("photometeor-bench-{}.json", std::process::id()));
+    let mut cmd = Command::new(python);
+    cmd.arg(&script).arg("--phase-out").arg(&phase_file);
+    if repeat == 1 {
+        cmd.arg("--quick");
+    }
+    let out = cmd
+        .output()
+        .with_context(|| format!("running {python} {}", script.display()))?;
+    if !out.status.success() {
+        bail!(
+            "{} failed: {}",
+            script.display(),
+            String::from_utf8_lossy(&out.stderr)
+                .lines()
+                .last()
+                .unwrap_or("")
+        );
+    }
+    let mut value: serde_json::Value =
+        serde_json::from_slice(&out.stdout).context("parsing miepython benchmark JSON")?;
+    let phase: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(&phase_file).context("reading miepython rain phase functions")?,
+    )?;
+    let _ = std::fs::remove_file(&phase_file);
+    value["rain_phase"] = phase;
+    Ok(value)
+}
+
+/// Largest relative difference between our rain phase functions and miepython's.
+fn compare_phase(ours: &[Vec<f64>], theirs: &serde_json::Value) -> Result<f64> {
+    let rows = theirs
+        .get("phase")
+        .or_else(|| theirs.get("phases"))
+        .unwrap_or(theirs)
+        .as_array()
+        .context("miepython phase output: expected a list of 3 rows")?;
+    let mut worst: f64 = 0.0;
+    for (a, b) in ours.iter().zip(rows) {
+        let b = b.as_array().context("miepython phase row")?;
+        for (x, y) in a.iter().zip(b) {
+            let y = y.as_f64().context("miepython phase value")?;
+            worst = worst.max((x - y).abs() / y.abs());
+        }
+    }
+    Ok(worst)
+}
+
+/// One `photometeor bake … --json` in a child process; its JSON summary.
+fn bake_once(
+    scene: &Option<PathBuf>,
+    out: &std::path::Path,
+    preset: &str,
+    jobs: Option<usize>,
+) -> Result<(f64, serde_json::Value)> {
+    let exe = std::env::current_exe().context("locating the photometeor executable")?;
+    let mut cmd = Command::new(exe);
+    cmd.arg("bake");
+    if let Some(s) = scene {
+        cmd.arg(s);
+    }
+    cmd.arg("--out")
+        .arg(out)
+        .args(["--quality", preset, "--quiet", "--json"]);
+    if let Some(j) = jobs {
+        cmd.args(["--jobs", &j.to_string()]);
+    }
+    let start = Instant::now();
+    let output = cmd.output().context("running photometeor bake")?;
+    let wall = start.elapsed().as_secs_f64();
+    if !output.status.success() {
+        bail!(
+            "photometeor bake --quality {preset} failed: {}",
+            String::from_utf8_lossy(&output.stderr).trim()
+        );
+    }
+    let report = serde_json::from_slice(&output.stdout).context("reading the bake summary")?;
+    Ok((wall, report))
+}
+
+fn bench_bake(b: BakeBench) -> Result<()> {
+    let temp;
+    let root = match &b.keep {
+        Some(dir) => dir.clone(),
+        None => {
+            temp = tempfile::tempdir().context("creating a temporary directory")?;
+            temp.path().to_path_buf()
+        }
+    };
+    let mut rows = Vec::new();
+    for preset in b
+        .presets
+        .split(',')
+        .map(str::trim)
+        .filter(|p| !p.is_empty())
+    {
+        if !["draft", "standard", "reference"].contains(&preset) {
+            bail!("preset {preset:?} is not one of draft, standard, reference");
+        }
+        let out = root.join(preset);
+        if out.exists() {
+            std::fs::remove_dir_all(&out).with_context(|| format!("clearing {}", out.display()))?;
+        }
+        let (first, report) = bake_once(&b.scene, &out, preset, b.jobs)?;
+        let (again, report_again) = bake_once(&b.scene, &out, preset, b.jobs)?;
+        let bytes: u64 = std::fs::read_dir(&out)?
+            .filter_map(|e| e.ok())
+            .filter(|e| e.path().extension().is_some_and(|x| x == "exr"))
+            .filter_map(|e| e.metadata().ok().map(|m| m.len()))
+            .sum();
+        rows.push(json!({
+            "preset": preset,
+            "first_s": first,
+            "rebake_s": again,
+            "rebake_speedup": first / again,
+            "peak_rss_mib": report["peak_rss_mib"],
+            "computed": report["computed"],
+            "rebake_cached": report_again["cached"],
+            "rebake_computed": report_again["computed"],
+            "exr_bytes": bytes,
+        }));
+    }
+    let threads = b.jobs.unwrap_or_else(rayon::current_num_threads);
+    if b.json {
+        println!("{}", json!({ "threads": threads, "presets": rows }));
+        return Ok(());
+    }
+    println!("bake benchmark ({threads} threads; wall time of each process):");
+    println!(
+        "  {:<10} {:>10} {:>10} {:>10} {:>12} {:>10}",
+        "preset", "first s", "re-bake s", "speed-up", "peak MiB", "EXR KiB"
+    );
+    for r in &rows {
+        println!(
+            "  {:<10} {:>10.2} {:>10.3} {:>10.0} {:>12.0} {:>10.0}",
+            r["preset"].as_str().unwrap_or(""),
+            r["first_s"].as_f64().unwrap_or(f64::NAN),
+            r["rebake_s"].as_f64().unwrap_or(f64::NAN),
+            r["rebake_speedup"].as_f64().unwrap_or(f64::NAN),
+            r["peak_rss_mib"].as_f64().unwrap_or(f64::NAN),
+            r["exr_bytes"].as_u64().unwrap_or(0) as f64 / 1024.0
+        );
+    }
+    Ok(())
+}
+
+fn bench_crystal(c: CrystalBench) -> Result<()> {
+    use mie::crystal::{Prism, TraceSettings, trace};
+    let prism = Prism::new(c.aspect_ratio, 100.0);
+    let grid = ThetaGrid::new(0.18).expect("0.18° divides 180°");
+    let n_ice = mie::Material::Ice.refractive_index(550.0, -20.0)?.re;
+    let all = rayon::current_num_threads();
+    for threads in [1, all] {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .context("building the thread pool")?;
+        let start = Instant::now();
+        let t = pool.install(|| {
+            trace(
+                &prism,
+                n_ice,
+                0.0,
+                grid,
+                TraceSettings::new(c.rays, 1, c.roughness),
+            )
+        });
+        let seconds = start.elapsed().as_secs_f64();
+        let rate = t.rays_hit as f64 / seconds;
+        println!(
+            "{threads} thread(s): {} rays in {seconds:.2} s = {:.3} M rays/s ({:.3} M rays/s per thread); g_GO {:.4}, delta {:.3}, lost {:.1e}",
+            t.rays_hit,
+            rate / 1e6,
+            rate / 1e6 / threads as f64,
+            t.g,
+            t.delta,
+            t.lost
+        );
+    }
+    Ok(())
+}
+
+fn bench_render(b: RenderBench) -> Result<()> {
+    use render::riley::{cpu, gpu::Renderer};
+    use runtime::gpu::{Gpu, GpuTables, TexelFormat};
+    let (scene, tables) =
+        super::render::prepare(b.scene.as_deref(), b.tables, Some(&b.quality), true, |_| {})?;
+    let gpu =
+        Gpu::new().context("no GPU adapter (on Debian: apt-get install mesa-vulkan-drivers)")?;
+    let uploaded = GpuTables::upload(&gpu, &tables, TexelFormat::Auto)?;
+    let renderer = Renderer::new(&gpu, &uploaded);
+    let base = scene.frame(&tables).map_err(|e| anyhow::anyhow!(e))?;
+    let mut settings: Vec<(usize, usize)> = vec![(b.size, b.slices)];
+    settings.extend(b.slice_counts.iter().map(|&s| (b.size, s)));
+    settings.extend(b.sizes.iter().map(|&n| (n, b.slices)));
+    let mut seen = std::collections::HashSet::new();
+    settings.retain(|s| seen.insert(*s));
+    let mut rows = Vec::new();
+    for &(size, slices) in &settings {
+        let mut frame = base.clone();
+        frame.width = size;
+        frame.height = size;
+        frame.slices = slices;
+        let mut best = f64::INFINITY;
+        let mut readback = f64::INFINITY;
+        for _ in 0..b.repeat.max(1) {
+            let (_, t) = renderer.render(&gpu, &tables, &uploaded, &frame)?;
+            best = best.min(t.frame);
+            readback = readback.min(t.readback);
+        }
+        let cpu_s = if b.cpu {
+            let start = Instant::now();
+            cpu::render(&tables, &frame)?;
+            Some(start.elapsed().as_secs_f64())
+        } else {
+            None
+        };
+        rows.push(json!({
+            "width": size, "height": size, "slices": slices,
+            "light_resolution": frame.light_resolution,
+            "frame_ms": best * 1e3, "readback_ms": readback * 1e3,
+            "cpu_reference_ms": cpu_s.map(|s| s * 1e3),
+        }));
+    }
+    let report = json!({
+        "adapter": gpu.describe(),
+        "tables_upload_ms": uploaded.upload_seconds * 1e3,
+        "texel_format": format!("{:?}", uploaded.format),
+        "grid": base.grid.dims,
+        "threads": rayon::current_num_threads(),
+        "frames": rows,
+    });
+    if b.json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+        return Ok(());
+    }
+    println!(
+        "{}: tables upload {:.1} ms ({:?}), grid {:?}, best of {}",
+        gpu.describe(),
+        uploaded.upload_seconds * 1e3,
+        uploaded.format,
+        base.grid.dims,
+        b.repeat.max(1)
+    );
+    let base_ms = rows[0]["frame_ms"].as_f64().unwrap_or(f64::NAN);
+    println!(
+        "{:>6} {:>6} {:>7} {:>10} {:>9} {:>13}",
+        "size", "slices", "light", "frame ms", "× base", "CPU ref ms"
+    );
+    for r in &rows {
+        let ms = r["frame_ms"].as_f64().unwrap_or(f64::NAN);
+        println!(
+            "{:>6} {:>6} {:>7} {:>10.1} {:>9.2} {:>13}",
+            r["width"].as_u64().unwrap_or(0),
+            r["slices"].as_u64().unwrap_or(0),
+            r["light_resolution"].as_u64().unwrap_or(0),
+            ms,
+            ms / base_ms,
+            r["cpu_reference_ms"]
+                .as_f64()
+                .map_or("—".into(), |v| format!("{v:.1}"))
+        );
+    }
+    Ok(())
+}

@@ -1,0 +1,47 @@
+//! `photometeor inspect`: the summary of a bake directory.
+
+use anyhow::Result;
+use clap::Args as ClapArgs;
+
+#[derive(Debug, ClapArgs)]
+pub struct InspectArgs {
+    /// A bake directory (holding manifest.json).
+    dir: std::path::PathBuf,
+    /// Print JSON.
+    #[arg(long)]
+    json: bool,
+}
+
+pub fn run(a: InspectArgs) -> Result<()> {
+    let manifest = format::read_manifest(&a.dir)?;
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&manifest)?);
+        return Ok(());
+    }
+    println!(
+        "{}: schema {}, {} {}, Δθ = {}°, {} angles",
+        a.dir.display(),
+        manifest.schema,
+        manifest.tool,
+        manifest.tool_version,
+        manifest.theta_step_deg,
+        manifest.angle_count
+    );
+    for f in &manifest.fields {
+        println!(
+            "  {:<10} {:<5} {:<14} N = {:<4} g = {:.4}/{:.4}/{:.4}  σ_ext = {:.3e} m²  F_1 = {:.4}  F_N = {:.4}  n_iso(1e-6) = {:?}",
+            f.name,
+            f.kind,
+            f.file,
+            f.n_max,
+            f.g.r,
+            f.g.g,
+            f.g.b,
+            f.sigma_ext_m2.g,
+            f.forward_fraction.g[0],
+            f.forward_fraction.g[f.n_max - 1],
+            f.n_isotropic.g.get("1e-6").copied().flatten()
+        );
+    }
+    Ok(())
+}

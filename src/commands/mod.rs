@@ -1,0 +1,12 @@
+//! One module per subcommand: its arguments and the code that runs it.
+
+pub mod bake;
+pub mod bench;
+pub mod compare;
+pub mod inspect;
+pub mod mie;
+pub mod phase;
+pub mod plot;
+pub mod render;
+pub mod tradeoff;
+pub mod validate;

@@ -1,0 +1,196 @@
+//! `photometeor phase`: a size distribution's σ_ext, albedo, g and bin-averaged phase
+//! function per wavelength.
+
+use anyhow::{Context, Result, bail};
+use clap::Args as ClapArgs;
+use mie::{BulkRequest, NodeCounts, SizeDistribution, ThetaGrid, bulk_phase};
+use serde_json::json;
+
+use super::mie::angles_from;
+use crate::cli::{MaterialArg, parse_list};
+
+#[derive(Debug, ClapArgs)]
+pub struct PhaseArgs {
+    /// Particle material.
+    #[arg(long, value_enum, default_value = "water")]
+    material: MaterialArg,
+    /// Lognormal median radius r_g in µm (with --sigma-g).
+    #[arg(long, allow_hyphen_values = true, requires = "sigma_g")]
+    lognormal_median_um: Option<f64>,
+    /// Lognormal geometric standard deviation σ_g, in (1, 5].
+    #[arg(long, allow_hyphen_values = true)]
+    sigma_g: Option<f64>,
+    /// Effective radius in µm (with --v-eff): gamma distribution, or lognormal with --lognormal.
+    #[arg(long, allow_hyphen_values = true, requires = "v_eff")]
+    r_eff_um: Option<f64>,
+    /// Effective variance (with --r-eff-um).
+    #[arg(long, allow_hyphen_values = true)]
+    v_eff: Option<f64>,
+    /// Use a lognormal (instead of gamma) for --r-eff-um/--v-eff.
+    #[arg(long)]
+    lognormal: bool,
+    /// Marshall–Palmer raindrop spectrum for this rain rate in mm/h, [0.1, 500].
+    #[arg(long, allow_hyphen_values = true)]
+    marshall_palmer_mm_h: Option<f64>,
+    /// Vacuum wavelengths in nm, comma-separated (water: 200–1100 nm).
+    #[arg(long, allow_hyphen_values = true, required = true)]
+    wavelengths_nm: String,
+    /// Fixed number of sizes (nodes in ln r); default: adaptive to --tolerance.
+    #[arg(long)]
+    sizes: Option<usize>,
+    /// Fixed Gauss nodes per angular panel (with --sizes; default 4).
+    #[arg(long)]
+    nodes_per_panel: Option<usize>,
+    /// Adaptive refinement stops when one doubling changes the bins (rms, θ ≥ 1°), σ_ext or g
+    /// by less than this.
+    #[arg(long, default_value_t = 0.01)]
+    tolerance: f64,
+    /// Angle step of the output bins in degrees (must divide 180).
+    #[arg(long, default_value_t = ThetaGrid::DEFAULT_STEP_DEG)]
+    angles_step_deg: f64,
+    /// Water temperature in °C.
+    #[arg(long, default_value_t = 20.0, allow_hyphen_values = true)]
+    temperature_c: f64,
+    /// Also report p̄ at these angles (degrees, comma-separated, in [0, 180]) as point values.
+    #[arg(long, allow_hyphen_values = true)]
+    angles_deg: Option<String>,
+    /// Mass fraction of the distribution left outside the truncated size range.
+    #[arg(long, default_value_t = 1e-3)]
+    tail_mass: f64,
+    /// Print JSON instead of a summary.
+    #[arg(long)]
+    json: bool,
+}
+
+/// Chooses the size distribution from the mutually exclusive flag groups.
+fn distribution_from(a: &PhaseArgs) -> Result<SizeDistribution> {
+    let chosen = [
+        a.lognormal_median_um.is_some(),
+        a.r_eff_um.is_some(),
+        a.marshall_palmer_mm_h.is_some(),
+    ]
+    .iter()
+    .filter(|&&c| c)
+    .count();
+    if chosen != 1 {
+        bail!(
+            "choose exactly one size distribution: --lognormal-median-um with --sigma-g, \
+             --r-eff-um with --v-eff, or --marshall-palmer-mm-h"
+        );
+    }
+    let d = if let Some(median) = a.lognormal_median_um {
+        SizeDistribution::Lognormal {
+            median_radius_um: median,
+            sigma_g: a.sigma_g.context("--lognormal-median-um needs --sigma-g")?,
+        }
+    } else if let Some(r_eff) = a.r_eff_um {
+        let v_eff = a.v_eff.context("--r-eff-um needs --v-eff")?;
+        if a.lognormal {
+            SizeDistribution::lognormal_from_effective(r_eff, v_eff)?
+        } else {
+            SizeDistribution::Gamma {
+                r_eff_um: r_eff,
+                v_eff,
+            }
+        }
+    } else {
+        SizeDistribution::MarshallPalmer {
+            rain_rate_mm_h: a.marshall_palmer_mm_h.unwrap_or_default(),
+        }
+    };
+    Ok(d.validated()?)
+}
+
+pub fn run(a: PhaseArgs) -> Result<()> {
+    let wavelengths_nm = parse_list("wavelength (nm)", &a.wavelengths_nm, "[200, 1100] nm")?;
+    let distribution = distribution_from(&a)?;
+    let nodes = match (a.sizes, a.nodes_per_panel) {
+        (Some(sizes), nodes) => {
+            if sizes == 0 {
+                bail!("--sizes 0 is outside the allowed range [1, ∞)");
+            }
+            NodeCounts::Fixed {
+                sizes,
+                nodes_per_panel: nodes.unwrap_or(4).max(1),
+            }
+        }
+        (None, Some(_)) => bail!("--nodes-per-panel needs --sizes (fixed node counts)"),
+        (None, None) => {
+            if !(a.tolerance > 0.0 && a.tolerance < 1.0) {
+                bail!(
+                    "--tolerance {} is outside the allowed range (0, 1)",
+                    a.tolerance
+                );
+            }
+            NodeCounts::Adaptive {
+                tolerance: a.tolerance,
+                max_sizes: 1 << 14,
+            }
+        }
+    };
+    let (point_angles_deg, point_cosines) = match &a.angles_deg {
+        Some(text) => angles_from(Some(text.clone()), None)?,
+        None => (Vec::new(), Vec::new()),
+    };
+    let request = BulkRequest {
+        material: a.material.into(),
+        temperature_c: a.temperature_c,
+        distribution,
+        wavelengths_nm,
+        grid: ThetaGrid::new(a.angles_step_deg)?,
+        nodes,
+        tail_mass: a.tail_mass,
+        point_cosines,
+    };
+    let result = bulk_phase(&request)?;
+    if a.json {
+        let out = json!({
+            "material": request.material,
+            "temperature_c": request.temperature_c,
+            "distribution": request.distribution,
+            "theta_step_deg": request.grid.step_deg(),
+            "angles_deg": request.grid.thetas_deg(),
+            "point_angles_deg": point_angles_deg,
+            "node_counts": request.nodes,
+            "tail_mass": request.tail_mass,
+            "wavelengths": result,
+        });
+        println!("{}", serde_json::to_string(&out)?);
+    } else {
+        println!(
+            "{} {}, {} bins of {}°",
+            request.material.name(),
+            request.distribution.describe(),
+            request.grid.len(),
+            request.grid.step_deg()
+        );
+        println!(
+            "{:>8} {:>22} {:>13} {:>10} {:>9} {:>6} {:>6} {:>11}",
+            "λ (nm)", "m", "σ_ext (m²)", "albedo", "g", "sizes", "nodes", "energy-1"
+        );
+        for r in &result {
+            println!(
+                "{:>8} {:>22} {:>13.6e} {:>10.8} {:>9.6} {:>6} {:>6} {:>11.2e}",
+                r.wavelength_nm,
+                format!("{:.5}+{:.3e}i", r.m_re, r.m_im),
+                r.sigma_ext_m2,
+                r.albedo,
+                r.g,
+                r.mie().map_or(0, |m| m.sizes),
+                r.mie().map_or(0, |m| m.nodes_per_panel),
+                r.mie().map_or(f64::NAN, |m| m.energy_closure)
+            );
+        }
+        if !point_angles_deg.is_empty() {
+            println!("p̄ (1/sr) at the requested angles:");
+            for (k, theta) in point_angles_deg.iter().enumerate() {
+                let values: Vec<String> = result
+                    .iter()
+                    .map(|r| format!("{:>14.6e}", r.points[k]))
+                    .collect();
+                println!("{theta:>10.4}° {}", values.join(" "));
+            }
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,421 @@
+//! `photometeor plot`: pictures of a bake, each as PNG and SVG (plotters): the single-scattering
+//! phase function Ams_1 per channel on a log scale (with a reference bake overlaid), the Ams_n
+//! family, F_i against n, zooms on each field's optical features, sRGB colour strips of what an
+//! observer sees across 0–180° after n scatterings, and the Pareto front of a tradeoff run.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result, anyhow};
+use clap::Args as ClapArgs;
+use format::{FieldImage, read_field_exr, read_manifest};
+use plotters::coord::Shift;
+use plotters::prelude::*;
+
+#[derive(Debug, ClapArgs)]
+pub struct PlotArgs {
+    /// Bake directory (holding manifest.json); optional with --tradeoff.
+    dir: Option<PathBuf>,
+    /// Folder for the pictures (created if missing).
+    #[arg(long, default_value = "photometeor-plots")]
+    out: PathBuf,
+    /// A reference bake of the same scene, overlaid in black on the phase-function plots.
+    #[arg(long)]
+    reference: Option<PathBuf>,
+    /// tradeoff.json from `photometeor tradeoff`: plot its Pareto front (time against error).
+    #[arg(long)]
+    tradeoff: Option<PathBuf>,
+}
+
+const CHANNEL_COLOURS: [RGBColor; 3] = [RGBColor(214, 39, 40), RGBColor(44, 160, 44), BLUE_1];
+const BLUE_1: RGBColor = RGBColor(31, 119, 180);
+const FAMILY_COLOURS: [RGBColor; 6] = [
+    RGBColor(0, 0, 0),
+    RGBColor(31, 119, 180),
+    RGBColor(44, 160, 44),
+    RGBColor(255, 127, 14),
+    RGBColor(148, 103, 189),
+    RGBColor(214, 39, 40),
+];
+
+/// One curve of a plot: a line, or dots where `width` is 0.
+struct Series {
+    label: String,
+    colour: RGBColor,
+    width: u32,
+    points: Vec<(f64, f64)>,
+}
+
+/// A plot whose axes are each linear or logarithmic.
+struct LinePlot {
+    title: String,
+    x_label: String,
+    y_label: String,
+    x_range: (f64, f64),
+    log_x: bool,
+    log_y: bool,
+    series: Vec<Series>,
+}
+
+/// Runs `photometeor plot`.
+pub fn run(a: PlotArgs) -> Result<()> {
+    std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
+    let mut written = Vec::new();
+    if let Some(dir) = &a.dir {
+        written.extend(plot_bake(dir, a.reference.as_deref(), &a.out)?);
+    }
+    if let Some(t) = &a.tradeoff {
+        written.extend(plot_tradeoff(t, &a.out)?);
+    }
+    if a.dir.is_none() && a.tradeoff.is_none() {
+        anyhow::bail!("nothing to plot: give a bake directory, --tradeoff FILE, or both");
+    }
+    for w in &written {
+        println!("{}", w.display());
+    }
+    Ok(())
+}
+
+fn plot_bake(dir: &Path, reference: Option<&Path>, out: &Path) -> Result<Vec<PathBuf>> {
+    let manifest = read_manifest(dir)?;
+    let step = manifest.theta_step_deg;
+    let theta = |k: usize| k as f64 * step;
+    let mut written = Vec::new();
+    let mut forward = Vec::new();
+    for (i, f) in manifest.fields.iter().enumerate() {
+        let image = read_field_exr(dir.join(&f.file)).with_context(|| f.file.clone())?;
+        let reference_image = match reference {
+            Some(r) => Some(
+                read_field_exr(r.join(&f.file))
+                    .with_context(|| format!("reference {}", r.join(&f.file).display()))?,
+            ),
+            None => None,
+        };
+        let row_series =
+            |c: usize, r: usize, img: &FieldImage, a: f64, b: f64| -> Vec<(f64, f64)> {
+                img.row(c, r)
+                    .iter()
+                    .enumerate()
+                    .map(|(k, &v)| (theta(k), v))
+                    .filter(|&(t, v)| t >= a && t <= b && v > 0.0)
+                    .collect()
+            };
+        let phase = |a: f64, b: f64, title: &str| {
+            let mut series: Vec<Series> = (0..3)
+                .map(|c| Series {
+                    label: ["R", "G", "B"][c].to_string(),
+                    colour: CHANNEL_COLOURS[c],
+                    width: 2,
+                    points: row_series(c, 0, &image, a, b),
+                })
+                .collect();
+            if let Some(ri) = &reference_image {
+                for c in 0..3 {
+                    series.push(Series {
+                        label: if c == 0 {
+                            "reference bake".into()
+                        } else {
+                            String::new()
+                        },
+                        colour: RGBColor(0, 0, 0),
+                        width: 1,
+                        points: row_series(c, 0, ri, a, b),
+                    });
+                }
+            }
+            LinePlot {
+                title: format!("{} ({}): {title}", f.name, f.kind),
+                x_label: "scattering angle θ (°)".into(),
+                y_label: "Ams₁ = phase function (1/sr)".into(),
+                x_range: (a, b),
+                log_x: false,
+                log_y: true,
+                series,
+            }
+        };
+        written.extend(save(
+            &phase(0.0, 180.0, "single scattering, per channel"),
+            out,
+            &format!("{}_phase", f.name),
+        )?);
+        let zooms: &[(&str, &str, f64, f64)] = match f.kind.as_str() {
+            "rain" => &[("rainbows", "primary and secondary rainbows", 120.0, 145.0)],
+            "cloud" => &[
+                ("corona", "corona", 0.0, 10.0),
+                ("glory", "glory", 165.0, 180.0),
+                ("fogbow", "fogbow", 120.0, 160.0),
+            ],
+            "ice" => &[("halos", "22° and 46° halos", 15.0, 50.0)],
+            _ => &[("no_halos", "10–60° (no halos expected)", 10.0, 60.0)],
+        };
+        for (slug, title, a, b) in zooms {
+            written.extend(save(
+                &phase(*a, *b, title),
+                out,
+                &format!("{}_zoom_{slug}", f.name),
+            )?);
+        }
+        // The Ams_n family in the G channel.
+        let n_max = image.n_max();
+        let mut orders: Vec<usize> = [1, 2, 4, 8, 16]
+            .into_iter()
+            .filter(|&n| n < n_max)
+            .collect();
+        orders.push(n_max);
+        written.extend(save(
+            &LinePlot {
+                title: format!("{}: Ams_n, channel G", f.name),
+                x_label: "scattering angle θ (°)".into(),
+                y_label: "Ams_n (1/sr)".into(),
+                x_range: (0.0, 180.0),
+                log_x: false,
+                log_y: true,
+                series: orders
+                    .iter()
+                    .enumerate()
+                    .map(|(j, &n)| Series {
+                        label: format!("n = {n}"),
+                        colour: FAMILY_COLOURS[j % FAMILY_COLOURS.len()],
+                        width: 2,
+                        points: row_series(1, n - 1, &image, 0.0, 180.0),
+                    })
+                    .collect(),
+            },
+            out,
+            &format!("{}_ams_family", f.name),
+        )?);
+        for c in 0..3 {
+            forward.push(Series {
+                label: if c == 1 {
+                    f.name.clone()
+                } else {
+                    String::new()
+                },
+                colour: FAMILY_COLOURS[(i + 1) % FAMILY_COLOURS.len()],
+                width: if c == 1 { 2 } else { 1 },
+                points: image
+                    .forward_fractions(c)
+                    .iter()
+                    .enumerate()
+                    .map(|(n, &v)| ((n + 1) as f64, v))
+                    .collect(),
+            });
+        }
+        written.push(colour_strips(&image, step, out, &f.name)?);
+    }
+    let n_max = manifest.fields.iter().map(|f| f.n_max).max().unwrap_or(1);
+    written.extend(save(
+        &LinePlot {
+            title: "forward fraction F_n (R, G thick, B)".into(),
+            x_label: "scattering order n".into(),
+            y_label: "F_n".into(),
+            x_range: (1.0, n_max as f64),
+            log_x: false,
+            log_y: false,
+            series: forward,
+        },
+        out,
+        "forward_fraction",
+    )?);
+    Ok(written)
+}
+
+/// sRGB strips, one per order n ∈ {1, 2, 4, 8}: column k is Ams_n(θ_k) as linear sRGB, exposed
+/// so the 98th percentile of the largest channel over θ ≥ 30° maps to 1 (the
+/// forward lobe saturates; features at larger angles keep their contrast), tone-mapped by
+/// x/(1 + x)·2 (1 ↦ 1) and encoded with the sRGB transfer function.
+fn colour_strips(image: &FieldImage, step: f64, out: &Path, name: &str) -> Result<PathBuf> {
+    let k_len = image.angle_count();
+    let orders: Vec<usize> = [1, 2, 4, 8]
+        .into_iter()
+        .filter(|&n| n <= image.n_max())
+        .collect();
+    let strip_h = 40u32;
+    let gap = 6u32;
+    let path = out.join(format!("{name}_colours.png"));
+    let height = orders.len() as u32 * (strip_h + gap);
+    {
+        let root = BitMapBackend::new(&path, (k_len as u32, height)).into_drawing_area();
+        root.fill(&WHITE).map_err(|e| anyhow!("{e:?}"))?;
+        let k2 = ((30.0 / step).ceil() as usize).min(k_len - 1);
+        for (s, &n) in orders.iter().enumerate() {
+            let rows = [
+                image.row(0, n - 1),
+                image.row(1, n - 1),
+                image.row(2, n - 1),
+            ];
+            let mut peaks: Vec<f64> = (k2..k_len)
+                .map(|k| rows.iter().map(|r| r[k]).fold(0.0, f64::max))
+                .collect();
+            peaks.sort_by(f64::total_cmp);
+            let scale = peaks[(0.98 * (peaks.len() - 1) as f64) as usize].max(1e-30);
+            let y0 = s as u32 * (strip_h + gap);
+            for k in 0..k_len {
+                let rgb: Vec<u8> = rows
+                    .iter()
+                    .map(|r| {
+                        let x = (r[k] / scale).max(0.0);
+                        let t = (2.0 * x / (1.0 + x)).min(1.0);
+                        (255.0 * render::image::srgb_encode(t)).round() as u8
+                    })
+                    .collect();
+                let colour = RGBColor(rgb[0], rgb[1], rgb[2]);
+                for y in y0..y0 + strip_h {
+                    root.draw_pixel((k as i32, y as i32), &colour)
+                        .map_err(|e| anyhow!("{e:?}"))?;
+                }
+            }
+        }
+        root.present()
+            .map_err(|e| anyhow!("writing {}: {e:?}", path.display()))?;
+    }
+    Ok(path)
+}
+
+fn plot_tradeoff(path: &Path, out: &Path) -> Result<Vec<PathBuf>> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let v: serde_json::Value =
+        serde_json::from_str(&text).with_context(|| format!("parsing {}", path.display()))?;
+    let rows = v["rows"]
+        .as_array()
+        .ok_or_else(|| anyhow!("{}: no rows", path.display()))?;
+    let mut series = Vec::new();
+    let (mut x_min, mut x_max) = (f64::INFINITY, 1.0f64);
+    for (g, group) in ["drops", "crystals"].into_iter().enumerate() {
+        let mut pts: Vec<(f64, f64)> = rows
+            .iter()
+            .filter(|r| r["fields"] == group)
+            .filter_map(|r| Some((r["seconds"].as_f64()?, 100.0 * r["rms_rel_ams1"].as_f64()?)))
+            .collect();
+        if pts.is_empty() {
+            continue;
+        }
+        pts.sort_by(|a, b| a.0.total_cmp(&b.0));
+        x_min = x_min.min(pts[0].0 / 1.5);
+        x_max = x_max.max(pts.last().unwrap().0 * 1.2);
+        // Pareto front: points no faster-or-equal point beats in error.
+        let mut front = Vec::new();
+        let mut best = f64::INFINITY;
+        for &(t, e) in &pts {
+            if e < best {
+                front.push((t, e));
+                best = e;
+            }
+        }
+        series.push(Series {
+            label: format!("{group}: variants"),
+            colour: FAMILY_COLOURS[2 * g + 1],
+            width: 0,
+            points: pts,
+        });
+        series.push(Series {
+            label: format!("{group}: Pareto front"),
+            colour: FAMILY_COLOURS[2 * g + 1],
+            width: 2,
+            points: front,
+        });
+    }
+    save(
+        &LinePlot {
+            title: "speed/accuracy: bake time against rms error of Ams₁".into(),
+            x_label: "bake time on this machine (s)".into(),
+            y_label: "rms relative error of Ams₁, θ ≥ 1° (%)".into(),
+            x_range: (x_min.min(x_max / 10.0), x_max),
+            log_x: true,
+            log_y: true,
+            series,
+        },
+        out,
+        "tradeoff_pareto",
+    )
+}
+
+/// Writes `plot` as `<name>.png` and `<name>.svg` under `out`.
+fn save(plot: &LinePlot, out: &Path, name: &str) -> Result<Vec<PathBuf>> {
+    let png = out.join(format!("{name}.png"));
+    let svg = out.join(format!("{name}.svg"));
+    draw(
+        BitMapBackend::new(&png, (960, 540)).into_drawing_area(),
+        plot,
+    )
+    .with_context(|| format!("writing {}", png.display()))?;
+    draw(SVGBackend::new(&svg, (960, 540)).into_drawing_area(), plot)
+        .with_context(|| format!("writing {}", svg.display()))?;
+    Ok(vec![png, svg])
+}
+
+fn y_bounds(plot: &LinePlot) -> (f64, f64) {
+    let ys = plot
+        .series
+        .iter()
+        .flat_map(|s| s.points.iter().map(|p| p.1));
+    let (lo, hi) = ys.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), y| {
+        (a.min(y), b.max(y))
+    });
+    if !(lo.is_finite() && hi.is_finite()) {
+        return (1e-3, 1.0);
+    }
+    if plot.log_y {
+        (lo / 1.5, hi * 1.5)
+    } else {
+        let pad = 0.05 * (hi - lo).max(1e-9);
+        (lo - pad, hi + pad)
+    }
+}
+
+/// A coordinate on a log axis is drawn as its log10 on a linear one.
+fn axis(v: f64, log: bool) -> f64 {
+    if log { v.log10() } else { v }
+}
+
+fn draw<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, plot: &LinePlot) -> Result<()>
+where
+    DB::ErrorType: 'static,
+{
+    let err = |e: DrawingAreaErrorKind<DB::ErrorType>| anyhow!("{e:?}");
+    root.fill(&WHITE).map_err(err)?;
+    let (lx, ly) = (plot.log_x, plot.log_y);
+    let (y0, y1) = y_bounds(plot);
+    let (x0, x1) = plot.x_range;
+    let mut chart = ChartBuilder::on(&root)
+        .caption(&plot.title, ("sans-serif", 22))
+        .margin(12)
+        .x_label_area_size(45)
+        .y_label_area_size(70)
+        .build_cartesian_2d(axis(x0, lx)..axis(x1, lx), axis(y0, ly)..axis(y1, ly))
+        .map_err(err)?;
+    let decade = |v: &f64| format!("{:.1e}", 10f64.powf(*v));
+    let mut mesh = chart.configure_mesh();
+    mesh.x_desc(&plot.x_label).y_desc(&plot.y_label);
+    if lx {
+        mesh.x_label_formatter(&decade);
+    }
+    if ly {
+        mesh.y_label_formatter(&decade);
+    }
+    mesh.draw().map_err(err)?;
+    for s in &plot.series {
+        let points = s.points.iter().map(|&(x, y)| (axis(x, lx), axis(y, ly)));
+        let colour = s.colour;
+        let style = ShapeStyle::from(&colour).stroke_width(s.width.max(1));
+        let drawn = if s.width == 0 {
+            chart.draw_series(points.map(|p| Circle::new(p, 5, colour.filled())))
+        } else {
+            chart.draw_series(LineSeries::new(points, style))
+        }
+        .map_err(err)?;
+        if !s.label.is_empty() {
+            drawn
+                .label(&s.label)
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], style));
+        }
+    }
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .draw()
+        .map_err(err)?;
+    root.present().map_err(err)?;
+    Ok(())
+}

@@ -1,0 +1,229 @@
+//! `photometeor render`: bake what a scene's volumes use, then render it (Riley et al. 2004
+//! §4–5) on the GPU, or with the CPU reference.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::{Context, Result, anyhow, bail};
+use bake::{BakePlan, Quality, Scene};
+use clap::Args as ClapArgs;
+use render::riley::cpu;
+use render::riley::gpu::Renderer;
+use render::{Frame, RenderScene};
+use runtime::Tables;
+use runtime::gpu::{Gpu, GpuTables, TexelFormat};
+
+use crate::progress::Bars;
+
+/// The scene `photometeor render` uses when none is given: the rainbow in a rain shaft.
+pub const DEFAULT_RENDER_SCENE: &str = include_str!("../../data/scenes/rainbow.toml");
+
+#[derive(Debug, ClapArgs)]
+pub struct RenderArgs {
+    /// Scene file (TOML: [scene], [[field]], [render], [camera], [sun], [sky], [[volume]]; see
+    /// data/scenes/). Default: the embedded rainbow scene (data/scenes/rainbow.toml).
+    scene: Option<PathBuf>,
+    /// HDR output: OpenEXR with R, G, B = linear radiance per unit solar irradiance outside
+    /// the atmosphere (1/sr) and A = the volumes' transparency.
+    #[arg(long)]
+    out: PathBuf,
+    /// Also write a tone-mapped sRGB PNG.
+    #[arg(long)]
+    png: Option<PathBuf>,
+    /// Image width in pixels (overrides [render] width).
+    #[arg(long)]
+    width: Option<usize>,
+    /// Image height in pixels (overrides [render] height).
+    #[arg(long)]
+    height: Option<usize>,
+    /// Half-angle slices through the volumes (overrides [render] slices).
+    #[arg(long)]
+    slices: Option<usize>,
+    /// Light-buffer texels per side (overrides [render] light_resolution).
+    #[arg(long)]
+    light_resolution: Option<usize>,
+    /// PNG exposure (multiplies radiance before 1 − e^{−x}); default: the scene's, or automatic.
+    #[arg(long)]
+    exposure: Option<f64>,
+    /// Bake directory for the scene's tables (the fields its volumes use are baked or taken
+    /// from the cache in DIR/.cache; other fields a bake there has are kept). Default: a
+    /// directory per scene under the user's cache directory ($XDG_CACHE_HOME/photometeor or
+    /// ~/.cache/photometeor).
+    #[arg(long)]
+    tables: Option<PathBuf>,
+    /// The render model: `riley` (Riley et al. 2004's half-angle slicing with light and eye
+    /// buffers, the multiple-scattering tables for the angular spread of sunlight).
+    #[arg(long, default_value = "riley", value_parser = ["riley"])]
+    model: String,
+    /// Accuracy preset of the bake, overriding the scene's.
+    #[arg(long, value_parser = ["draft", "standard", "reference"])]
+    quality: Option<String>,
+    /// Render with the CPU reference instead of the GPU (slow; no adapter needed).
+    #[arg(long)]
+    cpu: bool,
+    /// No progress output.
+    #[arg(long)]
+    quiet: bool,
+}
+
+/// Reads the scene, bakes the fields its volumes use, loads and checks them, builds the frame.
+/// `adjust` overrides the scene's render settings; the result is checked before the bake.
+pub fn prepare(
+    scene_path: Option<&std::path::Path>,
+    tables_dir: Option<PathBuf>,
+    quality: Option<&str>,
+    quiet: bool,
+    adjust: impl FnOnce(&mut RenderScene),
+) -> Result<(RenderScene, Tables)> {
+    let (text, origin, base) = match scene_path {
+        Some(p) => (
+            std::fs::read_to_string(p).with_context(|| format!("reading scene {}", p.display()))?,
+            p.display().to_string(),
+            p.parent().map(PathBuf::from).unwrap_or_default(),
+        ),
+        None => (
+            DEFAULT_RENDER_SCENE.to_string(),
+            "default render scene".to_string(),
+            PathBuf::from("."),
+        ),
+    };
+    let mut scene = Scene::parse(&text, &origin)?;
+    let mut render = RenderScene::parse(&text, &origin, &base).map_err(|e| anyhow!(e))?;
+    adjust(&mut render);
+    render.check().map_err(|e| anyhow!("{origin}: {e}"))?;
+    let used = render.fields();
+    for name in &used {
+        if !scene.fields.iter().any(|f| &f.name == name) {
+            let have: Vec<&str> = scene.fields.iter().map(|f| f.name.as_str()).collect();
+            bail!(
+                "{origin}: a [[volume]] uses field {name:?}; the scene's [[field]]s are {have:?}"
+            );
+        }
+    }
+    // Model only what the scene requires.
+    scene.fields.retain(|f| used.contains(&f.name));
+    let quality = match quality {
+        Some(q) => Quality::parse(q).context("quality preset")?,
+        None => scene.quality,
+    };
+    let dir = match tables_dir {
+        Some(d) => d,
+        None => default_tables_dir(&scene.name)?,
+    };
+    let mut plan = BakePlan::for_preset(scene, dir.clone(), quality);
+    // A render bakes only what its volumes use and never removes another field's tables.
+    plan.prune = false;
+    bake::run(&plan, &Bars::new(quiet))?;
+    let names: Vec<&str> = used.iter().map(String::as_str).collect();
+    let tables = Tables::open_fields(&dir, Some(&names))?;
+    Ok((render, tables))
+}
+
+/// Runs `photometeor render`.
+pub fn run(a: RenderArgs) -> Result<()> {
+    let (render, tables) = prepare(
+        a.scene.as_deref(),
+        a.tables,
+        a.quality.as_deref(),
+        a.quiet,
+        |r| {
+            r.width = a.width.unwrap_or(r.width);
+            r.height = a.height.unwrap_or(r.height);
+            r.slices = a.slices.unwrap_or(r.slices);
+            r.light_resolution = a.light_resolution.unwrap_or(r.light_resolution);
+        },
+    )?;
+    let started = Instant::now();
+    let frame: Frame = render.frame(&tables).map_err(|e| anyhow!(e))?;
+    let raster = started.elapsed().as_secs_f64();
+    let image = if a.cpu {
+        let t = Instant::now();
+        let image = cpu::render(&tables, &frame)?;
+        if !a.quiet {
+            eprintln!(
+                "CPU reference: {}×{}, {} slices, light buffer {}²: {:.2} s (grid {:?} built in {raster:.2} s)",
+                frame.width,
+                frame.height,
+                frame.slices,
+                frame.light_resolution,
+                t.elapsed().as_secs_f64(),
+                frame.grid.dims
+            );
+        }
+        image
+    } else {
+        let gpu = Gpu::new().context(
+            "no GPU adapter: install a driver (on Debian, mesa-vulkan-drivers gives lavapipe, a \
+             software Vulkan) or render with --cpu",
+        )?;
+        let gpu_tables = GpuTables::upload(&gpu, &tables, TexelFormat::Auto)?;
+        let renderer = Renderer::new(&gpu, &gpu_tables);
+        let (image, t) = renderer.render(&gpu, &tables, &gpu_tables, &frame)?;
+        if !a.quiet {
+            eprintln!(
+                "{}: {}×{}, {} slices, light buffer {}²: tables upload {:.1} ms, grid {:?} built \
+                 {raster:.2} s and uploaded {:.1} ms, frame {:.1} ms, readback {:.1} ms",
+                gpu.describe(),
+                frame.width,
+                frame.height,
+                frame.slices,
+                frame.light_resolution,
+                gpu_tables.upload_seconds * 1e3,
+                frame.grid.dims,
+                t.upload * 1e3,
+                t.frame * 1e3,
+                t.readback * 1e3
+            );
+        }
+        image
+    };
+    if image.rgb.iter().flatten().any(|v| !v.is_finite()) {
+        bail!("the render produced a non-finite pixel; nothing written");
+    }
+    image.write_exr(&a.out)?;
+    if let Some(png) = &a.png {
+        let exposure = a
+            .exposure
+            .or(render.exposure)
+            .unwrap_or_else(|| image.auto_exposure());
+        image.write_png(png, exposure)?;
+    }
+    Ok(())
+}
+
+/// The bake directory of a scene when `--tables` is not given: under the user's cache directory
+/// (`$XDG_CACHE_HOME/photometeor/tables`, else `~/.cache/photometeor/tables`, else the system's
+/// temporary directory), named by the scene's name reduced to `[A-Za-z0-9_-]` plus a hash of the
+/// full name, so that no name can leave that directory or collide with another.
+pub fn default_tables_dir(scene_name: &str) -> Result<PathBuf> {
+    let base = std::env::var_os("XDG_CACHE_HOME")
+        .filter(|v| !v.is_empty())
+        .map(PathBuf::from)
+        .or_else(|| {
+            std::env::var_os("HOME")
+                .filter(|v| !v.is_empty())
+                .map(|h| PathBuf::from(h).join(".cache"))
+        })
+        .unwrap_or_else(std::env::temp_dir);
+    let safe: String = scene_name
+        .chars()
+        .take(64)
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '_' || c == '-' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect();
+    // FNV-1a of the full name: stable across runs and platforms.
+    let hash = scene_name.bytes().fold(0xcbf2_9ce4_8422_2325u64, |h, b| {
+        (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3)
+    });
+    let dir = base
+        .join("photometeor")
+        .join("tables")
+        .join(format!("{safe}-{:08x}", hash as u32));
+    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+    Ok(dir)
+}

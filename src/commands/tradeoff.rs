@@ -1,0 +1,263 @@
+//! `photometeor tradeoff`: the measured speed/accuracy trade. Every knob of the bake is varied
+//! alone from the `standard` preset, each variant is baked from scratch and timed, and its
+//! tables are compared with a `reference`-quality bake of the same scene: rms and max relative
+//! error of Ams_1 and of all rows (θ ≥ 1°), the largest |ΔF_i|, and the largest shift of a
+//! validated peak angle (rainbows, glory/corona ring, halos). Drop knobs are varied on the
+//! scene's sphere fields and the ray count on its crystal fields, so no variant pays for work
+//! its knob does not touch.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{Context, Result, bail};
+use bake::compare::{ChannelError, compare};
+use bake::scene::SpectralMode as Spectral;
+use bake::validate::validate;
+use bake::{BakePlan, FieldKind, Knobs, Quality, Scene, Silent};
+use clap::Args as ClapArgs;
+use serde::Serialize;
+
+#[derive(Debug, ClapArgs)]
+pub struct TradeoffArgs {
+    /// Scene file (TOML); default: the embedded default scene.
+    scene: Option<PathBuf>,
+    /// Working directory: one bake per variant, the reference bake and tradeoff.json.
+    #[arg(long, default_value = "photometeor-tradeoff")]
+    out: PathBuf,
+    /// Use this existing reference-quality bake of the same scene instead of baking one.
+    #[arg(long)]
+    reference: Option<PathBuf>,
+    /// Fewer variants (one step each way from standard) for a quick look.
+    #[arg(long)]
+    quick: bool,
+}
+
+/// One measured variant.
+#[derive(Debug, Clone, Serialize)]
+pub struct Row {
+    /// Which knob was varied ("preset" for the presets themselves).
+    pub knob: String,
+    pub value: String,
+    /// "drops" or "crystals": the fields this variant baked.
+    pub fields: &'static str,
+    pub seconds: f64,
+    pub rms_rel_ams1: f64,
+    pub max_rel_ams1: f64,
+    pub rms_rel_all: f64,
+    pub max_abs_forward_fraction: f64,
+    /// Largest |Δ| of a validated peak angle against the reference (degrees); None without one.
+    pub max_peak_shift_deg: Option<f64>,
+}
+
+struct Variant {
+    knob: &'static str,
+    value: String,
+    drops: bool,
+    knobs: Knobs,
+    wavelengths: Option<usize>,
+}
+
+/// Runs `photometeor tradeoff`.
+pub fn run(a: TradeoffArgs) -> Result<()> {
+    let scene = Scene::from_file_or_default(a.scene.as_deref())?;
+    std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
+    let reference = match &a.reference {
+        Some(r) => r.clone(),
+        None => {
+            let dir = a.out.join("reference");
+            eprintln!("tradeoff: baking the reference ({})", dir.display());
+            bake_variant(&scene, &dir, Quality::Reference, Quality::Reference.knobs())?;
+            dir
+        }
+    };
+    let reference_checks = validate(&reference)?;
+
+    let is_drop = |k: FieldKind| matches!(k, FieldKind::Cloud | FieldKind::Rain);
+    let has = |drops: bool| scene.fields.iter().any(|f| is_drop(f.kind) == drops);
+    let standard = Quality::Standard.knobs();
+    let mut variants = Vec::new();
+    for drops in [true, false] {
+        if !has(drops) {
+            continue;
+        }
+        for q in [Quality::Draft, Quality::Standard] {
+            variants.push(Variant {
+                knob: "preset",
+                value: format!("{q:?}").to_lowercase(),
+                drops,
+                knobs: q.knobs(),
+                wavelengths: None,
+            });
+        }
+    }
+    let pick = |full: Vec<f64>, quick: Vec<f64>| if a.quick { quick } else { full };
+    if has(true) {
+        for s in pick(vec![32.0, 100.0, 1600.0], vec![100.0]) {
+            variants.push(Variant {
+                knob: "sizes per λ",
+                value: format!("{s}"),
+                drops: true,
+                knobs: Knobs {
+                    sizes: s as usize,
+                    ..standard
+                },
+                wavelengths: None,
+            });
+        }
+        for n in pick(vec![1.0, 4.0], vec![1.0]) {
+            variants.push(Variant {
+                knob: "nodes per angular panel",
+                value: format!("{n}"),
+                drops: true,
+                knobs: Knobs {
+                    nodes_per_panel: n as usize,
+                    ..standard
+                },
+                wavelengths: None,
+            });
+        }
+        for b in pick(vec![0.25, 1.0], vec![1.0]) {
+            variants.push(Variant {
+                knob: "peak blur (bins)",
+                value: format!("{b}"),
+                drops: true,
+                knobs: Knobs {
+                    blur_bins: b,
+                    ..standard
+                },
+                wavelengths: None,
+            });
+        }
+        if matches!(scene.spectral, Spectral::Spectral { .. }) {
+            for w in pick(vec![8.0, 16.0], vec![16.0]) {
+                variants.push(Variant {
+                    knob: "wavelengths",
+                    value: format!("{w}"),
+                    drops: true,
+                    knobs: standard,
+                    wavelengths: Some(w as usize),
+                });
+            }
+        }
+    }
+    if has(false) {
+        for r in pick(vec![1.5e5, 2.4e6], vec![1.5e5]) {
+            variants.push(Variant {
+                knob: "rays per λ",
+                value: format!("{r:e}"),
+                drops: false,
+                knobs: Knobs {
+                    rays: r as u64,
+                    ..standard
+                },
+                wavelengths: None,
+            });
+        }
+    }
+
+    let mut rows = Vec::new();
+    for (i, v) in variants.iter().enumerate() {
+        let mut s = scene.clone();
+        s.fields.retain(|f| is_drop(f.kind) == v.drops);
+        if let (Some(w), Spectral::Spectral { min_nm, max_nm, .. }) = (v.wavelengths, s.spectral) {
+            s.spectral = Spectral::Spectral {
+                count: w,
+                min_nm,
+                max_nm,
+            };
+        }
+        let dir = a.out.join(format!("variant-{i:02}"));
+        eprintln!(
+            "tradeoff: {} = {} on {} ({}/{})",
+            v.knob,
+            v.value,
+            if v.drops { "drops" } else { "crystals" },
+            i + 1,
+            variants.len()
+        );
+        let seconds = bake_variant(&s, &dir, Quality::Standard, v.knobs)?;
+        let cmp = compare(&dir, &reference, 1.0)?;
+        let worst = |f: &dyn Fn(&ChannelError) -> f64| cmp.fields.iter().map(f).fold(0.0, f64::max);
+        let checks = validate(&dir)?;
+        let shift = checks
+            .checks
+            .iter()
+            .filter(|c| c.unit == "deg" && c.expected.is_some())
+            .filter_map(|c| {
+                let r = reference_checks
+                    .checks
+                    .iter()
+                    .find(|r| r.field == c.field && r.channel == c.channel && r.name == c.name)?;
+                Some((c.measured? - r.measured?).abs())
+            })
+            .reduce(f64::max);
+        rows.push(Row {
+            knob: v.knob.into(),
+            value: v.value.clone(),
+            fields: if v.drops { "drops" } else { "crystals" },
+            seconds,
+            rms_rel_ams1: worst(&|e| e.rms_rel_ams1),
+            max_rel_ams1: worst(&|e| e.max_rel_ams1),
+            rms_rel_all: worst(&|e| e.rms_rel_all),
+            max_abs_forward_fraction: worst(&|e| e.max_abs_forward_fraction),
+            max_peak_shift_deg: shift,
+        });
+    }
+    print_table(&rows);
+    let json = serde_json::json!({
+        "scene": scene.name,
+        "reference": reference.display().to_string(),
+        "standard_knobs": standard,
+        "rows": rows,
+    });
+    let path = a.out.join("tradeoff.json");
+    std::fs::write(&path, serde_json::to_string_pretty(&json)?)
+        .with_context(|| format!("writing {}", path.display()))?;
+    eprintln!(
+        "tradeoff: wrote {} (plot it with `photometeor plot --tradeoff`)",
+        path.display()
+    );
+    Ok(())
+}
+
+fn bake_variant(scene: &Scene, dir: &Path, quality: Quality, knobs: Knobs) -> Result<f64> {
+    if dir.exists() {
+        std::fs::remove_dir_all(dir).with_context(|| format!("clearing {}", dir.display()))?;
+    }
+    let plan = BakePlan {
+        scene: scene.clone(),
+        out_dir: dir.to_path_buf(),
+        quality,
+        knobs,
+        prune: true,
+    };
+    let start = Instant::now();
+    let report = bake::run(&plan, &Silent)?;
+    if report.computed.len() != scene.fields.len() {
+        bail!("{}: fields were read from a cache", dir.display());
+    }
+    Ok(start.elapsed().as_secs_f64())
+}
+
+/// The table as Markdown (docs/accuracy.md takes it as printed).
+pub fn print_table(rows: &[Row]) {
+    println!(
+        "| fields | knob | value | time (s) | rms Ams_1 | max Ams_1 | rms all n | max ΔF_i | max peak shift (°) |"
+    );
+    println!("|---|---|---|---|---|---|---|---|---|");
+    for r in rows {
+        println!(
+            "| {} | {} | {} | {:.1} | {:.2} % | {:.1} % | {:.2} % | {:.1e} | {} |",
+            r.fields,
+            r.knob,
+            r.value,
+            r.seconds,
+            100.0 * r.rms_rel_ams1,
+            100.0 * r.max_rel_ams1,
+            100.0 * r.rms_rel_all,
+            r.max_abs_forward_fraction,
+            r.max_peak_shift_deg
+                .map_or("—".to_string(), |s| format!("{s:.3}"))
+        );
+    }
+}

@@ -1,0 +1,48 @@
+//! Progress bars for long bakes: drawn on stderr with indicatif, hidden with `--quiet` or when
+//! the `CI` environment variable is set (logs are not terminals).
+
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+
+/// One bar per field.
+pub struct Bars {
+    hidden: bool,
+}
+
+impl Bars {
+    /// Bars unless `quiet` or in CI.
+    pub fn new(quiet: bool) -> Self {
+        Self {
+            hidden: quiet || std::env::var_os("CI").is_some(),
+        }
+    }
+}
+
+struct Bar(ProgressBar);
+
+impl bake::progress::FieldProgress for Bar {
+    fn message(&self, text: &str) {
+        self.0.set_message(text.to_string());
+    }
+    fn advance(&self) {
+        self.0.inc(1);
+    }
+    fn finish(&self) {
+        self.0.finish_with_message("done");
+    }
+}
+
+impl bake::Progress for Bars {
+    fn field(&self, name: &str, steps: u64) -> Box<dyn bake::progress::FieldProgress + '_> {
+        if self.hidden {
+            return Box::new(Bar(ProgressBar::hidden()));
+        }
+        let p = ProgressBar::with_draw_target(Some(steps), ProgressDrawTarget::stderr());
+        p.set_style(
+            ProgressStyle::with_template("{prefix:>8} [{bar:30}] {pos}/{len} {msg} ({elapsed})")
+                .expect("valid template")
+                .progress_chars("=> "),
+        );
+        p.set_prefix(name.to_string());
+        Box::new(Bar(p))
+    }
+}

@@ -1,0 +1,517 @@
+//! `photometeor bake`: scene → plan → per-field phase functions (Mie or the crystal tracer) →
+//! RGB → Ams_n, F_n → EXR + manifest, with a content-addressed [`crate::cache`] so an unchanged
+//! field is not recomputed.
+//!
+//! The plan ([`BakePlan`]) is plain data made from the validated scene and the caller's options;
+//! nothing touches the output directory until every field is computed.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use format::{FieldEntry, FieldImage, Manifest, PerChannel, write_field_exr, write_manifest};
+use grid::ThetaGrid;
+use mie::PhaseFunction;
+use mie::crystal::crystal_phase;
+use mie::ensemble::bulk_at;
+use ndarray::{Array2, Array3, s};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use tables::ams::{AmsMixture, AmsSeries};
+use tables::spectral::ChannelWeights;
+
+use crate::cache::{self, Lookup, content_hash};
+use crate::error::BakeError;
+use crate::plan::{BakePlan, Knobs};
+use crate::progress::Progress;
+use crate::scene::{Field, Quality};
+
+/// n_iso is searched up to this order.
+const N_ISO_CAP: usize = 100_000;
+/// The ε of the n_iso report, in the order of [`format::manifest::N_ISOTROPIC_EPSILONS`].
+const N_ISO_EPSILONS: [f64; 3] = [1e-2, 1e-4, 1e-6];
+
+/// The per-channel numbers of a field the manifest carries beside its EXR.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FieldSummary {
+    /// Per channel and row: the energy of Ams_n held by the exact forward delta.
+    pub forward_peak_fraction: [Vec<f64>; 3],
+    /// g = ⟨cos θ⟩ per channel.
+    pub g: [f64; 3],
+    /// σ_ext per particle (m²) per channel.
+    pub sigma_ext_m2: [f64; 3],
+    /// Single-scattering albedo per channel.
+    pub albedo: [f64; 3],
+    /// `n_isotropic[e][c]`: n_iso(ε_e) of channel c.
+    pub n_isotropic: [[Option<u32>; 3]; 3],
+    /// Highest Legendre degree used.
+    pub l_max: usize,
+    /// Seconds the field took to compute.
+    pub seconds: f64,
+}
+
+/// One field's bake: its RGB tables and their summary.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BakedField {
+    /// Ams_1..Ams_N and F_1..F_N per channel, as written to the field's EXR.
+    pub image: FieldImage,
+    /// The numbers the manifest carries.
+    pub summary: FieldSummary,
+}
+
+/// The cache record of a field: the tables flattened, and the summary.
+#[derive(Serialize, Deserialize)]
+struct Record {
+    n_max: usize,
+    angle_count: usize,
+    ams: Vec<f64>,
+    forward_fraction: Vec<f64>,
+    summary: FieldSummary,
+}
+
+impl Record {
+    fn of(field: &BakedField) -> Self {
+        Self {
+            n_max: field.image.n_max(),
+            angle_count: field.image.angle_count(),
+            ams: field.image.ams.iter().copied().collect(),
+            forward_fraction: field.image.forward_fraction.iter().copied().collect(),
+            summary: field.summary.clone(),
+        }
+    }
+
+    fn into_field(self, name: &str, theta_step_deg: f64) -> Option<BakedField> {
+        let ams = Array3::from_shape_vec((3, self.n_max, self.angle_count), self.ams).ok()?;
+        let forward_fraction =
+            Array2::from_shape_vec((3, self.n_max), self.forward_fraction).ok()?;
+        Some(BakedField {
+            image: FieldImage {
+                field: name.to_string(),
+                theta_step_deg,
+                ams,
+                forward_fraction,
+                extra_layers: Vec::new(),
+            },
+            summary: self.summary,
+        })
+    }
+}
+
+/// Summary of a bake.
+#[derive(Debug, Clone, Serialize)]
+pub struct BakeReport {
+    /// The scene's name.
+    pub scene: String,
+    /// The bake directory.
+    pub out_dir: PathBuf,
+    /// The preset.
+    pub quality: Quality,
+    /// Fields computed in this run.
+    pub computed: Vec<String>,
+    /// Fields read from the cache.
+    pub cached: Vec<String>,
+    /// Cache records that could not be used (file and why); their fields were recomputed.
+    pub rejected_cache: Vec<String>,
+    /// Wall-clock seconds.
+    pub seconds: f64,
+    /// Peak resident memory of this process (Linux `VmHWM`), MiB.
+    pub peak_rss_mib: Option<f64>,
+}
+
+/// Peak resident set size of this process in MiB, where the OS reports it (Linux).
+pub fn peak_rss_mib() -> Option<f64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kib: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kib / 1024.0)
+}
+
+/// Runs a plan. Fields whose inputs are unchanged are read from the cache.
+pub fn run(plan: &BakePlan, progress: &dyn Progress) -> Result<BakeReport, BakeError> {
+    let start = Instant::now();
+    let weights = ChannelWeights::new(&plan.scene.spectral)?;
+    let grid = ThetaGrid::new(plan.scene.theta_step_deg)?;
+    let mut report = BakeReport {
+        scene: plan.scene.name.clone(),
+        out_dir: plan.out_dir.clone(),
+        quality: plan.quality,
+        computed: Vec::new(),
+        cached: Vec::new(),
+        rejected_cache: Vec::new(),
+        seconds: 0.0,
+        peak_rss_mib: None,
+    };
+    // Compute (or read from the cache) every field first; only then touch the tables, so a
+    // failing field leaves the previous bake as it was.
+    let mut done = Vec::new();
+    let mut fresh = Vec::new();
+    for field in &plan.scene.fields {
+        let hash = content_hash(plan, field);
+        let cache_file = cache::record_path(&plan.out_dir, &hash);
+        let cached = match cache::read::<Record>(&cache_file, &hash) {
+            Lookup::Hit(r) => r.into_field(&field.name, plan.scene.theta_step_deg),
+            Lookup::Missing => None,
+            Lookup::Rejected(why) => {
+                report
+                    .rejected_cache
+                    .push(format!("{}: {why}", cache_file.display()));
+                None
+            }
+        };
+        let result = match cached {
+            Some(r) => {
+                report.cached.push(field.name.clone());
+                r
+            }
+            None => {
+                let r = compute_field(plan, field, &weights, &grid, progress)?;
+                report.computed.push(field.name.clone());
+                fresh.push((done.len(), cache_file));
+                r
+            }
+        };
+        done.push((field, hash, result));
+    }
+    // Before anything is written: the previous bake, and which of its fields this one keeps.
+    let previous = format::read_manifest(&plan.out_dir).ok();
+    let channels = weights.channel_definitions();
+    let mut kept: Vec<FieldEntry> = Vec::new();
+    if !plan.prune
+        && let Some(previous) = &previous
+    {
+        // Keep the other fields of a compatible previous bake (same grid and channels).
+        let compatible =
+            previous.theta_step_deg == plan.scene.theta_step_deg && previous.channels == channels;
+        let ours = |old: &FieldEntry| {
+            plan.scene
+                .fields
+                .iter()
+                .any(|f| f.name == old.name || format!("{}.exr", f.name) == old.file)
+        };
+        let others: Vec<&FieldEntry> = previous.fields.iter().filter(|o| !ours(o)).collect();
+        if !others.is_empty() && !compatible {
+            return Err(BakeError::Incompatible(format!(
+                "{} holds a bake on another grid or spectrum with fields {:?}, which this bake \
+                 would orphan; bake into another directory",
+                plan.out_dir.display(),
+                others.iter().map(|o| o.name.as_str()).collect::<Vec<_>>()
+            )));
+        }
+        kept = others.into_iter().cloned().collect();
+    }
+    let cache_dir = plan.out_dir.join(".cache");
+    std::fs::create_dir_all(&cache_dir).map_err(|source| BakeError::Io {
+        path: cache_dir.clone(),
+        op: "creating",
+        source,
+    })?;
+    for (i, cache_file) in &fresh {
+        let (_, hash, result) = &done[*i];
+        cache::write(cache_file, hash, &Record::of(result))?;
+    }
+    let mut entries = Vec::new();
+    for (field, hash, result) in done {
+        let file = format!("{}.exr", field.name);
+        write_field_exr(plan.out_dir.join(&file), &result.image)?;
+        entries.push(field_entry(plan, field, &result, file, hash));
+    }
+    entries.extend(kept);
+    let manifest = Manifest {
+        schema: format::manifest::MANIFEST_SCHEMA_VERSION,
+        tool: "photometeor".into(),
+        tool_version: env!("CARGO_PKG_VERSION").into(),
+        theta_step_deg: plan.scene.theta_step_deg,
+        angle_count: grid.len(),
+        channels,
+        fields: entries,
+    };
+    write_manifest(&plan.out_dir, &manifest)?;
+    // Tables of fields the scene no longer has would be read as current: remove them.
+    if let Some(previous) = previous {
+        for old in previous.fields {
+            let stale = !manifest.fields.iter().any(|f| f.file == old.file);
+            let plain_name = std::path::Path::new(&old.file).file_name() == Some(old.file.as_ref());
+            if stale && plain_name {
+                let _ = std::fs::remove_file(plan.out_dir.join(&old.file));
+            }
+        }
+    }
+    report.seconds = start.elapsed().as_secs_f64();
+    report.peak_rss_mib = peak_rss_mib();
+    Ok(report)
+}
+
+fn field_entry(
+    plan: &BakePlan,
+    field: &Field,
+    r: &BakedField,
+    file: String,
+    hash: String,
+) -> FieldEntry {
+    let s = &r.summary;
+    let n_iso = |c: usize| {
+        format::manifest::N_ISOTROPIC_EPSILONS
+            .iter()
+            .enumerate()
+            .map(|(e, key)| (key.to_string(), s.n_isotropic[e][c]))
+            .collect()
+    };
+    let forward_fraction: [Vec<f64>; 3] =
+        std::array::from_fn(|c| r.image.forward_fractions(c).to_vec());
+    FieldEntry {
+        name: field.name.clone(),
+        file,
+        kind: format!("{:?}", field.kind).to_lowercase(),
+        n_max: plan.scene.n_max,
+        forward_fraction: PerChannel::from_array(forward_fraction),
+        forward_peak_fraction: PerChannel::from_array(s.forward_peak_fraction.clone()),
+        g: PerChannel::from_array(s.g),
+        sigma_ext_m2: PerChannel::from_array(s.sigma_ext_m2),
+        albedo: PerChannel::from_array(s.albedo),
+        n_isotropic: PerChannel::from_array([n_iso(0), n_iso(1), n_iso(2)]),
+        microphysics: serde_json::to_value(field).unwrap_or_default(),
+        quality: serde_json::json!({ "preset": plan.quality, "knobs": plan.knobs, "legendre_l_max": s.l_max }),
+        content_hash: hash,
+    }
+}
+
+/// The phase function of `field` at every wavelength of `weights`, in order.
+pub fn phase_functions(
+    plan: &BakePlan,
+    field: &Field,
+    weights: &ChannelWeights,
+    grid: ThetaGrid,
+    advance: &dyn Fn(),
+) -> Result<Vec<PhaseFunction>, BakeError> {
+    let knobs = plan.knobs;
+    let lambdas = &weights.wavelengths_nm;
+    let j_len = lambdas.len();
+    let mie_error = |context: String| {
+        let name = field.name.clone();
+        move |source| BakeError::Mie {
+            field: name,
+            context,
+            source,
+        }
+    };
+    let mut per_wavelength = Vec::with_capacity(j_len);
+    match (field.distribution, field.crystal) {
+        (Some(distribution), _) => {
+            for (j, &lambda) in lambdas.iter().enumerate() {
+                let m = field
+                    .material
+                    .refractive_index(lambda, field.temperature_c)
+                    .map_err(mie_error(format!(" at {lambda} nm")))?;
+                let q = knobs.size_quadrature(&distribution, j, j_len);
+                let nodes = nodes_per_bin(&distribution, lambda, knobs, grid.step_deg());
+                let context = format!(
+                    " at {lambda} nm (radii {:.3}–{:.0} µm after truncating {:e} of the mass)",
+                    q.radius_um.first().copied().unwrap_or(f64::NAN),
+                    q.radius_um.last().copied().unwrap_or(f64::NAN),
+                    knobs.tail_mass
+                );
+                per_wavelength
+                    .push(bulk_at(m, lambda, &q, grid, nodes, &[]).map_err(mie_error(context))?);
+                advance();
+            }
+        }
+        (None, Some(crystal)) => {
+            let rays = ray_allocation(weights, knobs.rays);
+            for (j, &lambda) in lambdas.iter().enumerate() {
+                // Each wavelength its own random stream: a channel averages J independent traces.
+                let seed = CRYSTAL_SEED ^ (j as u64);
+                let p = crystal_phase(&crystal, lambda, grid, rays[j], seed)
+                    .map_err(mie_error(format!(" at {lambda} nm")))?;
+                per_wavelength.push(p);
+                advance();
+            }
+        }
+        (None, None) => {
+            return Err(BakeError::Incompatible(format!(
+                "field {:?} has neither sizes nor crystals",
+                field.name
+            )));
+        }
+    }
+    Ok(per_wavelength)
+}
+
+/// Phase functions per wavelength → RGB → Ams_n per channel.
+pub fn compute_field(
+    plan: &BakePlan,
+    field: &Field,
+    weights: &ChannelWeights,
+    grid: &ThetaGrid,
+    progress: &dyn Progress,
+) -> Result<BakedField, BakeError> {
+    let start = Instant::now();
+    let knobs = plan.knobs;
+    let lambdas = &weights.wavelengths_nm;
+    let bar = progress.field(&field.name, lambdas.len() as u64 + 3);
+    bar.message(if field.crystal.is_some() {
+        "ray tracing per wavelength"
+    } else {
+        "Mie per wavelength"
+    });
+    let per_wavelength = phase_functions(plan, field, weights, *grid, &|| bar.advance())?;
+    // Channel c mixes wavelength j with a_cj = w_cj σ_sca,j / Σ_j w_cj σ_sca,j (the scattered
+    // light's spectrum); every row is Σ_j a_cj Ams_n[P_j], light keeping its wavelength.
+    bar.message("Legendre series per wavelength");
+    let series: Vec<AmsSeries> = per_wavelength
+        .par_iter()
+        .map(|p| AmsSeries::from_phase(p, knobs.blur_bins))
+        .collect();
+    bar.message("RGB and Ams_n");
+    let orders: Vec<usize> = (1..=plan.scene.n_max).collect();
+    let channels: Vec<ChannelResult> = (0..3)
+        .into_par_iter()
+        .map(|c| {
+            let r = channel_tables(&weights.weights[c], &per_wavelength, &series, &orders);
+            bar.advance();
+            r
+        })
+        .collect::<Result<_, _>>()
+        .map_err(|source| BakeError::Mixture {
+            field: field.name.clone(),
+            source,
+        })?;
+    let n = orders.len();
+    let k = grid.len();
+    let mut ams = Array3::zeros((3, n, k));
+    let mut forward_fraction = Array2::zeros((3, n));
+    let mut summary = FieldSummary {
+        forward_peak_fraction: Default::default(),
+        g: [0.0; 3],
+        sigma_ext_m2: [0.0; 3],
+        albedo: [0.0; 3],
+        n_isotropic: [[None; 3]; 3],
+        l_max: 0,
+        seconds: 0.0,
+    };
+    for (c, ch) in channels.into_iter().enumerate() {
+        ams.slice_mut(s![c, .., ..]).assign(&ch.rows);
+        for (r, f) in ch.forward_fraction.iter().enumerate() {
+            forward_fraction[[c, r]] = *f;
+        }
+        summary.forward_peak_fraction[c] = ch.forward_peak_fraction;
+        summary.g[c] = ch.g;
+        summary.sigma_ext_m2[c] = ch.sigma_ext_m2;
+        summary.albedo[c] = ch.albedo;
+        for e in 0..N_ISO_EPSILONS.len() {
+            summary.n_isotropic[e][c] = ch.n_isotropic[e];
+        }
+        summary.l_max = ch.l_max;
+    }
+    bar.finish();
+    summary.seconds = start.elapsed().as_secs_f64();
+    Ok(BakedField {
+        image: FieldImage {
+            field: field.name.clone(),
+            theta_step_deg: plan.scene.theta_step_deg,
+            ams,
+            forward_fraction,
+            extra_layers: Vec::new(),
+        },
+        summary,
+    })
+}
+
+/// Gauss nodes per bin. A distribution averages the ripple of each size (period ≈ π/x in θ)
+/// away, so the preset's node count serves; a single size keeps its ripple, and a bin of
+/// Δθ holds x·Δθ/π ripples, which 3 nodes per ripple resolve (a 1000 µm drop at 450 nm: 14
+/// ripples per 0.18° bin; bin averages then agree with miepython's to 1e-7, mie/tests/mieplot.rs).
+fn nodes_per_bin(d: &mie::SizeDistribution, lambda_nm: f64, knobs: Knobs, step_deg: f64) -> usize {
+    match *d {
+        mie::SizeDistribution::Monodisperse { radius_um } => {
+            let x = mie::size_parameter(radius_um, lambda_nm);
+            let ripples = x * step_deg.to_radians() / std::f64::consts::PI;
+            knobs
+                .nodes_per_panel
+                .max((3.0 * ripples).ceil() as usize + 2)
+        }
+        _ => knobs.nodes_per_panel,
+    }
+}
+
+/// Rays per wavelength for crystals: `per_wavelength` × J in all, shared in proportion to the
+/// largest weight any channel gives the wavelength (at least a tenth of the mean each). A
+/// channel's noise is Σ_j a_j² / n_j, smallest for n_j ∝ a_j: wavelengths a channel leans on get
+/// the rays, those at the spectrum's ends (weights ~10⁻³) few.
+pub fn ray_allocation(weights: &ChannelWeights, per_wavelength: u64) -> Vec<u64> {
+    let j_len = weights.wavelengths_nm.len();
+    let floor = per_wavelength / 10;
+    let total = per_wavelength * j_len as u64;
+    let importance: Vec<f64> = (0..j_len)
+        .map(|j| (0..3).map(|c| weights.weights[c][j]).fold(0.0, f64::max))
+        .collect();
+    let sum: f64 = importance.iter().sum();
+    let spare = total.saturating_sub(floor * j_len as u64) as f64;
+    importance
+        .iter()
+        .map(|m| floor + (spare * m / sum).round() as u64)
+        .collect()
+}
+
+/// Seed of the crystal traces (wavelength j uses CRYSTAL_SEED ^ j).
+const CRYSTAL_SEED: u64 = 0x7068_6f74_6f6d_6574;
+
+/// One channel's tables.
+struct ChannelResult {
+    rows: Array2<f64>,
+    forward_fraction: Vec<f64>,
+    forward_peak_fraction: Vec<f64>,
+    g: f64,
+    sigma_ext_m2: f64,
+    albedo: f64,
+    n_isotropic: [Option<u32>; 3],
+    l_max: usize,
+}
+
+/// Channel with weights `w` over the wavelengths: a_j = w_j σ_sca,j / Σ w σ_sca, and every row
+/// Σ_j a_j Ams_n[P_j] (light keeps its wavelength while it scatters).
+fn channel_tables(
+    w: &[f64],
+    per_wavelength: &[PhaseFunction],
+    series: &[AmsSeries],
+    orders: &[usize],
+) -> Result<ChannelResult, tables::TablesError> {
+    let sca: f64 = w
+        .iter()
+        .zip(per_wavelength)
+        .map(|(w, b)| w * b.sigma_sca_m2)
+        .sum();
+    let ext: f64 = w
+        .iter()
+        .zip(per_wavelength)
+        .map(|(w, b)| w * b.sigma_ext_m2)
+        .sum();
+    let mut parts = Vec::new();
+    let mut g = 0.0;
+    for ((wj, b), s) in w.iter().zip(per_wavelength).zip(series) {
+        if *wj > 0.0 {
+            let a = wj * b.sigma_sca_m2 / sca;
+            g += a * b.g;
+            parts.push((a, s.clone()));
+        }
+    }
+    let mixture = AmsMixture::new(parts)?;
+    let mut n_isotropic = [None; 3];
+    for (slot, &eps) in n_isotropic.iter_mut().zip(&N_ISO_EPSILONS) {
+        *slot = mixture.isotropic_order(eps, N_ISO_CAP).map(|n| n as u32);
+    }
+    Ok(ChannelResult {
+        rows: mixture.rows(orders),
+        forward_fraction: orders
+            .iter()
+            .map(|&n| mixture.forward_fraction(n))
+            .collect(),
+        forward_peak_fraction: orders
+            .iter()
+            .map(|&n| mixture.forward_peak_fraction(n))
+            .collect(),
+        g,
+        sigma_ext_m2: ext,
+        albedo: sca / ext,
+        n_isotropic,
+        l_max: mixture.l_max(),
+    })
+}

@@ -1,0 +1,547 @@
+//! Scene files: what a scene contains, so that only that is modelled.
+//!
+//! A scene is TOML with one `[scene]` table and any number of `[[field]]` tables:
+//!
+//! ```toml
+//! [scene]
+//! name = "default"
+//! spectral = "spectral"     # or "rgb3" (Riley's 650/515/440 nm)
+//! wavelengths = 31          # spectral samples over [wavelength_min_nm, wavelength_max_nm]
+//! theta_step_deg = 0.18     # must divide 180
+//! n_max = 26                # scattering orders Ams_1..Ams_N, or:
+//! # max_optical_depth = 10  # N = ⌈τ + 4√τ + 4⌉ (the Poisson tail of the scatter count)
+//! quality = "standard"      # draft | standard | reference
+//!
+//! [[field]]
+//! name = "cloud"            # user name: the EXR is <name>.exr
+//! kind = "cloud"            # cloud | rain (water spheres), ice | snow (crystals)
+//! # crystals instead of a distribution: habit = "plate" | "column" | "aggregate",
+//! # aspect_ratio (L/2a), max_dimension_um (median), dimension_sigma_g, roughness (Macke δ)
+//! temperature_c = 10
+//! distribution = { kind = "gamma", r_eff_um = 10, v_eff = 0.1 }
+//! ```
+//!
+//! Errors name the key and its line; nothing is written before the whole scene is valid.
+//! The tables `[render]`, `[camera]`, `[sun]`, `[sky]` and `[[volume]]` belong to the renderer
+//! (`photometeor render`, `photometeor-render`'s `scene` module) and are passed over here.
+
+use std::path::{Path, PathBuf};
+
+use mie::{Material, SizeDistribution};
+use serde::{Deserialize, Serialize};
+use thiserror::Error;
+use toml::Spanned;
+
+pub use tables::spectral::SpectralMode;
+
+/// The scene `photometeor bake` uses when none is given: all four kinds.
+pub const DEFAULT_SCENE: &str = include_str!("../data/scenes/default.toml");
+
+/// A scene that cannot be used: the file, and where possible the line and key.
+#[derive(Debug, Error)]
+pub enum SceneError {
+    /// The file could not be read.
+    #[error("reading scene {}: {source}", path.display())]
+    Read {
+        /// The scene file.
+        path: PathBuf,
+        /// The underlying error.
+        source: std::io::Error,
+    },
+    /// A key's value is malformed or out of range.
+    #[error("{origin} line {line}: {message}")]
+    At {
+        /// The scene file (or "default scene").
+        origin: String,
+        /// 1-based line of the key.
+        line: usize,
+        /// What is wrong, naming the key, its value and the allowed range.
+        message: String,
+    },
+    /// The scene as a whole cannot be baked.
+    #[error("{origin}: {message}")]
+    Scene {
+        /// The scene file.
+        origin: String,
+        /// What is wrong.
+        message: String,
+    },
+}
+
+/// Where a key sits: file and line.
+#[derive(Debug, Clone)]
+struct At {
+    origin: String,
+    line: usize,
+}
+
+impl At {
+    fn error(self, message: String) -> SceneError {
+        SceneError::At {
+            origin: self.origin,
+            line: self.line,
+            message,
+        }
+    }
+}
+
+/// `return Err(at.error(format!(…)))`.
+macro_rules! fail {
+    ($at:expr, $($fmt:tt)*) => {
+        return Err($at.error(format!($($fmt)*)))
+    };
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SceneFile {
+    scene: Spanned<Header>,
+    #[serde(rename = "field", default)]
+    fields: Vec<Spanned<FieldFile>>,
+    // The renderer's tables (`runtime::render::scene`), checked there, not by the bake.
+    #[serde(default, rename = "render")]
+    _render: Option<toml::Value>,
+    #[serde(default, rename = "camera")]
+    _camera: Option<toml::Value>,
+    #[serde(default, rename = "sun")]
+    _sun: Option<toml::Value>,
+    #[serde(default, rename = "sky")]
+    _sky: Option<toml::Value>,
+    #[serde(default, rename = "volume")]
+    _volume: Option<toml::Value>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Header {
+    name: String,
+    #[serde(default)]
+    spectral: Option<String>,
+    #[serde(default)]
+    wavelengths: Option<usize>,
+    #[serde(default)]
+    wavelength_min_nm: Option<f64>,
+    #[serde(default)]
+    wavelength_max_nm: Option<f64>,
+    #[serde(default)]
+    theta_step_deg: Option<f64>,
+    #[serde(default)]
+    n_max: Option<usize>,
+    #[serde(default)]
+    max_optical_depth: Option<f64>,
+    #[serde(default)]
+    quality: Option<String>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct FieldFile {
+    name: String,
+    kind: FieldKind,
+    #[serde(default)]
+    temperature_c: Option<f64>,
+    #[serde(default)]
+    distribution: Option<SizeDistribution>,
+    /// Sphere material (cloud, rain): water (default) or ice (frozen drops).
+    #[serde(default)]
+    material: Option<mie::refractive::Material>,
+    /// Crystal habit (ice, snow): plate | column | aggregate; sets the default aspect ratio.
+    #[serde(default)]
+    habit: Option<String>,
+    #[serde(default)]
+    aspect_ratio: Option<f64>,
+    #[serde(default)]
+    max_dimension_um: Option<f64>,
+    #[serde(default)]
+    dimension_sigma_g: Option<f64>,
+    #[serde(default)]
+    roughness: Option<f64>,
+}
+
+/// What a particle field is made of.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum FieldKind {
+    /// Cloud droplets: spheres, water by default.
+    Cloud,
+    /// Raindrops: spheres, water by default.
+    Rain,
+    /// Ice crystals: hexagonal prisms, columns by default.
+    Ice,
+    /// Snow: rough ice crystals, aggregates by default.
+    Snow,
+}
+
+/// Accuracy presets; their node counts are set from the measured speed/accuracy trade.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Quality {
+    /// Fewest nodes and rays (counts in [`Quality::knobs`]): fast, coarse.
+    Draft,
+    /// The default: the middle preset.
+    Standard,
+    /// Most nodes and rays: the slowest and most accurate.
+    Reference,
+}
+
+impl Quality {
+    /// Parses "draft", "standard" or "reference"; None for anything else.
+    pub fn parse(text: &str) -> Option<Self> {
+        match text {
+            "draft" => Some(Self::Draft),
+            "standard" => Some(Self::Standard),
+            "reference" => Some(Self::Reference),
+            _ => None,
+        }
+    }
+}
+
+/// One validated particle field.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Field {
+    /// User name (ASCII letters, digits, '_', '-'); the EXR is `<name>.exr`.
+    pub name: String,
+    /// What the field is made of.
+    pub kind: FieldKind,
+    /// Temperature, °C (default 10 for cloud and rain, −20 for ice and snow); water: [−12, 99].
+    pub temperature_c: f64,
+    /// What the particles are made of: spheres of water (default) or ice; crystals are ice.
+    pub material: mie::refractive::Material,
+    /// Size distribution of spheres (cloud, rain).
+    pub distribution: Option<SizeDistribution>,
+    /// Crystal population (ice, snow).
+    pub crystal: Option<mie::crystal::CrystalField>,
+}
+
+/// A validated scene: plain data.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Scene {
+    /// Scene name, from `[scene] name`.
+    pub name: String,
+    /// Spectral sampling: RGB3 or wavelengths over a range.
+    pub spectral: SpectralMode,
+    /// Angular bin width Δθ, degrees: divides 180, in [0.01, 30] (default 0.18).
+    pub theta_step_deg: f64,
+    /// Highest scattering order N of Ams_1..Ams_N, in [1, 10000] (default 26).
+    pub n_max: usize,
+    /// Accuracy preset (default standard).
+    pub quality: Quality,
+    /// The particle fields, at least one, with distinct names.
+    pub fields: Vec<Field>,
+}
+
+/// 1-based line of byte offset `at` in `text`.
+fn line_of(text: &str, at: usize) -> usize {
+    text[..at.min(text.len())].matches('\n').count() + 1
+}
+
+/// Line of `key =` in the table that starts at the span (up to the next table header), or
+/// the span's first line.
+fn key_line(text: &str, span: std::ops::Range<usize>, key: &str) -> usize {
+    let body = &text[span.start.min(text.len())..];
+    let found = body.lines().scan(span.start, |offset, line| {
+        let here = *offset;
+        *offset += line.len() + 1;
+        Some((here, line))
+    });
+    for (i, (offset, line)) in found.enumerate() {
+        if i > 0 && line.trim_start().starts_with('[') {
+            break;
+        }
+        let t = line.trim_start();
+        if t.starts_with(key) && t[key.len()..].trim_start().starts_with('=') {
+            return line_of(text, offset);
+        }
+    }
+    line_of(text, span.start)
+}
+
+impl Scene {
+    /// The scene file at `path`, or the embedded default scene.
+    pub fn from_file_or_default(path: Option<&Path>) -> Result<Self, SceneError> {
+        match path {
+            Some(p) => Self::from_file(p),
+            None => Self::parse(DEFAULT_SCENE, "default scene"),
+        }
+    }
+
+    /// Reads and validates a scene file.
+    pub fn from_file(path: &Path) -> Result<Self, SceneError> {
+        let text = std::fs::read_to_string(path).map_err(|source| SceneError::Read {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        Self::parse(&text, &path.display().to_string())
+    }
+
+    /// Parses and validates scene text; `origin` names it in errors.
+    pub fn parse(text: &str, origin: &str) -> Result<Self, SceneError> {
+        let file: SceneFile = toml::from_str(text).map_err(|e| SceneError::At {
+            origin: origin.to_string(),
+            line: e.span().map(|s| line_of(text, s.start)).unwrap_or(0),
+            message: e.message().to_string(),
+        })?;
+        let header_span = file.scene.span();
+        let header = file.scene.into_inner();
+        let at = |key: &str| At {
+            origin: origin.to_string(),
+            line: key_line(text, header_span.clone(), key),
+        };
+
+        let theta_step_deg = header.theta_step_deg.unwrap_or(0.18);
+        if grid::ThetaGrid::new(theta_step_deg).is_err() {
+            fail!(
+                at("theta_step_deg"),
+                "theta_step_deg = {theta_step_deg} must divide 180° and lie in [0.01, 30]"
+            );
+        }
+        let n_max = match (header.n_max, header.max_optical_depth) {
+            (Some(_), Some(_)) => fail!(
+                at("max_optical_depth"),
+                "give n_max or max_optical_depth, not both"
+            ),
+            (Some(n), None) => {
+                if !(1..=10_000).contains(&n) {
+                    fail!(
+                        at("n_max"),
+                        "n_max = {n} is outside the allowed range [1, 10000]"
+                    );
+                }
+                n
+            }
+            (None, Some(tau)) => {
+                if !(tau.is_finite() && tau > 0.0 && tau <= 5000.0) {
+                    fail!(
+                        at("max_optical_depth"),
+                        "max_optical_depth = {tau} is outside the allowed range (0, 5000]"
+                    );
+                }
+                (tau + 4.0 * tau.sqrt() + 4.0).ceil() as usize
+            }
+            (None, None) => 26,
+        };
+        let spectral = match header.spectral.as_deref().unwrap_or("spectral") {
+            "rgb3" => SpectralMode::Rgb3,
+            "spectral" => {
+                let count = header.wavelengths.unwrap_or(31);
+                let (min_nm, max_nm) = (
+                    header.wavelength_min_nm.unwrap_or(400.0),
+                    header.wavelength_max_nm.unwrap_or(700.0),
+                );
+                if !(3..=1000).contains(&count) {
+                    fail!(
+                        at("wavelengths"),
+                        "wavelengths = {count} is outside the allowed range [3, 1000]"
+                    );
+                }
+                if !(min_nm >= 360.0 && max_nm <= 830.0 && min_nm < max_nm) {
+                    fail!(
+                        at("wavelength_min_nm"),
+                        "wavelength range [{min_nm}, {max_nm}] nm must lie within the CIE table [360, 830] nm"
+                    );
+                }
+                SpectralMode::Spectral {
+                    count,
+                    min_nm,
+                    max_nm,
+                }
+            }
+            other => fail!(
+                at("spectral"),
+                "spectral = {other:?} is not one of \"spectral\", \"rgb3\""
+            ),
+        };
+        let quality = match header.quality.as_deref() {
+            None => Quality::Standard,
+            Some(q) => Quality::parse(q).ok_or_else(|| {
+                at("quality").error(format!(
+                    "quality = {q:?} is not one of draft, standard, reference"
+                ))
+            })?,
+        };
+
+        let mut fields: Vec<Field> = Vec::new();
+        for spanned in file.fields {
+            let span = spanned.span();
+            let f = spanned.into_inner();
+            let at = |key: &str| At {
+                origin: origin.to_string(),
+                line: key_line(text, span.clone(), key),
+            };
+            if f.name.is_empty()
+                || !f
+                    .name
+                    .chars()
+                    .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
+            {
+                fail!(
+                    at("name"),
+                    "field name {:?} must be non-empty ASCII letters, digits, '_' or '-' (it names the EXR file)",
+                    f.name
+                );
+            }
+            if fields.iter().any(|g| g.name == f.name) {
+                fail!(at("name"), "field name {:?} is used twice", f.name);
+            }
+            let temperature_c = f.temperature_c.unwrap_or(match f.kind {
+                FieldKind::Cloud | FieldKind::Rain => 10.0,
+                FieldKind::Ice | FieldKind::Snow => -20.0,
+            });
+            let material = f.material.unwrap_or(match f.kind {
+                FieldKind::Cloud | FieldKind::Rain => Material::Water,
+                FieldKind::Ice | FieldKind::Snow => Material::Ice,
+            });
+            if material == Material::Water && matches!(f.kind, FieldKind::Ice | FieldKind::Snow) {
+                fail!(
+                    at("material"),
+                    "field {:?} ({:?}): crystals are ice; material = \"water\" is only for cloud and rain",
+                    f.name,
+                    f.kind
+                );
+            }
+            let (distribution, crystal) = match f.kind {
+                FieldKind::Cloud | FieldKind::Rain => {
+                    let d = f.distribution.ok_or_else(|| {
+                        at("kind").error(format!(
+                            "field {:?} ({:?}) needs a distribution",
+                            f.name, f.kind
+                        ))
+                    })?;
+                    let d = d.validated().map_err(|e| {
+                        at("distribution").error(format!("field {:?}: distribution: {e}", f.name))
+                    })?;
+                    if material == Material::Water
+                        && mie::refractive::water_density_kg_m3(temperature_c).is_err()
+                    {
+                        fail!(
+                            at("temperature_c"),
+                            "temperature_c = {temperature_c} is outside the allowed range [-12, 99] °C for liquid water"
+                        );
+                    }
+                    (Some(d), None)
+                }
+                FieldKind::Ice | FieldKind::Snow => {
+                    if f.distribution.is_some() {
+                        fail!(
+                            at("distribution"),
+                            "field {:?} ({:?}): crystals take habit, aspect_ratio, max_dimension_um, dimension_sigma_g and roughness, not a sphere distribution",
+                            f.name,
+                            f.kind
+                        );
+                    }
+                    let snow = f.kind == FieldKind::Snow;
+                    let habit =
+                        f.habit
+                            .as_deref()
+                            .unwrap_or(if snow { "aggregate" } else { "column" });
+                    let default_ar = match habit {
+                        "plate" => 0.2,
+                        "column" => 2.0,
+                        "aggregate" => 1.0,
+                        other => fail!(
+                            at("habit"),
+                            "habit = {other:?} is not one of \"plate\", \"column\", \"aggregate\""
+                        ),
+                    };
+                    let crystal = mie::crystal::CrystalField {
+                        aspect_ratio: f.aspect_ratio.unwrap_or(default_ar),
+                        max_dimension_um: f.max_dimension_um.unwrap_or(if snow {
+                            2000.0
+                        } else {
+                            100.0
+                        }),
+                        sigma_g: f.dimension_sigma_g.unwrap_or(1.5),
+                        roughness: f.roughness.unwrap_or(if snow { 0.7 } else { 0.0 }),
+                    };
+                    let crystal = crystal.validated().map_err(|e| {
+                        let key = match e.to_string() {
+                            t if t.starts_with("aspect") => "aspect_ratio",
+                            t if t.starts_with("maximum") => "max_dimension_um",
+                            t if t.starts_with("σ_g") => "dimension_sigma_g",
+                            _ => "roughness",
+                        };
+                        at(key).error(format!("field {:?}: {key}: {e}", f.name))
+                    })?;
+                    (None, Some(crystal))
+                }
+            };
+            fields.push(Field {
+                name: f.name,
+                kind: f.kind,
+                temperature_c,
+                material,
+                distribution,
+                crystal,
+            });
+        }
+        if fields.is_empty() {
+            return Err(SceneError::Scene {
+                origin: origin.to_string(),
+                message: "the scene has no [[field]]; nothing to bake".into(),
+            });
+        }
+        Ok(Scene {
+            name: header.name,
+            spectral,
+            theta_step_deg,
+            n_max,
+            quality,
+            fields,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn default_scene_parses_with_all_four_kinds() {
+        let s = Scene::parse(DEFAULT_SCENE, "default").unwrap();
+        let kinds: Vec<FieldKind> = s.fields.iter().map(|f| f.kind).collect();
+        for k in [
+            FieldKind::Cloud,
+            FieldKind::Rain,
+            FieldKind::Ice,
+            FieldKind::Snow,
+        ] {
+            assert!(kinds.contains(&k), "{k:?} missing");
+        }
+        assert_eq!(s.n_max, 26);
+        assert_eq!(s.theta_step_deg, 0.18);
+    }
+
+    fn error_of(text: &str) -> String {
+        Scene::parse(text, "s.toml").unwrap_err().to_string()
+    }
+
+    const HEAD: &str = "[scene]\nname = \"t\"\n";
+    const RAIN: &str = "[[field]]\nname = \"rain\"\nkind = \"rain\"\ndistribution = { kind = \"lognormal\", median_radius_um = 500, sigma_g = 1.4 }\n";
+
+    #[test]
+    fn malformed_scenes_name_the_key_and_line() {
+        let e = error_of(&format!("{HEAD}colour = 3\n{RAIN}"));
+        assert!(e.contains("line 3") && e.contains("colour"), "{e}");
+        let e = error_of(&format!(
+            "{HEAD}{}",
+            RAIN.replace("median_radius_um = 500", "median_radius_um = -5")
+        ));
+        assert!(
+            e.contains("line 6") && e.contains("-5") && e.contains("(0, ∞)"),
+            "{e}"
+        );
+        let e = error_of(&format!("{HEAD}n_max = 0\n{RAIN}"));
+        assert!(e.contains("line 3") && e.contains("n_max = 0"), "{e}");
+        let e = error_of(&format!("{HEAD}theta_step_deg = 0.7\n{RAIN}"));
+        assert!(
+            e.contains("line 3") && e.contains("theta_step_deg = 0.7"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn optical_depth_sets_the_number_of_orders() {
+        let s = Scene::parse(&format!("{HEAD}max_optical_depth = 16\n{RAIN}"), "s").unwrap();
+        assert_eq!(s.n_max, 36); // 16 + 4·4 + 4
+    }
+}

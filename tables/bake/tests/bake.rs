@@ -1,0 +1,273 @@
+//! The bake as a library: Ams_1 against an independent single-scattering computation, the
+//! corona and glory of a narrow cloud, the cache (unchanged → nothing recomputed; one field
+//! changed → only that field), determinism across thread counts, stale tables removed.
+
+use std::fs;
+use std::path::Path;
+
+use bake::BakeReport;
+use format::read_field_exr;
+use mie::ensemble::bulk_at;
+use mie::{Material, ThetaGrid};
+use tables::spectral::RGB3_WAVELENGTHS_NM;
+
+mod common;
+
+use common::{plan, rows_of, run};
+
+const SCENE: &str = r#"
+[scene]
+name = "test"
+spectral = "rgb3"
+n_max = 8
+quality = "draft"
+
+[[field]]
+name = "altocumulus"
+kind = "cloud"
+temperature_c = 5
+distribution = { kind = "gamma", r_eff_um = 10, v_eff = 0.02 }
+
+[[field]]
+name = "rain"
+kind = "rain"
+distribution = { kind = "lognormal", median_radius_um = 500, sigma_g = 1.4 }
+"#;
+
+fn bake(text: &str, out: &Path) -> BakeReport {
+    run(&plan(text, out).unwrap()).unwrap()
+}
+
+#[test]
+fn ams1_is_the_single_scattering_bin_average_computed_independently() {
+    let dir = tempfile::tempdir().unwrap();
+    let plan = plan(SCENE, dir.path()).unwrap();
+    run(&plan).unwrap();
+    let grid = ThetaGrid::new(0.18).unwrap();
+    let omega = grid.bin_solid_angles();
+    let k_1deg = (1.0 / 0.18f64).ceil() as usize;
+    for field in &plan.scene.fields {
+        let image = read_field_exr(dir.path().join(format!("{}.exr", field.name))).unwrap();
+        let d = field.distribution.unwrap();
+        for (c, &lambda) in RGB3_WAVELENGTHS_NM.iter().enumerate() {
+            // Straight from the Mie ensemble, no Legendre machinery in between.
+            let m = Material::Water
+                .refractive_index(lambda, field.temperature_c)
+                .unwrap();
+            let q = plan.knobs.size_quadrature(&d, c, 3);
+            let direct = bulk_at(
+                m,
+                lambda,
+                &q,
+                ThetaGrid::new(0.18).unwrap(),
+                plan.knobs.nodes_per_panel,
+                &[],
+            )
+            .unwrap();
+            // The tables are normalized exactly; the direct bins only as well as the draft
+            // quadrature samples the ripple of large drops (~1e-3).
+            let total: f64 = direct.bins.iter().zip(&omega).map(|(a, o)| a * o).sum();
+            assert!((total - 1.0).abs() < 1e-2, "direct bins' energy {total}");
+            let direct: Vec<f64> = direct.bins.iter().map(|b| b / total).collect();
+            let rows = rows_of(&image);
+            let row = &rows[c][0];
+            let worst = row[k_1deg..]
+                .iter()
+                .zip(&direct[k_1deg..])
+                .map(|(a, b)| ((a - b) / b).abs())
+                .fold(0.0, f64::max);
+            assert!(
+                worst < 1e-3,
+                "{} {lambda} nm: Ams_1 vs direct bins {worst:.2e}",
+                field.name
+            );
+            // The bins inside 1° keep the forward peak's energy.
+            let energy =
+                |v: &[f64]| -> f64 { v[..k_1deg].iter().zip(&omega).map(|(a, o)| a * o).sum() };
+            let (ours, theirs) = (energy(row), energy(&direct));
+            assert!(
+                (ours - theirs).abs() < 1e-6,
+                "{} {lambda} nm: energy inside 1°: {ours} vs {theirs}",
+                field.name
+            );
+        }
+    }
+}
+
+/// Contrast of the first corona ring (its maximum over the minimum inside it) and of the glory
+/// (180° over the minimum of 170–178°), per row.
+fn corona_depth(row: &[f64]) -> Option<f64> {
+    // θ in 1°..8°: first local minimum, then the following local maximum.
+    let (a, b) = (6, 45);
+    let min = (a + 1..b).find(|&k| row[k] < row[k - 1] && row[k] < row[k + 1])?;
+    let max = (min + 1..b).find(|&k| row[k] > row[k - 1] && row[k] > row[k + 1])?;
+    Some(row[max] / row[min])
+}
+
+#[test]
+fn narrow_cloud_has_a_corona_and_a_glory_that_fade_with_order() {
+    let dir = tempfile::tempdir().unwrap();
+    bake(SCENE, dir.path());
+    let image = read_field_exr(dir.path().join("altocumulus.exr")).unwrap();
+    for c in 0..3 {
+        let all = rows_of(&image);
+        let rows = &all[c];
+        let depth1 = corona_depth(&rows[0]).expect("a corona ring in Ams_1");
+        assert!(depth1 > 1.05, "channel {c}: first ring contrast {depth1}");
+        // Ring radius ~ 1.63 λ / (2π r) rad beyond the first dark ring: red ring the widest.
+        let depth2 = corona_depth(&rows[1]).unwrap_or(1.0);
+        assert!(depth2 < depth1, "channel {c}: corona {depth1} → {depth2}");
+        let glory = |r: &[f64]| r[1000] / r[944..989].iter().copied().fold(f64::INFINITY, f64::min);
+        let contrasts: Vec<f64> = rows.iter().map(|r| glory(r)).collect();
+        assert!(
+            contrasts[0] > 1.5,
+            "channel {c}: glory contrast {contrasts:?}"
+        );
+        for w in contrasts.windows(2) {
+            assert!(w[1] < w[0], "channel {c}: glory must fade: {contrasts:?}");
+        }
+    }
+    let ring = |c: usize| {
+        let rows = rows_of(&image);
+        let row = &rows[c][0];
+        (7..45)
+            .find(|&k| row[k] < row[k - 1] && row[k] < row[k + 1])
+            .unwrap()
+    };
+    assert!(ring(0) > ring(2), "red's first dark ring outside blue's");
+}
+
+fn bytes(dir: &Path, name: &str) -> Vec<u8> {
+    fs::read(dir.join(name)).unwrap()
+}
+
+#[test]
+fn cache_recomputes_only_what_changed_and_output_is_deterministic() {
+    let dir = tempfile::tempdir().unwrap();
+    let first = bake(SCENE, dir.path());
+    assert_eq!(first.computed, ["altocumulus", "rain"]);
+    assert!(first.cached.is_empty());
+    let (cloud, rain, manifest) = (
+        bytes(dir.path(), "altocumulus.exr"),
+        bytes(dir.path(), "rain.exr"),
+        bytes(dir.path(), "manifest.json"),
+    );
+
+    let again = bake(SCENE, dir.path());
+    assert!(again.computed.is_empty(), "{again:?}");
+    assert_eq!(again.cached, ["altocumulus", "rain"]);
+    assert_eq!(bytes(dir.path(), "altocumulus.exr"), cloud);
+    assert_eq!(bytes(dir.path(), "rain.exr"), rain);
+    assert_eq!(bytes(dir.path(), "manifest.json"), manifest);
+
+    // One thread, fresh directory: the same bytes.
+    let single = tempfile::tempdir().unwrap();
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .unwrap()
+        .install(|| bake(SCENE, single.path()));
+    assert_eq!(bytes(single.path(), "altocumulus.exr"), cloud);
+    assert_eq!(bytes(single.path(), "rain.exr"), rain);
+    assert_eq!(bytes(single.path(), "manifest.json"), manifest);
+
+    // Change the rain only.
+    let changed = SCENE.replace("sigma_g = 1.4", "sigma_g = 1.5");
+    let third = bake(&changed, dir.path());
+    assert_eq!(third.computed, ["rain"]);
+    assert_eq!(third.cached, ["altocumulus"]);
+    assert_eq!(bytes(dir.path(), "altocumulus.exr"), cloud);
+    assert_ne!(bytes(dir.path(), "rain.exr"), rain);
+
+    // Drop the rain: its table goes with it.
+    let cloud_only = &changed[..changed.find("[[field]]\nname = \"rain\"").unwrap()];
+    let fourth = bake(cloud_only, dir.path());
+    assert_eq!(fourth.cached, ["altocumulus"]);
+    assert!(!dir.path().join("rain.exr").exists());
+    let m = format::read_manifest(dir.path()).unwrap();
+    assert_eq!(m.fields.len(), 1);
+}
+
+#[test]
+fn cache_records_that_do_not_match_their_key_or_checksum_are_recomputed() {
+    let dir = tempfile::tempdir().unwrap();
+    let plan = plan(SCENE, dir.path()).unwrap();
+    run(&plan).unwrap();
+    let record = |i: usize| {
+        let hash = bake::cache::content_hash(&plan, &plan.scene.fields[i]);
+        bake::cache::record_path(dir.path(), &hash)
+    };
+    let (cloud_exr, rain_exr) = (
+        bytes(dir.path(), "altocumulus.exr"),
+        bytes(dir.path(), "rain.exr"),
+    );
+
+    // Rain's record copied over the cloud's: computed for another key, so not used.
+    fs::copy(record(1), record(0)).unwrap();
+    let r = run(&plan).unwrap();
+    assert_eq!(r.computed, ["altocumulus"], "{r:?}");
+    assert_eq!(r.cached, ["rain"]);
+    assert!(
+        r.rejected_cache.len() == 1 && r.rejected_cache[0].contains("computed for key"),
+        "{:?}",
+        r.rejected_cache
+    );
+    assert_eq!(bytes(dir.path(), "altocumulus.exr"), cloud_exr);
+
+    // One bit of the rain's tables flipped in its record: the checksum catches it.
+    let mut b = fs::read(record(1)).unwrap();
+    let n = b.len();
+    b[n - 10] ^= 1;
+    fs::write(record(1), &b).unwrap();
+    let r = run(&plan).unwrap();
+    assert_eq!(r.computed, ["rain"], "{r:?}");
+    assert!(
+        r.rejected_cache[0].contains("checksum"),
+        "{:?}",
+        r.rejected_cache
+    );
+    assert_eq!(bytes(dir.path(), "rain.exr"), rain_exr);
+
+    // A truncated record does not decode.
+    fs::write(record(1), &b[..n / 2]).unwrap();
+    let r = run(&plan).unwrap();
+    assert_eq!(r.computed, ["rain"], "{r:?}");
+    assert_eq!(bytes(dir.path(), "rain.exr"), rain_exr);
+    // And the records now written are good again.
+    assert!(run(&plan).unwrap().computed.is_empty());
+}
+
+#[test]
+fn a_bake_without_pruning_keeps_other_fields_and_refuses_to_orphan_them() {
+    let dir = tempfile::tempdir().unwrap();
+    bake(SCENE, dir.path());
+    let rain_exr = bytes(dir.path(), "rain.exr");
+    let cloud_only = &SCENE[..SCENE.find("[[field]]\nname = \"rain\"").unwrap()];
+
+    // Only the cloud, not pruning (what `photometeor render` does): rain stays, listed.
+    let mut keep = plan(cloud_only, dir.path()).unwrap();
+    keep.prune = false;
+    let r = run(&keep).unwrap();
+    assert_eq!(r.cached, ["altocumulus"]);
+    let names: Vec<String> = format::read_manifest(dir.path())
+        .unwrap()
+        .fields
+        .into_iter()
+        .map(|f| f.name)
+        .collect();
+    assert_eq!(names, ["altocumulus", "rain"]);
+    assert_eq!(bytes(dir.path(), "rain.exr"), rain_exr);
+
+    // On another grid the rain could not stay listed: refused before anything is written.
+    let manifest = bytes(dir.path(), "manifest.json");
+    let coarse = cloud_only.replace("n_max = 8", "n_max = 8\ntheta_step_deg = 1");
+    let mut other = plan(&coarse, dir.path()).unwrap();
+    other.prune = false;
+    let err = run(&other).unwrap_err().to_string();
+    assert!(
+        err.contains("another grid") && err.contains("rain"),
+        "{err}"
+    );
+    assert_eq!(bytes(dir.path(), "manifest.json"), manifest);
+    assert_eq!(bytes(dir.path(), "rain.exr"), rain_exr);
+}

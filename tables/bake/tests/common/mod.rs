@@ -1,0 +1,33 @@
+//! Shared helpers of the bake tests: a plan at a scene's own preset, and a field's rows as
+//! nested vectors.
+
+#![allow(dead_code)]
+
+use bake::{BakeError, BakePlan, Scene};
+use format::FieldImage;
+
+/// A bake of the scene `text` into `out` at the scene's own preset.
+pub fn plan(text: &str, out: &std::path::Path) -> Result<BakePlan, BakeError> {
+    let scene = Scene::parse(text, "test scene")?;
+    let quality = scene.quality;
+    Ok(BakePlan::for_preset(scene, out.to_path_buf(), quality))
+}
+
+/// Runs a plan silently.
+pub fn run(plan: &BakePlan) -> Result<bake::BakeReport, BakeError> {
+    bake::run(plan, &bake::Silent)
+}
+
+/// `rows[c][r][k]` of a field's tables.
+pub fn rows_of(image: &FieldImage) -> [Vec<Vec<f64>>; 3] {
+    std::array::from_fn(|c| {
+        (0..image.n_max())
+            .map(|r| image.row(c, r).to_vec())
+            .collect()
+    })
+}
+
+/// F_1..F_N of channel c.
+pub fn forward_fractions(image: &FieldImage, c: usize) -> Vec<f64> {
+    image.forward_fractions(c).to_vec()
+}

@@ -1,0 +1,24 @@
+//! The file format of a photometeor bake: what a renderer reads, and nothing that computes it.
+//!
+//! A bake directory holds `manifest.json` ([`manifest`]: the grid, the channel definitions and
+//! one [`FieldEntry`] per particle field) and one OpenEXR file per field ([`exr`]: rows
+//! Ams_1..Ams_N × columns θ_k = k·Δθ, channels R, G, B in 1/sr, F_1..F_N in the header).
+//! Writers go through [`write_file_atomically`]; readers through [`read_regular_file`], so a
+//! FIFO or a device is never read and no file is read past a size bound. Every reader checks
+//! what it reads against the contract, naming the file and the failed check.
+//!
+//! This crate depends on neither the solver nor the bake: an engine that loads tables links
+//! only this and `photometeor-runtime`.
+
+#![warn(missing_docs)]
+
+pub mod atomic;
+pub mod exr;
+pub mod manifest;
+
+pub use atomic::{read_regular_file, write_file_atomically};
+pub use exr::{ContractError, FieldImage, IoError, RGB_CHANNELS, read_field_exr, write_field_exr};
+pub use manifest::{
+    FieldEntry, MANIFEST_FILE, Manifest, ManifestCheck, ManifestError, PerChannel, read_manifest,
+    write_manifest,
+};

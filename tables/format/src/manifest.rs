@@ -1,0 +1,348 @@
+//! `DIR/manifest.json`: what a bake produced, for renderers and for `photometeor inspect`.
+//!
+//! [`Manifest`] lists the grid, the channel definitions and one [`FieldEntry`] per field, in
+//! the scene's order; the numbers a renderer needs besides the textures (F_i, g, σ_ext, albedo,
+//! n_iso) and every input that produced them. [`write_manifest`] writes it atomically as pretty
+//! JSON; [`read_manifest`] checks the schema version before anything else.
+//!
+//! # Determinism
+//! Fields are a `Vec` (scene order) and maps are `BTreeMap`s or fixed structs, so the same
+//! manifest serializes to the same bytes. `serde_json` writes every finite `f64` as its
+//! shortest round-trip decimal; non-finite numbers (which JSON cannot hold) are refused by
+//! [`Manifest::check`] before writing.
+//!
+//! # Example (abridged)
+//! ```json
+//! {
+//!   "schema": 1,
+//!   "tool": "photometeor",
+//!   "tool_version": "0.1.0",
+//!   "theta_step_deg": 0.18,
+//!   "angle_count": 1001,
+//!   "channels": { "mode": "spectral", "...": "..." },
+//!   "fields": [
+//!     {
+//!       "name": "rain", "file": "rain.exr", "kind": "rain", "n_max": 26,
+//!       "forward_fraction": { "R": [0.97, "..."], "G": ["..."], "B": ["..."] },
+//!       "forward_peak_fraction": { "R": ["..."], "G": ["..."], "B": ["..."] },
+//!       "g": { "R": 0.87, "G": 0.88, "B": 0.88 },
+//!       "sigma_ext_m2": { "R": 1.6e-6, "G": "...", "B": "..." },
+//!       "albedo": { "R": 1.0, "G": 1.0, "B": 1.0 },
+//!       "n_isotropic": { "R": { "1e-2": 9, "1e-4": 17, "1e-6": null }, "G": {}, "B": {} },
+//!       "microphysics": { "...": "..." },
+//!       "quality": { "...": "..." },
+//!       "content_hash": "3f2a…"
+//!     }
+//!   ]
+//! }
+//! ```
+
+use std::collections::BTreeMap;
+use std::io;
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+use serde_json::Value;
+use thiserror::Error;
+
+use crate::atomic::{read_regular_file, write_file_atomically};
+
+/// The manifest's layout version; [`read_manifest`] rejects any other.
+pub const MANIFEST_SCHEMA_VERSION: u32 = 1;
+
+/// The manifest's file name inside the bake directory.
+pub const MANIFEST_FILE: &str = "manifest.json";
+
+/// The ε keys of [`FieldEntry::n_isotropic`], largest first.
+pub const N_ISOTROPIC_EPSILONS: [&str; 3] = ["1e-2", "1e-4", "1e-6"];
+
+/// One value per colour channel, serialized as `{"R": …, "G": …, "B": …}`.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct PerChannel<T> {
+    /// Red.
+    #[serde(rename = "R")]
+    pub r: T,
+    /// Green.
+    #[serde(rename = "G")]
+    pub g: T,
+    /// Blue.
+    #[serde(rename = "B")]
+    pub b: T,
+}
+
+impl<T> PerChannel<T> {
+    /// The three values in the order R, G, B.
+    pub fn as_array(&self) -> [&T; 3] {
+        [&self.r, &self.g, &self.b]
+    }
+
+    /// Builds from `[R, G, B]`.
+    pub fn from_array([r, g, b]: [T; 3]) -> Self {
+        Self { r, g, b }
+    }
+}
+
+/// The whole `manifest.json`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Manifest {
+    /// [`MANIFEST_SCHEMA_VERSION`].
+    pub schema: u32,
+    /// The producing tool, `"photometeor"`.
+    pub tool: String,
+    /// Its version (`CARGO_PKG_VERSION` of the binary).
+    pub tool_version: String,
+    /// Δθ in degrees.
+    pub theta_step_deg: f64,
+    /// K = 180°/Δθ + 1, the width of every EXR.
+    pub angle_count: usize,
+    /// How R, G and B were formed (spectral mode, wavelengths, weights), as the caller
+    /// defines it.
+    pub channels: Value,
+    /// One entry per field, in the scene's order.
+    pub fields: Vec<FieldEntry>,
+}
+
+/// The manifest entry of one particle field.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FieldEntry {
+    /// The field's name in the scene (also `photometeor/field` in its EXR).
+    pub name: String,
+    /// Its EXR, relative to the bake directory (`<name>.exr`).
+    pub file: String,
+    /// `cloud`, `rain`, `ice` or `snow`.
+    pub kind: String,
+    /// N, the number of rows Ams_1..Ams_N.
+    pub n_max: usize,
+    /// F_1..F_N per channel (Riley et al. 2004 Eq. 23).
+    pub forward_fraction: PerChannel<Vec<f64>>,
+    /// Per channel and row: the fraction of the row's energy in the unresolved forward peak
+    /// kept inside bin 0.
+    pub forward_peak_fraction: PerChannel<Vec<f64>>,
+    /// Asymmetry parameter g = ⟨cos θ⟩ per channel.
+    pub g: PerChannel<f64>,
+    /// Extinction cross-section per particle, m², per channel.
+    pub sigma_ext_m2: PerChannel<f64>,
+    /// Single-scattering albedo per channel.
+    pub albedo: PerChannel<f64>,
+    /// Per channel: ε (`"1e-2"`, `"1e-4"`, `"1e-6"`) → the smallest n with
+    /// max_k |4π Ams_n(θ_k) − 1| < ε, or `null` when no n ≤ N reaches it.
+    pub n_isotropic: PerChannel<BTreeMap<String, Option<u32>>>,
+    /// Every microphysics input of the field, as the scene gave it.
+    pub microphysics: Value,
+    /// Every quality input (preset and the numbers it set).
+    pub quality: Value,
+    /// Hash of every input that affects the field's result, lowercase hex.
+    pub content_hash: String,
+}
+
+/// A failed consistency check of a [`Manifest`] (see [`Manifest::check`]).
+#[derive(Debug, Clone, PartialEq, Error)]
+#[error("{what}")]
+pub struct ManifestCheck {
+    /// What was checked and what was found.
+    pub what: String,
+}
+
+impl From<String> for ManifestCheck {
+    fn from(what: String) -> Self {
+        Self { what }
+    }
+}
+
+/// The largest manifest a reader accepts (bytes); a bake of 1000 fields stays far below.
+pub const MAX_MANIFEST_BYTES: u64 = 64 << 20;
+
+/// What went wrong writing or reading a manifest. Every variant names the file.
+#[derive(Debug, Error)]
+pub enum ManifestError {
+    /// The operating system refused a read or write.
+    #[error("{}: {op}: {source}", path.display())]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// What was being done.
+        op: &'static str,
+        /// The underlying error.
+        source: io::Error,
+    },
+    /// Not valid JSON, or not the manifest's structure (the message has line and column).
+    #[error("{}: {source}", path.display())]
+    Json {
+        /// The file.
+        path: PathBuf,
+        /// The underlying error.
+        source: serde_json::Error,
+    },
+    /// A schema version this reader does not know.
+    #[error("{}: schema {found}, expected {expected}", path.display())]
+    Schema {
+        /// The file.
+        path: PathBuf,
+        /// What the file says (`missing` if absent).
+        found: String,
+        /// [`MANIFEST_SCHEMA_VERSION`].
+        expected: u32,
+    },
+    /// The manifest is well-formed JSON but inconsistent.
+    #[error("{}: {what}", path.display())]
+    Invalid {
+        /// The file.
+        path: PathBuf,
+        /// The failed check.
+        what: String,
+    },
+}
+
+impl Manifest {
+    /// Consistency checks made on write and on read: schema, K = 180°/Δθ + 1, unique field
+    /// names, plain file names, N values per channel for F_i and the peak fractions, finite
+    /// numbers, known ε keys, a lowercase hex hash.
+    pub fn check(&self) -> Result<(), ManifestCheck> {
+        self.check_inner().map_err(ManifestCheck::from)
+    }
+
+    fn check_inner(&self) -> Result<(), String> {
+        if self.schema != MANIFEST_SCHEMA_VERSION {
+            return Err(format!(
+                "schema {}, expected {MANIFEST_SCHEMA_VERSION}",
+                self.schema
+            ));
+        }
+        let grid = grid::ThetaGrid::new(self.theta_step_deg).map_err(|e| e.to_string())?;
+        if self.angle_count != grid.len() {
+            return Err(format!(
+                "angle_count {}, expected 180°/{}° + 1 = {}",
+                self.angle_count,
+                self.theta_step_deg,
+                grid.len()
+            ));
+        }
+        for (i, f) in self.fields.iter().enumerate() {
+            let at = |what: String| format!("field {:?}: {what}", f.name);
+            if f.name.is_empty() {
+                return Err(format!("field {i}: empty name"));
+            }
+            if self.fields[..i].iter().any(|o| o.name == f.name) {
+                return Err(at("name given twice".into()));
+            }
+            let plain = Path::new(&f.file)
+                .file_name()
+                .is_some_and(|n| n == f.file.as_str());
+            if !plain || f.file.starts_with('.') {
+                return Err(at(format!(
+                    "file {:?} must be a plain file name inside the bake directory",
+                    f.file
+                )));
+            }
+            if f.n_max == 0 {
+                return Err(at("n_max = 0, expected ≥ 1".into()));
+            }
+            for (key, per) in [
+                ("forward_fraction", &f.forward_fraction),
+                ("forward_peak_fraction", &f.forward_peak_fraction),
+            ] {
+                for (c, v) in ["R", "G", "B"].iter().zip(per.as_array()) {
+                    if v.len() != f.n_max {
+                        return Err(at(format!(
+                            "{key}.{c} has {} values, expected n_max = {}",
+                            v.len(),
+                            f.n_max
+                        )));
+                    }
+                    if let Some(j) = v.iter().position(|x| !x.is_finite()) {
+                        return Err(at(format!("{key}.{c}[{j}] = {} is not finite", v[j])));
+                    }
+                }
+            }
+            for (key, per) in [
+                ("g", &f.g),
+                ("sigma_ext_m2", &f.sigma_ext_m2),
+                ("albedo", &f.albedo),
+            ] {
+                for (c, v) in ["R", "G", "B"].iter().zip(per.as_array()) {
+                    if !v.is_finite() {
+                        return Err(at(format!("{key}.{c} = {v} is not finite")));
+                    }
+                }
+            }
+            for (c, map) in ["R", "G", "B"].iter().zip(f.n_isotropic.as_array()) {
+                if let Some(k) = map
+                    .keys()
+                    .find(|k| !N_ISOTROPIC_EPSILONS.contains(&k.as_str()))
+                {
+                    return Err(at(format!(
+                        "n_isotropic.{c} has key {k:?}, expected one of {N_ISOTROPIC_EPSILONS:?}"
+                    )));
+                }
+            }
+            let hex = |s: &str| {
+                !s.is_empty()
+                    && s.bytes()
+                        .all(|b| b.is_ascii_digit() || (b'a'..=b'f').contains(&b))
+            };
+            if !hex(&f.content_hash) {
+                return Err(at(format!(
+                    "content_hash {:?} is not lowercase hex",
+                    f.content_hash
+                )));
+            }
+        }
+        Ok(())
+    }
+
+    /// The manifest as written: pretty JSON and a final newline.
+    pub fn to_json_bytes(&self) -> Vec<u8> {
+        let mut bytes = serde_json::to_vec_pretty(self).expect("a manifest always serializes");
+        bytes.push(b'\n');
+        bytes
+    }
+}
+
+/// Writes `DIR/manifest.json` atomically (see [`write_file_atomically`]) after
+/// [`Manifest::check`]. `dir` must exist; on any error an existing manifest is untouched.
+pub fn write_manifest(dir: impl AsRef<Path>, manifest: &Manifest) -> Result<(), ManifestError> {
+    let path = dir.as_ref().join(MANIFEST_FILE);
+    manifest.check().map_err(|e| ManifestError::Invalid {
+        path: path.clone(),
+        what: format!("{}; nothing was written", e.what),
+    })?;
+    write_file_atomically(&path, &manifest.to_json_bytes())
+        .map_err(|(op, source)| ManifestError::Io { path, op, source })
+}
+
+/// Reads `DIR/manifest.json`: the schema version is checked first (so a newer layout fails
+/// with [`ManifestError::Schema`], not with a missing key), then the structure, then
+/// [`Manifest::check`].
+pub fn read_manifest(dir: impl AsRef<Path>) -> Result<Manifest, ManifestError> {
+    let path = dir.as_ref().join(MANIFEST_FILE);
+    let bytes =
+        read_regular_file(&path, MAX_MANIFEST_BYTES).map_err(|(op, source)| ManifestError::Io {
+            path: path.clone(),
+            op,
+            source,
+        })?;
+    let value: Value = serde_json::from_slice(&bytes).map_err(|source| ManifestError::Json {
+        path: path.clone(),
+        source,
+    })?;
+    match value.get("schema") {
+        Some(Value::Number(n)) if n.as_u64() == Some(u64::from(MANIFEST_SCHEMA_VERSION)) => {}
+        found => {
+            return Err(ManifestError::Schema {
+                path,
+                found: found.map_or("missing".to_string(), Value::to_string),
+                expected: MANIFEST_SCHEMA_VERSION,
+            });
+        }
+    }
+    // Deserialize from the bytes (not the Value) so errors keep their line and column.
+    let manifest: Manifest =
+        serde_json::from_slice(&bytes).map_err(|source| ManifestError::Json {
+            path: path.clone(),
+            source,
+        })?;
+    manifest
+        .check()
+        .map_err(|e| ManifestError::Invalid { path, what: e.what })?;
+    Ok(manifest)
+}
