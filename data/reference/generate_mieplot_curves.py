@@ -18,7 +18,7 @@ Conventions (photometeor's, Bohren & Huffman)
 ---------------------------------------------
 * m = m_re + i m_im, m_im >= 0 absorbing; miepython is called with complex(m_re, -m_im).
   Water: linear interpolation in vacuum wavelength of the n and k columns of
-  data/refractive_index/water_segelstein1981.csv (Segelstein 1981, 25 C).
+  mie/data/refractive_index/water_segelstein1981.csv (Segelstein 1981, 25 C).
 * x = 2 pi r / lambda (vacuum wavelength, medium index 1).
 * p(theta) = (|S1|^2 + |S2|^2) / (2 pi x^2 Qsca), 1/sr, integral over 4 pi = 1.
 * Angle grid: photometeor's table grid, theta_k = 0.18 k deg, k = 0..1000.  Sample k stands for
@@ -90,7 +90,7 @@ import miepython
 HERE = os.path.dirname(os.path.abspath(__file__))
 REPO = os.path.dirname(os.path.dirname(HERE))
 OUT = os.path.join(HERE, "mieplot_curves.json")
-WATER_CSV = os.path.join(REPO, "data", "refractive_index", "water_segelstein1981.csv")
+WATER_CSV = os.path.join(REPO, "mie", "data", "refractive_index", "water_segelstein1981.csv")
 
 WAVELENGTHS_NM = [650.0, 550.0, 450.0]
 SPHERE_RADII_UM = [1.0, 10.0, 100.0, 1000.0]
@@ -613,7 +613,7 @@ def main():
         "convention": (
             "m = m_re + i*m_im, m_im >= 0 absorbing (Bohren & Huffman); miepython called with m_re - i*m_im. "
             "Water index: linear interpolation in wavelength of n and k in "
-            "data/refractive_index/water_segelstein1981.csv. x = 2 pi r / lambda. "
+            "mie/data/refractive_index/water_segelstein1981.csv. x = 2 pi r / lambda. "
             "p(theta) = (|S1|^2 + |S2|^2) / (2 pi x^2 Qsca) in 1/sr, integral over 4 pi = 1. "
             "phase_bin[k] = (1/dOmega_k) * integral of p dOmega over bin k (solid-angle average); "
             "phase_point[k] = p(theta_k). Lognormal: n(r) dr ~ (1/r) exp(-(ln r - ln r_g)^2/(2 ln^2 sigma_g)) dr, "

@@ -184,6 +184,38 @@ pub fn relative_change(a: &PhaseFunction, b: &PhaseFunction) -> f64 {
         .max((b.g - a.g).abs())
 }
 
+/// The size-averaged phase function p̄ (1/sr) of spheres of index `m` at vacuum wavelength
+/// `wavelength_nm` over the size nodes `sizes`, at the (folded) angles `angles` only — no bins:
+/// p̄ = Σ_i w_i (|S1|² + |S2|²)_i / (2 k² σ_sca), σ_sca = Σ_i w_i Q_sca,i π r_i², k = 2π/λ.
+pub fn mean_phase_at(
+    m: Complex64,
+    wavelength_nm: f64,
+    sizes: &SizeQuadrature,
+    angles: &FoldedAngles,
+) -> Result<Vec<f64>, MieError> {
+    let k = 2.0 * std::f64::consts::PI / (wavelength_nm / 1000.0);
+    let per_size: Vec<(SphereTerms, f64)> = sizes
+        .radius_um
+        .par_iter()
+        .map(|&r| -> Result<_, MieError> {
+            let c = Sphere::new(m, k * r)?.coefficients();
+            let q_sca = c.efficiencies().q_sca;
+            Ok((SphereTerms::new(&c), q_sca * std::f64::consts::PI * r * r))
+        })
+        .collect::<Result<_, _>>()?;
+    let sigma_sca: f64 = per_size
+        .iter()
+        .zip(&sizes.weight)
+        .map(|((_, s), w)| s * w)
+        .sum();
+    let terms: Vec<SphereTerms> = per_size.into_iter().map(|(t, _)| t).collect();
+    let intensity = weighted_intensity(&terms, &sizes.weight, angles);
+    Ok(intensity
+        .iter()
+        .map(|i| i / (2.0 * k * k * sigma_sca))
+        .collect())
+}
+
 /// Sizes whose Mie coefficients are held at once by [`bulk_at`] (64 raindrops at x ≈ 2e4 hold
 /// ~50 MB).
 const SIZE_CHUNK: usize = 64;

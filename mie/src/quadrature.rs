@@ -84,4 +84,40 @@ mod tests {
             );
         }
     }
+
+    #[test]
+    fn gauss_legendre_matches_published_five_point_rule() {
+        // A&S 25.4 Table, n = 5; closed forms x = ⅓√(5 ∓ 2√(10/7)), w = (322 ± 13√70)/900,
+        // centre 0 with weight 128/225.
+        // Descending order, largest node first.
+        let (x, w) = gauss_legendre(5);
+        let x: Vec<f64> = x.into_iter().rev().collect();
+        let w: Vec<f64> = w.into_iter().rev().collect();
+        let s = (10.0f64 / 7.0).sqrt();
+        let x_want = [
+            (5.0 + 2.0 * s).sqrt() / 3.0,
+            (5.0 - 2.0 * s).sqrt() / 3.0,
+            0.0,
+        ];
+        let r70 = 70.0f64.sqrt();
+        let w_want = [
+            (322.0 - 13.0 * r70) / 900.0,
+            (322.0 + 13.0 * r70) / 900.0,
+            128.0 / 225.0,
+        ];
+        for i in 0..3 {
+            assert!((x[i] - x_want[i]).abs() < 2e-16, "x_{i} = {}", x[i]);
+            assert!((w[i] - w_want[i]).abs() < 4e-16, "w_{i} = {}", w[i]);
+            assert_eq!(x[4 - i], -x[i]);
+        }
+        // Table digits, A&S 25.4: 0.906179845938664, 0.236926885056189.
+        assert!((x[0] - 0.906_179_845_938_664).abs() < 1e-15);
+        assert!((w[0] - 0.236_926_885_056_189).abs() < 1e-15);
+        // Σ w = 2 and exactness on x^{2n−2} at a large n.
+        let (x, w) = gauss_legendre(1001);
+        let total: f64 = w.iter().sum();
+        assert!((total - 2.0).abs() < 1e-13, "{total}");
+        let m2: f64 = x.iter().zip(&w).map(|(x, w)| w * x * x).sum();
+        assert!((m2 - 2.0 / 3.0).abs() < 1e-13, "{m2}");
+    }
 }

@@ -2,10 +2,10 @@
 //!
 //! - Water, real part: IAPWS R9-97 (Harvey et al. 1998, J. Phys. Chem. Ref. Data 27, 761),
 //!   a function of wavelength, temperature and density; the density at 1 atm comes from the
-//!   IAPWS-95 table in `data/water/density_1atm.csv` (linear in T). Valid 200–1100 nm and
+//!   IAPWS-95 table in `mie/data/water/density_1atm.csv` (linear in T). Valid 200–1100 nm and
 //!   −12…99 °C (the density table; IAPWS R9-97 itself holds from 261.15 K).
-//! - Water, imaginary part: Segelstein 1981 (`data/refractive_index/water_segelstein1981.csv`).
-//! - Ice: Warren & Brandt 2008 at −7 °C (`data/refractive_index/ice_warren_brandt2008.csv`),
+//! - Water, imaginary part: Segelstein 1981 (`mie/data/refractive_index/water_segelstein1981.csv`).
+//! - Ice: Warren & Brandt 2008 at −7 °C (`mie/data/refractive_index/ice_warren_brandt2008.csv`),
 //!   both parts.
 //!
 //! # Interpolation

@@ -14,10 +14,9 @@ use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use clap::{Args, Subcommand};
-use mie::amplitude::weighted_intensity;
-use mie::{FoldedAngles, SizeQuadrature, Sphere, SphereTerms, ThetaGrid, amplitudes};
+use mie::ensemble::mean_phase_at;
+use mie::{FoldedAngles, SizeQuadrature, Sphere, ThetaGrid, amplitudes};
 use num_complex::Complex64;
-use rayon::prelude::*;
 use serde_json::json;
 
 #[derive(Debug, Args)]
@@ -48,7 +47,8 @@ struct RenderBench {
     /// Bake preset for the tables (frame time does not depend on it).
     #[arg(long, default_value = "draft")]
     quality: String,
-    /// Bake directory (default: photometeor-tables-<scene name>).
+    /// Bake directory (default: a directory per scene under the user's cache directory, as
+    /// `photometeor render`).
     #[arg(long)]
     tables: Option<std::path::PathBuf>,
     /// Base setting: width = height (pixels) and slices.
@@ -229,31 +229,17 @@ fn single_sphere() -> Result<()> {
 /// Returns the three normalized phase functions (1/sr) at the 1001 grid angles.
 fn rain_lognormal() -> Result<Vec<Vec<f64>>> {
     // The rule scripts/bench_miepython.py uses: 100 radii log-spaced over r_g e^{±3 ln σ_g}.
-    let SizeQuadrature {
-        radius_um: radii,
-        weight: weights,
-    } = SizeQuadrature::lognormal_log_spaced(500.0, 1.4, 100, 3.0);
+    let sizes = SizeQuadrature::lognormal_log_spaced(500.0, 1.4, 100, 3.0);
     let angles = FoldedAngles::new(&grid_cosines());
     RAIN_CASES
         .iter()
         .map(|&(lambda_nm, n, kappa)| {
-            let k = 2.0 * std::f64::consts::PI / (lambda_nm / 1000.0);
-            let m = Complex64::new(n, kappa);
-            let per_size: Vec<(SphereTerms, f64)> = radii
-                .par_iter()
-                .map(|&r| -> Result<_> {
-                    let c = Sphere::new(m, k * r)?.coefficients();
-                    let q_sca = c.efficiencies().q_sca;
-                    Ok((SphereTerms::new(&c), q_sca * std::f64::consts::PI * r * r))
-                })
-                .collect::<Result<_>>()?;
-            let sigma_sca: f64 = per_size.iter().zip(&weights).map(|((_, s), w)| s * w).sum();
-            let terms: Vec<SphereTerms> = per_size.into_iter().map(|(t, _)| t).collect();
-            let intensity = weighted_intensity(&terms, &weights, &angles);
-            Ok(intensity
-                .iter()
-                .map(|i| i / (2.0 * k * k * sigma_sca))
-                .collect())
+            Ok(mean_phase_at(
+                Complex64::new(n, kappa),
+                lambda_nm,
+                &sizes,
+                &angles,
+            )?)
         })
         .collect()
 }

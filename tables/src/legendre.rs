@@ -9,12 +9,19 @@
 //!   ([`coefficients_from_bins`], [`coefficients_from_bin_rows`]) and bin averages of a series
 //!   ([`bin_averages_from_coefficients`]). This is the exact path the tables use: a table value
 //!   is a true bin average of the series, whatever the degree.
-//! - [`fast`]: point values of Σ_l a_l P_l(μ) on the cosine grid μ_j = cos(jπ/N) and the inverse
-//!   (interpolation at those nodes), by Legendre ↔ Chebyshev conversion plus a DCT-I done with
-//!   rustfft.
-//! - [`reference`]: the slow, obviously-correct counterparts the fast and exact kernels are
-//!   tested against: direct recurrence summation, Gauss–Legendre quadrature, and per-bin
-//!   Gauss–Legendre integration of P_l.
+//! - [`reference`]: the slow, obviously-correct counterparts the exact kernels are tested
+//!   against: P_l by recurrence, Gauss–Legendre quadrature, and per-bin Gauss–Legendre
+//!   integration of P_l.
+//!
+//! # Why no fast transform
+//! A Legendre ↔ point-value transform on the cosine grid (Alpert–Rokhlin Legendre ↔ Chebyshev
+//! conversion plus a DCT) gives point values, not the bin averages the tables hold, and its
+//! conversion costs (L + 1)²/4 per series. Measured on the bake's own step (Henyey–Greenstein
+//! g = 0.85 at 0.18°, L = 5630, 26 orders, release build, one run on this 2-core machine): the
+//! exact bin averages of all 26 rows took 15 ms (the series stops per order where χ_l^n has
+//! vanished), the fast transform 96–99 ms for the point values alone, before they could be
+//! turned into bin averages. The renderers never transform: they interpolate the tables. So the
+//! fast transform was removed; it does not pay for bin-averaged tables.
 //!
 //! # Normalization
 //! θ is the scattering angle, μ = cos θ. A phase function p(μ) is normalized
@@ -24,14 +31,12 @@
 //!
 //! so χ_0 = 1 and χ_1 = g (the asymmetry parameter); Henyey–Greenstein has χ_l = g^l.
 //! Funk–Hecke: the spherical convolution of two zonal functions has χ_l = χ_l^a χ_l^b, hence
-//! Ams_n ↔ χ_l^n (Riley et al. 2004 §4.2). Plain series in [`fast`] and [`reference`] are
-//! written f(μ) = Σ_l a_l P_l(μ) with no weights; a_l = (2l + 1)/(4π) χ_l.
+//! Ams_n ↔ χ_l^n (Riley et al. 2004 §4.2).
 //!
 //! # Angle order
 //! Bins follow [`ThetaGrid`]: k = 0 forward (μ = 1) to k = K − 1 backward (μ = −1); bin k
 //! covers [θ_k − Δθ/2, θ_k + Δθ/2] ∩ [0°, 180°], and a bin value is the average of p over the
-//! bin's solid angle Ω_k = 2π Δμ_k. The cosine grid of [`fast`] runs the same way:
-//! μ_j = cos(jπ/N), j = 0 forward; with N = 180°/Δθ its nodes are the θ_k of the table grid.
+//! bin's solid angle Ω_k = 2π Δμ_k.
 //!
 //! # Numerical hazards
 //! - Legendre polynomials come from Bonnet's three-term recurrence
@@ -43,20 +48,13 @@
 //!   get ≈ 3e-6, losing ~6 digits. [`bins`] uses the same identity rearranged,
 //!   ∫_μ^1 P_l = (P_{l−1} − P_{l+1})/(2l + 1) = sin²θ P'_l(μ)/(l(l + 1)), which has no
 //!   cancellation and is exactly 0 at both poles (so Σ_k W_lk telescopes to 2δ_l0).
-//! - See [`fast`] for the Legendre ↔ Chebyshev conversion and the conditioning of point values
-//!   near μ = ±1.
 
 pub mod bins;
-pub mod fast;
 pub mod reference;
 
 pub use bins::{
     BinIntegrals, bin_averages_from_coefficients, bin_integrals, coefficients_from_bin_rows,
     coefficients_from_bins,
-};
-pub use fast::{
-    chebyshev_to_legendre, coefficients_from_cosine_grid, evaluate_on_cosine_grid,
-    legendre_to_chebyshev,
 };
 pub use grid::{GridError, ThetaGrid};
 
@@ -82,11 +80,5 @@ pub enum LegendreError {
         got: usize,
         /// l_max + 1.
         expected: usize,
-    },
-    /// A cosine grid needs at least two nodes (N ≥ 1).
-    #[error("cosine grid needs N ≥ 1 intervals (at least 2 samples), got {samples} samples")]
-    TooFewSamples {
-        /// Samples supplied (N + 1).
-        samples: usize,
     },
 }

@@ -2,8 +2,7 @@
 //! wavelength → Legendre coefficients χ_l → Ams_n (χ_l^n, Funk–Hecke) and F_n → RGB channels.
 //!
 //! - [`legendre`]: exact bin integrals of P_l on the [`grid::ThetaGrid`], χ_l from bin averages
-//!   and bin averages from χ_l, and a fast Legendre ↔ point-value transform (Chebyshev
-//!   conversion + DCT via rustfft) with its slow reference.
+//!   and bin averages from χ_l, with their slow references.
 //! - [`ams`]: [`ams::AmsSeries`] (Ams_n and F_n of one phase function by a forward-delta split
 //!   and a blurred Legendre series, n_iso(ε)) and [`ams::AmsMixture`], the per-wavelength
 //!   mixture an RGB channel is.

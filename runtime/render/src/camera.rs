@@ -5,7 +5,9 @@ use glam::DVec3;
 /// A pinhole camera; y is up, metres, sea level at y = 0.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Camera {
+    /// Eye position (m); at or above sea level (y ≥ 0) and outside the volumes' box.
     pub position_m: DVec3,
+    /// Point the camera looks at (m); must differ from `position_m`.
     pub look_at_m: DVec3,
     /// Vertical field of view, degrees.
     pub fov_deg: f64,

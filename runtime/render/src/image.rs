@@ -15,12 +15,22 @@ use crate::Image;
 /// Why a frame could not be written.
 #[derive(Debug, thiserror::Error)]
 pub enum WriteError {
+    /// The EXR or PNG encoder failed; nothing was written.
     #[error("{path}: encoding failed: {message}")]
-    Encode { path: String, message: String },
+    Encode {
+        /// The file that was to be written.
+        path: String,
+        /// The encoder's error.
+        message: String,
+    },
+    /// Writing the encoded bytes failed; `path` is left untouched.
     #[error("{path}: {op}: {source}")]
     Io {
+        /// The file being written.
         path: String,
+        /// The step of the atomic write that failed.
         op: &'static str,
+        /// The I/O error.
         source: std::io::Error,
     },
 }
@@ -109,6 +119,7 @@ impl Image {
         self.rgb.iter().flat_map(|p| p.map(encode)).collect()
     }
 
+    /// Writes an 8-bit sRGB PNG of [`Image::to_srgb8`] at `exposure`.
     pub fn write_png(&self, path: &Path, exposure: f64) -> Result<(), WriteError> {
         let mut bytes = Vec::new();
         let encode_err = |e: png::EncodingError| WriteError::Encode {

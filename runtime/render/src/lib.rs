@@ -29,8 +29,6 @@ pub use scene::RenderScene;
 pub use sky::Atmosphere;
 pub use volume::DensityGrid;
 
-use glam::DVec3;
-
 /// Up to this many fields take part in one render (one RGBA texel per voxel).
 pub const MAX_FIELDS: usize = 4;
 
@@ -40,16 +38,23 @@ pub const SUN_DIAMETER_DEG: f64 = 0.5;
 /// Everything one frame needs besides the tables.
 #[derive(Debug, Clone)]
 pub struct Frame {
+    /// The pinhole camera; fov (0, 170) degrees.
     pub camera: Camera,
+    /// The sun; elevation (0, 90] degrees.
     pub sun: Sun,
+    /// The analytic sky and aerial perspective (Riley Eqs. 11–15).
     pub atmosphere: Atmosphere,
     /// Riley's ξ: back-scattered light added to the phase function in the eye pass (1/sr).
     pub xi: f64,
+    /// Image width, 1…8192 pixels.
     pub width: usize,
+    /// Image height, 1…8192 pixels.
     pub height: usize,
+    /// Number S of half-angle slices through the grid's box, [1, 4096].
     pub slices: usize,
     /// Light-buffer texels per side.
     pub light_resolution: usize,
+    /// Number densities, channel i = field i of the tables.
     pub grid: DensityGrid,
 }
 
@@ -62,8 +67,12 @@ pub struct FrameError(pub String);
 /// transparency (green channel) per pixel.
 #[derive(Debug, Clone)]
 pub struct Image {
+    /// Width in pixels.
     pub width: usize,
+    /// Height in pixels.
     pub height: usize,
+    /// Linear R, G, B radiance per pixel, row-major (1/sr per unit solar irradiance).
     pub rgb: Vec<[f32; 3]>,
+    /// The volume's transparency T_vol (green channel) per pixel, 0…1.
     pub transparency: Vec<f32>,
 }

@@ -328,7 +328,7 @@ impl Density {
                 let inside = blobs
                     .iter()
                     .map(|&(c, r)| {
-                        let d = (p - c);
+                        let d = p - c;
                         1.0 - d.dot(d).sqrt() / r
                     })
                     .fold(f64::NEG_INFINITY, f64::max);

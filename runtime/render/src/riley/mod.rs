@@ -113,7 +113,7 @@ impl Frame {
                 self.camera.position_m, self.grid.min_m, self.grid.max_m
             ));
         }
-        let forward = (self.camera.look_at_m - self.camera.position_m);
+        let forward = self.camera.look_at_m - self.camera.position_m;
         if forward.dot(forward) == 0.0 {
             return bad("camera look_at_m equals position_m".into());
         }
