@@ -34,24 +34,34 @@ const F16_MAX: f64 = 65504.0;
 /// Why the GPU path cannot run.
 #[derive(Debug, Error)]
 pub enum GpuError {
+    /// No adapter on any enabled backend; wgpu's reason.
     #[error("no GPU adapter found (any backend; set WGPU_BACKEND to choose one): {0}")]
     NoAdapter(String),
+    /// The adapter refused a device, or the device failed while waiting; wgpu's reason.
     #[error("the adapter refused a device: {0}")]
     Device(String),
+    /// A size exceeds a device limit.
     #[error("{what} = {value} exceeds this device's limit {limit}")]
     Limit {
+        /// What was too large.
         what: &'static str,
+        /// The amount asked for (a count or bytes).
         value: u64,
+        /// The device's limit.
         limit: u64,
     },
+    /// Copying, waiting for or mapping the readback buffer failed; wgpu's reason.
     #[error("reading back from the GPU failed: {0}")]
     Readback(String),
 }
 
 /// A headless device.
 pub struct Gpu {
+    /// The adapter the device was requested from.
     pub adapter: wgpu::Adapter,
+    /// The device, with the adapter's full limits and no optional features.
     pub device: wgpu::Device,
+    /// The device's queue.
     pub queue: wgpu::Queue,
 }
 
@@ -91,17 +101,25 @@ impl Gpu {
 pub enum TexelFormat {
     /// Half floats where every value fits, else 32-bit.
     Auto,
+    /// Always `Rgba32Float`.
     F32,
 }
 
 /// Tables resident on the GPU.
 pub struct GpuTables {
+    /// The Ams_n texture array (binding 0): K × N_max texels, one layer per field.
     pub texture: wgpu::Texture,
+    /// The texture's format, `Rgba16Float` or `Rgba32Float`.
     pub format: wgpu::TextureFormat,
+    /// F_n per field (binding 1).
     pub forward_fraction: wgpu::Buffer,
+    /// (N, σ_sca R, G, B) per field (binding 2; σ_sca in m²).
     pub field_info: wgpu::Buffer,
+    /// (K, N_max, field count, 1/Δθ in 1/rad) uniform (binding 3).
     pub params: wgpu::Buffer,
+    /// The layout of bind group 0.
     pub layout: wgpu::BindGroupLayout,
+    /// Bind group 0, binding the four resources above.
     pub bind_group: wgpu::BindGroup,
     /// Rows per layer (the largest N).
     pub n_stride: usize,
@@ -335,8 +353,11 @@ impl GpuTables {
 /// One query of [`evaluate`]: `ams(field, n, cos θ)` and `forward_fraction(field, n)`.
 #[derive(Debug, Clone, Copy)]
 pub struct Query {
+    /// Index into [`Tables::fields`].
     pub field: u32,
+    /// Scattering order n, fractional (n < 1 samples Ams_1).
     pub n: f32,
+    /// cos θ, θ the scattering angle.
     pub cos_theta: f32,
 }
 

@@ -127,17 +127,27 @@ struct VolumeKeys {
 /// What a render needs from a scene file.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RenderScene {
+    /// Image width, 1…8192 pixels (default 512).
     pub width: usize,
+    /// Image height, 1…8192 pixels (default 512).
     pub height: usize,
+    /// Half-angle slices through the volumes' box, [1, 4096] (default 256).
     pub slices: usize,
+    /// Light-buffer texels per side, [2, 4096] (default 512).
     pub light_resolution: usize,
+    /// Voxels along the box's longest side, [2, 512] (default 128).
     pub grid_resolution: usize,
+    /// Riley's ξ (1/sr), back-scattered light in the eye pass; ≥ 0 (default 0).
     pub xi: f64,
     /// None: automatic.
     pub exposure: Option<f64>,
+    /// From `[camera]`; fov (0, 170) degrees (default 60).
     pub camera: Camera,
+    /// From `[sun]`; elevation (0, 90] degrees, irradiance ≥ 0 (default [1, 1, 1]).
     pub sun: Sun,
+    /// From `[sky]`; `enabled = false` sets β_sl to zero (no sky, no aerial perspective).
     pub atmosphere: Atmosphere,
+    /// The `[[volume]]` tables, at least one.
     pub volumes: Vec<Volume>,
 }
 

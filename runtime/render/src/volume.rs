@@ -13,14 +13,18 @@ use crate::MAX_FIELDS;
 /// renderer's [`crate::Tables`]). Outside the box the density is zero.
 #[derive(Debug, Clone, PartialEq)]
 pub struct DensityGrid {
+    /// Lower corner of the box (m).
     pub min_m: DVec3,
+    /// Upper corner of the box (m).
     pub max_m: DVec3,
+    /// Voxels along x, y, z.
     pub dims: [usize; 3],
     /// x fastest, then y, then z.
     pub data: Vec<[f32; MAX_FIELDS]>,
 }
 
 impl DensityGrid {
+    /// The box's eight corners (m); bit 0, 1, 2 of the index picks max over min in x, y, z.
     pub fn corners(&self) -> [DVec3; 8] {
         std::array::from_fn(|i| {
             DVec3::new(
@@ -43,6 +47,7 @@ impl DensityGrid {
         })
     }
 
+    /// Whether `p` lies in the closed box [min_m, max_m].
     pub fn contains(&self, p: DVec3) -> bool {
         (0..3).all(|a| p[a] >= self.min_m[a] && p[a] <= self.max_m[a])
     }
@@ -105,29 +110,43 @@ impl DensityGrid {
 pub enum Shape {
     /// A heap of seeded blobs with a flat base at centre_y − height/2, fbm-noised edges.
     Cumulus {
+        /// Centre of the bounding box (m).
         center_m: DVec3,
+        /// Horizontal half-width of the bounding box (m).
         radius_m: f64,
+        /// Height from base to top (m).
         height_m: f64,
     },
     /// A thin horizontal sheet with streaky fbm texture.
     Cirrus {
+        /// Centre of the sheet (m).
         center_m: DVec3,
+        /// Side of the square sheet (m).
         size_m: f64,
+        /// Vertical thickness (m).
         thickness_m: f64,
     },
     /// A vertical cylinder of rain from `bottom_m` to `top_m`, soft at its rim and top.
     RainShaft {
+        /// The axis's position (m); only x and z are used.
         center_m: DVec3,
+        /// Cylinder radius (m).
         radius_m: f64,
+        /// Height of the base (m); below `top_m`.
         bottom_m: f64,
+        /// Height of the top (m).
         top_m: f64,
     },
     /// Raw little-endian f32 values, x fastest, filling [min_m, max_m]; multiplied by the
     /// volume's number density.
     Grid {
+        /// The raw f32 file (resolved against the scene file's directory).
         file: PathBuf,
+        /// Values along x, y, z, each in [1, 4096].
         dims: [usize; 3],
+        /// Lower corner of the box (m).
         min_m: DVec3,
+        /// Upper corner of the box (m); above `min_m` on every axis.
         max_m: DVec3,
     },
 }
@@ -135,14 +154,18 @@ pub enum Shape {
 /// One volume of one field.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Volume {
+    /// Name of the scene's `[[field]]` (a field of the tables) this volume holds.
     pub field: String,
     /// Peak number density (particles/m³); β_ext = density · σ_ext (Riley Eq. 2).
     pub number_density_per_m3: f64,
+    /// Where the volume lies and how its density falls off.
     pub shape: Shape,
+    /// Seed of the blobs and noise of the procedural shapes (default 1).
     pub seed: u64,
 }
 
 impl Volume {
+    /// Axis-aligned bounding box (min, max) of the shape (m).
     pub fn bounds(&self) -> (DVec3, DVec3) {
         match &self.shape {
             Shape::Cumulus {

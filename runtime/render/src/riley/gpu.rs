@@ -20,8 +20,10 @@ pub const RENDER_WGSL: &str = include_str!("render.wgsl");
 /// Why a GPU render failed.
 #[derive(Debug, thiserror::Error)]
 pub enum RenderError {
+    /// The frame's parameters are out of range or its fields do not fit the tables.
     #[error(transparent)]
     Frame(#[from] FrameError),
+    /// The device failed, or a buffer exceeds its limits.
     #[error(transparent)]
     Gpu(#[from] GpuError),
 }
@@ -64,6 +66,8 @@ fn v4(v: glam::DVec3, w: f64) -> [f32; 4] {
 }
 
 impl Renderer {
+    /// Compiles [`RENDER_WGSL`] after [`WGSL`] and builds the pipelines, with `tables`' layout
+    /// as bind group 0.
     pub fn new(gpu: &Gpu, tables: &GpuTables) -> Self {
         let device = &gpu.device;
         use wgpu::BufferBindingType::{Storage, Uniform};

@@ -45,23 +45,35 @@ pub fn basis(d: DVec3) -> (DVec3, DVec3) {
 /// The derived geometry both renderers use (module docs).
 #[derive(Debug, Clone, Copy)]
 pub struct Setup {
+    /// Eye position (m).
     pub eye: DVec3,
+    /// Unit view direction v.
     pub forward: DVec3,
+    /// Unit camera right axis, v × y (x when looking straight up or down).
     pub right: DVec3,
+    /// Unit camera up axis, right × v.
     pub up: DVec3,
+    /// tan of half the vertical field of view.
     pub tan_half_fov_y: f64,
+    /// Image width / height.
     pub aspect: f64,
     /// Direction the sunlight travels (−sun direction).
     pub light: DVec3,
+    /// Unit half-angle vector h, the slices' normal: ∝ v + l if front to back, else ∝ l − v.
     pub half: DVec3,
+    /// Whether the eye composites front to back (v·l ≥ 0); otherwise back to front.
     pub front_to_back: bool,
     /// Plane value of the first slice's centre, and the spacing Δ along h.
     pub slice_start: f64,
+    /// Slice spacing Δ along h (m).
     pub slice_step: f64,
     /// Light-buffer axes (⟂ l), origin (u, w of texel (0, 0)'s corner) and texel size.
     pub light_u: DVec3,
+    /// Second light-buffer axis w (⟂ l and u).
     pub light_w: DVec3,
+    /// (u, w) of texel (0, 0)'s corner (m).
     pub light_origin: [f64; 2],
+    /// Texel size along u and w (m).
     pub light_texel: [f64; 2],
 }
 
