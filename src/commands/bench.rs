@@ -438,7 +438,7 @@ fn bench_render(b: RenderBench) -> Result<()> {
         Gpu::new().context("no GPU adapter (on Debian: apt-get install mesa-vulkan-drivers)")?;
     let uploaded = GpuTables::upload(&gpu, &tables, TexelFormat::Auto)?;
     let renderer = Renderer::new(&gpu, &uploaded);
-    let base = scene.frame(&tables).map_err(|e| anyhow::anyhow!(e))?;
+    let base = scene.frame(&tables)?;
     let mut settings: Vec<(usize, usize)> = vec![(b.size, b.slices)];
     settings.extend(b.slice_counts.iter().map(|&s| (b.size, s)));
     settings.extend(b.sizes.iter().map(|&n| (n, b.slices)));

@@ -88,7 +88,7 @@ pub fn prepare(
         ),
     };
     let mut scene = Scene::parse(&text, &origin)?;
-    let mut render = RenderScene::parse(&text, &origin, &base).map_err(|e| anyhow!(e))?;
+    let mut render = RenderScene::parse(&text, &origin, &base)?;
     adjust(&mut render);
     render.check().map_err(|e| anyhow!("{origin}: {e}"))?;
     let used = render.fields();
@@ -134,7 +134,7 @@ pub fn run(a: RenderArgs) -> Result<()> {
         },
     )?;
     let started = Instant::now();
-    let frame: Frame = render.frame(&tables).map_err(|e| anyhow!(e))?;
+    let frame: Frame = render.frame(&tables)?;
     let raster = started.elapsed().as_secs_f64();
     let image = if a.cpu {
         let t = Instant::now();

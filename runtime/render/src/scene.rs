@@ -51,7 +51,8 @@ use glam::DVec3;
 
 use crate::volume::{Shape, Volume, joint_bounds, rasterize};
 
-use crate::{Atmosphere, Camera, Frame, Sun};
+use crate::volume::VolumeError;
+use crate::{Atmosphere, Camera, Frame, FrameError, Sun};
 use runtime::Tables;
 
 #[derive(Debug, Default, Deserialize)]
@@ -151,6 +152,39 @@ pub struct RenderScene {
     pub volumes: Vec<Volume>,
 }
 
+/// A render scene that cannot be used, naming the file, the key or volume, and the allowed range.
+#[derive(Debug, thiserror::Error)]
+pub enum SceneError {
+    /// The scene file could not be read.
+    #[error("reading {}: {source}", path.display())]
+    Read {
+        /// The scene file.
+        path: std::path::PathBuf,
+        /// The underlying error.
+        source: std::io::Error,
+    },
+    /// A table or key is missing, malformed or out of range.
+    #[error("{origin}: {message}")]
+    Invalid {
+        /// The scene file (or "default render scene").
+        origin: String,
+        /// What is wrong, naming the key, its value and the allowed range.
+        message: String,
+    },
+    /// The frame's parameters (size, slices, camera, sun) are out of range.
+    #[error(transparent)]
+    Frame(#[from] FrameError),
+    /// A volume cannot be rasterized (grid file size, values).
+    #[error(transparent)]
+    Volume(#[from] VolumeError),
+    /// A volume uses a field the loaded tables do not hold.
+    #[error("a volume uses field {name:?}, which the tables do not hold")]
+    MissingField {
+        /// The field's name.
+        name: String,
+    },
+}
+
 fn positive(what: &str, v: f64) -> Result<f64, String> {
     if v.is_finite() && v > 0.0 {
         Ok(v)
@@ -162,9 +196,12 @@ fn positive(what: &str, v: f64) -> Result<f64, String> {
 impl RenderScene {
     /// Parses the render tables of a scene; `origin` names it in errors, `base` resolves grid
     /// files. A scene without `[camera]`, `[sun]` or `[[volume]]` cannot be rendered.
-    pub fn parse(text: &str, origin: &str, base: &Path) -> Result<Self, String> {
-        let file: File = toml::from_str(text).map_err(|e| format!("{origin}: {}", e.message()))?;
-        let err = |m: String| format!("{origin}: {m}");
+    pub fn parse(text: &str, origin: &str, base: &Path) -> Result<Self, SceneError> {
+        let err = |message: String| SceneError::Invalid {
+            origin: origin.to_string(),
+            message,
+        };
+        let file: File = toml::from_str(text).map_err(|e| err(e.message().to_string()))?;
         let render = file.render.unwrap_or_default();
         let camera = file
             .camera
@@ -243,7 +280,7 @@ impl RenderScene {
 
     /// The frame's parameters checked (sizes, camera, sun) before anything is baked: a frame
     /// over the volumes' bounds without rasterizing them.
-    pub fn check(&self) -> Result<(), String> {
+    pub fn check(&self) -> Result<(), FrameError> {
         let (lo, hi) = joint_bounds(&self.volumes);
         let grid = super::DensityGrid {
             min_m: lo,
@@ -251,7 +288,7 @@ impl RenderScene {
             dims: [1, 1, 1],
             data: vec![[0.0; super::MAX_FIELDS]],
         };
-        self.frame_with(grid).setup().map(|_| ()).map_err(|e| e.0)
+        self.frame_with(grid).setup().map(|_| ())
     }
 
     fn frame_with(&self, grid: super::DensityGrid) -> Frame {
@@ -269,9 +306,11 @@ impl RenderScene {
     }
 
     /// Reads a scene file.
-    pub fn from_file(path: &Path) -> Result<Self, String> {
-        let text = std::fs::read_to_string(path)
-            .map_err(|e| format!("reading {}: {e}", path.display()))?;
+    pub fn from_file(path: &Path) -> Result<Self, SceneError> {
+        let text = std::fs::read_to_string(path).map_err(|source| SceneError::Read {
+            path: path.to_path_buf(),
+            source,
+        })?;
         let base = path.parent().unwrap_or(Path::new("."));
         Self::parse(&text, &path.display().to_string(), base)
     }
@@ -288,12 +327,10 @@ impl RenderScene {
     }
 
     /// The frame: volumes rasterized with channel i = `tables.fields[i]`.
-    pub fn frame(&self, tables: &Tables) -> Result<Frame, String> {
+    pub fn frame(&self, tables: &Tables) -> Result<Frame, SceneError> {
         for name in self.fields() {
             if tables.field(&name).is_none() {
-                return Err(format!(
-                    "a volume uses field {name:?}, which the tables do not hold"
-                ));
+                return Err(SceneError::MissingField { name });
             }
         }
         let index = |name: &str| {

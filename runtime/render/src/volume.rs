@@ -436,6 +436,11 @@ fn read_grid(
     })
 }
 
+/// A volume that cannot be rasterized: the grid file and what is wrong with it.
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct VolumeError(pub String);
+
 /// The box holding every volume.
 pub fn joint_bounds(volumes: &[Volume]) -> (DVec3, DVec3) {
     let mut lo = [f64::INFINITY; 3];
@@ -456,9 +461,9 @@ pub fn rasterize(
     volumes: &[Volume],
     resolution: usize,
     field_index: impl Fn(&str) -> usize,
-) -> Result<DensityGrid, String> {
+) -> Result<DensityGrid, VolumeError> {
     if volumes.is_empty() {
-        return Err("the scene has no [[volume]]".into());
+        return Err(VolumeError("the scene has no [[volume]]".into()));
     }
     let (lo, hi) = joint_bounds(volumes);
     let extent = [hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]];
@@ -473,7 +478,8 @@ pub fn rasterize(
                 Density::new(v)?,
             ))
         })
-        .collect::<Result<_, String>>()?;
+        .collect::<Result<_, String>>()
+        .map_err(VolumeError)?;
     let [nx, ny, nz] = dims;
     let mut data = vec![[0f32; MAX_FIELDS]; nx * ny * nz];
     use rayon::prelude::*;
