@@ -1,18 +1,19 @@
 //! Loading and checking a bake directory.
 //!
 //! # Checks (each failure names the file and the check)
-//! - `manifest.json`: schema version, grid (K = 180°/Δθ + 1), per-field shapes (by
-//!   `format::read_manifest`);
-//! - each selected field's EXR: a complete OpenEXR file following the contract (by
-//!   `format::read_field_exr`), then against its manifest entry: the field name
-//!   attribute, Δθ, N and K, and F_1..F_N equal to the manifest's per channel;
+//! - the directory has no pending commit of an interrupted bake; `manifest.json`: schema
+//!   version, grid (K = 180°/Δθ + 1), per-field shapes, file names, physical ranges (albedo,
+//!   g, σ_ext, F_i) (by `format::BakeDir::open`);
+//! - each selected field's EXR: a complete OpenEXR file following the contract, then against
+//!   its manifest entry: the field name attribute, Δθ, N and K, F_1..F_N equal to the
+//!   manifest's per channel, and the file's size and CRC-32 (by `format::BakeDir::read_field`);
 //! - every row Ams_n, per channel, integrates to 1 over the sphere within [`NORMALIZATION_TOLERANCE`]
 //!   (the texels are 32-bit floats) and has no value below −10⁻⁶ of its maximum;
 //! - F_n lies in [½, 1] and does not rise with n.
 
 use std::path::{Path, PathBuf};
 
-use format::{FieldImage, read_field_exr, read_manifest};
+use format::{BakeDir, FieldImage};
 use grid::ThetaGrid;
 use ndarray::Axis;
 use thiserror::Error;
@@ -82,10 +83,11 @@ impl Tables {
     pub fn open_fields(dir: impl AsRef<Path>, names: Option<&[&str]>) -> Result<Self, LoadError> {
         let dir = dir.as_ref();
         let manifest_file = dir.join(format::MANIFEST_FILE);
-        let manifest = read_manifest(dir).map_err(|e| LoadError {
+        let bake = BakeDir::open(dir).map_err(|e| LoadError {
             file: manifest_file.clone(),
             check: strip_path(&e.to_string(), &manifest_file),
         })?;
+        let manifest = &bake.manifest;
         if let Some(names) = names {
             for n in names {
                 if !manifest.fields.iter().any(|f| f.name == *n) {
@@ -109,39 +111,12 @@ impl Tables {
                 file: file.clone(),
                 check,
             };
-            let image =
-                read_field_exr(&file).map_err(|e| fail(strip_path(&e.to_string(), &file)))?;
-            if image.field != entry.name {
-                return Err(fail(format!(
-                    "field attribute {:?}, but manifest.json lists this file for field {:?}",
-                    image.field, entry.name
-                )));
-            }
-            if image.theta_step_deg != manifest.theta_step_deg {
-                return Err(fail(format!(
-                    "Δθ = {}°, manifest.json says {}°",
-                    image.theta_step_deg, manifest.theta_step_deg
-                )));
-            }
-            // The angle count follows from Δθ, which read_field_exr and read_manifest check.
-            if image.n_max() != entry.n_max {
-                return Err(fail(format!(
-                    "{} rows, manifest.json says N = {}",
-                    image.n_max(),
-                    entry.n_max
-                )));
-            }
-            let manifest_f = entry.forward_fraction.as_array();
+            // Contract, manifest cross-checks (name, Δθ, K, N, F_i) and size + CRC-32.
+            let image = bake
+                .read_field(entry)
+                .map_err(|e| fail(strip_path(&e.to_string(), &file)))?;
             for (c, ch) in ["R", "G", "B"].into_iter().enumerate() {
                 let f = image.forward_fractions(c);
-                if let Some(i) = (0..f.len()).find(|&i| f[i] != manifest_f[c][i]) {
-                    return Err(fail(format!(
-                        "F_{}.{ch} = {} in the EXR header, {} in manifest.json",
-                        i + 1,
-                        f[i],
-                        manifest_f[c][i]
-                    )));
-                }
                 if let Some(i) = (0..f.len()).find(|&i| !(0.5 - 1e-9..=1.0).contains(&f[i])) {
                     return Err(fail(format!(
                         "F_{}.{ch} = {} is outside [0.5, 1]",

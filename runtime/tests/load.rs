@@ -118,6 +118,19 @@ fn sampling_is_linear_in_angle_and_order() {
     }
 }
 
+/// Records field `index`'s current EXR size and CRC-32 in the manifest.
+fn restamp(dir: &Path, index: usize) {
+    let file = dir.join(format!(
+        "{}.exr",
+        format::read_manifest(dir).unwrap().fields[index].name
+    ));
+    let bytes = fs::read(file).unwrap();
+    edit_manifest(dir, |v| {
+        v["fields"][index]["bytes"] = (bytes.len() as u64).into();
+        v["fields"][index]["crc32"] = format::crc32_hex(&bytes).into();
+    });
+}
+
 /// Edits `manifest.json` as JSON.
 fn edit_manifest(dir: &Path, f: impl FnOnce(&mut serde_json::Value)) {
     let path = dir.join("manifest.json");
@@ -129,7 +142,7 @@ fn edit_manifest(dir: &Path, f: impl FnOnce(&mut serde_json::Value)) {
 #[test]
 fn corrupt_truncated_and_mismatched_files_name_the_file_and_the_check() {
     type Corrupt = fn(&Path);
-    let cases: [(&str, Corrupt, &str, &str); 8] = [
+    let cases: [(&str, Corrupt, &str, &str); 11] = [
         (
             "truncated EXR",
             |d| {
@@ -153,13 +166,13 @@ fn corrupt_truncated_and_mismatched_files_name_the_file_and_the_check() {
         ),
         (
             "unknown schema",
-            |d| edit_manifest(d, |v| v["schema"] = 2.into()),
+            |d| edit_manifest(d, |v| v["schema"] = 3.into()),
             "manifest.json",
-            "schema 2",
+            "schema 3",
         ),
         (
             "manifest not JSON",
-            |d| fs::write(d.join("manifest.json"), b"{ \"schema\": 1,").unwrap(),
+            |d| fs::write(d.join("manifest.json"), b"{ \"schema\": 2,").unwrap(),
             "manifest.json",
             "EOF",
         ),
@@ -190,9 +203,33 @@ fn corrupt_truncated_and_mismatched_files_name_the_file_and_the_check() {
                     *v *= 1.001;
                 }
                 write_field_exr(d.join("rain.exr"), &image).unwrap();
+                // A consistent but wrong bake: the manifest vouches for the new file.
+                restamp(d, 1);
             },
             "rain.exr",
             "Ams_4.B integrates to",
+        ),
+        (
+            "the same field's table from another bake",
+            |d| {
+                let mut image = read_field_exr(d.join("rain.exr")).unwrap();
+                image.ams[[0, 0, 500]] *= 1.5;
+                write_field_exr(d.join("rain.exr"), &image).unwrap();
+            },
+            "rain.exr",
+            "not the one this bake wrote",
+        ),
+        (
+            "an interrupted bake's pending commit",
+            |d| fs::create_dir(d.join(".commit")).unwrap(),
+            "manifest.json",
+            "interrupted",
+        ),
+        (
+            "an albedo out of range",
+            |d| edit_manifest(d, |v| v["fields"][0]["albedo"]["R"] = 7.0.into()),
+            "manifest.json",
+            "albedo.R = 7",
         ),
     ];
     for (what, corrupt, file, needle) in cases {

@@ -13,7 +13,12 @@ pub struct InspectArgs {
 }
 
 pub fn run(a: InspectArgs) -> Result<()> {
-    let manifest = format::read_manifest(&a.dir)?;
+    // Every field's EXR is read and checked against its entry, not only the manifest.
+    let bake = format::BakeDir::open(&a.dir)?;
+    for entry in &bake.manifest.fields {
+        bake.read_field(entry)?;
+    }
+    let manifest = bake.manifest;
     if a.json {
         println!("{}", serde_json::to_string_pretty(&manifest)?);
         return Ok(());

@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, anyhow};
 use clap::Args as ClapArgs;
-use format::{FieldImage, read_field_exr, read_manifest};
+use format::{BakeDir, FieldImage};
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
@@ -76,20 +76,31 @@ pub fn run(a: PlotArgs) -> Result<()> {
 }
 
 fn plot_bake(dir: &Path, reference: Option<&Path>, out: &Path) -> Result<Vec<PathBuf>> {
-    let manifest = read_manifest(dir)?;
+    let bake = BakeDir::open(dir)?;
+    let manifest = &bake.manifest;
+    let reference = reference.map(BakeDir::open).transpose()?;
     let step = manifest.theta_step_deg;
     let theta = |k: usize| k as f64 * step;
     let mut written = Vec::new();
     let mut forward = Vec::new();
     for (i, f) in manifest.fields.iter().enumerate() {
-        let image = read_field_exr(dir.join(&f.file)).with_context(|| f.file.clone())?;
-        let reference_image = match reference {
-            Some(r) => Some(
-                read_field_exr(r.join(&f.file))
-                    .with_context(|| format!("reference {}", r.join(&f.file).display()))?,
-            ),
-            None => None,
-        };
+        let image = bake.read_field(f).with_context(|| f.file.clone())?;
+        let reference_image =
+            match &reference {
+                Some(r) => {
+                    let entry = r.entry(&f.name).with_context(|| {
+                        format!(
+                            "field {:?} is not in the reference bake {}",
+                            f.name,
+                            r.dir.display()
+                        )
+                    })?;
+                    Some(r.read_field(entry).with_context(|| {
+                        format!("reference {}", r.dir.join(&entry.file).display())
+                    })?)
+                }
+                None => None,
+            };
         let row_series =
             |c: usize, r: usize, img: &FieldImage, a: f64, b: f64| -> Vec<(f64, f64)> {
                 img.row(c, r)

@@ -8,7 +8,8 @@
 use std::path::PathBuf;
 use std::time::Instant;
 
-use format::{FieldEntry, FieldImage, Manifest, PerChannel, write_field_exr, write_manifest};
+use format::exr::field_exr_bytes;
+use format::{BakeLock, FieldEntry, FieldImage, Manifest, PerChannel, Staging};
 use grid::ThetaGrid;
 use mie::PhaseFunction;
 use mie::crystal::crystal_phase;
@@ -111,6 +112,9 @@ pub struct BakeReport {
     pub cached: Vec<String>,
     /// Cache records that could not be used (file and why); their fields were recomputed.
     pub rejected_cache: Vec<String>,
+    /// Leftovers of interrupted bakes finished or removed before this one (see
+    /// `photometeor_format::commit`).
+    pub cleaned: Vec<String>,
     /// Wall-clock seconds.
     pub seconds: f64,
     /// Peak resident memory of this process (Linux `VmHWM`), MiB.
@@ -137,6 +141,7 @@ pub fn run(plan: &BakePlan, progress: &dyn Progress) -> Result<BakeReport, BakeE
         computed: Vec::new(),
         cached: Vec::new(),
         rejected_cache: Vec::new(),
+        cleaned: Vec::new(),
         seconds: 0.0,
         peak_rss_mib: None,
     };
@@ -171,7 +176,11 @@ pub fn run(plan: &BakePlan, progress: &dyn Progress) -> Result<BakeReport, BakeE
         };
         done.push((field, hash, result));
     }
-    // Before anything is written: the previous bake, and which of its fields this one keeps.
+    // Only now is the directory touched, under its lock: a pending commit of an interrupted
+    // bake is finished and dead writers' leftovers removed (format::commit).
+    let lock = BakeLock::acquire(&plan.out_dir)?;
+    report.cleaned = lock.clean_stale()?;
+    // The previous bake, and which of its fields this one keeps.
     let previous = format::read_manifest(&plan.out_dir).ok();
     let channels = weights.channel_definitions();
     let mut kept: Vec<FieldEntry> = Vec::new();
@@ -208,11 +217,14 @@ pub fn run(plan: &BakePlan, progress: &dyn Progress) -> Result<BakeReport, BakeE
         let (_, hash, result) = &done[*i];
         cache::write(cache_file, hash, &Record::of(result))?;
     }
+    // Stage the whole generation, then publish it in one rename (format::commit).
+    let mut stage = Staging::begin(&lock)?;
     let mut entries = Vec::new();
     for (field, hash, result) in done {
         let file = format!("{}.exr", field.name);
-        write_field_exr(plan.out_dir.join(&file), &result.image)?;
-        entries.push(field_entry(plan, field, &result, file, hash));
+        let bytes = field_exr_bytes(&result.image)?;
+        stage.write(&file, &bytes)?;
+        entries.push(field_entry(plan, field, &result, file, hash, &bytes));
     }
     entries.extend(kept);
     let manifest = Manifest {
@@ -224,17 +236,21 @@ pub fn run(plan: &BakePlan, progress: &dyn Progress) -> Result<BakeReport, BakeE
         channels,
         fields: entries,
     };
-    write_manifest(&plan.out_dir, &manifest)?;
+    manifest
+        .check()
+        .map_err(|e| BakeError::Incompatible(format!("the new manifest: {}", e.what)))?;
+    stage.write(format::MANIFEST_FILE, &manifest.to_json_bytes())?;
+    stage.commit()?;
     // Tables of fields the scene no longer has would be read as current: remove them.
     if let Some(previous) = previous {
         for old in previous.fields {
             let stale = !manifest.fields.iter().any(|f| f.file == old.file);
-            let plain_name = std::path::Path::new(&old.file).file_name() == Some(old.file.as_ref());
-            if stale && plain_name {
+            if stale {
                 let _ = std::fs::remove_file(plan.out_dir.join(&old.file));
             }
         }
     }
+    drop(lock);
     report.seconds = start.elapsed().as_secs_f64();
     report.peak_rss_mib = peak_rss_mib();
     Ok(report)
@@ -246,6 +262,7 @@ fn field_entry(
     r: &BakedField,
     file: String,
     hash: String,
+    bytes: &[u8],
 ) -> FieldEntry {
     let s = &r.summary;
     let n_iso = |c: usize| {
@@ -260,6 +277,8 @@ fn field_entry(
     FieldEntry {
         name: field.name.clone(),
         file,
+        bytes: bytes.len() as u64,
+        crc32: format::crc32_hex(bytes),
         kind: format!("{:?}", field.kind).to_lowercase(),
         n_max: plan.scene.n_max,
         forward_fraction: PerChannel::from_array(forward_fraction),

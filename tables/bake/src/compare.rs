@@ -3,7 +3,7 @@
 
 use std::path::Path;
 
-use format::{read_field_exr, read_manifest};
+use format::BakeDir;
 use serde::Serialize;
 
 use crate::error::BakeError;
@@ -49,8 +49,9 @@ pub fn compare(
             range: "[0, 180]",
         });
     }
-    let ours = read_manifest(dir)?;
-    let theirs = read_manifest(reference)?;
+    let ours_dir = BakeDir::open(dir)?;
+    let theirs_dir = BakeDir::open(reference)?;
+    let (ours, theirs) = (&ours_dir.manifest, &theirs_dir.manifest);
     if ours.theta_step_deg != theirs.theta_step_deg || ours.angle_count != theirs.angle_count {
         return Err(BakeError::Incompatible(format!(
             "the bakes use different grids: Δθ = {}° ({} angles) against {}° ({} angles)",
@@ -67,8 +68,8 @@ pub fn compare(
                 reference.display()
             )));
         };
-        let a = read_field_exr(dir.join(&f.file))?;
-        let b = read_field_exr(reference.join(&r.file))?;
+        let a = ours_dir.read_field(f)?;
+        let b = theirs_dir.read_field(r)?;
         if a.n_max() != b.n_max() {
             return Err(BakeError::Incompatible(format!(
                 "field {:?}: N = {} against the reference's {}",

@@ -43,6 +43,9 @@ pub enum BakeError {
     /// The manifest could not be written or read.
     #[error(transparent)]
     Manifest(#[from] format::ManifestError),
+    /// The bake directory is locked by another bake, or its commit failed.
+    #[error(transparent)]
+    Commit(#[from] format::CommitError),
     /// The operating system refused a file operation.
     #[error("{}: {op}: {source}", path.display())]
     Io {

@@ -288,6 +288,16 @@ impl Scene {
             line: key_line(text, header_span.clone(), key),
         };
 
+        if header.name.is_empty()
+            || header.name.chars().count() > 200
+            || header.name.chars().any(char::is_control)
+        {
+            fail!(
+                at("name"),
+                "scene name {:?} must have 1 to 200 characters and no control characters",
+                header.name
+            );
+        }
         let theta_step_deg = header.theta_step_deg.unwrap_or(0.18);
         if grid::ThetaGrid::new(theta_step_deg).is_err() {
             fail!(
@@ -369,6 +379,7 @@ impl Scene {
                 line: key_line(text, span.clone(), key),
             };
             if f.name.is_empty()
+                || f.name.len() > 200
                 || !f
                     .name
                     .chars()
@@ -376,7 +387,7 @@ impl Scene {
             {
                 fail!(
                     at("name"),
-                    "field name {:?} must be non-empty ASCII letters, digits, '_' or '-' (it names the EXR file)",
+                    "field name {:?} must be 1 to 200 ASCII letters, digits, '_' or '-' (it names the EXR file)",
                     f.name
                 );
             }

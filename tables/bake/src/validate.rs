@@ -32,7 +32,7 @@
 
 use std::path::Path;
 
-use format::{read_field_exr, read_manifest};
+use format::BakeDir;
 use mie::theory::{minimum_deviation_deg, rainbow_theory, size_parameter};
 use mie::{Material, SizeDistribution};
 use serde::Serialize;
@@ -141,7 +141,8 @@ impl ChannelBand {
 
 /// Validates the bake in `dir`.
 pub fn validate(dir: &Path) -> Result<Report> {
-    let manifest = read_manifest(dir)?;
+    let bake = BakeDir::open(dir)?;
+    let manifest = &bake.manifest;
     let step = manifest.theta_step_deg;
     let lambdas: Vec<f64> = serde_json::from_value(manifest.channels["wavelengths_nm"].clone())
         .map_err(|e| manifest_error(format!("channels.wavelengths_nm: {e}")))?;
@@ -170,7 +171,7 @@ pub fn validate(dir: &Path) -> Result<Report> {
 
     let mut checks = Vec::new();
     for entry in &manifest.fields {
-        let image = read_field_exr(dir.join(&entry.file))?;
+        let image = bake.read_field(entry)?;
         let ams1: Vec<Vec<f64>> = (0..3).map(|c| image.row(c, 0).to_vec()).collect();
         let rows: Vec<&[f64]> = ams1.iter().map(Vec::as_slice).collect();
         let micro = &entry.microphysics;

@@ -376,6 +376,9 @@ pub enum ContractError {
         /// What the contract wants.
         expected: String,
     },
+    /// The file disagrees with its manifest entry.
+    #[error("{0}")]
+    Manifest(String),
     /// A texel is NaN or infinite.
     #[error("channel {channel} row {row} column {column} is {value}, expected a finite value")]
     NonFinite {
@@ -409,6 +412,15 @@ pub fn write_field_exr(path: impl AsRef<Path>, field: &FieldImage) -> Result<(),
 }
 
 /// Encodes a checked image into the bytes of an EXR file, with the header canonicalized.
+/// The bytes of `field`'s EXR after [`FieldImage::check`]: what [`write_field_exr`] writes.
+pub fn field_exr_bytes(field: &FieldImage) -> Result<Vec<u8>, IoError> {
+    field.check()?;
+    encode_field_exr(field).map_err(|source| IoError::Encode {
+        path: PathBuf::from(format!("{}.exr", field.field)),
+        source,
+    })
+}
+
 fn encode_field_exr(field: &FieldImage) -> Result<Vec<u8>, exr::error::Error> {
     let n = field.n_max();
     let k = field.angle_count();
@@ -567,6 +579,22 @@ fn sort_header_attributes(bytes: &mut [u8]) -> Result<(), exr::error::Error> {
 /// missing or malformed attribute, non-finite texel).
 pub fn read_field_exr(path: impl AsRef<Path>) -> Result<FieldImage, IoError> {
     let path = path.as_ref();
+    let bytes = read_exr_bytes(path)?;
+    decode_field_exr(&bytes, path)
+}
+
+/// The bytes of an EXR file, read only if it is a regular file of at most [`MAX_EXR_BYTES`].
+pub fn read_exr_bytes(path: &Path) -> Result<Vec<u8>, IoError> {
+    read_regular_file(path, MAX_EXR_BYTES).map_err(|(op, source)| IoError::Io {
+        path: path.to_path_buf(),
+        op,
+        source,
+    })
+}
+
+/// Decodes and checks the bytes of a field's EXR (see [`read_field_exr`]); `path` names the
+/// file in errors.
+pub fn decode_field_exr(bytes: &[u8], path: &Path) -> Result<FieldImage, IoError> {
     let contract = |check: ContractError| IoError::Contract {
         path: path.to_path_buf(),
         check,
@@ -575,14 +603,9 @@ pub fn read_field_exr(path: impl AsRef<Path>) -> Result<FieldImage, IoError> {
         path: path.to_path_buf(),
         source,
     };
-    let bytes = read_regular_file(path, MAX_EXR_BYTES).map_err(|(op, source)| IoError::Io {
-        path: path.to_path_buf(),
-        op,
-        source,
-    })?;
 
     // Layout and channel list, from the header alone.
-    let meta = MetaData::read_from_buffered(Cursor::new(&bytes), true).map_err(unreadable)?;
+    let meta = MetaData::read_from_buffered(Cursor::new(bytes), true).map_err(unreadable)?;
     if meta.headers.len() != 1 {
         return Err(contract(ContractError::Layout(format!(
             "{} parts",
@@ -708,7 +731,7 @@ pub fn read_field_exr(path: impl AsRef<Path>) -> Result<FieldImage, IoError> {
         .all_attributes()
         .pedantic()
         .non_parallel()
-        .from_buffered(Cursor::new(&bytes))
+        .from_buffered(Cursor::new(bytes))
         .map_err(unreadable)?;
     let layer = &image.layer_data;
     let mut ams = Array3::zeros((3, height, width));

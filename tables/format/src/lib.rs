@@ -13,12 +13,16 @@
 #![warn(missing_docs)]
 
 pub mod atomic;
+pub mod commit;
 pub mod exr;
 pub mod manifest;
 
 pub use atomic::{read_regular_file, write_file_atomically};
+pub use commit::{
+    BakeLock, CommitError, Staging, check_no_pending_commit, crc32_hex, roll_forward,
+};
 pub use exr::{ContractError, FieldImage, IoError, RGB_CHANNELS, read_field_exr, write_field_exr};
 pub use manifest::{
-    FieldEntry, MANIFEST_FILE, Manifest, ManifestCheck, ManifestError, PerChannel, read_manifest,
-    write_manifest,
+    BakeDir, FieldEntry, MANIFEST_FILE, Manifest, ManifestCheck, ManifestError, PerChannel,
+    read_manifest, write_manifest,
 };

@@ -3,7 +3,9 @@
 //! [`Manifest`] lists the grid, the channel definitions and one [`FieldEntry`] per field, in
 //! the scene's order; the numbers a renderer needs besides the textures (F_i, g, σ_ext, albedo,
 //! n_iso) and every input that produced them. [`write_manifest`] writes it atomically as pretty
-//! JSON; [`read_manifest`] checks the schema version before anything else.
+//! JSON; [`read_manifest`] refuses a directory with a pending commit ([`crate::commit`]), then
+//! checks the schema version before anything else. [`BakeDir`] reads a field's EXR and checks
+//! it against its entry: size and CRC-32, field name, Δθ, K, N and F_i.
 //!
 //! # Determinism
 //! Fields are a `Vec` (scene order) and maps are `BTreeMap`s or fixed structs, so the same
@@ -14,7 +16,7 @@
 //! # Example (abridged)
 //! ```json
 //! {
-//!   "schema": 1,
+//!   "schema": 2,
 //!   "tool": "photometeor",
 //!   "tool_version": "0.1.0",
 //!   "theta_step_deg": 0.18,
@@ -22,7 +24,8 @@
 //!   "channels": { "mode": "spectral", "...": "..." },
 //!   "fields": [
 //!     {
-//!       "name": "rain", "file": "rain.exr", "kind": "rain", "n_max": 26,
+//!       "name": "rain", "file": "rain.exr", "bytes": 266881, "crc32": "1c0ffee5",
+//!       "kind": "rain", "n_max": 26,
 //!       "forward_fraction": { "R": [0.97, "..."], "G": ["..."], "B": ["..."] },
 //!       "forward_peak_fraction": { "R": ["..."], "G": ["..."], "B": ["..."] },
 //!       "g": { "R": 0.87, "G": 0.88, "B": 0.88 },
@@ -48,7 +51,7 @@ use thiserror::Error;
 use crate::atomic::{read_regular_file, write_file_atomically};
 
 /// The manifest's layout version; [`read_manifest`] rejects any other.
-pub const MANIFEST_SCHEMA_VERSION: u32 = 1;
+pub const MANIFEST_SCHEMA_VERSION: u32 = 2;
 
 /// The manifest's file name inside the bake directory.
 pub const MANIFEST_FILE: &str = "manifest.json";
@@ -107,8 +110,13 @@ pub struct Manifest {
 pub struct FieldEntry {
     /// The field's name in the scene (also `photometeor/field` in its EXR).
     pub name: String,
-    /// Its EXR, relative to the bake directory (`<name>.exr`).
+    /// Its EXR, relative to the bake directory: always `<name>.exr`.
     pub file: String,
+    /// The EXR's size in bytes; readers refuse a file of another size.
+    pub bytes: u64,
+    /// CRC-32 (IEEE) of the EXR's bytes, 8 lowercase hex digits; readers refuse a file that
+    /// does not match (a file of another generation, a corrupted copy).
+    pub crc32: String,
     /// `cloud`, `rain`, `ice` or `snow`.
     pub kind: String,
     /// N, the number of rows Ams_1..Ams_N.
@@ -183,6 +191,9 @@ pub enum ManifestError {
         /// [`MANIFEST_SCHEMA_VERSION`].
         expected: u32,
     },
+    /// The directory's last bake stopped while publishing its files.
+    #[error(transparent)]
+    Pending(#[from] crate::commit::CommitError),
     /// The manifest is well-formed JSON but inconsistent.
     #[error("{}: {what}", path.display())]
     Invalid {
@@ -225,13 +236,30 @@ impl Manifest {
             if self.fields[..i].iter().any(|o| o.name == f.name) {
                 return Err(at("name given twice".into()));
             }
-            let plain = Path::new(&f.file)
+            let plain = Path::new(&f.name)
                 .file_name()
-                .is_some_and(|n| n == f.file.as_str());
-            if !plain || f.file.starts_with('.') {
+                .is_some_and(|n| n == f.name.as_str());
+            if !plain || f.name.starts_with('.') || f.name.len() > 200 {
                 return Err(at(format!(
-                    "file {:?} must be a plain file name inside the bake directory",
-                    f.file
+                    "name {:?} must be a plain file name stem (no path, no leading '.', at most 200 bytes)",
+                    f.name
+                )));
+            }
+            if f.file != format!("{}.exr", f.name) {
+                return Err(at(format!(
+                    "file {:?} is not the bake's own name for this field, expected \"{}.exr\"",
+                    f.file, f.name
+                )));
+            }
+            if f.crc32.len() != 8
+                || !f
+                    .crc32
+                    .bytes()
+                    .all(|b| b.is_ascii_hexdigit() && !b.is_ascii_uppercase())
+            {
+                return Err(at(format!(
+                    "crc32 {:?} is not 8 lowercase hex digits",
+                    f.crc32
                 )));
             }
             if f.n_max == 0 {
@@ -263,6 +291,50 @@ impl Manifest {
                     if !v.is_finite() {
                         return Err(at(format!("{key}.{c} = {v} is not finite")));
                     }
+                }
+            }
+            for (c, v) in ["R", "G", "B"].iter().zip(f.albedo.as_array()) {
+                if !(0.0..=1.0).contains(v) {
+                    return Err(at(format!("albedo.{c} = {v} is outside [0, 1]")));
+                }
+            }
+            for (c, v) in ["R", "G", "B"].iter().zip(f.g.as_array()) {
+                if !(-1.0..=1.0).contains(v) {
+                    return Err(at(format!("g.{c} = {v} is outside [-1, 1]")));
+                }
+            }
+            for (c, v) in ["R", "G", "B"].iter().zip(f.sigma_ext_m2.as_array()) {
+                if !(*v > 0.0) {
+                    return Err(at(format!("sigma_ext_m2.{c} = {v} must be > 0 (m²)")));
+                }
+            }
+            for (c, v) in ["R", "G", "B"].iter().zip(f.forward_fraction.as_array()) {
+                if let Some(i) = v.iter().position(|x| !(0.5 - 1e-9..=1.0).contains(x)) {
+                    return Err(at(format!(
+                        "forward_fraction.{c}: F_{} = {} is outside [0.5, 1]",
+                        i + 1,
+                        v[i]
+                    )));
+                }
+                if let Some(i) = (1..v.len()).find(|&i| v[i] > v[i - 1] + 1e-12) {
+                    return Err(at(format!(
+                        "forward_fraction.{c}: F_{} = {} exceeds F_{} = {}: forward fractions cannot rise with n",
+                        i + 1,
+                        v[i],
+                        i,
+                        v[i - 1]
+                    )));
+                }
+            }
+            for (c, v) in ["R", "G", "B"]
+                .iter()
+                .zip(f.forward_peak_fraction.as_array())
+            {
+                if let Some(i) = v.iter().position(|x| !(0.0..=1.0).contains(x)) {
+                    return Err(at(format!(
+                        "forward_peak_fraction.{c}[{i}] = {} is outside [0, 1]",
+                        v[i]
+                    )));
                 }
             }
             for (c, map) in ["R", "G", "B"].iter().zip(f.n_isotropic.as_array()) {
@@ -314,6 +386,7 @@ pub fn write_manifest(dir: impl AsRef<Path>, manifest: &Manifest) -> Result<(), 
 /// with [`ManifestError::Schema`], not with a missing key), then the structure, then
 /// [`Manifest::check`].
 pub fn read_manifest(dir: impl AsRef<Path>) -> Result<Manifest, ManifestError> {
+    crate::commit::check_no_pending_commit(dir.as_ref())?;
     let path = dir.as_ref().join(MANIFEST_FILE);
     let bytes =
         read_regular_file(&path, MAX_MANIFEST_BYTES).map_err(|(op, source)| ManifestError::Io {
@@ -345,4 +418,93 @@ pub fn read_manifest(dir: impl AsRef<Path>) -> Result<Manifest, ManifestError> {
         .check()
         .map_err(|e| ManifestError::Invalid { path, what: e.what })?;
     Ok(manifest)
+}
+
+/// A bake directory opened for reading: its checked manifest, and fields read through it.
+#[derive(Debug, Clone)]
+pub struct BakeDir {
+    /// The directory.
+    pub dir: PathBuf,
+    /// Its manifest, checked.
+    pub manifest: Manifest,
+}
+
+impl BakeDir {
+    /// Reads and checks `DIR/manifest.json` (see [`read_manifest`]).
+    pub fn open(dir: impl AsRef<Path>) -> Result<Self, ManifestError> {
+        let dir = dir.as_ref().to_path_buf();
+        let manifest = read_manifest(&dir)?;
+        Ok(Self { dir, manifest })
+    }
+
+    /// The entry of field `name`.
+    pub fn entry(&self, name: &str) -> Option<&FieldEntry> {
+        self.manifest.fields.iter().find(|f| f.name == name)
+    }
+
+    /// Reads the EXR of `entry` and checks it: the EXR contract ([`crate::read_field_exr`]),
+    /// then against the manifest — field name, Δθ, K, N, F_1..F_N bit for bit — and last its
+    /// size and CRC-32, so a file of another generation is refused even when it fits.
+    pub fn read_field(&self, entry: &FieldEntry) -> Result<crate::FieldImage, crate::IoError> {
+        use crate::exr::{decode_field_exr, read_exr_bytes};
+        use crate::{ContractError, IoError};
+        let path = self.dir.join(&entry.file);
+        let bytes = read_exr_bytes(&path)?;
+        let image = decode_field_exr(&bytes, &path)?;
+        let mismatch = |what: String| IoError::Contract {
+            path: path.clone(),
+            check: ContractError::Manifest(what),
+        };
+        if image.field != entry.name {
+            return Err(mismatch(format!(
+                "field attribute {:?}, but manifest.json lists this file for field {:?}",
+                image.field, entry.name
+            )));
+        }
+        if image.theta_step_deg != self.manifest.theta_step_deg {
+            return Err(mismatch(format!(
+                "Δθ = {}°, manifest.json says {}°",
+                image.theta_step_deg, self.manifest.theta_step_deg
+            )));
+        }
+        if image.angle_count() != self.manifest.angle_count {
+            return Err(mismatch(format!(
+                "{} angles, manifest.json says {}",
+                image.angle_count(),
+                self.manifest.angle_count
+            )));
+        }
+        if image.n_max() != entry.n_max {
+            return Err(mismatch(format!(
+                "{} rows, manifest.json says N = {}",
+                image.n_max(),
+                entry.n_max
+            )));
+        }
+        for (c, (ch, want)) in ["R", "G", "B"]
+            .iter()
+            .zip(entry.forward_fraction.as_array())
+            .enumerate()
+        {
+            let f = image.forward_fractions(c);
+            if let Some(i) = (0..f.len()).find(|&i| f[i].to_bits() != want[i].to_bits()) {
+                return Err(mismatch(format!(
+                    "F_{}.{ch} = {} in the EXR header, {} in manifest.json",
+                    i + 1,
+                    f[i],
+                    want[i]
+                )));
+            }
+        }
+        let crc = crate::commit::crc32_hex(&bytes);
+        if bytes.len() as u64 != entry.bytes || crc != entry.crc32 {
+            return Err(mismatch(format!(
+                "{} bytes with CRC-32 {crc}, manifest.json says {} bytes with {}: the file is not the one this bake wrote (from another bake, or changed since)",
+                bytes.len(),
+                entry.bytes,
+                entry.crc32
+            )));
+        }
+        Ok(image)
+    }
 }

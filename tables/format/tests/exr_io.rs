@@ -558,19 +558,21 @@ fn sample_manifest() -> Manifest {
     let field = |name: &str, kind: &str| FieldEntry {
         name: name.to_string(),
         file: format!("{name}.exr"),
+        bytes: 1234,
+        crc32: "0123abcd".to_string(),
         kind: kind.to_string(),
         n_max: 3,
         forward_fraction: PerChannel::from_array([
             vec![0.97, 0.9, 0.8],
             vec![0.96, 0.89, 0.79],
-            vec![0.1 + 0.2, 0.88, 0.78],
+            vec![0.7 + 0.2, 0.88, 0.78],
         ]),
         forward_peak_fraction: PerChannel::from_array(std::array::from_fn(|_| {
             vec![0.4, 0.16, 0.064]
         })),
         g: per(0.87),
         sigma_ext_m2: per(1.6e-6),
-        albedo: per(1.0),
+        albedo: per(0.98),
         n_isotropic: PerChannel::from_array([
             eps(Some(9), Some(17), None),
             eps(Some(9), Some(18), None),
@@ -581,7 +583,7 @@ fn sample_manifest() -> Manifest {
         content_hash: "0123456789abcdef".to_string(),
     };
     Manifest {
-        schema: 1,
+        schema: 2,
         tool: "photometeor".to_string(),
         tool_version: "0.1.0".to_string(),
         theta_step_deg: STEP,
@@ -609,7 +611,8 @@ fn manifest_round_trips_byte_identically() {
     // Field order is the scene's; keys are the documented ones.
     assert!(text.find("\"rain\"").unwrap() < text.find("\"cloud\"").unwrap());
     for key in [
-        "\"schema\": 1",
+        "\"schema\": 2",
+        "\"crc32\": \"0123abcd\"",
         "\"tool_version\"",
         "\"theta_step_deg\": 18.0",
         "\"angle_count\": 11",
@@ -618,7 +621,7 @@ fn manifest_round_trips_byte_identically() {
         "\"albedo\"",
         "\"1e-6\": null",
         "\"content_hash\": \"0123456789abcdef\"",
-        "0.30000000000000004",
+        "0.8999999999999999",
     ] {
         assert!(text.contains(key), "manifest lacks {key}:\n{text}");
     }
@@ -633,10 +636,10 @@ fn manifest_schema_and_consistency_are_checked() {
     let written = fs::read(&path).unwrap();
 
     // Another schema fails as a schema error, before any missing key.
-    fs::write(&path, br#"{"schema": 2, "whatever": true}"#).unwrap();
+    fs::write(&path, br#"{"schema": 1, "whatever": true}"#).unwrap();
     let err = read_manifest(dir.path()).unwrap_err();
     assert!(
-        matches!(err, ManifestError::Schema { ref found, .. } if found == "2"),
+        matches!(err, ManifestError::Schema { ref found, .. } if found == "1"),
         "{err:?}"
     );
     assert!(err.to_string().contains("manifest.json"), "{err}");
@@ -646,7 +649,7 @@ fn manifest_schema_and_consistency_are_checked() {
         Err(ManifestError::Schema { ref found, .. }) if found == "missing"
     ));
     // Broken JSON / wrong structure keep line and column.
-    fs::write(&path, "{\n  \"schema\": 1,\n  \"tool\": 5\n}").unwrap();
+    fs::write(&path, "{\n  \"schema\": 2,\n  \"tool\": 5\n}").unwrap();
     let err = read_manifest(dir.path()).unwrap_err();
     assert!(matches!(err, ManifestError::Json { .. }), "{err:?}");
     assert!(err.to_string().contains("line 3"), "{err}");
@@ -678,6 +681,39 @@ fn manifest_schema_and_consistency_are_checked() {
     let mut bad = good.clone();
     bad.fields[0].n_isotropic.r.insert("1e-3".into(), Some(4));
     assert!(write_manifest(dir.path(), &bad).is_err());
+    // Physics and file names: each refused naming the value.
+    type Edit = fn(&mut FieldEntry);
+    let cases: [(Edit, &str); 9] = [
+        (|f| f.albedo.g = 7.0, "albedo.G = 7"),
+        (|f| f.g.r = -5.0, "g.R = -5"),
+        (|f| f.sigma_ext_m2.b = -1e-6, "sigma_ext_m2.B = -0.000001"),
+        (|f| f.forward_fraction.r[0] = 1.5, "F_1 = 1.5"),
+        (|f| f.forward_fraction.r[2] = 0.95, "F_3 = 0.95 exceeds F_2"),
+        (
+            |f| f.forward_peak_fraction.g[1] = 2.0,
+            "forward_peak_fraction.G[1] = 2",
+        ),
+        (
+            |f| f.file = "notes.txt".into(),
+            "\"notes.txt\" is not the bake's own name",
+        ),
+        (
+            |f| f.file = MANIFEST_FILE.into(),
+            "\"manifest.json\" is not the bake's own name",
+        ),
+        (|f| f.crc32 = "XYZ".into(), "crc32 \"XYZ\""),
+    ];
+    for (edit, needle) in cases {
+        let mut bad = good.clone();
+        edit(&mut bad.fields[0]);
+        let err = write_manifest(dir.path(), &bad).unwrap_err().to_string();
+        assert!(err.contains(needle), "{err} lacks {needle:?}");
+        // And on read: a hand-edited manifest is refused the same way.
+        fs::write(&path, bad.to_json_bytes()).unwrap();
+        let err = read_manifest(dir.path()).unwrap_err().to_string();
+        assert!(err.contains(needle), "{err} lacks {needle:?}");
+        fs::write(&path, &written).unwrap();
+    }
     assert_eq!(fs::read(&path).unwrap(), written);
     assert_eq!(dir_entries(dir.path()), [MANIFEST_FILE]);
 
