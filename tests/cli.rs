@@ -102,11 +102,11 @@ fn bad_input_exits_nonzero_with_one_line_naming_value_and_range() {
         ),
         (
             vec!["mie", "--m", "1.33", "--x", "0"],
-            vec!["x = 0", "(0, 2e5]"],
+            vec!["x = 0", "[1e-6, 2e5]"],
         ),
         (
             vec!["mie", "--m", "1.33", "--x", "-3"],
-            vec!["x = -3", "(0, 2e5]"],
+            vec!["x = -3", "[1e-6, 2e5]"],
         ),
         (
             vec!["mie", "--m", "1.3.3+i", "--x", "10"],
@@ -340,4 +340,168 @@ fn phase_point_values_agree_with_bins_where_the_function_is_smooth() {
             "θ = {theta}: {point} vs {bin}"
         );
     }
+}
+
+/// True when every number in `v` is finite (serde_json writes NaN and ±∞ as null).
+fn all_finite(v: &Value) -> bool {
+    match v {
+        Value::Null => false,
+        Value::Number(n) => n.as_f64().is_some_and(f64::is_finite),
+        Value::Array(a) => a.iter().all(all_finite),
+        Value::Object(o) => o.iter().all(|(k, v)| {
+            // Keys that are null by design: n_iso not reached.
+            k == "1e-6" || k == "1e-4" || k == "1e-2" || all_finite(v)
+        }),
+        _ => true,
+    }
+}
+
+#[test]
+fn the_ends_of_every_range_answer_finitely_or_refuse_in_one_line() {
+    let x_ends = [
+        "1e-300",
+        "1e-60",
+        "9.9e-7",
+        "1e-6",
+        "1.0000001e-6",
+        "1",
+        "199999.9",
+        "2e5",
+        "2.0000001e5",
+        "NaN",
+        "inf",
+        "-0",
+    ];
+    let mut cases: Vec<Vec<String>> = Vec::new();
+    let own = |v: &[&str]| v.iter().map(|s| s.to_string()).collect::<Vec<_>>();
+    for x in x_ends {
+        cases.push(own(&[
+            "mie",
+            "--m",
+            "1.333+1e-8i",
+            "--x",
+            x,
+            "--angles-deg",
+            "0,90,180",
+            "--json",
+        ]));
+    }
+    for m in [
+        "0.4",
+        "0.5",
+        "10",
+        "10.1",
+        "1.33+10i",
+        "1.33+10.1i",
+        "1",
+        "1+0i",
+        "NaN",
+        "inf",
+    ] {
+        cases.push(own(&[
+            "mie",
+            "--m",
+            m,
+            "--x",
+            "10",
+            "--angles-deg",
+            "0,180",
+            "--json",
+        ]));
+    }
+    for step in ["0.005", "0.01", "30", "36", "0", "-1", "NaN"] {
+        cases.push(own(&[
+            "mie",
+            "--m",
+            "1.33",
+            "--x",
+            "1",
+            "--angles-step-deg",
+            step,
+            "--json",
+        ]));
+    }
+    for (median, sizes, nodes) in [
+        ("1e-60", "8", "2"),
+        ("1e-300", "8", "2"),
+        ("1e-3", "8", "2"),
+        ("10", "0", "2"),
+        ("10", "100001", "2"),
+        ("10", "18446744073709551615", "2"),
+        ("10", "8", "0"),
+        ("10", "8", "65"),
+        ("10", "8", "1000000000"),
+    ] {
+        cases.push(own(&[
+            "phase",
+            "--lognormal-median-um",
+            median,
+            "--sigma-g",
+            "1.2",
+            "--wavelengths-nm",
+            "550",
+            "--sizes",
+            sizes,
+            "--nodes-per-panel",
+            nodes,
+            "--angles-step-deg",
+            "1",
+            "--json",
+        ]));
+    }
+    for sigma in ["1", "1.0000001", "5", "5.1", "NaN"] {
+        cases.push(own(&[
+            "phase",
+            "--lognormal-median-um",
+            "5",
+            "--sigma-g",
+            sigma,
+            "--wavelengths-nm",
+            "550",
+            "--sizes",
+            "8",
+            "--angles-step-deg",
+            "1",
+            "--json",
+        ]));
+    }
+    for jobs in ["0", "257", "100000"] {
+        cases.push(own(&[
+            "bake",
+            "--jobs",
+            jobs,
+            "--out",
+            "never-written",
+            "--quiet",
+        ]));
+    }
+    let mut answered = 0;
+    for args in &cases {
+        let argv: Vec<&str> = args.iter().map(String::as_str).collect();
+        let out = photometeor(&argv, Some(1));
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        match out.status.code() {
+            Some(0) => {
+                let v: Value = serde_json::from_slice(&out.stdout).expect("JSON on stdout");
+                assert!(all_finite(&v), "{argv:?}: a non-finite number in {v}");
+                answered += 1;
+            }
+            Some(2) => {
+                // One line of ours, or clap's refusal of a malformed argument (its usage
+                // follows); either way it starts with "error:" and names no panic.
+                assert!(stderr.starts_with("error:"), "{argv:?}: {stderr}");
+                assert!(!stderr.contains("panicked"), "{argv:?}: {stderr}");
+                if !stderr.contains("Usage:") {
+                    assert_eq!(stderr.trim().lines().count(), 1, "{argv:?}: {stderr}");
+                }
+            }
+            other => panic!("{argv:?}: exit {other:?} (a panic or abort):\n{stderr}"),
+        }
+    }
+    assert!(!std::path::Path::new("never-written").exists());
+    println!(
+        "{} cases: {answered} answered, {} refused",
+        cases.len(),
+        cases.len() - answered
+    );
 }

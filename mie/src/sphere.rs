@@ -22,6 +22,9 @@ use crate::error::{MieError, check_range};
 
 /// Largest size parameter the solver is validated for.
 pub const X_MAX: f64 = 2.0e5;
+/// Smallest size parameter accepted: the validated range starts here (below it Q_sca ∝ x⁴
+/// underflows toward 0 and a phase function normalized by it is undefined).
+pub const X_MIN: f64 = 1.0e-6;
 /// Largest real part of m the solver is validated for.
 pub const N_MAX: f64 = 10.0;
 /// Smallest real part of m the solver is validated for.
@@ -38,13 +41,13 @@ pub struct Sphere {
 
 impl Sphere {
     /// Checks m = n + iκ and x against the validated ranges:
-    /// x ∈ (0, 2e5], n ∈ [0.5, 10], κ ∈ [0, 10], m ≠ 1.
+    /// x ∈ [1e-6, 2e5], n ∈ [0.5, 10], κ ∈ [0, 10], m ≠ 1.
     pub fn new(m: Complex64, x: f64) -> Result<Self, MieError> {
-        if !(x.is_finite() && x > 0.0 && x <= X_MAX) {
+        if !(x.is_finite() && (X_MIN..=X_MAX).contains(&x)) {
             return Err(MieError::OutOfRange {
                 name: "size parameter x",
                 value: x,
-                range: "(0, 2e5]",
+                range: "[1e-6, 2e5]",
             });
         }
         if m.im.is_finite() && m.im < 0.0 {

@@ -18,7 +18,7 @@ pub struct BakeArgs {
     /// for drops (crystals 1–3 %); README "Presets, measured" has the table.
     #[arg(long, value_parser = ["draft", "standard", "reference"])]
     quality: Option<String>,
-    /// Worker threads (default: all cores).
+    /// Worker threads, [1, 256] (default: all cores).
     #[arg(long)]
     jobs: Option<usize>,
     /// No progress bars or summary.
@@ -29,14 +29,20 @@ pub struct BakeArgs {
     json: bool,
 }
 
+/// Most worker threads a bake starts.
+const MAX_JOBS: usize = 256;
+
+/// Runs `photometeor bake`.
 pub fn run(a: BakeArgs) -> Result<()> {
     let scene = Scene::from_file_or_default(a.scene.as_deref())?;
     let quality = match a.quality.as_deref() {
         Some(q) => Quality::parse(q).context("quality preset")?,
         None => scene.quality,
     };
-    if a.jobs == Some(0) {
-        bail!("--jobs 0 is outside the allowed range [1, ∞)");
+    if let Some(jobs) = a.jobs
+        && !(1..=MAX_JOBS).contains(&jobs)
+    {
+        bail!("--jobs {jobs} is outside the allowed range [1, {MAX_JOBS}]");
     }
     let plan = BakePlan::for_preset(scene, a.out.clone(), quality);
     let progress = Bars::new(a.quiet);

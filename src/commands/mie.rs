@@ -16,7 +16,7 @@ pub struct MieArgs {
     /// Refractive index relative to the medium, e.g. 1.333+1e-8i (κ ≥ 0 absorbs).
     #[arg(long, allow_hyphen_values = true, conflicts_with_all = ["material"])]
     m: Option<String>,
-    /// Size parameter x = 2πr/λ, in (0, 2e5].
+    /// Size parameter x = 2πr/λ, in [1e-6, 2e5].
     #[arg(long, allow_hyphen_values = true, requires = "m")]
     x: Option<f64>,
     /// Material instead of --m: water (IAPWS R9-97 + Segelstein) or ice (Warren & Brandt 2008).
@@ -34,8 +34,8 @@ pub struct MieArgs {
     /// Scattering angles in degrees, comma-separated, each in [0, 180].
     #[arg(long, allow_hyphen_values = true, conflicts_with = "angles_step_deg")]
     angles_deg: Option<String>,
-    /// Full grid 0, D, 2D, …, 180 (D in degrees, dividing 180).
-    #[arg(long)]
+    /// Full grid 0, D, 2D, …, 180 (D in degrees, in [0.01, 30] and dividing 180).
+    #[arg(long, allow_hyphen_values = true)]
     angles_step_deg: Option<f64>,
     /// Print one JSON object instead of a table.
     #[arg(long)]
@@ -65,7 +65,7 @@ pub fn angles_from(angles_deg: Option<String>, step: Option<f64>) -> Result<(Vec
 pub fn run(a: MieArgs) -> Result<()> {
     let (m, x) = match (&a.m, a.x, a.material) {
         (Some(m), Some(x), None) => (parse_complex(m)?, x),
-        (Some(_), None, _) => bail!("--m needs --x (size parameter, in (0, 2e5])"),
+        (Some(_), None, _) => bail!("--m needs --x (size parameter, in [1e-6, 2e5])"),
         (None, _, Some(material)) => {
             let radius = a.radius_um.context("--material needs --radius-um")?;
             let lambda = a

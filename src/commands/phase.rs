@@ -35,10 +35,10 @@ pub struct PhaseArgs {
     /// Vacuum wavelengths in nm, comma-separated (water: 200–1100 nm).
     #[arg(long, allow_hyphen_values = true, required = true)]
     wavelengths_nm: String,
-    /// Fixed number of sizes (nodes in ln r); default: adaptive to --tolerance.
+    /// Fixed number of sizes (nodes in ln r), [1, 100000]; default: adaptive to --tolerance.
     #[arg(long)]
     sizes: Option<usize>,
-    /// Fixed Gauss nodes per angular panel (with --sizes; default 4).
+    /// Fixed Gauss nodes per angular panel, [1, 64] (with --sizes; default 4).
     #[arg(long)]
     nodes_per_panel: Option<usize>,
     /// Adaptive refinement stops when one doubling changes the bins (rms, θ ≥ 1°), σ_ext or g
@@ -101,17 +101,30 @@ fn distribution_from(a: &PhaseArgs) -> Result<SizeDistribution> {
     Ok(d.validated()?)
 }
 
+/// Largest --sizes: 25× the reference preset's 4096, far past where one doubling still changes
+/// a bin (and about 1 GB of coefficients at x = 2e5).
+const MAX_SIZES: usize = 100_000;
+/// Largest --nodes-per-panel: where the adaptive refinement gives up.
+const MAX_NODES_PER_PANEL: usize = 64;
+
+/// Runs `photometeor phase`.
 pub fn run(a: PhaseArgs) -> Result<()> {
     let wavelengths_nm = parse_list("wavelength (nm)", &a.wavelengths_nm, "[200, 1100] nm")?;
     let distribution = distribution_from(&a)?;
     let nodes = match (a.sizes, a.nodes_per_panel) {
         (Some(sizes), nodes) => {
-            if sizes == 0 {
-                bail!("--sizes 0 is outside the allowed range [1, ∞)");
+            if !(1..=MAX_SIZES).contains(&sizes) {
+                bail!("--sizes {sizes} is outside the allowed range [1, {MAX_SIZES}]");
+            }
+            let nodes_per_panel = nodes.unwrap_or(4);
+            if !(1..=MAX_NODES_PER_PANEL).contains(&nodes_per_panel) {
+                bail!(
+                    "--nodes-per-panel {nodes_per_panel} is outside the allowed range [1, {MAX_NODES_PER_PANEL}]"
+                );
             }
             NodeCounts::Fixed {
                 sizes,
-                nodes_per_panel: nodes.unwrap_or(4).max(1),
+                nodes_per_panel,
             }
         }
         (None, Some(_)) => bail!("--nodes-per-panel needs --sizes (fixed node counts)"),

@@ -5,7 +5,7 @@
 //! The plan ([`BakePlan`]) is plain data made from the validated scene and the caller's options;
 //! nothing touches the output directory until every field is computed.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use format::exr::field_exr_bytes;
@@ -145,6 +145,9 @@ pub fn run(plan: &BakePlan, progress: &dyn Progress) -> Result<BakeReport, BakeE
         seconds: 0.0,
         peak_rss_mib: None,
     };
+    // Every check that needs no solver, before any work: the output directory can be written,
+    // and every field's refractive index and size parameters are in range at every wavelength.
+    preflight(plan, &weights)?;
     // Compute (or read from the cache) every field first; only then touch the tables, so a
     // failing field leaves the previous bake as it was.
     let mut done = Vec::new();
@@ -254,6 +257,71 @@ pub fn run(plan: &BakePlan, progress: &dyn Progress) -> Result<BakeReport, BakeE
     report.seconds = start.elapsed().as_secs_f64();
     report.peak_rss_mib = peak_rss_mib();
     Ok(report)
+}
+
+/// The checks [`run`] makes before computing anything (see there).
+pub fn preflight(plan: &BakePlan, weights: &ChannelWeights) -> Result<(), BakeError> {
+    check_writable(&plan.out_dir)?;
+    let lambdas = &weights.wavelengths_nm;
+    let j_len = lambdas.len();
+    for field in &plan.scene.fields {
+        let mie_error = |context: String| {
+            let name = field.name.clone();
+            move |source| BakeError::Mie {
+                field: name,
+                context,
+                source,
+            }
+        };
+        for (j, &lambda) in lambdas.iter().enumerate() {
+            let m = field
+                .material
+                .refractive_index(lambda, field.temperature_c)
+                .map_err(mie_error(format!(" at {lambda} nm")))?;
+            if let Some(d) = &field.distribution {
+                // The radii this wavelength's quadrature uses, with the solver's own x = k r.
+                let q = plan.knobs.size_quadrature(d, j, j_len);
+                let k = 2.0 * std::f64::consts::PI / (lambda / 1000.0);
+                for &r in [q.radius_um.first(), q.radius_um.last()].iter().flatten() {
+                    mie::Sphere::new(m, k * r).map_err(mie_error(format!(
+                        " at {lambda} nm, radius {r} µm (the quadrature's range after truncating {:e} of the mass)",
+                        plan.knobs.tail_mass
+                    )))?;
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Fails early when `dir` (or, if it does not exist yet, its nearest existing ancestor) is not a
+/// directory this process can create files in.
+fn check_writable(dir: &Path) -> Result<(), BakeError> {
+    let io = |path: &Path, source: std::io::Error| BakeError::Io {
+        path: path.to_path_buf(),
+        op: "checking that the output directory can be written",
+        source,
+    };
+    let mut probe_dir = dir;
+    while !probe_dir.exists() {
+        match probe_dir.parent() {
+            Some(p) if !p.as_os_str().is_empty() => probe_dir = p,
+            _ => {
+                probe_dir = Path::new(".");
+                break;
+            }
+        }
+    }
+    if !probe_dir.is_dir() {
+        return Err(io(
+            probe_dir,
+            std::io::Error::other("exists and is not a directory"),
+        ));
+    }
+    let probe = probe_dir.join(format!(".photometeor-probe-{}", std::process::id()));
+    std::fs::File::create(&probe).map_err(|e| io(probe_dir, e))?;
+    let _ = std::fs::remove_file(&probe);
+    Ok(())
 }
 
 fn field_entry(

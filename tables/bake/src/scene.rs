@@ -402,6 +402,14 @@ impl Scene {
                 FieldKind::Cloud | FieldKind::Rain => Material::Water,
                 FieldKind::Ice | FieldKind::Snow => Material::Ice,
             });
+            if material == Material::Ice
+                && !(temperature_c.is_finite() && (-100.0..=0.0).contains(&temperature_c))
+            {
+                fail!(
+                    at("temperature_c"),
+                    "temperature_c = {temperature_c} is outside the allowed range [-100, 0] °C for ice"
+                );
+            }
             if material == Material::Water && matches!(f.kind, FieldKind::Ice | FieldKind::Snow) {
                 fail!(
                     at("material"),
