@@ -304,7 +304,7 @@ impl Manifest {
                 }
             }
             for (c, v) in ["R", "G", "B"].iter().zip(f.sigma_ext_m2.as_array()) {
-                if !(*v > 0.0) {
+                if v.is_nan() || *v <= 0.0 {
                     return Err(at(format!("sigma_ext_m2.{c} = {v} must be > 0 (m²)")));
                 }
             }
