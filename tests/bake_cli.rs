@@ -423,8 +423,27 @@ fn validate_judges_the_corona_and_fails_on_a_table_with_the_wrong_index() {
             "{text}"
         );
     }
-    // Water's manifest, ice's rain table.
+    // Water's manifest, ice's rain table. Copied alone, every reader refuses it (its F_i and
+    // checksum are not the manifest's); so the manifest is made to vouch for it (size, CRC-32 and F_i of the
+    // ice table, microphysics still water), as a bake with the wrong index would have written.
     fs::copy(ice.join("rain.exr"), water.join("rain.exr")).unwrap();
+    let out = photometeor(&["validate", water.to_str().unwrap()], Path::new("."));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains("rain.exr") && stderr.contains("manifest.json"),
+        "{stderr}"
+    );
+    let ice_rain = read_manifest(&ice).unwrap().fields[1].clone();
+    let mut m = read_manifest(&water).unwrap();
+    assert_eq!(
+        (m.fields[1].name.as_str(), ice_rain.name.as_str()),
+        ("rain", "rain")
+    );
+    m.fields[1].bytes = ice_rain.bytes;
+    m.fields[1].crc32 = ice_rain.crc32;
+    m.fields[1].forward_fraction = ice_rain.forward_fraction;
+    fs::write(water.join("manifest.json"), m.to_json_bytes()).unwrap();
     let out = photometeor(&["validate", water.to_str().unwrap()], Path::new("."));
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(1), "{stderr}");

@@ -318,3 +318,75 @@ fn every_reader_refuses_a_swapped_table_and_an_edited_manifest() {
     fs::write(dir.join("manifest.json"), manifest).unwrap();
     assert_eq!(consistent(&dir), ["cloud", "rain"]);
 }
+
+#[test]
+fn readers_refuse_fifos_devices_and_oversized_files_without_blocking() {
+    let work = workdir("faults-special-files");
+    let dir = work.join("tables");
+    bake_into(&scene("a", &["rain"]), &dir).unwrap();
+    let started = std::time::Instant::now();
+    // The EXR replaced by a link to /dev/zero: refused, not read until memory runs out.
+    fs::remove_file(dir.join("rain.exr")).unwrap();
+    std::os::unix::fs::symlink("/dev/zero", dir.join("rain.exr")).unwrap();
+    let e = runtime::Tables::open(&dir).unwrap_err().to_string();
+    assert!(e.contains("not a regular file"), "{e}");
+    // The manifest replaced by a FIFO: refused, not waited on forever.
+    fs::remove_file(dir.join("manifest.json")).unwrap();
+    let made = Command::new("mkfifo")
+        .arg(dir.join("manifest.json"))
+        .status()
+        .unwrap();
+    assert!(made.success(), "mkfifo failed");
+    let e = format::read_manifest(&dir).unwrap_err().to_string();
+    assert!(e.contains("not a regular file"), "{e}");
+    assert!(started.elapsed().as_secs_f64() < 5.0, "a reader blocked");
+    // And the next bake replaces both with a whole generation.
+    fs::remove_file(dir.join("manifest.json")).unwrap();
+    fs::remove_file(dir.join("rain.exr")).unwrap();
+    bake_into(&scene("a", &["rain"]), &dir).unwrap();
+    assert_eq!(consistent(&dir), ["rain"]);
+}
+
+#[test]
+fn a_full_disk_leaves_the_previous_bake_as_it_was() {
+    let work = workdir("faults-full-disk");
+    let dir = work.join("tables");
+    fs::create_dir_all(&dir).unwrap();
+    // A 512 KiB tmpfs: room for a one-field bake of 4 orders, not for two fields of 60.
+    let mounted = Command::new("mount")
+        .args(["-t", "tmpfs", "-o", "size=512k", "tmpfs"])
+        .arg(&dir)
+        .output();
+    match mounted {
+        Ok(out) if out.status.success() => {}
+        Ok(out) => {
+            eprintln!(
+                "skipped: cannot mount a tmpfs here ({})",
+                String::from_utf8_lossy(&out.stderr).trim()
+            );
+            return;
+        }
+        Err(e) => {
+            eprintln!("skipped: cannot run mount ({e})");
+            return;
+        }
+    }
+    struct Unmount(PathBuf);
+    impl Drop for Unmount {
+        fn drop(&mut self) {
+            let _ = Command::new("umount").arg(&self.0).status();
+        }
+    }
+    let _unmount = Unmount(dir.clone());
+    bake_into(&scene("a", &["rain"]), &dir).unwrap();
+    let before = snapshot(&dir);
+    let big = scene("b", &["cloud", "rain"]).replace("n_max = 4", "n_max = 60");
+    let e = bake_into(&big, &dir).unwrap_err().to_string();
+    println!("full disk: {e}");
+    assert!(
+        e.contains("No space left") || e.contains("space"),
+        "not a full-disk error: {e}"
+    );
+    assert_eq!(snapshot(&dir), before);
+    assert_eq!(consistent(&dir), ["rain"]);
+}

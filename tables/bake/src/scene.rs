@@ -394,13 +394,14 @@ impl Scene {
             if fields.iter().any(|g| g.name == f.name) {
                 fail!(at("name"), "field name {:?} is used twice", f.name);
             }
-            let temperature_c = f.temperature_c.unwrap_or(match f.kind {
-                FieldKind::Cloud | FieldKind::Rain => 10.0,
-                FieldKind::Ice | FieldKind::Snow => -20.0,
-            });
             let material = f.material.unwrap_or(match f.kind {
                 FieldKind::Cloud | FieldKind::Rain => Material::Water,
                 FieldKind::Ice | FieldKind::Snow => Material::Ice,
+            });
+            // Liquid drops at 10 °C, ice (crystals or frozen drops) at −20 °C unless given.
+            let temperature_c = f.temperature_c.unwrap_or(match material {
+                Material::Water => 10.0,
+                Material::Ice => -20.0,
             });
             if material == Material::Ice
                 && !(temperature_c.is_finite() && (-100.0..=0.0).contains(&temperature_c))
@@ -556,6 +557,29 @@ mod tests {
             e.contains("line 3") && e.contains("theta_step_deg = 0.7"),
             "{e}"
         );
+    }
+
+    #[test]
+    fn names_and_temperatures_out_of_range_are_refused_before_any_work() {
+        // A field name too long for a file name, a scene name with a terminal escape, ice at
+        // NaN and at 1000 °C: each named with its line.
+        let long = "n".repeat(300);
+        let e = error_of(&format!(
+            "{HEAD}{}",
+            RAIN.replace("name = \"rain\"", &format!("name = \"{long}\""))
+        ));
+        assert!(e.contains("line 4") && e.contains("1 to 200"), "{e}");
+        let e = error_of(&format!("[scene]\nname = \"a\\u001b[2Jb\"\n{RAIN}"));
+        assert!(
+            e.contains("line 2") && e.contains("control characters"),
+            "{e}"
+        );
+        let ice = "[[field]]\nname = \"ice\"\nkind = \"ice\"\ntemperature_c = T\n";
+        for t in ["nan", "1000", "-101"] {
+            let e = error_of(&format!("{HEAD}{}", ice.replace('T', t)));
+            assert!(e.contains("line 6") && e.contains("[-100, 0]"), "{t}: {e}");
+        }
+        assert!(Scene::parse(&format!("{HEAD}{}", ice.replace('T', "-40")), "s").is_ok());
     }
 
     #[test]
