@@ -34,6 +34,9 @@ use toml::Spanned;
 
 pub use tables::spectral::SpectralMode;
 
+/// Most N × K values a channel's tables may hold (500 orders at 0.09°, 26 orders at 0.01° fit).
+pub const MAX_TEXELS_PER_CHANNEL: usize = 2_000_000;
+
 /// The scene `photometeor bake` uses when none is given: all four kinds.
 pub const DEFAULT_SCENE: &str = include_str!("../data/scenes/default.toml");
 
@@ -361,6 +364,22 @@ impl Scene {
                 "spectral = {other:?} is not one of \"spectral\", \"rgb3\""
             ),
         };
+        // The tables hold N × K values per channel and wavelength mixture; bound their size
+        // (and so the bake's memory and time) before anything is computed.
+        let angles = (180.0 / theta_step_deg).round() as usize + 1;
+        if n_max * angles > MAX_TEXELS_PER_CHANNEL {
+            let key = if header.max_optical_depth.is_some() {
+                "max_optical_depth"
+            } else {
+                "n_max"
+            };
+            fail!(
+                at(key),
+                "n_max = {n_max} orders × {angles} angles (theta_step_deg = {theta_step_deg}) = {} texels per channel exceeds the allowed {MAX_TEXELS_PER_CHANNEL} (≈ {:.0} MB of tables in memory); lower n_max or raise theta_step_deg",
+                n_max * angles,
+                (n_max * angles * 3 * 8 * 4) as f64 / 1e6
+            );
+        }
         let quality = match header.quality.as_deref() {
             None => Quality::Standard,
             Some(q) => Quality::parse(q).ok_or_else(|| {
@@ -580,6 +599,11 @@ mod tests {
             assert!(e.contains("line 6") && e.contains("[-100, 0]"), "{t}: {e}");
         }
         assert!(Scene::parse(&format!("{HEAD}{}", ice.replace('T', "-40")), "s").is_ok());
+        // Tables too large for memory: 10000 orders at 0.01° (1.8e8 values per channel).
+        let e = error_of(&format!("{HEAD}n_max = 10000\ntheta_step_deg = 0.01\n{RAIN}"));
+        assert!(e.contains("line 3") && e.contains("texels per channel exceeds"), "{e}");
+        assert!(Scene::parse(&format!("{HEAD}n_max = 500\n{RAIN}"), "s").is_ok());
+        assert!(Scene::parse(&format!("{HEAD}theta_step_deg = 0.01\n{RAIN}"), "s").is_ok());
     }
 
     #[test]
