@@ -600,8 +600,13 @@ mod tests {
         }
         assert!(Scene::parse(&format!("{HEAD}{}", ice.replace('T', "-40")), "s").is_ok());
         // Tables too large for memory: 10000 orders at 0.01° (1.8e8 values per channel).
-        let e = error_of(&format!("{HEAD}n_max = 10000\ntheta_step_deg = 0.01\n{RAIN}"));
-        assert!(e.contains("line 3") && e.contains("texels per channel exceeds"), "{e}");
+        let e = error_of(&format!(
+            "{HEAD}n_max = 10000\ntheta_step_deg = 0.01\n{RAIN}"
+        ));
+        assert!(
+            e.contains("line 3") && e.contains("texels per channel exceeds"),
+            "{e}"
+        );
         assert!(Scene::parse(&format!("{HEAD}n_max = 500\n{RAIN}"), "s").is_ok());
         assert!(Scene::parse(&format!("{HEAD}theta_step_deg = 0.01\n{RAIN}"), "s").is_ok());
     }
