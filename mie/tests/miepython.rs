@@ -21,13 +21,7 @@ use common::floats;
 
 /// cos θ with θ > 90° folded as −cos(180° − θ), as the CLI and grids do.
 fn cosine(theta_deg: f64) -> f64 {
-    if theta_deg == 90.0 {
-        0.0
-    } else if theta_deg > 90.0 {
-        -(180.0 - theta_deg).to_radians().cos()
-    } else {
-        theta_deg.to_radians().cos()
-    }
+    mie::exact_cosine_deg(theta_deg)
 }
 
 #[test]

@@ -259,20 +259,23 @@ pub fn run(plan: &BakePlan, progress: &dyn Progress) -> Result<BakeReport, BakeE
     Ok(report)
 }
 
+/// The solver's refusal of `field`'s inputs, with where it happened (`context`).
+fn mie_error(field: &Field, context: String) -> impl FnOnce(mie::MieError) -> BakeError {
+    let name = field.name.clone();
+    move |source| BakeError::Mie {
+        field: name,
+        context,
+        source,
+    }
+}
+
 /// The checks [`run`] makes before computing anything (see there).
 pub fn preflight(plan: &BakePlan, weights: &ChannelWeights) -> Result<(), BakeError> {
     check_writable(&plan.out_dir)?;
     let lambdas = &weights.wavelengths_nm;
     let j_len = lambdas.len();
     for field in &plan.scene.fields {
-        let mie_error = |context: String| {
-            let name = field.name.clone();
-            move |source| BakeError::Mie {
-                field: name,
-                context,
-                source,
-            }
-        };
+        let mie_error = |context: String| mie_error(field, context);
         for (j, &lambda) in lambdas.iter().enumerate() {
             let m = field
                 .material
@@ -372,14 +375,7 @@ pub fn phase_functions(
     let knobs = plan.knobs;
     let lambdas = &weights.wavelengths_nm;
     let j_len = lambdas.len();
-    let mie_error = |context: String| {
-        let name = field.name.clone();
-        move |source| BakeError::Mie {
-            field: name,
-            context,
-            source,
-        }
-    };
+    let mie_error = |context: String| mie_error(field, context);
     let mut per_wavelength = Vec::with_capacity(j_len);
     match (field.distribution, field.crystal) {
         (Some(distribution), _) => {
