@@ -80,11 +80,6 @@ impl ThetaGrid {
         })
     }
 
-    /// Number of steps N = 180°/Δθ.
-    pub fn n_steps(&self) -> usize {
-        self.n_steps
-    }
-
     /// Number of samples (bins) K = N + 1.
     pub fn len(&self) -> usize {
         self.n_steps + 1

@@ -301,13 +301,8 @@ pub fn bulk_at(
     let node_phase: Vec<f64> = intensity.iter().map(|i| i * scale).collect();
     let bins = quadrature.average(&node_phase);
     let points: Vec<f64> = point_intensity.iter().map(|i| i * scale).collect();
-    let energy: f64 = bins
-        .iter()
-        .zip(grid.bin_solid_angles())
-        .map(|(v, omega)| v * omega)
-        .sum();
     const UM2_TO_M2: f64 = 1e-12;
-    Ok(PhaseFunction {
+    let mut phase = PhaseFunction {
         wavelength_nm,
         m_re: m.re,
         m_im: m.im,
@@ -320,10 +315,15 @@ pub fn bulk_at(
         forward_delta_fraction: 0.0,
         points,
         origin: Origin::Mie(MieOrigin {
-            energy_closure: energy - 1.0,
+            energy_closure: 0.0,
             sizes: sizes.radius_um.len(),
             nodes_per_panel,
             last_change: 0.0,
         }),
-    })
+    };
+    let closure = phase.integral() - 1.0;
+    if let Origin::Mie(m) = &mut phase.origin {
+        m.energy_closure = closure;
+    }
+    Ok(phase)
 }

@@ -65,4 +65,34 @@ mod tests {
         let x = size_parameter(10.0, 550.0);
         assert!((x - 114.2397).abs() < 1e-3, "{x}");
     }
+
+    #[test]
+    fn rainbow_angles_match_the_tabulated_values() {
+        // docs/physics.md §4, water IAPWS 20 °C at 550 nm: n = 1.3347, 138.17° and 128.67°.
+        let (t1, _) = rainbow_theory(1.3347, 1, 1e6);
+        let (t2, _) = rainbow_theory(1.3347, 2, 1e6);
+        assert!((t1 - 138.17).abs() < 0.02, "{t1}");
+        assert!((t2 - 128.67).abs() < 0.02, "{t2}");
+    }
+
+    #[test]
+    fn airy_shift_scales_as_x_to_minus_two_thirds() {
+        let (_, a) = rainbow_theory(1.3347, 1, 1000.0);
+        let (_, b) = rainbow_theory(1.3347, 1, 8000.0);
+        assert!((a / b - 4.0).abs() < 1e-9, "{a} {b}");
+        // r = 500 µm at 550 nm (x ≈ 5712): about 0.3° beyond Descartes' angle.
+        let (_, s) = rainbow_theory(1.3347, 1, 5712.0);
+        assert!(s > 0.25 && s < 0.35, "{s}");
+    }
+
+    #[test]
+    fn halo_minimum_deviation_matches_the_tabulated_values() {
+        // docs/physics.md §4 at 550 nm: 21.915° and 45.949° (n_ice = 1.3110).
+        let n = crate::Material::Ice
+            .refractive_index(550.0, -20.0)
+            .unwrap()
+            .re;
+        assert!((minimum_deviation_deg(n, 60.0) - 21.915).abs() < 0.01);
+        assert!((minimum_deviation_deg(n, 90.0) - 45.949).abs() < 0.01);
+    }
 }

@@ -212,23 +212,23 @@ impl<'a> Staging<'a> {
 
     /// The commit point (stage → `.commit`, one rename), then the roll-forward (the manifest is
     /// published last).
-    pub fn commit(mut self) -> Result<(), CommitError> {
+    pub fn commit(self) -> Result<(), CommitError> {
+        let dir = self.lock.dir.clone();
+        self.commit_point_only()?;
+        roll_forward(&dir)?;
+        Ok(())
+    }
+
+    /// The commit point only, without the roll-forward: what a writer killed right after it
+    /// leaves. [`Self::commit`] is this plus [`roll_forward`]; alone, it serves fault-injection
+    /// tests.
+    #[doc(hidden)]
+    pub fn commit_point_only(mut self) -> Result<(), CommitError> {
         sync_dir(&self.stage);
         let commit = self.lock.dir.join(COMMIT_DIR);
         fs::rename(&self.stage, &commit).map_err(io_error(&commit, "publishing the stage"))?;
         self.done = true;
         sync_dir(&self.lock.dir);
-        roll_forward(&self.lock.dir)?;
-        Ok(())
-    }
-
-    /// The commit point only, without the roll-forward: what a writer killed right after it
-    /// leaves. For fault-injection tests.
-    #[doc(hidden)]
-    pub fn commit_point_only(mut self) -> Result<(), CommitError> {
-        let commit = self.lock.dir.join(COMMIT_DIR);
-        fs::rename(&self.stage, &commit).map_err(io_error(&commit, "publishing the stage"))?;
-        self.done = true;
         Ok(())
     }
 }
