@@ -15,4 +15,4 @@ pub mod gpu;
 pub mod load;
 pub mod sample;
 
-pub use load::{FieldTable, LoadError, Tables};
+pub use load::{FieldTable, LoadError, Spectrum, Tables};

@@ -14,7 +14,7 @@
 
 use std::path::{Path, PathBuf};
 
-use format::{BakeDir, FieldImage};
+use format::{BakeDir, FieldImage, SingleScatter};
 use grid::ThetaGrid;
 use ndarray::Axis;
 use thiserror::Error;
@@ -51,6 +51,9 @@ pub struct FieldTable {
     pub sigma_ext_m2: [f64; 3],
     /// Single-scattering albedo per channel.
     pub albedo: [f64; 3],
+    /// The field's single-scattering optics per wavelength (`<name>.single.exr`), which a
+    /// spectral path tracer samples; `None` for bakes written before it existed.
+    pub single: Option<SingleScatter>,
 }
 
 impl FieldTable {
@@ -71,6 +74,60 @@ pub struct Tables {
     pub angle_count: usize,
     /// The selected fields.
     pub fields: Vec<FieldTable>,
+    /// The bake's wavelengths (nm) and each channel's weights over them (`weights[c][j]`),
+    /// from the manifest's `channels`; `None` when the manifest does not list them.
+    pub spectrum: Option<Spectrum>,
+}
+
+/// How a bake's wavelengths make its R, G, B channels (the manifest's `channels`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Spectrum {
+    /// λ_1..λ_W (nm), in the order of the single-scattering tables' rows.
+    pub wavelengths_nm: Vec<f64>,
+    /// weights[c][j] ≥ 0, Σ_j weights[c][j] = 1.
+    pub weights: [Vec<f64>; 3],
+}
+
+impl Spectrum {
+    /// Reads `wavelengths_nm` and `weights.{R,G,B}` of the manifest's `channels`, checking
+    /// their lengths and ranges.
+    pub fn from_channels(channels: &serde_json::Value) -> Result<Option<Self>, String> {
+        let Some(lambdas) = channels.get("wavelengths_nm") else {
+            return Ok(None);
+        };
+        let list = |v: &serde_json::Value, what: &str| -> Result<Vec<f64>, String> {
+            v.as_array()
+                .and_then(|a| {
+                    a.iter()
+                        .map(serde_json::Value::as_f64)
+                        .collect::<Option<Vec<_>>>()
+                })
+                .ok_or_else(|| format!("channels.{what} is not a list of numbers"))
+        };
+        let wavelengths_nm = list(lambdas, "wavelengths_nm")?;
+        let mut weights: [Vec<f64>; 3] = Default::default();
+        for (c, ch) in ["R", "G", "B"].iter().enumerate() {
+            let w = channels
+                .get("weights")
+                .and_then(|w| w.get(ch))
+                .ok_or_else(|| format!("channels.weights.{ch} is missing"))?;
+            weights[c] = list(w, &format!("weights.{ch}"))?;
+            let sum: f64 = weights[c].iter().sum();
+            if weights[c].len() != wavelengths_nm.len()
+                || weights[c].iter().any(|v| !(v.is_finite() && *v >= 0.0))
+                || (sum - 1.0).abs() > 1e-9
+            {
+                return Err(format!(
+                    "channels.weights.{ch} must be {} values ≥ 0 summing to 1",
+                    wavelengths_nm.len()
+                ));
+            }
+        }
+        Ok(Some(Self {
+            wavelengths_nm,
+            weights,
+        }))
+    }
 }
 
 impl Tables {
@@ -100,6 +157,10 @@ impl Tables {
                 }
             }
         }
+        let spectrum = Spectrum::from_channels(&manifest.channels).map_err(|check| LoadError {
+            file: manifest_file.clone(),
+            check,
+        })?;
         let grid = ThetaGrid::new(manifest.theta_step_deg).expect("checked by read_manifest");
         let omega = grid.bin_solid_angles();
         let mut fields = Vec::new();
@@ -138,6 +199,23 @@ impl Tables {
                     }
                 }
             }
+            let single = bake.read_single(entry).map_err(|e| {
+                let path = dir.join(format::single_file_name(&entry.name));
+                LoadError {
+                    check: strip_path(&e.to_string(), &path),
+                    file: path,
+                }
+            })?;
+            if let (Some(t), Some(s)) = (&single, &spectrum)
+                && t.wavelengths_nm != s.wavelengths_nm
+            {
+                return Err(fail(format!(
+                    "{}'s wavelengths {:?} differ from manifest.json's {:?}",
+                    format::single_file_name(&entry.name),
+                    t.wavelengths_nm,
+                    s.wavelengths_nm
+                )));
+            }
             let ext = entry.sigma_ext_m2.as_array().map(|&v| v);
             let alb = entry.albedo.as_array().map(|&v| v);
             fields.push(FieldTable {
@@ -147,6 +225,7 @@ impl Tables {
                 sigma_sca_m2: [ext[0] * alb[0], ext[1] * alb[1], ext[2] * alb[2]],
                 sigma_ext_m2: ext,
                 albedo: alb,
+                single,
             });
         }
         Ok(Self {
@@ -154,6 +233,7 @@ impl Tables {
             theta_step_deg: manifest.theta_step_deg,
             angle_count: manifest.angle_count,
             fields,
+            spectrum,
         })
     }
 

@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use format::exr::field_exr_bytes;
-use format::{BakeLock, FieldEntry, FieldImage, Manifest, PerChannel, Staging};
+use format::{BakeLock, FieldEntry, FieldImage, Manifest, PerChannel, SingleScatter, Staging};
 use grid::ThetaGrid;
 use mie::PhaseFunction;
 use mie::crystal::crystal_phase;
@@ -57,6 +57,8 @@ pub struct BakedField {
     pub image: FieldImage,
     /// The numbers the manifest carries.
     pub summary: FieldSummary,
+    /// The single-scattering optics per wavelength, as written to `<name>.single.exr`.
+    pub single: SingleScatter,
 }
 
 /// The cache record of a field: the tables flattened, and the summary.
@@ -67,6 +69,11 @@ struct Record {
     ams: Vec<f64>,
     forward_fraction: Vec<f64>,
     summary: FieldSummary,
+    wavelengths_nm: Vec<f64>,
+    single_bins: Vec<f64>,
+    forward_delta_fraction: Vec<f64>,
+    sigma_ext_m2: Vec<f64>,
+    albedo: Vec<f64>,
 }
 
 impl Record {
@@ -77,6 +84,11 @@ impl Record {
             ams: field.image.ams.iter().copied().collect(),
             forward_fraction: field.image.forward_fraction.iter().copied().collect(),
             summary: field.summary.clone(),
+            wavelengths_nm: field.single.wavelengths_nm.clone(),
+            single_bins: field.single.bins.iter().copied().collect(),
+            forward_delta_fraction: field.single.forward_delta_fraction.clone(),
+            sigma_ext_m2: field.single.sigma_ext_m2.clone(),
+            albedo: field.single.albedo.clone(),
         }
     }
 
@@ -84,7 +96,21 @@ impl Record {
         let ams = Array3::from_shape_vec((3, self.n_max, self.angle_count), self.ams).ok()?;
         let forward_fraction =
             Array2::from_shape_vec((3, self.n_max), self.forward_fraction).ok()?;
+        let bins = Array2::from_shape_vec(
+            (self.wavelengths_nm.len(), self.angle_count),
+            self.single_bins,
+        )
+        .ok()?;
         Some(BakedField {
+            single: SingleScatter {
+                field: name.to_string(),
+                theta_step_deg,
+                wavelengths_nm: self.wavelengths_nm,
+                bins,
+                forward_delta_fraction: self.forward_delta_fraction,
+                sigma_ext_m2: self.sigma_ext_m2,
+                albedo: self.albedo,
+            },
             image: FieldImage {
                 field: name.to_string(),
                 theta_step_deg,
@@ -227,7 +253,16 @@ pub fn run(plan: &BakePlan, progress: &dyn Progress) -> Result<BakeReport, BakeE
         let file = format!("{}.exr", field.name);
         let bytes = field_exr_bytes(&result.image)?;
         stage.write(&file, &bytes)?;
-        entries.push(field_entry(plan, field, &result, file, hash, &bytes));
+        let single_file = format::single_file_name(&field.name);
+        let single_bytes = format::single_exr_bytes(&result.single)?;
+        stage.write(&single_file, &single_bytes)?;
+        let mut entry = field_entry(plan, field, &result, file, hash, &bytes);
+        entry.single_scattering = Some(format::manifest::FileRef {
+            file: single_file,
+            bytes: single_bytes.len() as u64,
+            crc32: format::crc32_hex(&single_bytes),
+        });
+        entries.push(entry);
     }
     entries.extend(kept);
     let manifest = Manifest {
@@ -250,6 +285,9 @@ pub fn run(plan: &BakePlan, progress: &dyn Progress) -> Result<BakeReport, BakeE
             let stale = !manifest.fields.iter().any(|f| f.file == old.file);
             if stale {
                 let _ = std::fs::remove_file(plan.out_dir.join(&old.file));
+                if let Some(single) = &old.single_scattering {
+                    let _ = std::fs::remove_file(plan.out_dir.join(&single.file));
+                }
             }
         }
     }
@@ -361,6 +399,7 @@ fn field_entry(
         microphysics: serde_json::to_value(field).unwrap_or_default(),
         quality: serde_json::json!({ "preset": plan.quality, "knobs": plan.knobs, "legendre_l_max": s.l_max }),
         content_hash: hash,
+        single_scattering: None,
     }
 }
 
@@ -486,7 +525,22 @@ pub fn compute_field(
     }
     bar.finish();
     summary.seconds = start.elapsed().as_secs_f64();
+    let single = SingleScatter {
+        field: field.name.clone(),
+        theta_step_deg: plan.scene.theta_step_deg,
+        wavelengths_nm: lambdas.clone(),
+        bins: Array2::from_shape_fn((per_wavelength.len(), k), |(j, kk)| {
+            per_wavelength[j].bins[kk]
+        }),
+        forward_delta_fraction: per_wavelength
+            .iter()
+            .map(|p| p.forward_delta_fraction)
+            .collect(),
+        sigma_ext_m2: per_wavelength.iter().map(|p| p.sigma_ext_m2).collect(),
+        albedo: per_wavelength.iter().map(|p| p.albedo).collect(),
+    };
     Ok(BakedField {
+        single,
         image: FieldImage {
             field: field.name.clone(),
             theta_step_deg: plan.scene.theta_step_deg,

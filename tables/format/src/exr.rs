@@ -528,7 +528,7 @@ pub fn parse_f64_list(text: &str) -> Result<Vec<f64>, String> {
 /// Layout (OpenEXR file layout, "Header"): magic (4 bytes), version and flags (4), then
 /// records `name\0 type\0 size:i32le value[size]`, closed by a single `\0`. Only the order of
 /// records changes, so the header length and every offset after it stay the same.
-fn sort_header_attributes(bytes: &mut [u8]) -> Result<(), exr::error::Error> {
+pub(crate) fn sort_header_attributes(bytes: &mut [u8]) -> Result<(), exr::error::Error> {
     let bad = || exr::error::Error::Invalid("header layout while canonicalizing attributes".into());
     let start = 8;
     let mut pos = start;

@@ -141,6 +141,21 @@ pub struct FieldEntry {
     pub quality: Value,
     /// Hash of every input that affects the field's result, lowercase hex.
     pub content_hash: String,
+    /// The field's single-scattering optics per wavelength (`crate::single`), for spectral
+    /// path tracing; absent in bakes written before it existed.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub single_scattering: Option<FileRef>,
+}
+
+/// A further file of a field: its name in the bake directory, size and CRC-32.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FileRef {
+    /// Relative to the bake directory: `<name>.single.exr`.
+    pub file: String,
+    /// Size in bytes.
+    pub bytes: u64,
+    /// CRC-32 (IEEE) of the bytes, 8 lowercase hex digits.
+    pub crc32: String,
 }
 
 /// A failed consistency check of a [`Manifest`] (see [`Manifest::check`]).
@@ -249,6 +264,15 @@ impl Manifest {
                 return Err(at(format!(
                     "file {:?} is not the bake's own name for this field, expected \"{}.exr\"",
                     f.file, f.name
+                )));
+            }
+            if let Some(single) = &f.single_scattering
+                && single.file != crate::single::single_file_name(&f.name)
+            {
+                return Err(at(format!(
+                    "single_scattering file {:?} is not the bake's own name, expected {:?}",
+                    single.file,
+                    crate::single::single_file_name(&f.name)
                 )));
             }
             if f.crc32.len() != 8
@@ -506,5 +530,51 @@ impl BakeDir {
             )));
         }
         Ok(image)
+    }
+
+    /// Reads the single-scattering EXR of `entry` (`crate::single`), if the bake has one, and
+    /// checks it: the contract, then the field name, Δθ, K, and last its size and CRC-32.
+    pub fn read_single(
+        &self,
+        entry: &FieldEntry,
+    ) -> Result<Option<crate::SingleScatter>, crate::IoError> {
+        use crate::{ContractError, IoError};
+        let Some(single) = &entry.single_scattering else {
+            return Ok(None);
+        };
+        let path = self.dir.join(&single.file);
+        let bytes = crate::exr::read_exr_bytes(&path)?;
+        let table = crate::single::decode_single_exr(&bytes, &path)?;
+        let mismatch = |what: String| IoError::Contract {
+            path: path.clone(),
+            check: ContractError::Manifest(what),
+        };
+        if table.field != entry.name {
+            return Err(mismatch(format!(
+                "field attribute {:?}, but manifest.json lists this file for field {:?}",
+                table.field, entry.name
+            )));
+        }
+        if table.theta_step_deg != self.manifest.theta_step_deg
+            || table.bins.ncols() != self.manifest.angle_count
+        {
+            return Err(mismatch(format!(
+                "Δθ = {}° with {} angles, manifest.json says {}° with {}",
+                table.theta_step_deg,
+                table.bins.ncols(),
+                self.manifest.theta_step_deg,
+                self.manifest.angle_count
+            )));
+        }
+        let crc = crate::commit::crc32_hex(&bytes);
+        if bytes.len() as u64 != single.bytes || crc != single.crc32 {
+            return Err(mismatch(format!(
+                "{} bytes with CRC-32 {crc}, manifest.json says {} bytes with {}: the file is not the one this bake wrote",
+                bytes.len(),
+                single.bytes,
+                single.crc32
+            )));
+        }
+        Ok(Some(table))
     }
 }

@@ -581,6 +581,7 @@ fn sample_manifest() -> Manifest {
         microphysics: json!({"radius_um": 500.0, "distribution": "marshall-palmer", "z": [1, 2]}),
         quality: json!({"preset": "draft", "l_max": 4000}),
         content_hash: "0123456789abcdef".to_string(),
+        single_scattering: None,
     };
     Manifest {
         schema: 2,
