@@ -7,7 +7,8 @@ use mie::Material;
 use num_complex::Complex64;
 
 use crate::commands::{
-    bake, bench, compare, inspect, mie as mie_cmd, phase, plot, render, tradeoff, validate,
+    bake, bench, compare, compare_render, inspect, mie as mie_cmd, phase, plot, render, tradeoff,
+    validate,
 };
 
 /// Phase functions of cloud droplets, raindrops, ice and snow, and the multiple-scattering
@@ -31,6 +32,7 @@ impl Args {
             Command::Phase(a) => phase::run(a),
             Command::Bench(a) => bench::run(a),
             Command::Render(a) => render::run(a),
+            Command::CompareRender(a) => compare_render::run(a),
             Command::Bake(a) => bake::run(a),
             Command::Inspect(a) => inspect::run(a),
             Command::Compare(a) => compare::run(a),
@@ -76,6 +78,11 @@ enum Command {
     /// reference renderer), with the analytic sky and aerial perspective. Writes an HDR EXR
     /// (radiance per unit solar irradiance, 1/sr) and optionally a tone-mapped PNG.
     Render(render::RenderArgs),
+    /// Measure a model's frame against the path-traced truth of the same scene (`render --model
+    /// truth`): mean and 95th-percentile relative error of luminance and the bias, over the
+    /// pixels where the volume matters (1 − T_vol > 1 %), ignoring differences within 3σ of
+    /// the truth's noise; optionally an error-map PNG.
+    CompareRender(compare_render::CompareRenderArgs),
     /// Time photometeor's Mie workloads (and miepython's, side by side, when available).
     Bench(bench::BenchArgs),
 }

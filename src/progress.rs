@@ -46,3 +46,36 @@ impl bake::Progress for Bars {
         Box::new(Bar(p))
     }
 }
+
+/// The path tracer's bar: samples per pixel done, time left, and the current noise.
+pub struct SampleBar(ProgressBar);
+
+impl SampleBar {
+    /// A bar over `total` samples per pixel, hidden with `quiet` or in CI.
+    pub fn new(quiet: bool, total: u64) -> Self {
+        if quiet || std::env::var_os("CI").is_some() {
+            return Self(ProgressBar::hidden());
+        }
+        let p = ProgressBar::with_draw_target(Some(total), ProgressDrawTarget::stderr());
+        p.set_style(
+            ProgressStyle::with_template(
+                "   truth [{bar:30}] {pos}/{len} spp, noise {msg} ({elapsed}, {eta} left)",
+            )
+            .expect("valid template")
+            .progress_chars("=> "),
+        );
+        Self(p)
+    }
+
+    /// Clears the bar.
+    pub fn finish(&self) {
+        self.0.finish_and_clear();
+    }
+}
+
+impl render::truth::TruthProgress for SampleBar {
+    fn pass(&self, spp: usize, _total: usize, noise: f64, _seconds: f64) {
+        self.0.set_position(spp as u64);
+        self.0.set_message(format!("{:.2} %", noise * 100.0));
+    }
+}

@@ -432,8 +432,14 @@ fn bench_crystal(c: CrystalBench) -> Result<()> {
 fn bench_render(b: RenderBench) -> Result<()> {
     use render::riley::{cpu, gpu::Renderer};
     use runtime::gpu::{Gpu, GpuTables, TexelFormat};
-    let (scene, tables) =
-        super::render::prepare(b.scene.as_deref(), b.tables, Some(&b.quality), true, |_| {})?;
+    let (scene, tables) = super::render::prepare(
+        "riley",
+        b.scene.as_deref(),
+        b.tables,
+        Some(&b.quality),
+        true,
+        |_| {},
+    )?;
     let gpu =
         Gpu::new().context("no GPU adapter (on Debian: apt-get install mesa-vulkan-drivers)")?;
     let uploaded = GpuTables::upload(&gpu, &tables, TexelFormat::Auto)?;

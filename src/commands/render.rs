@@ -52,9 +52,22 @@ pub struct RenderArgs {
     #[arg(long)]
     tables: Option<PathBuf>,
     /// The render model: `riley` (Riley et al. 2004's half-angle slicing with light and eye
-    /// buffers, the multiple-scattering tables for the angular spread of sunlight).
-    #[arg(long, default_value = "riley", value_parser = ["riley"])]
+    /// buffers, the multiple-scattering tables for the angular spread of sunlight) or `truth`
+    /// (an unbiased spectral Monte Carlo path tracer of the same scene on the CPU, all cores;
+    /// its EXR adds stderr.R/G/B, each pixel's standard error; docs/truth.md).
+    #[arg(long, default_value = "riley", value_parser = ["riley", "truth"])]
     model: String,
+    /// --model truth: samples (paths) per pixel, [1, 1048576] (overrides [render] spp).
+    #[arg(long)]
+    spp: Option<usize>,
+    /// --model truth: stop early once the median relative standard error of the volume's
+    /// pixels (green) is at or below this, e.g. 0.01 for 1 %; 0: run all samples.
+    #[arg(long, default_value_t = 0.0)]
+    noise: f64,
+    /// --model truth: seed of the random streams (overrides [render] seed); the image is the
+    /// same for a seed whatever the thread count.
+    #[arg(long)]
+    seed: Option<u64>,
     /// Accuracy preset of the bake, overriding the scene's.
     #[arg(long, value_parser = ["draft", "standard", "reference"])]
     quality: Option<String>,
@@ -69,6 +82,7 @@ pub struct RenderArgs {
 /// Reads the scene, bakes the fields its volumes use, loads and checks them, builds the frame.
 /// `adjust` overrides the scene's render settings; the result is checked before the bake.
 pub fn prepare(
+    model: &str,
     scene_path: Option<&std::path::Path>,
     tables_dir: Option<PathBuf>,
     quality: Option<&str>,
@@ -90,7 +104,9 @@ pub fn prepare(
     let mut scene = Scene::parse(&text, &origin)?;
     let mut render = RenderScene::parse(&text, &origin, &base)?;
     adjust(&mut render);
-    render.check().map_err(|e| anyhow!("{origin}: {e}"))?;
+    render
+        .check_for(model)
+        .map_err(|e| anyhow!("{origin}: {e}"))?;
     let used = render.fields();
     for name in &used {
         if !scene.fields.iter().any(|f| &f.name == name) {
@@ -122,8 +138,9 @@ pub fn prepare(
 /// Runs `photometeor render`.
 pub fn run(a: RenderArgs) -> Result<()> {
     let (render, tables) = prepare(
+        &a.model,
         a.scene.as_deref(),
-        a.tables,
+        a.tables.clone(),
         a.quality.as_deref(),
         a.quiet,
         |r| {
@@ -131,8 +148,13 @@ pub fn run(a: RenderArgs) -> Result<()> {
             r.height = a.height.unwrap_or(r.height);
             r.slices = a.slices.unwrap_or(r.slices);
             r.light_resolution = a.light_resolution.unwrap_or(r.light_resolution);
+            r.spp = a.spp.unwrap_or(r.spp);
+            r.seed = a.seed.unwrap_or(r.seed);
         },
     )?;
+    if a.model == "truth" {
+        return run_truth(&a, &render, &tables);
+    }
     let started = Instant::now();
     let frame: Frame = render.frame(&tables)?;
     let raster = started.elapsed().as_secs_f64();
@@ -181,6 +203,49 @@ pub fn run(a: RenderArgs) -> Result<()> {
         bail!("the render produced a non-finite pixel; nothing written");
     }
     image.write_exr(&a.out)?;
+    if let Some(png) = &a.png {
+        let exposure = a
+            .exposure
+            .or(render.exposure)
+            .unwrap_or_else(|| image.auto_exposure());
+        image.write_png(png, exposure)?;
+    }
+    Ok(())
+}
+
+/// `render --model truth`: path-trace, then write the EXR (with stderr.R/G/B) and the PNG.
+fn run_truth(a: &RenderArgs, render: &RenderScene, tables: &Tables) -> Result<()> {
+    let frame: Frame = render.frame(tables)?;
+    let mut settings = render.truth_settings();
+    settings.target_noise = a.noise;
+    let bar = crate::progress::SampleBar::new(a.quiet, settings.spp as u64);
+    let truth = render::truth::render(tables, &frame, &settings, &bar)?;
+    bar.finish();
+    if !a.quiet {
+        eprintln!(
+            "path-traced truth: {}×{}, {} spp, noise {:.2} % (median relative standard error, green, volume pixels), {:.1} s, {:.3} M paths/s on {} threads",
+            frame.width,
+            frame.height,
+            truth.spp,
+            truth.noise * 100.0,
+            truth.seconds,
+            truth.paths_per_second / 1e6,
+            rayon::current_num_threads()
+        );
+    }
+    let image = &truth.image;
+    if image.rgb.iter().flatten().any(|v| !v.is_finite()) {
+        bail!("the render produced a non-finite pixel; nothing written");
+    }
+    let extra = (0..3)
+        .map(|c| {
+            (
+                format!("stderr.{}", ["R", "G", "B"][c]),
+                truth.std_error.iter().map(|e| e[c]).collect(),
+            )
+        })
+        .collect();
+    image.write_exr_with(&a.out, extra)?;
     if let Some(png) = &a.png {
         let exposure = a
             .exposure

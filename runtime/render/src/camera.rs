@@ -13,6 +13,38 @@ pub struct Camera {
     pub fov_deg: f64,
 }
 
+impl Camera {
+    /// The unit view direction v, right axis v × y (x when looking straight up or down) and
+    /// up axis right × v; `None` when `look_at_m` equals `position_m`.
+    pub fn axes(&self) -> Option<(DVec3, DVec3, DVec3)> {
+        let forward = self.look_at_m - self.position_m;
+        if forward.dot(forward) == 0.0 {
+            return None;
+        }
+        let forward = forward.normalize();
+        let mut right = forward.cross(DVec3::Y);
+        if right.dot(right) < 1e-12 {
+            right = DVec3::X;
+        }
+        let right = right.normalize();
+        Some((forward, right, right.cross(forward)))
+    }
+}
+
+/// The unit ray through the centre of pixel (i, j) (row j = 0 at the top) of a `width` ×
+/// `height` image, for camera axes `(forward, right, up)` and tan of half the vertical fov.
+pub fn pixel_ray(
+    axes: (DVec3, DVec3, DVec3),
+    tan_half_fov_y: f64,
+    (i, j): (usize, usize),
+    (width, height): (usize, usize),
+) -> DVec3 {
+    let aspect = width as f64 / height as f64;
+    let sx = (2.0 * (i as f64 + 0.5) / width as f64 - 1.0) * tan_half_fov_y * aspect;
+    let sy = (1.0 - 2.0 * (j as f64 + 0.5) / height as f64) * tan_half_fov_y;
+    ((axes.0 + sx * axes.1) + sy * axes.2).normalize()
+}
+
 /// The sun: a collimated source (Riley Eq. 18).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Sun {

@@ -55,6 +55,16 @@ fn write_bytes(path: &Path, bytes: &[u8]) -> Result<(), WriteError> {
 impl Image {
     /// Writes R, G, B (linear radiance per unit solar irradiance, 1/sr) and A (transparency).
     pub fn write_exr(&self, path: &Path) -> Result<(), WriteError> {
+        self.write_exr_with(path, Vec::new())
+    }
+
+    /// [`Image::write_exr`] with further 32-bit float channels `(name, one value per pixel)`,
+    /// such as the path tracer's `stderr.R`, `stderr.G`, `stderr.B`.
+    pub fn write_exr_with(
+        &self,
+        path: &Path,
+        extra: Vec<(String, Vec<f32>)>,
+    ) -> Result<(), WriteError> {
         let channel = |name: &str, values: Vec<f32>| {
             let mut c = AnyChannel::new(name, FlatSamples::F32(values));
             c.quantize_linearly = false;
@@ -69,6 +79,15 @@ impl Image {
             ("A", self.transparency.clone()),
         ] {
             list.push(channel(name, values));
+        }
+        for (name, values) in extra {
+            if values.len() != self.width * self.height {
+                return Err(WriteError::Encode {
+                    path: path.display().to_string(),
+                    message: format!("channel {name} has {} values", values.len()),
+                });
+            }
+            list.push(channel(&name, values));
         }
         let channels = AnyChannels::sort(list);
         let layer = Layer::new(
@@ -121,21 +140,29 @@ impl Image {
 
     /// Writes an 8-bit sRGB PNG of [`Image::to_srgb8`] at `exposure`.
     pub fn write_png(&self, path: &Path, exposure: f64) -> Result<(), WriteError> {
-        let mut bytes = Vec::new();
-        let encode_err = |e: png::EncodingError| WriteError::Encode {
-            path: path.display().to_string(),
-            message: e.to_string(),
-        };
-        {
-            let mut encoder = png::Encoder::new(&mut bytes, self.width as u32, self.height as u32);
-            encoder.set_color(png::ColorType::Rgb);
-            encoder.set_depth(png::BitDepth::Eight);
-            encoder.set_source_srgb(png::SrgbRenderingIntent::Perceptual);
-            let mut writer = encoder.write_header().map_err(encode_err)?;
-            writer
-                .write_image_data(&self.to_srgb8(exposure))
-                .map_err(encode_err)?;
-        }
-        write_bytes(path, &bytes)
+        write_png_rgb8(path, self.width, self.height, &self.to_srgb8(exposure))
     }
+}
+
+/// Writes 8-bit sRGB pixels (R, G, B per pixel, rows top to bottom) as a PNG, atomically.
+pub fn write_png_rgb8(
+    path: &Path,
+    width: usize,
+    height: usize,
+    data: &[u8],
+) -> Result<(), WriteError> {
+    let mut bytes = Vec::new();
+    let encode_err = |e: png::EncodingError| WriteError::Encode {
+        path: path.display().to_string(),
+        message: e.to_string(),
+    };
+    {
+        let mut encoder = png::Encoder::new(&mut bytes, width as u32, height as u32);
+        encoder.set_color(png::ColorType::Rgb);
+        encoder.set_depth(png::BitDepth::Eight);
+        encoder.set_source_srgb(png::SrgbRenderingIntent::Perceptual);
+        let mut writer = encoder.write_header().map_err(encode_err)?;
+        writer.write_image_data(data).map_err(encode_err)?;
+    }
+    write_bytes(path, &bytes)
 }

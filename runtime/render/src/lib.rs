@@ -8,8 +8,11 @@
 //!   the multiple-scattering tables Ams_n and F_n for the angular spread of sunlight (`--model
 //!   riley`, the default).
 //!
-//! A new model (a path-traced truth, Miyazaki's shadow-view slices, Max et al.'s diffusion,
-//! Biri's analytic single scattering) goes beside `riley` as `src/<model>/`, using the same
+//! - [`truth`]: an unbiased spectral Monte Carlo path tracer of the full radiative transfer on
+//!   the same scene (`--model truth`), the reference every fast model is measured against.
+//!
+//! A new model (Miyazaki's shadow-view slices, Max et al.'s diffusion,
+//! Biri's analytic single scattering) goes beside them as `src/<model>/`, using the same
 //! scene, volumes, sky, camera and image.
 //!
 //! Units: radiance per unit solar irradiance outside the atmosphere (1/sr) per channel; lengths
@@ -18,10 +21,12 @@
 #![warn(missing_docs)]
 
 pub mod camera;
+pub mod error_map;
 pub mod image;
 pub mod riley;
 pub mod scene;
 pub mod sky;
+pub mod truth;
 pub mod volume;
 
 pub use camera::{Camera, Sun};

@@ -9,6 +9,17 @@
 //! grid_resolution = 128     # voxels along the box's longest side
 //! xi = 0.0                  # Riley's ξ (1/sr), back-scattered light in the eye pass
 //! exposure = 0.0            # PNG exposure; 0 or absent: automatic
+//! spp = 256                 # --model truth: samples (paths) per pixel, [1, 2²⁰]
+//! seed = 1                  # --model truth: seed of the random streams
+//!
+//! [ground]
+//! albedo = 0.0              # Lambertian ground at y = 0, [0, 1]; 0: black (--model truth only)
+//!
+//! [[light]]                 # point or spot light (--model truth only)
+//! position_m = [0, 50, 0]   # y > 0
+//! intensity = [1e4, 1e4, 1e4]   # per channel: irradiance I/r² in the image's unit at r metres
+//! spot_direction = [0, -1, 0]   # optional: a spot's axis
+//! spot_half_angle_deg = 30      # with spot_direction, (0, 180]
 //!
 //! [camera]
 //! position_m = [0, 2, 0]    # metres, y up, sea level y = 0
@@ -67,6 +78,25 @@ struct File {
     sky: Option<SkyKeys>,
     #[serde(default, rename = "volume")]
     volumes: Vec<VolumeKeys>,
+    #[serde(default)]
+    ground: Option<GroundKeys>,
+    #[serde(default, rename = "light")]
+    lights: Vec<LightKeys>,
+}
+
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct GroundKeys {
+    albedo: Option<f64>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct LightKeys {
+    position_m: [f64; 3],
+    intensity: [f64; 3],
+    spot_direction: Option<[f64; 3]>,
+    spot_half_angle_deg: Option<f64>,
 }
 
 #[derive(Debug, Default, Deserialize)]
@@ -79,6 +109,8 @@ struct RenderKeys {
     grid_resolution: Option<usize>,
     xi: Option<f64>,
     exposure: Option<f64>,
+    spp: Option<usize>,
+    seed: Option<u64>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -150,6 +182,14 @@ pub struct RenderScene {
     pub atmosphere: Atmosphere,
     /// The `[[volume]]` tables, at least one.
     pub volumes: Vec<Volume>,
+    /// `[ground] albedo`: a Lambertian ground at y = 0, [0, 1] (default 0, black).
+    pub ground_albedo: f64,
+    /// The `[[light]]` tables.
+    pub lights: Vec<crate::truth::Light>,
+    /// `[render] spp` for the path tracer (default 256).
+    pub spp: usize,
+    /// `[render] seed` for the path tracer (default 1).
+    pub seed: u64,
 }
 
 /// A render scene that cannot be used, naming the file, the key or volume, and the allowed range.
@@ -246,6 +286,25 @@ impl RenderScene {
                 "[render] grid_resolution = {grid_resolution} is outside the allowed range [2, 512]"
             )));
         }
+        let ground_albedo = file.ground.and_then(|g| g.albedo).unwrap_or(0.0);
+        if !(0.0..=1.0).contains(&ground_albedo) {
+            return Err(err(format!(
+                "[ground] albedo = {ground_albedo} is outside the allowed range [0, 1]"
+            )));
+        }
+        let lights = file
+            .lights
+            .iter()
+            .enumerate()
+            .map(|(i, l)| light(l).map_err(|m| err(format!("[[light]] {}: {m}", i + 1))))
+            .collect::<Result<Vec<_>, _>>()?;
+        let spp = render.spp.unwrap_or(256);
+        let (lo, hi) = crate::truth::SPP_RANGE;
+        if !(lo..=hi).contains(&spp) {
+            return Err(err(format!(
+                "[render] spp = {spp} is outside the allowed range [{lo}, {hi}] samples per pixel"
+            )));
+        }
         if file.volumes.is_empty() {
             return Err(err("no [[volume]] table: nothing to render".into()));
         }
@@ -275,12 +334,57 @@ impl RenderScene {
             },
             atmosphere,
             volumes,
+            ground_albedo,
+            lights,
+            spp,
+            seed: render.seed.unwrap_or(1),
         })
+    }
+
+    /// Refuses what a model cannot draw: Riley's model has sunlight and a black ground only.
+    pub fn check_model(&self, model: &str) -> Result<(), FrameError> {
+        if model == "truth" {
+            return Ok(());
+        }
+        if !self.lights.is_empty() {
+            return Err(FrameError(format!(
+                "the scene has {} [[light]] table(s); --model {model} models sunlight only \
+                 (render it with --model truth)",
+                self.lights.len()
+            )));
+        }
+        if self.ground_albedo > 0.0 {
+            return Err(FrameError(format!(
+                "[ground] albedo = {}; --model {model} draws a black ground (albedo 0; render \
+                 it with --model truth)",
+                self.ground_albedo
+            )));
+        }
+        Ok(())
+    }
+
+    /// The path tracer's settings from the scene (spp, seed, ground, lights).
+    pub fn truth_settings(&self) -> crate::truth::TruthSettings {
+        crate::truth::TruthSettings {
+            spp: self.spp,
+            target_noise: 0.0,
+            seed: self.seed,
+            ground_albedo: self.ground_albedo,
+            lights: self.lights.clone(),
+        }
     }
 
     /// The frame's parameters checked (sizes, camera, sun) before anything is baked: a frame
     /// over the volumes' bounds without rasterizing them.
     pub fn check(&self) -> Result<(), FrameError> {
+        self.check_for("riley")
+    }
+
+    /// [`RenderScene::check`] for `model`: `riley` checks its slicing setup and refuses
+    /// lights and a bright ground ([`RenderScene::check_model`]); `truth` checks the path
+    /// tracer's ranges (`truth::check`), and allows a camera inside the volumes.
+    pub fn check_for(&self, model: &str) -> Result<(), FrameError> {
+        self.check_model(model)?;
         let (lo, hi) = joint_bounds(&self.volumes);
         let grid = super::DensityGrid {
             min_m: lo,
@@ -288,7 +392,12 @@ impl RenderScene {
             dims: [1, 1, 1],
             data: vec![[0.0; super::MAX_FIELDS]],
         };
-        self.frame_with(grid).setup().map(|_| ())
+        let frame = self.frame_with(grid);
+        if model == "truth" {
+            crate::truth::check(&frame, &self.truth_settings())
+        } else {
+            frame.setup().map(|_| ())
+        }
     }
 
     fn frame_with(&self, grid: super::DensityGrid) -> Frame {
@@ -343,6 +452,46 @@ impl RenderScene {
         let grid = rasterize(&self.volumes, self.grid_resolution, index)?;
         Ok(self.frame_with(grid))
     }
+}
+
+fn light(l: &LightKeys) -> Result<crate::truth::Light, String> {
+    let p = DVec3::from_array(l.position_m);
+    if !p.is_finite() || p.y <= 0.0 {
+        return Err(format!(
+            "position_m = {:?} must be finite and above the ground (y > 0): a light at or \
+             below y = 0 is inside the ground, an occluder",
+            l.position_m
+        ));
+    }
+    if l.intensity.iter().any(|v| !(v.is_finite() && *v >= 0.0)) {
+        return Err(format!("intensity = {:?} must be ≥ 0", l.intensity));
+    }
+    let spot = match (l.spot_direction, l.spot_half_angle_deg) {
+        (None, None) => None,
+        (Some(d), Some(a)) => {
+            let d = DVec3::from_array(d);
+            if !d.is_finite() || d.length() == 0.0 {
+                return Err(format!(
+                    "spot_direction = {:?} must be a non-zero vector",
+                    d
+                ));
+            }
+            if !(a > 0.0 && a <= 180.0) {
+                return Err(format!(
+                    "spot_half_angle_deg = {a} is outside the allowed range (0, 180]"
+                ));
+            }
+            Some((d.normalize(), a))
+        }
+        _ => {
+            return Err("a spot needs both spot_direction and spot_half_angle_deg".into());
+        }
+    };
+    Ok(crate::truth::Light {
+        position_m: p,
+        intensity: l.intensity,
+        spot,
+    })
 }
 
 fn volume(v: VolumeKeys, base: &Path) -> Result<Volume, String> {

@@ -131,8 +131,7 @@ impl SingleScatter {
                 self.albedo[j],
                 self.forward_delta_fraction[j],
             );
-            if !(s.is_finite() && s > 0.0) || !(0.0..=1.0).contains(&a) || !(0.0..1.0).contains(&f)
-            {
+            if !(s.is_finite() && s > 0.0 && (0.0..=1.0).contains(&a) && (0.0..1.0).contains(&f)) {
                 return Err(format!(
                     "wavelength {} nm: σ_ext = {s} m² (> 0), albedo = {a} ([0, 1]), forward \
                      delta = {f} ([0, 1)) out of range",

@@ -125,17 +125,9 @@ impl Frame {
                 self.camera.position_m, self.grid.min_m, self.grid.max_m
             ));
         }
-        let forward = self.camera.look_at_m - self.camera.position_m;
-        if forward.dot(forward) == 0.0 {
+        let Some((forward, right, up)) = self.camera.axes() else {
             return bad("camera look_at_m equals position_m".into());
-        }
-        let forward = forward.normalize();
-        let mut right = forward.cross(DVec3::Y);
-        if right.dot(right) < 1e-12 {
-            right = DVec3::X;
-        }
-        let right = right.normalize();
-        let up = right.cross(forward);
+        };
 
         let light = -self.sun.direction();
         let front_to_back = forward.dot(light) >= 0.0;
@@ -183,8 +175,11 @@ impl Frame {
 impl Setup {
     /// Unit ray direction through the centre of pixel (i, j), row j = 0 at the top.
     pub fn ray(&self, i: usize, j: usize, width: usize, height: usize) -> DVec3 {
-        let sx = (2.0 * (i as f64 + 0.5) / width as f64 - 1.0) * self.tan_half_fov_y * self.aspect;
-        let sy = (1.0 - 2.0 * (j as f64 + 0.5) / height as f64) * self.tan_half_fov_y;
-        ((self.forward + sx * self.right) + sy * self.up).normalize()
+        crate::camera::pixel_ray(
+            (self.forward, self.right, self.up),
+            self.tan_half_fov_y,
+            (i, j),
+            (width, height),
+        )
     }
 }

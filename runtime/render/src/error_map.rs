@@ -1,0 +1,206 @@
+//! How right an image is: a model's frame measured against the path-traced truth of the same
+//! scene (`photometeor compare-render TRUTH.exr MODEL.exr`).
+//!
+//! # The statistics
+//! Over the pixels where the volume matters — 1 − T_vol > 1 % in the truth's A channel (the
+//! same ray march of β_ext in both models) — with luminance Y = 0.2126 R + 0.7152 G +
+//! 0.0722 B (Rec. 709) and the truth's standard error σ_Y = (Σ_c w_c² σ_c²)^{1/2}:
+//! - the pixel's difference d = Y_model − Y_truth counts as 0 when |d| ≤ 3 σ_Y (it cannot be
+//!   told from the truth's own noise), else as d;
+//! - relative error e = |d| / Y_truth: its mean and 95th percentile are reported;
+//! - bias = Σ d / Σ Y_truth (signed; the share of light the model gains or loses overall,
+//!   all masked pixels, without the 3σ rule);
+//! - `resolved` = the share of masked pixels whose |d| ≤ 3σ_Y.
+//!
+//! The error map (PNG) shows d / Y_truth per pixel: red where the model is too bright, blue
+//! where too dark (full colour at ±50 %), grey where |d| ≤ 3σ, black outside the mask.
+
+use std::path::Path;
+
+use exr::prelude::{ReadChannels, ReadLayers};
+use serde::Serialize;
+
+use crate::Image;
+
+/// An EXR frame as `photometeor render` writes it: R, G, B, A and any further channels.
+#[derive(Debug, Clone)]
+pub struct Frame {
+    /// The image (A is the transparency).
+    pub image: Image,
+    /// stderr.R/G/B when present (the truth's).
+    pub std_error: Option<Vec<[f32; 3]>>,
+}
+
+/// Why a frame could not be read or compared.
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct CompareError(pub String);
+
+/// Reads a frame written by `photometeor render`.
+pub fn read_frame(path: &Path) -> Result<Frame, CompareError> {
+    let fail = |m: String| CompareError(format!("{}: {m}", path.display()));
+    let bytes =
+        format::read_regular_file(path, 1 << 30).map_err(|(op, e)| fail(format!("{op}: {e}")))?;
+    let image = exr::prelude::read()
+        .no_deep_data()
+        .largest_resolution_level()
+        .all_channels()
+        .first_valid_layer()
+        .all_attributes()
+        .from_buffered(std::io::Cursor::new(bytes))
+        .map_err(|e| fail(format!("not a readable OpenEXR file: {e}")))?;
+    let size = image.layer_data.size;
+    let (w, h) = (size.0, size.1);
+    let get = |name: &str| -> Option<Vec<f32>> {
+        image
+            .layer_data
+            .channel_data
+            .list
+            .iter()
+            .find(|c| c.name.to_string() == name)
+            .map(|c| c.sample_data.values_as_f32().collect())
+    };
+    let need = |v: Option<Vec<f32>>, name: &str| {
+        v.ok_or_else(|| fail(format!("no channel {name} (R, G, B, A expected)")))
+    };
+    let (r, g, b, a) = (
+        need(get("R"), "R")?,
+        need(get("G"), "G")?,
+        need(get("B"), "B")?,
+        need(get("A"), "A")?,
+    );
+    let std_error = match (get("stderr.R"), get("stderr.G"), get("stderr.B")) {
+        (Some(er), Some(eg), Some(eb)) => Some((0..w * h).map(|i| [er[i], eg[i], eb[i]]).collect()),
+        _ => None,
+    };
+    Ok(Frame {
+        image: Image {
+            width: w,
+            height: h,
+            rgb: (0..w * h).map(|i| [r[i], g[i], b[i]]).collect(),
+            transparency: a,
+        },
+        std_error,
+    })
+}
+
+/// The measured error of a model's frame against the truth (module docs).
+#[derive(Debug, Clone, Serialize)]
+pub struct ErrorReport {
+    /// Pixels in the mask (1 − T_vol > 1 %).
+    pub pixels: usize,
+    /// Mean relative error of luminance over the mask (differences within 3σ count as 0).
+    pub mean_rel_error: f64,
+    /// 95th percentile of the same.
+    pub p95_rel_error: f64,
+    /// Σ (Y_model − Y_truth) / Σ Y_truth over the mask.
+    pub bias: f64,
+    /// Share of masked pixels whose difference is within 3σ of the truth's noise.
+    pub resolved: f64,
+    /// Median relative standard error of the truth's luminance over the mask.
+    pub truth_noise: f64,
+}
+
+const LUMA: [f64; 3] = [0.2126, 0.7152, 0.0722];
+
+/// Compares `model` against `truth` (same size; `truth` must carry stderr channels), and
+/// returns the report and the signed relative difference per pixel (`None` outside the mask,
+/// `Some(0)` within 3σ).
+pub fn compare(
+    truth: &Frame,
+    model: &Frame,
+) -> Result<(ErrorReport, Vec<Option<f64>>), CompareError> {
+    let (t, m) = (&truth.image, &model.image);
+    if (t.width, t.height) != (m.width, m.height) {
+        return Err(CompareError(format!(
+            "the frames differ in size: truth {}×{}, model {}×{}",
+            t.width, t.height, m.width, m.height
+        )));
+    }
+    let err = truth.std_error.as_ref().ok_or_else(|| {
+        CompareError(
+            "the truth frame has no stderr.R/G/B channels: render it with --model truth".into(),
+        )
+    })?;
+    let y = |p: [f32; 3]| (0..3).map(|c| LUMA[c] * p[c] as f64).sum::<f64>();
+    let mut rel = Vec::new();
+    let mut noise = Vec::new();
+    let (mut sum_d, mut sum_t, mut resolved) = (0.0, 0.0, 0usize);
+    let mut map = vec![None; t.rgb.len()];
+    for i in 0..t.rgb.len() {
+        if 1.0 - t.transparency[i] as f64 <= 0.01 {
+            continue;
+        }
+        let (yt, ym) = (y(t.rgb[i]), y(m.rgb[i]));
+        if yt.is_nan() || yt <= 0.0 {
+            continue;
+        }
+        let sigma = (0..3)
+            .map(|c| (LUMA[c] * err[i][c] as f64).powi(2))
+            .sum::<f64>()
+            .sqrt();
+        let d = ym - yt;
+        sum_d += d;
+        sum_t += yt;
+        noise.push(sigma / yt);
+        let e = if d.abs() <= 3.0 * sigma {
+            resolved += 1;
+            0.0
+        } else {
+            d / yt
+        };
+        rel.push(e.abs());
+        map[i] = Some(e);
+    }
+    if rel.is_empty() {
+        return Err(CompareError(
+            "no pixel of the truth has 1 − T_vol > 1 %: the volume covers nothing to compare"
+                .into(),
+        ));
+    }
+    let n = rel.len();
+    let mean = rel.iter().sum::<f64>() / n as f64;
+    rel.sort_by(f64::total_cmp);
+    noise.sort_by(f64::total_cmp);
+    Ok((
+        ErrorReport {
+            pixels: n,
+            mean_rel_error: mean,
+            p95_rel_error: rel[((n - 1) as f64 * 0.95).round() as usize],
+            bias: sum_d / sum_t,
+            resolved: resolved as f64 / n as f64,
+            truth_noise: noise[n / 2],
+        },
+        map,
+    ))
+}
+
+/// The error map as an 8-bit RGB image (module docs).
+pub fn error_map_rgb8(map: &[Option<f64>]) -> Vec<u8> {
+    map.iter()
+        .flat_map(|e| match *e {
+            None => [0u8, 0, 0],
+            Some(0.0) => [128, 128, 128],
+            Some(e) => {
+                let a = (e.abs() / 0.5).min(1.0);
+                let hi = 128.0 + 127.0 * a;
+                let lo = 128.0 * (1.0 - a);
+                if e > 0.0 {
+                    [hi as u8, lo as u8, lo as u8]
+                } else {
+                    [lo as u8, lo as u8, hi as u8]
+                }
+            }
+        })
+        .collect()
+}
+
+/// Writes the error map as a PNG.
+pub fn write_error_map(
+    path: &Path,
+    map: &[Option<f64>],
+    width: usize,
+    height: usize,
+) -> Result<(), crate::image::WriteError> {
+    crate::image::write_png_rgb8(path, width, height, &error_map_rgb8(map))
+}

@@ -1,0 +1,821 @@
+//! The path-traced truth (`render --model truth`): an unbiased spectral Monte Carlo solution of
+//! the radiative transfer equation on the same scene — volumes, camera, sun, atmosphere,
+//! ground and lights — that the fast models approximate, so that each of them can be measured
+//! against it (`photometeor compare-render`, `docs/truth.md`).
+//!
+//! # Transport
+//! - **Spectral.** Every path carries one wavelength λ_j of the bake, drawn with probability
+//!   q_j = (w_Rj + w_Gj + w_Bj)/3 from the manifest's channel weights, and uses that
+//!   wavelength's own phase function, σ_ext and albedo (`<field>.single.exr`). Its radiance L_j
+//!   adds w_cj L_j / q_j to channel c, so a pixel's R, G, B are the same weighted sums over
+//!   wavelengths that the tables are (Σ_j w_cj L_j); for `rgb3` bakes each channel is its own
+//!   wavelength.
+//! - **Volumes.** Free paths in the density grid by delta tracking (Woodcock et al. 1965) with
+//!   the grid's majorant μ̄_j = Σ_f max ρ_f · σ_ext,f,j; at a real collision the scattering
+//!   field is chosen by its share of β_sca and the path's weight multiplied by β_sca/β_ext
+//!   (Riley et al. 2004 Eqs. 3 and 6: the mixture of fields is the β_sca-weighted mix of their
+//!   phase functions). Transmittance for next-event estimation by ratio tracking (Cramer 1978;
+//!   Novák et al. 2014), with Russian roulette once it falls below 1/20.
+//! - **Air.** An exponential Rayleigh atmosphere β(y) = β_sl(λ) e^{−y/H} with the sky model's
+//!   β_sl and scale height H (Riley et al. 2004 §4.1, Eq. 1 for the phase function), sampled
+//!   analytically (the optical depth along a ray is closed-form), competing with the volumes:
+//!   the collision is the nearer of the two independent free paths. β_sl(λ) interpolates the
+//!   three per-channel values log-linearly in ln λ at the channels' mean wavelengths (so an
+//!   `rgb3` bake gets exactly β_sl of its channel). `[sky] enabled = false` turns the air off.
+//! - **Sun.** Collimated, as in the fast models (Riley Eq. 18), with its irradiance per
+//!   channel, attenuated by the air (and by the volumes, by ratio tracking). A camera ray that
+//!   leaves the scene without a collision inside the 0.5° disk sees I_s/Ω_disk, as the fast
+//!   models draw it.
+//! - **Ground.** A Lambertian plane at y = 0 of albedo `[ground] albedo` (0: black, as the
+//!   fast models' ground).
+//! - **Lights.** Point lights of intensity I (per channel, the image's unit × m²/sr), spot
+//!   lights with a hard cone; I/r² times the transmittance.
+//! - **Estimators.** Next-event estimation toward the sun and every light at every scattering
+//!   vertex, weighted by the exact tabulated phase function (the bin the angle falls into),
+//!   and phase-function sampling for the continuation. All light sources here are δ
+//!   distributions in direction (the sun is collimated, lights are points), which phase
+//!   sampling can never hit: the balance-heuristic MIS weight of the next-event sample is 1
+//!   and the combined estimator is next-event estimation alone; the forward peak of a
+//!   droplet (hundreds per sr) enters through the NEE weight, bounded, never as a firefly of
+//!   a sampled direction hitting the sun.
+//! - **Paths** end when they leave the scene (black space), on a black ground, by Russian
+//!   roulette once the throughput falls below ½ (survival probability = throughput), or after
+//!   [`MAX_BOUNCES`] scatterings (a safety bound far beyond any table order).
+//!
+//! # Determinism
+//! Sample s of pixel p draws from its own random stream, seeded by (seed, p, s): the image is
+//! the same for a given seed whatever the thread count or pass schedule.
+//!
+//! # Camera
+//! One ray through each pixel's centre, as the fast models sample pixels, so images compare
+//! pixel for pixel. The camera may sit inside a volume.
+
+pub mod phase;
+
+use std::f64::consts::PI;
+use std::time::Instant;
+
+use glam::DVec3;
+use grid::ThetaGrid;
+use rayon::prelude::*;
+
+use crate::camera::pixel_ray;
+use crate::riley::cpu::box_span;
+use crate::{DensityGrid, Frame, FrameError, Image, MAX_FIELDS, SUN_DIAMETER_DEG};
+use phase::{PhaseSampler, rayleigh, rotate, sample_rayleigh};
+use runtime::Tables;
+
+/// Scatterings after which a path is cut (none of our scenes comes near it: a path through a
+/// cloud of optical depth 100 scatters ~10⁴ times).
+pub const MAX_BOUNCES: usize = 1_000_000;
+
+/// Samples per pixel allowed.
+pub const SPP_RANGE: (usize, usize) = (1, 1 << 20);
+
+/// A point light, optionally a spot.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Light {
+    /// Position (m); above the ground (y > 0).
+    pub position_m: DVec3,
+    /// Radiant intensity per channel, in the image's unit × m² (1/sr per unit solar
+    /// irradiance × m²): at distance r it gives irradiance I/r².
+    pub intensity: [f64; 3],
+    /// A spot's unit axis and half-angle (degrees, (0, 180]); `None`: all directions.
+    pub spot: Option<(DVec3, f64)>,
+}
+
+/// What the path tracer needs besides the frame.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TruthSettings {
+    /// Samples (paths) per pixel, [`SPP_RANGE`].
+    pub spp: usize,
+    /// Stop early once the noise (see [`TruthImage::noise`]) is at or below this; 0: never.
+    pub target_noise: f64,
+    /// Seed of the random streams.
+    pub seed: u64,
+    /// Lambertian ground albedo at y = 0, [0, 1].
+    pub ground_albedo: f64,
+    /// Point and spot lights.
+    pub lights: Vec<Light>,
+}
+
+impl Default for TruthSettings {
+    fn default() -> Self {
+        Self {
+            spp: 256,
+            target_noise: 0.0,
+            seed: 1,
+            ground_albedo: 0.0,
+            lights: Vec::new(),
+        }
+    }
+}
+
+/// A path-traced frame with its per-pixel Monte Carlo standard error.
+#[derive(Debug, Clone)]
+pub struct TruthImage {
+    /// Mean radiance per pixel (and the volume's transparency T_vol, from a fine ray march of
+    /// the green channel's β_ext, as the fast models define it).
+    pub image: Image,
+    /// Standard error of each pixel's mean, per channel (same unit).
+    pub std_error: Vec<[f32; 3]>,
+    /// Samples per pixel taken.
+    pub spp: usize,
+    /// Median over the pixels where the volume matters (1 − T_vol > 1 %) of the green
+    /// channel's relative standard error; over all lit pixels if there are none.
+    pub noise: f64,
+    /// Seconds spent tracing.
+    pub seconds: f64,
+    /// Paths traced per second.
+    pub paths_per_second: f64,
+}
+
+/// Progress of a progressive render: called after each pass.
+pub trait TruthProgress: Sync {
+    /// `spp` of `total` samples per pixel done, current noise, seconds so far.
+    fn pass(&self, spp: usize, total: usize, noise: f64, seconds: f64);
+}
+
+impl TruthProgress for () {
+    fn pass(&self, _: usize, _: usize, _: f64, _: f64) {}
+}
+
+/// SplitMix64 stream (Steele et al. 2014), seeded by a hash of (seed, pixel, sample).
+pub struct Rng(u64);
+
+impl Rng {
+    /// The stream of sample `sample` of pixel `pixel` under `seed`.
+    pub fn new(seed: u64, pixel: u64, sample: u64) -> Self {
+        let mut r = Rng(seed ^ 0x5DEE_CE66_D1CE_4E5B);
+        let a = r.next_u64() ^ pixel.wrapping_mul(0x9E37_79B9_7F4A_7C15);
+        let mut r = Rng(a);
+        let b = r.next_u64() ^ sample.wrapping_mul(0xC2B2_AE3D_27D4_EB4F);
+        Rng(b)
+    }
+
+    fn next_u64(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+
+    /// Uniform in [0, 1).
+    pub fn uniform(&mut self) -> f64 {
+        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
+    }
+
+    /// Exponential with rate 1.
+    fn exp(&mut self) -> f64 {
+        -(1.0 - self.uniform()).ln()
+    }
+}
+
+/// One field's optics at one wavelength.
+#[derive(Debug, Clone)]
+struct FieldOptics {
+    sigma_ext: f64,
+    albedo: f64,
+    phase: PhaseSampler,
+}
+
+/// Everything that depends on the wavelength.
+#[derive(Debug, Clone)]
+struct Band {
+    fields: Vec<FieldOptics>,
+    majorant: f64,
+    beta_air_sl: f64,
+    /// w_cj / q_j: what one unit of this wavelength's radiance adds to channel c.
+    to_rgb: [f64; 3],
+}
+
+/// A scene ready to trace: the grid, the optics per wavelength, the sources.
+#[derive(Debug, Clone)]
+pub struct Tracer<'a> {
+    grid: &'a DensityGrid,
+    n_fields: usize,
+    bands: Vec<Band>,
+    /// Cumulative q_j.
+    band_cdf: Vec<f64>,
+    gamma: f64,
+    sun: DVec3,
+    sun_irradiance: [f64; 3],
+    cos_disk: f64,
+    disk_sr: f64,
+    ground_albedo: f64,
+    lights: Vec<Light>,
+    /// Radiance (per channel, the image's unit) of everything a path leaves into: 0 for the
+    /// scenes (black space); 1 makes the white-furnace test.
+    pub background: [f64; 3],
+    /// Scatterings after which a path ends ([`MAX_BOUNCES`] by default); 1 gives exact single
+    /// scattering (the tests' analytic limit).
+    pub max_scatterings: usize,
+    /// Green channel σ_ext per field (for T_vol), from the tables.
+    sigma_ext_g: [f64; MAX_FIELDS],
+}
+
+fn bad<T>(s: String) -> Result<T, FrameError> {
+    Err(FrameError(s))
+}
+
+impl<'a> Tracer<'a> {
+    /// Builds the per-wavelength optics of `tables` (which must hold single-scattering tables,
+    /// i.e. come from a bake of this version) for the frame's grid, sun and atmosphere.
+    pub fn new(
+        tables: &Tables,
+        frame: &'a Frame,
+        settings: &TruthSettings,
+    ) -> Result<Self, FrameError> {
+        crate::riley::cpu::check_fields(tables, frame)?;
+        let spectrum = tables.spectrum.as_ref().ok_or_else(|| {
+            FrameError(format!(
+                "{}: the manifest lists no wavelengths and channel weights; rebake",
+                tables.dir.display()
+            ))
+        })?;
+        let grid_theta = ThetaGrid::new(tables.theta_step_deg)
+            .map_err(|e| FrameError(format!("tables' Δθ: {e}")))?;
+        for f in &tables.fields {
+            if f.single.is_none() {
+                return bad(format!(
+                    "field {:?} has no single-scattering table ({}.single.exr): the bake predates \
+                     the path tracer; rebake it",
+                    f.name, f.name
+                ));
+            }
+        }
+        let max = frame.grid.max_density();
+        if max.iter().all(|&m| m <= 0.0) {
+            return bad(
+                "the density grid holds no particles (every voxel is 0): nothing scatters, \
+                 refusing to trace an empty scene"
+                    .into(),
+            );
+        }
+        let weights = &spectrum.weights;
+        let lambdas = &spectrum.wavelengths_nm;
+        // β_sl(λ): log-linear in ln λ through the channels' mean wavelengths.
+        let mean_lambda: [f64; 3] =
+            std::array::from_fn(|c| (0..lambdas.len()).map(|j| weights[c][j] * lambdas[j]).sum());
+        let beta = frame.atmosphere.beta_sea_level_per_m;
+        let beta_at = |l: f64| -> f64 {
+            let mut pts: Vec<(f64, f64)> = (0..3).map(|c| (mean_lambda[c], beta[c])).collect();
+            pts.sort_by(|a, b| a.0.total_cmp(&b.0));
+            if pts.iter().any(|p| p.1 <= 0.0) {
+                // Air off (or a channel without air): the nearest channel's value.
+                return pts
+                    .iter()
+                    .min_by(|a, b| (a.0 - l).abs().total_cmp(&(b.0 - l).abs()))
+                    .map_or(0.0, |p| p.1);
+            }
+            let seg = if l <= pts[1].0 { 0 } else { 1 };
+            let (a, b) = (pts[seg], pts[seg + 1]);
+            if a.0 == b.0 {
+                return a.1;
+            }
+            let t = (l.ln() - a.0.ln()) / (b.0.ln() - a.0.ln());
+            (a.1.ln() + t * (b.1.ln() - a.1.ln())).exp()
+        };
+        let mut bands = Vec::new();
+        let mut band_cdf = Vec::new();
+        let mut acc = 0.0;
+        for (j, &lambda) in lambdas.iter().enumerate() {
+            let q = (weights[0][j] + weights[1][j] + weights[2][j]) / 3.0;
+            if q <= 0.0 {
+                continue;
+            }
+            let fields: Vec<FieldOptics> = tables
+                .fields
+                .iter()
+                .map(|f| {
+                    let s = f.single.as_ref().expect("checked above");
+                    let bins: Vec<f64> = s.bins.row(j).to_vec();
+                    FieldOptics {
+                        sigma_ext: s.sigma_ext_m2[j],
+                        albedo: s.albedo[j],
+                        phase: PhaseSampler::new(&grid_theta, &bins, s.forward_delta_fraction[j]),
+                    }
+                })
+                .collect();
+            let majorant = fields
+                .iter()
+                .zip(&max)
+                .map(|(f, m)| f.sigma_ext * m)
+                .sum::<f64>();
+            bands.push(Band {
+                fields,
+                majorant,
+                beta_air_sl: beta_at(lambda),
+                to_rgb: std::array::from_fn(|c| weights[c][j] / q),
+            });
+            acc += q;
+            band_cdf.push(acc);
+        }
+        for c in band_cdf.iter_mut() {
+            *c /= acc;
+        }
+        let cos_disk = (SUN_DIAMETER_DEG / 2.0).to_radians().cos();
+        let mut sigma_ext_g = [0.0; MAX_FIELDS];
+        for (i, f) in tables.fields.iter().enumerate() {
+            sigma_ext_g[i] = f.sigma_ext_m2[1];
+        }
+        Ok(Self {
+            grid: &frame.grid,
+            n_fields: tables.fields.len(),
+            bands,
+            band_cdf,
+            gamma: 1.0 / frame.atmosphere.scale_height_m,
+            sun: frame.sun.direction(),
+            sun_irradiance: frame.sun.irradiance,
+            cos_disk,
+            disk_sr: 2.0 * PI * (1.0 - cos_disk),
+            ground_albedo: settings.ground_albedo,
+            lights: settings.lights.clone(),
+            background: [0.0; 3],
+            max_scatterings: MAX_BOUNCES,
+            sigma_ext_g,
+        })
+    }
+
+    /// Overrides every field's single-scattering albedo (the white-furnace test sets 1).
+    pub fn set_albedo(&mut self, albedo: f64) {
+        for b in &mut self.bands {
+            for f in &mut b.fields {
+                f.albedo = albedo;
+            }
+        }
+    }
+
+    /// Volume extinction at `p` for band `b`, and the densities.
+    fn extinction(&self, b: &Band, p: DVec3) -> (f64, [f64; MAX_FIELDS]) {
+        let rho = self.grid.sample(p);
+        let mut e = 0.0;
+        for f in 0..self.n_fields {
+            e += rho[f] * b.fields[f].sigma_ext;
+        }
+        (e, rho)
+    }
+
+    /// Air's β_ext at height y.
+    fn air(&self, b: &Band, y: f64) -> f64 {
+        b.beta_air_sl * (-self.gamma * y).exp()
+    }
+
+    /// Air optical depth from `p` along unit `d` over distance `s` (∞ allowed for d_y > 0).
+    fn air_depth(&self, b: &Band, p: DVec3, d: DVec3, s: f64) -> f64 {
+        if b.beta_air_sl == 0.0 {
+            return 0.0;
+        }
+        let k = self.gamma * d.y;
+        let path = if k.abs() * s.min(1e12) < 1e-9 {
+            s
+        } else if s.is_infinite() {
+            if k > 0.0 { 1.0 / k } else { f64::INFINITY }
+        } else {
+            -(-k * s).exp_m1() / k
+        };
+        self.air(b, p.y) * path
+    }
+
+    /// Distance to the next air collision from `p` along `d`, or ∞.
+    fn sample_air(&self, b: &Band, p: DVec3, d: DVec3, rng: &mut Rng) -> f64 {
+        if b.beta_air_sl == 0.0 {
+            return f64::INFINITY;
+        }
+        let target = rng.exp() / self.air(b, p.y);
+        let k = self.gamma * d.y;
+        if k.abs() < 1e-15 {
+            return target;
+        }
+        let x = target * k;
+        if x >= 1.0 {
+            return f64::INFINITY;
+        }
+        -(-x).ln_1p() / k
+    }
+
+    /// Delta tracking through the grid up to distance `limit`: the distance and densities of
+    /// the first real collision, if any.
+    fn track(
+        &self,
+        b: &Band,
+        p: DVec3,
+        d: DVec3,
+        limit: f64,
+        rng: &mut Rng,
+    ) -> Option<(f64, f64, [f64; MAX_FIELDS])> {
+        let (t0, t1) = box_span(self.grid.min_m, self.grid.max_m, p, d)?;
+        let end = t1.min(limit);
+        let mut t = t0;
+        loop {
+            t += rng.exp() / b.majorant;
+            if t >= end {
+                return None;
+            }
+            let (e, rho) = self.extinction(b, p + t * d);
+            if rng.uniform() * b.majorant < e {
+                return Some((t, e, rho));
+            }
+        }
+    }
+
+    /// Transmittance of the volumes from `p` along `d` over `limit` by ratio tracking.
+    fn volume_transmittance(&self, b: &Band, p: DVec3, d: DVec3, limit: f64, rng: &mut Rng) -> f64 {
+        let Some((t0, t1)) = box_span(self.grid.min_m, self.grid.max_m, p, d) else {
+            return 1.0;
+        };
+        let end = t1.min(limit);
+        let mut t = t0;
+        let mut tr = 1.0;
+        loop {
+            t += rng.exp() / b.majorant;
+            if t >= end {
+                return tr;
+            }
+            let (e, _) = self.extinction(b, p + t * d);
+            tr *= 1.0 - e / b.majorant;
+            if tr < 0.05 {
+                if rng.uniform() < 0.5 {
+                    return 0.0;
+                }
+                tr *= 2.0;
+            }
+        }
+    }
+
+    /// Direct light at `p` from every source, weighted per direction by `weight(ω)` (the
+    /// phase function or BRDF × cosine), per channel before the band's `to_rgb`.
+    fn direct(&self, b: &Band, p: DVec3, weight: impl Fn(DVec3) -> f64, rng: &mut Rng) -> [f64; 3] {
+        let mut out = [0.0; 3];
+        let w = weight(self.sun);
+        if w > 0.0 {
+            let t = (-self.air_depth(b, p, self.sun, f64::INFINITY)).exp()
+                * self.volume_transmittance(b, p, self.sun, f64::INFINITY, rng);
+            for c in 0..3 {
+                out[c] += w * t * self.sun_irradiance[c];
+            }
+        }
+        for light in &self.lights {
+            let to = light.position_m - p;
+            let r2 = to.length_squared();
+            if r2 == 0.0 {
+                continue;
+            }
+            let r = r2.sqrt();
+            let dir = to / r;
+            if let Some((axis, half_deg)) = light.spot
+                && (-dir).dot(axis) < half_deg.to_radians().cos()
+            {
+                continue;
+            }
+            let w = weight(dir);
+            if w <= 0.0 {
+                continue;
+            }
+            let t = (-self.air_depth(b, p, dir, r)).exp()
+                * self.volume_transmittance(b, p, dir, r, rng);
+            for c in 0..3 {
+                out[c] += w * t * light.intensity[c] / r2;
+            }
+        }
+        out
+    }
+
+    /// One path's radiance estimate (per channel) arriving at `origin` from direction `-dir`
+    /// (the path leaves `origin` along `dir`).
+    pub fn radiance(&self, origin: DVec3, dir: DVec3, rng: &mut Rng) -> [f64; 3] {
+        let u = rng.uniform();
+        let j = self
+            .band_cdf
+            .partition_point(|&c| c <= u)
+            .min(self.bands.len() - 1);
+        let b = &self.bands[j];
+        let mut sum = [0.0; 3];
+        let mut throughput = 1.0;
+        let (mut p, mut d) = (origin, dir);
+        for bounce in 0..MAX_BOUNCES {
+            let t_ground = if d.y < 0.0 {
+                (p.y / -d.y).max(0.0)
+            } else {
+                f64::INFINITY
+            };
+            let t_air = self.sample_air(b, p, d, rng);
+            let limit = t_ground.min(t_air);
+            let scatter = if let Some((t, e, rho)) = self.track(b, p, d, limit, rng) {
+                p += t * d;
+                // The field by its share of β_sca; the weight by β_sca/β_ext.
+                let mut sca = [0.0; MAX_FIELDS];
+                let mut total = 0.0;
+                for f in 0..self.n_fields {
+                    sca[f] = rho[f] * b.fields[f].sigma_ext * b.fields[f].albedo;
+                    total += sca[f];
+                }
+                throughput *= total / e;
+                let mut pick = rng.uniform() * total;
+                let mut field = self.n_fields - 1;
+                for f in 0..self.n_fields {
+                    if pick < sca[f] {
+                        field = f;
+                        break;
+                    }
+                    pick -= sca[f];
+                }
+                let ph = &b.fields[field].phase;
+                let l = self.direct(b, p, |w| ph.eval(d, w), rng);
+                for c in 0..3 {
+                    sum[c] += throughput * l[c];
+                }
+                if let Some((omm, sin)) = ph.sample(rng.uniform(), rng.uniform()) {
+                    d = rotate(d, omm, sin, rng.uniform());
+                }
+                true
+            } else if t_air < t_ground {
+                p += t_air * d;
+                let l = self.direct(b, p, |w| rayleigh(d.dot(w)), rng);
+                for c in 0..3 {
+                    sum[c] += throughput * l[c];
+                }
+                let mu = sample_rayleigh(rng.uniform());
+                d = rotate(d, 1.0 - mu, (1.0 - mu * mu).max(0.0).sqrt(), rng.uniform());
+                true
+            } else if t_ground.is_finite() {
+                p += t_ground * d;
+                p.y = 0.0;
+                if self.ground_albedo <= 0.0 {
+                    break;
+                }
+                let a = self.ground_albedo;
+                let l = self.direct(b, p, |w| a / PI * w.y.max(0.0), rng);
+                for c in 0..3 {
+                    sum[c] += throughput * l[c];
+                }
+                throughput *= a;
+                // Cosine-weighted about +y.
+                let (r, phi) = (rng.uniform().sqrt(), 2.0 * PI * rng.uniform());
+                let (e1, e2) = phase::basis(DVec3::Y);
+                d = (r * phi.cos() * e1
+                    + r * phi.sin() * e2
+                    + (1.0 - r * r).max(0.0).sqrt() * DVec3::Y)
+                    .normalize();
+                true
+            } else {
+                if bounce == 0 && d.dot(self.sun) >= self.cos_disk {
+                    for c in 0..3 {
+                        sum[c] += self.sun_irradiance[c] / self.disk_sr;
+                    }
+                }
+                for c in 0..3 {
+                    sum[c] += throughput * self.background[c];
+                }
+                false
+            };
+            if !scatter || bounce + 1 >= self.max_scatterings {
+                break;
+            }
+            if throughput < 0.5 {
+                if rng.uniform() >= throughput {
+                    break;
+                }
+                throughput = 1.0;
+            }
+        }
+        std::array::from_fn(|c| sum[c] * b.to_rgb[c])
+    }
+
+    /// A photon's random walk forward from `origin` along `dir` through the volumes and the
+    /// air: the direction in which it leaves them for good (towards space or the ground, which
+    /// is not modelled here) and its weight, or `None` if it was ended by roulette. The same free paths, phase
+    /// sampling and albedo as [`Tracer::radiance`], run the other way: the flux estimator of
+    /// the slab tests, whose forward peak a camera-side estimator would hit only rarely.
+    pub fn photon(&self, origin: DVec3, dir: DVec3, rng: &mut Rng) -> Option<(DVec3, f64)> {
+        let b = &self.bands[self
+            .band_cdf
+            .partition_point(|&c| c <= rng.uniform())
+            .min(self.bands.len() - 1)];
+        let (mut p, mut d, mut weight) = (origin, dir, 1.0);
+        for _ in 0..self.max_scatterings {
+            let t_ground = if d.y < 0.0 {
+                (p.y / -d.y).max(0.0)
+            } else {
+                f64::INFINITY
+            };
+            let t_air = self.sample_air(b, p, d, rng);
+            if let Some((t, e, rho)) = self.track(b, p, d, t_ground.min(t_air), rng) {
+                p += t * d;
+                let mut sca = [0.0; MAX_FIELDS];
+                let mut total = 0.0;
+                for f in 0..self.n_fields {
+                    sca[f] = rho[f] * b.fields[f].sigma_ext * b.fields[f].albedo;
+                    total += sca[f];
+                }
+                weight *= total / e;
+                let mut pick = rng.uniform() * total;
+                let mut field = self.n_fields - 1;
+                for f in 0..self.n_fields {
+                    if pick < sca[f] {
+                        field = f;
+                        break;
+                    }
+                    pick -= sca[f];
+                }
+                if let Some((omm, sin)) = b.fields[field].phase.sample(rng.uniform(), rng.uniform())
+                {
+                    d = rotate(d, omm, sin, rng.uniform());
+                }
+            } else if t_air < t_ground {
+                p += t_air * d;
+                let mu = sample_rayleigh(rng.uniform());
+                d = rotate(d, 1.0 - mu, (1.0 - mu * mu).max(0.0).sqrt(), rng.uniform());
+            } else {
+                return Some((d, weight));
+            }
+            if weight < 0.5 {
+                if rng.uniform() >= weight {
+                    return None;
+                }
+                weight = 1.0;
+            }
+        }
+        None
+    }
+
+    /// The volumes' transparency along a ray by a fine ray march of the green channel's β_ext
+    /// (quarter-voxel midpoint steps), as the fast models' A channel.
+    pub fn transparency(&self, origin: DVec3, dir: DVec3) -> f64 {
+        let Some((t0, t1)) = box_span(self.grid.min_m, self.grid.max_m, origin, dir) else {
+            return 1.0;
+        };
+        let voxel = (0..3)
+            .map(|a| (self.grid.max_m[a] - self.grid.min_m[a]) / self.grid.dims[a] as f64)
+            .fold(f64::INFINITY, f64::min);
+        let steps = (((t1 - t0) / (0.25 * voxel)).ceil() as usize).clamp(1, 1 << 16);
+        let dt = (t1 - t0) / steps as f64;
+        let mut tau = 0.0;
+        for i in 0..steps {
+            let rho = self
+                .grid
+                .sample(origin + (t0 + (i as f64 + 0.5) * dt) * dir);
+            for f in 0..self.n_fields {
+                tau += rho[f] * self.sigma_ext_g[f] * dt;
+            }
+        }
+        (-tau).exp()
+    }
+}
+
+/// Checks what the truth needs of a frame and its settings, naming the value and its range.
+pub fn check(frame: &Frame, settings: &TruthSettings) -> Result<(), FrameError> {
+    if !(1..=8192).contains(&frame.width) || !(1..=8192).contains(&frame.height) {
+        return bad(format!(
+            "image size {}×{} is outside the allowed range 1…8192 pixels per side",
+            frame.width, frame.height
+        ));
+    }
+    if !(SPP_RANGE.0..=SPP_RANGE.1).contains(&settings.spp) {
+        return bad(format!(
+            "spp = {} is outside the allowed range [{}, {}] samples per pixel",
+            settings.spp, SPP_RANGE.0, SPP_RANGE.1
+        ));
+    }
+    if !(settings.target_noise.is_finite() && (0.0..1.0).contains(&settings.target_noise)) {
+        return bad(format!(
+            "target noise = {} is outside the allowed range [0, 1) (relative standard error)",
+            settings.target_noise
+        ));
+    }
+    let fov = frame.camera.fov_deg;
+    if !(fov > 0.0 && fov < 170.0) {
+        return bad(format!(
+            "camera fov_deg = {fov} is outside the allowed range (0, 170) degrees"
+        ));
+    }
+    if frame.camera.position_m.y < 0.0 {
+        return bad(format!(
+            "camera height {} m is below the ground (y ≥ 0 required)",
+            frame.camera.position_m.y
+        ));
+    }
+    if frame.camera.axes().is_none() {
+        return bad("camera look_at_m equals position_m".into());
+    }
+    let e = frame.sun.elevation_deg;
+    if !(e > 0.0 && e <= 90.0) {
+        return bad(format!(
+            "sun elevation_deg = {e} is outside the allowed range (0, 90]"
+        ));
+    }
+    if !(0.0..=1.0).contains(&settings.ground_albedo) {
+        return bad(format!(
+            "[ground] albedo = {} is outside the allowed range [0, 1]",
+            settings.ground_albedo
+        ));
+    }
+    for (i, l) in settings.lights.iter().enumerate() {
+        if l.position_m.y.is_nan() || l.position_m.y <= 0.0 || !l.position_m.is_finite() {
+            return bad(format!(
+                "[[light]] {}: position_m = {:?} is at or below the ground (y = 0), inside an \
+                 occluder: its light could never reach the scene; y > 0 required",
+                i + 1,
+                l.position_m.to_array()
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Renders `frame` by path tracing (module docs); `progress` is told after every pass.
+pub fn render(
+    tables: &Tables,
+    frame: &Frame,
+    settings: &TruthSettings,
+    progress: &dyn TruthProgress,
+) -> Result<TruthImage, FrameError> {
+    check(frame, settings)?;
+    let tracer = Tracer::new(tables, frame, settings)?;
+    let (w, h) = (frame.width, frame.height);
+    let axes = frame.camera.axes().expect("checked");
+    let tan = (frame.camera.fov_deg.to_radians() / 2.0).tan();
+    let rays: Vec<DVec3> = (0..w * h)
+        .map(|p| pixel_ray(axes, tan, (p % w, p / w), (w, h)))
+        .collect();
+    let eye = frame.camera.position_m;
+    let transparency: Vec<f64> = rays
+        .par_iter()
+        .map(|&d| tracer.transparency(eye, d))
+        .collect();
+    // Per pixel: Σx and Σx² per channel.
+    let mut acc = vec![([0.0f64; 3], [0.0f64; 3]); w * h];
+    let start = Instant::now();
+    let mut done = 0usize;
+    let mut noise = f64::INFINITY;
+    while done < settings.spp {
+        // Passes of 1, 1, 2, 4, … samples (at most 64), so progress and noise come early.
+        let batch = done.clamp(1, 64).min(settings.spp - done);
+        acc.par_iter_mut().enumerate().for_each(|(p, a)| {
+            for s in done..done + batch {
+                let mut rng = Rng::new(settings.seed, p as u64, s as u64);
+                let l = tracer.radiance(eye, rays[p], &mut rng);
+                for c in 0..3 {
+                    a.0[c] += l[c];
+                    a.1[c] += l[c] * l[c];
+                }
+            }
+        });
+        done += batch;
+        noise = noise_of(&acc, done, &transparency);
+        progress.pass(done, settings.spp, noise, start.elapsed().as_secs_f64());
+        if settings.target_noise > 0.0 && noise <= settings.target_noise {
+            break;
+        }
+    }
+    let seconds = start.elapsed().as_secs_f64();
+    let n = done as f64;
+    let mean: Vec<[f32; 3]> = acc.iter().map(|(s, _)| s.map(|v| (v / n) as f32)).collect();
+    let std_error: Vec<[f32; 3]> = acc
+        .iter()
+        .map(|(s, q)| std::array::from_fn(|c| std_error(s[c], q[c], n) as f32))
+        .collect();
+    Ok(TruthImage {
+        image: Image {
+            width: w,
+            height: h,
+            rgb: mean,
+            transparency: transparency.iter().map(|&t| t as f32).collect(),
+        },
+        std_error,
+        spp: done,
+        noise,
+        seconds,
+        paths_per_second: (w * h * done) as f64 / seconds.max(1e-9),
+    })
+}
+
+/// Standard error of the mean of n samples with sum `s` and sum of squares `q`.
+pub fn std_error(s: f64, q: f64, n: f64) -> f64 {
+    if n < 2.0 {
+        return f64::INFINITY;
+    }
+    let mean = s / n;
+    ((q / n - mean * mean).max(0.0) / (n - 1.0)).sqrt()
+}
+
+fn noise_of(acc: &[([f64; 3], [f64; 3])], n: usize, transparency: &[f64]) -> f64 {
+    let n = n as f64;
+    let rel = |pick: &dyn Fn(usize) -> bool| -> Vec<f64> {
+        acc.iter()
+            .enumerate()
+            .filter(|(i, (s, _))| pick(*i) && s[1] > 0.0)
+            .map(|(_, (s, q))| std_error(s[1], q[1], n) / (s[1] / n))
+            .collect()
+    };
+    let mut v = rel(&|i| 1.0 - transparency[i] > 0.01);
+    if v.is_empty() {
+        v = rel(&|_| true);
+    }
+    if v.is_empty() {
+        return 0.0;
+    }
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
