@@ -76,7 +76,8 @@ fn consistent(dir: &Path) -> Vec<String> {
 }
 
 /// Stages a second generation of `dir` (each field's F_i unchanged, one texel changed by a
-/// part in 10⁶, within every normalization check), with a manifest that vouches for it.
+/// part in 10⁶, within every normalization check; the single-scattering files as they were),
+/// with a manifest that vouches for it.
 fn stage_next_generation(lock: &BakeLock) -> Staging<'_> {
     let dir = lock.dir();
     let old = BakeDir::open(dir).unwrap();
@@ -89,6 +90,10 @@ fn stage_next_generation(lock: &BakeLock) -> Staging<'_> {
         entry.bytes = bytes.len() as u64;
         entry.crc32 = format::crc32_hex(&bytes);
         stage.write(&entry.file, &bytes).unwrap();
+        if let Some(single) = &entry.single_scattering {
+            let same = fs::read(dir.join(&single.file)).unwrap();
+            stage.write(&single.file, &same).unwrap();
+        }
     }
     stage
         .write(format::MANIFEST_FILE, &manifest.to_json_bytes())
@@ -102,7 +107,7 @@ fn a_writer_killed_at_any_step_of_its_commit_never_shows_a_mix() {
     let dir = work.join("tables");
     bake_into(&scene("a", &["cloud", "rain"]), &dir).unwrap();
     let before = snapshot(&dir);
-    let files = before.len(); // cloud.exr, manifest.json, rain.exr
+    let files = before.len(); // cloud.exr, cloud.single.exr, manifest.json, rain.exr, rain.single.exr
 
     // Killed while staging (before the commit point): the previous bake is untouched, and
     // the next writer removes the stage.
