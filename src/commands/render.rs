@@ -199,10 +199,21 @@ pub fn run(a: RenderArgs) -> Result<()> {
         }
         image
     };
+    write_outputs(&a, &render, &image, Vec::new())
+}
+
+/// Writes the frame's EXR (with `extra` channels) and, if asked, its PNG; a frame with a
+/// non-finite pixel writes nothing.
+fn write_outputs(
+    a: &RenderArgs,
+    render: &RenderScene,
+    image: &render::Image,
+    extra: Vec<(String, Vec<f32>)>,
+) -> Result<()> {
     if image.rgb.iter().flatten().any(|v| !v.is_finite()) {
         bail!("the render produced a non-finite pixel; nothing written");
     }
-    image.write_exr(&a.out)?;
+    image.write_exr_with(&a.out, extra)?;
     if let Some(png) = &a.png {
         let exposure = a
             .exposure
@@ -233,10 +244,6 @@ fn run_truth(a: &RenderArgs, render: &RenderScene, tables: &Tables) -> Result<()
             rayon::current_num_threads()
         );
     }
-    let image = &truth.image;
-    if image.rgb.iter().flatten().any(|v| !v.is_finite()) {
-        bail!("the render produced a non-finite pixel; nothing written");
-    }
     let extra = (0..3)
         .map(|c| {
             (
@@ -245,15 +252,7 @@ fn run_truth(a: &RenderArgs, render: &RenderScene, tables: &Tables) -> Result<()
             )
         })
         .collect();
-    image.write_exr_with(&a.out, extra)?;
-    if let Some(png) = &a.png {
-        let exposure = a
-            .exposure
-            .or(render.exposure)
-            .unwrap_or_else(|| image.auto_exposure());
-        image.write_png(png, exposure)?;
-    }
-    Ok(())
+    write_outputs(a, render, &truth.image, extra)
 }
 
 /// The bake directory of a scene when `--tables` is not given: under the user's cache directory

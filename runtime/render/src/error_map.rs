@@ -17,7 +17,6 @@
 
 use std::path::Path;
 
-use exr::prelude::{ReadChannels, ReadLayers};
 use serde::Serialize;
 
 use crate::Image;
@@ -41,24 +40,13 @@ pub fn read_frame(path: &Path) -> Result<Frame, CompareError> {
     let fail = |m: String| CompareError(format!("{}: {m}", path.display()));
     let bytes =
         format::read_regular_file(path, 1 << 30).map_err(|(op, e)| fail(format!("{op}: {e}")))?;
-    let image = exr::prelude::read()
-        .no_deep_data()
-        .largest_resolution_level()
-        .all_channels()
-        .first_valid_layer()
-        .all_attributes()
-        .from_buffered(std::io::Cursor::new(bytes))
+    let (channels, w, h) = format::exr::decode_channels(&bytes)
         .map_err(|e| fail(format!("not a readable OpenEXR file: {e}")))?;
-    let size = image.layer_data.size;
-    let (w, h) = (size.0, size.1);
     let get = |name: &str| -> Option<Vec<f32>> {
-        image
-            .layer_data
-            .channel_data
-            .list
+        channels
             .iter()
-            .find(|c| c.name.to_string() == name)
-            .map(|c| c.sample_data.values_as_f32().collect())
+            .find(|(n, _)| n == name)
+            .map(|(_, v)| v.clone())
     };
     let need = |v: Option<Vec<f32>>, name: &str| {
         v.ok_or_else(|| fail(format!("no channel {name} (R, G, B, A expected)")))

@@ -24,6 +24,7 @@ pub mod camera;
 pub mod error_map;
 pub mod image;
 pub mod riley;
+pub mod rng;
 pub mod scene;
 pub mod sky;
 pub mod truth;
@@ -33,6 +34,15 @@ pub use camera::{Camera, Sun};
 pub use scene::RenderScene;
 pub use sky::Atmosphere;
 pub use volume::DensityGrid;
+
+use glam::DVec3;
+
+/// Two unit vectors completing the unit vector `d` to an orthonormal basis (d, e1, e2).
+pub fn basis(d: DVec3) -> (DVec3, DVec3) {
+    let helper = if d.x.abs() < 0.9 { DVec3::X } else { DVec3::Y };
+    let e1 = (helper - helper.dot(d) * d).normalize();
+    (e1, d.cross(e1))
+}
 
 /// Up to this many fields take part in one render (one RGBA texel per voxel).
 pub const MAX_FIELDS: usize = 4;
@@ -61,6 +71,43 @@ pub struct Frame {
     pub light_resolution: usize,
     /// Number densities, channel i = field i of the tables.
     pub grid: DensityGrid,
+}
+
+impl Frame {
+    /// The checks every model makes of the view: image size, field of view, sun above the
+    /// horizon, camera at or above sea level and looking somewhere.
+    pub fn check_view(&self) -> Result<(), FrameError> {
+        let bad = |s: String| Err(FrameError(s));
+        if !(1..=8192).contains(&self.width) || !(1..=8192).contains(&self.height) {
+            return bad(format!(
+                "image size {}×{} is outside the allowed range 1…8192 pixels per side",
+                self.width, self.height
+            ));
+        }
+        let fov = self.camera.fov_deg;
+        if !(fov > 0.0 && fov < 170.0) {
+            return bad(format!(
+                "camera fov_deg = {fov} is outside the allowed range (0, 170) degrees"
+            ));
+        }
+        let e = self.sun.elevation_deg;
+        if !(e > 0.0 && e <= 90.0) {
+            return bad(format!(
+                "sun elevation_deg = {e} is outside the allowed range (0, 90]: the sky model \
+                 (Riley et al. 2004 Eq. 12) needs the sun above the horizon"
+            ));
+        }
+        if self.camera.position_m.y < 0.0 {
+            return bad(format!(
+                "camera height {} m is below sea level (y ≥ 0 required)",
+                self.camera.position_m.y
+            ));
+        }
+        if self.camera.axes().is_none() {
+            return bad("camera look_at_m equals position_m".into());
+        }
+        Ok(())
+    }
 }
 
 /// Bad frame parameters, named with their allowed range.

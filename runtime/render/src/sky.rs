@@ -41,7 +41,7 @@ pub fn rayleigh_phase(cos_theta: f64) -> f64 {
 }
 
 /// (1 − e^{−γ p K})/p, finite for p → 0 (→ γK) and for K = ∞ with p > 0 (→ 1/p).
-fn one_minus_u_over_p(gamma: f64, p_y: f64, k: f64) -> f64 {
+pub(crate) fn one_minus_u_over_p(gamma: f64, p_y: f64, k: f64) -> f64 {
     let x = gamma * p_y * k;
     if x.abs() < 1e-8 {
         gamma * k

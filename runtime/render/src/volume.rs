@@ -228,17 +228,7 @@ fn smoothstep(e0: f64, e1: f64, x: f64) -> f64 {
     t * t * (3.0 - 2.0 * t)
 }
 
-/// SplitMix64: a seeded stream of uniform numbers in [0, 1).
-struct Rng(u64);
-impl Rng {
-    fn next(&mut self) -> f64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
-    }
-}
+use crate::rng::SplitMix64 as Rng;
 
 /// Hash of a lattice point to [0, 1).
 fn lattice(seed: u64, x: i64, y: i64, z: i64) -> f64 {
@@ -247,7 +237,7 @@ fn lattice(seed: u64, x: i64, y: i64, z: i64) -> f64 {
         h = (h ^ v as u64).wrapping_mul(0x100_0000_01B3);
         h ^= h >> 29;
     }
-    Rng(h).next()
+    Rng(h).uniform()
 }
 
 /// Value noise with smooth interpolation, in [0, 1].
@@ -294,10 +284,10 @@ impl Density {
                     0.5 * h.min(2.0 * r),
                 )];
                 for _ in 0..14 {
-                    let a = rng.next() * std::f64::consts::TAU;
-                    let size = (0.25 + 0.2 * rng.next()) * r.min(h);
-                    let d = rng.next().sqrt() * (r - size).max(0.0) * 0.9;
-                    let y = (base + size * (0.6 + 0.8 * rng.next())).min(c[1] + h / 2.0 - size);
+                    let a = rng.uniform() * std::f64::consts::TAU;
+                    let size = (0.25 + 0.2 * rng.uniform()) * r.min(h);
+                    let d = rng.uniform().sqrt() * (r - size).max(0.0) * 0.9;
+                    let y = (base + size * (0.6 + 0.8 * rng.uniform())).min(c[1] + h / 2.0 - size);
                     blobs.push((DVec3::new(c[0] + d * a.cos(), y, c[2] + d * a.sin()), size));
                 }
                 Density::Cumulus {

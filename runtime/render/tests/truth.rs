@@ -138,7 +138,7 @@ fn radiance(tracer: &Tracer, w: DVec3, n: usize, seed: u64) -> (f64, f64) {
     };
     let (mut s, mut q) = (0.0, 0.0);
     for i in 0..n {
-        let mut rng = Rng::new(seed, 0, i as u64);
+        let mut rng = Rng::stream(seed, 0, i as u64);
         let l = tracer.radiance(origin, -w, &mut rng)[1];
         s += l;
         q += l * l;
@@ -215,7 +215,7 @@ fn white_furnace_returns_exactly_the_background() {
     let eye = DVec3::new(0.0, 5.0, -300.0);
     let mut worst: f64 = 0.0;
     for i in 0..4000u64 {
-        let mut rng = Rng::new(3, i, 0);
+        let mut rng = Rng::stream(3, i, 0);
         let d = DVec3::new(rng.uniform() - 0.5, rng.uniform() * 0.8 - 0.2, 1.0).normalize();
         // One path carries one wavelength j and adds w_cj/q_j to channel c: Σ_c w_cj/q_j = 3.
         let l = tracer.radiance(eye, d, &mut rng);
@@ -266,7 +266,7 @@ quality = "draft"
         for &n in &[1usize, 2, 4, 8, 16] {
             let mut counts = vec![0usize; edges.len()];
             for s in 0..samples {
-                let mut rng = Rng::new(17 + n as u64, s as u64, 0);
+                let mut rng = Rng::stream(17 + n as u64, s as u64, 0);
                 let mut u = rng.uniform() * total;
                 let mut j = a.len() - 1;
                 for (i, w) in a.iter().enumerate() {
@@ -349,7 +349,7 @@ fn fluxes(tracer: &Tracer, beam: DVec3, n: usize, seed: u64) -> [(f64, f64); 2] 
     let exits: Vec<(f64, f64)> = (0..n)
         .into_par_iter()
         .map(|i| {
-            let mut rng = Rng::new(seed, 2, i as u64);
+            let mut rng = Rng::stream(seed, 2, i as u64);
             match tracer.photon(DVec3::new(0.0, 2.0 + 1e-9, 0.0), beam, &mut rng) {
                 Some((d, w)) if d.y > 0.0 => (w, 0.0),
                 Some((d, w)) if d.dot(beam) < 1.0 - 1e-15 => (0.0, w),

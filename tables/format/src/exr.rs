@@ -428,58 +428,67 @@ fn encode_field_exr(field: &FieldImage) -> Result<Vec<u8>, exr::error::Error> {
         // Row-major, top row first: sample (x = k, y = r) at index r·K + k.
         rows.iter().map(|&v| v as f32).collect()
     };
-    let mut channels: SmallVec<[AnyChannel<FlatSamples>; 4]> = SmallVec::new();
-    for (c, name) in RGB_CHANNELS.iter().enumerate() {
-        channels.push(AnyChannel::new(
-            *name,
-            FlatSamples::F32(flatten(field.ams.index_axis(Axis(0), c))),
-        ));
-    }
+    let mut channels: Vec<(Text, Vec<f32>)> = RGB_CHANNELS
+        .iter()
+        .enumerate()
+        .map(|(c, name)| (Text::from(*name), flatten(field.ams.index_axis(Axis(0), c))))
+        .collect();
     for (name, rows) in &field.extra_layers {
         let name = Text::new_or_none(name).expect("checked: printable ASCII");
-        channels.push(AnyChannel::new(
-            name,
-            FlatSamples::F32(flatten(rows.view())),
-        ));
+        channels.push((name, flatten(rows.view())));
     }
-    for channel in &mut channels {
+    let n_i32 = i32::try_from(n).expect("N fits an EXR int");
+    let mut attributes = vec![
+        (attr::SCHEMA, AttributeValue::I32(EXR_SCHEMA_VERSION)),
+        (attr::FIELD, AttributeValue::Text(utf8_text(&field.field))),
+        (
+            attr::THETA_STEP_DEG,
+            AttributeValue::F64(field.theta_step_deg),
+        ),
+        (attr::N_MAX, AttributeValue::I32(n_i32)),
+    ];
+    for (c, name) in attr::FORWARD_FRACTION.iter().enumerate() {
+        let values: Vec<f64> = field.forward_fraction.row(c).to_vec();
+        attributes.push((name, f64_list_attribute(&values)));
+    }
+    encode_layer((k, n), channels, attributes)
+}
+
+/// One scanline ZIP layer of 32-bit float `channels` (row-major, top row first) of `size` =
+/// (width, height) with the `attributes`, encoded in memory with the header's attribute
+/// records sorted by name (see "Determinism"). Both contracts' files are written by it.
+pub(crate) fn encode_layer(
+    size: (usize, usize),
+    channels: Vec<(Text, Vec<f32>)>,
+    attributes: Vec<(&str, AttributeValue)>,
+) -> Result<Vec<u8>, exr::error::Error> {
+    let mut list: SmallVec<[AnyChannel<FlatSamples>; 4]> = channels
+        .into_iter()
+        .map(|(name, values)| AnyChannel::new(name, FlatSamples::F32(values)))
+        .collect();
+    for channel in &mut list {
         // pLinear = 0 for every channel: all hold radiance-like values. The crate would guess
         // from the name and mark e.g. `lambda_550.Y` as perceptually linear (only lossy
         // compressors read the flag, but the header should not depend on a name heuristic).
         channel.quantize_linearly = false;
     }
-
-    let mut attributes = LayerAttributes::default();
-    let mut set = |name: &str, value: AttributeValue| {
-        attributes.other.insert(
+    let mut layer_attributes = LayerAttributes::default();
+    for (name, value) in attributes {
+        layer_attributes.other.insert(
             Text::new_or_none(name).expect("ASCII attribute name"),
             value,
         );
-    };
-    let n_i32 = i32::try_from(n).expect("N fits an EXR int");
-    set(attr::SCHEMA, AttributeValue::I32(EXR_SCHEMA_VERSION));
-    set(attr::FIELD, AttributeValue::Text(utf8_text(&field.field)));
-    set(
-        attr::THETA_STEP_DEG,
-        AttributeValue::F64(field.theta_step_deg),
-    );
-    set(attr::N_MAX, AttributeValue::I32(n_i32));
-    for (c, name) in attr::FORWARD_FRACTION.iter().enumerate() {
-        let values: Vec<f64> = field.forward_fraction.row(c).to_vec();
-        let text = format_f64_list(&values);
-        set(name, AttributeValue::Text(utf8_text(&text)));
     }
-
     let encoding = Encoding {
         compression: Compression::ZIP16,
         blocks: Blocks::ScanLines,
         line_order: LineOrder::Increasing,
     };
     let layer = Layer::new(
-        Vec2(k, n),
-        attributes,
+        Vec2(size.0, size.1),
+        layer_attributes,
         encoding,
-        AnyChannels::sort(channels),
+        AnyChannels::sort(list),
     );
     let mut bytes = Vec::new();
     Image::from_layer(layer)
@@ -490,9 +499,14 @@ fn encode_field_exr(field: &FieldImage) -> Result<Vec<u8>, exr::error::Error> {
     Ok(bytes)
 }
 
+/// A `string` attribute holding [`format_f64_list`] of `values`.
+pub(crate) fn f64_list_attribute(values: &[f64]) -> AttributeValue {
+    AttributeValue::Text(utf8_text(&format_f64_list(values)))
+}
+
 /// An EXR `string` holding the UTF-8 bytes of `s` (EXR strings are byte strings; the `exr`
 /// crate's `Text::from(&str)` would store Latin-1 instead).
-fn utf8_text(s: &str) -> Text {
+pub(crate) fn utf8_text(s: &str) -> Text {
     Text::from_slice_unchecked(s.as_bytes())
 }
 
@@ -528,7 +542,7 @@ pub fn parse_f64_list(text: &str) -> Result<Vec<f64>, String> {
 /// Layout (OpenEXR file layout, "Header"): magic (4 bytes), version and flags (4), then
 /// records `name\0 type\0 size:i32le value[size]`, closed by a single `\0`. Only the order of
 /// records changes, so the header length and every offset after it stay the same.
-pub(crate) fn sort_header_attributes(bytes: &mut [u8]) -> Result<(), exr::error::Error> {
+fn sort_header_attributes(bytes: &mut [u8]) -> Result<(), exr::error::Error> {
     let bad = || exr::error::Error::Invalid("header layout while canonicalizing attributes".into());
     let start = 8;
     let mut pos = start;
@@ -592,117 +606,228 @@ pub fn read_exr_bytes(path: &Path) -> Result<Vec<u8>, IoError> {
     })
 }
 
-/// Decodes and checks the bytes of a field's EXR (see [`read_field_exr`]); `path` names the
-/// file in errors.
-pub fn decode_field_exr(bytes: &[u8], path: &Path) -> Result<FieldImage, IoError> {
-    let contract = |check: ContractError| IoError::Contract {
-        path: path.to_path_buf(),
-        check,
-    };
-    let unreadable = |source| IoError::Unreadable {
-        path: path.to_path_buf(),
-        source,
-    };
+/// The header of a single-part EXR, read and checked for the layout both photometeor
+/// contracts share (one flat, single-resolution, scanline part), with the attribute and pixel
+/// accessors their decoders use; errors name the file.
+pub(crate) struct Checked<'a> {
+    path: &'a Path,
+    bytes: &'a [u8],
+    header: exr::meta::header::Header,
+}
 
-    // Layout and channel list, from the header alone.
-    let meta = MetaData::read_from_buffered(Cursor::new(bytes), true).map_err(unreadable)?;
-    if meta.headers.len() != 1 {
-        return Err(contract(ContractError::Layout(format!(
-            "{} parts",
-            meta.headers.len()
-        ))));
+impl<'a> Checked<'a> {
+    /// Reads the header of `bytes` (from `path`) and checks the layout.
+    pub(crate) fn read(bytes: &'a [u8], path: &'a Path) -> Result<Self, IoError> {
+        let meta = MetaData::read_from_buffered(Cursor::new(bytes), true).map_err(|source| {
+            IoError::Unreadable {
+                path: path.to_path_buf(),
+                source,
+            }
+        })?;
+        if meta.headers.len() != 1 {
+            return Err(IoError::Contract {
+                path: path.to_path_buf(),
+                check: ContractError::Layout(format!("{} parts", meta.headers.len())),
+            });
+        }
+        let checked = Self {
+            path,
+            bytes,
+            header: meta.headers.into_iter().next().expect("one part"),
+        };
+        if checked.header.deep {
+            return Err(checked.contract(ContractError::Layout("deep data".into())));
+        }
+        if !matches!(
+            checked.header.blocks,
+            exr::meta::BlockDescription::ScanLines
+        ) {
+            return Err(checked.contract(ContractError::Layout("tiled".into())));
+        }
+        Ok(checked)
     }
-    let header = &meta.headers[0];
-    if header.deep {
-        return Err(contract(ContractError::Layout("deep data".into())));
+
+    /// The header.
+    pub(crate) fn header(&self) -> &exr::meta::header::Header {
+        &self.header
     }
-    if !matches!(header.blocks, exr::meta::BlockDescription::ScanLines) {
-        return Err(contract(ContractError::Layout("tiled".into())));
-    }
-    let position = header.own_attributes.layer_position;
-    if position != Vec2(0, 0) {
-        return Err(contract(ContractError::Size(format!(
-            "data window starts at ({}, {}), expected (0, 0)",
-            position.0, position.1
-        ))));
-    }
-    let names: Vec<String> = header
-        .channels
-        .list
-        .iter()
-        .map(|c| String::from_utf8_lossy(c.name.bytes()).into_owned())
-        .collect();
-    if !RGB_CHANNELS
-        .iter()
-        .all(|rgb| names.iter().any(|n| n == rgb))
-    {
-        return Err(contract(ContractError::Channels { found: names }));
-    }
-    for (channel, name) in header.channels.list.iter().zip(&names) {
-        if channel.sample_type != SampleType::F32 || channel.sampling != Vec2(1, 1) {
-            return Err(contract(ContractError::SampleType {
-                channel: name.clone(),
-                found: format!(
-                    "{:?} with sampling {}×{}",
-                    channel.sample_type, channel.sampling.0, channel.sampling.1
-                ),
-            }));
+
+    /// A contract failure of this file.
+    pub(crate) fn contract(&self, check: ContractError) -> IoError {
+        IoError::Contract {
+            path: self.path.to_path_buf(),
+            check,
         }
     }
 
-    // Attributes.
-    let attrs = &header.own_attributes.other;
-    let get = |name: &'static str| -> Result<&AttributeValue, IoError> {
-        attrs
+    /// The channel names in the file's order.
+    pub(crate) fn channel_names(&self) -> Vec<String> {
+        self.header
+            .channels
+            .list
+            .iter()
+            .map(|c| String::from_utf8_lossy(c.name.bytes()).into_owned())
+            .collect()
+    }
+
+    /// Every channel is 32-bit float with sampling 1×1.
+    pub(crate) fn check_sample_types(&self) -> Result<(), IoError> {
+        for (channel, name) in self.header.channels.list.iter().zip(self.channel_names()) {
+            if channel.sample_type != SampleType::F32 || channel.sampling != Vec2(1, 1) {
+                return Err(self.contract(ContractError::SampleType {
+                    channel: name,
+                    found: format!(
+                        "{:?} with sampling {}×{}",
+                        channel.sample_type, channel.sampling.0, channel.sampling.1
+                    ),
+                }));
+            }
+        }
+        Ok(())
+    }
+
+    /// The attribute `name`, or a missing-attribute failure.
+    pub(crate) fn get(&self, name: &'static str) -> Result<&AttributeValue, IoError> {
+        self.header
+            .own_attributes
+            .other
             .get(&Text::new_or_none(name).expect("ASCII attribute name"))
-            .ok_or_else(|| contract(ContractError::MissingAttribute(name)))
-    };
-    let bad = |name: &'static str, found: String, expected: &str| {
-        contract(ContractError::BadAttribute {
+            .ok_or_else(|| self.contract(ContractError::MissingAttribute(name)))
+    }
+
+    /// A malformed-attribute failure.
+    pub(crate) fn bad(&self, name: &'static str, found: String, expected: &str) -> IoError {
+        self.contract(ContractError::BadAttribute {
             name,
             found,
             expected: expected.to_string(),
         })
-    };
-    let text = |name: &'static str| -> Result<String, IoError> {
-        match get(name)? {
+    }
+
+    /// A UTF-8 `string` attribute.
+    pub(crate) fn text(&self, name: &'static str) -> Result<String, IoError> {
+        match self.get(name)? {
             AttributeValue::Text(t) => String::from_utf8(t.bytes().to_vec())
-                .map_err(|_| bad(name, "bytes that are not UTF-8".into(), "a UTF-8 string")),
-            other => Err(bad(name, format!("{other:?}"), "a string")),
-        }
-    };
-    match get(attr::SCHEMA)? {
-        AttributeValue::I32(EXR_SCHEMA_VERSION) => {}
-        other => {
-            return Err(bad(
-                attr::SCHEMA,
-                format!("{other:?}"),
-                &format!("int {EXR_SCHEMA_VERSION}"),
-            ));
+                .map_err(|_| self.bad(name, "bytes that are not UTF-8".into(), "a UTF-8 string")),
+            other => Err(self.bad(name, format!("{other:?}"), "a string")),
         }
     }
-    let field = text(attr::FIELD)?;
-    let theta_step_deg = match get(attr::THETA_STEP_DEG)? {
-        AttributeValue::F64(v) => *v,
-        other => return Err(bad(attr::THETA_STEP_DEG, format!("{other:?}"), "a double")),
-    };
+
+    /// A `string` attribute holding a [`format_f64_list`]; `expected` describes it in errors.
+    pub(crate) fn f64_list(&self, name: &'static str, expected: &str) -> Result<Vec<f64>, IoError> {
+        parse_f64_list(&self.text(name)?).map_err(|why| self.bad(name, why, expected))
+    }
+
+    /// A `double` attribute.
+    pub(crate) fn double(&self, name: &'static str) -> Result<f64, IoError> {
+        match self.get(name)? {
+            AttributeValue::F64(v) => Ok(*v),
+            other => Err(self.bad(name, format!("{other:?}"), "a double")),
+        }
+    }
+
+    /// The `int` attribute `name` must be `version`.
+    pub(crate) fn schema(&self, name: &'static str, version: i32) -> Result<(), IoError> {
+        match self.get(name)? {
+            AttributeValue::I32(v) if *v == version => Ok(()),
+            other => Err(self.bad(name, format!("{other:?}"), &format!("int {version}"))),
+        }
+    }
+
+    /// The pixels, channel by channel in the file's order, each checked to hold width ×
+    /// height samples: a truncated or corrupt chunk fails here.
+    pub(crate) fn channels(&self) -> Result<Channels, IoError> {
+        let (channels, width, height) =
+            decode_channels(self.bytes).map_err(|source| IoError::Unreadable {
+                path: self.path.to_path_buf(),
+                source,
+            })?;
+        for (name, samples) in &channels {
+            if samples.len() != width * height {
+                return Err(self.contract(ContractError::Size(format!(
+                    "channel {name} has {} samples, expected {width} × {height}",
+                    samples.len()
+                ))));
+            }
+        }
+        Ok(channels)
+    }
+}
+
+/// Named channels of 32-bit float samples, in a file's order.
+pub type Channels = Vec<(String, Vec<f32>)>;
+
+/// Every channel of the first layer of an EXR as 32-bit floats, in the file's order, with the
+/// layer's width and height (any flat EXR: `photometeor render`'s frames as well as tables).
+pub fn decode_channels(bytes: &[u8]) -> Result<(Channels, usize, usize), exr::error::Error> {
+    let image = exr::prelude::read()
+        .no_deep_data()
+        .largest_resolution_level()
+        .all_channels()
+        .first_valid_layer()
+        .all_attributes()
+        .pedantic()
+        .non_parallel()
+        .from_buffered(Cursor::new(bytes))?;
+    let layer = image.layer_data;
+    let channels = layer
+        .channel_data
+        .list
+        .into_iter()
+        .map(|c| {
+            let name = String::from_utf8_lossy(c.name.bytes()).into_owned();
+            let samples = match c.sample_data {
+                FlatSamples::F32(v) => v,
+                other => other.values_as_f32().collect(),
+            };
+            (name, samples)
+        })
+        .collect();
+    Ok((channels, layer.size.0, layer.size.1))
+}
+
+/// Decodes and checks the bytes of a field's EXR (see [`read_field_exr`]); `path` names the
+/// file in errors.
+pub fn decode_field_exr(bytes: &[u8], path: &Path) -> Result<FieldImage, IoError> {
+    // Layout and channel list, from the header alone.
+    let file = Checked::read(bytes, path)?;
+    let header = file.header();
+    let position = header.own_attributes.layer_position;
+    if position != Vec2(0, 0) {
+        return Err(file.contract(ContractError::Size(format!(
+            "data window starts at ({}, {}), expected (0, 0)",
+            position.0, position.1
+        ))));
+    }
+    let names = file.channel_names();
+    if !RGB_CHANNELS
+        .iter()
+        .all(|rgb| names.iter().any(|n| n == rgb))
+    {
+        return Err(file.contract(ContractError::Channels { found: names }));
+    }
+    file.check_sample_types()?;
+
+    // Attributes.
+    file.schema(attr::SCHEMA, EXR_SCHEMA_VERSION)?;
+    let field = file.text(attr::FIELD)?;
+    let theta_step_deg = file.double(attr::THETA_STEP_DEG)?;
     let grid = ThetaGrid::new(theta_step_deg).map_err(|e| {
-        bad(
+        file.bad(
             attr::THETA_STEP_DEG,
             theta_step_deg.to_string(),
             &format!("a step dividing 180° ({e})"),
         )
     })?;
-    let n = match get(attr::N_MAX)? {
+    let n = match file.get(attr::N_MAX)? {
         AttributeValue::I32(v) if *v >= 1 => *v as usize,
-        other => return Err(bad(attr::N_MAX, format!("{other:?}"), "an int ≥ 1")),
+        other => return Err(file.bad(attr::N_MAX, format!("{other:?}"), "an int ≥ 1")),
     };
     let mut forward_fraction = Array2::zeros((3, n));
     for (c, name) in attr::FORWARD_FRACTION.iter().enumerate() {
-        let values = parse_f64_list(&text(name)?)
-            .map_err(|why| bad(name, why, "comma-separated finite decimals F_1..F_N"))?;
+        let values = file.f64_list(name, "comma-separated finite decimals F_1..F_N")?;
         if values.len() != n {
-            return Err(bad(
+            return Err(file.bad(
                 name,
                 format!("{} values", values.len()),
                 &format!("N = n_max = {n} values"),
@@ -716,42 +841,18 @@ pub fn decode_field_exr(bytes: &[u8], path: &Path) -> Result<FieldImage, IoError
     // Size.
     let (width, height) = (header.layer_size.0, header.layer_size.1);
     if width != grid.len() || height != n {
-        return Err(contract(ContractError::Size(format!(
+        return Err(file.contract(ContractError::Size(format!(
             "data window is {width} × {height}, expected K × N = {} × {n} (K = 180°/{theta_step_deg}° + 1, N = n_max)",
             grid.len()
         ))));
     }
 
-    // Pixels: a truncated or corrupt chunk fails here.
-    let image = exr::prelude::read()
-        .no_deep_data()
-        .largest_resolution_level()
-        .all_channels()
-        .first_valid_layer()
-        .all_attributes()
-        .pedantic()
-        .non_parallel()
-        .from_buffered(Cursor::new(bytes))
-        .map_err(unreadable)?;
-    let layer = &image.layer_data;
+    // Pixels.
     let mut ams = Array3::zeros((3, height, width));
     let mut extra_layers = Vec::new();
-    for channel in &layer.channel_data.list {
-        let name = String::from_utf8_lossy(channel.name.bytes()).into_owned();
-        let FlatSamples::F32(samples) = &channel.sample_data else {
-            return Err(contract(ContractError::SampleType {
-                channel: name,
-                found: "non-f32 samples".into(),
-            }));
-        };
-        if samples.len() != width * height {
-            return Err(contract(ContractError::Size(format!(
-                "channel {name} has {} samples, expected {width} × {height}",
-                samples.len()
-            ))));
-        }
+    for (name, samples) in file.channels()? {
         if let Some(i) = samples.iter().position(|v| !v.is_finite()) {
-            return Err(contract(ContractError::NonFinite {
+            return Err(file.contract(ContractError::NonFinite {
                 channel: name,
                 row: i / width,
                 column: i % width,

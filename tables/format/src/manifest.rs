@@ -520,15 +520,7 @@ impl BakeDir {
                 )));
             }
         }
-        let crc = crate::commit::crc32_hex(&bytes);
-        if bytes.len() as u64 != entry.bytes || crc != entry.crc32 {
-            return Err(mismatch(format!(
-                "{} bytes with CRC-32 {crc}, manifest.json says {} bytes with {}: the file is not the one this bake wrote (from another bake, or changed since)",
-                bytes.len(),
-                entry.bytes,
-                entry.crc32
-            )));
-        }
+        same_generation(&bytes, entry.bytes, &entry.crc32).map_err(mismatch)?;
         Ok(image)
     }
 
@@ -566,15 +558,20 @@ impl BakeDir {
                 self.manifest.angle_count
             )));
         }
-        let crc = crate::commit::crc32_hex(&bytes);
-        if bytes.len() as u64 != single.bytes || crc != single.crc32 {
-            return Err(mismatch(format!(
-                "{} bytes with CRC-32 {crc}, manifest.json says {} bytes with {}: the file is not the one this bake wrote",
-                bytes.len(),
-                single.bytes,
-                single.crc32
-            )));
-        }
+        same_generation(&bytes, single.bytes, &single.crc32).map_err(mismatch)?;
         Ok(Some(table))
     }
+}
+
+/// Whether `bytes` are the file the manifest lists with `size` bytes and CRC-32 `crc32`; the
+/// error says what was found.
+fn same_generation(bytes: &[u8], size: u64, crc32: &str) -> Result<(), String> {
+    let crc = crate::commit::crc32_hex(bytes);
+    if bytes.len() as u64 != size || crc != crc32 {
+        return Err(format!(
+            "{} bytes with CRC-32 {crc}, manifest.json says {size} bytes with {crc32}: the file is not the one this bake wrote (from another bake, or changed since)",
+            bytes.len(),
+        ));
+    }
+    Ok(())
 }

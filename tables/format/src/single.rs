@@ -32,19 +32,13 @@
 //! The texels are 32-bit floats, so a sampler normalizes each row's CDF itself: its phase
 //! function is the stored one to within f32 rounding (relative 6·10⁻⁸).
 
-use std::io::Cursor;
 use std::path::{Path, PathBuf};
 
-use exr::meta::MetaData;
-use exr::meta::attribute::{AttributeValue, SampleType, Text};
-use exr::prelude::{
-    AnyChannel, AnyChannels, Blocks, Compression, Encoding, FlatSamples, Image, Layer,
-    LayerAttributes, LineOrder, ReadChannels, ReadLayers, SmallVec, Vec2, WritableImage,
-};
+use exr::meta::attribute::{AttributeValue, Text};
 use grid::ThetaGrid;
 use ndarray::Array2;
 
-use crate::exr::{ContractError, IoError, format_f64_list, parse_f64_list};
+use crate::exr::{Checked, ContractError, IoError, encode_layer, f64_list_attribute, utf8_text};
 
 /// Version of this layout in `photometeor/schema`; a reader rejects any other.
 pub const SINGLE_SCHEMA_VERSION: i32 = 1;
@@ -158,53 +152,21 @@ pub fn single_exr_bytes(s: &SingleScatter) -> Result<Vec<u8>, IoError> {
         field: s.field.clone(),
         what: format!("single-scattering table: {what}"),
     })?;
-    let encode = || -> Result<Vec<u8>, exr::error::Error> {
-        let (w, k) = s.bins.dim();
-        let mut channel = AnyChannel::new(
-            "Y",
-            FlatSamples::F32(s.bins.iter().map(|&v| v as f32).collect()),
-        );
-        channel.quantize_linearly = false;
-        let mut channels: SmallVec<[AnyChannel<FlatSamples>; 4]> = SmallVec::new();
-        channels.push(channel);
-        let mut attributes = LayerAttributes::default();
-        let mut set = |name: &str, value: AttributeValue| {
-            attributes
-                .other
-                .insert(Text::new_or_none(name).expect("ASCII name"), value);
-        };
-        let text = |v: &[f64]| {
-            AttributeValue::Text(Text::from_slice_unchecked(format_f64_list(v).as_bytes()))
-        };
-        set(attr::SCHEMA, AttributeValue::I32(SINGLE_SCHEMA_VERSION));
-        set(
-            attr::FIELD,
-            AttributeValue::Text(Text::from_slice_unchecked(s.field.as_bytes())),
-        );
-        set(attr::THETA_STEP_DEG, AttributeValue::F64(s.theta_step_deg));
-        set(attr::WAVELENGTHS_NM, text(&s.wavelengths_nm));
-        set(attr::SIGMA_EXT_M2, text(&s.sigma_ext_m2));
-        set(attr::ALBEDO, text(&s.albedo));
-        set(attr::FORWARD_DELTA, text(&s.forward_delta_fraction));
-        let layer = Layer::new(
-            Vec2(k, w),
-            attributes,
-            Encoding {
-                compression: Compression::ZIP16,
-                blocks: Blocks::ScanLines,
-                line_order: LineOrder::Increasing,
-            },
-            AnyChannels::sort(channels),
-        );
-        let mut bytes = Vec::new();
-        Image::from_layer(layer)
-            .write()
-            .non_parallel()
-            .to_buffered(Cursor::new(&mut bytes))?;
-        crate::exr::sort_header_attributes(&mut bytes)?;
-        Ok(bytes)
-    };
-    encode().map_err(|source| IoError::Encode {
+    let (w, k) = s.bins.dim();
+    let channels = vec![(Text::from("Y"), s.bins.iter().map(|&v| v as f32).collect())];
+    let attributes = vec![
+        (attr::SCHEMA, AttributeValue::I32(SINGLE_SCHEMA_VERSION)),
+        (attr::FIELD, AttributeValue::Text(utf8_text(&s.field))),
+        (attr::THETA_STEP_DEG, AttributeValue::F64(s.theta_step_deg)),
+        (attr::WAVELENGTHS_NM, f64_list_attribute(&s.wavelengths_nm)),
+        (attr::SIGMA_EXT_M2, f64_list_attribute(&s.sigma_ext_m2)),
+        (attr::ALBEDO, f64_list_attribute(&s.albedo)),
+        (
+            attr::FORWARD_DELTA,
+            f64_list_attribute(&s.forward_delta_fraction),
+        ),
+    ];
+    encode_layer((k, w), channels, attributes).map_err(|source| IoError::Encode {
         path: PathBuf::from(single_file_name(&s.field)),
         source,
     })
@@ -212,109 +174,23 @@ pub fn single_exr_bytes(s: &SingleScatter) -> Result<Vec<u8>, IoError> {
 
 /// Decodes and checks the bytes of a single-scattering EXR; `path` names it in errors.
 pub fn decode_single_exr(bytes: &[u8], path: &Path) -> Result<SingleScatter, IoError> {
-    let contract = |check: ContractError| IoError::Contract {
-        path: path.to_path_buf(),
-        check,
-    };
-    let unreadable = |source| IoError::Unreadable {
-        path: path.to_path_buf(),
-        source,
-    };
-    let meta = MetaData::read_from_buffered(Cursor::new(bytes), true).map_err(unreadable)?;
-    if meta.headers.len() != 1 {
-        return Err(contract(ContractError::Layout(format!(
-            "{} parts",
-            meta.headers.len()
-        ))));
-    }
-    let header = &meta.headers[0];
-    if header.deep || !matches!(header.blocks, exr::meta::BlockDescription::ScanLines) {
-        return Err(contract(ContractError::Layout("deep or tiled".into())));
-    }
-    let names: Vec<String> = header
-        .channels
-        .list
-        .iter()
-        .map(|c| String::from_utf8_lossy(c.name.bytes()).into_owned())
-        .collect();
+    let file = Checked::read(bytes, path)?;
+    let names = file.channel_names();
     if names != ["Y"] {
-        return Err(contract(ContractError::Channels { found: names }));
+        return Err(file.contract(ContractError::Channels { found: names }));
     }
-    let ch = &header.channels.list[0];
-    if ch.sample_type != SampleType::F32 || ch.sampling != Vec2(1, 1) {
-        return Err(contract(ContractError::SampleType {
-            channel: "Y".into(),
-            found: format!(
-                "{:?} with sampling {}×{}",
-                ch.sample_type, ch.sampling.0, ch.sampling.1
-            ),
-        }));
-    }
-    let attrs = &header.own_attributes.other;
-    let get = |name: &'static str| -> Result<&AttributeValue, IoError> {
-        attrs
-            .get(&Text::new_or_none(name).expect("ASCII name"))
-            .ok_or_else(|| contract(ContractError::MissingAttribute(name)))
-    };
-    let bad = |name: &'static str, found: String, expected: &str| {
-        contract(ContractError::BadAttribute {
-            name,
-            found,
-            expected: expected.to_string(),
-        })
-    };
-    let text = |name: &'static str| -> Result<String, IoError> {
-        match get(name)? {
-            AttributeValue::Text(t) => String::from_utf8(t.bytes().to_vec())
-                .map_err(|_| bad(name, "bytes that are not UTF-8".into(), "a UTF-8 string")),
-            other => Err(bad(name, format!("{other:?}"), "a string")),
-        }
-    };
-    let list = |name: &'static str| -> Result<Vec<f64>, IoError> {
-        parse_f64_list(&text(name)?).map_err(|why| bad(name, why, "comma-separated decimals"))
-    };
-    match get(attr::SCHEMA)? {
-        AttributeValue::I32(SINGLE_SCHEMA_VERSION) => {}
-        other => {
-            return Err(bad(
-                attr::SCHEMA,
-                format!("{other:?}"),
-                &format!("int {SINGLE_SCHEMA_VERSION}"),
-            ));
-        }
-    }
-    let field = text(attr::FIELD)?;
-    let theta_step_deg = match get(attr::THETA_STEP_DEG)? {
-        AttributeValue::F64(v) => *v,
-        other => return Err(bad(attr::THETA_STEP_DEG, format!("{other:?}"), "a double")),
-    };
+    file.check_sample_types()?;
+    file.schema(attr::SCHEMA, SINGLE_SCHEMA_VERSION)?;
+    let field = file.text(attr::FIELD)?;
+    let theta_step_deg = file.double(attr::THETA_STEP_DEG)?;
+    let list = |name| file.f64_list(name, "comma-separated decimals");
     let wavelengths_nm = list(attr::WAVELENGTHS_NM)?;
     let sigma_ext_m2 = list(attr::SIGMA_EXT_M2)?;
     let albedo = list(attr::ALBEDO)?;
     let forward_delta_fraction = list(attr::FORWARD_DELTA)?;
-    let (width, height) = (header.layer_size.0, header.layer_size.1);
-    let image = exr::prelude::read()
-        .no_deep_data()
-        .largest_resolution_level()
-        .all_channels()
-        .first_valid_layer()
-        .all_attributes()
-        .pedantic()
-        .non_parallel()
-        .from_buffered(Cursor::new(bytes))
-        .map_err(unreadable)?;
-    let FlatSamples::F32(samples) = &image.layer_data.channel_data.list[0].sample_data else {
-        return Err(contract(ContractError::SampleType {
-            channel: "Y".into(),
-            found: "non-f32 samples".into(),
-        }));
-    };
-    if samples.len() != width * height {
-        return Err(contract(ContractError::Size(format!(
-            "{} samples, expected {width} × {height}",
-            samples.len()
-        ))));
-    }
+    let (width, height) = (file.header().layer_size.0, file.header().layer_size.1);
+    let channels = file.channels()?;
+    let samples = &channels[0].1;
     let bins = Array2::from_shape_fn((height, width), |(j, k)| f64::from(samples[j * width + k]));
     let s = SingleScatter {
         field,
@@ -326,7 +202,7 @@ pub fn decode_single_exr(bytes: &[u8], path: &Path) -> Result<SingleScatter, IoE
         albedo,
     };
     s.check()
-        .map_err(|why| contract(ContractError::Size(why)))?;
+        .map_err(|why| file.contract(ContractError::Size(why)))?;
     Ok(s)
 }
 

@@ -35,12 +35,7 @@ use glam::DVec3;
 
 use crate::{Frame, FrameError};
 
-/// Two unit vectors completing the unit vector `d` to an orthonormal basis (d, e1, e2).
-pub fn basis(d: DVec3) -> (DVec3, DVec3) {
-    let helper = if d.x.abs() < 0.9 { DVec3::X } else { DVec3::Y };
-    let e1 = (helper - helper.dot(d) * d).normalize();
-    (e1, d.cross(e1))
-}
+pub use crate::basis;
 
 /// The derived geometry both renderers use (module docs).
 #[derive(Debug, Clone, Copy)]
@@ -80,13 +75,8 @@ pub struct Setup {
 impl Frame {
     /// Checks the parameters and derives the slicing geometry.
     pub fn setup(&self) -> Result<Setup, FrameError> {
+        self.check_view()?;
         let bad = |s: String| Err(FrameError(s));
-        if !(1..=8192).contains(&self.width) || !(1..=8192).contains(&self.height) {
-            return bad(format!(
-                "image size {}×{} is outside the allowed range 1…8192 pixels per side",
-                self.width, self.height
-            ));
-        }
         if !(1..=4096).contains(&self.slices) {
             return bad(format!(
                 "slices = {} is outside the allowed range [1, 4096]",
@@ -99,25 +89,6 @@ impl Frame {
                 self.light_resolution
             ));
         }
-        let fov = self.camera.fov_deg;
-        if !(fov > 0.0 && fov < 170.0) {
-            return bad(format!(
-                "camera fov_deg = {fov} is outside the allowed range (0, 170) degrees"
-            ));
-        }
-        let e = self.sun.elevation_deg;
-        if !(e > 0.0 && e <= 90.0) {
-            return bad(format!(
-                "sun elevation_deg = {e} is outside the allowed range (0, 90]: the sky model \
-                 (Riley et al. 2004 Eq. 12) needs the sun above the horizon"
-            ));
-        }
-        if self.camera.position_m.y < 0.0 {
-            return bad(format!(
-                "camera height {} m is below sea level (y ≥ 0 required)",
-                self.camera.position_m.y
-            ));
-        }
         if self.grid.contains(self.camera.position_m) {
             return bad(format!(
                 "the camera at {:?} m is inside the volumes' box {:?}…{:?} m; half-angle \
@@ -125,9 +96,8 @@ impl Frame {
                 self.camera.position_m, self.grid.min_m, self.grid.max_m
             ));
         }
-        let Some((forward, right, up)) = self.camera.axes() else {
-            return bad("camera look_at_m equals position_m".into());
-        };
+        let (forward, right, up) = self.camera.axes().expect("checked by check_view");
+        let fov = self.camera.fov_deg;
 
         let light = -self.sun.direction();
         let front_to_back = forward.dot(light) >= 0.0;

@@ -59,6 +59,7 @@ use glam::DVec3;
 use grid::ThetaGrid;
 use rayon::prelude::*;
 
+use crate::basis;
 use crate::camera::pixel_ray;
 use crate::riley::cpu::box_span;
 use crate::{DensityGrid, Frame, FrameError, Image, MAX_FIELDS, SUN_DIAMETER_DEG};
@@ -140,37 +141,8 @@ impl TruthProgress for () {
     fn pass(&self, _: usize, _: usize, _: f64, _: f64) {}
 }
 
-/// SplitMix64 stream (Steele et al. 2014), seeded by a hash of (seed, pixel, sample).
-pub struct Rng(u64);
-
-impl Rng {
-    /// The stream of sample `sample` of pixel `pixel` under `seed`.
-    pub fn new(seed: u64, pixel: u64, sample: u64) -> Self {
-        let mut r = Rng(seed ^ 0x5DEE_CE66_D1CE_4E5B);
-        let a = r.next_u64() ^ pixel.wrapping_mul(0x9E37_79B9_7F4A_7C15);
-        let mut r = Rng(a);
-        let b = r.next_u64() ^ sample.wrapping_mul(0xC2B2_AE3D_27D4_EB4F);
-        Rng(b)
-    }
-
-    fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-
-    /// Uniform in [0, 1).
-    pub fn uniform(&mut self) -> f64 {
-        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
-    }
-
-    /// Exponential with rate 1.
-    fn exp(&mut self) -> f64 {
-        -(1.0 - self.uniform()).ln()
-    }
-}
+/// The random stream of one sample (`Rng::stream(seed, pixel, sample)`).
+pub use crate::rng::SplitMix64 as Rng;
 
 /// One field's optics at one wavelength.
 #[derive(Debug, Clone)]
@@ -188,6 +160,31 @@ struct Band {
     beta_air_sl: f64,
     /// w_cj / q_j: what one unit of this wavelength's radiance adds to channel c.
     to_rgb: [f64; 3],
+}
+
+/// What ends a free path.
+#[derive(Debug, Clone, Copy)]
+enum Event {
+    /// A real collision in the volumes, scattered by this field.
+    Volume(usize),
+    /// A collision with the air.
+    Air,
+    /// The ground at y = 0.
+    Ground,
+    /// Nothing: the path leaves the scene.
+    Escape,
+}
+
+/// Russian roulette once the weight falls below ½ (survival probability = weight, which then
+/// becomes 1); false when the path ends.
+fn roulette(weight: &mut f64, rng: &mut Rng) -> bool {
+    if *weight < 0.5 {
+        if rng.uniform() >= *weight {
+            return false;
+        }
+        *weight = 1.0;
+    }
+    true
 }
 
 /// A scene ready to trace: the grid, the optics per wavelength, the sources.
@@ -259,9 +256,9 @@ impl<'a> Tracer<'a> {
         let mean_lambda: [f64; 3] =
             std::array::from_fn(|c| (0..lambdas.len()).map(|j| weights[c][j] * lambdas[j]).sum());
         let beta = frame.atmosphere.beta_sea_level_per_m;
+        let mut pts: Vec<(f64, f64)> = (0..3).map(|c| (mean_lambda[c], beta[c])).collect();
+        pts.sort_by(|a, b| a.0.total_cmp(&b.0));
         let beta_at = |l: f64| -> f64 {
-            let mut pts: Vec<(f64, f64)> = (0..3).map(|c| (mean_lambda[c], beta[c])).collect();
-            pts.sort_by(|a, b| a.0.total_cmp(&b.0));
             if pts.iter().any(|p| p.1 <= 0.0) {
                 // Air off (or a channel without air): the nearest channel's value.
                 return pts
@@ -367,15 +364,7 @@ impl<'a> Tracer<'a> {
         if b.beta_air_sl == 0.0 {
             return 0.0;
         }
-        let k = self.gamma * d.y;
-        let path = if k.abs() * s.min(1e12) < 1e-9 {
-            s
-        } else if s.is_infinite() {
-            if k > 0.0 { 1.0 / k } else { f64::INFINITY }
-        } else {
-            -(-k * s).exp_m1() / k
-        };
-        self.air(b, p.y) * path
+        self.air(b, p.y) * crate::sky::one_minus_u_over_p(self.gamma, d.y, s) / self.gamma
     }
 
     /// Distance to the next air collision from `p` along `d`, or ∞.
@@ -482,102 +471,131 @@ impl<'a> Tracer<'a> {
         out
     }
 
-    /// One path's radiance estimate (per channel) arriving at `origin` from direction `-dir`
-    /// (the path leaves `origin` along `dir`).
-    pub fn radiance(&self, origin: DVec3, dir: DVec3, rng: &mut Rng) -> [f64; 3] {
+    /// The band of a path, drawn with probability q_j.
+    fn band(&self, rng: &mut Rng) -> &Band {
         let u = rng.uniform();
         let j = self
             .band_cdf
             .partition_point(|&c| c <= u)
             .min(self.bands.len() - 1);
-        let b = &self.bands[j];
+        &self.bands[j]
+    }
+
+    /// Follows the free path from `p` along `d` to what ends it, moving `p` there. At a
+    /// volume collision the scattering field is chosen by its share of β_sca and `weight` is
+    /// multiplied by β_sca/β_ext.
+    fn next_event(
+        &self,
+        b: &Band,
+        p: &mut DVec3,
+        d: DVec3,
+        weight: &mut f64,
+        rng: &mut Rng,
+    ) -> Event {
+        let t_ground = if d.y < 0.0 {
+            (p.y / -d.y).max(0.0)
+        } else {
+            f64::INFINITY
+        };
+        let t_air = self.sample_air(b, *p, d, rng);
+        if let Some((t, e, rho)) = self.track(b, *p, d, t_ground.min(t_air), rng) {
+            *p += t * d;
+            let mut sca = [0.0; MAX_FIELDS];
+            let mut total = 0.0;
+            for f in 0..self.n_fields {
+                sca[f] = rho[f] * b.fields[f].sigma_ext * b.fields[f].albedo;
+                total += sca[f];
+            }
+            *weight *= total / e;
+            let mut pick = rng.uniform() * total;
+            let mut field = self.n_fields - 1;
+            for f in 0..self.n_fields {
+                if pick < sca[f] {
+                    field = f;
+                    break;
+                }
+                pick -= sca[f];
+            }
+            Event::Volume(field)
+        } else if t_air < t_ground {
+            *p += t_air * d;
+            Event::Air
+        } else if t_ground.is_finite() {
+            *p += t_ground * d;
+            p.y = 0.0;
+            Event::Ground
+        } else {
+            Event::Escape
+        }
+    }
+
+    /// The direction after scattering `d` at a volume or air event (the phase function's own
+    /// sample; a δ leaves `d` as it is).
+    fn scatter(&self, b: &Band, event: Event, d: DVec3, rng: &mut Rng) -> DVec3 {
+        match event {
+            Event::Volume(field) => {
+                match b.fields[field].phase.sample(rng.uniform(), rng.uniform()) {
+                    Some((omm, sin)) => rotate(d, omm, sin, rng.uniform()),
+                    None => d,
+                }
+            }
+            Event::Air => {
+                let mu = sample_rayleigh(rng.uniform());
+                rotate(d, 1.0 - mu, (1.0 - mu * mu).max(0.0).sqrt(), rng.uniform())
+            }
+            Event::Ground | Event::Escape => d,
+        }
+    }
+
+    /// One path's radiance estimate (per channel) arriving at `origin` from direction `-dir`
+    /// (the path leaves `origin` along `dir`).
+    pub fn radiance(&self, origin: DVec3, dir: DVec3, rng: &mut Rng) -> [f64; 3] {
+        let b = self.band(rng);
         let mut sum = [0.0; 3];
         let mut throughput = 1.0;
         let (mut p, mut d) = (origin, dir);
-        for bounce in 0..MAX_BOUNCES {
-            let t_ground = if d.y < 0.0 {
-                (p.y / -d.y).max(0.0)
-            } else {
-                f64::INFINITY
-            };
-            let t_air = self.sample_air(b, p, d, rng);
-            let limit = t_ground.min(t_air);
-            let scatter = if let Some((t, e, rho)) = self.track(b, p, d, limit, rng) {
-                p += t * d;
-                // The field by its share of β_sca; the weight by β_sca/β_ext.
-                let mut sca = [0.0; MAX_FIELDS];
-                let mut total = 0.0;
-                for f in 0..self.n_fields {
-                    sca[f] = rho[f] * b.fields[f].sigma_ext * b.fields[f].albedo;
-                    total += sca[f];
+        for bounce in 0..self.max_scatterings {
+            let event = self.next_event(b, &mut p, d, &mut throughput, rng);
+            let l = match event {
+                Event::Volume(field) => {
+                    let ph = &b.fields[field].phase;
+                    self.direct(b, p, |w| ph.eval(d, w), rng)
                 }
-                throughput *= total / e;
-                let mut pick = rng.uniform() * total;
-                let mut field = self.n_fields - 1;
-                for f in 0..self.n_fields {
-                    if pick < sca[f] {
-                        field = f;
+                Event::Air => self.direct(b, p, |w| rayleigh(d.dot(w)), rng),
+                Event::Ground => {
+                    let a = self.ground_albedo;
+                    if a <= 0.0 {
                         break;
                     }
-                    pick -= sca[f];
+                    self.direct(b, p, |w| a / PI * w.y.max(0.0), rng)
                 }
-                let ph = &b.fields[field].phase;
-                let l = self.direct(b, p, |w| ph.eval(d, w), rng);
-                for c in 0..3 {
-                    sum[c] += throughput * l[c];
-                }
-                if let Some((omm, sin)) = ph.sample(rng.uniform(), rng.uniform()) {
-                    d = rotate(d, omm, sin, rng.uniform());
-                }
-                true
-            } else if t_air < t_ground {
-                p += t_air * d;
-                let l = self.direct(b, p, |w| rayleigh(d.dot(w)), rng);
-                for c in 0..3 {
-                    sum[c] += throughput * l[c];
-                }
-                let mu = sample_rayleigh(rng.uniform());
-                d = rotate(d, 1.0 - mu, (1.0 - mu * mu).max(0.0).sqrt(), rng.uniform());
-                true
-            } else if t_ground.is_finite() {
-                p += t_ground * d;
-                p.y = 0.0;
-                if self.ground_albedo <= 0.0 {
+                Event::Escape => {
+                    if bounce == 0 && d.dot(self.sun) >= self.cos_disk {
+                        for c in 0..3 {
+                            sum[c] += self.sun_irradiance[c] / self.disk_sr;
+                        }
+                    }
+                    for c in 0..3 {
+                        sum[c] += throughput * self.background[c];
+                    }
                     break;
                 }
-                let a = self.ground_albedo;
-                let l = self.direct(b, p, |w| a / PI * w.y.max(0.0), rng);
-                for c in 0..3 {
-                    sum[c] += throughput * l[c];
-                }
-                throughput *= a;
+            };
+            for c in 0..3 {
+                sum[c] += throughput * l[c];
+            }
+            d = if let Event::Ground = event {
+                throughput *= self.ground_albedo;
                 // Cosine-weighted about +y.
                 let (r, phi) = (rng.uniform().sqrt(), 2.0 * PI * rng.uniform());
-                let (e1, e2) = phase::basis(DVec3::Y);
-                d = (r * phi.cos() * e1
-                    + r * phi.sin() * e2
-                    + (1.0 - r * r).max(0.0).sqrt() * DVec3::Y)
-                    .normalize();
-                true
+                let (e1, e2) = basis(DVec3::Y);
+                (r * phi.cos() * e1 + r * phi.sin() * e2 + (1.0 - r * r).max(0.0).sqrt() * DVec3::Y)
+                    .normalize()
             } else {
-                if bounce == 0 && d.dot(self.sun) >= self.cos_disk {
-                    for c in 0..3 {
-                        sum[c] += self.sun_irradiance[c] / self.disk_sr;
-                    }
-                }
-                for c in 0..3 {
-                    sum[c] += throughput * self.background[c];
-                }
-                false
+                self.scatter(b, event, d, rng)
             };
-            if !scatter || bounce + 1 >= self.max_scatterings {
+            if bounce + 1 >= self.max_scatterings || !roulette(&mut throughput, rng) {
                 break;
-            }
-            if throughput < 0.5 {
-                if rng.uniform() >= throughput {
-                    break;
-                }
-                throughput = 1.0;
             }
         }
         std::array::from_fn(|c| sum[c] * b.to_rgb[c])
@@ -585,56 +603,21 @@ impl<'a> Tracer<'a> {
 
     /// A photon's random walk forward from `origin` along `dir` through the volumes and the
     /// air: the direction in which it leaves them for good (towards space or the ground, which
-    /// is not modelled here) and its weight, or `None` if it was ended by roulette. The same free paths, phase
-    /// sampling and albedo as [`Tracer::radiance`], run the other way: the flux estimator of
-    /// the slab tests, whose forward peak a camera-side estimator would hit only rarely.
+    /// is not modelled here) and its weight, or `None` if it was ended by roulette. The same
+    /// free paths, phase sampling and albedo as [`Tracer::radiance`], run the other way: the
+    /// flux estimator of the slab tests, whose forward peak a camera-side estimator would hit
+    /// only rarely.
     pub fn photon(&self, origin: DVec3, dir: DVec3, rng: &mut Rng) -> Option<(DVec3, f64)> {
-        let b = &self.bands[self
-            .band_cdf
-            .partition_point(|&c| c <= rng.uniform())
-            .min(self.bands.len() - 1)];
+        let b = self.band(rng);
         let (mut p, mut d, mut weight) = (origin, dir, 1.0);
         for _ in 0..self.max_scatterings {
-            let t_ground = if d.y < 0.0 {
-                (p.y / -d.y).max(0.0)
-            } else {
-                f64::INFINITY
-            };
-            let t_air = self.sample_air(b, p, d, rng);
-            if let Some((t, e, rho)) = self.track(b, p, d, t_ground.min(t_air), rng) {
-                p += t * d;
-                let mut sca = [0.0; MAX_FIELDS];
-                let mut total = 0.0;
-                for f in 0..self.n_fields {
-                    sca[f] = rho[f] * b.fields[f].sigma_ext * b.fields[f].albedo;
-                    total += sca[f];
-                }
-                weight *= total / e;
-                let mut pick = rng.uniform() * total;
-                let mut field = self.n_fields - 1;
-                for f in 0..self.n_fields {
-                    if pick < sca[f] {
-                        field = f;
-                        break;
-                    }
-                    pick -= sca[f];
-                }
-                if let Some((omm, sin)) = b.fields[field].phase.sample(rng.uniform(), rng.uniform())
-                {
-                    d = rotate(d, omm, sin, rng.uniform());
-                }
-            } else if t_air < t_ground {
-                p += t_air * d;
-                let mu = sample_rayleigh(rng.uniform());
-                d = rotate(d, 1.0 - mu, (1.0 - mu * mu).max(0.0).sqrt(), rng.uniform());
-            } else {
+            let event = self.next_event(b, &mut p, d, &mut weight, rng);
+            if let Event::Ground | Event::Escape = event {
                 return Some((d, weight));
             }
-            if weight < 0.5 {
-                if rng.uniform() >= weight {
-                    return None;
-                }
-                weight = 1.0;
+            d = self.scatter(b, event, d, rng);
+            if !roulette(&mut weight, rng) {
+                return None;
             }
         }
         None
@@ -666,12 +649,7 @@ impl<'a> Tracer<'a> {
 
 /// Checks what the truth needs of a frame and its settings, naming the value and its range.
 pub fn check(frame: &Frame, settings: &TruthSettings) -> Result<(), FrameError> {
-    if !(1..=8192).contains(&frame.width) || !(1..=8192).contains(&frame.height) {
-        return bad(format!(
-            "image size {}×{} is outside the allowed range 1…8192 pixels per side",
-            frame.width, frame.height
-        ));
-    }
+    frame.check_view()?;
     if !(SPP_RANGE.0..=SPP_RANGE.1).contains(&settings.spp) {
         return bad(format!(
             "spp = {} is outside the allowed range [{}, {}] samples per pixel",
@@ -682,27 +660,6 @@ pub fn check(frame: &Frame, settings: &TruthSettings) -> Result<(), FrameError> 
         return bad(format!(
             "target noise = {} is outside the allowed range [0, 1) (relative standard error)",
             settings.target_noise
-        ));
-    }
-    let fov = frame.camera.fov_deg;
-    if !(fov > 0.0 && fov < 170.0) {
-        return bad(format!(
-            "camera fov_deg = {fov} is outside the allowed range (0, 170) degrees"
-        ));
-    }
-    if frame.camera.position_m.y < 0.0 {
-        return bad(format!(
-            "camera height {} m is below the ground (y ≥ 0 required)",
-            frame.camera.position_m.y
-        ));
-    }
-    if frame.camera.axes().is_none() {
-        return bad("camera look_at_m equals position_m".into());
-    }
-    let e = frame.sun.elevation_deg;
-    if !(e > 0.0 && e <= 90.0) {
-        return bad(format!(
-            "sun elevation_deg = {e} is outside the allowed range (0, 90]"
         ));
     }
     if !(0.0..=1.0).contains(&settings.ground_albedo) {
@@ -754,7 +711,7 @@ pub fn render(
         let batch = done.clamp(1, 64).min(settings.spp - done);
         acc.par_iter_mut().enumerate().for_each(|(p, a)| {
             for s in done..done + batch {
-                let mut rng = Rng::new(settings.seed, p as u64, s as u64);
+                let mut rng = Rng::stream(settings.seed, p as u64, s as u64);
                 let l = tracer.radiance(eye, rays[p], &mut rng);
                 for c in 0..3 {
                     a.0[c] += l[c];

@@ -104,21 +104,9 @@ pub fn sample_rayleigh(u: f64) -> f64 {
     ((q + r).cbrt() + (q - r).cbrt()).clamp(-1.0, 1.0)
 }
 
-/// Two unit vectors completing the unit vector `d` to an orthonormal basis (Duff et al. 2017,
-/// "Building an orthonormal basis, revisited").
-pub fn basis(d: DVec3) -> (DVec3, DVec3) {
-    let sign = 1f64.copysign(d.z);
-    let a = -1.0 / (sign + d.z);
-    let b = d.x * d.y * a;
-    (
-        DVec3::new(1.0 + sign * d.x * d.x * a, sign * b, -sign * d.x),
-        DVec3::new(b, sign + d.y * d.y * a, -d.y),
-    )
-}
-
 /// The direction at angle θ (given as 1 − cos θ and sin θ) from `d`, at azimuth 2π·`u`.
 pub fn rotate(d: DVec3, one_minus_mu: f64, sin: f64, u: f64) -> DVec3 {
-    let (e1, e2) = basis(d);
+    let (e1, e2) = crate::basis(d);
     let phi = 2.0 * PI * u;
     ((1.0 - one_minus_mu) * d + sin * (phi.cos() * e1 + phi.sin() * e2)).normalize()
 }
@@ -139,7 +127,7 @@ mod tests {
         let n = 400_000;
         let mut counts = vec![0usize; grid.len()];
         let mut deltas = 0;
-        let mut rng = crate::truth::Rng::new(7, 0, 0);
+        let mut rng = crate::truth::Rng::stream(7, 0, 0);
         for _ in 0..n {
             match s.sample(rng.uniform(), rng.uniform()) {
                 None => deltas += 1,
