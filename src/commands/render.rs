@@ -42,6 +42,11 @@ pub struct RenderArgs {
     /// Light-buffer texels per side (overrides [render] light_resolution).
     #[arg(long)]
     light_resolution: Option<usize>,
+    /// --model riley: the light buffer's update per slab, `continuum` (I ← I e^{−τ(1 − αF)}, the
+    /// default: converges as slices are added) or `riley2004` (Eq. 25 as printed); overrides
+    /// [render] light_update.
+    #[arg(long, value_parser = ["continuum", "riley2004"])]
+    light_update: Option<String>,
     /// PNG exposure (multiplies radiance before 1 − e^{−x}); default: the scene's, or automatic.
     #[arg(long)]
     exposure: Option<f64>,
@@ -149,6 +154,13 @@ pub fn run(a: RenderArgs) -> Result<()> {
             r.slices = a.slices.unwrap_or(r.slices);
             r.light_resolution = a.light_resolution.unwrap_or(r.light_resolution);
             r.spp = a.spp.unwrap_or(r.spp);
+            if let Some(u) = a
+                .light_update
+                .as_deref()
+                .and_then(render::LightUpdate::parse)
+            {
+                r.light_update = u;
+            }
             r.seed = a.seed.unwrap_or(r.seed);
         },
     )?;

@@ -61,6 +61,8 @@ pub struct Frame {
     pub atmosphere: Atmosphere,
     /// Riley's ξ: back-scattered light added to the phase function in the eye pass (1/sr).
     pub xi: f64,
+    /// How the light buffer loses light per slab (`riley` model).
+    pub light_update: LightUpdate,
     /// Image width, 1…8192 pixels.
     pub width: usize,
     /// Image height, 1…8192 pixels.
@@ -107,6 +109,44 @@ impl Frame {
             return bad("camera look_at_m equals position_m".into());
         }
         Ok(())
+    }
+}
+
+/// The light buffer's update across a slab of optical depth τ = β_ext Δ_l, with albedo α and
+/// forward fraction F (Riley et al. 2004 Eq. 25 and what this project uses instead).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum LightUpdate {
+    /// I ← I e^{−τ(1 − αF)}: of the light a slab removes from the beam, the forward-scattered
+    /// share αF stays in it. First order in τ, and the same for any slicing (a product of
+    /// exponentials), so the buffer converges as slices are added.
+    #[default]
+    Continuum,
+    /// Eq. 25 as printed, I ← I e^{−τ} + I (1 − e^{−τ}) (αF)^τ: its loss is second order in τ,
+    /// so thin slabs lose almost nothing and the buffer brightens without limit as slices are
+    /// added (docs/truth.md).
+    Riley2004,
+}
+
+impl LightUpdate {
+    /// The scene/CLI name: `continuum` or `riley2004`.
+    pub fn parse(name: &str) -> Option<Self> {
+        match name {
+            "continuum" => Some(Self::Continuum),
+            "riley2004" => Some(Self::Riley2004),
+            _ => None,
+        }
+    }
+
+    /// The fraction of the intensity kept across a slab of optical depth `tau` with albedo
+    /// `albedo` and forward fraction `f`.
+    pub fn keep(self, tau: f64, albedo: f64, f: f64) -> f64 {
+        match self {
+            Self::Continuum => (-tau * (1.0 - albedo * f)).exp(),
+            Self::Riley2004 => {
+                let through = (-tau).exp();
+                through + (1.0 - through) * (albedo * f).powf(tau)
+            }
+        }
     }
 }
 

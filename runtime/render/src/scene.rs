@@ -8,6 +8,7 @@
 //! light_resolution = 512    # light-buffer texels per side
 //! grid_resolution = 128     # voxels along the box's longest side
 //! xi = 0.0                  # Riley's ξ (1/sr), back-scattered light in the eye pass
+//! light_update = "continuum"   # riley: "continuum" (default) or "riley2004" (Eq. 25 as printed)
 //! exposure = 0.0            # PNG exposure; 0 or absent: automatic
 //! spp = 256                 # --model truth: samples (paths) per pixel, [1, 2²⁰]
 //! seed = 1                  # --model truth: seed of the random streams
@@ -108,6 +109,7 @@ struct RenderKeys {
     light_resolution: Option<usize>,
     grid_resolution: Option<usize>,
     xi: Option<f64>,
+    light_update: Option<String>,
     exposure: Option<f64>,
     spp: Option<usize>,
     seed: Option<u64>,
@@ -172,6 +174,8 @@ pub struct RenderScene {
     pub grid_resolution: usize,
     /// Riley's ξ (1/sr), back-scattered light in the eye pass; ≥ 0 (default 0).
     pub xi: f64,
+    /// `[render] light_update` (default continuum).
+    pub light_update: crate::LightUpdate,
     /// None: automatic.
     pub exposure: Option<f64>,
     /// From `[camera]`; fov (0, 170) degrees (default 60).
@@ -275,6 +279,14 @@ impl RenderScene {
         if !(xi.is_finite() && xi >= 0.0) {
             return Err(err(format!("[render] xi = {xi} must be ≥ 0 (1/sr)")));
         }
+        let light_update = match render.light_update.as_deref() {
+            None => crate::LightUpdate::default(),
+            Some(name) => crate::LightUpdate::parse(name).ok_or_else(|| {
+                err(format!(
+                    "[render] light_update = {name:?} is not one of \"continuum\", \"riley2004\""
+                ))
+            })?,
+        };
         let exposure = match render.exposure {
             None => None,
             Some(0.0) => None,
@@ -321,6 +333,7 @@ impl RenderScene {
             light_resolution: render.light_resolution.unwrap_or(512),
             grid_resolution,
             xi,
+            light_update,
             exposure,
             camera: Camera {
                 position_m: DVec3::from_array(camera.position_m),
@@ -406,6 +419,7 @@ impl RenderScene {
             sun: self.sun,
             atmosphere: self.atmosphere,
             xi: self.xi,
+            light_update: self.light_update,
             width: self.width,
             height: self.height,
             slices: self.slices,

@@ -7,7 +7,7 @@ use std::path::Path;
 
 use render::riley::cpu::{self, box_span};
 use render::riley::gpu::Renderer;
-use render::{Frame, RenderScene};
+use render::{Frame, LightUpdate, RenderScene};
 use runtime::Tables;
 use runtime::gpu::{GpuTables, TexelFormat};
 use runtime::sample;
@@ -72,8 +72,13 @@ fn gpu_render_matches_the_cpu_reference_in_both_compositing_orders() {
     let uploaded = GpuTables::upload(&gpu, &tables, TexelFormat::F32).unwrap();
     let renderer = Renderer::new(&gpu, &uploaded);
     // Sun behind the camera (front to back), then ahead of it (back to front).
-    for (elevation, azimuth, front_to_back) in [(20.0, 200.0, true), (30.0, 10.0, false)] {
-        let frame = two_field_frame(&tables, elevation, azimuth);
+    for (elevation, azimuth, front_to_back, update) in [
+        (20.0, 200.0, true, LightUpdate::Continuum),
+        (30.0, 10.0, false, LightUpdate::Continuum),
+        (30.0, 10.0, false, LightUpdate::Riley2004),
+    ] {
+        let mut frame = two_field_frame(&tables, elevation, azimuth);
+        frame.light_update = update;
         assert_eq!(frame.setup().unwrap().front_to_back, front_to_back);
         let reference = cpu::render(&tables, &frame).unwrap();
         let (image, t) = renderer.render(&gpu, &tables, &uploaded, &frame).unwrap();
@@ -104,7 +109,7 @@ fn gpu_render_matches_the_cpu_reference_in_both_compositing_orders() {
         let seen = reference.transparency.iter().filter(|&&t| t < 0.5).count();
         assert!(seen > 100, "the volumes cover only {seen} pixels");
         eprintln!(
-            "sun {elevation}°/{azimuth}°: worst |GPU − CPU| = {worst:.3} of the tolerance, frame {:.1} ms",
+            "sun {elevation}°/{azimuth}°, {update:?}: worst |GPU − CPU| = {worst:.3} of the tolerance, frame {:.1} ms",
             t.frame * 1e3
         );
     }
@@ -187,4 +192,96 @@ max_m = [500, 2000, 5500]
     }
     assert!(checked > 200, "only {checked} pixels crossed the box");
     eprintln!("{checked} pixels: worst relative difference from single scattering {worst:.2e}");
+}
+
+/// A soft ball of cloud, 48³ voxels over a 1 km box, of optical depth `tau` through its centre
+/// in green, side-lit by a low sun (Riley's hardest case for the light buffer).
+fn side_lit_ball(
+    tables: &Tables,
+    dir: &Path,
+    tau: f64,
+    slices: usize,
+    update: LightUpdate,
+) -> Frame {
+    let n = 48;
+    let file = dir.join("ball.f32");
+    if !file.exists() {
+        let mut bytes = Vec::with_capacity(4 * n * n * n);
+        for z in 0..n {
+            for y in 0..n {
+                for x in 0..n {
+                    let c = |i: usize| (i as f64 + 0.5) / n as f64 * 2.0 - 1.0;
+                    let r = (c(x).powi(2) + c(y).powi(2) + c(z).powi(2)).sqrt();
+                    bytes.extend_from_slice(&((1.0 - r).max(0.0).sqrt() as f32).to_le_bytes());
+                }
+            }
+        }
+        std::fs::write(&file, bytes).unwrap();
+    }
+    // ∫ sqrt(1 − |x|) over the diameter of the unit box's ball: 2·(2/3) of the box side / 2.
+    let density = tau / (0.666 * 1000.0 * tables.field("cloud").unwrap().sigma_ext_m2[1]);
+    let text = format!(
+        r#"{}
+[render]
+width = 64
+height = 64
+slices = {slices}
+light_resolution = 64
+grid_resolution = 48
+
+[camera]
+position_m = [0, 500, -2500]
+look_at_m = [0, 500, 500]
+fov_deg = 30
+
+[sun]
+elevation_deg = 5
+azimuth_deg = 90
+
+[sky]
+enabled = false
+
+[[volume]]
+field = "cloud"
+shape = "grid"
+file = "{}"
+dims = [48, 48, 48]
+min_m = [-500, 0, 0]
+max_m = [500, 1000, 1000]
+number_density_per_m3 = {density}
+"#,
+        fields(),
+        file.display()
+    );
+    let mut frame = RenderScene::parse(&text, "test", Path::new("."))
+        .unwrap()
+        .frame(tables)
+        .unwrap();
+    frame.light_update = update;
+    frame
+}
+
+#[test]
+fn the_light_buffer_converges_as_slices_are_added() {
+    let (tmp, dir) = bake(&fields());
+    let tables = Tables::open(&dir).unwrap();
+    let total = |tau: f64, slices: usize, update: LightUpdate| -> f64 {
+        let frame = side_lit_ball(&tables, tmp.path(), tau, slices, update);
+        let image = cpu::render(&tables, &frame).unwrap();
+        image.rgb.iter().map(|p| p[1] as f64).sum()
+    };
+    for tau in [8.0, 32.0] {
+        let coarse = total(tau, 256, LightUpdate::Continuum);
+        let fine = total(tau, 1024, LightUpdate::Continuum);
+        let change = fine / coarse - 1.0;
+        let paper = total(tau, 1024, LightUpdate::Riley2004)
+            / total(tau, 256, LightUpdate::Riley2004)
+            - 1.0;
+        eprintln!(
+            "τ {tau}: 256 → 1024 slices, continuum {:+.2} %, Eq. 25 as printed {:+.2} %",
+            change * 100.0,
+            paper * 100.0
+        );
+        assert!(change.abs() < 0.01, "τ {tau}: the total moved {change:+.4}");
+    }
 }

@@ -108,6 +108,7 @@ fn slab_frame(tau: f64) -> Frame {
             scale_height_m: 8000.0,
         },
         xi: 0.0,
+        light_update: render::LightUpdate::Continuum,
         width: 1,
         height: 1,
         slices: 1,

@@ -9,7 +9,7 @@ use runtime::sample;
 use runtime::{FieldTable, Tables};
 
 use super::Setup;
-use crate::{Frame, FrameError, Image, MAX_FIELDS, SUN_DIAMETER_DEG};
+use crate::{Frame, FrameError, Image, LightUpdate, MAX_FIELDS, SUN_DIAMETER_DEG};
 
 /// Light-buffer texel: intensity per channel (fraction of the sunlight at that height) and the
 /// expected scatter count n.
@@ -124,6 +124,30 @@ fn bilinear(buffer: &[Light], res: usize, uv: [f64; 2]) -> Light {
     out
 }
 
+/// Carries a light-buffer value across optical path `length` (m) at a point with extinction
+/// `ext`, scattering `sca` and densities `rho` (Eqs. 21, 25 or the continuum update; n ← n +
+/// α τ in green).
+fn cross_slab(
+    texel: &mut Light,
+    fields: &[&FieldTable],
+    ext: &[f64; 3],
+    sca: &[f64; 3],
+    rho: &[f64; MAX_FIELDS],
+    length: f64,
+    update: LightUpdate,
+) {
+    let tau: [f64; 3] = ext.map(|e| e * length);
+    let f = sample::forward_fraction_mix(fields, rho, texel.n + 1.0 + tau[1]);
+    for ch in 0..3 {
+        if ext[ch] > 0.0 {
+            texel.intensity[ch] *= update.keep(tau[ch], sca[ch] / ext[ch], f[ch]);
+        }
+    }
+    if ext[1] > 0.0 {
+        texel.n += sca[1] / ext[1] * tau[1];
+    }
+}
+
 /// Renders `frame` with the fields of `tables` (field i = grid channel i).
 pub fn render(tables: &Tables, frame: &Frame) -> Result<Image, FrameError> {
     let setup = frame.setup()?;
@@ -146,6 +170,8 @@ pub fn render(tables: &Tables, frame: &Frame) -> Result<Image, FrameError> {
     let mut eye = vec![([0.0f64; 3], [1.0f64; 3]); w * h];
     let h_dot_l = setup.half.dot(setup.light);
     let h_dot_e = setup.half.dot(setup.eye);
+    // Δ_l, the light's path through one slab.
+    let light_thickness = setup.slice_step / h_dot_l;
 
     for k in 0..frame.slices {
         let c = setup.slice_start + k as f64 * setup.slice_step;
@@ -164,7 +190,19 @@ pub fn render(tables: &Tables, frame: &Frame) -> Result<Image, FrameError> {
             if ext.iter().all(|&e| e <= 0.0) {
                 return;
             }
-            let lit = bilinear(&light, res, setup.light_coords(p));
+            let mut lit = bilinear(&light, res, setup.light_coords(p));
+            if frame.light_update == LightUpdate::Continuum {
+                // The light at the slab's middle: the buffer holds it at the slab's entry.
+                cross_slab(
+                    &mut lit,
+                    &fields,
+                    &ext,
+                    &sca,
+                    &rho,
+                    light_thickness / 2.0,
+                    frame.light_update,
+                );
+            }
             let sun = frame.atmosphere.sunlight(p[1], l_y);
             let phase = sample::mix(
                 &fields,
@@ -194,7 +232,7 @@ pub fn render(tables: &Tables, frame: &Frame) -> Result<Image, FrameError> {
                 *tr *= slab;
             }
         });
-        let thickness = setup.slice_step / h_dot_l;
+        let thickness = light_thickness;
         light.par_iter_mut().enumerate().for_each(|(i, texel)| {
             let p = setup.light_point(i % res, i / res, c);
             let rho = frame.grid.sample(p);
@@ -202,21 +240,15 @@ pub fn render(tables: &Tables, frame: &Frame) -> Result<Image, FrameError> {
             if ext.iter().all(|&e| e <= 0.0) {
                 return;
             }
-            let tau: [f64; 3] = ext.map(|e| e * thickness);
-            let f = sample::forward_fraction_mix(&fields, &rho, texel.n + 1.0 + tau[1]);
-            for ch in 0..3 {
-                if ext[ch] <= 0.0 {
-                    continue;
-                }
-                let albedo = sca[ch] / ext[ch];
-                let through = (-tau[ch]).exp();
-                let i = texel.intensity[ch];
-                texel.intensity[ch] =
-                    i * through + i * (1.0 - through) * (albedo * f[ch]).powf(tau[ch]);
-            }
-            if ext[1] > 0.0 {
-                texel.n += sca[1] / ext[1] * tau[1];
-            }
+            cross_slab(
+                texel,
+                &fields,
+                &ext,
+                &sca,
+                &rho,
+                thickness,
+                frame.light_update,
+            );
         });
     }
 

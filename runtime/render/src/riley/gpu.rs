@@ -149,7 +149,11 @@ impl Renderer {
         params.push(v4(setup.right, setup.aspect));
         params.push(v4(setup.up, frame.xi));
         params.push(v4(setup.light, setup.slice_step));
-        params.push(v4(setup.half, 0.0));
+        let continuum = match frame.light_update {
+            crate::LightUpdate::Continuum => 1.0,
+            crate::LightUpdate::Riley2004 => 0.0,
+        };
+        params.push(v4(setup.half, continuum));
         params.push(v4(setup.light_u, setup.light_origin[0]));
         params.push(v4(setup.light_w, setup.light_origin[1]));
         params.push([

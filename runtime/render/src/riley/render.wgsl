@@ -8,7 +8,7 @@ struct RenderParams {
     right: vec4<f32>,        // xyz; w = aspect
     up: vec4<f32>,           // xyz; w = ξ (1/sr)
     light: vec4<f32>,        // direction of travel; w = slice spacing Δ (m)
-    half_vector: vec4<f32>,  // xyz; w unused
+    half_vector: vec4<f32>,  // xyz; w = 1: continuum light update, 0: Eq. 25 as printed
     light_u: vec4<f32>,      // xyz; w = light-buffer origin along u
     light_w: vec4<f32>,      // xyz; w = light-buffer origin along w
     light_texel: vec4<f32>,  // texel size u, w (m); z = sun's y component; w unused
@@ -205,11 +205,22 @@ fn eye_slice(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     let sca = scattering(rho);
-    let lit = light_at(p);
+    let albedo = select(vec3<f32>(0.0), sca / ext, ext > vec3<f32>(0.0));
+    var lit = light_at(p);
+    if (rp.half_vector.w > 0.5) {
+        // The light at the slab's middle (cpu::cross_slab over half the light's path).
+        let tau_h = ext * (0.5 * rp.light.w / dot(rp.half_vector.xyz, rp.light.xyz));
+        let f_h = forward_fraction_mix(rho, lit.w + 1.0 + tau_h.g);
+        let kept = select(vec3<f32>(1.0), exp(-tau_h * (1.0 - albedo * f_h)), ext > vec3<f32>(0.0));
+        var n_h = lit.w;
+        if (ext.g > 0.0) {
+            n_h = n_h + albedo.g * tau_h.g;
+        }
+        lit = vec4<f32>(lit.rgb * kept, n_h);
+    }
     let phase = ams_mix(rho, lit.w + 1.0, -dot(rp.light.xyz, d));
     let thickness = rp.light.w / abs(hd);
     let slab = exp(-ext * thickness);
-    let albedo = select(vec3<f32>(0.0), sca / ext, ext > vec3<f32>(0.0));
     let scattered = lit.rgb * sunlight(p.y) * rp.irradiance.rgb * (phase + rp.up.w) * albedo
         * (1.0 - slab);
     let i = id.x + rp.sizes.x * id.y;
@@ -244,10 +255,16 @@ fn light_slice(@builtin(global_invocation_id) id: vec3<u32>) {
     let texel = light_buffer[id.x + res * id.y];
     let f = forward_fraction_mix(rho, texel.w + 1.0 + tau.g);
     let albedo = select(vec3<f32>(0.0), sca / ext, ext > vec3<f32>(0.0));
-    let through = exp(-tau);
-    let keep = pow(max(albedo * f, vec3<f32>(1e-30)), tau);
+    // runtime::render::LightUpdate::keep.
+    var kept: vec3<f32>;
+    if (rp.half_vector.w > 0.5) {
+        kept = exp(-tau * (1.0 - albedo * f));
+    } else {
+        let through = exp(-tau);
+        kept = through + (1.0 - through) * pow(max(albedo * f, vec3<f32>(1e-30)), tau);
+    }
     let i = texel.rgb;
-    let lit = select(i, i * through + i * (1.0 - through) * keep, ext > vec3<f32>(0.0));
+    let lit = select(i, i * kept, ext > vec3<f32>(0.0));
     var n = texel.w;
     if (ext.g > 0.0) {
         n = n + albedo.g * tau.g;
