@@ -91,6 +91,16 @@ impl PhaseSampler {
     }
 }
 
+impl PhaseSampler {
+    /// A scattering angle from the smooth part alone (the bins, without the δ), whose density
+    /// in solid angle is [`PhaseSampler::eval`] / (1 − δ); `u` ∈ [0, 1)².
+    pub fn sample_smooth(&self, u: f64, v: f64) -> (f64, f64) {
+        let u = self.delta + u * (1.0 - self.delta);
+        self.sample(u.min(1.0 - f64::EPSILON), v)
+            .expect("u ≥ δ samples the bins")
+    }
+}
+
 /// Rayleigh phase function 3/(16π)·(1 + cos²θ) (1/sr).
 pub fn rayleigh(cos: f64) -> f64 {
     3.0 / (16.0 * PI) * (1.0 + cos * cos)
