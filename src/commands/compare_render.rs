@@ -40,8 +40,9 @@ pub fn run(a: CompareRenderArgs) -> Result<()> {
         report.pixels
     );
     println!(
-        "  mean relative error {:.2} %, 95th percentile {:.2} %, bias {:+.2} %",
+        "  mean relative error {:.2} %, median {:.2} %, 95th percentile {:.2} %, bias {:+.2} %",
         report.mean_rel_error * 100.0,
+        report.median_rel_error * 100.0,
         report.p95_rel_error * 100.0,
         report.bias * 100.0
     );

@@ -7,7 +7,7 @@
 //! 0.0722 B (Rec. 709) and the truth's standard error σ_Y = (Σ_c w_c² σ_c²)^{1/2}:
 //! - the pixel's difference d = Y_model − Y_truth counts as 0 when |d| ≤ 3 σ_Y (it cannot be
 //!   told from the truth's own noise), else as d;
-//! - relative error e = |d| / Y_truth: its mean and 95th percentile are reported;
+//! - relative error e = |d| / Y_truth: its mean, median and 95th percentile are reported;
 //! - bias = Σ d / Σ Y_truth (signed; the share of light the model gains or loses overall,
 //!   all masked pixels, without the 3σ rule);
 //! - `resolved` = the share of masked pixels whose |d| ≤ 3σ_Y.
@@ -79,6 +79,9 @@ pub struct ErrorReport {
     pub pixels: usize,
     /// Mean relative error of luminance over the mask (differences within 3σ count as 0).
     pub mean_rel_error: f64,
+    /// Median of the same (robust where the truth is nearly black: a relative error there can
+    /// be huge and dominate the mean).
+    pub median_rel_error: f64,
     /// 95th percentile of the same.
     pub p95_rel_error: f64,
     /// Σ (Y_model − Y_truth) / Σ Y_truth over the mask.
@@ -154,6 +157,7 @@ pub fn compare(
         ErrorReport {
             pixels: n,
             mean_rel_error: mean,
+            median_rel_error: rel[n / 2],
             p95_rel_error: rel[((n - 1) as f64 * 0.95).round() as usize],
             bias: sum_d / sum_t,
             resolved: resolved as f64 / n as f64,
