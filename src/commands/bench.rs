@@ -68,6 +68,13 @@ struct RenderBench {
     /// Also time the CPU reference renderer at each setting.
     #[arg(long)]
     cpu: bool,
+    /// `riley` (frame times on the GPU) or `truth` (the path tracer at --size: paths per
+    /// second, the noise reached in --spp samples per pixel and the time to 1 % noise).
+    #[arg(long, default_value = "riley", value_parser = ["riley", "truth"])]
+    model: String,
+    /// --model truth: samples per pixel of the timed run.
+    #[arg(long, default_value_t = 64)]
+    spp: usize,
     /// Print JSON.
     #[arg(long)]
     json: bool,
@@ -429,7 +436,53 @@ fn bench_crystal(c: CrystalBench) -> Result<()> {
     Ok(())
 }
 
+/// `bench render --model truth`: one timed path-traced frame. The noise n is the median
+/// relative standard error of the volume's pixels (green); it falls as 1/√spp, so the time to
+/// 1 % is t·(n / 0.01)².
+fn bench_truth(b: RenderBench) -> Result<()> {
+    let (scene, tables) = super::render::prepare(
+        "truth",
+        b.scene.as_deref(),
+        b.tables,
+        Some(&b.quality),
+        true,
+        |_| {},
+    )?;
+    let mut frame = scene.frame(&tables)?;
+    frame.width = b.size;
+    frame.height = b.size;
+    let mut settings = scene.truth_settings();
+    settings.spp = b.spp;
+    let t = render::truth::render(&tables, &frame, &settings, &())?;
+    let to_one_percent = t.seconds * (t.noise / 0.01).powi(2);
+    let report = json!({
+        "width": b.size, "height": b.size, "spp": t.spp, "seconds": t.seconds,
+        "paths_per_second": t.paths_per_second, "noise": t.noise,
+        "seconds_to_1_percent_noise": to_one_percent,
+        "threads": rayon::current_num_threads(), "grid": frame.grid.dims,
+    });
+    if b.json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+        return Ok(());
+    }
+    println!(
+        "path-traced truth, {}², {} spp on {} threads: {:.2} s, {:.3} M paths/s, noise {:.2} % \
+         (median relative standard error, green, volume pixels); time to 1 % noise ≈ {:.0} s",
+        b.size,
+        t.spp,
+        rayon::current_num_threads(),
+        t.seconds,
+        t.paths_per_second / 1e6,
+        t.noise * 100.0,
+        to_one_percent
+    );
+    Ok(())
+}
+
 fn bench_render(b: RenderBench) -> Result<()> {
+    if b.model == "truth" {
+        return bench_truth(b);
+    }
     use render::riley::{cpu, gpu::Renderer};
     use runtime::gpu::{Gpu, GpuTables, TexelFormat};
     let (scene, tables) = super::render::prepare(
