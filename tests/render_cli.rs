@@ -267,3 +267,55 @@ fn render_without_tables_bakes_under_the_cache_directory_with_a_safe_name() {
     assert!(name.starts_with("x_______victim-"), "{name}");
     assert!(Tables::open(&dirs[0]).unwrap().field("rain").is_some());
 }
+
+#[test]
+fn scenes_the_path_tracer_cannot_handle_are_refused_before_any_bake() {
+    let cwd = workdir("render-truth-bad");
+    let base = std::fs::read_to_string(scene_path("rainbow.toml")).unwrap();
+    std::fs::write(cwd.join("zeros.f32"), [0u8; 4 * 8]).unwrap();
+    let grid = base.replace(
+        "shape = \"rain_shaft\"",
+        "shape = \"grid\"\nfile = \"zeros.f32\"\ndims = [2, 2, 2]\nmin_m = [-100, 0, 5000]\nmax_m = [100, 200, 5200]",
+    );
+    let cases: [(String, &[&str], &str); 3] = [
+        (
+            format!("{base}\n[[light]]\nposition_m = [0, -3, 100]\nintensity = [1, 1, 1]\n"),
+            &[],
+            "[0.0, -3.0, 100.0]",
+        ),
+        (base.clone(), &["--spp", "0"], "spp = 0"),
+        (grid, &[], "every one of its 8 values is 0"),
+    ];
+    for (text, extra, named) in cases {
+        std::fs::write(cwd.join("bad.toml"), text).unwrap();
+        let mut args = vec![
+            "render",
+            "bad.toml",
+            "--model",
+            "truth",
+            "--quality",
+            "draft",
+            "--tables",
+            "tables",
+            "--out",
+            "bad.exr",
+            "--width",
+            "8",
+            "--height",
+            "8",
+        ];
+        args.extend_from_slice(extra);
+        let out = photometeor(&args, &cwd);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{named}: accepted");
+        assert!(stderr.contains(named), "{named}: not named:\n{stderr}");
+        assert!(
+            !cwd.join("tables").exists(),
+            "{named}: baked before refusing"
+        );
+        assert!(
+            !cwd.join("bad.exr").exists(),
+            "{named}: an image was written"
+        );
+    }
+}

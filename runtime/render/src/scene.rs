@@ -560,11 +560,18 @@ fn volume(v: VolumeKeys, base: &Path) -> Result<Volume, String> {
                     "min_m = {lo:?} must lie below max_m = {hi:?} on every axis"
                 ));
             }
+            let (file, min_m, max_m) = (
+                base.join(file),
+                DVec3::from_array(lo),
+                DVec3::from_array(hi),
+            );
+            let values = crate::volume::read_grid(&file, dims, min_m, max_m)?;
             Shape::Grid {
-                file: base.join(file),
+                file,
                 dims,
-                min_m: DVec3::from_array(lo),
-                max_m: DVec3::from_array(hi),
+                min_m,
+                max_m,
+                values,
             }
         }
         other => {

@@ -148,6 +148,9 @@ pub enum Shape {
         min_m: DVec3,
         /// Upper corner of the box (m); above `min_m` on every axis.
         max_m: DVec3,
+        /// The file's values, read when the scene is parsed (so a bad or empty file is refused
+        /// before anything is baked): channel 0 of a grid over [min_m, max_m].
+        values: DensityGrid,
     },
 }
 
@@ -320,12 +323,7 @@ impl Density {
                 top: top_m,
                 seed: v.seed,
             },
-            Shape::Grid {
-                file,
-                dims,
-                min_m,
-                max_m,
-            } => Density::Grid(read_grid(file, *dims, *min_m, *max_m)?),
+            Shape::Grid { values, .. } => Density::Grid(values.clone()),
         })
     }
 
@@ -382,7 +380,9 @@ impl Density {
     }
 }
 
-fn read_grid(
+/// Reads a grid volume's raw f32 file: `dims` values (each axis in [1, 4096]), finite and ≥ 0,
+/// not all zero (a grid without particles renders nothing).
+pub fn read_grid(
     file: &Path,
     dims: [usize; 3],
     min_m: DVec3,
@@ -417,6 +417,12 @@ fn read_grid(
             ));
         }
         data.push([v, 0.0, 0.0, 0.0]);
+    }
+    if data.iter().all(|v| v[0] == 0.0) {
+        return Err(format!(
+            "grid {}: every one of its {count} values is 0: the volume holds no particles",
+            file.display()
+        ));
     }
     Ok(DensityGrid {
         min_m,
@@ -571,6 +577,9 @@ mod tests {
             negative.contains("-2") && negative.contains("index 1"),
             "{negative}"
         );
+        std::fs::write(&file, [0u8; 8]).unwrap();
+        let empty = read_grid(&file, [2, 1, 1], DVec3::ZERO, DVec3::ONE).unwrap_err();
+        assert!(empty.contains("every one of its 2 values is 0"), "{empty}");
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -22,7 +22,8 @@
 //! ```
 //!
 //! Errors name the key and its line; nothing is written before the whole scene is valid.
-//! The tables `[render]`, `[camera]`, `[sun]`, `[sky]` and `[[volume]]` belong to the renderer
+//! The tables `[render]`, `[camera]`, `[sun]`, `[sky]`, `[ground]`, `[[volume]]` and `[[light]]`
+//! belong to the renderer
 //! (`photometeor render`, `photometeor-render`'s `scene` module) and are passed over here.
 
 use std::path::{Path, PathBuf};
@@ -112,6 +113,10 @@ struct SceneFile {
     _sky: Option<toml::Value>,
     #[serde(default, rename = "volume")]
     _volume: Option<toml::Value>,
+    #[serde(default, rename = "ground")]
+    _ground: Option<toml::Value>,
+    #[serde(default, rename = "light")]
+    _light: Option<toml::Value>,
 }
 
 #[derive(Debug, Deserialize)]
