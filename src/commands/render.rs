@@ -73,6 +73,12 @@ pub struct RenderArgs {
     /// same for a seed whatever the thread count.
     #[arg(long)]
     seed: Option<u64>,
+    /// --model truth: wavelengths each path carries, 1–4 (hero-wavelength sampling: the
+    /// first decides the path, all of them score it, combined by the balance heuristic); the
+    /// default, 0, carries all three of an rgb3 bake and 4 of a spectral one. 1 is one
+    /// wavelength per path, the simple baseline.
+    #[arg(long, default_value_t = 0)]
+    wavelengths_per_path: usize,
     /// Accuracy preset of the bake, overriding the scene's.
     #[arg(long, value_parser = ["draft", "standard", "reference"])]
     quality: Option<String>,
@@ -142,6 +148,13 @@ pub fn prepare(
 
 /// Runs `photometeor render`.
 pub fn run(a: RenderArgs) -> Result<()> {
+    if a.wavelengths_per_path > render::truth::MAX_CARRIED {
+        bail!(
+            "--wavelengths-per-path {} is outside the allowed range [1, {}] (0: the default)",
+            a.wavelengths_per_path,
+            render::truth::MAX_CARRIED
+        );
+    }
     let (render, tables) = prepare(
         &a.model,
         a.scene.as_deref(),
@@ -241,6 +254,7 @@ fn run_truth(a: &RenderArgs, render: &RenderScene, tables: &Tables) -> Result<()
     let frame: Frame = render.frame(tables)?;
     let mut settings = render.truth_settings();
     settings.target_noise = a.noise;
+    settings.wavelengths_per_path = a.wavelengths_per_path;
     let bar = crate::progress::SampleBar::new(a.quiet, settings.spp as u64);
     let truth = render::truth::render(tables, &frame, &settings, &bar)?;
     bar.finish();

@@ -384,6 +384,7 @@ impl RenderScene {
             seed: self.seed,
             ground_albedo: self.ground_albedo,
             lights: self.lights.clone(),
+            wavelengths_per_path: 0,
         }
     }
 

@@ -4,18 +4,29 @@
 //! against it (`photometeor compare-render`, `docs/truth.md`).
 //!
 //! # Transport
-//! - **Spectral.** Every path carries one wavelength λ_j of the bake, drawn with probability
-//!   q_j = (w_Rj + w_Gj + w_Bj)/3 from the manifest's channel weights, and uses that
-//!   wavelength's own phase function, σ_ext and albedo (`<field>.single.exr`). Its radiance L_j
-//!   adds w_cj L_j / q_j to channel c, so a pixel's R, G, B are the same weighted sums over
-//!   wavelengths that the tables are (Σ_j w_cj L_j); for `rgb3` bakes each channel is its own
-//!   wavelength.
+//! - **Spectral.** Every camera path carries n = min(N, [`MAX_CARRIED`]) of the bake's N
+//!   wavelengths — all three of an `rgb3` bake — by hero-wavelength sampling (Wilkie, Nawaz,
+//!   Droske, Weidlich & Hanika 2014): one uniform number u places the m-th at u + m/n (mod 1)
+//!   in the CDF of q_j = (w_Rj + w_Gj + w_Bj)/3 (from the manifest's channel weights), so
+//!   each is marginally drawn with probability q_j. The first, the hero, makes every sampling
+//!   decision with its own phase function, σ_ext and albedo (`<field>.single.exr`); for each
+//!   carried wavelength m the path keeps f_m/p_0 (its contribution over the hero's sampling
+//!   density) and p_m/p_0 (how likely m's own sampling was to make the same path). Its
+//!   radiance L_m then adds w_cm L_m f_m / (q_m Σ_k p_k) to channel c: the one-sample balance
+//!   heuristic over the carried wavelengths (Veach 1997 §9.2), which keeps every weight below
+//!   n times what m's own sampling would give, whatever the spread of phase functions, σ_ext
+//!   and Rayleigh β with λ. A pixel's R, G, B are then the same weighted sums over
+//!   wavelengths that the tables are (Σ_j w_cj L_j), and every path feeds every channel.
+//!   `wavelengths_per_path = 1` is one wavelength per path (its contribution w_cj L_j / q_j),
+//!   which the photon estimator of the slab tests uses.
 //! - **Volumes.** Free paths in the density grid by delta tracking (Woodcock et al. 1965) with
-//!   the grid's majorant μ̄_j = Σ_f max ρ_f · σ_ext,f,j; at a real collision the scattering
-//!   field is chosen by its share of β_sca and the path's weight multiplied by β_sca/β_ext
-//!   (Riley et al. 2004 Eqs. 3 and 6: the mixture of fields is the β_sca-weighted mix of their
-//!   phase functions). Transmittance for next-event estimation by ratio tracking (Cramer 1978;
-//!   Novák et al. 2014), with Russian roulette once it falls below 1/20.
+//!   one majorant for every wavelength, μ̄ = max_j Σ_f max ρ_f · σ_ext,f,j, decided by the
+//!   hero; a null collision changes wavelength m's density by (μ̄ − μ_m)/(μ̄ − μ_0). At a real
+//!   collision the scattering field is chosen by the hero's share of β_sca and f_m gains
+//!   β_sca,f,m/β_ext,0 (Riley et al. 2004 Eqs. 3 and 6: the mixture of fields is the
+//!   β_sca-weighted mix of their phase functions). Transmittance for next-event estimation by
+//!   ratio tracking (Cramer 1978; Novák et al. 2014) on tentative points shared by the carried
+//!   wavelengths, with Russian roulette once the largest falls below 1/20.
 //! - **Air.** An exponential Rayleigh atmosphere β(y) = β_sl(λ) e^{−y/H} with the sky model's
 //!   β_sl and scale height H (Riley et al. 2004 §4.1, Eq. 1 for the phase function), sampled
 //!   analytically (the optical depth along a ray is closed-form), competing with the volumes:
@@ -47,8 +58,8 @@
 //!   cloud's camera-side radiances from heavy-tailed (18–35 % low at 5·10⁴ paths) into ones
 //!   that agree within 3σ, and it cuts the variance of HG double scattering 27-fold.
 //! - **Paths** end when they leave the scene (black space), on a black ground, by Russian
-//!   roulette once the weight falls below [`ROULETTE_WEIGHT`] (survivors carry exactly that
-//!   weight, never more), or after [`MAX_BOUNCES`] scatterings (a safety bound far beyond any
+//!   roulette once the largest weight n·f_m/Σ_k p_k falls below [`ROULETTE_WEIGHT`]
+//!   (survivors carry exactly that weight, never more), or after [`MAX_BOUNCES`] scatterings (a safety bound far beyond any
 //!   table order).
 //!
 //! # Determinism
@@ -110,6 +121,9 @@ pub struct TruthSettings {
     pub ground_albedo: f64,
     /// Point and spot lights.
     pub lights: Vec<Light>,
+    /// Wavelengths each camera path carries, 1…[`MAX_CARRIED`]; 0: the default (all of an
+    /// `rgb3` bake's three, else [`MAX_CARRIED`]). 1 is one wavelength per path.
+    pub wavelengths_per_path: usize,
 }
 
 impl Default for TruthSettings {
@@ -120,6 +134,7 @@ impl Default for TruthSettings {
             seed: 1,
             ground_albedo: 0.0,
             lights: Vec::new(),
+            wavelengths_per_path: 0,
         }
     }
 }
@@ -168,10 +183,45 @@ struct FieldOptics {
 #[derive(Debug, Clone)]
 struct Band {
     fields: Vec<FieldOptics>,
-    majorant: f64,
     beta_air_sl: f64,
     /// w_cj / q_j: what one unit of this wavelength's radiance adds to channel c.
     to_rgb: [f64; 3],
+}
+
+/// Most wavelengths one path carries (module docs, "Spectral").
+pub const MAX_CARRIED: usize = 4;
+
+/// The wavelengths one path carries and, per wavelength m, its path's contribution and
+/// sampling density relative to the hero's sampling density p_0 (module docs, "Spectral").
+#[derive(Debug, Clone, Copy)]
+struct Carried {
+    n: usize,
+    /// Indices into the tracer's bands; `band[0]` is the hero, which makes every decision.
+    band: [usize; MAX_CARRIED],
+    /// f_m(x)/p_0(x).
+    f: [f64; MAX_CARRIED],
+    /// p_m(x)/p_0(x): how likely wavelength m's own sampling was to make the same path.
+    r: [f64; MAX_CARRIED],
+}
+
+impl Carried {
+    /// W_m = f_m / Σ_k p_k (the balance heuristic over the carried wavelengths).
+    fn weights(&self) -> [f64; MAX_CARRIED] {
+        let s: f64 = self.r[..self.n].iter().sum();
+        std::array::from_fn(|m| {
+            if m < self.n && s > 0.0 {
+                self.f[m] / s
+            } else {
+                0.0
+            }
+        })
+    }
+
+    /// Multiplies wavelength m's f and p alike (an analog decision).
+    fn both(&mut self, m: usize, k: f64) {
+        self.f[m] *= k;
+        self.r[m] *= k;
+    }
 }
 
 /// What ends a free path.
@@ -212,6 +262,10 @@ pub struct Tracer<'a> {
     bands: Vec<Band>,
     /// Cumulative q_j.
     band_cdf: Vec<f64>,
+    /// The volumes' majorant over every wavelength, max_j Σ_f max ρ_f σ_ext,f,j.
+    majorant: f64,
+    /// Whether the air scatters.
+    air_on: bool,
     gamma: f64,
     sun: DVec3,
     sun_irradiance: [f64; 3],
@@ -228,6 +282,9 @@ pub struct Tracer<'a> {
     /// Share ε of continuations at volume vertices drawn from the phase function's lobe about
     /// the sun instead of about the path ([`GUIDE_SHARE`]; 0: plain phase sampling).
     pub guide: f64,
+    /// Wavelengths each camera path carries, 1…[`MAX_CARRIED`] (default: all of an `rgb3`
+    /// bake's three, else 4); 1 is one wavelength per path.
+    pub wavelengths_per_path: usize,
     /// Green channel σ_ext per field (for T_vol), from the tables.
     sigma_ext_g: [f64; MAX_FIELDS],
 }
@@ -296,6 +353,7 @@ impl<'a> Tracer<'a> {
         };
         let mut bands = Vec::new();
         let mut band_cdf = Vec::new();
+        let mut majorant: f64 = 0.0;
         let mut acc = 0.0;
         for (j, &lambda) in lambdas.iter().enumerate() {
             let q = (weights[0][j] + weights[1][j] + weights[2][j]) / 3.0;
@@ -315,14 +373,14 @@ impl<'a> Tracer<'a> {
                     }
                 })
                 .collect();
-            let majorant = fields
+            majorant = fields
                 .iter()
                 .zip(&max)
                 .map(|(f, m)| f.sigma_ext * m)
-                .sum::<f64>();
+                .sum::<f64>()
+                .max(majorant);
             bands.push(Band {
                 fields,
-                majorant,
                 beta_air_sl: beta_at(lambda),
                 to_rgb: std::array::from_fn(|c| weights[c][j] / q),
             });
@@ -340,8 +398,14 @@ impl<'a> Tracer<'a> {
         Ok(Self {
             grid: &frame.grid,
             n_fields: tables.fields.len(),
+            air_on: bands.iter().any(|b| b.beta_air_sl > 0.0),
+            wavelengths_per_path: match settings.wavelengths_per_path {
+                0 => bands.len().min(MAX_CARRIED),
+                n => n,
+            },
             bands,
             band_cdf,
+            majorant,
             gamma: 1.0 / frame.atmosphere.scale_height_m,
             sun: frame.sun.direction(),
             sun_irradiance: frame.sun.irradiance,
@@ -365,35 +429,59 @@ impl<'a> Tracer<'a> {
         }
     }
 
-    /// Volume extinction at `p` for band `b`, and the densities.
-    fn extinction(&self, b: &Band, p: DVec3) -> (f64, [f64; MAX_FIELDS]) {
-        let rho = self.grid.sample(p);
-        let mut e = 0.0;
-        for f in 0..self.n_fields {
-            e += rho[f] * b.fields[f].sigma_ext;
+    /// The wavelengths of one path (module docs, "Spectral"): `n` band indices from one
+    /// uniform number u, the m-th at u + m/n (mod 1) in the bands' CDF, so each is marginally
+    /// drawn with probability q_j; the first is the hero.
+    fn carry(&self, n: usize, rng: &mut Rng) -> Carried {
+        let u = rng.uniform();
+        let mut band = [0; MAX_CARRIED];
+        for (m, b) in band.iter_mut().enumerate().take(n) {
+            let mut um = u + m as f64 / n as f64;
+            if um >= 1.0 {
+                um -= 1.0;
+            }
+            *b = self
+                .band_cdf
+                .partition_point(|&c| c <= um)
+                .min(self.bands.len() - 1);
         }
-        (e, rho)
-    }
-
-    /// Air's β_ext at height y.
-    fn air(&self, b: &Band, y: f64) -> f64 {
-        b.beta_air_sl * (-self.gamma * y).exp()
-    }
-
-    /// Air optical depth from `p` along unit `d` over distance `s` (∞ allowed for d_y > 0).
-    fn air_depth(&self, b: &Band, p: DVec3, d: DVec3, s: f64) -> f64 {
-        if b.beta_air_sl == 0.0 {
-            return 0.0;
+        Carried {
+            n,
+            band,
+            f: [1.0; MAX_CARRIED],
+            r: [1.0; MAX_CARRIED],
         }
-        self.air(b, p.y) * crate::sky::one_minus_u_over_p(self.gamma, d.y, s) / self.gamma
     }
 
-    /// Distance to the next air collision from `p` along `d`, or ∞.
+    /// The optics of the `m`-th carried wavelength.
+    fn band_of(&self, c: &Carried, m: usize) -> &Band {
+        &self.bands[c.band[m]]
+    }
+
+    /// Volume extinction at densities `rho` for each carried wavelength.
+    fn extinctions(&self, c: &Carried, rho: &[f64; MAX_FIELDS]) -> [f64; MAX_CARRIED] {
+        let mut e = [0.0; MAX_CARRIED];
+        for (m, e) in e.iter_mut().enumerate().take(c.n) {
+            let b = self.band_of(c, m);
+            for f in 0..self.n_fields {
+                *e += rho[f] * b.fields[f].sigma_ext;
+            }
+        }
+        e
+    }
+
+    /// Air optical depth per unit β_sl from `p` along unit `d` over distance `s` (∞ allowed
+    /// for d_y > 0): β_sl times this is a wavelength's optical depth.
+    fn air_path(&self, p: DVec3, d: DVec3, s: f64) -> f64 {
+        (-self.gamma * p.y).exp() * crate::sky::one_minus_u_over_p(self.gamma, d.y, s) / self.gamma
+    }
+
+    /// Distance to the next air collision from `p` along `d` for the hero, or ∞.
     fn sample_air(&self, b: &Band, p: DVec3, d: DVec3, rng: &mut Rng) -> f64 {
         if b.beta_air_sl == 0.0 {
             return f64::INFINITY;
         }
-        let target = rng.exp() / self.air(b, p.y);
+        let target = rng.exp() / (b.beta_air_sl * (-self.gamma * p.y).exp());
         let k = self.gamma * d.y;
         if k.abs() < 1e-15 {
             return target;
@@ -405,67 +493,128 @@ impl<'a> Tracer<'a> {
         -(-x).ln_1p() / k
     }
 
-    /// Delta tracking through the grid up to distance `limit`: the distance and densities of
-    /// the first real collision, if any.
+    /// The air's part of a free path of length `s` from `p` along `d` that ends without an
+    /// air collision (`collided` false) or in one: every wavelength's density over the hero's
+    /// (the air is analog, so f and p change alike).
+    fn air_ratios(&self, c: &mut Carried, p: DVec3, d: DVec3, s: f64, collided: bool) {
+        if c.n == 1 || !self.air_on {
+            return;
+        }
+        let path = self.air_path(p, d, s);
+        let b0 = self.band_of(c, 0).beta_air_sl;
+        for m in 1..c.n {
+            let bm = self.band_of(c, m).beta_air_sl;
+            let mut k = (-(bm - b0) * path).exp();
+            if collided {
+                k *= bm / b0;
+            }
+            c.both(m, k);
+        }
+    }
+
+    /// Delta tracking through the grid up to distance `limit` with the common majorant,
+    /// decided by the hero: the distance and densities of the first real collision, if any.
+    /// At each null collision every other wavelength's density changes by its share of null
+    /// collisions over the hero's, (μ̄ − μ_m)/(μ̄ − μ_0).
     fn track(
         &self,
-        b: &Band,
+        c: &mut Carried,
         p: DVec3,
         d: DVec3,
         limit: f64,
         rng: &mut Rng,
-    ) -> Option<(f64, f64, [f64; MAX_FIELDS])> {
+    ) -> Option<(f64, [f64; MAX_FIELDS])> {
         let (t0, t1) = box_span(self.grid.min_m, self.grid.max_m, p, d)?;
         let end = t1.min(limit);
+        let mu = self.majorant;
         let mut t = t0;
         loop {
-            t += rng.exp() / b.majorant;
+            t += rng.exp() / mu;
             if t >= end {
                 return None;
             }
-            let (e, rho) = self.extinction(b, p + t * d);
-            if rng.uniform() * b.majorant < e {
-                return Some((t, e, rho));
+            let rho = self.grid.sample(p + t * d);
+            let e = self.extinctions(c, &rho);
+            if rng.uniform() * mu < e[0] {
+                return Some((t, rho));
+            }
+            for m in 1..c.n {
+                c.both(m, (mu - e[m]) / (mu - e[0]));
             }
         }
     }
 
-    /// Transmittance of the volumes from `p` along `d` over `limit` by ratio tracking.
-    fn volume_transmittance(&self, b: &Band, p: DVec3, d: DVec3, limit: f64, rng: &mut Rng) -> f64 {
+    /// Transmittance of the volumes from `p` along `d` over `limit` for each carried
+    /// wavelength, by ratio tracking on shared tentative points (the majorant is common), with
+    /// Russian roulette once the largest falls below 1/20.
+    fn volume_transmittance(
+        &self,
+        c: &Carried,
+        p: DVec3,
+        d: DVec3,
+        limit: f64,
+        rng: &mut Rng,
+    ) -> [f64; MAX_CARRIED] {
+        let mut tr = [1.0; MAX_CARRIED];
         let Some((t0, t1)) = box_span(self.grid.min_m, self.grid.max_m, p, d) else {
-            return 1.0;
+            return tr;
         };
         let end = t1.min(limit);
+        let mu = self.majorant;
         let mut t = t0;
-        let mut tr = 1.0;
         loop {
-            t += rng.exp() / b.majorant;
+            t += rng.exp() / mu;
             if t >= end {
                 return tr;
             }
-            let (e, _) = self.extinction(b, p + t * d);
-            tr *= 1.0 - e / b.majorant;
-            if tr < 0.05 {
+            let e = self.extinctions(c, &self.grid.sample(p + t * d));
+            let mut largest: f64 = 0.0;
+            for m in 0..c.n {
+                tr[m] *= 1.0 - e[m] / mu;
+                largest = largest.max(tr[m]);
+            }
+            if largest < 0.05 {
                 if rng.uniform() < 0.5 {
-                    return 0.0;
+                    return [0.0; MAX_CARRIED];
                 }
-                tr *= 2.0;
+                for t in tr.iter_mut() {
+                    *t *= 2.0;
+                }
             }
         }
     }
 
-    /// Direct light at `p` from every source, weighted per direction by `weight(ω)` (the
-    /// phase function or BRDF × cosine), per channel before the band's `to_rgb`.
-    fn direct(&self, b: &Band, p: DVec3, weight: impl Fn(DVec3) -> f64, rng: &mut Rng) -> [f64; 3] {
-        let mut out = [0.0; 3];
-        let w = weight(self.sun);
-        if w > 0.0 {
-            let t = (-self.air_depth(b, p, self.sun, f64::INFINITY)).exp()
-                * self.volume_transmittance(b, p, self.sun, f64::INFINITY, rng);
-            for c in 0..3 {
-                out[c] += w * t * self.sun_irradiance[c];
+    /// Adds the direct light at `p` from every source: for carried wavelength m and channel
+    /// ch, `coef[m][ch]` × `weight(ω)[m]` (the phase function or BRDF × cosine) × the
+    /// transmittance × the source.
+    fn direct(
+        &self,
+        c: &Carried,
+        p: DVec3,
+        coef: &[[f64; 3]; MAX_CARRIED],
+        weight: impl Fn(DVec3) -> [f64; MAX_CARRIED],
+        sum: &mut [f64; 3],
+        rng: &mut Rng,
+    ) {
+        let mut add = |dir: DVec3, limit: f64, source: [f64; 3], rng: &mut Rng| {
+            let w = weight(dir);
+            if w[..c.n].iter().all(|&w| w <= 0.0) {
+                return;
             }
-        }
+            let tv = self.volume_transmittance(c, p, dir, limit, rng);
+            let path = if self.air_on {
+                self.air_path(p, dir, limit)
+            } else {
+                0.0
+            };
+            for m in 0..c.n {
+                let t = w[m] * tv[m] * (-self.band_of(c, m).beta_air_sl * path).exp();
+                for ch in 0..3 {
+                    sum[ch] += coef[m][ch] * t * source[ch];
+                }
+            }
+        };
+        add(self.sun, f64::INFINITY, self.sun_irradiance, rng);
         for light in &self.lights {
             let to = light.position_m - p;
             let r2 = to.length_squared();
@@ -479,195 +628,271 @@ impl<'a> Tracer<'a> {
             {
                 continue;
             }
-            let w = weight(dir);
-            if w <= 0.0 {
-                continue;
-            }
-            let t = (-self.air_depth(b, p, dir, r)).exp()
-                * self.volume_transmittance(b, p, dir, r, rng);
-            for c in 0..3 {
-                out[c] += w * t * light.intensity[c] / r2;
-            }
+            add(dir, r, light.intensity.map(|i| i / r2), rng);
         }
-        out
     }
 
-    /// The band of a path, drawn with probability q_j.
-    fn band(&self, rng: &mut Rng) -> &Band {
-        let u = rng.uniform();
-        let j = self
-            .band_cdf
-            .partition_point(|&c| c <= u)
-            .min(self.bands.len() - 1);
-        &self.bands[j]
-    }
-
-    /// Follows the free path from `p` along `d` to what ends it, moving `p` there. At a
-    /// volume collision the scattering field is chosen by its share of β_sca and `weight` is
-    /// multiplied by β_sca/β_ext.
-    fn next_event(
-        &self,
-        b: &Band,
-        p: &mut DVec3,
-        d: DVec3,
-        weight: &mut f64,
-        rng: &mut Rng,
-    ) -> Event {
+    /// Follows the free path from `p` along `d` to what ends it, moving `p` there, and updates
+    /// every carried wavelength's f and p for it. At a volume collision the hero chooses the
+    /// scattering field by its share of β_sca, and f gains β_sca,f (the albedo weighting).
+    fn next_event(&self, c: &mut Carried, p: &mut DVec3, d: DVec3, rng: &mut Rng) -> Event {
         let t_ground = if d.y < 0.0 {
             (p.y / -d.y).max(0.0)
         } else {
             f64::INFINITY
         };
-        let t_air = self.sample_air(b, *p, d, rng);
-        if let Some((t, e, rho)) = self.track(b, *p, d, t_ground.min(t_air), rng) {
+        let t_air = self.sample_air(self.band_of(c, 0), *p, d, rng);
+        if let Some((t, rho)) = self.track(c, *p, d, t_ground.min(t_air), rng) {
+            self.air_ratios(c, *p, d, t, false);
             *p += t * d;
-            let mut sca = [0.0; MAX_FIELDS];
-            let mut total = 0.0;
-            for f in 0..self.n_fields {
-                sca[f] = rho[f] * b.fields[f].sigma_ext * b.fields[f].albedo;
-                total += sca[f];
-            }
-            *weight *= total / e;
-            let mut pick = rng.uniform() * total;
-            let mut field = self.n_fields - 1;
-            for f in 0..self.n_fields {
-                if pick < sca[f] {
-                    field = f;
-                    break;
+            let e = self.extinctions(c, &rho);
+            // Per carried wavelength: β_sca of each field and in all.
+            let mut sca = [[0.0; MAX_FIELDS]; MAX_CARRIED];
+            let mut total = [0.0; MAX_CARRIED];
+            for m in 0..c.n {
+                let b = self.band_of(c, m);
+                for f in 0..self.n_fields {
+                    sca[m][f] = rho[f] * b.fields[f].sigma_ext * b.fields[f].albedo;
+                    total[m] += sca[m][f];
                 }
-                pick -= sca[f];
+            }
+            let field = if total[0] > 0.0 {
+                let mut pick = rng.uniform() * total[0];
+                let mut field = self.n_fields - 1;
+                for f in 0..self.n_fields {
+                    if pick < sca[0][f] {
+                        field = f;
+                        break;
+                    }
+                    pick -= sca[0][f];
+                }
+                field
+            } else {
+                (rng.uniform() * self.n_fields as f64) as usize % self.n_fields
+            };
+            // The probability of choosing `field` at wavelength m (uniform where nothing
+            // scatters), and the collision's p_m = μ_m/μ̄ · that, f_m = β_sca,field,m/μ̄.
+            let choice = |m: usize| {
+                if total[m] > 0.0 {
+                    sca[m][field] / total[m]
+                } else {
+                    1.0 / self.n_fields as f64
+                }
+            };
+            let p0 = e[0] * choice(0);
+            for m in 0..c.n {
+                c.f[m] *= sca[m][field] / p0;
+                c.r[m] *= e[m] * choice(m) / p0;
             }
             Event::Volume(field)
         } else if t_air < t_ground {
+            self.air_ratios(c, *p, d, t_air, true);
             *p += t_air * d;
             Event::Air
         } else if t_ground.is_finite() {
+            self.air_ratios(c, *p, d, t_ground, false);
             *p += t_ground * d;
             p.y = 0.0;
             Event::Ground
         } else {
+            self.air_ratios(c, *p, d, f64::INFINITY, false);
             Event::Escape
         }
     }
 
-    /// The direction after scattering `d` at a volume or air event (the phase function's own
-    /// sample; a δ leaves `d` as it is).
-    fn scatter(&self, b: &Band, event: Event, d: DVec3, rng: &mut Rng) -> DVec3 {
-        match event {
-            Event::Volume(field) => {
-                match b.fields[field].phase.sample(rng.uniform(), rng.uniform()) {
-                    Some((omm, sin)) => rotate(d, omm, sin, rng.uniform()),
-                    None => d,
-                }
-            }
-            Event::Air => {
-                let mu = sample_rayleigh(rng.uniform());
-                rotate(d, 1.0 - mu, (1.0 - mu * mu).max(0.0).sqrt(), rng.uniform())
-            }
-            Event::Ground | Event::Escape => d,
-        }
-    }
-
-    /// The continuation at a volume vertex and its weight p/q: with probability ε from the
-    /// smooth part of the phase function about the sun direction, else from the phase
-    /// function about `d`; q = (1 − ε) p(d, ω) + ε p(sun, ω)/(1 − f) for a smooth ω, and the
-    /// forward δ (only the second branch draws it) has weight 1/(1 − ε). Unbiased for any ε < 1.
-    fn guided(&self, ph: &PhaseSampler, d: DVec3, rng: &mut Rng) -> (DVec3, f64) {
-        let eps = self.guide;
-        let next = if rng.uniform() < eps {
+    /// The continuation at a volume vertex of `field`: with probability ε from the smooth
+    /// part of the hero's phase function about the sun direction, else from it about `d`
+    /// (the forward δ included). The hero's density is q_0 = (1 − ε) p_0(d, ω) + ε p_0(sun,
+    /// ω)/(1 − f_0) for a smooth ω (f the forward δ, which only the second branch draws), each
+    /// carried wavelength's q_m the same with its own phase function; f_m gains p_m(d, ω).
+    /// Unbiased for any ε < 1.
+    fn continue_volume(
+        &self,
+        c: &mut Carried,
+        field: usize,
+        d: DVec3,
+        eps: f64,
+        rng: &mut Rng,
+    ) -> DVec3 {
+        let phase = |m: usize| &self.band_of(c, m).fields[field].phase;
+        let ph = phase(0);
+        let next = if eps > 0.0 && rng.uniform() < eps {
             let (omm, sin) = ph.sample_smooth(rng.uniform(), rng.uniform());
             rotate(self.sun, omm, sin, rng.uniform())
         } else {
             match ph.sample(rng.uniform(), rng.uniform()) {
                 Some((omm, sin)) => rotate(d, omm, sin, rng.uniform()),
-                None => return (d, 1.0 / (1.0 - eps)),
+                None => {
+                    // The forward δ: p_m = (1 − ε) f_m, f_m = f_m.
+                    let f0 = ph.delta();
+                    let ratios: [f64; MAX_CARRIED] =
+                        std::array::from_fn(|m| if m < c.n { phase(m).delta() / f0 } else { 0.0 });
+                    for m in 0..c.n {
+                        c.f[m] *= ratios[m] / (1.0 - eps);
+                        c.r[m] *= ratios[m];
+                    }
+                    return d;
+                }
             }
         };
-        let p = ph.eval(d, next);
-        let q = (1.0 - eps) * p + eps * ph.eval(self.sun, next) / (1.0 - ph.delta());
-        (next, if q > 0.0 { p / q } else { 0.0 })
+        if eps == 0.0 && c.n == 1 {
+            return next; // f_0 = q_0
+        }
+        let kd = ph.bin(d, next);
+        let ks = if eps > 0.0 { ph.bin(self.sun, next) } else { 0 };
+        let q = |ph: &PhaseSampler| {
+            let p = ph.value(kd);
+            let q = if eps > 0.0 {
+                (1.0 - eps) * p + eps * ph.value(ks) / (1.0 - ph.delta())
+            } else {
+                p
+            };
+            (p, q)
+        };
+        let (_, q0) = q(ph);
+        if q0 <= 0.0 {
+            c.f = [0.0; MAX_CARRIED];
+            return next;
+        }
+        let pq: [(f64, f64); MAX_CARRIED] =
+            std::array::from_fn(|m| if m < c.n { q(phase(m)) } else { (0.0, 0.0) });
+        for (m, (p, q)) in pq.iter().enumerate().take(c.n) {
+            c.f[m] *= p / q0;
+            c.r[m] *= q / q0;
+        }
+        next
+    }
+
+    /// Russian roulette on the path's largest effective weight n·W_m (module docs, "Paths"):
+    /// survivors are scaled so that it becomes [`ROULETTE_WEIGHT`]; false when the path ends.
+    fn roulette(c: &mut Carried, rng: &mut Rng) -> bool {
+        let w = c.weights();
+        let largest = c.n as f64 * w[..c.n].iter().fold(0.0f64, |a, &b| a.max(b));
+        let mut kept = largest;
+        if !roulette(&mut kept, rng) {
+            return false;
+        }
+        if kept != largest {
+            for f in c.f.iter_mut() {
+                *f *= kept / largest;
+            }
+        }
+        true
     }
 
     /// One path's radiance estimate (per channel) arriving at `origin` from direction `-dir`
     /// (the path leaves `origin` along `dir`).
     pub fn radiance(&self, origin: DVec3, dir: DVec3, rng: &mut Rng) -> [f64; 3] {
-        let b = self.band(rng);
+        let n = self.wavelengths_per_path.clamp(1, MAX_CARRIED);
+        let mut c = self.carry(n, rng);
         let mut sum = [0.0; 3];
-        let mut throughput = 1.0;
         let (mut p, mut d) = (origin, dir);
         for bounce in 0..self.max_scatterings {
-            let event = self.next_event(b, &mut p, d, &mut throughput, rng);
-            let l = match event {
-                Event::Volume(field) => {
-                    let ph = &b.fields[field].phase;
-                    self.direct(b, p, |w| ph.eval(d, w), rng)
+            let event = self.next_event(&mut c, &mut p, d, rng);
+            // What a unit of radiance at wavelength m adds to channel ch: w_ch,m/q_m × W_m.
+            let w = c.weights();
+            let coef: [[f64; 3]; MAX_CARRIED] = std::array::from_fn(|m| {
+                if m < c.n {
+                    let to = self.band_of(&c, m).to_rgb;
+                    std::array::from_fn(|ch| to[ch] * w[m])
+                } else {
+                    [0.0; 3]
                 }
-                Event::Air => self.direct(b, p, |w| rayleigh(d.dot(w)), rng),
+            });
+            match event {
+                Event::Volume(field) => {
+                    let ph0 = &self.band_of(&c, 0).fields[field].phase;
+                    let weight = |w: DVec3| {
+                        let k = ph0.bin(d, w);
+                        std::array::from_fn(|m| {
+                            if m < c.n {
+                                self.band_of(&c, m).fields[field].phase.value(k)
+                            } else {
+                                0.0
+                            }
+                        })
+                    };
+                    self.direct(&c, p, &coef, weight, &mut sum, rng);
+                }
+                Event::Air => {
+                    let weight = |w: DVec3| [rayleigh(d.dot(w)); MAX_CARRIED];
+                    self.direct(&c, p, &coef, weight, &mut sum, rng);
+                }
                 Event::Ground => {
                     let a = self.ground_albedo;
-                    if a <= 0.0 {
+                    if a == 0.0 {
                         break;
                     }
-                    self.direct(b, p, |w| a / PI * w.y.max(0.0), rng)
+                    let weight = |w: DVec3| [a / PI * w.y.max(0.0); MAX_CARRIED];
+                    self.direct(&c, p, &coef, weight, &mut sum, rng);
                 }
                 Event::Escape => {
-                    if bounce == 0 && d.dot(self.sun) >= self.cos_disk {
-                        for c in 0..3 {
-                            sum[c] += self.sun_irradiance[c] / self.disk_sr;
+                    let disk = bounce == 0 && d.dot(self.sun) >= self.cos_disk;
+                    for ch in 0..3 {
+                        let l = self.background[ch]
+                            + if disk {
+                                self.sun_irradiance[ch] / self.disk_sr
+                            } else {
+                                0.0
+                            };
+                        for row in coef.iter().take(c.n) {
+                            sum[ch] += row[ch] * l;
                         }
-                    }
-                    for c in 0..3 {
-                        sum[c] += throughput * self.background[c];
                     }
                     break;
                 }
-            };
-            for c in 0..3 {
-                sum[c] += throughput * l[c];
             }
-            d = if let (Event::Volume(field), true) = (event, self.guide > 0.0) {
-                let (next, weight) = self.guided(&b.fields[field].phase, d, rng);
-                throughput *= weight;
-                next
-            } else if let Event::Ground = event {
-                throughput *= self.ground_albedo;
-                // Cosine-weighted about +y.
-                let (r, phi) = (rng.uniform().sqrt(), 2.0 * PI * rng.uniform());
-                let (e1, e2) = basis(DVec3::Y);
-                (r * phi.cos() * e1 + r * phi.sin() * e2 + (1.0 - r * r).max(0.0).sqrt() * DVec3::Y)
-                    .normalize()
-            } else {
-                self.scatter(b, event, d, rng)
+            d = match event {
+                Event::Volume(field) => self.continue_volume(&mut c, field, d, self.guide, rng),
+                Event::Ground => {
+                    for f in c.f.iter_mut() {
+                        *f *= self.ground_albedo;
+                    }
+                    // Cosine-weighted about +y.
+                    let (r, phi) = (rng.uniform().sqrt(), 2.0 * PI * rng.uniform());
+                    let (e1, e2) = basis(DVec3::Y);
+                    (r * phi.cos() * e1
+                        + r * phi.sin() * e2
+                        + (1.0 - r * r).max(0.0).sqrt() * DVec3::Y)
+                        .normalize()
+                }
+                _ => {
+                    let mu = sample_rayleigh(rng.uniform());
+                    rotate(d, 1.0 - mu, (1.0 - mu * mu).max(0.0).sqrt(), rng.uniform())
+                }
             };
-            if bounce + 1 >= self.max_scatterings || !roulette(&mut throughput, rng) {
+            if bounce + 1 >= self.max_scatterings || !Self::roulette(&mut c, rng) {
                 break;
             }
         }
-        std::array::from_fn(|c| sum[c] * b.to_rgb[c])
+        sum
     }
 
     /// A photon's random walk forward from `origin` along `dir` through the volumes and the
     /// air: the direction in which it leaves them for good (towards space or the ground, which
     /// is not modelled here) and its weight, or `None` if it was ended by roulette. The same
-    /// free paths, phase sampling and albedo as [`Tracer::radiance`], run the other way: the
-    /// flux estimator of the slab tests, whose forward peak a camera-side estimator would hit
-    /// only rarely.
+    /// free paths, phase sampling and albedo as [`Tracer::radiance`] (one wavelength, plain
+    /// phase sampling), run the other way: the flux estimator of the slab tests, whose forward
+    /// peak a camera-side estimator would hit only rarely.
     pub fn photon(&self, origin: DVec3, dir: DVec3, rng: &mut Rng) -> Option<(DVec3, f64)> {
-        let b = self.band(rng);
-        let (mut p, mut d, mut weight) = (origin, dir, 1.0);
+        let mut c = self.carry(1, rng);
+        let (mut p, mut d) = (origin, dir);
         for _ in 0..self.max_scatterings {
-            let event = self.next_event(b, &mut p, d, &mut weight, rng);
-            if let Event::Ground | Event::Escape = event {
-                return Some((d, weight));
-            }
-            d = self.scatter(b, event, d, rng);
-            if !roulette(&mut weight, rng) {
+            let event = self.next_event(&mut c, &mut p, d, rng);
+            d = match event {
+                Event::Ground | Event::Escape => return Some((d, c.f[0])),
+                Event::Volume(field) => self.continue_volume(&mut c, field, d, 0.0, rng),
+                Event::Air => {
+                    let mu = sample_rayleigh(rng.uniform());
+                    rotate(d, 1.0 - mu, (1.0 - mu * mu).max(0.0).sqrt(), rng.uniform())
+                }
+            };
+            if !Self::roulette(&mut c, rng) {
                 return None;
             }
         }
         None
     }
-
     /// The volumes' transparency along a ray by a fine ray march of the green channel's β_ext
     /// (quarter-voxel midpoint steps), as the fast models' A channel.
     pub fn transparency(&self, origin: DVec3, dir: DVec3) -> f64 {
@@ -705,6 +930,13 @@ pub fn check(frame: &Frame, settings: &TruthSettings) -> Result<(), FrameError> 
         return bad(format!(
             "target noise = {} is outside the allowed range [0, 1) (relative standard error)",
             settings.target_noise
+        ));
+    }
+    if settings.wavelengths_per_path > MAX_CARRIED {
+        return bad(format!(
+            "wavelengths per path = {} is outside the allowed range [1, {MAX_CARRIED}] (0: the \
+             default)",
+            settings.wavelengths_per_path
         ));
     }
     if !(0.0..=1.0).contains(&settings.ground_albedo) {

@@ -65,8 +65,18 @@ impl PhaseSampler {
     /// The phase function (1/sr) between the direction of travel `d` and the outgoing `w`
     /// (unit vectors), without the δ (which only the forward direction itself sees).
     pub fn eval(&self, d: DVec3, w: DVec3) -> f64 {
+        self.values[self.bin(d, w)]
+    }
+
+    /// The bin the angle between unit vectors `d` and `w` falls into (the same for every
+    /// sampler on the same θ grid).
+    pub fn bin(&self, d: DVec3, w: DVec3) -> usize {
         let theta = d.cross(w).length().atan2(d.dot(w));
-        let k = ((theta / self.step_rad).round() as usize).min(self.values.len() - 1);
+        ((theta / self.step_rad).round() as usize).min(self.values.len() - 1)
+    }
+
+    /// The value (1/sr) of bin `k`.
+    pub fn value(&self, k: usize) -> f64 {
         self.values[k]
     }
 
