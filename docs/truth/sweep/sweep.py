@@ -3,8 +3,8 @@
 
 A soft ball of cloud or rain (density sqrt(1 - r), 48^3 voxels over a 1 km box, draft rgb3
 tables, sky off, black ground), optical depth tau through its centre in green, seen from 3 km;
-the sun 20 degrees up at azimuth 0 (behind the ball: forward scattering), 90 (side) or 180
-(behind the camera: back scattering). For each case the truth is rendered once (--noise 0.03,
+the sun 20 degrees up at azimuth 0 (behind the ball: forward scattering, 20 degrees from the
+view), 45 (48 degrees from the view), 90 (side) or 180 (behind the camera: back scattering). For each case the truth is rendered once (--noise 0.03,
 at most 8192 spp) and Riley's model (CPU reference, 256 slices, continuum light update) at
 several xi; compare-render gives each one's median and 95th-percentile error and bias (the best
 xi is the one with the smallest |bias|). `--table-only` re-derives the table from sweep.json.
@@ -18,8 +18,11 @@ import json, os, subprocess, sys, time
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
 BIN = os.path.join(ROOT, "target", "release", "photometeor")
 WORK = os.environ.get("SWEEP_WORK", "/tmp/photometeor-sweep")
-TAUS = [0.1, 0.5, 2, 8, 32]
-AZIMUTHS = {"behind the ball (forward)": 0, "side": 90, "behind the camera (back)": 180}
+TAUS = [0.1, 0.5, 2, 8, 32, 50]
+# The sun 20° up; the angle between the view direction (+z) and the direction to the sun is
+# acos(cos 20° cos azimuth): 20°, 48°, 90°, 160°.
+AZIMUTHS = {"behind the ball, 20° from the view (forward)": 0, "48° from the view": 45,
+            "side, 90° from the view": 90, "behind the camera, 160° from the view (back)": 180}
 XIS = [0.0, 0.003, 0.01, 0.03, 0.1]
 FIELDS = {
     "cloud": 'distribution = { kind = "gamma", r_eff_um = 10, v_eff = 0.1 }',
@@ -48,7 +51,7 @@ def scene(field, tau, azimuth, sigma_ext_g, xi):
 name = "sweep-{field}"
 spectral = "rgb3"
 theta_step_deg = 0.18
-n_max = 64
+n_max = 96
 quality = "draft"
 
 [[field]]
