@@ -59,8 +59,10 @@ pub struct RenderArgs {
     /// The render model: `riley` (Riley et al. 2004's half-angle slicing with light and eye
     /// buffers, the multiple-scattering tables for the angular spread of sunlight) or `truth`
     /// (an unbiased spectral Monte Carlo path tracer of the same scene on the CPU, all cores;
-    /// its EXR adds stderr.R/G/B, each pixel's standard error; docs/truth.md).
-    #[arg(long, default_value = "riley", value_parser = ["riley", "truth"])]
+    /// its EXR adds stderr.R/G/B, each pixel's standard error; docs/truth.md) or `miyazaki`
+    /// (Miyazaki, Dobashi & Nishita's shadow-view slices: single scattering plus a constant
+    /// k_multi, shadows on the ground and in the air; CPU reference only so far, with --cpu).
+    #[arg(long, default_value = "riley", value_parser = ["riley", "truth", "miyazaki"])]
     model: String,
     /// --model truth: samples (paths) per pixel, [1, 1048576] (overrides [render] spp).
     #[arg(long)]
@@ -148,6 +150,12 @@ pub fn prepare(
 
 /// Runs `photometeor render`.
 pub fn run(a: RenderArgs) -> Result<()> {
+    if a.model == "miyazaki" && !a.cpu {
+        bail!(
+            "--model miyazaki has only its CPU reference so far (the GPU path is issue 15's next \
+             step): add --cpu"
+        );
+    }
     if a.wavelengths_per_path > render::truth::MAX_CARRIED {
         bail!(
             "--wavelengths-per-path {} is outside the allowed range [1, {}] (0: the default)",
@@ -183,6 +191,25 @@ pub fn run(a: RenderArgs) -> Result<()> {
     let started = Instant::now();
     let frame: Frame = render.frame(&tables)?;
     let raster = started.elapsed().as_secs_f64();
+    if a.model == "miyazaki" {
+        let t = Instant::now();
+        let image = render::miyazaki::cpu::render(&tables, &frame, &render.svs)?;
+        if !a.quiet {
+            eprintln!(
+                "shadow-view slices (CPU reference): {}×{}, {} slices, a = {}, k_multi = {} /sr, \
+                 shadow surface {}²: {:.2} s (grid {:?} built in {raster:.2} s)",
+                frame.width,
+                frame.height,
+                frame.slices,
+                render.svs.a,
+                render.svs.k_multi,
+                frame.light_resolution,
+                t.elapsed().as_secs_f64(),
+                frame.grid.dims
+            );
+        }
+        return write_outputs(&a, &render, &image, Vec::new());
+    }
     let image = if a.cpu {
         let t = Instant::now();
         let image = cpu::render(&tables, &frame)?;

@@ -8,12 +8,14 @@
 //!   the multiple-scattering tables Ams_n and F_n for the angular spread of sunlight (`--model
 //!   riley`, the default).
 //!
+//! - [`miyazaki`]: Miyazaki, Dobashi & Nishita's shadow-view slices — single scattering with
+//!   a constant k_multi, a shadow surface for the clouds' shadows on the ground and in the air
+//!   (`--model miyazaki`; CPU reference so far).
 //! - [`truth`]: an unbiased spectral Monte Carlo path tracer of the full radiative transfer on
 //!   the same scene (`--model truth`), the reference every fast model is measured against.
 //!
-//! A new model (Miyazaki's shadow-view slices, Max et al.'s diffusion,
-//! Biri's analytic single scattering) goes beside them as `src/<model>/`, using the same
-//! scene, volumes, sky, camera and image.
+//! A new model (Max et al.'s diffusion, Biri's analytic single scattering) goes beside them as
+//! `src/<model>/`, using the same scene, volumes, sky, camera and image.
 //!
 //! Units: radiance per unit solar irradiance outside the atmosphere (1/sr) per channel; lengths
 //! in metres, y up, sea level at y = 0.
@@ -23,6 +25,7 @@
 pub mod camera;
 pub mod error_map;
 pub mod image;
+pub mod miyazaki;
 pub mod riley;
 pub mod rng;
 pub mod scene;

@@ -11,6 +11,9 @@
 //! light_update = "continuum"   # riley: "continuum" (default) or "riley2004" (Eq. 25 as printed)
 //! exposure = 0.0            # PNG exposure; 0 or absent: automatic
 //! spp = 256                 # --model truth: samples (paths) per pixel, [1, 2²⁰]
+//! svs_a = 1.5               # --model miyazaki: slice normal splits view:sun angles 1 : a, (0, 2]
+//! k_multi = 0.0             # --model miyazaki: constant multiple scattering of clouds (1/sr), ≥ 0
+//! svs_phase = "tables"      # --model miyazaki: "tables" (Ams_1) or "cornette_shanks" (Eq. 3)
 //! seed = 1                  # --model truth: seed of the random streams
 //!
 //! [ground]
@@ -113,6 +116,9 @@ struct RenderKeys {
     exposure: Option<f64>,
     spp: Option<usize>,
     seed: Option<u64>,
+    svs_a: Option<f64>,
+    k_multi: Option<f64>,
+    svs_phase: Option<String>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -194,6 +200,8 @@ pub struct RenderScene {
     pub spp: usize,
     /// `[render] seed` for the path tracer (default 1).
     pub seed: u64,
+    /// `[render] svs_a`, `k_multi`, `svs_phase` and `[ground] albedo` for `--model miyazaki`.
+    pub svs: crate::miyazaki::SvsSettings,
 }
 
 /// A render scene that cannot be used, naming the file, the key or volume, and the allowed range.
@@ -317,6 +325,22 @@ impl RenderScene {
                 "[render] spp = {spp} is outside the allowed range [{lo}, {hi}] samples per pixel"
             )));
         }
+        let defaults = crate::miyazaki::SvsSettings::default();
+        let svs = crate::miyazaki::SvsSettings {
+            a: render.svs_a.unwrap_or(defaults.a),
+            k_multi: render.k_multi.unwrap_or(defaults.k_multi),
+            phase: match render.svs_phase.as_deref() {
+                None => defaults.phase,
+                Some(name) => crate::miyazaki::SvsPhase::parse(name).ok_or_else(|| {
+                    err(format!(
+                        "[render] svs_phase = {name:?} is not one of \"tables\", \
+                         \"cornette_shanks\""
+                    ))
+                })?,
+            },
+            ground_albedo,
+        };
+        crate::miyazaki::check(&svs).map_err(|e| err(e.0))?;
         if file.volumes.is_empty() {
             return Err(err("no [[volume]] table: nothing to render".into()));
         }
@@ -351,6 +375,7 @@ impl RenderScene {
             lights,
             spp,
             seed: render.seed.unwrap_or(1),
+            svs,
         })
     }
 
@@ -358,6 +383,9 @@ impl RenderScene {
     pub fn check_model(&self, model: &str) -> Result<(), FrameError> {
         if model == "truth" {
             return Ok(());
+        }
+        if model == "miyazaki" && self.lights.is_empty() {
+            return Ok(()); // sunlight over a Lambertian ground
         }
         if !self.lights.is_empty() {
             return Err(FrameError(format!(
@@ -407,10 +435,10 @@ impl RenderScene {
             data: vec![[0.0; super::MAX_FIELDS]],
         };
         let frame = self.frame_with(grid);
-        if model == "truth" {
-            crate::truth::check(&frame, &self.truth_settings())
-        } else {
-            frame.setup().map(|_| ())
+        match model {
+            "truth" => crate::truth::check(&frame, &self.truth_settings()),
+            "miyazaki" => crate::miyazaki::setup(&frame, &self.svs).map(|_| ()),
+            _ => frame.setup().map(|_| ()),
         }
     }
 

@@ -1,0 +1,289 @@
+//! Miyazaki, Dobashi & Nishita's shadow-view slices (`render::miyazaki`), CPU reference:
+//! - an optically thin uniform box gives single scattering with Ams_1 + k_multi (Eq. 1 with
+//!   g_view = g_sun = 1), and with Cornette–Shanks's function for the paper's phase option;
+//! - the ground under a slab of cloud of known optical depth is darker by e^{−τ/sin e} than
+//!   the lit ground beside it (the shadow surface, Eq. 10);
+//! - bad scene keys are refused, naming the key, the value and the range.
+
+use std::path::Path;
+
+use glam::DVec3;
+use render::miyazaki::cpu::{asymmetry, cornette_shanks, render};
+use render::miyazaki::{SvsPhase, setup};
+use render::riley::cpu::box_span;
+use render::{Frame, RenderScene};
+use runtime::{Tables, sample};
+
+#[path = "../../tests/common/mod.rs"]
+mod common;
+
+fn fields() -> String {
+    common::cloud_and_rain("miyazaki", 4)
+}
+
+/// A scene of one grid volume of constant density over `[min, max]`, written beside the bake.
+fn uniform_box(
+    tmp: &Path,
+    density: f64,
+    min: [f64; 3],
+    max: [f64; 3],
+    extra: &str,
+) -> (RenderScene, String) {
+    let grid_file = tmp.join("ones.f32");
+    let ones: Vec<u8> = (0..64).flat_map(|_| 1f32.to_le_bytes()).collect();
+    std::fs::write(&grid_file, ones).unwrap();
+    let text = format!(
+        r#"{}
+{extra}
+
+[[volume]]
+field = "cloud"
+shape = "grid"
+number_density_per_m3 = {density}
+file = "ones.f32"
+dims = [4, 4, 4]
+min_m = {min:?}
+max_m = {max:?}
+"#,
+        fields()
+    );
+    (RenderScene::parse(&text, "test", tmp).unwrap(), text)
+}
+
+fn pixel_ray(frame: &Frame, i: usize, j: usize) -> DVec3 {
+    let axes = frame.camera.axes().unwrap();
+    let tan = (frame.camera.fov_deg.to_radians() / 2.0).tan();
+    render::camera::pixel_ray(axes, tan, (i, j), (frame.width, frame.height))
+}
+
+#[test]
+fn thin_uniform_box_gives_single_scattering_with_k_multi() {
+    let (tmp, dir) = common::bake(&fields());
+    let tables = Tables::open(&dir).unwrap();
+    let cloud = tables.field("cloud").unwrap();
+    // τ = 1e-3 across the 1 km box in green.
+    let density = 1e-6 / cloud.sigma_ext_m2[1];
+    let g = asymmetry(cloud, tables.theta_step_deg);
+    let mut worst: f64 = 0.0;
+    for (k_multi, phase, name) in [
+        (0.0, SvsPhase::Tables, "tables"),
+        (0.05, SvsPhase::Tables, "tables"),
+        (0.02, SvsPhase::CornetteShanks, "cornette_shanks"),
+    ] {
+        let extra = format!(
+            "[render]\nwidth = 32\nheight = 32\nslices = 256\nlight_resolution = 32\n\
+             svs_a = 1.5\nk_multi = {k_multi}\nsvs_phase = \"{name}\"\n\n\
+             [camera]\nposition_m = [0, 1500, 0]\nlook_at_m = [0, 1500, 5000]\nfov_deg = 20\n\n\
+             [sun]\nelevation_deg = 30\nazimuth_deg = 160\n\n[sky]\nenabled = false"
+        );
+        let (scene, _) = uniform_box(
+            tmp.path(),
+            density,
+            [-500.0, 1000.0, 4500.0],
+            [500.0, 2000.0, 5500.0],
+            &extra,
+        );
+        assert_eq!(scene.svs.phase, phase);
+        let frame = scene.frame(&tables).unwrap();
+        let s = setup(&frame, &scene.svs).unwrap();
+        let image = render(&tables, &frame, &scene.svs).unwrap();
+        let mut checked = 0;
+        for j in 0..frame.height {
+            for i in 0..frame.width {
+                let d = pixel_ray(&frame, i, j);
+                let Some((t0, t1)) = box_span(frame.grid.min_m, frame.grid.max_m, s.eye, d) else {
+                    continue;
+                };
+                let chord = t1 - t0;
+                if chord < 500.0 {
+                    continue;
+                }
+                let cos = d.dot(s.to_sun);
+                let p1 = match phase {
+                    SvsPhase::Tables => sample::ams(cloud, tables.theta_step_deg, 1.0, cos),
+                    SvsPhase::CornetteShanks => std::array::from_fn(|c| cornette_shanks(g[c], cos)),
+                };
+                // One slab of the slicing resolves the chord; the light's and the eye's losses
+                // (τ ≤ 1e-3) move the rest by well under 5e-3.
+                let tol = s.step / s.normal.dot(d).abs() / chord + 5e-3;
+                for c in 0..3 {
+                    let want = (p1[c] + k_multi)
+                        * cloud.albedo[c]
+                        * (1.0 - (-density * cloud.sigma_ext_m2[c] * chord).exp());
+                    let got = image.rgb[i + frame.width * j][c] as f64;
+                    let rel = ((got - want) / want).abs();
+                    worst = worst.max(rel);
+                    assert!(
+                        rel < tol,
+                        "{name} k_multi {k_multi}, pixel ({i}, {j}) channel {c}: {got} vs \
+                         single scattering {want} (tolerance {tol})"
+                    );
+                }
+                checked += 1;
+            }
+        }
+        assert!(checked > 200, "only {checked} pixels crossed the box");
+    }
+    eprintln!("worst relative difference from single scattering {worst:.2e}");
+}
+
+#[test]
+fn cornette_shanks_is_normalized_and_has_its_asymmetry() {
+    for &g in &[0.0, 0.5, 0.85] {
+        let n = 200_000;
+        let (mut m0, mut m1) = (0.0, 0.0);
+        for i in 0..n {
+            let mu = -1.0 + (i as f64 + 0.5) * 2.0 / n as f64;
+            let p = cornette_shanks(g, mu) * 2.0 * std::f64::consts::PI * 2.0 / n as f64;
+            m0 += p;
+            m1 += p * mu;
+        }
+        // ∫ P dΩ = 1; Cornette & Shanks's mean cosine is 3g(4 + g²)/(5(2 + g²)).
+        let want_g = 3.0 * g * (4.0 + g * g) / (5.0 * (2.0 + g * g));
+        assert!((m0 - 1.0).abs() < 1e-6, "g {g}: ∫P dΩ = {m0}");
+        assert!(
+            (m1 - want_g).abs() < 1e-6,
+            "g {g}: ⟨cos⟩ = {m1} vs {want_g}"
+        );
+    }
+}
+
+#[test]
+fn the_ground_under_a_cloud_slab_is_darker_by_its_transmittance() {
+    let (tmp, dir) = common::bake(&fields());
+    let tables = Tables::open(&dir).unwrap();
+    let cloud = tables.field("cloud").unwrap();
+    // A slab 200 m thick of vertical optical depth 1 (green) at 1000–1200 m; the sun 60° up
+    // at azimuth 0, so the shadow falls 635 m towards −z of the slab; the camera under the
+    // slab looks down at the ground where both lit and shadowed ground are in view.
+    let thickness = 200.0;
+    let density = 1.0 / (cloud.sigma_ext_m2[1] * thickness);
+    let extra = "[render]\nwidth = 48\nheight = 36\nslices = 2048\nlight_resolution = 128\n\n\
+                 [camera]\nposition_m = [0, 500, -2000]\nlook_at_m = [0, 0, 2500]\nfov_deg = 50\n\n\
+                 [sun]\nelevation_deg = 60\nazimuth_deg = 0\n\n[sky]\nenabled = false\n\n\
+                 [ground]\nalbedo = 0.5";
+    let (scene, _) = uniform_box(
+        tmp.path(),
+        density,
+        [-3000.0, 1000.0, 0.0],
+        [3000.0, 1200.0, 4000.0],
+        extra,
+    );
+    let frame = scene.frame(&tables).unwrap();
+    let s = setup(&frame, &scene.svs).unwrap();
+    let image = render(&tables, &frame, &scene.svs).unwrap();
+    let l_y = s.to_sun.y;
+    let lit = 0.5 / std::f64::consts::PI * l_y;
+    let (mut shadowed, mut sunlit, mut worst) = (0, 0, 0.0f64);
+    for j in 0..frame.height {
+        for i in 0..frame.width {
+            let d = pixel_ray(&frame, i, j);
+            if d.y >= 0.0 {
+                continue;
+            }
+            let ground = s.eye + (s.eye.y / -d.y) * d;
+            // The ground point's sun ray through the slab's box: its path and its distance
+            // from the box's side faces (shadow edges are blurred over a texel).
+            let (path, margin) =
+                match box_span(frame.grid.min_m, frame.grid.max_m, ground, s.to_sun) {
+                    Some((t0, t1)) => {
+                        let p = ground + 0.5 * (t0 + t1) * s.to_sun;
+                        let m = (p.x - frame.grid.min_m.x)
+                            .min(frame.grid.max_m.x - p.x)
+                            .min(p.z - frame.grid.min_m.z)
+                            .min(frame.grid.max_m.z - p.z);
+                        (t1 - t0, m)
+                    }
+                    None => (0.0, f64::INFINITY),
+                };
+            let texel = s.shadow_texel[0].max(s.shadow_texel[1]);
+            let got = image.rgb[i + frame.width * j];
+            // Lit: the sun rays from the point and from points two texels off it in every
+            // direction of the shadow surface all miss the box.
+            let clear = [(0.0, 0.0), (2.0, 0.0), (-2.0, 0.0), (0.0, 2.0), (0.0, -2.0)]
+                .iter()
+                .all(|&(a, b)| {
+                    let q = ground + a * texel * s.shadow_u + b * texel * s.shadow_w;
+                    box_span(frame.grid.min_m, frame.grid.max_m, q, s.to_sun).is_none()
+                });
+            if clear {
+                for c in 0..3 {
+                    assert!(
+                        ((got[c] as f64) - lit).abs() < 1e-6 * lit,
+                        "lit ground ({i}, {j}) channel {c}: {} vs {lit}",
+                        got[c]
+                    );
+                }
+                sunlit += 1;
+            } else if margin > 3.0 * texel && (path - thickness / l_y).abs() < 1e-6 {
+                for c in 0..3 {
+                    let ext = density * cloud.sigma_ext_m2[c];
+                    let want = lit * (-ext * path).exp();
+                    // The shadow surface samples the sun's path at the slices: one slab Δs.
+                    let tol = ext * s.sun_step;
+                    let err = ((got[c] as f64) / want).ln().abs();
+                    worst = worst.max(err / tol);
+                    assert!(
+                        err < tol,
+                        "shadowed ground ({i}, {j}) channel {c}: {} vs {want} \
+                         (|ln ratio| {err:.2e}, tolerance {tol:.2e})",
+                        got[c]
+                    );
+                }
+                shadowed += 1;
+            }
+        }
+    }
+    assert!(
+        shadowed > 100 && sunlit > 50,
+        "{shadowed} shadowed, {sunlit} lit pixels"
+    );
+    eprintln!(
+        "{shadowed} shadowed and {sunlit} lit ground pixels; worst shadow error {worst:.2} of one \
+         slab's optical depth"
+    );
+}
+
+#[test]
+fn bad_keys_are_refused_naming_the_key_value_and_range() {
+    let base = format!(
+        "{}\n[camera]\nposition_m = [0, 100, 0]\nlook_at_m = [0, 100, 10]\n\n\
+         [sun]\nelevation_deg = 30\nazimuth_deg = 0\n\n\
+         [[volume]]\nfield = \"cloud\"\nshape = \"cumulus\"\nnumber_density_per_m3 = 1e6\n\
+         center_m = [0, 500, 2000]\nradius_m = 300\nheight_m = 300\n",
+        fields()
+    );
+    for (keys, needle) in [
+        (
+            "[render]\nsvs_a = -1",
+            "svs_a = -1 is outside the allowed range (0, 2]",
+        ),
+        (
+            "[render]\nsvs_a = 2.5",
+            "svs_a = 2.5 is outside the allowed range (0, 2]",
+        ),
+        (
+            "[render]\nk_multi = -0.1",
+            "k_multi = -0.1 must be finite and ≥ 0 (1/sr)",
+        ),
+        (
+            "[render]\nsvs_phase = \"hg\"",
+            "svs_phase = \"hg\" is not one of \"tables\", \"cornette_shanks\"",
+        ),
+        (
+            "[ground]\nalbedo = 1.5",
+            "albedo = 1.5 is outside the allowed range [0, 1]",
+        ),
+    ] {
+        let text = format!("{base}\n{keys}\n");
+        let e = RenderScene::parse(&text, "test", Path::new("."))
+            .expect_err(keys)
+            .to_string();
+        assert!(e.contains(needle), "{keys}: {e}");
+    }
+    // A good scene passes the model's checks, and a ground albedo is allowed for it.
+    let text = format!("{base}\n[ground]\nalbedo = 0.3\n");
+    let scene = RenderScene::parse(&text, "test", Path::new(".")).unwrap();
+    scene.check_for("miyazaki").unwrap();
+    assert!(scene.check_for("riley").is_err());
+}
