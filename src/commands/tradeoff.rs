@@ -72,7 +72,7 @@ pub fn run(a: TradeoffArgs) -> Result<()> {
     };
     let reference_checks = validate(&reference)?;
 
-    let is_drop = |k: FieldKind| matches!(k, FieldKind::Cloud | FieldKind::Rain);
+    let is_drop = |k: FieldKind| matches!(k, FieldKind::Cloud | FieldKind::Rain | FieldKind::Haze);
     let has = |drops: bool| scene.fields.iter().any(|f| is_drop(f.kind) == drops);
     let standard = Quality::Standard.knobs();
     let mut variants = Vec::new();

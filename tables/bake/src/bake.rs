@@ -316,8 +316,7 @@ pub fn preflight(plan: &BakePlan, weights: &ChannelWeights) -> Result<(), BakeEr
         let mie_error = |context: String| mie_error(field, context);
         for (j, &lambda) in lambdas.iter().enumerate() {
             let m = field
-                .material
-                .refractive_index(lambda, field.temperature_c)
+                .refractive_index(lambda)
                 .map_err(mie_error(format!(" at {lambda} nm")))?;
             if let Some(d) = &field.distribution {
                 // The radii this wavelength's quadrature uses, with the solver's own x = k r.
@@ -420,8 +419,7 @@ pub fn phase_functions(
         (Some(distribution), _) => {
             for (j, &lambda) in lambdas.iter().enumerate() {
                 let m = field
-                    .material
-                    .refractive_index(lambda, field.temperature_c)
+                    .refractive_index(lambda)
                     .map_err(mie_error(format!(" at {lambda} nm")))?;
                 let q = knobs.size_quadrature(&distribution, j, j_len);
                 let nodes = nodes_per_bin(&distribution, lambda, knobs, grid.step_deg());

@@ -14,7 +14,9 @@
 //!
 //! [[field]]
 //! name = "cloud"            # user name: the EXR is <name>.exr
-//! kind = "cloud"            # cloud | rain (water spheres), ice | snow (crystals)
+//! kind = "cloud"            # cloud | rain | haze (spheres), ice | snow (crystals)
+//! # haze: aerosol spheres, lognormal with median_radius_um in [0.05, 1] (default 0.1, σ_g 2);
+//! # refractive_index = [n, κ] (cloud, rain, haze) replaces the material's at every wavelength
 //! # crystals instead of a distribution: habit = "plate" | "column" | "aggregate",
 //! # aspect_ratio (L/2a), max_dimension_um (median), dimension_sigma_g, roughness (Macke δ)
 //! temperature_c = 10
@@ -150,9 +152,12 @@ struct FieldFile {
     temperature_c: Option<f64>,
     #[serde(default)]
     distribution: Option<SizeDistribution>,
-    /// Sphere material (cloud, rain): water (default) or ice (frozen drops).
+    /// Sphere material (cloud, rain, haze): water (default) or ice (frozen drops).
     #[serde(default)]
     material: Option<mie::refractive::Material>,
+    /// A sphere field's own refractive index m = n + iκ, the same at every wavelength.
+    #[serde(default)]
+    refractive_index: Option<[f64; 2]>,
     /// Crystal habit (ice, snow): plate | column | aggregate; sets the default aspect ratio.
     #[serde(default)]
     habit: Option<String>,
@@ -178,6 +183,9 @@ pub enum FieldKind {
     Ice,
     /// Snow: rough ice crystals, aggregates by default.
     Snow,
+    /// Haze: aerosol spheres (lognormal, 0.05–1 µm median radius), water by default or a
+    /// given refractive index; its phase function makes light shafts visible.
+    Haze,
 }
 
 /// Accuracy presets; their node counts are set from the measured speed/accuracy trade.
@@ -215,10 +223,30 @@ pub struct Field {
     pub temperature_c: f64,
     /// What the particles are made of: spheres of water (default) or ice; crystals are ice.
     pub material: mie::refractive::Material,
+    /// A sphere field's given refractive index [n, κ], replacing `material`'s at every
+    /// wavelength; n in (1, 3], κ in [0, 10].
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub refractive_index: Option<[f64; 2]>,
     /// Size distribution of spheres (cloud, rain).
     pub distribution: Option<SizeDistribution>,
     /// Crystal population (ice, snow).
     pub crystal: Option<mie::crystal::CrystalField>,
+}
+
+impl Field {
+    /// m = n + iκ at `wavelength_nm`: the given [`Field::refractive_index`], else the
+    /// material's at the field's temperature.
+    pub fn refractive_index(
+        &self,
+        wavelength_nm: f64,
+    ) -> Result<num_complex::Complex64, mie::MieError> {
+        match self.refractive_index {
+            Some([n, kappa]) => Ok(num_complex::Complex64::new(n, kappa)),
+            None => self
+                .material
+                .refractive_index(wavelength_nm, self.temperature_c),
+        }
+    }
 }
 
 /// A validated scene: plain data.
@@ -419,7 +447,7 @@ impl Scene {
                 fail!(at("name"), "field name {:?} is used twice", f.name);
             }
             let material = f.material.unwrap_or(match f.kind {
-                FieldKind::Cloud | FieldKind::Rain => Material::Water,
+                FieldKind::Cloud | FieldKind::Rain | FieldKind::Haze => Material::Water,
                 FieldKind::Ice | FieldKind::Snow => Material::Ice,
             });
             // Liquid drops at 10 °C, ice (crystals or frozen drops) at −20 °C unless given.
@@ -443,9 +471,64 @@ impl Scene {
                     f.kind
                 );
             }
+            if let Some([n, kappa]) = f.refractive_index {
+                if matches!(f.kind, FieldKind::Ice | FieldKind::Snow) {
+                    fail!(
+                        at("refractive_index"),
+                        "field {:?} ({:?}): crystals are ice; refractive_index is for spheres \
+                         (cloud, rain, haze)",
+                        f.name,
+                        f.kind
+                    );
+                }
+                if !(n.is_finite() && n > 1.0 && n <= 3.0) {
+                    fail!(
+                        at("refractive_index"),
+                        "refractive_index = [{n}, {kappa}]: n = {n} is outside the allowed range \
+                         (1, 3]"
+                    );
+                }
+                if !(kappa.is_finite() && (0.0..=10.0).contains(&kappa)) {
+                    fail!(
+                        at("refractive_index"),
+                        "refractive_index = [{n}, {kappa}]: κ = {kappa} is outside the allowed \
+                         range [0, 10]"
+                    );
+                }
+            }
+            let distribution = match (f.kind, f.distribution) {
+                (FieldKind::Haze, None) => Some(SizeDistribution::Lognormal {
+                    median_radius_um: 0.1,
+                    sigma_g: 2.0,
+                }),
+                (FieldKind::Haze, Some(d)) => {
+                    let SizeDistribution::Lognormal {
+                        median_radius_um, ..
+                    } = d
+                    else {
+                        fail!(
+                            at("distribution"),
+                            "field {:?} (haze): distribution must be lognormal (kind = \
+                             \"lognormal\", median_radius_um, sigma_g)",
+                            f.name
+                        );
+                    };
+                    if !(0.05..=1.0).contains(&median_radius_um) {
+                        fail!(
+                            at("distribution"),
+                            "field {:?} (haze): median_radius_um = {median_radius_um} is outside \
+                             the allowed range [0.05, 1] µm of aerosols (cloud droplets are kind \
+                             = \"cloud\")",
+                            f.name
+                        );
+                    }
+                    Some(d)
+                }
+                (_, d) => d,
+            };
             let (distribution, crystal) = match f.kind {
-                FieldKind::Cloud | FieldKind::Rain => {
-                    let d = f.distribution.ok_or_else(|| {
+                FieldKind::Cloud | FieldKind::Rain | FieldKind::Haze => {
+                    let d = distribution.ok_or_else(|| {
                         at("kind").error(format!(
                             "field {:?} ({:?}) needs a distribution",
                             f.name, f.kind
@@ -465,7 +548,7 @@ impl Scene {
                     (Some(d), None)
                 }
                 FieldKind::Ice | FieldKind::Snow => {
-                    if f.distribution.is_some() {
+                    if distribution.is_some() {
                         fail!(
                             at("distribution"),
                             "field {:?} ({:?}): crystals take habit, aspect_ratio, max_dimension_um, dimension_sigma_g and roughness, not a sphere distribution",
@@ -514,6 +597,7 @@ impl Scene {
                 kind: f.kind,
                 temperature_c,
                 material,
+                refractive_index: f.refractive_index,
                 distribution,
                 crystal,
             });
@@ -614,6 +698,54 @@ mod tests {
         );
         assert!(Scene::parse(&format!("{HEAD}n_max = 500\n{RAIN}"), "s").is_ok());
         assert!(Scene::parse(&format!("{HEAD}theta_step_deg = 0.01\n{RAIN}"), "s").is_ok());
+    }
+
+    #[test]
+    fn haze_is_aerosol_spheres_with_a_default_size_and_an_optional_index() {
+        let haze = "[[field]]\nname = \"haze\"\nkind = \"haze\"\n";
+        let s = Scene::parse(&format!("{HEAD}{haze}"), "s").unwrap();
+        let f = &s.fields[0];
+        assert_eq!(f.kind, FieldKind::Haze);
+        assert_eq!(f.material, Material::Water);
+        assert_eq!(
+            f.distribution,
+            Some(SizeDistribution::Lognormal {
+                median_radius_um: 0.1,
+                sigma_g: 2.0
+            })
+        );
+        assert_eq!(f.refractive_index, None);
+        let given = format!("{HEAD}{haze}refractive_index = [1.53, 0.008]\n");
+        let f = Scene::parse(&given, "s").unwrap().fields[0].clone();
+        assert_eq!(
+            f.refractive_index(550.0).unwrap(),
+            num_complex::Complex64::new(1.53, 0.008)
+        );
+        // Refused, naming the key, its value, the range and the line.
+        for (extra, needle) in [
+            (
+                "distribution = { kind = \"lognormal\", median_radius_um = 5, sigma_g = 1.5 }\n",
+                "line 6: field \"haze\" (haze): median_radius_um = 5 is outside the allowed range [0.05, 1] µm",
+            ),
+            (
+                "distribution = { kind = \"gamma\", r_eff_um = 0.3, v_eff = 0.1 }\n",
+                "line 6: field \"haze\" (haze): distribution must be lognormal",
+            ),
+            (
+                "refractive_index = [0.9, 0]\n",
+                "line 6: refractive_index = [0.9, 0]: n = 0.9 is outside the allowed range (1, 3]",
+            ),
+            (
+                "refractive_index = [1.5, -1]\n",
+                "line 6: refractive_index = [1.5, -1]: κ = -1 is outside the allowed range [0, 10]",
+            ),
+        ] {
+            let e = error_of(&format!("{HEAD}{haze}{extra}"));
+            assert!(e.contains(needle), "{extra}: {e}");
+        }
+        let ice = "[[field]]\nname = \"ice\"\nkind = \"ice\"\nrefractive_index = [1.31, 0]\n";
+        let e = error_of(&format!("{HEAD}{ice}"));
+        assert!(e.contains("refractive_index is for spheres"), "{e}");
     }
 
     #[test]

@@ -215,7 +215,7 @@ pub fn validate(dir: &Path) -> Result<Report> {
                     ));
                 }
             }
-            "snow" => featureless(&ctx, &mut checks),
+            "snow" | "haze" => featureless(&ctx, &mut checks),
             other => checks.push(ctx.info("RGB", "kind", format!("unknown kind {other:?}"))),
         }
     }

@@ -271,3 +271,73 @@ fn a_bake_without_pruning_keeps_other_fields_and_refuses_to_orphan_them() {
     assert_eq!(bytes(dir.path(), "manifest.json"), manifest);
     assert_eq!(bytes(dir.path(), "rain.exr"), rain_exr);
 }
+
+#[test]
+fn haze_bakes_with_its_own_refractive_index() {
+    // Water haze (the default material) and mineral dust given as m = 1.53 + 0.008i: each
+    // field's Ams_1 is the direct ensemble of its own index, and the absorbing dust scatters
+    // visibly less of what it removes.
+    let text = r#"
+[scene]
+name = "haze"
+spectral = "rgb3"
+n_max = 4
+quality = "draft"
+
+[[field]]
+name = "haze"
+kind = "haze"
+
+[[field]]
+name = "dust"
+kind = "haze"
+refractive_index = [1.53, 0.008]
+distribution = { kind = "lognormal", median_radius_um = 0.3, sigma_g = 1.8 }
+"#;
+    let dir = tempfile::tempdir().unwrap();
+    let plan = plan(text, dir.path()).unwrap();
+    run(&plan).unwrap();
+    let grid = ThetaGrid::new(0.18).unwrap();
+    let omega = grid.bin_solid_angles();
+    let manifest: serde_json::Value =
+        serde_json::from_str(&fs::read_to_string(dir.path().join("manifest.json")).unwrap())
+            .unwrap();
+    for (i, field) in plan.scene.fields.iter().enumerate() {
+        let image = read_field_exr(dir.path().join(format!("{}.exr", field.name))).unwrap();
+        let d = field.distribution.unwrap();
+        let rows = rows_of(&image);
+        for (c, &lambda) in RGB3_WAVELENGTHS_NM.iter().enumerate() {
+            let m = field.refractive_index(lambda).unwrap();
+            let q = plan.knobs.size_quadrature(&d, c, 3);
+            let direct = bulk_at(
+                m,
+                lambda,
+                &q,
+                ThetaGrid::new(0.18).unwrap(),
+                plan.knobs.nodes_per_panel,
+                &[],
+            )
+            .unwrap();
+            let total: f64 = direct.bins.iter().zip(&omega).map(|(a, o)| a * o).sum();
+            let worst = rows[c][0]
+                .iter()
+                .zip(&direct.bins)
+                .map(|(a, b)| ((a - b / total) / (b / total)).abs())
+                .fold(0.0, f64::max);
+            assert!(
+                worst < 1e-6,
+                "{} {lambda} nm: Ams_1 vs the direct ensemble {worst:.2e}",
+                field.name
+            );
+        }
+        let albedo = manifest["fields"][i]["albedo"]["G"].as_f64().unwrap();
+        let g = manifest["fields"][i]["g"]["G"].as_f64().unwrap();
+        eprintln!("{}: albedo {albedo:.4}, g {g:.3} at 515 nm", field.name);
+        if field.name == "dust" {
+            assert!(albedo < 0.95, "dust albedo {albedo}");
+        } else {
+            assert!(albedo > 0.999_99, "water haze albedo {albedo}");
+        }
+        assert!((0.4..0.85).contains(&g), "{}: g = {g}", field.name);
+    }
+}
