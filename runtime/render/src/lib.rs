@@ -76,6 +76,19 @@ pub struct Frame {
     pub light_resolution: usize,
     /// Number densities, channel i = field i of the tables.
     pub grid: DensityGrid,
+    /// An aerosol layer over the whole scene (`[haze]`; `miyazaki` and `truth`).
+    pub haze: Option<Haze>,
+}
+
+/// An aerosol layer: field `field` of the tables at N(y) = N_0 e^{−y/H}.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Haze {
+    /// Index of its field in the tables.
+    pub field: usize,
+    /// N_0 at y = 0 (1/m³).
+    pub number_density_per_m3: f64,
+    /// H (m).
+    pub scale_height_m: f64,
 }
 
 impl Frame {

@@ -40,6 +40,11 @@
 //! beta_sea_level_per_m = [5.8e-6, 1.35e-5, 3.31e-5]
 //! scale_height_m = 8000
 //!
+//! [haze]                    # --model miyazaki, truth: an aerosol layer over the whole scene
+//! field = "haze"            # a [[field]] of kind haze
+//! number_density_per_m3 = 2e8   # at sea level (y = 0), > 0
+//! scale_height_m = 1200     # N(y) = N_0 e^{−y/H}, > 0
+//!
 //! [[volume]]
 //! field = "rain"            # a [[field]] of the scene
 //! shape = "rain_shaft"      # cumulus | cirrus | rain_shaft | grid
@@ -86,6 +91,28 @@ struct File {
     ground: Option<GroundKeys>,
     #[serde(default, rename = "light")]
     lights: Vec<LightKeys>,
+    #[serde(default)]
+    haze: Option<HazeKeys>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct HazeKeys {
+    field: String,
+    number_density_per_m3: f64,
+    scale_height_m: f64,
+}
+
+/// `[haze]`: an aerosol layer of a `[[field]]` (of kind haze) with an exponential height
+/// profile N(y) = N_0 e^{−y/H} over the whole scene.
+#[derive(Debug, Clone, PartialEq)]
+pub struct HazeKeysChecked {
+    /// The field's name.
+    pub field: String,
+    /// N_0 at y = 0 (1/m³), > 0.
+    pub number_density_per_m3: f64,
+    /// H (m), > 0.
+    pub scale_height_m: f64,
 }
 
 #[derive(Debug, Default, Deserialize)]
@@ -202,6 +229,8 @@ pub struct RenderScene {
     pub seed: u64,
     /// `[render] svs_a`, `k_multi`, `svs_phase` and `[ground] albedo` for `--model miyazaki`.
     pub svs: crate::miyazaki::SvsSettings,
+    /// `[haze]`, if any.
+    pub haze: Option<HazeKeysChecked>,
 }
 
 /// A render scene that cannot be used, naming the file, the key or volume, and the allowed range.
@@ -341,6 +370,29 @@ impl RenderScene {
             ground_albedo,
         };
         crate::miyazaki::check(&svs).map_err(|e| err(e.0))?;
+        let haze = match file.haze {
+            None => None,
+            Some(h) => {
+                if !(h.number_density_per_m3.is_finite() && h.number_density_per_m3 > 0.0) {
+                    return Err(err(format!(
+                        "[haze] number_density_per_m3 = {} must be finite and > 0 (particles \
+                         per m³ at y = 0)",
+                        h.number_density_per_m3
+                    )));
+                }
+                if !(h.scale_height_m.is_finite() && h.scale_height_m > 0.0) {
+                    return Err(err(format!(
+                        "[haze] scale_height_m = {} must be finite and > 0 (m)",
+                        h.scale_height_m
+                    )));
+                }
+                Some(HazeKeysChecked {
+                    field: h.field,
+                    number_density_per_m3: h.number_density_per_m3,
+                    scale_height_m: h.scale_height_m,
+                })
+            }
+        };
         if file.volumes.is_empty() {
             return Err(err("no [[volume]] table: nothing to render".into()));
         }
@@ -376,6 +428,7 @@ impl RenderScene {
             spp,
             seed: render.seed.unwrap_or(1),
             svs,
+            haze,
         })
     }
 
@@ -385,7 +438,14 @@ impl RenderScene {
             return Ok(());
         }
         if model == "miyazaki" && self.lights.is_empty() {
-            return Ok(()); // sunlight over a Lambertian ground
+            return Ok(()); // sunlight over a Lambertian ground, through haze
+        }
+        if let Some(h) = &self.haze {
+            return Err(FrameError(format!(
+                "the scene has a [haze] layer (field {:?}); --model {model} draws Rayleigh air \
+                 only (render it with --model miyazaki or truth)",
+                h.field
+            )));
         }
         if !self.lights.is_empty() {
             return Err(FrameError(format!(
@@ -454,6 +514,7 @@ impl RenderScene {
             slices: self.slices,
             light_resolution: self.light_resolution,
             grid,
+            haze: None,
         }
     }
 
@@ -467,13 +528,18 @@ impl RenderScene {
         Self::parse(&text, &path.display().to_string(), base)
     }
 
-    /// The fields the volumes use, in order of first use.
+    /// The fields the volumes use, in order of first use, then the haze layer's.
     pub fn fields(&self) -> Vec<String> {
         let mut names: Vec<String> = Vec::new();
         for v in &self.volumes {
             if !names.contains(&v.field) {
                 names.push(v.field.clone());
             }
+        }
+        if let Some(h) = &self.haze
+            && !names.contains(&h.field)
+        {
+            names.push(h.field.clone());
         }
         names
     }
@@ -493,7 +559,13 @@ impl RenderScene {
                 .expect("checked above")
         };
         let grid = rasterize(&self.volumes, self.grid_resolution, index)?;
-        Ok(self.frame_with(grid))
+        let mut frame = self.frame_with(grid);
+        frame.haze = self.haze.as_ref().map(|h| crate::Haze {
+            field: index(&h.field),
+            number_density_per_m3: h.number_density_per_m3,
+            scale_height_m: h.scale_height_m,
+        });
+        Ok(frame)
     }
 }
 

@@ -245,6 +245,51 @@ fn the_ground_under_a_cloud_slab_is_darker_by_its_transmittance() {
 }
 
 #[test]
+fn single_scattering_in_a_haze_layer_is_exact() {
+    // Eq. 1's atmosphere term alone: a horizontal ray at 500 m through an exponential haze
+    // (H = 1 km, β_ext ≈ 1e-4 /m there), the sun 30° up at 90° to the ray: per channel
+    // ω P(90°) e^{−τ_sun}, P the haze's Ams_1.
+    let (tmp, dir) = common::bake(&common::scene(
+        "haze",
+        4,
+        &format!("{}{}", common::CLOUD, common::HAZE),
+    ));
+    let tables = Tables::open(&dir).unwrap();
+    let haze = tables.field("haze").unwrap();
+    let n0 = 1e-4 / (haze.sigma_ext_m2[1] * (-0.5f64).exp());
+    let scene = RenderScene::parse(&common::haze_scene(n0), "haze", tmp.path()).unwrap();
+    let frame = scene.frame(&tables).unwrap();
+    let s = setup(&frame, &scene.svs).unwrap();
+    let image = render(&tables, &frame, &scene.svs).unwrap();
+    let mut worst: f64 = 0.0;
+    for (p, rgb) in image.rgb.iter().enumerate() {
+        let d = pixel_ray(&frame, p % frame.width, p / frame.width);
+        let cos = d.dot(s.to_sun);
+        let phase = sample::ams(haze, tables.theta_step_deg, 1.0, cos);
+        for c in 0..3 {
+            let want = common::haze_single_scattering(
+                haze.albedo[c],
+                phase[c],
+                n0 * haze.sigma_ext_m2[c],
+                1000.0,
+                500.0,
+                s.to_sun.y,
+            );
+            let rel = (rgb[c] as f64 - want) / want;
+            worst = worst.max(rel.abs());
+            // The midpoint rule at 0.02 of an optical depth per step, and f32 output:
+            // measured worst 1.5e-4.
+            assert!(
+                rel.abs() < 3e-4,
+                "pixel {p} channel {c}: {} vs {want} ({rel:+.2e})",
+                rgb[c]
+            );
+        }
+    }
+    eprintln!("worst relative difference {worst:.2e}");
+}
+
+#[test]
 fn bad_keys_are_refused_naming_the_key_value_and_range() {
     let base = format!(
         "{}\n[camera]\nposition_m = [0, 100, 0]\nlook_at_m = [0, 100, 10]\n\n\
@@ -274,6 +319,14 @@ fn bad_keys_are_refused_naming_the_key_value_and_range() {
             "[ground]\nalbedo = 1.5",
             "albedo = 1.5 is outside the allowed range [0, 1]",
         ),
+        (
+            "[haze]\nfield = \"cloud\"\nnumber_density_per_m3 = 1e8\nscale_height_m = 0",
+            "[haze] scale_height_m = 0 must be finite and > 0 (m)",
+        ),
+        (
+            "[haze]\nfield = \"cloud\"\nnumber_density_per_m3 = -1\nscale_height_m = 1000",
+            "[haze] number_density_per_m3 = -1 must be finite and > 0",
+        ),
     ] {
         let text = format!("{base}\n{keys}\n");
         let e = RenderScene::parse(&text, "test", Path::new("."))
@@ -286,4 +339,13 @@ fn bad_keys_are_refused_naming_the_key_value_and_range() {
     let scene = RenderScene::parse(&text, "test", Path::new(".")).unwrap();
     scene.check_for("miyazaki").unwrap();
     assert!(scene.check_for("riley").is_err());
+    // Riley's model has Rayleigh air only: a haze layer is refused, naming it.
+    let text = format!(
+        "{base}\n[haze]\nfield = \"cloud\"\nnumber_density_per_m3 = 1e8\nscale_height_m = 1000\n"
+    );
+    let scene = RenderScene::parse(&text, "test", Path::new(".")).unwrap();
+    scene.check_for("miyazaki").unwrap();
+    scene.check_for("truth").unwrap();
+    let e = scene.check_for("riley").unwrap_err().0;
+    assert!(e.contains("[haze] layer (field \"cloud\")"), "{e}");
 }

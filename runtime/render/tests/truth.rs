@@ -141,6 +141,7 @@ fn slab_frame(tau: f64) -> Frame {
             dims: [2, 2, 2],
             data,
         },
+        haze: None,
     }
 }
 
@@ -340,6 +341,59 @@ fn exact_single_scattering_from_a_slab() {
         assert!(z.abs() < 4.0, "μ {mu} φ {phi}: {got} ± {se} vs {want}");
     }
     eprintln!("worst {worst:.2}σ");
+}
+
+#[test]
+fn single_scattering_in_a_haze_layer_is_exact() {
+    // A horizontal camera ray at 500 m in an exponential haze (H = 1 km, β_ext ≈ 1e-4 /m
+    // there), the sun 30° up at 90° to the ray, one scattering only: per channel
+    // ω P(90°) e^{−τ_sun}, with each wavelength's own σ, ω and phase function (three carried).
+    let (tmp, dir) = common::bake(&common::scene(
+        "haze",
+        4,
+        &format!("{}{}", common::CLOUD, common::HAZE),
+    ));
+    let tables = Tables::open(&dir).unwrap();
+    let haze = tables.field("haze").unwrap();
+    let n0 = 1e-4 / (haze.sigma_ext_m2[1] * (-0.5f64).exp());
+    let scene = RenderScene::parse(&common::haze_scene(n0), "haze", tmp.path()).unwrap();
+    let frame = scene.frame(&tables).unwrap();
+    let mut tracer = Tracer::new(&tables, &frame, &scene.truth_settings()).unwrap();
+    tracer.max_scatterings = 1;
+    let single = haze.single.as_ref().unwrap();
+    let grid = ThetaGrid::new(tables.theta_step_deg).unwrap();
+    let eye = frame.camera.position_m;
+    let d = DVec3::Z;
+    let sun = frame.sun.direction();
+    let n = 40_000;
+    let (mut s, mut q) = ([0.0; 3], [0.0; 3]);
+    for i in 0..n {
+        let mut rng = Rng::stream(31, 0, i as u64);
+        let l = tracer.radiance(eye, d, &mut rng);
+        for c in 0..3 {
+            s[c] += l[c];
+            q[c] += l[c] * l[c];
+        }
+    }
+    for c in 0..3 {
+        let bins: Vec<f64> = single.bins.row(c).to_vec();
+        let phase = PhaseSampler::new(&grid, &bins, single.forward_delta_fraction[c]).eval(d, sun);
+        let want = common::haze_single_scattering(
+            single.albedo[c],
+            phase,
+            n0 * single.sigma_ext_m2[c],
+            1000.0,
+            500.0,
+            sun.y,
+        );
+        let (got, se) = (
+            s[c] / n as f64,
+            render::truth::std_error(s[c], q[c], n as f64),
+        );
+        let z = (got - want) / se;
+        eprintln!("channel {c}: {got:.6} ± {se:.1e} vs {want:.6} ({z:+.2}σ)");
+        assert!(z.abs() < 4.0, "channel {c}: {got} ± {se} vs {want}");
+    }
 }
 
 #[test]

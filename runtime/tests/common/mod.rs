@@ -64,3 +64,68 @@ pub fn gpu() -> Option<runtime::gpu::Gpu> {
         }
     }
 }
+
+/// A water haze field (kind haze, the default lognormal).
+#[allow(dead_code)]
+pub const HAZE: &str = r#"
+[[field]]
+name = "haze"
+kind = "haze"
+"#;
+
+/// A scene of cloud and haze seen along a horizontal ray at 500 m through a haze layer of
+/// N_0 = `n0` and H = 1000 m, the sun 30° up at the side (azimuth 90°), sky off; the only
+/// cloud is far on the side away from the sun, out of view and off every sun ray.
+#[allow(dead_code)]
+pub fn haze_scene(n0: f64) -> String {
+    format!(
+        r#"{}
+[render]
+width = 4
+height = 4
+slices = 64
+light_resolution = 16
+
+[camera]
+position_m = [0, 500, 0]
+look_at_m = [0, 500, 1000]
+fov_deg = 0.01
+
+[sun]
+elevation_deg = 30
+azimuth_deg = 90
+
+[sky]
+enabled = false
+
+[haze]
+field = "haze"
+number_density_per_m3 = {n0}
+scale_height_m = 1000
+
+[[volume]]
+field = "cloud"
+shape = "cumulus"
+number_density_per_m3 = 1e6
+center_m = [-20000, 1000, 0]
+radius_m = 300
+height_m = 300
+"#,
+        scene("haze", 4, &format!("{CLOUD}{HAZE}"))
+    )
+}
+
+/// Single scattering along a horizontal ray at height y through an exponential haze of
+/// N(y) σ_ext = `beta_ext` there, scale height `h`, with the sun at vertical component `l_y`:
+/// ω P(α) e^{−β_ext(0) h e^{−y/h} / l_y} (the ray is infinite, so ∫ β_sca e^{−β_ext t} dt = ω).
+#[allow(dead_code)]
+pub fn haze_single_scattering(
+    omega: f64,
+    phase: f64,
+    beta_ext_sl: f64,
+    h: f64,
+    y: f64,
+    l_y: f64,
+) -> f64 {
+    omega * phase * (-beta_ext_sl * h * (-y / h).exp() / l_y).exp()
+}

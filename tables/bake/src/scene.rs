@@ -24,7 +24,7 @@
 //! ```
 //!
 //! Errors name the key and its line; nothing is written before the whole scene is valid.
-//! The tables `[render]`, `[camera]`, `[sun]`, `[sky]`, `[ground]`, `[[volume]]` and `[[light]]`
+//! The tables `[render]`, `[camera]`, `[sun]`, `[sky]`, `[ground]`, `[haze]`, `[[volume]]` and `[[light]]`
 //! belong to the renderer
 //! (`photometeor render`, `photometeor-render`'s `scene` module) and are passed over here.
 
@@ -119,6 +119,8 @@ struct SceneFile {
     _ground: Option<toml::Value>,
     #[serde(default, rename = "light")]
     _light: Option<toml::Value>,
+    #[serde(default, rename = "haze")]
+    _haze: Option<toml::Value>,
 }
 
 #[derive(Debug, Deserialize)]

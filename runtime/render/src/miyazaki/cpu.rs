@@ -17,6 +17,13 @@ use crate::{Frame, FrameError, Image, MAX_FIELDS, SUN_DIAMETER_DEG};
 /// Quadrature points for the shadowed air outside the slices (module docs of [`super`]).
 const SHADOWED_AIR_POINTS: usize = 64;
 
+/// Midpoint steps for hazy air outside the slices: this optical depth of the densest channel,
+/// at most [`HAZY_AIR_MAX_STEP_M`].
+const HAZY_AIR_STEP_TAU: f64 = 0.02;
+
+/// The longest midpoint step for hazy air (m).
+const HAZY_AIR_MAX_STEP_M: f64 = 2000.0;
+
 /// The longest stretch of a view ray integrated for shadowed air beyond the slices (m).
 const SHADOWED_AIR_MAX_M: f64 = 200_000.0;
 
@@ -97,6 +104,68 @@ fn prism_span(s: &SvsSetup, res: usize, origin: DVec3, d: DVec3, t0: f64, t1: f6
     (lo, hi.max(lo))
 }
 
+/// The air: Rayleigh (the sky model's β_sl, H) and the haze layer, each an exponential in
+/// height, for the extinction, the sunlight reaching a height (Eq. 12 for each) and the
+/// transmittance along a ray.
+struct Air<'a> {
+    atm: &'a crate::Atmosphere,
+    /// N_0 σ_ext per channel (1/m at y = 0) and 1/H of the haze; zero without one.
+    haze_ext: [f64; 3],
+    haze_gamma: f64,
+    l_y: f64,
+}
+
+impl Air<'_> {
+    fn on(&self) -> bool {
+        self.atm.beta_sea_level_per_m.iter().any(|&b| b > 0.0) || self.haze_on()
+    }
+
+    fn haze_on(&self) -> bool {
+        self.haze_ext.iter().any(|&b| b > 0.0)
+    }
+
+    /// Rayleigh β and the haze's N(y)/N_0 at height y.
+    fn at(&self, y: f64) -> ([f64; 3], f64) {
+        let r = std::array::from_fn(|c| {
+            self.atm.beta_sea_level_per_m[c] * (-y / self.atm.scale_height_m).exp()
+        });
+        (
+            r,
+            if self.haze_on() {
+                (-self.haze_gamma * y).exp()
+            } else {
+                0.0
+            },
+        )
+    }
+
+    /// Sunlight reaching height y through both (Eq. 12, and its haze analogue).
+    fn sunlight(&self, y: f64) -> [f64; 3] {
+        let mut s = self.atm.sunlight(y, self.l_y);
+        if self.haze_on() {
+            let depth = (-self.haze_gamma * y).exp() / self.haze_gamma / self.l_y;
+            for c in 0..3 {
+                s[c] *= (-self.haze_ext[c] * depth).exp();
+            }
+        }
+        s
+    }
+
+    /// Transmittance from the eye at height `y` along `d_y` over `t` (Eq. 11 for each).
+    fn transparency(&self, y: f64, d_y: f64, t: f64) -> [f64; 3] {
+        let mut tr = self.atm.transparency(y, d_y, t);
+        if self.haze_on() {
+            let depth = (-self.haze_gamma * y).exp()
+                * crate::sky::one_minus_u_over_p(self.haze_gamma, d_y, t)
+                / self.haze_gamma;
+            for c in 0..3 {
+                tr[c] *= (-self.haze_ext[c] * depth).exp();
+            }
+        }
+        tr
+    }
+}
+
 /// Renders `frame` by shadow-view slicing with the fields of `tables` (field i = grid
 /// channel i).
 pub fn render(tables: &Tables, frame: &Frame, settings: &SvsSettings) -> Result<Image, FrameError> {
@@ -106,8 +175,17 @@ pub fn render(tables: &Tables, frame: &Frame, settings: &SvsSettings) -> Result<
     let (w, h) = (frame.width, frame.height);
     let res = frame.light_resolution;
     let atm = &frame.atmosphere;
-    let air_on = atm.beta_sea_level_per_m.iter().any(|&b| b > 0.0);
     let l_y = s.to_sun.y;
+    let haze = frame.haze.map(|h| (tables.fields[h.field].clone(), h));
+    let air = Air {
+        atm,
+        haze_ext: haze.as_ref().map_or([0.0; 3], |(f, h)| {
+            f.sigma_ext_m2.map(|e| e * h.number_density_per_m3)
+        }),
+        haze_gamma: haze.as_ref().map_or(0.0, |(_, h)| 1.0 / h.scale_height_m),
+        l_y,
+    };
+    let air_on = air.on();
     let irradiance = frame.sun.irradiance;
     let rays: Vec<DVec3> = (0..w * h)
         .map(|p| crate::camera::pixel_ray(s.axes, s.tan_half_fov_y, (p % w, p / w), (w, h)))
@@ -118,12 +196,34 @@ pub fn render(tables: &Tables, frame: &Frame, settings: &SvsSettings) -> Result<
         .collect();
     // The Mie scattering texture (§4.1): per pixel and field, (P_f(α) + k_multi) σ_sca,f per
     // channel, and the Rayleigh phase; α is constant along a pixel's ray.
-    let mie: Vec<([[f64; 3]; MAX_FIELDS], f64)> = rays
+    // The haze's β_atm: N_0 σ_sca P(α) (its Ams_1 or Cornette–Shanks), no k_multi (Eq. 1).
+    let haze_g = haze
+        .as_ref()
+        .map(|(f, _)| asymmetry(f, tables.theta_step_deg));
+    let haze_beta = |cos: f64| -> [f64; 3] {
+        let Some((f, h)) = &haze else {
+            return [0.0; 3];
+        };
+        let p = match settings.phase {
+            SvsPhase::Tables => sample::ams(f, tables.theta_step_deg, 1.0, cos),
+            SvsPhase::CornetteShanks => {
+                let g = haze_g.expect("with the haze");
+                std::array::from_fn(|c| cornette_shanks(g[c], cos))
+            }
+        };
+        std::array::from_fn(|c| p[c] * f.sigma_sca_m2[c] * h.number_density_per_m3)
+    };
+    let haze_field = frame.haze.map(|h| h.field);
+    type Texture = ([[f64; 3]; MAX_FIELDS], f64, [f64; 3]);
+    let mie: Vec<Texture> = rays
         .par_iter()
         .map(|&d| {
             let cos = d.dot(s.to_sun);
             let mut out = [[0.0; 3]; MAX_FIELDS];
             for (i, f) in fields.iter().enumerate() {
+                if Some(i) == haze_field {
+                    continue; // the haze layer lives in the air, not the grid
+                }
                 let p = match settings.phase {
                     SvsPhase::Tables => sample::ams(f, tables.theta_step_deg, 1.0, cos),
                     SvsPhase::CornetteShanks => {
@@ -132,7 +232,7 @@ pub fn render(tables: &Tables, frame: &Frame, settings: &SvsSettings) -> Result<
                 };
                 out[i] = std::array::from_fn(|c| (p[c] + settings.k_multi) * f.sigma_sca_m2[c]);
             }
-            (out, rayleigh_phase(cos))
+            (out, rayleigh_phase(cos), haze_beta(cos))
         })
         .collect();
 
@@ -164,7 +264,7 @@ pub fn render(tables: &Tables, frame: &Frame, settings: &SvsSettings) -> Result<
         eye.par_iter_mut()
             .zip(&rays)
             .zip(&mie)
-            .for_each(|((px, &d), (beta, p_air))| {
+            .for_each(|((px, &d), (beta, p_air, haze_b))| {
                 let nd = s.normal.dot(d);
                 if nd.abs() < 1e-9 {
                     return;
@@ -176,32 +276,24 @@ pub fn render(tables: &Tables, frame: &Frame, settings: &SvsSettings) -> Result<
                 let p = s.eye + t * d;
                 let rho = frame.grid.sample(p);
                 let (ext, _) = coefficients(&fields, &rho);
-                let air: [f64; 3] = if air_on {
-                    std::array::from_fn(|ch| {
-                        atm.beta_sea_level_per_m[ch] * (-p.y / atm.scale_height_m).exp()
-                    })
-                } else {
-                    [0.0; 3]
-                };
-                if ext.iter().chain(&air).all(|&e| e <= 0.0) {
+                let (rayleigh, n_haze) = if air_on { air.at(p.y) } else { ([0.0; 3], 0.0) };
+                let air_ext: [f64; 3] =
+                    std::array::from_fn(|ch| rayleigh[ch] + n_haze * air.haze_ext[ch]);
+                if ext.iter().chain(&air_ext).all(|&e| e <= 0.0) {
                     return;
                 }
                 let dt = s.step / nd.abs();
                 let g_cl = shadow_at(&shadow, res, s.shadow_coords(p));
-                let g_atm = if air_on {
-                    atm.sunlight(p.y, l_y)
-                } else {
-                    [1.0; 3]
-                };
+                let g_atm = if air_on { air.sunlight(p.y) } else { [1.0; 3] };
                 let (sum, alpha_star, t_cl) = px;
                 for ch in 0..3 {
-                    let mut b = air[ch] * p_air;
+                    let mut b = rayleigh[ch] * p_air + n_haze * haze_b[ch];
                     for (f, r) in rho.iter().enumerate().take(fields.len()) {
                         b += r * beta[f][ch];
                     }
                     // Eq. 8 (× I_sun), Eq. 9.
                     let contribution = irradiance[ch] * dt * b * g_atm[ch] * g_cl[ch];
-                    let slab = (-(ext[ch] + air[ch]) * dt).exp();
+                    let slab = (-(ext[ch] + air_ext[ch]) * dt).exp();
                     if s.back_to_front {
                         sum[ch] = contribution + slab * sum[ch];
                     } else {
@@ -216,12 +308,12 @@ pub fn render(tables: &Tables, frame: &Frame, settings: &SvsSettings) -> Result<
     // Composite: the air before and after the slices, the ground, the sun disk.
     let cos_disk = (SUN_DIAMETER_DEG / 2.0).to_radians().cos();
     let disk_sr = std::f64::consts::TAU * (1.0 - cos_disk);
-    let sun_ground = atm.sunlight(0.0, l_y);
+    let sun_ground = air.sunlight(0.0);
     let pixels: Vec<([f32; 3], f32)> = eye
         .par_iter()
         .zip(&rays)
         .zip(&mie)
-        .map(|((&(sum, _, t_cl), &d), &(_, p_air))| {
+        .map(|((&(sum, _, t_cl), &d), &(_, p_air, haze_b))| {
             let t_end = t_ground(d);
             // The slices' range along the ray, clipped to [0, t_end].
             let nd = s.normal.dot(d);
@@ -240,35 +332,80 @@ pub fn render(tables: &Tables, frame: &Frame, settings: &SvsSettings) -> Result<
                 if !air_on || t1 <= t0 {
                     return [0.0; 3];
                 }
-                let a = atm.inscatter(y_eye, d.y, t1, l_y, cos_sun);
-                let b = atm.inscatter(y_eye, d.y, t0, l_y, cos_sun);
-                let mut out: [f64; 3] = std::array::from_fn(|c| a[c] - b[c]);
                 let probe = s.eye + (t0 + 1e-6 * (t1 - t0).min(1.0)) * d;
-                if s.sunward_of_slices(probe) {
-                    return out;
-                }
-                let (lo, hi) = prism_span(&s, res, s.eye, d, t0, t1.min(t0 + SHADOWED_AIR_MAX_M));
+                let sunward = s.sunward_of_slices(probe);
+                let haze_on = air.haze_on();
+                // Without haze: Eq. 14 in closed form, less the final shadow's deficit on the
+                // far side (inside the shadow prism). With haze: both species by the midpoint
+                // rule along the whole segment.
+                let mut out = [0.0; 3];
+                let (lo, hi, shadow_only) = if haze_on {
+                    let cap = if t1.is_finite() {
+                        t1
+                    } else {
+                        t0 + SHADOWED_AIR_MAX_M
+                    };
+                    (t0, cap, false)
+                } else {
+                    let a = atm.inscatter(y_eye, d.y, t1, l_y, cos_sun);
+                    let b = atm.inscatter(y_eye, d.y, t0, l_y, cos_sun);
+                    out = std::array::from_fn(|c| a[c] - b[c]);
+                    if sunward {
+                        return out;
+                    }
+                    let (lo, hi) =
+                        prism_span(&s, res, s.eye, d, t0, t1.min(t0 + SHADOWED_AIR_MAX_M));
+                    (lo, hi, true)
+                };
                 if hi <= lo {
                     return out;
                 }
-                let dt = (hi - lo) / SHADOWED_AIR_POINTS as f64;
-                for i in 0..SHADOWED_AIR_POINTS {
-                    let t = lo + (i as f64 + 0.5) * dt;
-                    let p = s.eye + t * d;
-                    let g_cl = shadow_at(&shadow, res, s.shadow_coords(p));
-                    let sun = atm.sunlight(p.y, l_y);
-                    let tr = atm.transparency(y_eye, d.y, t);
+                // The shadow deficit: 64 midpoints over the prism. The hazy air: midpoints
+                // 0.02 of an optical depth (or 2 km) apart, until the transmittance from the
+                // eye is below 1e-7.
+                let (mut t, uniform) = (lo, (hi - lo) / SHADOWED_AIR_POINTS as f64);
+                while t < hi {
+                    let (rayleigh, n_haze) = air.at(s.eye.y + (t + 0.5 * uniform) * d.y);
+                    let dt = if shadow_only {
+                        uniform
+                    } else {
+                        let ext = (0..3)
+                            .map(|c| rayleigh[c] + n_haze * air.haze_ext[c])
+                            .fold(0.0, f64::max);
+                        (HAZY_AIR_STEP_TAU / ext.max(1e-300))
+                            .min(HAZY_AIR_MAX_STEP_M)
+                            .min(hi - t)
+                    };
+                    let tm = t + 0.5 * dt;
+                    t += dt;
+                    let p = s.eye + tm * d;
+                    let g_cl = if sunward {
+                        [1.0; 3]
+                    } else {
+                        shadow_at(&shadow, res, s.shadow_coords(p))
+                    };
+                    let sun = air.sunlight(p.y);
+                    let tr = air.transparency(y_eye, d.y, tm);
+                    let (rayleigh, n_haze) = air.at(p.y);
                     for c in 0..3 {
-                        let beta = atm.beta_sea_level_per_m[c] * (-p.y / atm.scale_height_m).exp();
-                        out[c] -= beta * p_air * sun[c] * tr[c] * (1.0 - g_cl[c]) * dt;
+                        let b = rayleigh[c] * p_air + n_haze * haze_b[c];
+                        let lit = if shadow_only {
+                            -(1.0 - g_cl[c])
+                        } else {
+                            g_cl[c]
+                        };
+                        out[c] += b * sun[c] * tr[c] * lit * dt;
+                    }
+                    if !shadow_only && tr.iter().all(|&v| v < 1e-7) {
+                        break;
                     }
                 }
                 out
             };
             let front = air_segment(0.0, ta);
             let back = air_segment(tb, t_end);
-            let t_front = atm.transparency(y_eye, d.y, ta);
-            let t_all = atm.transparency(y_eye, d.y, t_end);
+            let t_front = air.transparency(y_eye, d.y, ta);
+            let t_all = air.transparency(y_eye, d.y, t_end);
             // What lies beyond: the ground, lit through the final shadow surface, or the sun.
             let end: [f64; 3] = if t_end.is_finite() {
                 let ground = s.eye + t_end * d;

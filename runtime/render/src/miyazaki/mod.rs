@@ -24,9 +24,13 @@
 //!   blended back to front as S ← C + Δg_view S or front to back as S ← S + α* C, α* ← α* Δg_view
 //!   (C = I_sun ΔI_SVS). As printed, a slice's own light is not attenuated by the slice, and C
 //!   is the Riemann term Δt·β, not Riley's α(1 − e^{−τ}).
-//! - **Atmosphere (§4.4)**: g_sun_atm(h), the sunlight reaching height h through the air, is
-//!   the sky model's Eq. 12 ([`crate::Atmosphere::sunlight`]); ρ_atm β_atm is the Rayleigh air
-//!   β_sl e^{−h/H} with its phase function (Riley Eq. 1).
+//! - **Atmosphere (§4.4)**: the atmospheric particles are the Rayleigh air, β_sl e^{−h/H}
+//!   with its phase function (Riley Eq. 1), and the aerosol layer `[haze]` ([`crate::Haze`]):
+//!   N_0 e^{−h/H_h} particles of a baked field (kind `haze`) with its own Ams_1 (or
+//!   Cornette–Shanks), σ_sca and σ_ext. g_sun_atm(h), the sunlight reaching height h, is the
+//!   sky model's Eq. 12 ([`crate::Atmosphere::sunlight`]) times its analogue for the haze,
+//!   e^{−N_0 σ_ext H_h e^{−h/H_h}/sin e}; the paper tabulates the same in its atmosphere
+//!   texture. k_multi does not apply to the haze (Eq. 1).
 //!
 //! # With our tables
 //! - β_cl(α) ρ_cl = Σ_f ρ_f σ_sca,f P_f(α) per channel, P_f = the field's Ams_1 (its
@@ -39,10 +43,12 @@
 //!
 //! # Where this departs from, or fills in, the paper
 //! - The slices span the volumes' box only. Outside it, along each view ray, the air is
-//!   integrated in closed form (Riley's sky, Eq. 14) where the sunlight reaches it unshadowed
-//!   (the sun's side of the slices), and with the final shadow surface looked up by a
-//!   64-point midpoint rule where it may be shadowed (the far side), so light shafts continue
-//!   below the box down to the ground.
+//!   integrated with the final shadow surface where it may be shadowed (the far side of the
+//!   slices from the sun; unshadowed on the sun's side), so light shafts continue below the
+//!   box down to the ground: without haze, Eq. 14 in closed form less the shadow's deficit by a
+//!   64-point midpoint rule over the shadow's prism; with haze, both species by the midpoint
+//!   rule at 0.02 of an optical depth (at most 2 km) per step, until the transmittance from
+//!   the eye is below 10⁻⁷.
 //! - The ground is a Lambertian plane at y = 0 of albedo [`SvsSettings::ground_albedo`], lit
 //!   by the sun through the air (Eq. 12) and the final shadow surface; the paper draws shadows
 //!   on its terrain but gives no reflectance model. No skylight reaches the ground.

@@ -184,6 +184,9 @@ struct FieldOptics {
 struct Band {
     fields: Vec<FieldOptics>,
     beta_air_sl: f64,
+    /// The haze layer's N_0 σ_ext and σ_sca (1/m at y = 0); zero without one.
+    haze_ext_sl: f64,
+    haze_sca_sl: f64,
     /// w_cj / q_j: what one unit of this wavelength's radiance adds to channel c.
     to_rgb: [f64; 3],
 }
@@ -254,6 +257,24 @@ fn roulette(weight: &mut f64, rng: &mut Rng) -> bool {
     true
 }
 
+/// Distance to the next collision with an exponential species of β(y) = β_0 e^{−γ y} from `p`
+/// along `d` (closed-form inversion of its optical depth), or ∞.
+fn sample_exponential(beta0: f64, gamma: f64, p: DVec3, d: DVec3, rng: &mut Rng) -> f64 {
+    if beta0 == 0.0 {
+        return f64::INFINITY;
+    }
+    let target = rng.exp() / (beta0 * (-gamma * p.y).exp());
+    let k = gamma * d.y;
+    if k.abs() < 1e-15 {
+        return target;
+    }
+    let x = target * k;
+    if x >= 1.0 {
+        return f64::INFINITY;
+    }
+    -(-x).ln_1p() / k
+}
+
 /// A scene ready to trace: the grid, the optics per wavelength, the sources.
 #[derive(Debug, Clone)]
 pub struct Tracer<'a> {
@@ -266,6 +287,8 @@ pub struct Tracer<'a> {
     majorant: f64,
     /// Whether the air scatters.
     air_on: bool,
+    /// The haze layer: its field (whose phase function it scatters with) and 1/H.
+    haze: Option<(usize, f64)>,
     gamma: f64,
     sun: DVec3,
     sun_irradiance: [f64; 3],
@@ -379,9 +402,16 @@ impl<'a> Tracer<'a> {
                 .map(|(f, m)| f.sigma_ext * m)
                 .sum::<f64>()
                 .max(majorant);
+            let (haze_ext_sl, haze_sca_sl) = frame.haze.map_or((0.0, 0.0), |h| {
+                let f = &fields[h.field];
+                let ext = h.number_density_per_m3 * f.sigma_ext;
+                (ext, ext * f.albedo)
+            });
             bands.push(Band {
                 fields,
                 beta_air_sl: beta_at(lambda),
+                haze_ext_sl,
+                haze_sca_sl,
                 to_rgb: std::array::from_fn(|c| weights[c][j] / q),
             });
             acc += q;
@@ -399,6 +429,7 @@ impl<'a> Tracer<'a> {
             grid: &frame.grid,
             n_fields: tables.fields.len(),
             air_on: bands.iter().any(|b| b.beta_air_sl > 0.0),
+            haze: frame.haze.map(|h| (h.field, 1.0 / h.scale_height_m)),
             wavelengths_per_path: match settings.wavelengths_per_path {
                 0 => bands.len().min(MAX_CARRIED),
                 n => n,
@@ -426,6 +457,7 @@ impl<'a> Tracer<'a> {
             for f in &mut b.fields {
                 f.albedo = albedo;
             }
+            b.haze_sca_sl = b.haze_ext_sl * albedo;
         }
     }
 
@@ -476,21 +508,46 @@ impl<'a> Tracer<'a> {
         (-self.gamma * p.y).exp() * crate::sky::one_minus_u_over_p(self.gamma, d.y, s) / self.gamma
     }
 
+    /// Haze optical depth per unit N_0 σ_ext from `p` along unit `d` over distance `s`.
+    fn haze_path(&self, p: DVec3, d: DVec3, s: f64) -> f64 {
+        let Some((_, gamma)) = self.haze else {
+            return 0.0;
+        };
+        (-gamma * p.y).exp() * crate::sky::one_minus_u_over_p(gamma, d.y, s) / gamma
+    }
+
     /// Distance to the next air collision from `p` along `d` for the hero, or ∞.
     fn sample_air(&self, b: &Band, p: DVec3, d: DVec3, rng: &mut Rng) -> f64 {
-        if b.beta_air_sl == 0.0 {
-            return f64::INFINITY;
+        sample_exponential(b.beta_air_sl, self.gamma, p, d, rng)
+    }
+
+    /// Distance to the next haze collision from `p` along `d` for the hero, or ∞.
+    fn sample_haze(&self, b: &Band, p: DVec3, d: DVec3, rng: &mut Rng) -> f64 {
+        match self.haze {
+            Some((_, gamma)) => sample_exponential(b.haze_ext_sl, gamma, p, d, rng),
+            None => f64::INFINITY,
         }
-        let target = rng.exp() / (b.beta_air_sl * (-self.gamma * p.y).exp());
-        let k = self.gamma * d.y;
-        if k.abs() < 1e-15 {
-            return target;
+    }
+
+    /// The haze's part of a free path of length `s` that ends without a haze collision or in
+    /// one: p_m gains N σ_ext,m e^{−τ_m} over the hero's, f_m the same with σ_sca,m (the
+    /// albedo weighting).
+    fn haze_ratios(&self, c: &mut Carried, p: DVec3, d: DVec3, s: f64, collided: bool) {
+        if self.haze.is_none() {
+            return;
         }
-        let x = target * k;
-        if x >= 1.0 {
-            return f64::INFINITY;
+        let path = self.haze_path(p, d, s);
+        let b0 = self.band_of(c, 0).haze_ext_sl;
+        for m in 0..c.n {
+            let b = self.band_of(c, m);
+            let k = (-(b.haze_ext_sl - b0) * path).exp();
+            if collided {
+                c.f[m] *= k * b.haze_sca_sl / b0;
+                c.r[m] *= k * b.haze_ext_sl / b0;
+            } else if m > 0 {
+                c.both(m, k);
+            }
         }
-        -(-x).ln_1p() / k
     }
 
     /// The air's part of a free path of length `s` from `p` along `d` that ends without an
@@ -607,8 +664,10 @@ impl<'a> Tracer<'a> {
             } else {
                 0.0
             };
+            let haze = self.haze_path(p, dir, limit);
             for m in 0..c.n {
-                let t = w[m] * tv[m] * (-self.band_of(c, m).beta_air_sl * path).exp();
+                let b = self.band_of(c, m);
+                let t = w[m] * tv[m] * (-b.beta_air_sl * path - b.haze_ext_sl * haze).exp();
                 for ch in 0..3 {
                     sum[ch] += coef[m][ch] * t * source[ch];
                 }
@@ -642,8 +701,10 @@ impl<'a> Tracer<'a> {
             f64::INFINITY
         };
         let t_air = self.sample_air(self.band_of(c, 0), *p, d, rng);
-        if let Some((t, rho)) = self.track(c, *p, d, t_ground.min(t_air), rng) {
+        let t_haze = self.sample_haze(self.band_of(c, 0), *p, d, rng);
+        if let Some((t, rho)) = self.track(c, *p, d, t_ground.min(t_air).min(t_haze), rng) {
             self.air_ratios(c, *p, d, t, false);
+            self.haze_ratios(c, *p, d, t, false);
             *p += t * d;
             let e = self.extinctions(c, &rho);
             // Per carried wavelength: β_sca of each field and in all.
@@ -685,17 +746,26 @@ impl<'a> Tracer<'a> {
                 c.r[m] *= e[m] * choice(m) / p0;
             }
             Event::Volume(field)
+        } else if t_haze < t_ground.min(t_air) {
+            self.air_ratios(c, *p, d, t_haze, false);
+            self.haze_ratios(c, *p, d, t_haze, true);
+            *p += t_haze * d;
+            // It scatters with its field's phase function: a volume event of that field.
+            Event::Volume(self.haze.expect("sampled").0)
         } else if t_air < t_ground {
             self.air_ratios(c, *p, d, t_air, true);
+            self.haze_ratios(c, *p, d, t_air, false);
             *p += t_air * d;
             Event::Air
         } else if t_ground.is_finite() {
             self.air_ratios(c, *p, d, t_ground, false);
+            self.haze_ratios(c, *p, d, t_ground, false);
             *p += t_ground * d;
             p.y = 0.0;
             Event::Ground
         } else {
             self.air_ratios(c, *p, d, f64::INFINITY, false);
+            self.haze_ratios(c, *p, d, f64::INFINITY, false);
             Event::Escape
         }
     }
