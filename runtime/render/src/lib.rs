@@ -78,6 +78,9 @@ pub struct Frame {
     pub grid: DensityGrid,
     /// An aerosol layer over the whole scene (`[haze]`; `miyazaki` and `truth`).
     pub haze: Option<Haze>,
+    /// Lambertian albedo of the ground at y = 0 (`[ground] albedo`, [0, 1]; 0 is black), for
+    /// `riley` (`miyazaki` and `truth` take it in their settings).
+    pub ground_albedo: f64,
 }
 
 /// An aerosol layer: field `field` of the tables at N(y) = N_0 e^{−y/H}.

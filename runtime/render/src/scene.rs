@@ -432,7 +432,7 @@ impl RenderScene {
         })
     }
 
-    /// Refuses what a model cannot draw: Riley's model has sunlight and a black ground only.
+    /// Refuses what a model cannot draw: Riley's model has sunlight and Rayleigh air only.
     pub fn check_model(&self, model: &str) -> Result<(), FrameError> {
         if model == "truth" {
             return Ok(());
@@ -452,13 +452,6 @@ impl RenderScene {
                 "the scene has {} [[light]] table(s); --model {model} models sunlight only \
                  (render it with --model truth)",
                 self.lights.len()
-            )));
-        }
-        if self.ground_albedo > 0.0 {
-            return Err(FrameError(format!(
-                "[ground] albedo = {}; --model {model} draws a black ground (albedo 0; render \
-                 it with --model truth)",
-                self.ground_albedo
             )));
         }
         Ok(())
@@ -515,6 +508,7 @@ impl RenderScene {
             light_resolution: self.light_resolution,
             grid,
             haze: None,
+            ground_albedo: self.ground_albedo,
         }
     }
 

@@ -334,11 +334,11 @@ fn bad_keys_are_refused_naming_the_key_value_and_range() {
             .to_string();
         assert!(e.contains(needle), "{keys}: {e}");
     }
-    // A good scene passes the model's checks, and a ground albedo is allowed for it.
+    // A good scene passes the models' checks, a ground albedo included.
     let text = format!("{base}\n[ground]\nalbedo = 0.3\n");
     let scene = RenderScene::parse(&text, "test", Path::new(".")).unwrap();
     scene.check_for("miyazaki").unwrap();
-    assert!(scene.check_for("riley").is_err());
+    scene.check_for("riley").unwrap();
     // Riley's model has Rayleigh air only: a haze layer is refused, naming it.
     let text = format!(
         "{base}\n[haze]\nfield = \"cloud\"\nnumber_density_per_m3 = 1e8\nscale_height_m = 1000\n"

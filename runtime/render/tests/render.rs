@@ -42,6 +42,9 @@ fov_deg = 50
 elevation_deg = {elevation}
 azimuth_deg = {azimuth}
 
+[ground]
+albedo = 0.3
+
 [[volume]]
 field = "cloud"
 shape = "cumulus"

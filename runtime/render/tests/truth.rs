@@ -142,6 +142,7 @@ fn slab_frame(tau: f64) -> Frame {
             data,
         },
         haze: None,
+        ground_albedo: 0.0,
     }
 }
 

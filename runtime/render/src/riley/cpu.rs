@@ -277,12 +277,31 @@ pub fn render(tables: &Tables, frame: &Frame) -> Result<Image, FrameError> {
             let t_mid = atm.transparency(y, d[1], k_mid);
             let on_disk = k_end.is_infinite() && cos_sun >= cos_disk;
             let t_all = atm.transparency(y, d[1], k_end);
+            // A Lambertian ground lit through the air (Eq. 12) and the final light buffer
+            // (1 outside its footprint, where no volume is).
+            let ground: [f64; 3] = if frame.ground_albedo > 0.0 && k_end.is_finite() && k_end > 0.0
+            {
+                let uv = setup.light_coords(setup.eye + k_end * d);
+                let edge = (res - 1) as f64 + 0.5;
+                let lit = if uv.iter().all(|&v| (-0.5..=edge).contains(&v)) {
+                    bilinear(&light, res, uv).intensity
+                } else {
+                    [1.0; 3]
+                };
+                let sun0 = atm.sunlight(0.0, l_y);
+                std::array::from_fn(|c| {
+                    frame.ground_albedo / std::f64::consts::PI * l_y * sun0[c] * lit[c] * t_all[c]
+                })
+            } else {
+                [0.0; 3]
+            };
             let rgb = std::array::from_fn(|c| {
                 let i_s = frame.sun.irradiance[c];
                 let mut v = i_s * (front[c] + t_vol[c] * (all[c] - front[c])) + t_mid[c] * l_vol[c];
                 if on_disk {
                     v += t_vol[c] * i_s * t_all[c] / disk_sr;
                 }
+                v += t_vol[c] * i_s * ground[c];
                 v as f32
             });
             (rgb, t_vol[1] as f32)

@@ -162,7 +162,7 @@ impl Renderer {
             sun_dir[1] as f32,
             0.0,
         ]);
-        params.push(v4(frame.grid.min_m, 0.0));
+        params.push(v4(frame.grid.min_m, frame.ground_albedo));
         params.push(v4(frame.grid.max_m, 0.0));
         let [nx, ny, nz] = frame.grid.dims;
         let uints = |v: [u32; 4]| v.map(f32::from_bits);

@@ -12,7 +12,7 @@ struct RenderParams {
     light_u: vec4<f32>,      // xyz; w = light-buffer origin along u
     light_w: vec4<f32>,      // xyz; w = light-buffer origin along w
     light_texel: vec4<f32>,  // texel size u, w (m); z = sun's y component; w unused
-    grid_min: vec4<f32>,
+    grid_min: vec4<f32>,     // xyz; w = ground albedo (Lambertian, 0: black)
     grid_max: vec4<f32>,
     grid_dims: vec4<u32>,    // nx, ny, nz, field count
     sizes: vec4<u32>,        // width, height, light resolution, 0
@@ -318,6 +318,20 @@ fn composite(@builtin(global_invocation_id) id: vec3<u32>) {
     var v = i_s * (front + t_vol * (all_sky - front)) + t_mid * l_vol;
     if (k_end < 0.0 && cos_sun >= rp.sun.w) {
         v = v + t_vol * i_s * air_transparency(y, d.y, -1.0) / rp.irradiance.w;
+    }
+    if (rp.grid_min.w > 0.0 && k_end > 0.0) {
+        // The ground, lit through the air and the final light buffer (1 outside it).
+        let g = rp.eye.xyz + k_end * d;
+        let res = f32(rp.sizes.z);
+        let u = (dot(rp.light_u.xyz, g) - rp.light_u.w) / rp.light_texel.x - 0.5;
+        let w = (dot(rp.light_w.xyz, g) - rp.light_w.w) / rp.light_texel.y - 0.5;
+        var lit = vec3<f32>(1.0);
+        if (u >= -0.5 && u <= res - 0.5 && w >= -0.5 && w <= res - 0.5) {
+            lit = light_at(g).rgb;
+        }
+        let l_y = rp.light_texel.z;
+        v = v + t_vol * i_s * (rp.grid_min.w / 3.14159265358979 * l_y) * sunlight(0.0) * lit
+            * air_transparency(y, d.y, k_end);
     }
     image[i] = vec4<f32>(v, t_vol.g);
 }
