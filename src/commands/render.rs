@@ -61,7 +61,7 @@ pub struct RenderArgs {
     /// (an unbiased spectral Monte Carlo path tracer of the same scene on the CPU, all cores;
     /// its EXR adds stderr.R/G/B, each pixel's standard error; docs/truth.md) or `miyazaki`
     /// (Miyazaki, Dobashi & Nishita's shadow-view slices: single scattering plus a constant
-    /// k_multi, shadows on the ground and in the air; CPU reference only so far, with --cpu).
+    /// k_multi, shadows on the ground and in the air, an aerosol [haze] layer).
     #[arg(long, default_value = "riley", value_parser = ["riley", "truth", "miyazaki"])]
     model: String,
     /// --model truth: samples (paths) per pixel, [1, 1048576] (overrides [render] spp).
@@ -150,12 +150,6 @@ pub fn prepare(
 
 /// Runs `photometeor render`.
 pub fn run(a: RenderArgs) -> Result<()> {
-    if a.model == "miyazaki" && !a.cpu {
-        bail!(
-            "--model miyazaki has only its CPU reference so far (the GPU path is issue 15's next \
-             step): add --cpu"
-        );
-    }
     if a.wavelengths_per_path > render::truth::MAX_CARRIED {
         bail!(
             "--wavelengths-per-path {} is outside the allowed range [1, {}] (0: the default)",
@@ -193,11 +187,31 @@ pub fn run(a: RenderArgs) -> Result<()> {
     let raster = started.elapsed().as_secs_f64();
     if a.model == "miyazaki" {
         let t = Instant::now();
-        let image = render::miyazaki::cpu::render(&tables, &frame, &render.svs)?;
+        let (image, on) = if a.cpu {
+            let image = render::miyazaki::cpu::render(&tables, &frame, &render.svs)?;
+            (image, "CPU reference".to_string())
+        } else {
+            let gpu = Gpu::new().context(
+                "no GPU adapter: install a driver (on Debian, mesa-vulkan-drivers gives \
+                 lavapipe, a software Vulkan) or render with --cpu",
+            )?;
+            let gpu_tables = GpuTables::upload(&gpu, &tables, TexelFormat::Auto)?;
+            let renderer = render::miyazaki::gpu::Renderer::new(&gpu, &gpu_tables);
+            let (image, times) =
+                renderer.render(&gpu, &tables, &gpu_tables, &frame, &render.svs)?;
+            let on = format!(
+                "{}, frame {:.1} ms (upload {:.1} ms, readback {:.1} ms)",
+                gpu.describe(),
+                times.frame * 1e3,
+                times.upload * 1e3,
+                times.readback * 1e3
+            );
+            (image, on)
+        };
         if !a.quiet {
             eprintln!(
-                "shadow-view slices (CPU reference): {}×{}, {} slices, a = {}, k_multi = {} /sr, \
-                 shadow surface {}²: {:.2} s (grid {:?} built in {raster:.2} s)",
+                "shadow-view slices ({on}): {}×{}, {} slices, a = {}, k_multi = {} /sr, shadow \
+                 surface {}²: {:.2} s in all (grid {:?} built in {raster:.2} s)",
                 frame.width,
                 frame.height,
                 frame.slices,

@@ -10,7 +10,7 @@
 //!
 //! - [`miyazaki`]: Miyazaki, Dobashi & Nishita's shadow-view slices — single scattering with
 //!   a constant k_multi, a shadow surface for the clouds' shadows on the ground and in the air
-//!   (`--model miyazaki`; CPU reference so far).
+//!   (`--model miyazaki`).
 //! - [`truth`]: an unbiased spectral Monte Carlo path tracer of the full radiative transfer on
 //!   the same scene (`--model truth`), the reference every fast model is measured against.
 //!

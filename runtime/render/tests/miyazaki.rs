@@ -290,6 +290,113 @@ fn single_scattering_in_a_haze_layer_is_exact() {
 }
 
 #[test]
+fn gpu_render_matches_the_cpu_reference() {
+    let Some(gpu) = common::gpu() else { return };
+    // A cumulus and a rain shaft over a grey ground, in Rayleigh air and haze, the sun behind
+    // the camera (front to back) and ahead of it (back to front), both phase functions, a = 1
+    // and 2, k_multi 0.05.
+    let (tmp, dir) = common::bake(&common::scene(
+        "svs-gpu",
+        4,
+        &format!("{}{}{}", common::CLOUD, common::RAIN, common::HAZE),
+    ));
+    let tables = Tables::open(&dir).unwrap();
+    let uploaded =
+        runtime::gpu::GpuTables::upload(&gpu, &tables, runtime::gpu::TexelFormat::F32).unwrap();
+    let renderer = render::miyazaki::gpu::Renderer::new(&gpu, &uploaded);
+    for (elevation, azimuth, a, phase) in [
+        (20.0, 200.0, 1.0, "tables"),
+        (30.0, 10.0, 2.0, "tables"),
+        (30.0, 10.0, 1.5, "cornette_shanks"),
+    ] {
+        let text = format!(
+            r#"{}
+[render]
+width = 64
+height = 48
+slices = 64
+light_resolution = 64
+grid_resolution = 40
+svs_a = {a}
+k_multi = 0.05
+svs_phase = "{phase}"
+
+[camera]
+position_m = [0, 300, 0]
+look_at_m = [0, 1500, 6000]
+fov_deg = 50
+
+[sun]
+elevation_deg = {elevation}
+azimuth_deg = {azimuth}
+
+[ground]
+albedo = 0.3
+
+[haze]
+field = "haze"
+number_density_per_m3 = 2e9
+scale_height_m = 1200
+
+[[volume]]
+field = "cloud"
+shape = "cumulus"
+number_density_per_m3 = 3e6
+center_m = [-800, 1500, 6000]
+radius_m = 1200
+height_m = 1400
+
+[[volume]]
+field = "rain"
+shape = "rain_shaft"
+number_density_per_m3 = 300
+center_m = [800, 0, 6000]
+radius_m = 1000
+top_m = 2000
+"#,
+            common::scene(
+                "svs-gpu",
+                4,
+                &format!("{}{}{}", common::CLOUD, common::RAIN, common::HAZE)
+            )
+        );
+        let scene = RenderScene::parse(&text, "test", tmp.path()).unwrap();
+        let frame = scene.frame(&tables).unwrap();
+        let reference = render(&tables, &frame, &scene.svs).unwrap();
+        let (image, t) = renderer
+            .render(&gpu, &tables, &uploaded, &frame, &scene.svs)
+            .unwrap();
+        let mut values: Vec<f64> = reference.rgb.iter().flatten().map(|&v| v as f64).collect();
+        values.sort_by(f64::total_cmp);
+        let scale = values[values.len() * 99 / 100];
+        let mut worst = 0f64;
+        for (p, (g, c)) in image.rgb.iter().zip(&reference.rgb).enumerate() {
+            for ch in 0..3 {
+                let (g, c) = (g[ch] as f64, c[ch] as f64);
+                // f32 against f64 on lavapipe: worst 1e-6·|c| + 1e-7 of the image's scale; the
+                // margin is for GPUs whose exp and pow are a few ulp off.
+                let tol = 1e-4 * c.abs() + 1e-5 * scale;
+                worst = worst.max((g - c).abs() / tol);
+                assert!(
+                    (g - c).abs() <= tol,
+                    "sun {elevation}°/{azimuth}° a {a} {phase}, pixel {p} channel {ch}: GPU {g}, \
+                     CPU {c}"
+                );
+            }
+            let (ta, tb) = (image.transparency[p], reference.transparency[p]);
+            assert!((ta - tb).abs() < 1e-5, "pixel {p}: T {ta} vs {tb}");
+        }
+        let seen = reference.transparency.iter().filter(|&&t| t < 0.5).count();
+        assert!(seen > 100, "the volumes cover only {seen} pixels");
+        eprintln!(
+            "sun {elevation}°/{azimuth}° a {a} {phase}: worst |GPU − CPU| = {worst:.3} of the \
+             tolerance, frame {:.1} ms",
+            t.frame * 1e3
+        );
+    }
+}
+
+#[test]
 fn bad_keys_are_refused_naming_the_key_value_and_range() {
     let base = format!(
         "{}\n[camera]\nposition_m = [0, 100, 0]\nlook_at_m = [0, 100, 10]\n\n\

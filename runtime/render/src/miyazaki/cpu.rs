@@ -332,7 +332,14 @@ pub fn render(tables: &Tables, frame: &Frame, settings: &SvsSettings) -> Result<
                 if !air_on || t1 <= t0 {
                     return [0.0; 3];
                 }
-                let probe = s.eye + (t0 + 1e-6 * (t1 - t0).min(1.0)) * d;
+                // The segment lies on one side of the slices: ask at a point well inside it (a
+                // point at its start would sit on the boundary plane in f32).
+                let probe_t = if t1.is_finite() {
+                    0.5 * (t0 + t1)
+                } else {
+                    t0 + t0.max(1.0)
+                };
+                let probe = s.eye + probe_t * d;
                 let sunward = s.sunward_of_slices(probe);
                 let haze_on = air.haze_on();
                 // Without haze: Eq. 14 in closed form, less the final shadow's deficit on the
@@ -364,9 +371,12 @@ pub fn render(tables: &Tables, frame: &Frame, settings: &SvsSettings) -> Result<
                 // 0.02 of an optical depth (or 2 km) apart, until the transmittance from the
                 // eye is below 1e-7.
                 let (mut t, uniform) = (lo, (hi - lo) / SHADOWED_AIR_POINTS as f64);
-                while t < hi {
+                let mut n = 0;
+                while (shadow_only && n < SHADOWED_AIR_POINTS) || (!shadow_only && t < hi) {
                     let (rayleigh, n_haze) = air.at(s.eye.y + (t + 0.5 * uniform) * d.y);
                     let dt = if shadow_only {
+                        // Counted, not accumulated: exactly the 64 midpoints.
+                        t = lo + n as f64 * uniform;
                         uniform
                     } else {
                         let ext = (0..3)
@@ -378,6 +388,7 @@ pub fn render(tables: &Tables, frame: &Frame, settings: &SvsSettings) -> Result<
                     };
                     let tm = t + 0.5 * dt;
                     t += dt;
+                    n += 1;
                     let p = s.eye + tm * d;
                     let g_cl = if sunward {
                         [1.0; 3]

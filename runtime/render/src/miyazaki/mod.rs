@@ -56,6 +56,7 @@
 //!   no cloud and g_sun_cl = 1 (not the edge texel).
 
 pub mod cpu;
+pub mod gpu;
 
 use glam::DVec3;
 

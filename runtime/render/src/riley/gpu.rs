@@ -14,8 +14,11 @@ use runtime::gpu::{Gpu, GpuError, GpuTables, WGSL, read_back};
 
 use crate::{Frame, FrameError, Image, MAX_FIELDS, SUN_DIAMETER_DEG};
 
-/// The renderer's WGSL (after [`WGSL`]).
+/// The renderer's WGSL (after [`WGSL`] and [`SLICING_WGSL`]).
 pub const RENDER_WGSL: &str = include_str!("render.wgsl");
+
+/// The pieces the slicing renderers' shaders share (grid sampling, camera rays, the sky).
+pub const SLICING_WGSL: &str = include_str!("../slicing.wgsl");
 
 /// Why a GPU render failed.
 #[derive(Debug, thiserror::Error)]
@@ -84,7 +87,9 @@ impl Renderer {
         });
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("photometeor render"),
-            source: wgpu::ShaderSource::Wgsl(format!("{WGSL}\n{RENDER_WGSL}").into()),
+            source: wgpu::ShaderSource::Wgsl(
+                format!("{WGSL}\n{SLICING_WGSL}\n{RENDER_WGSL}").into(),
+            ),
         });
         let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("photometeor render pipeline layout"),

@@ -1,6 +1,7 @@
 // photometeor's renderer (runtime::render docs): half-angle slicing with a light buffer and an
 // eye buffer, Riley et al. 2004 Eqs. 6, 21/22, 25, 26 and the analytic sky (Eqs. 11–15).
-// Included after tables.wgsl (bind group 0). The CPU reference is runtime::render::cpu.
+// Included after tables.wgsl (bind group 0) and slicing.wgsl. The CPU reference is
+// runtime::render::riley::cpu.
 
 struct RenderParams {
     eye: vec4<f32>,          // xyz; w = 1 front to back, 0 back to front
@@ -36,41 +37,6 @@ struct SliceParams {
 @group(1) @binding(4) var<storage, read_write> image: array<vec4<f32>>;         // rgb, T_vol
 @group(1) @binding(5) var<uniform> slice: SliceParams;
 
-fn inside_box(p: vec3<f32>) -> bool {
-    return all(p >= rp.grid_min.xyz) && all(p <= rp.grid_max.xyz);
-}
-
-fn voxel(x: u32, y: u32, z: u32) -> vec4<f32> {
-    return density[x + rp.grid_dims.x * (y + rp.grid_dims.y * z)];
-}
-
-// Trilinear densities at p, voxel centres, clamped to the edge voxels; zero outside the box.
-fn densities(p: vec3<f32>) -> vec4<f32> {
-    if (!inside_box(p)) {
-        return vec4<f32>(0.0);
-    }
-    let dims = vec3<f32>(rp.grid_dims.xyz);
-    let u = clamp((p - rp.grid_min.xyz) / (rp.grid_max.xyz - rp.grid_min.xyz) * dims - 0.5,
-        vec3<f32>(0.0), dims - 1.0);
-    let top = max(vec3<i32>(rp.grid_dims.xyz) - 2, vec3<i32>(0));
-    let lo = vec3<u32>(min(vec3<i32>(floor(u)), top));
-    let t = select(vec3<f32>(0.0), u - vec3<f32>(lo), rp.grid_dims.xyz > vec3<u32>(1u));
-    let s = vec3<u32>(rp.grid_dims.xyz > vec3<u32>(1u));
-    let c00 = mix(voxel(lo.x, lo.y, lo.z), voxel(lo.x + s.x, lo.y, lo.z), t.x);
-    let c10 = mix(voxel(lo.x, lo.y + s.y, lo.z), voxel(lo.x + s.x, lo.y + s.y, lo.z), t.x);
-    let c01 = mix(voxel(lo.x, lo.y, lo.z + s.z), voxel(lo.x + s.x, lo.y, lo.z + s.z), t.x);
-    let c11 = mix(voxel(lo.x, lo.y + s.y, lo.z + s.z), voxel(lo.x + s.x, lo.y + s.y, lo.z + s.z), t.x);
-    return mix(mix(c00, c10, t.y), mix(c01, c11, t.y), t.z);
-}
-
-fn extinction(rho: vec4<f32>) -> vec3<f32> {
-    var e = vec3<f32>(0.0);
-    for (var i = 0u; i < rp.grid_dims.w; i = i + 1u) {
-        e = e + rho[i] * rp.sigma_ext[i].rgb;
-    }
-    return e;
-}
-
 fn scattering(rho: vec4<f32>) -> vec3<f32> {
     var s = vec3<f32>(0.0);
     for (var i = 0u; i < rp.grid_dims.w; i = i + 1u) {
@@ -91,68 +57,6 @@ fn forward_fraction_mix(rho: vec4<f32>, n: f32) -> vec3<f32> {
         }
     }
     return select(vec3<f32>(1.0), num / den, den > vec3<f32>(0.0));
-}
-
-fn pixel_ray(i: u32, j: u32) -> vec3<f32> {
-    let sx = (2.0 * (f32(i) + 0.5) / f32(rp.sizes.x) - 1.0) * rp.forward.w * rp.right.w;
-    let sy = (1.0 - 2.0 * (f32(j) + 0.5) / f32(rp.sizes.y)) * rp.forward.w;
-    return normalize(rp.forward.xyz + sx * rp.right.xyz + sy * rp.up.xyz);
-}
-
-// e^x − 1 without cancellation for small x.
-fn expm1(x: f32) -> f32 {
-    if (abs(x) < 1e-2) {
-        return x * (1.0 + x * (0.5 + x * (1.0 / 6.0 + x / 24.0)));
-    }
-    return exp(x) - 1.0;
-}
-
-// Sunlight left at height y (Eq. 12).
-fn sunlight(y: f32) -> vec3<f32> {
-    let g = rp.sky_beta.w;
-    return exp(-rp.sky_beta.rgb / (g * rp.light_texel.z) * exp(-g * y));
-}
-
-// (1 − e^{−γ p K})/p; K < 0 means ∞.
-fn path_factor(p_y: f32, k: f32) -> f32 {
-    let g = rp.sky_beta.w;
-    if (k < 0.0) {
-        return select(1e30, 1.0 / p_y, p_y > 0.0);
-    }
-    let x = g * p_y * k;
-    if (abs(x) < 1e-8) {
-        return g * k;
-    }
-    return -expm1(-x) / p_y;
-}
-
-fn air_transparency(y: f32, p_y: f32, k: f32) -> vec3<f32> {
-    let g = rp.sky_beta.w;
-    let beta_eye = rp.sky_beta.rgb * exp(-g * y);
-    return exp(-beta_eye / g * path_factor(p_y, k));
-}
-
-// Sky light from the first K metres of the ray (runtime::render::sky::Atmosphere::inscatter).
-fn inscatter(y: f32, p_y: f32, k: f32, cos_sun: f32) -> vec3<f32> {
-    if (k == 0.0) {
-        return vec3<f32>(0.0);
-    }
-    let g = rp.sky_beta.w;
-    let l_y = rp.light_texel.z;
-    let phase = 3.0 / (16.0 * 3.14159265358979) * (1.0 + cos_sun * cos_sun);
-    let beta_eye = rp.sky_beta.rgb * exp(-g * y);
-    let q = beta_eye / g * path_factor(p_y, k) / l_y;
-    let e2 = -beta_eye / (g * l_y);
-    let eps = p_y - l_y;
-    var factor: vec3<f32>;
-    for (var c = 0; c < 3; c = c + 1) {
-        if (abs(q[c] * eps) < 1e-9) {
-            factor[c] = q[c];
-        } else {
-            factor[c] = expm1(q[c] * eps) / eps;
-        }
-    }
-    return phase * l_y * exp(e2) * factor;
 }
 
 fn light_at(p: vec3<f32>) -> vec4<f32> {
@@ -221,7 +125,7 @@ fn eye_slice(@builtin(global_invocation_id) id: vec3<u32>) {
     let phase = ams_mix(rho, lit.w + 1.0, -dot(rp.light.xyz, d));
     let thickness = rp.light.w / abs(hd);
     let slab = exp(-ext * thickness);
-    let scattered = lit.rgb * sunlight(p.y) * rp.irradiance.rgb * (phase + rp.up.w) * albedo
+    let scattered = lit.rgb * sunlight(p.y, rp.light_texel.z) * rp.irradiance.rgb * (phase + rp.up.w) * albedo
         * (1.0 - slab);
     let i = id.x + rp.sizes.x * id.y;
     let l = eye_buffer[2u * i].rgb;
@@ -272,26 +176,6 @@ fn light_slice(@builtin(global_invocation_id) id: vec3<u32>) {
     light_buffer[id.x + res * id.y] = vec4<f32>(lit, n);
 }
 
-// Where the ray enters and leaves the box (t ≥ 0), or (−1, −1).
-fn box_span(o: vec3<f32>, d: vec3<f32>) -> vec2<f32> {
-    var t0 = 0.0;
-    var t1 = 3.0e38;
-    for (var a = 0; a < 3; a = a + 1) {
-        if (d[a] == 0.0) {
-            if (o[a] < rp.grid_min[a] || o[a] > rp.grid_max[a]) {
-                return vec2<f32>(-1.0);
-            }
-            continue;
-        }
-        let inv = 1.0 / d[a];
-        let lo = (rp.grid_min[a] - o[a]) * inv;
-        let hi = (rp.grid_max[a] - o[a]) * inv;
-        t0 = max(t0, min(lo, hi));
-        t1 = min(t1, max(lo, hi));
-    }
-    return select(vec2<f32>(-1.0), vec2<f32>(t0, t1), t0 < t1);
-}
-
 @compute @workgroup_size(8, 8)
 fn composite(@builtin(global_invocation_id) id: vec3<u32>) {
     if (id.x >= rp.sizes.x || id.y >= rp.sizes.y) {
@@ -311,8 +195,8 @@ fn composite(@builtin(global_invocation_id) id: vec3<u32>) {
         k_mid = min(k_mid, k_end);
     }
     let cos_sun = dot(d, rp.sun.xyz);
-    let front = inscatter(y, d.y, k_mid, cos_sun);
-    let all_sky = inscatter(y, d.y, k_end, cos_sun);
+    let front = inscatter(y, d.y, k_mid, cos_sun, rp.light_texel.z);
+    let all_sky = inscatter(y, d.y, k_end, cos_sun, rp.light_texel.z);
     let t_mid = air_transparency(y, d.y, k_mid);
     let i_s = rp.irradiance.rgb;
     var v = i_s * (front + t_vol * (all_sky - front)) + t_mid * l_vol;
@@ -330,7 +214,7 @@ fn composite(@builtin(global_invocation_id) id: vec3<u32>) {
             lit = light_at(g).rgb;
         }
         let l_y = rp.light_texel.z;
-        v = v + t_vol * i_s * (rp.grid_min.w / 3.14159265358979 * l_y) * sunlight(0.0) * lit
+        v = v + t_vol * i_s * (rp.grid_min.w / 3.14159265358979 * l_y) * sunlight(0.0, rp.light_texel.z) * lit
             * air_transparency(y, d.y, k_end);
     }
     image[i] = vec4<f32>(v, t_vol.g);

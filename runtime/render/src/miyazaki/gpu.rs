@@ -1,0 +1,327 @@
+//! The shadow-view slices on wgpu compute shaders (`svs.wgsl` after the tables' WGSL and the
+//! slicing renderers' shared pieces): one `clear` (which also fills the per-pixel Mie
+//! scattering texture), then per slice a `shadow_slice` and an `eye_slice` dispatch (the
+//! shadow surface first, §4.1), then `composite`. Bind group 1: params uniform, densities,
+//! shadow surface (g_sun_cl rgb), eye buffer (S, α*, T_cl per pixel), image (rgb, T_vol),
+//! slice uniform (dynamic offset), pixel texture.
+
+use std::time::Instant;
+
+use wgpu::util::DeviceExt;
+
+use runtime::Tables;
+use runtime::gpu::{Gpu, GpuError, GpuTables, WGSL, read_back};
+
+use super::{SvsPhase, SvsSettings};
+use crate::riley::gpu::{RenderError, SLICING_WGSL, Timings};
+use crate::{Frame, Image, MAX_FIELDS, SUN_DIAMETER_DEG};
+
+/// The model's WGSL (after [`WGSL`] and [`SLICING_WGSL`]).
+pub const SVS_WGSL: &str = include_str!("svs.wgsl");
+
+fn whole(binding: u32, buffer: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> {
+    wgpu::BindGroupEntry {
+        binding,
+        resource: buffer.as_entire_binding(),
+    }
+}
+
+/// Pipelines and layouts, built once.
+pub struct Renderer {
+    layout: wgpu::BindGroupLayout,
+    clear: wgpu::ComputePipeline,
+    shadow: wgpu::ComputePipeline,
+    eye: wgpu::ComputePipeline,
+    composite: wgpu::ComputePipeline,
+}
+
+fn entry(binding: u32, ty: wgpu::BufferBindingType, dynamic: bool) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Buffer {
+            ty,
+            has_dynamic_offset: dynamic,
+            min_binding_size: None,
+        },
+        count: None,
+    }
+}
+
+fn v4(v: glam::DVec3, w: f64) -> [f32; 4] {
+    [v[0] as f32, v[1] as f32, v[2] as f32, w as f32]
+}
+
+fn a4(v: [f64; 3], w: f64) -> [f32; 4] {
+    [v[0] as f32, v[1] as f32, v[2] as f32, w as f32]
+}
+
+impl Renderer {
+    /// Compiles the shaders and builds the pipelines, with `tables`' layout as bind group 0.
+    pub fn new(gpu: &Gpu, tables: &GpuTables) -> Self {
+        let device = &gpu.device;
+        use wgpu::BufferBindingType::{Storage, Uniform};
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("photometeor svs layout"),
+            entries: &[
+                entry(0, Uniform, false),
+                entry(1, Storage { read_only: true }, false),
+                entry(2, Storage { read_only: false }, false),
+                entry(3, Storage { read_only: false }, false),
+                entry(4, Storage { read_only: false }, false),
+                entry(5, Uniform, true),
+                entry(6, Storage { read_only: false }, false),
+            ],
+        });
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("photometeor svs"),
+            source: wgpu::ShaderSource::Wgsl(format!("{WGSL}\n{SLICING_WGSL}\n{SVS_WGSL}").into()),
+        });
+        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("photometeor svs pipeline layout"),
+            bind_group_layouts: &[Some(&tables.layout), Some(&layout)],
+            immediate_size: 0,
+        });
+        let pipeline = |name: &str| {
+            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some(name),
+                layout: Some(&pipeline_layout),
+                module: &module,
+                entry_point: Some(name),
+                compilation_options: Default::default(),
+                cache: None,
+            })
+        };
+        Self {
+            clear: pipeline("clear"),
+            shadow: pipeline("shadow_slice"),
+            eye: pipeline("eye_slice"),
+            composite: pipeline("composite"),
+            layout,
+        }
+    }
+
+    /// Renders `frame` with `tables` (on the GPU as `gpu_tables`; field i = grid channel i).
+    pub fn render(
+        &self,
+        gpu: &Gpu,
+        tables: &Tables,
+        gpu_tables: &GpuTables,
+        frame: &Frame,
+        settings: &SvsSettings,
+    ) -> Result<(Image, Timings), RenderError> {
+        let s = super::setup(frame, settings)?;
+        crate::riley::cpu::check_fields(tables, frame)?;
+        let device = &gpu.device;
+        let limits = device.limits();
+        let start = Instant::now();
+        let (w, h, res) = (frame.width, frame.height, frame.light_resolution);
+        let voxels = frame.grid.data.len();
+        for (what, bytes) in [
+            ("density grid bytes", 16 * voxels as u64),
+            ("eye buffer bytes", 48 * (w * h) as u64),
+            ("pixel texture bytes", 80 * (w * h) as u64),
+            ("shadow surface bytes", 16 * (res * res) as u64),
+        ] {
+            let limit = limits.max_storage_buffer_binding_size;
+            if bytes > limit {
+                return Err(GpuError::Limit {
+                    what,
+                    value: bytes,
+                    limit,
+                }
+                .into());
+            }
+        }
+        let cos_disk = (SUN_DIAMETER_DEG / 2.0).to_radians().cos();
+        let (forward, right, up) = s.axes;
+        let haze = frame.haze.map(|h| (&tables.fields[h.field], h));
+        let mut params: Vec<[f32; 4]> = vec![
+            v4(s.eye, if s.back_to_front { 1.0 } else { 0.0 }),
+            v4(forward, s.tan_half_fov_y),
+            v4(right, w as f64 / h as f64),
+            v4(up, settings.k_multi),
+            v4(s.to_sun, s.step),
+            v4(s.normal, s.sun_step),
+            v4(s.shadow_u, s.shadow_origin[0]),
+            v4(s.shadow_w, s.shadow_origin[1]),
+            [
+                s.shadow_texel[0] as f32,
+                s.shadow_texel[1] as f32,
+                settings.ground_albedo as f32,
+                if settings.phase == SvsPhase::CornetteShanks {
+                    1.0
+                } else {
+                    0.0
+                },
+            ],
+            v4(frame.grid.min_m, s.range.0),
+            v4(frame.grid.max_m, s.range.1),
+        ];
+        let [nx, ny, nz] = frame.grid.dims;
+        let uints = |v: [u32; 4]| v.map(f32::from_bits);
+        params.push(uints([
+            nx as u32,
+            ny as u32,
+            nz as u32,
+            tables.fields.len() as u32,
+        ]));
+        params.push(uints([
+            w as u32,
+            h as u32,
+            res as u32,
+            frame.haze.map_or(0, |h| h.field as u32 + 1),
+        ]));
+        for i in 0..MAX_FIELDS {
+            params.push(
+                tables
+                    .fields
+                    .get(i)
+                    .map_or([0.0; 4], |f| a4(f.sigma_ext_m2, 0.0)),
+            );
+        }
+        for i in 0..MAX_FIELDS {
+            params.push(tables.fields.get(i).map_or([0.0; 4], |f| {
+                a4(super::cpu::asymmetry(f, tables.theta_step_deg), 0.0)
+            }));
+        }
+        params.push(a4(
+            frame.atmosphere.beta_sea_level_per_m,
+            1.0 / frame.atmosphere.scale_height_m,
+        ));
+        params.push(haze.map_or([0.0; 4], |(f, h)| {
+            a4(
+                f.sigma_ext_m2.map(|e| e * h.number_density_per_m3),
+                1.0 / h.scale_height_m,
+            )
+        }));
+        params.push(a4(
+            haze.map_or([0.0; 3], |(f, h)| {
+                f.sigma_sca_m2.map(|e| e * h.number_density_per_m3)
+            }),
+            cos_disk,
+        ));
+        params.push(a4(
+            frame.sun.irradiance,
+            std::f64::consts::TAU * (1.0 - cos_disk),
+        ));
+        let params = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("photometeor svs params"),
+            contents: bytemuck::cast_slice(&params),
+            usage: wgpu::BufferUsages::UNIFORM,
+        });
+        let density = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("photometeor svs densities"),
+            contents: bytemuck::cast_slice(&frame.grid.data),
+            usage: wgpu::BufferUsages::STORAGE,
+        });
+        let storage = |label: &str, size: u64, extra: wgpu::BufferUsages| {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size,
+                usage: wgpu::BufferUsages::STORAGE | extra,
+                mapped_at_creation: false,
+            })
+        };
+        let none = wgpu::BufferUsages::empty();
+        let shadow = storage("photometeor shadow surface", 16 * (res * res) as u64, none);
+        let eye_buffer = storage("photometeor svs eye buffer", 48 * (w * h) as u64, none);
+        let pixel_tex = storage("photometeor svs pixel texture", 80 * (w * h) as u64, none);
+        let image_size = 16 * (w * h) as u64;
+        let image = storage(
+            "photometeor svs image",
+            image_size,
+            wgpu::BufferUsages::COPY_SRC,
+        );
+        let stride = limits.min_uniform_buffer_offset_alignment.max(16) as usize;
+        let mut slices = vec![0u8; stride * frame.slices];
+        for k in 0..frame.slices {
+            let plane = s.plane(k) as f32;
+            let entry = &mut slices[k * stride..k * stride + 16];
+            entry[..4].copy_from_slice(&plane.to_le_bytes());
+            entry[4..8].copy_from_slice(&(k as u32).to_le_bytes());
+        }
+        let slice_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("photometeor svs slices"),
+            contents: &slices,
+            usage: wgpu::BufferUsages::UNIFORM,
+        });
+        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("photometeor svs bindings"),
+            layout: &self.layout,
+            entries: &[
+                whole(0, &params),
+                whole(1, &density),
+                whole(2, &shadow),
+                whole(3, &eye_buffer),
+                whole(4, &image),
+                wgpu::BindGroupEntry {
+                    binding: 5,
+                    resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                        buffer: &slice_buffer,
+                        offset: 0,
+                        size: wgpu::BufferSize::new(16),
+                    }),
+                },
+                whole(6, &pixel_tex),
+            ],
+        });
+        let wait = || {
+            device
+                .poll(wgpu::PollType::wait_indefinitely())
+                .map_err(|e| GpuError::Readback(e.to_string()))
+        };
+        gpu.queue.submit([]);
+        wait()?;
+        let upload = start.elapsed().as_secs_f64();
+
+        let start = Instant::now();
+        let groups = |x: usize, y: usize| (x.div_ceil(8) as u32, y.div_ceil(8) as u32);
+        let (ix, iy) = groups(w, h);
+        let (lx, ly) = groups(res, res);
+        let (cx, cy) = groups(w.max(res), h.max(res));
+        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+            label: Some("photometeor svs frame"),
+        });
+        {
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("photometeor shadow-view slices"),
+                timestamp_writes: None,
+            });
+            pass.set_bind_group(0, &gpu_tables.bind_group, &[]);
+            pass.set_bind_group(1, &bind_group, &[0]);
+            pass.set_pipeline(&self.clear);
+            pass.dispatch_workgroups(cx, cy, 1);
+            for k in 0..frame.slices {
+                pass.set_bind_group(1, &bind_group, &[(k * stride) as u32]);
+                pass.set_pipeline(&self.shadow);
+                pass.dispatch_workgroups(lx, ly, 1);
+                pass.set_pipeline(&self.eye);
+                pass.dispatch_workgroups(ix, iy, 1);
+            }
+            pass.set_pipeline(&self.composite);
+            pass.dispatch_workgroups(ix, iy, 1);
+        }
+        gpu.queue.submit([encoder.finish()]);
+        wait()?;
+        let frame_time = start.elapsed().as_secs_f64();
+
+        let start = Instant::now();
+        let texels = read_back(gpu, &image, image_size)?;
+        let out = Image {
+            width: w,
+            height: h,
+            rgb: texels.iter().map(|c| [c[0], c[1], c[2]]).collect(),
+            transparency: texels.iter().map(|c| c[3]).collect(),
+        };
+        let readback_time = start.elapsed().as_secs_f64();
+        Ok((
+            out,
+            Timings {
+                upload,
+                frame: frame_time,
+                readback: readback_time,
+            },
+        ))
+    }
+}

@@ -1,0 +1,379 @@
+// Miyazaki, Dobashi & Nishita's shadow-view slices (runtime::render::miyazaki docs): per slice
+// the shadow surface first (Eq. 10), then the screen (Eqs. 8, 9, blended as §4.3), then the
+// composite with the air outside the slices, the ground and the sun disk. Included after
+// tables.wgsl (bind group 0) and slicing.wgsl. The CPU reference is
+// runtime::render::miyazaki::cpu; this follows it step for step.
+
+struct SvsParams {
+    eye: vec4<f32>,          // xyz; w = 1 back to front, 0 front to back
+    forward: vec4<f32>,      // xyz; w = tan(fov_y / 2)
+    right: vec4<f32>,        // xyz; w = aspect
+    up: vec4<f32>,           // xyz; w = k_multi (1/sr)
+    to_sun: vec4<f32>,       // unit vector towards the sun; w = slice spacing Δ (m)
+    normal: vec4<f32>,       // the slices' unit normal; w = Δs, the sun's path per slice (m)
+    shadow_u: vec4<f32>,     // xyz; w = shadow-surface origin along u
+    shadow_w: vec4<f32>,     // xyz; w = shadow-surface origin along w
+    shadow_texel: vec4<f32>, // texel size u, w (m); z = ground albedo; w = 1: Cornette–Shanks
+    grid_min: vec4<f32>,     // xyz; w = lower plane value of the slices' range
+    grid_max: vec4<f32>,     // xyz; w = upper plane value
+    grid_dims: vec4<u32>,    // nx, ny, nz, field count
+    sizes: vec4<u32>,        // width, height, shadow resolution, haze field + 1 (0: none)
+    sigma_ext: array<vec4<f32>, 4>,  // per field, m² per channel
+    g: array<vec4<f32>, 4>,          // per field, Cornette–Shanks asymmetry per channel
+    sky_beta: vec4<f32>,     // Rayleigh β_sl per channel (1/m); w = 1/H
+    haze: vec4<f32>,         // haze N_0 σ_ext per channel (1/m); w = 1/H_haze
+    haze_sca: vec4<f32>,     // haze N_0 σ_sca per channel (1/m); w = cos of the disk radius
+    irradiance: vec4<f32>,   // per channel; w = disk solid angle (sr)
+}
+
+struct SliceParams {
+    plane: f32,
+    index: u32,
+    pad0: u32,
+    pad1: u32,
+}
+
+@group(1) @binding(0) var<uniform> rp: SvsParams;
+@group(1) @binding(1) var<storage, read> density: array<vec4<f32>>;
+@group(1) @binding(2) var<storage, read_write> shadow: array<vec4<f32>>;   // g_sun_cl rgb
+@group(1) @binding(3) var<storage, read_write> eye_buffer: array<vec4<f32>>; // S, α*, T_cl
+@group(1) @binding(4) var<storage, read_write> image: array<vec4<f32>>;      // rgb, T_vol
+@group(1) @binding(5) var<uniform> slice: SliceParams;
+// Per pixel (the paper's Mie scattering texture): (P_f(α) + k_multi) σ_sca,f per field, then
+// the haze's N_0 σ_sca P(α) (rgb) with the Rayleigh phase in w.
+@group(1) @binding(6) var<storage, read_write> pixel_tex: array<vec4<f32>>;
+
+const PI: f32 = 3.14159265358979;
+const HAZY_AIR_STEP_TAU: f32 = 0.02;
+const HAZY_AIR_MAX_STEP_M: f32 = 2000.0;
+const SHADOWED_AIR_POINTS: u32 = 64u;
+const SHADOWED_AIR_MAX_M: f32 = 200000.0;
+
+fn haze_on() -> bool {
+    return rp.sizes.w > 0u;
+}
+
+fn cornette_shanks(g: vec3<f32>, c: f32) -> vec3<f32> {
+    return 1.5 * (1.0 - g * g) / (2.0 + g * g) * (1.0 + c * c)
+        / pow(1.0 + g * g - 2.0 * g * c, vec3<f32>(1.5)) / (4.0 * PI);
+}
+
+fn phase_of(field: u32, c: f32) -> vec3<f32> {
+    if (rp.shadow_texel.w > 0.5) {
+        return cornette_shanks(rp.g[field].rgb, c);
+    }
+    return ams(field, 1.0, c);
+}
+
+// Rayleigh β and the haze's N/N_0 at height y.
+fn air_at(y: f32) -> vec4<f32> {
+    let r = rp.sky_beta.rgb * exp(-y * rp.sky_beta.w);
+    let n = select(0.0, exp(-rp.haze.w * y), haze_on());
+    return vec4<f32>(r, n);
+}
+
+// Sunlight reaching height y through the air and the haze.
+fn sun_through_air(y: f32) -> vec3<f32> {
+    var s = sunlight(y, rp.to_sun.y);
+    if (haze_on()) {
+        s = s * exp(-rp.haze.rgb * (exp(-rp.haze.w * y) / rp.haze.w / rp.to_sun.y));
+    }
+    return s;
+}
+
+// Transmittance of the air and the haze from the eye at height y along p_y over k (< 0: ∞).
+fn air_haze_transparency(y: f32, p_y: f32, k: f32) -> vec3<f32> {
+    var t = air_transparency(y, p_y, k);
+    if (haze_on()) {
+        let depth = exp(-rp.haze.w * y) * path_factor_for(rp.haze.w, p_y, k) / rp.haze.w;
+        t = t * exp(-rp.haze.rgb * depth);
+    }
+    return t;
+}
+
+fn shadow_coords(p: vec3<f32>) -> vec2<f32> {
+    return vec2<f32>(
+        (dot(rp.shadow_u.xyz, p) - rp.shadow_u.w) / rp.shadow_texel.x - 0.5,
+        (dot(rp.shadow_w.xyz, p) - rp.shadow_w.w) / rp.shadow_texel.y - 0.5);
+}
+
+// Bilinear in the shadow surface; 1 outside its footprint.
+fn shadow_at(p: vec3<f32>) -> vec3<f32> {
+    let res = rp.sizes.z;
+    let edge = f32(res - 1u);
+    let uv = shadow_coords(p);
+    if (uv.x < -0.5 || uv.x > edge + 0.5 || uv.y < -0.5 || uv.y > edge + 0.5) {
+        return vec3<f32>(1.0);
+    }
+    let u = clamp(uv.x, 0.0, edge);
+    let v = clamp(uv.y, 0.0, edge);
+    let a0 = min(u32(floor(u)), res - 2u);
+    let b0 = min(u32(floor(v)), res - 2u);
+    let s = u - f32(a0);
+    let t = v - f32(b0);
+    let l00 = shadow[a0 + res * b0].rgb;
+    let l10 = shadow[a0 + 1u + res * b0].rgb;
+    let l01 = shadow[a0 + res * (b0 + 1u)].rgb;
+    let l11 = shadow[a0 + 1u + res * (b0 + 1u)].rgb;
+    return mix(mix(l00, l10, s), mix(l01, l11, s), t);
+}
+
+fn ground_distance(d: vec3<f32>) -> f32 {
+    // < 0: none (the ray leaves upwards).
+    if (d.y < 0.0) {
+        return max(rp.eye.y / -d.y, 0.0);
+    }
+    return -1.0;
+}
+
+fn sunward_of_slices(p: vec3<f32>) -> bool {
+    let c = dot(rp.normal.xyz, p);
+    if (dot(rp.normal.xyz, rp.to_sun.xyz) > 0.0) {
+        return c >= rp.grid_max.w;
+    }
+    return c <= rp.grid_min.w;
+}
+
+@compute @workgroup_size(8, 8)
+fn clear(@builtin(global_invocation_id) id: vec3<u32>) {
+    let res = rp.sizes.z;
+    if (id.x < res && id.y < res) {
+        shadow[id.x + res * id.y] = vec4<f32>(1.0);
+    }
+    if (id.x < rp.sizes.x && id.y < rp.sizes.y) {
+        let i = id.x + rp.sizes.x * id.y;
+        eye_buffer[3u * i] = vec4<f32>(0.0);
+        eye_buffer[3u * i + 1u] = vec4<f32>(1.0);
+        eye_buffer[3u * i + 2u] = vec4<f32>(1.0);
+        // The Mie scattering texture.
+        let c = dot(pixel_ray(id.x, id.y), rp.to_sun.xyz);
+        let haze = i32(rp.sizes.w) - 1;
+        for (var f = 0u; f < 4u; f = f + 1u) {
+            var b = vec3<f32>(0.0);
+            if (f < rp.grid_dims.w && i32(f) != haze) {
+                b = (phase_of(f, c) + rp.up.w) * ams_field_info[f].yzw;
+            }
+            pixel_tex[5u * i + f] = vec4<f32>(b, 0.0);
+        }
+        var hb = vec3<f32>(0.0);
+        if (haze_on()) {
+            hb = phase_of(u32(haze), c) * rp.haze_sca.rgb;
+        }
+        pixel_tex[5u * i + 4u] = vec4<f32>(hb, 3.0 / (16.0 * PI) * (1.0 + c * c));
+    }
+}
+
+@compute @workgroup_size(8, 8)
+fn shadow_slice(@builtin(global_invocation_id) id: vec3<u32>) {
+    let res = rp.sizes.z;
+    if (id.x >= res || id.y >= res) {
+        return;
+    }
+    let q = rp.shadow_u.xyz * (rp.shadow_u.w + (f32(id.x) + 0.5) * rp.shadow_texel.x)
+        + rp.shadow_w.xyz * (rp.shadow_w.w + (f32(id.y) + 0.5) * rp.shadow_texel.y);
+    let p = q + (slice.plane - dot(rp.normal.xyz, q)) / dot(rp.normal.xyz, rp.to_sun.xyz)
+        * rp.to_sun.xyz;
+    let ext = extinction(densities(p));
+    let i = id.x + res * id.y;
+    shadow[i] = vec4<f32>(shadow[i].rgb * exp(-ext * rp.normal.w), 1.0);
+}
+
+@compute @workgroup_size(8, 8)
+fn eye_slice(@builtin(global_invocation_id) id: vec3<u32>) {
+    if (id.x >= rp.sizes.x || id.y >= rp.sizes.y) {
+        return;
+    }
+    let d = pixel_ray(id.x, id.y);
+    let nd = dot(rp.normal.xyz, d);
+    if (abs(nd) < 1e-9) {
+        return;
+    }
+    let t = (slice.plane - dot(rp.normal.xyz, rp.eye.xyz)) / nd;
+    let tg = ground_distance(d);
+    if (t <= 0.0 || (tg >= 0.0 && t > tg)) {
+        return;
+    }
+    let p = rp.eye.xyz + t * d;
+    let rho = densities(p);
+    let ext = extinction(rho);
+    let air = air_at(p.y);
+    let air_ext = air.rgb + air.w * rp.haze.rgb;
+    if (all(ext <= vec3<f32>(0.0)) && all(air_ext <= vec3<f32>(0.0))) {
+        return;
+    }
+    let i = id.x + rp.sizes.x * id.y;
+    let dt = rp.to_sun.w / abs(nd);
+    let g_cl = shadow_at(p);
+    let g_atm = sun_through_air(p.y);
+    let tex_haze = pixel_tex[5u * i + 4u];
+    var b = air.rgb * tex_haze.w + air.w * tex_haze.rgb;
+    for (var f = 0u; f < rp.grid_dims.w; f = f + 1u) {
+        b = b + rho[f] * pixel_tex[5u * i + f].rgb;
+    }
+    let contribution = rp.irradiance.rgb * dt * b * g_atm * g_cl;   // Eq. 8 × I_sun
+    let slab = exp(-(ext + air_ext) * dt);                           // Eq. 9
+    var sum = eye_buffer[3u * i].rgb;
+    let alpha_star = eye_buffer[3u * i + 1u].rgb;
+    if (rp.eye.w > 0.5) {
+        sum = contribution + slab * sum;
+    } else {
+        sum = sum + alpha_star * contribution;
+    }
+    eye_buffer[3u * i] = vec4<f32>(sum, 0.0);
+    eye_buffer[3u * i + 1u] = vec4<f32>(alpha_star * slab, 0.0);
+    eye_buffer[3u * i + 2u] = vec4<f32>(eye_buffer[3u * i + 2u].rgb * exp(-ext * dt), 0.0);
+}
+
+// Where the ray lies over the shadow surface's footprint, within [t0, t1].
+fn prism_span(d: vec3<f32>, t0: f32, t1: f32) -> vec2<f32> {
+    var lo = t0;
+    var hi = t1;
+    let res = f32(rp.sizes.z);
+    for (var k = 0; k < 2; k = k + 1) {
+        var axis = rp.shadow_u;
+        var texel = rp.shadow_texel.x;
+        if (k == 1) {
+            axis = rp.shadow_w;
+            texel = rp.shadow_texel.y;
+        }
+        let a = axis.w;
+        let b = axis.w + texel * res;
+        let p = dot(axis.xyz, rp.eye.xyz);
+        let v = dot(axis.xyz, d);
+        if (abs(v) < 1e-15) {
+            if (p < a || p > b) {
+                return vec2<f32>(t0, t0);
+            }
+            continue;
+        }
+        let x = (a - p) / v;
+        let y = (b - p) / v;
+        lo = max(lo, min(x, y));
+        hi = min(hi, max(x, y));
+    }
+    return vec2<f32>(lo, max(hi, lo));
+}
+
+// In-scattering by the air over [t0, t1] (t1 < 0: ∞) per unit irradiance (cpu::render's
+// air_segment).
+fn air_segment(d: vec3<f32>, t0: f32, t1_in: f32, tex: vec4<f32>) -> vec3<f32> {
+    let air_on = any(rp.sky_beta.rgb > vec3<f32>(0.0)) || haze_on();
+    let infinite = t1_in < 0.0;
+    if (!air_on || (!infinite && t1_in <= t0)) {
+        return vec3<f32>(0.0);
+    }
+    let y = rp.eye.y;
+    let cos_sun = dot(d, rp.to_sun.xyz);
+    // The segment lies on one side of the slices: ask at a point well inside it.
+    let probe_t = select(0.5 * (t0 + t1_in), t0 + max(t0, 1.0), infinite);
+    let probe = rp.eye.xyz + probe_t * d;
+    let sunward = sunward_of_slices(probe);
+    var out = vec3<f32>(0.0);
+    var lo = t0;
+    var hi = t1_in;
+    var shadow_only = false;
+    if (haze_on()) {
+        hi = select(t1_in, t0 + SHADOWED_AIR_MAX_M, infinite);
+    } else {
+        let k0 = t0;
+        out = inscatter(y, d.y, t1_in, cos_sun, rp.to_sun.y) - inscatter(y, d.y, k0, cos_sun, rp.to_sun.y);
+        if (sunward) {
+            return out;
+        }
+        var cap = t0 + SHADOWED_AIR_MAX_M;
+        if (!infinite) {
+            cap = min(t1_in, cap);
+        }
+        let s = prism_span(d, t0, cap);
+        lo = s.x;
+        hi = s.y;
+        shadow_only = true;
+    }
+    if (hi <= lo) {
+        return out;
+    }
+    let uniform_step = (hi - lo) / f32(SHADOWED_AIR_POINTS);
+    var t = lo;
+    for (var n = 0u; n < 100000u; n = n + 1u) {
+        if ((shadow_only && n >= SHADOWED_AIR_POINTS) || (!shadow_only && t >= hi)) {
+            break;
+        }
+        if (shadow_only) {
+            t = lo + f32(n) * uniform_step; // counted, not accumulated: exactly the midpoints
+        }
+        let ahead = air_at(y + (t + 0.5 * uniform_step) * d.y);
+        var dt = uniform_step;
+        if (!shadow_only) {
+            let e = ahead.rgb + ahead.w * rp.haze.rgb;
+            let ext = max(e.r, max(e.g, e.b));
+            dt = min(min(HAZY_AIR_STEP_TAU / max(ext, 1e-30), HAZY_AIR_MAX_STEP_M), hi - t);
+        }
+        let tm = t + 0.5 * dt;
+        t = t + dt;
+        let p = rp.eye.xyz + tm * d;
+        var g_cl = vec3<f32>(1.0);
+        if (!sunward) {
+            g_cl = shadow_at(p);
+        }
+        let sun = sun_through_air(p.y);
+        let tr = air_haze_transparency(y, d.y, tm);
+        let a = air_at(p.y);
+        let b = a.rgb * tex.w + a.w * tex.rgb;
+        var lit = g_cl;
+        if (shadow_only) {
+            lit = -(1.0 - g_cl);
+        }
+        out = out + b * sun * tr * lit * dt;
+        if (!shadow_only && all(tr < vec3<f32>(1e-7))) {
+            break;
+        }
+    }
+    return out;
+}
+
+@compute @workgroup_size(8, 8)
+fn composite(@builtin(global_invocation_id) id: vec3<u32>) {
+    if (id.x >= rp.sizes.x || id.y >= rp.sizes.y) {
+        return;
+    }
+    let i = id.x + rp.sizes.x * id.y;
+    let d = pixel_ray(id.x, id.y);
+    let sum = eye_buffer[3u * i].rgb;
+    let t_cl = eye_buffer[3u * i + 2u].rgb;
+    let tex = pixel_tex[5u * i + 4u];
+    let t_end = ground_distance(d); // < 0: ∞
+    let n_dot_e = dot(rp.normal.xyz, rp.eye.xyz);
+    let nd = dot(rp.normal.xyz, d);
+    let big = 3.0e38;
+    let end = select(t_end, big, t_end < 0.0);
+    var ta = 0.0;
+    var tb = 0.0;
+    if (abs(nd) < 1e-12) {
+        if (n_dot_e >= rp.grid_min.w && n_dot_e <= rp.grid_max.w) {
+            tb = end;
+        }
+    } else {
+        let x = (rp.grid_min.w - n_dot_e) / nd;
+        let y = (rp.grid_max.w - n_dot_e) / nd;
+        ta = clamp(min(x, y), 0.0, end);
+        tb = clamp(max(x, y), 0.0, end);
+    }
+    let front = air_segment(d, 0.0, ta, tex);
+    // tb = end = ∞ leaves nothing behind the slices.
+    var back = vec3<f32>(0.0);
+    if (tb < end) {
+        back = air_segment(d, tb, t_end, tex);
+    }
+    let t_front = air_haze_transparency(rp.eye.y, d.y, ta);
+    let t_all = air_haze_transparency(rp.eye.y, d.y, t_end);
+    var beyond = vec3<f32>(0.0);
+    if (t_end >= 0.0) {
+        let g_cl = shadow_at(rp.eye.xyz + t_end * d);
+        beyond = rp.shadow_texel.z / PI * rp.to_sun.y * sun_through_air(0.0) * g_cl * t_all;
+    } else if (dot(d, rp.to_sun.xyz) >= rp.haze_sca.w) {
+        beyond = t_all / rp.irradiance.w;
+    }
+    let i_s = rp.irradiance.rgb;
+    let v = i_s * front + t_front * sum + t_cl * i_s * (back + beyond);
+    image[i] = vec4<f32>(v, t_cl.g);
+}

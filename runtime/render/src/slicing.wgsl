@@ -1,0 +1,127 @@
+// Pieces both slicing renderers' shaders use (runtime::render::riley and ::miyazaki), included
+// after tables.wgsl and before either. The including shader declares `rp` with at least:
+// forward (w = tan(fov_y / 2)), right (w = aspect), up, sizes (x = width, y = height),
+// grid_min, grid_max (xyz: the box), grid_dims (xyz voxels, w = field count), sigma_ext
+// (array<vec4<f32>, 4>, m² per channel per field) and sky_beta (rgb = β_sl, w = γ), and the
+// density buffer `density` (array<vec4<f32>>, one channel per field).
+
+fn inside_box(p: vec3<f32>) -> bool {
+    return all(p >= rp.grid_min.xyz) && all(p <= rp.grid_max.xyz);
+}
+
+fn voxel(x: u32, y: u32, z: u32) -> vec4<f32> {
+    return density[x + rp.grid_dims.x * (y + rp.grid_dims.y * z)];
+}
+
+// Trilinear densities at p, voxel centres, clamped to the edge voxels; zero outside the box.
+fn densities(p: vec3<f32>) -> vec4<f32> {
+    if (!inside_box(p)) {
+        return vec4<f32>(0.0);
+    }
+    let dims = vec3<f32>(rp.grid_dims.xyz);
+    let u = clamp((p - rp.grid_min.xyz) / (rp.grid_max.xyz - rp.grid_min.xyz) * dims - 0.5,
+        vec3<f32>(0.0), dims - 1.0);
+    let top = max(vec3<i32>(rp.grid_dims.xyz) - 2, vec3<i32>(0));
+    let lo = vec3<u32>(min(vec3<i32>(floor(u)), top));
+    let t = select(vec3<f32>(0.0), u - vec3<f32>(lo), rp.grid_dims.xyz > vec3<u32>(1u));
+    let s = vec3<u32>(rp.grid_dims.xyz > vec3<u32>(1u));
+    let c00 = mix(voxel(lo.x, lo.y, lo.z), voxel(lo.x + s.x, lo.y, lo.z), t.x);
+    let c10 = mix(voxel(lo.x, lo.y + s.y, lo.z), voxel(lo.x + s.x, lo.y + s.y, lo.z), t.x);
+    let c01 = mix(voxel(lo.x, lo.y, lo.z + s.z), voxel(lo.x + s.x, lo.y, lo.z + s.z), t.x);
+    let c11 = mix(voxel(lo.x, lo.y + s.y, lo.z + s.z), voxel(lo.x + s.x, lo.y + s.y, lo.z + s.z), t.x);
+    return mix(mix(c00, c10, t.y), mix(c01, c11, t.y), t.z);
+}
+
+fn extinction(rho: vec4<f32>) -> vec3<f32> {
+    var e = vec3<f32>(0.0);
+    for (var i = 0u; i < rp.grid_dims.w; i = i + 1u) {
+        e = e + rho[i] * rp.sigma_ext[i].rgb;
+    }
+    return e;
+}
+
+fn pixel_ray(i: u32, j: u32) -> vec3<f32> {
+    let sx = (2.0 * (f32(i) + 0.5) / f32(rp.sizes.x) - 1.0) * rp.forward.w * rp.right.w;
+    let sy = (1.0 - 2.0 * (f32(j) + 0.5) / f32(rp.sizes.y)) * rp.forward.w;
+    return normalize(rp.forward.xyz + sx * rp.right.xyz + sy * rp.up.xyz);
+}
+
+// e^x − 1 without cancellation for small x.
+fn expm1(x: f32) -> f32 {
+    if (abs(x) < 1e-2) {
+        return x * (1.0 + x * (0.5 + x * (1.0 / 6.0 + x / 24.0)));
+    }
+    return exp(x) - 1.0;
+}
+
+// Sunlight left at height y with the sun at vertical component l_y (Eq. 12).
+fn sunlight(y: f32, l_y: f32) -> vec3<f32> {
+    let g = rp.sky_beta.w;
+    return exp(-rp.sky_beta.rgb / (g * l_y) * exp(-g * y));
+}
+
+// (1 − e^{−γ p K})/p for the air's γ; K < 0 means ∞.
+fn path_factor(p_y: f32, k: f32) -> f32 {
+    return path_factor_for(rp.sky_beta.w, p_y, k);
+}
+
+// (1 − e^{−g p K})/p for an exponential of 1/scale height g; K < 0 means ∞.
+fn path_factor_for(g: f32, p_y: f32, k: f32) -> f32 {
+    if (k < 0.0) {
+        return select(1e30, 1.0 / p_y, p_y > 0.0);
+    }
+    let x = g * p_y * k;
+    if (abs(x) < 1e-8) {
+        return g * k;
+    }
+    return -expm1(-x) / p_y;
+}
+
+fn air_transparency(y: f32, p_y: f32, k: f32) -> vec3<f32> {
+    let g = rp.sky_beta.w;
+    let beta_eye = rp.sky_beta.rgb * exp(-g * y);
+    return exp(-beta_eye / g * path_factor(p_y, k));
+}
+
+// Sky light from the first K metres of the ray (runtime::render::sky::Atmosphere::inscatter).
+fn inscatter(y: f32, p_y: f32, k: f32, cos_sun: f32, l_y: f32) -> vec3<f32> {
+    if (k == 0.0) {
+        return vec3<f32>(0.0);
+    }
+    let g = rp.sky_beta.w;
+    let phase = 3.0 / (16.0 * 3.14159265358979) * (1.0 + cos_sun * cos_sun);
+    let beta_eye = rp.sky_beta.rgb * exp(-g * y);
+    let q = beta_eye / g * path_factor(p_y, k) / l_y;
+    let e2 = -beta_eye / (g * l_y);
+    let eps = p_y - l_y;
+    var factor: vec3<f32>;
+    for (var c = 0; c < 3; c = c + 1) {
+        if (abs(q[c] * eps) < 1e-9) {
+            factor[c] = q[c];
+        } else {
+            factor[c] = expm1(q[c] * eps) / eps;
+        }
+    }
+    return phase * l_y * exp(e2) * factor;
+}
+
+// Where the ray enters and leaves the box (t ≥ 0), or (−1, −1).
+fn box_span(o: vec3<f32>, d: vec3<f32>) -> vec2<f32> {
+    var t0 = 0.0;
+    var t1 = 3.0e38;
+    for (var a = 0; a < 3; a = a + 1) {
+        if (d[a] == 0.0) {
+            if (o[a] < rp.grid_min[a] || o[a] > rp.grid_max[a]) {
+                return vec2<f32>(-1.0);
+            }
+            continue;
+        }
+        let inv = 1.0 / d[a];
+        let lo = (rp.grid_min[a] - o[a]) * inv;
+        let hi = (rp.grid_max[a] - o[a]) * inv;
+        t0 = max(t0, min(lo, hi));
+        t1 = min(t1, max(lo, hi));
+    }
+    return select(vec2<f32>(-1.0), vec2<f32>(t0, t1), t0 < t1);
+}
+
