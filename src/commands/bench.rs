@@ -68,9 +68,10 @@ struct RenderBench {
     /// Also time the CPU reference renderer at each setting.
     #[arg(long)]
     cpu: bool,
-    /// `riley` (frame times on the GPU) or `truth` (the path tracer at --size: paths per
+    /// `riley` or `miyazaki` (frame times on the GPU), `both` (the two side by side in one
+    /// run, interleaved, with their ratio), or `truth` (the path tracer at --size: paths per
     /// second, the noise reached in --spp samples per pixel and the time to 1 % noise).
-    #[arg(long, default_value = "riley", value_parser = ["riley", "truth"])]
+    #[arg(long, default_value = "riley", value_parser = ["riley", "miyazaki", "both", "truth"])]
     model: String,
     /// --model truth: samples per pixel of the timed run.
     #[arg(long, default_value_t = 64)]
@@ -483,20 +484,29 @@ fn bench_render(b: RenderBench) -> Result<()> {
     if b.model == "truth" {
         return bench_truth(b);
     }
+    use render::miyazaki::gpu::Renderer as SvsRenderer;
     use render::riley::{cpu, gpu::Renderer};
     use runtime::gpu::{Gpu, GpuTables, TexelFormat};
+    let models: Vec<&str> = match b.model.as_str() {
+        "both" => vec!["riley", "miyazaki"],
+        m => vec![m],
+    };
     let (scene, tables) = super::render::prepare(
-        "riley",
+        models[0],
         b.scene.as_deref(),
         b.tables,
         Some(&b.quality),
         true,
         |_| {},
     )?;
+    for m in &models {
+        scene.check_for(m)?;
+    }
     let gpu =
         Gpu::new().context("no GPU adapter (on Debian: apt-get install mesa-vulkan-drivers)")?;
     let uploaded = GpuTables::upload(&gpu, &tables, TexelFormat::Auto)?;
-    let renderer = Renderer::new(&gpu, &uploaded);
+    let riley = Renderer::new(&gpu, &uploaded);
+    let svs = SvsRenderer::new(&gpu, &uploaded);
     let base = scene.frame(&tables)?;
     let mut settings: Vec<(usize, usize)> = vec![(b.size, b.slices)];
     settings.extend(b.slice_counts.iter().map(|&s| (b.size, s)));
@@ -509,29 +519,46 @@ fn bench_render(b: RenderBench) -> Result<()> {
         frame.width = size;
         frame.height = size;
         frame.slices = slices;
-        let mut best = f64::INFINITY;
-        let mut readback = f64::INFINITY;
+        let mut best = vec![f64::INFINITY; models.len()];
+        let mut readback = vec![f64::INFINITY; models.len()];
+        // Interleaved, so that a change in the machine's load hits every model alike.
         for _ in 0..b.repeat.max(1) {
-            let (_, t) = renderer.render(&gpu, &tables, &uploaded, &frame)?;
-            best = best.min(t.frame);
-            readback = readback.min(t.readback);
+            for (i, m) in models.iter().enumerate() {
+                let (_, t) = if *m == "riley" {
+                    riley.render(&gpu, &tables, &uploaded, &frame)?
+                } else {
+                    svs.render(&gpu, &tables, &uploaded, &frame, &scene.svs)?
+                };
+                best[i] = best[i].min(t.frame);
+                readback[i] = readback[i].min(t.readback);
+            }
         }
-        let cpu_s = if b.cpu {
-            let start = Instant::now();
-            cpu::render(&tables, &frame)?;
-            Some(start.elapsed().as_secs_f64())
-        } else {
-            None
-        };
-        rows.push(json!({
+        let mut row = json!({
             "width": size, "height": size, "slices": slices,
             "light_resolution": frame.light_resolution,
-            "frame_ms": best * 1e3, "readback_ms": readback * 1e3,
-            "cpu_reference_ms": cpu_s.map(|s| s * 1e3),
-        }));
+        });
+        for (i, m) in models.iter().enumerate() {
+            let cpu_s = if b.cpu {
+                let start = Instant::now();
+                if *m == "riley" {
+                    cpu::render(&tables, &frame)?;
+                } else {
+                    render::miyazaki::cpu::render(&tables, &frame, &scene.svs)?;
+                }
+                Some(start.elapsed().as_secs_f64())
+            } else {
+                None
+            };
+            row[*m] = json!({
+                "frame_ms": best[i] * 1e3, "readback_ms": readback[i] * 1e3,
+                "cpu_reference_ms": cpu_s.map(|s| s * 1e3),
+            });
+        }
+        rows.push(row);
     }
     let report = json!({
         "adapter": gpu.describe(),
+        "models": models,
         "tables_upload_ms": uploaded.upload_seconds * 1e3,
         "texel_format": format!("{:?}", uploaded.format),
         "grid": base.grid.dims,
@@ -543,31 +570,48 @@ fn bench_render(b: RenderBench) -> Result<()> {
         return Ok(());
     }
     println!(
-        "{}: tables upload {:.1} ms ({:?}), grid {:?}, best of {}",
+        "{}: tables upload {:.1} ms ({:?}), grid {:?}, best of {}, models interleaved",
         gpu.describe(),
         uploaded.upload_seconds * 1e3,
         uploaded.format,
         base.grid.dims,
         b.repeat.max(1)
     );
-    let base_ms = rows[0]["frame_ms"].as_f64().unwrap_or(f64::NAN);
-    println!(
-        "{:>6} {:>6} {:>7} {:>10} {:>9} {:>13}",
-        "size", "slices", "light", "frame ms", "× base", "CPU ref ms"
-    );
+    let ms = |r: &serde_json::Value, m: &str| r[m]["frame_ms"].as_f64().unwrap_or(f64::NAN);
+    let mut head = format!("{:>6} {:>6} {:>7}", "size", "slices", "light");
+    for m in &models {
+        head += &format!(
+            " {:>14} {:>7} {:>13}",
+            format!("{m} ms"),
+            "× base",
+            "CPU ref ms"
+        );
+    }
+    if models.len() == 2 {
+        head += &format!(" {:>16}", "miyazaki/riley");
+    }
+    println!("{head}");
     for r in &rows {
-        let ms = r["frame_ms"].as_f64().unwrap_or(f64::NAN);
-        println!(
-            "{:>6} {:>6} {:>7} {:>10.1} {:>9.2} {:>13}",
+        let mut line = format!(
+            "{:>6} {:>6} {:>7}",
             r["width"].as_u64().unwrap_or(0),
             r["slices"].as_u64().unwrap_or(0),
-            r["light_resolution"].as_u64().unwrap_or(0),
-            ms,
-            ms / base_ms,
-            r["cpu_reference_ms"]
-                .as_f64()
-                .map_or("—".into(), |v| format!("{v:.1}"))
+            r["light_resolution"].as_u64().unwrap_or(0)
         );
+        for m in &models {
+            line += &format!(
+                " {:>14.1} {:>7.2} {:>13}",
+                ms(r, m),
+                ms(r, m) / ms(&rows[0], m),
+                r[*m]["cpu_reference_ms"]
+                    .as_f64()
+                    .map_or("—".into(), |v| format!("{v:.1}"))
+            );
+        }
+        if models.len() == 2 {
+            line += &format!(" {:>16.2}", ms(r, "miyazaki") / ms(r, "riley"));
+        }
+        println!("{line}");
     }
     Ok(())
 }
