@@ -371,6 +371,10 @@ pub fn render(tables: &Tables, frame: &Frame, settings: &SvsSettings) -> Result<
                 // 0.02 of an optical depth (or 2 km) apart, until the transmittance from the
                 // eye is below 1e-7.
                 let (mut t, uniform) = (lo, (hi - lo) / SHADOWED_AIR_POINTS as f64);
+                let prism = prism_span(&s, res, s.eye, d, lo, hi);
+                let prism_step = s.shadow_texel[0]
+                    .min(s.shadow_texel[1])
+                    .max((prism.1 - prism.0) / 256.0);
                 let mut n = 0;
                 while (shadow_only && n < SHADOWED_AIR_POINTS) || (!shadow_only && t < hi) {
                     let (rayleigh, n_haze) = air.at(s.eye.y + (t + 0.5 * uniform) * d.y);
@@ -382,9 +386,20 @@ pub fn render(tables: &Tables, frame: &Frame, settings: &SvsSettings) -> Result<
                         let ext = (0..3)
                             .map(|c| rayleigh[c] + n_haze * air.haze_ext[c])
                             .fold(0.0, f64::max);
-                        (HAZY_AIR_STEP_TAU / ext.max(1e-300))
+                        let mut dt = (HAZY_AIR_STEP_TAU / ext.max(1e-300))
                             .min(HAZY_AIR_MAX_STEP_M)
-                            .min(hi - t)
+                            .min(hi - t);
+                        // Over the shadow's prism the steps resolve its edges: a shadow texel,
+                        // or 1/256 of the prism's stretch if that is longer; and a step ends
+                        // where the prism begins.
+                        if !sunward {
+                            if t < prism.0 {
+                                dt = dt.min(prism.0 - t);
+                            } else if t < prism.1 {
+                                dt = dt.min(prism_step);
+                            }
+                        }
+                        dt
                     };
                     let tm = t + 0.5 * dt;
                     t += dt;

@@ -293,6 +293,8 @@ fn air_segment(d: vec3<f32>, t0: f32, t1_in: f32, tex: vec4<f32>) -> vec3<f32> {
         return out;
     }
     let uniform_step = (hi - lo) / f32(SHADOWED_AIR_POINTS);
+    let prism = prism_span(d, lo, hi);
+    let prism_step = max(min(rp.shadow_texel.x, rp.shadow_texel.y), (prism.y - prism.x) / 256.0);
     var t = lo;
     for (var n = 0u; n < 100000u; n = n + 1u) {
         if ((shadow_only && n >= SHADOWED_AIR_POINTS) || (!shadow_only && t >= hi)) {
@@ -307,6 +309,14 @@ fn air_segment(d: vec3<f32>, t0: f32, t1_in: f32, tex: vec4<f32>) -> vec3<f32> {
             let e = ahead.rgb + ahead.w * rp.haze.rgb;
             let ext = max(e.r, max(e.g, e.b));
             dt = min(min(HAZY_AIR_STEP_TAU / max(ext, 1e-30), HAZY_AIR_MAX_STEP_M), hi - t);
+            // Over the shadow's prism the steps resolve its edges (cpu::render).
+            if (!sunward) {
+                if (t < prism.x) {
+                    dt = min(dt, prism.x - t);
+                } else if (t < prism.y) {
+                    dt = min(dt, prism_step);
+                }
+            }
         }
         let tm = t + 0.5 * dt;
         t = t + dt;
