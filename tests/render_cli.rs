@@ -319,3 +319,73 @@ fn scenes_the_path_tracer_cannot_handle_are_refused_before_any_bake() {
         );
     }
 }
+
+#[test]
+fn miyazaki_keys_out_of_range_are_refused_before_any_bake() {
+    let cwd = workdir("render-miyazaki-bad");
+    let base = std::fs::read_to_string(scene_path("shafts.toml")).unwrap();
+    let cases = [
+        (
+            base.replace("svs_a = 1.5", "svs_a = -0.5"),
+            "[render] svs_a = -0.5 is outside the allowed range (0, 2]",
+        ),
+        (
+            base.replace("svs_a = 1.5", "svs_a = 2.5"),
+            "[render] svs_a = 2.5 is outside the allowed range (0, 2]",
+        ),
+        (
+            base.replace("scale_height_m = 1500", "scale_height_m = 0"),
+            "[haze] scale_height_m = 0 must be finite and > 0 (m)",
+        ),
+        (
+            base.replace("albedo = 0.1", "albedo = 1.2"),
+            "[ground] albedo = 1.2 is outside the allowed range [0, 1]",
+        ),
+    ];
+    for (text, named) in cases {
+        std::fs::write(cwd.join("bad.toml"), text).unwrap();
+        let args = [
+            "render",
+            "bad.toml",
+            "--model",
+            "miyazaki",
+            "--cpu",
+            "--quality",
+            "draft",
+            "--tables",
+            "tables",
+            "--out",
+            "bad.exr",
+            "--width",
+            "8",
+            "--height",
+            "8",
+        ];
+        let out = photometeor(&args, &cwd);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{named}: accepted");
+        assert!(stderr.contains(named), "{named}: not named:\n{stderr}");
+        assert!(
+            !cwd.join("tables").exists(),
+            "{named}: baked before refusing"
+        );
+        assert!(
+            !cwd.join("bad.exr").exists(),
+            "{named}: an image was written"
+        );
+    }
+    // Riley's model refuses the haze layer, naming it, before any bake.
+    std::fs::write(cwd.join("bad.toml"), &base).unwrap();
+    let out = photometeor(
+        &[
+            "render", "bad.toml", "--cpu", "--tables", "tables", "--out", "bad.exr",
+        ],
+        &cwd,
+    );
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && stderr.contains("[haze] layer"),
+        "{stderr}"
+    );
+    assert!(!cwd.join("tables").exists());
+}
