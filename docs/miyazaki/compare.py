@@ -33,9 +33,10 @@ def run(args):
 
 
 def scene_with(src, dst, keys):
-    """`src` with extra [render] keys (appended to its [render] table)."""
+    """`src` with these [render] keys set (replacing the scene's own, if any)."""
     text = open(src).read()
-    lines = text.splitlines()
+    lines = [l for l in text.splitlines()
+             if not any(l.replace(" ", "").startswith(f"{k}=") for k in keys)]
     i = lines.index("[render]")
     lines[i + 1:i + 1] = [f"{k} = {json.dumps(v)}" for k, v in keys.items()]
     open(dst, "w").write("\n".join(lines) + "\n")
