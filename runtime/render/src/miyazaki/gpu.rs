@@ -10,21 +10,17 @@ use std::time::Instant;
 use wgpu::util::DeviceExt;
 
 use runtime::Tables;
-use runtime::gpu::{Gpu, GpuError, GpuTables, WGSL, read_back};
+use runtime::gpu::{Gpu, GpuTables, WGSL};
 
 use super::{SvsPhase, SvsSettings};
-use crate::riley::gpu::{RenderError, SLICING_WGSL, Timings};
+use crate::riley::gpu::{
+    Dispatch, RenderError, SLICING_WGSL, Timings, check_sizes, entry, run_slices, slice_uniforms,
+    v4,
+};
 use crate::{Frame, Image, MAX_FIELDS, SUN_DIAMETER_DEG};
 
 /// The model's WGSL (after [`WGSL`] and [`SLICING_WGSL`]).
 pub const SVS_WGSL: &str = include_str!("svs.wgsl");
-
-fn whole(binding: u32, buffer: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> {
-    wgpu::BindGroupEntry {
-        binding,
-        resource: buffer.as_entire_binding(),
-    }
-}
 
 /// Pipelines and layouts, built once.
 pub struct Renderer {
@@ -35,21 +31,11 @@ pub struct Renderer {
     composite: wgpu::ComputePipeline,
 }
 
-fn entry(binding: u32, ty: wgpu::BufferBindingType, dynamic: bool) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
+fn whole(binding: u32, buffer: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> {
+    wgpu::BindGroupEntry {
         binding,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::Buffer {
-            ty,
-            has_dynamic_offset: dynamic,
-            min_binding_size: None,
-        },
-        count: None,
+        resource: buffer.as_entire_binding(),
     }
-}
-
-fn v4(v: glam::DVec3, w: f64) -> [f32; 4] {
-    [v[0] as f32, v[1] as f32, v[2] as f32, w as f32]
 }
 
 fn a4(v: [f64; 3], w: f64) -> [f32; 4] {
@@ -113,26 +99,17 @@ impl Renderer {
         let s = super::setup(frame, settings)?;
         crate::riley::cpu::check_fields(tables, frame)?;
         let device = &gpu.device;
-        let limits = device.limits();
         let start = Instant::now();
         let (w, h, res) = (frame.width, frame.height, frame.light_resolution);
-        let voxels = frame.grid.data.len();
-        for (what, bytes) in [
-            ("density grid bytes", 16 * voxels as u64),
-            ("eye buffer bytes", 48 * (w * h) as u64),
-            ("pixel texture bytes", 80 * (w * h) as u64),
-            ("shadow surface bytes", 16 * (res * res) as u64),
-        ] {
-            let limit = limits.max_storage_buffer_binding_size;
-            if bytes > limit {
-                return Err(GpuError::Limit {
-                    what,
-                    value: bytes,
-                    limit,
-                }
-                .into());
-            }
-        }
+        check_sizes(
+            device,
+            &[
+                ("density grid bytes", 16 * frame.grid.data.len() as u64),
+                ("eye buffer bytes", 48 * (w * h) as u64),
+                ("pixel texture bytes", 80 * (w * h) as u64),
+                ("shadow surface bytes", 16 * (res * res) as u64),
+            ],
+        )?;
         let cos_disk = (SUN_DIAMETER_DEG / 2.0).to_radians().cos();
         let (forward, right, up) = s.axes;
         let haze = frame.haze.map(|h| (&tables.fields[h.field], h));
@@ -233,19 +210,8 @@ impl Renderer {
             image_size,
             wgpu::BufferUsages::COPY_SRC,
         );
-        let stride = limits.min_uniform_buffer_offset_alignment.max(16) as usize;
-        let mut slices = vec![0u8; stride * frame.slices];
-        for k in 0..frame.slices {
-            let plane = s.plane(k) as f32;
-            let entry = &mut slices[k * stride..k * stride + 16];
-            entry[..4].copy_from_slice(&plane.to_le_bytes());
-            entry[4..8].copy_from_slice(&(k as u32).to_le_bytes());
-        }
-        let slice_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("photometeor svs slices"),
-            contents: &slices,
-            usage: wgpu::BufferUsages::UNIFORM,
-        });
+        let planes: Vec<f64> = (0..frame.slices).map(|k| s.plane(k)).collect();
+        let (slice_buffer, stride) = slice_uniforms(device, &planes);
         let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("photometeor svs bindings"),
             layout: &self.layout,
@@ -266,62 +232,19 @@ impl Renderer {
                 whole(6, &pixel_tex),
             ],
         });
-        let wait = || {
-            device
-                .poll(wgpu::PollType::wait_indefinitely())
-                .map_err(|e| GpuError::Readback(e.to_string()))
-        };
-        gpu.queue.submit([]);
-        wait()?;
-        let upload = start.elapsed().as_secs_f64();
-
-        let start = Instant::now();
-        let groups = |x: usize, y: usize| (x.div_ceil(8) as u32, y.div_ceil(8) as u32);
-        let (ix, iy) = groups(w, h);
-        let (lx, ly) = groups(res, res);
-        let (cx, cy) = groups(w.max(res), h.max(res));
-        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
-            label: Some("photometeor svs frame"),
-        });
-        {
-            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some("photometeor shadow-view slices"),
-                timestamp_writes: None,
-            });
-            pass.set_bind_group(0, &gpu_tables.bind_group, &[]);
-            pass.set_bind_group(1, &bind_group, &[0]);
-            pass.set_pipeline(&self.clear);
-            pass.dispatch_workgroups(cx, cy, 1);
-            for k in 0..frame.slices {
-                pass.set_bind_group(1, &bind_group, &[(k * stride) as u32]);
-                pass.set_pipeline(&self.shadow);
-                pass.dispatch_workgroups(lx, ly, 1);
-                pass.set_pipeline(&self.eye);
-                pass.dispatch_workgroups(ix, iy, 1);
-            }
-            pass.set_pipeline(&self.composite);
-            pass.dispatch_workgroups(ix, iy, 1);
-        }
-        gpu.queue.submit([encoder.finish()]);
-        wait()?;
-        let frame_time = start.elapsed().as_secs_f64();
-
-        let start = Instant::now();
-        let texels = read_back(gpu, &image, image_size)?;
-        let out = Image {
-            width: w,
-            height: h,
-            rgb: texels.iter().map(|c| [c[0], c[1], c[2]]).collect(),
-            transparency: texels.iter().map(|c| c[3]).collect(),
-        };
-        let readback_time = start.elapsed().as_secs_f64();
-        Ok((
-            out,
-            Timings {
-                upload,
-                frame: frame_time,
-                readback: readback_time,
-            },
-        ))
+        Ok(run_slices(
+            gpu,
+            gpu_tables,
+            &bind_group,
+            start,
+            (frame.slices, stride),
+            (
+                Dispatch(&self.clear, (w.max(res), h.max(res))),
+                &[Dispatch(&self.shadow, (res, res)), Dispatch(&self.eye, (w, h))],
+                Dispatch(&self.composite, (w, h)),
+            ),
+            &image,
+            (w, h),
+        )?)
     }
 }

@@ -51,7 +51,12 @@ pub struct Renderer {
     composite: wgpu::ComputePipeline,
 }
 
-fn entry(binding: u32, ty: wgpu::BufferBindingType, dynamic: bool) -> wgpu::BindGroupLayoutEntry {
+/// A compute-visible buffer binding of bind group 1.
+pub(crate) fn entry(
+    binding: u32,
+    ty: wgpu::BufferBindingType,
+    dynamic: bool,
+) -> wgpu::BindGroupLayoutEntry {
     wgpu::BindGroupLayoutEntry {
         binding,
         visibility: wgpu::ShaderStages::COMPUTE,
@@ -64,8 +69,120 @@ fn entry(binding: u32, ty: wgpu::BufferBindingType, dynamic: bool) -> wgpu::Bind
     }
 }
 
-fn v4(v: glam::DVec3, w: f64) -> [f32; 4] {
+/// A vector and a scalar as one vec4<f32> uniform row.
+pub(crate) fn v4(v: glam::DVec3, w: f64) -> [f32; 4] {
     [v[0] as f32, v[1] as f32, v[2] as f32, w as f32]
+}
+
+/// Refuses buffers larger than the device's storage-binding limit, naming the buffer.
+pub(crate) fn check_sizes(device: &wgpu::Device, sizes: &[(&'static str, u64)]) -> Result<(), GpuError> {
+    let limit = device.limits().max_storage_buffer_binding_size;
+    for &(what, bytes) in sizes {
+        if bytes > limit {
+            return Err(GpuError::Limit {
+                what,
+                value: bytes,
+                limit,
+            });
+        }
+    }
+    Ok(())
+}
+
+/// The per-slice uniforms (plane value, index) at the device's dynamic-offset stride: the
+/// buffer and the stride.
+pub(crate) fn slice_uniforms(device: &wgpu::Device, planes: &[f64]) -> (wgpu::Buffer, usize) {
+    let stride = device.limits().min_uniform_buffer_offset_alignment.max(16) as usize;
+    let mut bytes = vec![0u8; stride * planes.len()];
+    for (k, &plane) in planes.iter().enumerate() {
+        let entry = &mut bytes[k * stride..k * stride + 16];
+        entry[..4].copy_from_slice(&(plane as f32).to_le_bytes());
+        entry[4..8].copy_from_slice(&(k as u32).to_le_bytes());
+    }
+    let buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some("photometeor slices"),
+        contents: &bytes,
+        usage: wgpu::BufferUsages::UNIFORM,
+    });
+    (buffer, stride)
+}
+
+/// A compute pipeline and the grid (x, y) it runs over, in 8 × 8 workgroups.
+pub(crate) struct Dispatch<'a>(pub &'a wgpu::ComputePipeline, pub (usize, usize));
+
+/// The rest of a slicing frame once its buffers are bound: waits for the uploads (timed from
+/// `start`); records `clear`, then for each of `slices` slices every pipeline of `per_slice` in
+/// order (bind group 1 at the slice's uniform offset, `k · stride`), then `composite`, in one
+/// compute pass (each dispatch sees the previous one's writes); submits, waits, and reads the
+/// (rgb, T_vol) image of `size` back.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn run_slices(
+    gpu: &Gpu,
+    gpu_tables: &GpuTables,
+    bind_group: &wgpu::BindGroup,
+    start: Instant,
+    (slices, stride): (usize, usize),
+    (clear, per_slice, composite): (Dispatch, &[Dispatch], Dispatch),
+    image: &wgpu::Buffer,
+    size: (usize, usize),
+) -> Result<(Image, Timings), GpuError> {
+    let device = &gpu.device;
+    let wait = || {
+        device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map_err(|e| GpuError::Readback(e.to_string()))
+    };
+    gpu.queue.submit([]);
+    wait()?;
+    let upload = start.elapsed().as_secs_f64();
+
+    let start = Instant::now();
+    let groups = |(x, y): (usize, usize)| (x.div_ceil(8) as u32, y.div_ceil(8) as u32);
+    let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+        label: Some("photometeor frame"),
+    });
+    {
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some("photometeor slices"),
+            timestamp_writes: None,
+        });
+        pass.set_bind_group(0, &gpu_tables.bind_group, &[]);
+        pass.set_bind_group(1, bind_group, &[0]);
+        let run = |d: &Dispatch, pass: &mut wgpu::ComputePass| {
+            let (x, y) = groups(d.1);
+            pass.set_pipeline(d.0);
+            pass.dispatch_workgroups(x, y, 1);
+        };
+        run(&clear, &mut pass);
+        for k in 0..slices {
+            pass.set_bind_group(1, bind_group, &[(k * stride) as u32]);
+            for d in per_slice {
+                run(d, &mut pass);
+            }
+        }
+        run(&composite, &mut pass);
+    }
+    gpu.queue.submit([encoder.finish()]);
+    wait()?;
+    let frame_time = start.elapsed().as_secs_f64();
+
+    let start = Instant::now();
+    let (w, h) = size;
+    let texels = read_back(gpu, image, 16 * (w * h) as u64)?;
+    let out = Image {
+        width: w,
+        height: h,
+        rgb: texels.iter().map(|c| [c[0], c[1], c[2]]).collect(),
+        transparency: texels.iter().map(|c| c[3]).collect(),
+    };
+    Ok((
+        out,
+        Timings {
+            upload,
+            frame: frame_time,
+            readback: start.elapsed().as_secs_f64(),
+        },
+    ))
 }
 
 impl Renderer {
@@ -126,25 +243,17 @@ impl Renderer {
         let setup = frame.setup()?;
         super::cpu::check_fields(tables, frame)?;
         let device = &gpu.device;
-        let limits = device.limits();
         let start = Instant::now();
         let (w, h, res) = (frame.width, frame.height, frame.light_resolution);
         let voxels = frame.grid.data.len();
-        for (what, bytes) in [
-            ("density grid bytes", 16 * voxels as u64),
-            ("eye buffer bytes", 32 * (w * h) as u64),
-            ("light buffer bytes", 16 * (res * res) as u64),
-        ] {
-            let limit = limits.max_storage_buffer_binding_size;
-            if bytes > limit {
-                return Err(GpuError::Limit {
-                    what,
-                    value: bytes,
-                    limit,
-                }
-                .into());
-            }
-        }
+        check_sizes(
+            device,
+            &[
+                ("density grid bytes", 16 * voxels as u64),
+                ("eye buffer bytes", 32 * (w * h) as u64),
+                ("light buffer bytes", 16 * (res * res) as u64),
+            ],
+        )?;
 
         let mut params: Vec<[f32; 4]> = Vec::new();
         let sun_dir = frame.sun.direction();
@@ -222,19 +331,10 @@ impl Renderer {
             image_size,
             wgpu::BufferUsages::COPY_SRC,
         );
-        let stride = limits.min_uniform_buffer_offset_alignment.max(16) as usize;
-        let mut slices = vec![0u8; stride * frame.slices];
-        for k in 0..frame.slices {
-            let plane = (setup.slice_start + k as f64 * setup.slice_step) as f32;
-            let entry = &mut slices[k * stride..k * stride + 16];
-            entry[..4].copy_from_slice(&plane.to_le_bytes());
-            entry[4..8].copy_from_slice(&(k as u32).to_le_bytes());
-        }
-        let slice_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("photometeor slices"),
-            contents: &slices,
-            usage: wgpu::BufferUsages::UNIFORM,
-        });
+        let planes: Vec<f64> = (0..frame.slices)
+            .map(|k| setup.slice_start + k as f64 * setup.slice_step)
+            .collect();
+        let (slice_buffer, stride) = slice_uniforms(device, &planes);
         let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("photometeor render bindings"),
             layout: &self.layout,
@@ -269,62 +369,19 @@ impl Renderer {
                 },
             ],
         });
-        let wait = || {
-            device
-                .poll(wgpu::PollType::wait_indefinitely())
-                .map_err(|e| GpuError::Readback(e.to_string()))
-        };
-        gpu.queue.submit([]);
-        wait()?;
-        let upload = start.elapsed().as_secs_f64();
-
-        let start = Instant::now();
-        let groups = |x: usize, y: usize| (x.div_ceil(8) as u32, y.div_ceil(8) as u32);
-        let (ix, iy) = groups(w, h);
-        let (lx, ly) = groups(res, res);
-        let (cx, cy) = groups(w.max(res), h.max(res));
-        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
-            label: Some("photometeor frame"),
-        });
-        {
-            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some("photometeor slices"),
-                timestamp_writes: None,
-            });
-            pass.set_bind_group(0, &gpu_tables.bind_group, &[]);
-            pass.set_bind_group(1, &bind_group, &[0]);
-            pass.set_pipeline(&self.clear);
-            pass.dispatch_workgroups(cx, cy, 1);
-            for k in 0..frame.slices {
-                pass.set_bind_group(1, &bind_group, &[(k * stride) as u32]);
-                pass.set_pipeline(&self.eye);
-                pass.dispatch_workgroups(ix, iy, 1);
-                pass.set_pipeline(&self.light);
-                pass.dispatch_workgroups(lx, ly, 1);
-            }
-            pass.set_pipeline(&self.composite);
-            pass.dispatch_workgroups(ix, iy, 1);
-        }
-        gpu.queue.submit([encoder.finish()]);
-        wait()?;
-        let frame_time = start.elapsed().as_secs_f64();
-
-        let start = Instant::now();
-        let texels = read_back(gpu, &image, image_size)?;
-        let out = Image {
-            width: w,
-            height: h,
-            rgb: texels.iter().map(|c| [c[0], c[1], c[2]]).collect(),
-            transparency: texels.iter().map(|c| c[3]).collect(),
-        };
-        let readback_time = start.elapsed().as_secs_f64();
-        Ok((
-            out,
-            Timings {
-                upload,
-                frame: frame_time,
-                readback: readback_time,
-            },
-        ))
+        Ok(run_slices(
+            gpu,
+            gpu_tables,
+            &bind_group,
+            start,
+            (frame.slices, stride),
+            (
+                Dispatch(&self.clear, (w.max(res), h.max(res))),
+                &[Dispatch(&self.eye, (w, h)), Dispatch(&self.light, (res, res))],
+                Dispatch(&self.composite, (w, h)),
+            ),
+            &image,
+            (w, h),
+        )?)
     }
 }
