@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 use clap::Args as ClapArgs;
-use render::error_map::{compare, read_frame, write_error_map};
+use render::error_map::{Pixels, compare, read_frame, write_error_map};
 
 #[derive(Debug, ClapArgs)]
 pub struct CompareRenderArgs {
@@ -16,6 +16,10 @@ pub struct CompareRenderArgs {
     /// within 3σ of the truth's noise, black where the volume does not matter.
     #[arg(long)]
     map: Option<PathBuf>,
+    /// Which pixels to measure: `volume` (1 − T_vol > 1 %, the default) or `all` (every pixel
+    /// the truth lights: also the air, such as haze and its light shafts, and the ground).
+    #[arg(long, default_value = "volume", value_parser = ["volume", "all"])]
+    pixels: String,
     /// Print JSON.
     #[arg(long)]
     json: bool,
@@ -24,7 +28,12 @@ pub struct CompareRenderArgs {
 pub fn run(a: CompareRenderArgs) -> Result<()> {
     let truth = read_frame(&a.truth)?;
     let model = read_frame(&a.model)?;
-    let (report, map) = compare(&truth, &model)?;
+    let pixels = if a.pixels == "all" {
+        Pixels::All
+    } else {
+        Pixels::Volume
+    };
+    let (report, map) = compare(&truth, &model, pixels)?;
     if let Some(path) = &a.map {
         write_error_map(path, &map, truth.image.width, truth.image.height)?;
     }
@@ -33,11 +42,15 @@ pub fn run(a: CompareRenderArgs) -> Result<()> {
         return Ok(());
     }
     println!(
-        "{} against the truth {} over {} pixels with 1 − T_vol > 1 % (luminance; differences \
-         within 3σ of the truth's noise count as 0):",
+        "{} against the truth {} over {} pixels {} (luminance; differences within 3σ of the \
+         truth's noise count as 0):",
         a.model.display(),
         a.truth.display(),
-        report.pixels
+        report.pixels,
+        match pixels {
+            Pixels::Volume => "with 1 − T_vol > 1 %",
+            Pixels::All => "(all lit)",
+        }
     );
     println!(
         "  mean relative error {:.2} %, median {:.2} %, 95th percentile {:.2} %, bias {:+.2} %",

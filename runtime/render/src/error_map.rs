@@ -72,10 +72,20 @@ pub fn read_frame(path: &Path) -> Result<Frame, CompareError> {
     })
 }
 
+/// Which pixels are measured.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Pixels {
+    /// Where the volume matters, 1 − T_vol > 1 % (the default).
+    #[default]
+    Volume,
+    /// Every pixel the truth lights: the air too (haze, shafts, sky) and the ground.
+    All,
+}
+
 /// The measured error of a model's frame against the truth (module docs).
 #[derive(Debug, Clone, Serialize)]
 pub struct ErrorReport {
-    /// Pixels in the mask (1 − T_vol > 1 %).
+    /// Pixels in the mask (1 − T_vol > 1 %, or all lit ones with [`Pixels::All`]).
     pub pixels: usize,
     /// Mean relative error of luminance over the mask (differences within 3σ count as 0).
     pub mean_rel_error: f64,
@@ -100,6 +110,7 @@ const LUMA: [f64; 3] = [0.2126, 0.7152, 0.0722];
 pub fn compare(
     truth: &Frame,
     model: &Frame,
+    pixels: Pixels,
 ) -> Result<(ErrorReport, Vec<Option<f64>>), CompareError> {
     let (t, m) = (&truth.image, &model.image);
     if (t.width, t.height) != (m.width, m.height) {
@@ -119,7 +130,7 @@ pub fn compare(
     let (mut sum_d, mut sum_t, mut resolved) = (0.0, 0.0, 0usize);
     let mut map = vec![None; t.rgb.len()];
     for i in 0..t.rgb.len() {
-        if 1.0 - t.transparency[i] as f64 <= 0.01 {
+        if pixels == Pixels::Volume && 1.0 - t.transparency[i] as f64 <= 0.01 {
             continue;
         }
         let (yt, ym) = (y(t.rgb[i]), y(m.rgb[i]));
@@ -144,10 +155,13 @@ pub fn compare(
         map[i] = Some(e);
     }
     if rel.is_empty() {
-        return Err(CompareError(
-            "no pixel of the truth has 1 − T_vol > 1 %: the volume covers nothing to compare"
-                .into(),
-        ));
+        return Err(CompareError(match pixels {
+            Pixels::Volume => {
+                "no pixel of the truth has 1 − T_vol > 1 %: the volume covers nothing to compare"
+                    .into()
+            }
+            Pixels::All => "no pixel of the truth is lit: nothing to compare".into(),
+        }));
     }
     let n = rel.len();
     let mean = rel.iter().sum::<f64>() / n as f64;
@@ -195,4 +209,54 @@ pub fn write_error_map(
     height: usize,
 ) -> Result<(), crate::image::WriteError> {
     crate::image::write_png_rgb8(path, width, height, &error_map_rgb8(map))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A 4-pixel frame of grey luminance `y` per pixel, transparency `t`, stderr `se`.
+    fn frame(y: [f32; 4], t: [f32; 4], se: Option<f32>) -> Frame {
+        Frame {
+            image: Image {
+                width: 2,
+                height: 2,
+                rgb: y.iter().map(|&v| [v; 3]).collect(),
+                transparency: t.to_vec(),
+            },
+            std_error: se.map(|s| vec![[s; 3]; 4]),
+        }
+    }
+
+    #[test]
+    fn errors_count_beyond_the_truth_noise_over_the_chosen_pixels() {
+        // Pixels 0–2 are volume (T 0.5), pixel 3 is clear sky (T 1).
+        let truth = frame([1.0, 2.0, 4.0, 8.0], [0.5, 0.5, 0.5, 1.0], Some(0.01));
+        // +50 %, within noise (+0.02 < 3σ = 0.03), −25 %, and +100 % on the sky.
+        let model = frame([1.5, 2.02, 3.0, 16.0], [0.5; 4], None);
+        let (r, map) = compare(&truth, &model, Pixels::Volume).unwrap();
+        assert_eq!(r.pixels, 3);
+        assert!(
+            (r.mean_rel_error - (0.5 + 0.0 + 0.25) / 3.0).abs() < 1e-6,
+            "{r:?}"
+        );
+        assert!((r.median_rel_error - 0.25).abs() < 1e-6);
+        assert!((r.p95_rel_error - 0.5).abs() < 1e-6);
+        assert!((r.bias - (0.5 + 0.02 - 1.0) / 7.0).abs() < 1e-6);
+        assert!((r.resolved - 1.0 / 3.0).abs() < 1e-12);
+        assert_eq!(map[1], Some(0.0));
+        assert_eq!(map[3], None);
+        let (r, map) = compare(&truth, &model, Pixels::All).unwrap();
+        assert_eq!(r.pixels, 4);
+        assert!((r.bias - (0.5 + 0.02 - 1.0 + 8.0) / 15.0).abs() < 1e-6);
+        assert!(map[3].is_some_and(|e| (e - 1.0).abs() < 1e-6));
+        // Refusals: no stderr in the truth, frames of different sizes, nothing in the mask.
+        assert!(compare(&model, &truth, Pixels::Volume).is_err());
+        let mut small = model.clone();
+        small.image.width = 1;
+        assert!(compare(&truth, &small, Pixels::Volume).is_err());
+        let clear = frame([1.0; 4], [1.0; 4], Some(0.01));
+        let e = compare(&clear, &model, Pixels::Volume).unwrap_err().0;
+        assert!(e.contains("1 − T_vol > 1 %"), "{e}");
+    }
 }

@@ -240,7 +240,10 @@ impl Renderer {
             (frame.slices, stride),
             (
                 Dispatch(&self.clear, (w.max(res), h.max(res))),
-                &[Dispatch(&self.shadow, (res, res)), Dispatch(&self.eye, (w, h))],
+                &[
+                    Dispatch(&self.shadow, (res, res)),
+                    Dispatch(&self.eye, (w, h)),
+                ],
                 Dispatch(&self.composite, (w, h)),
             ),
             &image,

@@ -75,7 +75,10 @@ pub(crate) fn v4(v: glam::DVec3, w: f64) -> [f32; 4] {
 }
 
 /// Refuses buffers larger than the device's storage-binding limit, naming the buffer.
-pub(crate) fn check_sizes(device: &wgpu::Device, sizes: &[(&'static str, u64)]) -> Result<(), GpuError> {
+pub(crate) fn check_sizes(
+    device: &wgpu::Device,
+    sizes: &[(&'static str, u64)],
+) -> Result<(), GpuError> {
     let limit = device.limits().max_storage_buffer_binding_size;
     for &(what, bytes) in sizes {
         if bytes > limit {
@@ -377,7 +380,10 @@ impl Renderer {
             (frame.slices, stride),
             (
                 Dispatch(&self.clear, (w.max(res), h.max(res))),
-                &[Dispatch(&self.eye, (w, h)), Dispatch(&self.light, (res, res))],
+                &[
+                    Dispatch(&self.eye, (w, h)),
+                    Dispatch(&self.light, (res, res)),
+                ],
                 Dispatch(&self.composite, (w, h)),
             ),
             &image,
