@@ -268,6 +268,23 @@ fn render_without_tables_bakes_under_the_cache_directory_with_a_safe_name() {
     assert!(Tables::open(&dirs[0]).unwrap().field("rain").is_some());
 }
 
+/// Runs `args` in `cwd` and asserts that it fails naming `named`, with no bake (`tables`) and
+/// no image (`bad.exr`) left behind.
+fn assert_refused_before_any_work(args: &[&str], cwd: &Path, named: &str) {
+    let out = photometeor(args, cwd);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{named}: accepted");
+    assert!(stderr.contains(named), "{named}: not named:\n{stderr}");
+    assert!(
+        !cwd.join("tables").exists(),
+        "{named}: baked before refusing"
+    );
+    assert!(
+        !cwd.join("bad.exr").exists(),
+        "{named}: an image was written"
+    );
+}
+
 #[test]
 fn scenes_the_path_tracer_cannot_handle_are_refused_before_any_bake() {
     let cwd = workdir("render-truth-bad");
@@ -305,18 +322,7 @@ fn scenes_the_path_tracer_cannot_handle_are_refused_before_any_bake() {
             "8",
         ];
         args.extend_from_slice(extra);
-        let out = photometeor(&args, &cwd);
-        let stderr = String::from_utf8_lossy(&out.stderr);
-        assert!(!out.status.success(), "{named}: accepted");
-        assert!(stderr.contains(named), "{named}: not named:\n{stderr}");
-        assert!(
-            !cwd.join("tables").exists(),
-            "{named}: baked before refusing"
-        );
-        assert!(
-            !cwd.join("bad.exr").exists(),
-            "{named}: an image was written"
-        );
+        assert_refused_before_any_work(&args, &cwd, named);
     }
 }
 
@@ -361,18 +367,7 @@ fn miyazaki_keys_out_of_range_are_refused_before_any_bake() {
             "--height",
             "8",
         ];
-        let out = photometeor(&args, &cwd);
-        let stderr = String::from_utf8_lossy(&out.stderr);
-        assert!(!out.status.success(), "{named}: accepted");
-        assert!(stderr.contains(named), "{named}: not named:\n{stderr}");
-        assert!(
-            !cwd.join("tables").exists(),
-            "{named}: baked before refusing"
-        );
-        assert!(
-            !cwd.join("bad.exr").exists(),
-            "{named}: an image was written"
-        );
+        assert_refused_before_any_work(&args, &cwd, named);
     }
     // Riley's model refuses the haze layer, naming it, before any bake.
     std::fs::write(cwd.join("bad.toml"), &base).unwrap();

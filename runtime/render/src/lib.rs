@@ -78,8 +78,7 @@ pub struct Frame {
     pub grid: DensityGrid,
     /// An aerosol layer over the whole scene (`[haze]`; `miyazaki` and `truth`).
     pub haze: Option<Haze>,
-    /// Lambertian albedo of the ground at y = 0 (`[ground] albedo`, [0, 1]; 0 is black), for
-    /// `riley` (`miyazaki` and `truth` take it in their settings).
+    /// Lambertian albedo of the ground at y = 0 (`[ground] albedo`, [0, 1]; 0 is black).
     pub ground_albedo: f64,
 }
 
@@ -96,7 +95,7 @@ pub struct Haze {
 
 impl Frame {
     /// The checks every model makes of the view: image size, field of view, sun above the
-    /// horizon, camera at or above sea level and looking somewhere.
+    /// horizon, camera at or above sea level and looking somewhere, ground albedo in [0, 1].
     pub fn check_view(&self) -> Result<(), FrameError> {
         let bad = |s: String| Err(FrameError(s));
         if !(1..=8192).contains(&self.width) || !(1..=8192).contains(&self.height) {
@@ -126,6 +125,12 @@ impl Frame {
         }
         if self.camera.axes().is_none() {
             return bad("camera look_at_m equals position_m".into());
+        }
+        if !(0.0..=1.0).contains(&self.ground_albedo) {
+            return bad(format!(
+                "[ground] albedo = {} is outside the allowed range [0, 1]",
+                self.ground_albedo
+            ));
         }
         Ok(())
     }

@@ -227,7 +227,7 @@ pub struct RenderScene {
     pub spp: usize,
     /// `[render] seed` for the path tracer (default 1).
     pub seed: u64,
-    /// `[render] svs_a`, `k_multi`, `svs_phase` and `[ground] albedo` for `--model miyazaki`.
+    /// `[render] svs_a`, `k_multi` and `svs_phase` for `--model miyazaki`.
     pub svs: crate::miyazaki::SvsSettings,
     /// `[haze]`, if any.
     pub haze: Option<HazeKeysChecked>,
@@ -367,7 +367,6 @@ impl RenderScene {
                     ))
                 })?,
             },
-            ground_albedo,
         };
         crate::miyazaki::check(&svs).map_err(|e| err(e.0))?;
         let haze = match file.haze {
@@ -463,7 +462,6 @@ impl RenderScene {
             spp: self.spp,
             target_noise: 0.0,
             seed: self.seed,
-            ground_albedo: self.ground_albedo,
             lights: self.lights.clone(),
             wavelengths_per_path: 0,
         }

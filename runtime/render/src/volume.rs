@@ -47,6 +47,16 @@ impl DensityGrid {
         })
     }
 
+    /// The range of axis·x over the box's corners: its extent along `axis`.
+    pub fn span_along(&self, axis: DVec3) -> (f64, f64) {
+        self.corners()
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &c| {
+                let v = axis.dot(c);
+                (lo.min(v), hi.max(v))
+            })
+    }
+
     /// Whether `p` lies in the closed box [min_m, max_m].
     pub fn contains(&self, p: DVec3) -> bool {
         (0..3).all(|a| p[a] >= self.min_m[a] && p[a] <= self.max_m[a])

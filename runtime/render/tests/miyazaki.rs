@@ -444,28 +444,14 @@ top_m = 2000
         let (image, t) = renderer
             .render(&gpu, &tables, &uploaded, &frame, &scene.svs)
             .unwrap();
-        let mut values: Vec<f64> = reference.rgb.iter().flatten().map(|&v| v as f64).collect();
-        values.sort_by(f64::total_cmp);
-        let scale = values[values.len() * 99 / 100];
-        let mut worst = 0f64;
-        for (p, (g, c)) in image.rgb.iter().zip(&reference.rgb).enumerate() {
-            for ch in 0..3 {
-                let (g, c) = (g[ch] as f64, c[ch] as f64);
-                // f32 against f64 on lavapipe: worst 1e-6·|c| + 1e-7 of the image's scale; the
-                // margin is for GPUs whose exp and pow are a few ulp off.
-                let tol = 1e-4 * c.abs() + 1e-5 * scale;
-                worst = worst.max((g - c).abs() / tol);
-                assert!(
-                    (g - c).abs() <= tol,
-                    "sun {elevation}°/{azimuth}° a {a} {phase}, pixel {p} channel {ch}: GPU {g}, \
-                     CPU {c}"
-                );
-            }
-            let (ta, tb) = (image.transparency[p], reference.transparency[p]);
-            assert!((ta - tb).abs() < 1e-5, "pixel {p}: T {ta} vs {tb}");
-        }
-        let seen = reference.transparency.iter().filter(|&&t| t < 0.5).count();
-        assert!(seen > 100, "the volumes cover only {seen} pixels");
+        // f32 against f64 on lavapipe: worst 1e-6·|c| + 1e-7 of the image's scale; the margin
+        // is for GPUs whose exp and pow are a few ulp off.
+        let worst = common::assert_gpu_matches_cpu(
+            (&image.rgb, &image.transparency),
+            (&reference.rgb, &reference.transparency),
+            (1e-4, 1e-5, 1e-5),
+            &format!("sun {elevation}°/{azimuth}° a {a} {phase}"),
+        );
         eprintln!(
             "sun {elevation}°/{azimuth}° a {a} {phase}: worst |GPU − CPU| = {worst:.3} of the \
              tolerance, frame {:.1} ms",

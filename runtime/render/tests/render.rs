@@ -85,32 +85,15 @@ fn gpu_render_matches_the_cpu_reference_in_both_compositing_orders() {
         assert_eq!(frame.setup().unwrap().front_to_back, front_to_back);
         let reference = cpu::render(&tables, &frame).unwrap();
         let (image, t) = renderer.render(&gpu, &tables, &uploaded, &frame).unwrap();
-        // The image's scale: its 99th percentile (a sun disk in view must not set it).
-        let mut values: Vec<f64> = reference.rgb.iter().flatten().map(|&v| v as f64).collect();
-        values.sort_by(f64::total_cmp);
-        let scale = values[values.len() * 99 / 100];
         // f32 on the GPU against f64: rounding in ~100 slices of exp/pow, the asin polynomial
         // (1 ulp) and f32 coordinates of metre-scale points (a few 1e-5 of a texel) stay far
         // below 1e-3 of a pixel plus 1e-4 of the image's scale.
-        let mut worst = 0f64;
-        for (p, (g, c)) in image.rgb.iter().zip(&reference.rgb).enumerate() {
-            for ch in 0..3 {
-                let (g, c) = (g[ch] as f64, c[ch] as f64);
-                let tol = 1e-3 * c.abs() + 1e-4 * scale;
-                worst = worst.max((g - c).abs() / tol);
-                assert!(
-                    (g - c).abs() <= tol,
-                    "sun {elevation}°/{azimuth}°, pixel {p} channel {ch}: GPU {g}, CPU {c}"
-                );
-            }
-            let (ta, tb) = (
-                image.transparency[p] as f64,
-                reference.transparency[p] as f64,
-            );
-            assert!((ta - tb).abs() < 1e-4, "pixel {p}: T {ta} vs {tb}");
-        }
-        let seen = reference.transparency.iter().filter(|&&t| t < 0.5).count();
-        assert!(seen > 100, "the volumes cover only {seen} pixels");
+        let worst = common::assert_gpu_matches_cpu(
+            (&image.rgb, &image.transparency),
+            (&reference.rgb, &reference.transparency),
+            (1e-3, 1e-4, 1e-4),
+            &format!("sun {elevation}°/{azimuth}°"),
+        );
         eprintln!(
             "sun {elevation}°/{azimuth}°, {update:?}: worst |GPU − CPU| = {worst:.3} of the tolerance, frame {:.1} ms",
             t.frame * 1e3

@@ -258,11 +258,8 @@ fn carried_wavelengths_agree_with_one_wavelength_per_path() {
         beta_sea_level_per_m: [0.1, 0.25, 0.5],
         scale_height_m: 2.0,
     };
-    let settings = TruthSettings {
-        ground_albedo: 0.5,
-        ..TruthSettings::default()
-    };
-    let mut tracer = Tracer::new(&tables, &frame, &settings).unwrap();
+    frame.ground_albedo = 0.5;
+    let mut tracer = Tracer::new(&tables, &frame, &TruthSettings::default()).unwrap();
     assert_eq!(tracer.wavelengths_per_path, 4);
     let n = 40_000;
     let mut worst: f64 = 0.0;
@@ -417,11 +414,8 @@ fn white_furnace_returns_exactly_the_background() {
     };
     frame.sun.irradiance = [0.0; 3];
     frame.atmosphere = Atmosphere::default();
-    let settings = TruthSettings {
-        ground_albedo: 1.0,
-        ..TruthSettings::default()
-    };
-    let mut tracer = Tracer::new(&tables, &frame, &settings).unwrap();
+    frame.ground_albedo = 1.0;
+    let mut tracer = Tracer::new(&tables, &frame, &TruthSettings::default()).unwrap();
     tracer.set_albedo(1.0);
     tracer.background = [1.0; 3];
     // Plain phase sampling: every path's weight stays exactly 1. (Guided continuations weigh

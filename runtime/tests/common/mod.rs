@@ -129,3 +129,37 @@ pub fn haze_single_scattering(
 ) -> f64 {
     omega * phase * (-beta_ext_sl * h * (-y / h).exp() / l_y).exp()
 }
+
+/// Asserts that a GPU frame (`gpu`: rgb and T_vol per pixel) equals its CPU reference `cpu`
+/// per pixel and channel within `rel`·|cpu| + `of_scale`·(the reference's 99th percentile, so
+/// that a sun disk in view cannot set it), and T_vol within `t_tol`, and that the volumes
+/// cover more than 100 pixels. `what` names the case in failures. Returns the worst
+/// |GPU − CPU| as a share of the tolerance.
+#[allow(dead_code)]
+pub fn assert_gpu_matches_cpu(
+    gpu: (&[[f32; 3]], &[f32]),
+    cpu: (&[[f32; 3]], &[f32]),
+    (rel, of_scale, t_tol): (f64, f64, f64),
+    what: &str,
+) -> f64 {
+    let mut values: Vec<f64> = cpu.0.iter().flatten().map(|&v| v as f64).collect();
+    values.sort_by(f64::total_cmp);
+    let scale = values[values.len() * 99 / 100];
+    let mut worst = 0f64;
+    for (p, (g, c)) in gpu.0.iter().zip(cpu.0).enumerate() {
+        for ch in 0..3 {
+            let (g, c) = (g[ch] as f64, c[ch] as f64);
+            let tol = rel * c.abs() + of_scale * scale;
+            worst = worst.max((g - c).abs() / tol);
+            assert!(
+                (g - c).abs() <= tol,
+                "{what}, pixel {p} channel {ch}: GPU {g}, CPU {c}"
+            );
+        }
+        let (ta, tb) = (gpu.1[p] as f64, cpu.1[p] as f64);
+        assert!((ta - tb).abs() < t_tol, "{what}, pixel {p}: T {ta} vs {tb}");
+    }
+    let seen = cpu.1.iter().filter(|&&t| t < 0.5).count();
+    assert!(seen > 100, "{what}: the volumes cover only {seen} pixels");
+    worst
+}

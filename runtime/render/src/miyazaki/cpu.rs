@@ -10,7 +10,7 @@ use grid::ThetaGrid;
 use runtime::{FieldTable, Tables, sample};
 
 use super::{SvsPhase, SvsSettings, SvsSetup};
-use crate::riley::cpu::{check_fields, coefficients};
+use crate::riley::cpu::{bilinear_taps, check_fields, coefficients, over_footprint};
 use crate::sky::rayleigh_phase;
 use crate::{Frame, FrameError, Image, MAX_FIELDS, SUN_DIAMETER_DEG};
 
@@ -57,25 +57,11 @@ pub fn asymmetry(field: &FieldTable, theta_step_deg: f64) -> [f64; 3] {
 
 /// Bilinear lookup in the shadow surface; 1 (no cloud) outside its footprint.
 fn shadow_at(buffer: &[[f64; 3]], res: usize, uv: [f64; 2]) -> [f64; 3] {
-    let edge = (res - 1) as f64;
-    if uv.iter().any(|&v| !(-0.5..=edge + 0.5).contains(&v)) {
+    if !over_footprint(res, uv) {
         return [1.0; 3];
     }
-    let (u, v) = (uv[0].clamp(0.0, edge), uv[1].clamp(0.0, edge));
-    let (a0, b0) = (
-        (u.floor() as usize).min(res - 2),
-        (v.floor() as usize).min(res - 2),
-    );
-    let (s, t) = (u - a0 as f64, v - b0 as f64);
-    let at = |a: usize, b: usize| buffer[a + res * b];
-    let w = [(1.0 - s) * (1.0 - t), s * (1.0 - t), (1.0 - s) * t, s * t];
-    let l = [
-        at(a0, b0),
-        at(a0 + 1, b0),
-        at(a0, b0 + 1),
-        at(a0 + 1, b0 + 1),
-    ];
-    std::array::from_fn(|c| (0..4).map(|i| w[i] * l[i][c]).sum())
+    let taps = bilinear_taps(res, uv);
+    std::array::from_fn(|c| taps.iter().map(|&(i, w)| w * buffer[i][c]).sum())
 }
 
 /// The ray parameters where `origin + t d` lies over the shadow surface's footprint (the
@@ -437,7 +423,7 @@ pub fn render(tables: &Tables, frame: &Frame, settings: &SvsSettings) -> Result<
                 let ground = s.eye + t_end * d;
                 let g_cl = shadow_at(&shadow, res, s.shadow_coords(ground));
                 std::array::from_fn(|c| {
-                    settings.ground_albedo / PI * l_y * sun_ground[c] * g_cl[c] * t_all[c]
+                    frame.ground_albedo / PI * l_y * sun_ground[c] * g_cl[c] * t_all[c]
                 })
             } else if cos_sun >= cos_disk {
                 std::array::from_fn(|c| t_all[c] / disk_sr)

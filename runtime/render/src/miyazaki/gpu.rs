@@ -7,19 +7,17 @@
 
 use std::time::Instant;
 
-use wgpu::util::DeviceExt;
-
 use runtime::Tables;
-use runtime::gpu::{Gpu, GpuTables, WGSL};
+use runtime::gpu::{Gpu, GpuTables};
 
 use super::{SvsPhase, SvsSettings};
 use crate::riley::gpu::{
-    Dispatch, RenderError, SLICING_WGSL, Timings, check_sizes, entry, run_slices, slice_uniforms,
-    v4,
+    Dispatch, RenderError, Timings, bind, build, check_sizes, filled, run_slices, slice_uniforms,
+    storage, v4,
 };
 use crate::{Frame, Image, MAX_FIELDS, SUN_DIAMETER_DEG};
 
-/// The model's WGSL (after [`WGSL`] and [`SLICING_WGSL`]).
+/// The model's WGSL (after `runtime::gpu::WGSL` and `riley::gpu::SLICING_WGSL`).
 pub const SVS_WGSL: &str = include_str!("svs.wgsl");
 
 /// Pipelines and layouts, built once.
@@ -31,13 +29,6 @@ pub struct Renderer {
     composite: wgpu::ComputePipeline,
 }
 
-fn whole(binding: u32, buffer: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> {
-    wgpu::BindGroupEntry {
-        binding,
-        resource: buffer.as_entire_binding(),
-    }
-}
-
 fn a4(v: [f64; 3], w: f64) -> [f32; 4] {
     [v[0] as f32, v[1] as f32, v[2] as f32, w as f32]
 }
@@ -45,44 +36,20 @@ fn a4(v: [f64; 3], w: f64) -> [f32; 4] {
 impl Renderer {
     /// Compiles the shaders and builds the pipelines, with `tables`' layout as bind group 0.
     pub fn new(gpu: &Gpu, tables: &GpuTables) -> Self {
-        let device = &gpu.device;
-        use wgpu::BufferBindingType::{Storage, Uniform};
-        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("photometeor svs layout"),
-            entries: &[
-                entry(0, Uniform, false),
-                entry(1, Storage { read_only: true }, false),
-                entry(2, Storage { read_only: false }, false),
-                entry(3, Storage { read_only: false }, false),
-                entry(4, Storage { read_only: false }, false),
-                entry(5, Uniform, true),
-                entry(6, Storage { read_only: false }, false),
-            ],
-        });
-        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("photometeor svs"),
-            source: wgpu::ShaderSource::Wgsl(format!("{WGSL}\n{SLICING_WGSL}\n{SVS_WGSL}").into()),
-        });
-        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("photometeor svs pipeline layout"),
-            bind_group_layouts: &[Some(&tables.layout), Some(&layout)],
-            immediate_size: 0,
-        });
-        let pipeline = |name: &str| {
-            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some(name),
-                layout: Some(&pipeline_layout),
-                module: &module,
-                entry_point: Some(name),
-                compilation_options: Default::default(),
-                cache: None,
-            })
-        };
+        let (layout, p) = build(
+            gpu,
+            tables,
+            "photometeor svs",
+            SVS_WGSL,
+            7,
+            &["clear", "shadow_slice", "eye_slice", "composite"],
+        );
+        let [clear, shadow, eye, composite] = <[_; 4]>::try_from(p).expect("four pipelines");
         Self {
-            clear: pipeline("clear"),
-            shadow: pipeline("shadow_slice"),
-            eye: pipeline("eye_slice"),
-            composite: pipeline("composite"),
+            clear,
+            shadow,
+            eye,
+            composite,
             layout,
         }
     }
@@ -125,7 +92,7 @@ impl Renderer {
             [
                 s.shadow_texel[0] as f32,
                 s.shadow_texel[1] as f32,
-                settings.ground_albedo as f32,
+                frame.ground_albedo as f32,
                 if settings.phase == SvsPhase::CornetteShanks {
                     1.0
                 } else {
@@ -182,56 +149,53 @@ impl Renderer {
             frame.sun.irradiance,
             std::f64::consts::TAU * (1.0 - cos_disk),
         ));
-        let params = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("photometeor svs params"),
-            contents: bytemuck::cast_slice(&params),
-            usage: wgpu::BufferUsages::UNIFORM,
-        });
-        let density = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("photometeor svs densities"),
-            contents: bytemuck::cast_slice(&frame.grid.data),
-            usage: wgpu::BufferUsages::STORAGE,
-        });
-        let storage = |label: &str, size: u64, extra: wgpu::BufferUsages| {
-            device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some(label),
-                size,
-                usage: wgpu::BufferUsages::STORAGE | extra,
-                mapped_at_creation: false,
-            })
-        };
-        let none = wgpu::BufferUsages::empty();
-        let shadow = storage("photometeor shadow surface", 16 * (res * res) as u64, none);
-        let eye_buffer = storage("photometeor svs eye buffer", 48 * (w * h) as u64, none);
-        let pixel_tex = storage("photometeor svs pixel texture", 80 * (w * h) as u64, none);
-        let image_size = 16 * (w * h) as u64;
-        let image = storage(
-            "photometeor svs image",
-            image_size,
-            wgpu::BufferUsages::COPY_SRC,
+        let params = filled(
+            device,
+            "photometeor svs params",
+            bytemuck::cast_slice(&params),
+            wgpu::BufferUsages::UNIFORM,
         );
+        let density = filled(
+            device,
+            "photometeor svs densities",
+            bytemuck::cast_slice(&frame.grid.data),
+            wgpu::BufferUsages::STORAGE,
+        );
+        let shadow = storage(
+            device,
+            "photometeor shadow surface",
+            16 * (res * res) as u64,
+            false,
+        );
+        let eye_buffer = storage(
+            device,
+            "photometeor svs eye buffer",
+            48 * (w * h) as u64,
+            false,
+        );
+        let pixel_tex = storage(
+            device,
+            "photometeor svs pixel texture",
+            80 * (w * h) as u64,
+            false,
+        );
+        let image = storage(device, "photometeor svs image", 16 * (w * h) as u64, true);
         let planes: Vec<f64> = (0..frame.slices).map(|k| s.plane(k)).collect();
         let (slice_buffer, stride) = slice_uniforms(device, &planes);
-        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("photometeor svs bindings"),
-            layout: &self.layout,
-            entries: &[
-                whole(0, &params),
-                whole(1, &density),
-                whole(2, &shadow),
-                whole(3, &eye_buffer),
-                whole(4, &image),
-                wgpu::BindGroupEntry {
-                    binding: 5,
-                    resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                        buffer: &slice_buffer,
-                        offset: 0,
-                        size: wgpu::BufferSize::new(16),
-                    }),
-                },
-                whole(6, &pixel_tex),
+        let bind_group = bind(
+            device,
+            &self.layout,
+            "photometeor svs bindings",
+            &[
+                &params,
+                &density,
+                &shadow,
+                &eye_buffer,
+                &image,
+                &slice_buffer,
+                &pixel_tex,
             ],
-        });
+        );
         Ok(run_slices(
             gpu,
             gpu_tables,

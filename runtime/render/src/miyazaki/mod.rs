@@ -49,7 +49,7 @@
 //!   64-point midpoint rule over the shadow's prism; with haze, both species by the midpoint
 //!   rule at 0.02 of an optical depth (at most 2 km) per step, until the transmittance from
 //!   the eye is below 10⁻⁷.
-//! - The ground is a Lambertian plane at y = 0 of albedo [`SvsSettings::ground_albedo`], lit
+//! - The ground is a Lambertian plane at y = 0 of albedo [`crate::Frame::ground_albedo`], lit
 //!   by the sun through the air (Eq. 12) and the final shadow surface; the paper draws shadows
 //!   on its terrain but gives no reflectance model. No skylight reaches the ground.
 //! - The shadow surface covers the box's footprint as seen from the sun; outside it there is
@@ -88,7 +88,7 @@ impl SvsPhase {
 }
 
 /// What the model needs besides the frame (scene keys `[render] svs_a`, `k_multi`,
-/// `svs_phase`; `[ground] albedo`).
+/// `svs_phase`; the ground albedo is the frame's).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SvsSettings {
     /// θ_e : θ_s = 1 : a, in [`A_RANGE`] (0 excluded).
@@ -97,8 +97,6 @@ pub struct SvsSettings {
     pub k_multi: f64,
     /// The clouds' phase function.
     pub phase: SvsPhase,
-    /// Lambertian ground albedo at y = 0, [0, 1].
-    pub ground_albedo: f64,
 }
 
 impl Default for SvsSettings {
@@ -107,7 +105,6 @@ impl Default for SvsSettings {
             a: 1.5,
             k_multi: 0.0,
             phase: SvsPhase::Tables,
-            ground_albedo: 0.0,
         }
     }
 }
@@ -170,12 +167,6 @@ pub fn check(settings: &SvsSettings) -> Result<(), FrameError> {
             settings.k_multi
         ));
     }
-    if !(0.0..=1.0).contains(&settings.ground_albedo) {
-        return bad(format!(
-            "[ground] albedo = {} is outside the allowed range [0, 1]",
-            settings.ground_albedo
-        ));
-    }
     Ok(())
 }
 
@@ -207,15 +198,7 @@ pub fn setup(frame: &Frame, settings: &SvsSettings) -> Result<SvsSetup, FrameErr
     let axes = frame.camera.axes().expect("checked by check_view");
     let to_sun = frame.sun.direction();
     let normal = slice_normal(axes.0, to_sun, settings.a);
-    let corners = frame.grid.corners();
-    let along = |axis: DVec3| {
-        corners
-            .iter()
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &c| {
-                let v = axis.dot(c);
-                (lo.min(v), hi.max(v))
-            })
-    };
+    let along = |axis: DVec3| frame.grid.span_along(axis);
     let range = along(normal);
     let step = (range.1 - range.0) / frame.slices as f64;
     let (shadow_u, shadow_w) = basis(to_sun);

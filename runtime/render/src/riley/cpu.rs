@@ -95,7 +95,10 @@ impl Setup {
     }
 }
 
-fn bilinear(buffer: &[Light], res: usize, uv: [f64; 2]) -> Light {
+/// The four texels (indices into a res × res buffer, x fastest) and weights of a bilinear
+/// lookup at continuous coordinates `uv` (texel centres at integers), clamped to the edge
+/// texels.
+pub(crate) fn bilinear_taps(res: usize, uv: [f64; 2]) -> [(usize, f64); 4] {
     let clamp = |v: f64| v.clamp(0.0, (res - 1) as f64);
     let (u, v) = (clamp(uv[0]), clamp(uv[1]));
     let (a0, b0) = (
@@ -103,23 +106,32 @@ fn bilinear(buffer: &[Light], res: usize, uv: [f64; 2]) -> Light {
         (v.floor() as usize).min(res - 2),
     );
     let (s, t) = (u - a0 as f64, v - b0 as f64);
-    let at = |a: usize, b: usize| buffer[a + res * b];
-    let w = [(1.0 - s) * (1.0 - t), s * (1.0 - t), (1.0 - s) * t, s * t];
-    let l = [
-        at(a0, b0),
-        at(a0 + 1, b0),
-        at(a0, b0 + 1),
-        at(a0 + 1, b0 + 1),
-    ];
+    let at = |a: usize, b: usize| a + res * b;
+    [
+        (at(a0, b0), (1.0 - s) * (1.0 - t)),
+        (at(a0 + 1, b0), s * (1.0 - t)),
+        (at(a0, b0 + 1), (1.0 - s) * t),
+        (at(a0 + 1, b0 + 1), s * t),
+    ]
+}
+
+/// Whether `uv` lies over a res × res buffer's footprint (within half a texel of its edge
+/// texels); outside it no volume is in the way.
+pub(crate) fn over_footprint(res: usize, uv: [f64; 2]) -> bool {
+    let edge = (res - 1) as f64 + 0.5;
+    uv.iter().all(|&v| (-0.5..=edge).contains(&v))
+}
+
+fn bilinear(buffer: &[Light], res: usize, uv: [f64; 2]) -> Light {
     let mut out = Light {
         intensity: [0.0; 3],
         n: 0.0,
     };
-    for (wi, li) in w.iter().zip(&l) {
+    for (i, w) in bilinear_taps(res, uv) {
         for c in 0..3 {
-            out.intensity[c] += wi * li.intensity[c];
+            out.intensity[c] += w * buffer[i].intensity[c];
         }
-        out.n += wi * li.n;
+        out.n += w * buffer[i].n;
     }
     out
 }
@@ -282,8 +294,7 @@ pub fn render(tables: &Tables, frame: &Frame) -> Result<Image, FrameError> {
             let ground: [f64; 3] = if frame.ground_albedo > 0.0 && k_end.is_finite() && k_end > 0.0
             {
                 let uv = setup.light_coords(setup.eye + k_end * d);
-                let edge = (res - 1) as f64 + 0.5;
-                let lit = if uv.iter().all(|&v| (-0.5..=edge).contains(&v)) {
+                let lit = if over_footprint(res, uv) {
                     bilinear(&light, res, uv).intensity
                 } else {
                     [1.0; 3]

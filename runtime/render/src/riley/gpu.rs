@@ -52,11 +52,7 @@ pub struct Renderer {
 }
 
 /// A compute-visible buffer binding of bind group 1.
-pub(crate) fn entry(
-    binding: u32,
-    ty: wgpu::BufferBindingType,
-    dynamic: bool,
-) -> wgpu::BindGroupLayoutEntry {
+fn entry(binding: u32, ty: wgpu::BufferBindingType, dynamic: bool) -> wgpu::BindGroupLayoutEntry {
     wgpu::BindGroupLayoutEntry {
         binding,
         visibility: wgpu::ShaderStages::COMPUTE,
@@ -72,6 +68,122 @@ pub(crate) fn entry(
 /// A vector and a scalar as one vec4<f32> uniform row.
 pub(crate) fn v4(v: glam::DVec3, w: f64) -> [f32; 4] {
     [v[0] as f32, v[1] as f32, v[2] as f32, w as f32]
+}
+
+/// Bind group 1's layout and the compute pipelines `names` of a slicing renderer's shader
+/// `wgsl` (compiled after [`WGSL`] and [`SLICING_WGSL`], `tables`' layout as bind group 0).
+/// Bind group 1 has `bindings` buffers: 0 the params uniform, 1 the densities (read-only),
+/// 5 the slice uniforms (dynamic offset), every other one read-write storage.
+pub(crate) fn build(
+    gpu: &Gpu,
+    tables: &GpuTables,
+    label: &str,
+    wgsl: &str,
+    bindings: u32,
+    names: &[&str],
+) -> (wgpu::BindGroupLayout, Vec<wgpu::ComputePipeline>) {
+    use wgpu::BufferBindingType::{Storage, Uniform};
+    let device = &gpu.device;
+    let entries: Vec<wgpu::BindGroupLayoutEntry> = (0..bindings)
+        .map(|b| match b {
+            0 => entry(0, Uniform, false),
+            1 => entry(1, Storage { read_only: true }, false),
+            5 => entry(5, Uniform, true),
+            b => entry(b, Storage { read_only: false }, false),
+        })
+        .collect();
+    let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some(&format!("{label} layout")),
+        entries: &entries,
+    });
+    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        label: Some(label),
+        source: wgpu::ShaderSource::Wgsl(format!("{WGSL}\n{SLICING_WGSL}\n{wgsl}").into()),
+    });
+    let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+        label: Some(&format!("{label} pipeline layout")),
+        bind_group_layouts: &[Some(&tables.layout), Some(&layout)],
+        immediate_size: 0,
+    });
+    let pipelines = names
+        .iter()
+        .map(|name| {
+            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some(name),
+                layout: Some(&pipeline_layout),
+                module: &module,
+                entry_point: Some(name),
+                compilation_options: Default::default(),
+                cache: None,
+            })
+        })
+        .collect();
+    (layout, pipelines)
+}
+
+/// A buffer holding `bytes`.
+pub(crate) fn filled(
+    device: &wgpu::Device,
+    label: &str,
+    bytes: &[u8],
+    usage: wgpu::BufferUsages,
+) -> wgpu::Buffer {
+    device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some(label),
+        contents: bytes,
+        usage,
+    })
+}
+
+/// A storage buffer of `size` bytes; `readable` adds COPY_SRC for the readback.
+pub(crate) fn storage(
+    device: &wgpu::Device,
+    label: &str,
+    size: u64,
+    readable: bool,
+) -> wgpu::Buffer {
+    let extra = if readable {
+        wgpu::BufferUsages::COPY_SRC
+    } else {
+        wgpu::BufferUsages::empty()
+    };
+    device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some(label),
+        size,
+        usage: wgpu::BufferUsages::STORAGE | extra,
+        mapped_at_creation: false,
+    })
+}
+
+/// Bind group 1: `buffers[i]` at binding i, whole, except the slice uniforms at binding 5,
+/// bound as one 16-byte entry (the dynamic offset picks the slice).
+pub(crate) fn bind(
+    device: &wgpu::Device,
+    layout: &wgpu::BindGroupLayout,
+    label: &str,
+    buffers: &[&wgpu::Buffer],
+) -> wgpu::BindGroup {
+    let entries: Vec<wgpu::BindGroupEntry> = buffers
+        .iter()
+        .enumerate()
+        .map(|(i, buffer)| wgpu::BindGroupEntry {
+            binding: i as u32,
+            resource: if i == 5 {
+                wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                    buffer,
+                    offset: 0,
+                    size: wgpu::BufferSize::new(16),
+                })
+            } else {
+                buffer.as_entire_binding()
+            },
+        })
+        .collect();
+    device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some(label),
+        layout,
+        entries: &entries,
+    })
 }
 
 /// Refuses buffers larger than the device's storage-binding limit, naming the buffer.
@@ -102,11 +214,12 @@ pub(crate) fn slice_uniforms(device: &wgpu::Device, planes: &[f64]) -> (wgpu::Bu
         entry[..4].copy_from_slice(&(plane as f32).to_le_bytes());
         entry[4..8].copy_from_slice(&(k as u32).to_le_bytes());
     }
-    let buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-        label: Some("photometeor slices"),
-        contents: &bytes,
-        usage: wgpu::BufferUsages::UNIFORM,
-    });
+    let buffer = filled(
+        device,
+        "photometeor slices",
+        &bytes,
+        wgpu::BufferUsages::UNIFORM,
+    );
     (buffer, stride)
 }
 
@@ -192,45 +305,20 @@ impl Renderer {
     /// Compiles [`RENDER_WGSL`] after [`WGSL`] and builds the pipelines, with `tables`' layout
     /// as bind group 0.
     pub fn new(gpu: &Gpu, tables: &GpuTables) -> Self {
-        let device = &gpu.device;
-        use wgpu::BufferBindingType::{Storage, Uniform};
-        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("photometeor render layout"),
-            entries: &[
-                entry(0, Uniform, false),
-                entry(1, Storage { read_only: true }, false),
-                entry(2, Storage { read_only: false }, false),
-                entry(3, Storage { read_only: false }, false),
-                entry(4, Storage { read_only: false }, false),
-                entry(5, Uniform, true),
-            ],
-        });
-        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("photometeor render"),
-            source: wgpu::ShaderSource::Wgsl(
-                format!("{WGSL}\n{SLICING_WGSL}\n{RENDER_WGSL}").into(),
-            ),
-        });
-        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("photometeor render pipeline layout"),
-            bind_group_layouts: &[Some(&tables.layout), Some(&layout)],
-            immediate_size: 0,
-        });
-        let pipeline = |name: &str| {
-            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some(name),
-                layout: Some(&pipeline_layout),
-                module: &module,
-                entry_point: Some(name),
-                compilation_options: Default::default(),
-                cache: None,
-            })
-        };
+        let (layout, p) = build(
+            gpu,
+            tables,
+            "photometeor render",
+            RENDER_WGSL,
+            6,
+            &["clear", "eye_slice", "light_slice", "composite"],
+        );
+        let [clear, eye, light, composite] = <[_; 4]>::try_from(p).expect("four pipelines");
         Self {
-            clear: pipeline("clear"),
-            eye: pipeline("eye_slice"),
-            light: pipeline("light_slice"),
-            composite: pipeline("composite"),
+            clear,
+            eye,
+            light,
+            composite,
             layout,
         }
     }
@@ -307,71 +395,43 @@ impl Renderer {
             frame.sun.irradiance.into(),
             std::f64::consts::TAU * (1.0 - cos_disk),
         ));
-        let params = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("photometeor render params"),
-            contents: bytemuck::cast_slice(&params),
-            usage: wgpu::BufferUsages::UNIFORM,
-        });
-        let density = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("photometeor densities"),
-            contents: bytemuck::cast_slice(&frame.grid.data),
-            usage: wgpu::BufferUsages::STORAGE,
-        });
-        let storage = |label: &str, size: u64, extra: wgpu::BufferUsages| {
-            device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some(label),
-                size,
-                usage: wgpu::BufferUsages::STORAGE | extra,
-                mapped_at_creation: false,
-            })
-        };
-        let none = wgpu::BufferUsages::empty();
-        let light_buffer = storage("photometeor light buffer", 16 * (res * res) as u64, none);
-        let eye_buffer = storage("photometeor eye buffer", 32 * (w * h) as u64, none);
-        let image_size = 16 * (w * h) as u64;
-        let image = storage(
-            "photometeor image",
-            image_size,
-            wgpu::BufferUsages::COPY_SRC,
+        let params = filled(
+            device,
+            "photometeor render params",
+            bytemuck::cast_slice(&params),
+            wgpu::BufferUsages::UNIFORM,
         );
+        let density = filled(
+            device,
+            "photometeor densities",
+            bytemuck::cast_slice(&frame.grid.data),
+            wgpu::BufferUsages::STORAGE,
+        );
+        let light_buffer = storage(
+            device,
+            "photometeor light buffer",
+            16 * (res * res) as u64,
+            false,
+        );
+        let eye_buffer = storage(device, "photometeor eye buffer", 32 * (w * h) as u64, false);
+        let image = storage(device, "photometeor image", 16 * (w * h) as u64, true);
         let planes: Vec<f64> = (0..frame.slices)
             .map(|k| setup.slice_start + k as f64 * setup.slice_step)
             .collect();
         let (slice_buffer, stride) = slice_uniforms(device, &planes);
-        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("photometeor render bindings"),
-            layout: &self.layout,
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: params.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: density.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: light_buffer.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 3,
-                    resource: eye_buffer.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 4,
-                    resource: image.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 5,
-                    resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                        buffer: &slice_buffer,
-                        offset: 0,
-                        size: wgpu::BufferSize::new(16),
-                    }),
-                },
+        let bind_group = bind(
+            device,
+            &self.layout,
+            "photometeor render bindings",
+            &[
+                &params,
+                &density,
+                &light_buffer,
+                &eye_buffer,
+                &image,
+                &slice_buffer,
             ],
-        });
+        );
         Ok(run_slices(
             gpu,
             gpu_tables,

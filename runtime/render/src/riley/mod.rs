@@ -115,15 +115,7 @@ impl Frame {
         } else {
             (light - forward).normalize()
         };
-        let corners = self.grid.corners();
-        let along = |axis: DVec3| {
-            corners
-                .iter()
-                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &c| {
-                    let v = axis.dot(c);
-                    (lo.min(v), hi.max(v))
-                })
-        };
+        let along = |axis: DVec3| self.grid.span_along(axis);
         let (h_lo, h_hi) = along(half);
         let slice_step = (h_hi - h_lo) / self.slices as f64;
         // Light-buffer axes: any orthonormal pair ⟂ l.

@@ -117,8 +117,6 @@ pub struct TruthSettings {
     pub target_noise: f64,
     /// Seed of the random streams.
     pub seed: u64,
-    /// Lambertian ground albedo at y = 0, [0, 1].
-    pub ground_albedo: f64,
     /// Point and spot lights.
     pub lights: Vec<Light>,
     /// Wavelengths each camera path carries, 1…[`MAX_CARRIED`]; 0: the default (all of an
@@ -132,7 +130,6 @@ impl Default for TruthSettings {
             spp: 256,
             target_noise: 0.0,
             seed: 1,
-            ground_albedo: 0.0,
             lights: Vec::new(),
             wavelengths_per_path: 0,
         }
@@ -442,7 +439,7 @@ impl<'a> Tracer<'a> {
             sun_irradiance: frame.sun.irradiance,
             cos_disk,
             disk_sr: 2.0 * PI * (1.0 - cos_disk),
-            ground_albedo: settings.ground_albedo,
+            ground_albedo: frame.ground_albedo,
             lights: settings.lights.clone(),
             background: [0.0; 3],
             max_scatterings: MAX_BOUNCES,
@@ -1007,12 +1004,6 @@ pub fn check(frame: &Frame, settings: &TruthSettings) -> Result<(), FrameError> 
             "wavelengths per path = {} is outside the allowed range [1, {MAX_CARRIED}] (0: the \
              default)",
             settings.wavelengths_per_path
-        ));
-    }
-    if !(0.0..=1.0).contains(&settings.ground_albedo) {
-        return bad(format!(
-            "[ground] albedo = {} is outside the allowed range [0, 1]",
-            settings.ground_albedo
         ));
     }
     for (i, l) in settings.lights.iter().enumerate() {
