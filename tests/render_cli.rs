@@ -384,3 +384,56 @@ fn miyazaki_keys_out_of_range_are_refused_before_any_bake() {
     );
     assert!(!cwd.join("tables").exists());
 }
+
+#[test]
+fn max_keys_out_of_range_are_refused_before_any_bake() {
+    let cwd = workdir("render-max-bad");
+    let base = std::fs::read_to_string(scene_path("cumulus_dawn.toml")).unwrap();
+    let with = |key: &str| base.replace("[render]\n", &format!("[render]\n{key}\n"));
+    let cases = [
+        (
+            with("max_threshold = 0"),
+            "[render] max_threshold = 0 is outside the allowed range (0, ∞)",
+        ),
+        (
+            with("max_threshold = -2"),
+            "[render] max_threshold = -2 is outside the allowed range (0, ∞)",
+        ),
+        (
+            with("diffusion_tolerance = 0.5"),
+            "[render] diffusion_tolerance = 0.5 is outside the allowed range (0, 0.1]",
+        ),
+        (
+            with("max_diffusion_iterations = 0"),
+            "[render] max_diffusion_iterations = 0 is outside the allowed range [1, 100000]",
+        ),
+        (
+            base.replace("n_max = 26", "n_max = 26\npoisson_max_depth = 0"),
+            "poisson_max_depth = 0 is outside the allowed range (0.001, 1000]",
+        ),
+        (
+            std::fs::read_to_string(scene_path("shafts.toml")).unwrap(),
+            "--model max draws Rayleigh air only",
+        ),
+    ];
+    for (text, named) in cases {
+        std::fs::write(cwd.join("bad.toml"), text).unwrap();
+        let args = [
+            "render",
+            "bad.toml",
+            "--model",
+            "max",
+            "--quality",
+            "draft",
+            "--tables",
+            "tables",
+            "--out",
+            "bad.exr",
+            "--width",
+            "8",
+            "--height",
+            "8",
+        ];
+        assert_refused_before_any_work(&args, &cwd, named);
+    }
+}

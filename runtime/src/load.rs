@@ -14,7 +14,7 @@
 
 use std::path::{Path, PathBuf};
 
-use format::{BakeDir, FieldImage, SingleScatter};
+use format::{BakeDir, FieldImage, PoissonTable, SingleScatter};
 use grid::ThetaGrid;
 use ndarray::Axis;
 use thiserror::Error;
@@ -54,6 +54,12 @@ pub struct FieldTable {
     /// The field's single-scattering optics per wavelength (`<name>.single.exr`), which a
     /// spectral path tracer samples; `None` for bakes written before it existed.
     pub single: Option<SingleScatter>,
+    /// The field's Poisson mixtures M(D, θ) per channel (`<name>.poisson.exr`), which the
+    /// `max` model applies at a cloud's edges; `None` for bakes written before it existed.
+    pub poisson: Option<PoissonTable>,
+    /// σ_tr/σ_t = 1 − α g per channel (the diffusion equation's transport cross-section over
+    /// the extinction); `None` for bakes written before it existed.
+    pub transport_factor: Option<[f64; 3]>,
 }
 
 impl FieldTable {
@@ -216,6 +222,13 @@ impl Tables {
                     s.wavelengths_nm
                 )));
             }
+            let poisson = bake.read_poisson(entry).map_err(|e| {
+                let path = dir.join(format::poisson_file_name(&entry.name));
+                LoadError {
+                    check: strip_path(&e.to_string(), &path),
+                    file: path,
+                }
+            })?;
             let ext = entry.sigma_ext_m2.as_array().map(|&v| v);
             let alb = entry.albedo.as_array().map(|&v| v);
             fields.push(FieldTable {
@@ -226,6 +239,11 @@ impl Tables {
                 sigma_ext_m2: ext,
                 albedo: alb,
                 single,
+                poisson,
+                transport_factor: entry
+                    .transport_factor
+                    .as_ref()
+                    .map(|t| t.as_array().map(|&v| v)),
             });
         }
         Ok(Self {

@@ -91,3 +91,56 @@ pub fn mix(
 pub fn forward_fraction_mix(fields: &[&FieldTable], densities: &[f64], n: f64) -> [f64; 3] {
     weighted(fields, densities, 1.0, |f| forward_fraction(f, n))
 }
+
+/// M(D, θ) per channel (1/sr) from a field's Poisson-mixture table (`format::poisson`), each
+/// channel at its own optical depth `depth[c]`: linear in θ as [`ams`], linear in ln D between
+/// the table's depths; below the first depth D_1, linear in D from M(0) = Ams_1 to the first
+/// row (M − Ams_1 is O(D)); beyond the last depth the last row (a caller checks that its
+/// depths stay in range). `None` if the bake has no Poisson table.
+pub fn poisson(
+    field: &FieldTable,
+    theta_step_deg: f64,
+    depth: [f64; 3],
+    cos_theta: f64,
+) -> Option<[f64; 3]> {
+    let table = field.poisson.as_ref()?;
+    let rows = &table.rows;
+    let k_len = rows.dim().2;
+    let theta = cos_theta.clamp(-1.0, 1.0).acos().to_degrees();
+    let u = (theta / theta_step_deg).min((k_len - 1) as f64);
+    let k0 = (u.floor() as usize).min(k_len - 2);
+    let t = u - k0 as f64;
+    let depths = &table.depths;
+    Some(std::array::from_fn(|c| {
+        let d = depth[c];
+        let j = depths.partition_point(|&x| x <= d);
+        let at = |r: usize| rows[[c, r, k0]] * (1.0 - t) + rows[[c, r, k0 + 1]] * t;
+        if j == 0 {
+            let ams1 = &field.image.ams;
+            let single = ams1[[c, 0, k0]] * (1.0 - t) + ams1[[c, 0, k0 + 1]] * t;
+            let s = (d / depths[0]).max(0.0);
+            return single * (1.0 - s) + at(0) * s;
+        }
+        let (j0, j1, s) = if j >= depths.len() {
+            (depths.len() - 1, depths.len() - 1, 0.0)
+        } else {
+            let (a, b) = (depths[j - 1].ln(), depths[j].ln());
+            (j - 1, j, (d.ln() - a) / (b - a))
+        };
+        at(j0) * (1.0 - s) + at(j1) * s
+    }))
+}
+
+/// [`poisson`] of a mixture of fields, weighted like [`mix`] (fields without a table count as
+/// zero).
+pub fn poisson_mix(
+    fields: &[&FieldTable],
+    densities: &[f64],
+    theta_step_deg: f64,
+    depth: [f64; 3],
+    cos_theta: f64,
+) -> [f64; 3] {
+    weighted(fields, densities, 0.0, |f| {
+        poisson(f, theta_step_deg, depth, cos_theta).unwrap_or([0.0; 3])
+    })
+}

@@ -61,8 +61,11 @@ pub struct RenderArgs {
     /// (an unbiased spectral Monte Carlo path tracer of the same scene on the CPU, all cores;
     /// its EXR adds stderr.R/G/B, each pixel's standard error; docs/truth.md) or `miyazaki`
     /// (Miyazaki, Dobashi & Nishita's shadow-view slices: single scattering plus a constant
-    /// k_multi, shadows on the ground and in the air, an aerosol [haze] layer).
-    #[arg(long, default_value = "riley", value_parser = ["riley", "truth", "miyazaki"])]
+    /// k_multi, shadows on the ground and in the air, an aerosol [haze] layer) or `max` (Max et
+    /// al. 2004: a diffusion solve in the dense core, Poisson-weighted multiple anisotropic
+    /// scattering from the bake's M(D, θ) at the tenuous edges; CPU, all cores; [render]
+    /// max_threshold, diffusion_tolerance, max_diffusion_iterations).
+    #[arg(long, default_value = "riley", value_parser = ["riley", "truth", "miyazaki", "max"])]
     model: String,
     /// --model truth: samples (paths) per pixel, [1, 1048576] (overrides [render] spp).
     #[arg(long)]
@@ -185,6 +188,32 @@ pub fn run(a: RenderArgs) -> Result<()> {
     let started = Instant::now();
     let frame: Frame = render.frame(&tables)?;
     let raster = started.elapsed().as_secs_f64();
+    if a.model == "max" {
+        let (image, report) = render::max::cpu::render(&tables, &frame, &render.max)?;
+        if !a.quiet {
+            eprintln!(
+                "diffusion + Poisson edges (CPU, {} threads): {}×{}, grid {:?}: reduced sunlight \
+                 {:.2} s, diffusion {:.2} s ({} unknowns, {} levels, {:?} CG iterations to \
+                 residuals {:.1e}/{:.1e}/{:.1e}), final gather {:.2} s; largest edge depth {:.2} \
+                 (grid built in {raster:.2} s)",
+                rayon::current_num_threads(),
+                frame.width,
+                frame.height,
+                frame.grid.dims,
+                report.propagation_s,
+                report.diffusion_s,
+                report.unknowns,
+                report.levels,
+                report.iterations,
+                report.residual[0],
+                report.residual[1],
+                report.residual[2],
+                report.gather_s,
+                report.largest_edge_depth
+            );
+        }
+        return write_outputs(&a, &render, &image, Vec::new());
+    }
     if a.model == "miyazaki" {
         let t = Instant::now();
         let (image, on) = if a.cpu {

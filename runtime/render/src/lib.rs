@@ -25,6 +25,7 @@
 pub mod camera;
 pub mod error_map;
 pub mod image;
+pub mod max;
 pub mod miyazaki;
 pub mod riley;
 pub mod rng;

@@ -15,6 +15,9 @@
 //! k_multi = 0.0             # --model miyazaki: constant multiple scattering of clouds (1/sr), ≥ 0
 //! svs_phase = "tables"      # --model miyazaki: "tables" (Ams_1) or "cornette_shanks" (Eq. 3)
 //! seed = 1                  # --model truth: seed of the random streams
+//! max_threshold = 1.0       # --model max: voxel optical depth where diffusion takes over, > 0
+//! diffusion_tolerance = 1e-6       # --model max: relative residual of the solve, (0, 0.1]
+//! max_diffusion_iterations = 500   # --model max: CG iteration cap, [1, 100000]
 //!
 //! [ground]
 //! albedo = 0.0              # Lambertian ground at y = 0, [0, 1]; 0: black (--model truth only)
@@ -146,6 +149,9 @@ struct RenderKeys {
     svs_a: Option<f64>,
     k_multi: Option<f64>,
     svs_phase: Option<String>,
+    max_threshold: Option<f64>,
+    diffusion_tolerance: Option<f64>,
+    max_diffusion_iterations: Option<usize>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -229,6 +235,9 @@ pub struct RenderScene {
     pub seed: u64,
     /// `[render] svs_a`, `k_multi` and `svs_phase` for `--model miyazaki`.
     pub svs: crate::miyazaki::SvsSettings,
+    /// `[render] max_threshold`, `diffusion_tolerance`, `max_diffusion_iterations` for
+    /// `--model max`.
+    pub max: crate::max::MaxSettings,
     /// `[haze]`, if any.
     pub haze: Option<HazeKeysChecked>,
 }
@@ -369,6 +378,15 @@ impl RenderScene {
             },
         };
         crate::miyazaki::check(&svs).map_err(|e| err(e.0))?;
+        let max_defaults = crate::max::MaxSettings::default();
+        let max = crate::max::MaxSettings {
+            threshold: render.max_threshold.unwrap_or(max_defaults.threshold),
+            tolerance: render.diffusion_tolerance.unwrap_or(max_defaults.tolerance),
+            max_iterations: render
+                .max_diffusion_iterations
+                .unwrap_or(max_defaults.max_iterations),
+        };
+        max.check().map_err(|e| err(e.0))?;
         let haze = match file.haze {
             None => None,
             Some(h) => {
@@ -427,6 +445,7 @@ impl RenderScene {
             spp,
             seed: render.seed.unwrap_or(1),
             svs,
+            max,
             haze,
         })
     }
@@ -489,6 +508,7 @@ impl RenderScene {
         match model {
             "truth" => crate::truth::check(&frame, &self.truth_settings()),
             "miyazaki" => crate::miyazaki::setup(&frame, &self.svs).map(|_| ()),
+            "max" => frame.check_view().and_then(|()| self.max.check()),
             _ => frame.setup().map(|_| ()),
         }
     }

@@ -9,7 +9,9 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use format::exr::field_exr_bytes;
-use format::{BakeLock, FieldEntry, FieldImage, Manifest, PerChannel, SingleScatter, Staging};
+use format::{
+    BakeLock, FieldEntry, FieldImage, Manifest, PerChannel, PoissonTable, SingleScatter, Staging,
+};
 use grid::ThetaGrid;
 use mie::PhaseFunction;
 use mie::crystal::crystal_phase;
@@ -59,6 +61,8 @@ pub struct BakedField {
     pub summary: FieldSummary,
     /// The single-scattering optics per wavelength, as written to `<name>.single.exr`.
     pub single: SingleScatter,
+    /// The Poisson mixtures M(D, θ) per channel, as written to `<name>.poisson.exr`.
+    pub poisson: PoissonTable,
 }
 
 /// The cache record of a field: the tables flattened, and the summary.
@@ -74,6 +78,8 @@ struct Record {
     forward_delta_fraction: Vec<f64>,
     sigma_ext_m2: Vec<f64>,
     albedo: Vec<f64>,
+    poisson_depths: Vec<f64>,
+    poisson_rows: Vec<f64>,
 }
 
 impl Record {
@@ -89,6 +95,8 @@ impl Record {
             forward_delta_fraction: field.single.forward_delta_fraction.clone(),
             sigma_ext_m2: field.single.sigma_ext_m2.clone(),
             albedo: field.single.albedo.clone(),
+            poisson_depths: field.poisson.depths.clone(),
+            poisson_rows: field.poisson.rows.iter().copied().collect(),
         }
     }
 
@@ -101,7 +109,18 @@ impl Record {
             self.single_bins,
         )
         .ok()?;
+        let poisson_rows = Array3::from_shape_vec(
+            (3, self.poisson_depths.len(), self.angle_count),
+            self.poisson_rows,
+        )
+        .ok()?;
         Some(BakedField {
+            poisson: PoissonTable {
+                field: name.to_string(),
+                theta_step_deg,
+                depths: self.poisson_depths,
+                rows: poisson_rows,
+            },
             single: SingleScatter {
                 field: name.to_string(),
                 theta_step_deg,
@@ -256,11 +275,19 @@ pub fn run(plan: &BakePlan, progress: &dyn Progress) -> Result<BakeReport, BakeE
         let single_file = format::single_file_name(&field.name);
         let single_bytes = format::single_exr_bytes(&result.single)?;
         stage.write(&single_file, &single_bytes)?;
+        let poisson_file = format::poisson_file_name(&field.name);
+        let poisson_bytes = format::poisson_exr_bytes(&result.poisson)?;
+        stage.write(&poisson_file, &poisson_bytes)?;
         let mut entry = field_entry(plan, field, &result, file, hash, &bytes);
         entry.single_scattering = Some(format::manifest::FileRef {
             file: single_file,
             bytes: single_bytes.len() as u64,
             crc32: format::crc32_hex(&single_bytes),
+        });
+        entry.poisson = Some(format::manifest::FileRef {
+            file: poisson_file,
+            bytes: poisson_bytes.len() as u64,
+            crc32: format::crc32_hex(&poisson_bytes),
         });
         entries.push(entry);
     }
@@ -285,8 +312,8 @@ pub fn run(plan: &BakePlan, progress: &dyn Progress) -> Result<BakeReport, BakeE
             let stale = !manifest.fields.iter().any(|f| f.file == old.file);
             if stale {
                 let _ = std::fs::remove_file(plan.out_dir.join(&old.file));
-                if let Some(single) = &old.single_scattering {
-                    let _ = std::fs::remove_file(plan.out_dir.join(&single.file));
+                for extra in [&old.single_scattering, &old.poisson].into_iter().flatten() {
+                    let _ = std::fs::remove_file(plan.out_dir.join(&extra.file));
                 }
             }
         }
@@ -399,6 +426,11 @@ fn field_entry(
         quality: serde_json::json!({ "preset": plan.quality, "knobs": plan.knobs, "legendre_l_max": s.l_max }),
         content_hash: hash,
         single_scattering: None,
+        poisson: None,
+        // σ_tr/σ_t = 1 − α g (Max et al. 2004 §2, after Ishimaru 1978).
+        transport_factor: Some(PerChannel::from_array(std::array::from_fn(|c| {
+            1.0 - s.albedo[c] * s.g[c]
+        }))),
     }
 }
 
@@ -482,10 +514,17 @@ pub fn compute_field(
         .collect();
     bar.message("RGB and Ams_n");
     let orders: Vec<usize> = (1..=plan.scene.n_max).collect();
+    let depths = plan.scene.poisson_depths();
     let channels: Vec<ChannelResult> = (0..3)
         .into_par_iter()
         .map(|c| {
-            let r = channel_tables(&weights.weights[c], &per_wavelength, &series, &orders);
+            let r = channel_tables(
+                &weights.weights[c],
+                &per_wavelength,
+                &series,
+                &orders,
+                &depths,
+            );
             bar.advance();
             r
         })
@@ -497,6 +536,7 @@ pub fn compute_field(
     let n = orders.len();
     let k = grid.len();
     let mut ams = Array3::zeros((3, n, k));
+    let mut poisson_rows = Array3::zeros((3, depths.len(), k));
     let mut forward_fraction = Array2::zeros((3, n));
     let mut summary = FieldSummary {
         forward_peak_fraction: Default::default(),
@@ -509,6 +549,7 @@ pub fn compute_field(
     };
     for (c, ch) in channels.into_iter().enumerate() {
         ams.slice_mut(s![c, .., ..]).assign(&ch.rows);
+        poisson_rows.slice_mut(s![c, .., ..]).assign(&ch.poisson);
         for (r, f) in ch.forward_fraction.iter().enumerate() {
             forward_fraction[[c, r]] = *f;
         }
@@ -539,6 +580,12 @@ pub fn compute_field(
     };
     Ok(BakedField {
         single,
+        poisson: PoissonTable {
+            field: field.name.clone(),
+            theta_step_deg: plan.scene.theta_step_deg,
+            depths,
+            rows: poisson_rows,
+        },
         image: FieldImage {
             field: field.name.clone(),
             theta_step_deg: plan.scene.theta_step_deg,
@@ -592,6 +639,7 @@ const CRYSTAL_SEED: u64 = 0x7068_6f74_6f6d_6574;
 /// One channel's tables.
 struct ChannelResult {
     rows: Array2<f64>,
+    poisson: Array2<f64>,
     forward_fraction: Vec<f64>,
     forward_peak_fraction: Vec<f64>,
     g: f64,
@@ -608,6 +656,7 @@ fn channel_tables(
     per_wavelength: &[PhaseFunction],
     series: &[AmsSeries],
     orders: &[usize],
+    depths: &[f64],
 ) -> Result<ChannelResult, tables::TablesError> {
     let sca: f64 = w
         .iter()
@@ -635,6 +684,7 @@ fn channel_tables(
     }
     Ok(ChannelResult {
         rows: mixture.rows(orders),
+        poisson: mixture.poisson_rows(depths),
         forward_fraction: orders
             .iter()
             .map(|&n| mixture.forward_fraction(n))

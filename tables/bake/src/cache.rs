@@ -15,10 +15,10 @@ use crate::plan::BakePlan;
 use crate::scene::Field;
 
 /// Version of everything that changes a baked number; part of every cache key.
-pub const COMPUTE_VERSION: u32 = 6;
+pub const COMPUTE_VERSION: u32 = 7;
 
 /// Version of the record layout; a record of another layout is recomputed.
-const RECORD_LAYOUT: u32 = 2;
+const RECORD_LAYOUT: u32 = 3;
 
 /// Hash of every input that affects the field's result, lowercase hex.
 pub fn content_hash(plan: &BakePlan, field: &Field) -> String {
@@ -28,6 +28,7 @@ pub fn content_hash(plan: &BakePlan, field: &Field) -> String {
         "spectral": plan.scene.spectral,
         "theta_step_deg": plan.scene.theta_step_deg,
         "n_max": plan.scene.n_max,
+        "poisson_max_depth": plan.scene.poisson_max_depth,
         "knobs": plan.knobs,
     });
     hex(&Sha256::digest(key.to_string().as_bytes()))

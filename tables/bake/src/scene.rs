@@ -10,6 +10,7 @@
 //! theta_step_deg = 0.18     # must divide 180
 //! n_max = 26                # scattering orders Ams_1..Ams_N, or:
 //! # max_optical_depth = 10  # N = ⌈τ + 4√τ + 4⌉ (the Poisson tail of the scatter count)
+//! poisson_max_depth = 30    # largest optical depth D of the Poisson mixtures M(D, θ), (0, 1000]
 //! quality = "standard"      # draft | standard | reference
 //!
 //! [[field]]
@@ -36,6 +37,12 @@ use thiserror::Error;
 use toml::Spanned;
 
 pub use tables::spectral::SpectralMode;
+
+/// Number of optical depths of the Poisson-mixture table.
+pub const POISSON_DEPTHS: usize = 64;
+
+/// Smallest optical depth of the Poisson-mixture table (below it the rows are Ams_1 to 10⁻³).
+pub const POISSON_MIN_DEPTH: f64 = 1e-3;
 
 /// Most N × K values a channel's tables may hold (500 orders at 0.09°, 26 orders at 0.01° fit).
 pub const MAX_TEXELS_PER_CHANNEL: usize = 2_000_000;
@@ -141,6 +148,8 @@ struct Header {
     n_max: Option<usize>,
     #[serde(default)]
     max_optical_depth: Option<f64>,
+    #[serde(default)]
+    poisson_max_depth: Option<f64>,
     #[serde(default)]
     quality: Option<String>,
 }
@@ -262,6 +271,10 @@ pub struct Scene {
     pub theta_step_deg: f64,
     /// Highest scattering order N of Ams_1..Ams_N, in [1, 10000] (default 26).
     pub n_max: usize,
+    /// Largest optical depth of the Poisson-mixture table M(D, θ) (`format::poisson`), in
+    /// (0, 1000] (default 30); its [`POISSON_DEPTHS`] depths are log-spaced from
+    /// [`POISSON_MIN_DEPTH`] to it.
+    pub poisson_max_depth: f64,
     /// Accuracy preset (default standard).
     pub quality: Quality,
     /// The particle fields, at least one, with distinct names.
@@ -295,6 +308,21 @@ fn key_line(text: &str, span: std::ops::Range<usize>, key: &str) -> usize {
 }
 
 impl Scene {
+    /// The optical depths of the Poisson-mixture table: [`POISSON_DEPTHS`] values log-spaced
+    /// from [`POISSON_MIN_DEPTH`] to `poisson_max_depth`.
+    pub fn poisson_depths(&self) -> Vec<f64> {
+        let (a, b) = (POISSON_MIN_DEPTH.ln(), self.poisson_max_depth.ln());
+        (0..POISSON_DEPTHS)
+            .map(|j| {
+                if j + 1 == POISSON_DEPTHS {
+                    self.poisson_max_depth
+                } else {
+                    (a + (b - a) * j as f64 / (POISSON_DEPTHS - 1) as f64).exp()
+                }
+            })
+            .collect()
+    }
+
     /// The scene file at `path`, or the embedded default scene.
     pub fn from_file_or_default(path: Option<&Path>) -> Result<Self, SceneError> {
         match path {
@@ -368,6 +396,17 @@ impl Scene {
             }
             (None, None) => 26,
         };
+        let poisson_max_depth = header.poisson_max_depth.unwrap_or(30.0);
+        if !(poisson_max_depth.is_finite()
+            && poisson_max_depth > POISSON_MIN_DEPTH
+            && poisson_max_depth <= 1000.0)
+        {
+            fail!(
+                at("poisson_max_depth"),
+                "poisson_max_depth = {poisson_max_depth} is outside the allowed range \
+                 ({POISSON_MIN_DEPTH}, 1000] (optical depth)"
+            );
+        }
         let spectral = match header.spectral.as_deref().unwrap_or("spectral") {
             "rgb3" => SpectralMode::Rgb3,
             "spectral" => {
@@ -615,6 +654,7 @@ impl Scene {
             spectral,
             theta_step_deg,
             n_max,
+            poisson_max_depth,
             quality,
             fields,
         })

@@ -3,7 +3,8 @@
 //! A bake directory holds `manifest.json` ([`manifest`]: the grid, the channel definitions and
 //! one [`FieldEntry`] per particle field) and one OpenEXR file per field ([`exr`]: rows
 //! Ams_1..Ams_N × columns θ_k = k·Δθ, channels R, G, B in 1/sr, F_1..F_N in the header), and
-//! beside it the field's single-scattering optics per wavelength ([`single`]).
+//! beside it the field's single-scattering optics per wavelength ([`single`]) and its Poisson
+//! mixtures of all scattering orders ([`poisson`]).
 //! Writers go through [`write_file_atomically`]; readers through [`read_regular_file`], so a
 //! FIFO or a device is never read and no file is read past a size bound. Every reader checks
 //! what it reads against the contract, naming the file and the failed check.
@@ -17,6 +18,7 @@ pub mod atomic;
 pub mod commit;
 pub mod exr;
 pub mod manifest;
+pub mod poisson;
 pub mod single;
 
 pub use atomic::{read_regular_file, write_file_atomically};
@@ -28,4 +30,5 @@ pub use manifest::{
     BakeDir, FieldEntry, MANIFEST_FILE, Manifest, ManifestCheck, ManifestError, PerChannel,
     read_manifest, write_manifest,
 };
+pub use poisson::{PoissonTable, decode_poisson_exr, poisson_exr_bytes, poisson_file_name};
 pub use single::{SingleScatter, decode_single_exr, single_exr_bytes, single_file_name};

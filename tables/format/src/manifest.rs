@@ -145,6 +145,14 @@ pub struct FieldEntry {
     /// path tracing; absent in bakes written before it existed.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub single_scattering: Option<FileRef>,
+    /// The field's Poisson mixtures M(D, θ) (`crate::poisson`), for the `max` model; absent in
+    /// bakes written before it existed.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub poisson: Option<FileRef>,
+    /// σ_tr/σ_t = 1 − α g per channel: the transport cross-section of the diffusion equation
+    /// over the extinction cross-section (Max et al. 2004 §2); absent in older bakes.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub transport_factor: Option<PerChannel<f64>>,
 }
 
 /// A further file of a field: its name in the bake directory, size and CRC-32.
@@ -273,6 +281,25 @@ impl Manifest {
                     "single_scattering file {:?} is not the bake's own name, expected {:?}",
                     single.file,
                     crate::single::single_file_name(&f.name)
+                )));
+            }
+            if let Some(poisson) = &f.poisson
+                && poisson.file != crate::poisson::poisson_file_name(&f.name)
+            {
+                return Err(at(format!(
+                    "poisson file {:?} is not the bake's own name, expected {:?}",
+                    poisson.file,
+                    crate::poisson::poisson_file_name(&f.name)
+                )));
+            }
+            if let Some(t) = &f.transport_factor
+                && let Some((c, v)) = ["R", "G", "B"]
+                    .iter()
+                    .zip(t.as_array())
+                    .find(|(_, v)| !(v.is_finite() && (0.0..=2.0).contains(*v)))
+            {
+                return Err(at(format!(
+                    "transport_factor.{c} = {v}, expected 1 − α g in [0, 2]"
                 )));
             }
             if f.crc32.len() != 8
@@ -559,6 +586,44 @@ impl BakeDir {
             )));
         }
         same_generation(&bytes, single.bytes, &single.crc32).map_err(mismatch)?;
+        Ok(Some(table))
+    }
+
+    /// Reads the Poisson-mixture EXR of `entry` (`crate::poisson`), if the bake has one, and
+    /// checks it: the contract, then the field name, Δθ, K, and last its size and CRC-32.
+    pub fn read_poisson(
+        &self,
+        entry: &FieldEntry,
+    ) -> Result<Option<crate::PoissonTable>, crate::IoError> {
+        use crate::{ContractError, IoError};
+        let Some(poisson) = &entry.poisson else {
+            return Ok(None);
+        };
+        let path = self.dir.join(&poisson.file);
+        let bytes = crate::exr::read_exr_bytes(&path)?;
+        let table = crate::poisson::decode_poisson_exr(&bytes, &path)?;
+        let mismatch = |what: String| IoError::Contract {
+            path: path.clone(),
+            check: ContractError::Manifest(what),
+        };
+        if table.field != entry.name {
+            return Err(mismatch(format!(
+                "field attribute {:?}, but manifest.json lists this file for field {:?}",
+                table.field, entry.name
+            )));
+        }
+        if table.theta_step_deg != self.manifest.theta_step_deg
+            || table.rows.dim().2 != self.manifest.angle_count
+        {
+            return Err(mismatch(format!(
+                "Δθ = {}° with {} angles, manifest.json says {}° with {}",
+                table.theta_step_deg,
+                table.rows.dim().2,
+                self.manifest.theta_step_deg,
+                self.manifest.angle_count
+            )));
+        }
+        same_generation(&bytes, poisson.bytes, &poisson.crc32).map_err(mismatch)?;
         Ok(Some(table))
     }
 }

@@ -582,6 +582,8 @@ fn sample_manifest() -> Manifest {
         quality: json!({"preset": "draft", "l_max": 4000}),
         content_hash: "0123456789abcdef".to_string(),
         single_scattering: None,
+        poisson: None,
+        transport_factor: None,
     };
     Manifest {
         schema: 2,

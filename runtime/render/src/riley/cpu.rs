@@ -264,58 +264,24 @@ pub fn render(tables: &Tables, frame: &Frame) -> Result<Image, FrameError> {
         });
     }
 
-    let atm = &frame.atmosphere;
-    let sun_dir = frame.sun.direction();
-    let cos_disk = (SUN_DIAMETER_DEG / 2.0).to_radians().cos();
-    let disk_sr = std::f64::consts::TAU * (1.0 - cos_disk);
-    let y = setup.eye[1];
     let pixels: Vec<([f32; 3], f32)> = eye
         .par_iter()
         .zip(&rays)
         .map(|(&(l_vol, t_vol), &d)| {
-            let k_mid = box_span(frame.grid.min_m, frame.grid.max_m, setup.eye, d)
-                .map_or(0.0, |(t0, t1)| 0.5 * (t0 + t1));
-            let k_end = if d[1] < 0.0 && y > 0.0 {
-                y / -d[1]
-            } else if d[1] < 0.0 {
-                0.0
-            } else {
-                f64::INFINITY
-            };
-            let k_mid = k_mid.min(k_end);
-            let cos_sun = d.dot(sun_dir);
-            let front = atm.inscatter(y, d[1], k_mid, l_y, cos_sun);
-            let all = atm.inscatter(y, d[1], k_end, l_y, cos_sun);
-            let t_mid = atm.transparency(y, d[1], k_mid);
-            let on_disk = k_end.is_infinite() && cos_sun >= cos_disk;
-            let t_all = atm.transparency(y, d[1], k_end);
-            // A Lambertian ground lit through the air (Eq. 12) and the final light buffer
-            // (1 outside its footprint, where no volume is).
-            let ground: [f64; 3] = if frame.ground_albedo > 0.0 && k_end.is_finite() && k_end > 0.0
-            {
-                let uv = setup.light_coords(setup.eye + k_end * d);
-                let lit = if over_footprint(res, uv) {
+            // The ground is lit through the final light buffer (1 outside its footprint,
+            // where no volume is).
+            let ground_lit = |p: DVec3| {
+                let uv = setup.light_coords(p);
+                if over_footprint(res, uv) {
                     bilinear(&light, res, uv).intensity
                 } else {
                     [1.0; 3]
-                };
-                let sun0 = atm.sunlight(0.0, l_y);
-                std::array::from_fn(|c| {
-                    frame.ground_albedo / std::f64::consts::PI * l_y * sun0[c] * lit[c] * t_all[c]
-                })
-            } else {
-                [0.0; 3]
-            };
-            let rgb = std::array::from_fn(|c| {
-                let i_s = frame.sun.irradiance[c];
-                let mut v = i_s * (front[c] + t_vol[c] * (all[c] - front[c])) + t_mid[c] * l_vol[c];
-                if on_disk {
-                    v += t_vol[c] * i_s * t_all[c] / disk_sr;
                 }
-                v += t_vol[c] * i_s * ground[c];
-                v as f32
-            });
-            (rgb, t_vol[1] as f32)
+            };
+            (
+                compose(frame, setup.eye, d, l_vol, t_vol, ground_lit),
+                t_vol[1] as f32,
+            )
         })
         .collect();
     Ok(Image {
@@ -323,5 +289,60 @@ pub fn render(tables: &Tables, frame: &Frame) -> Result<Image, FrameError> {
         height: h,
         rgb: pixels.iter().map(|p| p.0).collect(),
         transparency: pixels.iter().map(|p| p.1).collect(),
+    })
+}
+
+/// A pixel's radiance from its ray `d` from `eye`, the volume's radiance `l_vol` (at the box's
+/// middle, before the air in front) and transparency `t_vol` per channel: the air in front of
+/// and behind the box (Eqs. 11–15), the sun's disk and a Lambertian ground lit through the air
+/// (Eq. 12) and through the volume as `ground_lit` says (the fraction of sunlight left at a
+/// ground point). Every slicing model composes its pixels this way.
+pub(crate) fn compose(
+    frame: &Frame,
+    eye: DVec3,
+    d: DVec3,
+    l_vol: [f64; 3],
+    t_vol: [f64; 3],
+    ground_lit: impl Fn(DVec3) -> [f64; 3],
+) -> [f32; 3] {
+    let atm = &frame.atmosphere;
+    let sun_dir = frame.sun.direction();
+    let l_y = sun_dir[1];
+    let cos_disk = (SUN_DIAMETER_DEG / 2.0).to_radians().cos();
+    let disk_sr = std::f64::consts::TAU * (1.0 - cos_disk);
+    let y = eye[1];
+    let k_mid = box_span(frame.grid.min_m, frame.grid.max_m, eye, d)
+        .map_or(0.0, |(t0, t1)| 0.5 * (t0 + t1));
+    let k_end = if d[1] < 0.0 && y > 0.0 {
+        y / -d[1]
+    } else if d[1] < 0.0 {
+        0.0
+    } else {
+        f64::INFINITY
+    };
+    let k_mid = k_mid.min(k_end);
+    let cos_sun = d.dot(sun_dir);
+    let front = atm.inscatter(y, d[1], k_mid, l_y, cos_sun);
+    let all = atm.inscatter(y, d[1], k_end, l_y, cos_sun);
+    let t_mid = atm.transparency(y, d[1], k_mid);
+    let on_disk = k_end.is_infinite() && cos_sun >= cos_disk;
+    let t_all = atm.transparency(y, d[1], k_end);
+    let ground: [f64; 3] = if frame.ground_albedo > 0.0 && k_end.is_finite() && k_end > 0.0 {
+        let lit = ground_lit(eye + k_end * d);
+        let sun0 = atm.sunlight(0.0, l_y);
+        std::array::from_fn(|c| {
+            frame.ground_albedo / std::f64::consts::PI * l_y * sun0[c] * lit[c] * t_all[c]
+        })
+    } else {
+        [0.0; 3]
+    };
+    std::array::from_fn(|c| {
+        let i_s = frame.sun.irradiance[c];
+        let mut v = i_s * (front[c] + t_vol[c] * (all[c] - front[c])) + t_mid[c] * l_vol[c];
+        if on_disk {
+            v += t_vol[c] * i_s * t_all[c] / disk_sr;
+        }
+        v += t_vol[c] * i_s * ground[c];
+        v as f32
     })
 }

@@ -1,0 +1,508 @@
+//! The `max` model on the CPU (rayon): reduced sunlight, diffusion solve and final gather as
+//! the [module docs](super) describe them.
+
+use std::f64::consts::PI;
+use std::time::Instant;
+
+use glam::DVec3;
+use rayon::prelude::*;
+
+use runtime::{FieldTable, Tables, sample};
+
+use super::MaxSettings;
+use super::diffusion::{self, Problem};
+use crate::riley::cpu::{box_span, check_fields, coefficients, compose};
+use crate::{DensityGrid, Frame, FrameError, Image, MAX_FIELDS};
+
+/// What a `max` render spent and found.
+#[derive(Debug, Clone, Default, serde::Serialize)]
+pub struct MaxReport {
+    /// Seconds for the reduced sunlight and the sources (steps 1, 2).
+    pub propagation_s: f64,
+    /// Seconds for the three diffusion solves (step 3).
+    pub diffusion_s: f64,
+    /// Seconds for the final gather and composition (steps 4, 5).
+    pub gather_s: f64,
+    /// Conjugate-gradient iterations per channel.
+    pub iterations: [usize; 3],
+    /// Relative residual reached per channel.
+    pub residual: [f64; 3],
+    /// Unknowns of the diffusion system (voxels with β_ext > 0).
+    pub unknowns: usize,
+    /// Multigrid levels.
+    pub levels: usize,
+    /// The largest optical depth an edge segment reached (any channel).
+    pub largest_edge_depth: f64,
+}
+
+/// Per-voxel optics of the grid, per channel.
+struct Voxels {
+    ext: Vec<[f64; 3]>,
+    sca: Vec<[f64; 3]>,
+    /// κ_tr = Σ_f β_ext,f (σ_tr/σ_t)_f.
+    transport: Vec<[f64; 3]>,
+    /// Σ_f β_sca,f g_f: the forward part of the first-scattered source.
+    g_sca: Vec<[f64; 3]>,
+}
+
+fn voxels(fields: &[&FieldTable], grid: &DensityGrid) -> Voxels {
+    let n = grid.data.len();
+    let mut v = Voxels {
+        ext: vec![[0.0; 3]; n],
+        sca: vec![[0.0; 3]; n],
+        transport: vec![[0.0; 3]; n],
+        g_sca: vec![[0.0; 3]; n],
+    };
+    for (i, rho) in grid.data.iter().enumerate() {
+        for (f, field) in fields.iter().enumerate() {
+            let r = f64::from(rho[f]);
+            if r <= 0.0 {
+                continue;
+            }
+            let tf = field.transport_factor.expect("checked by render");
+            for c in 0..3 {
+                let ext = r * field.sigma_ext_m2[c];
+                let sca = r * field.sigma_sca_m2[c];
+                let g = if field.albedo[c] > 0.0 {
+                    (1.0 - tf[c]) / field.albedo[c]
+                } else {
+                    0.0
+                };
+                v.ext[i][c] += ext;
+                v.sca[i][c] += sca;
+                v.transport[i][c] += ext * tf[c];
+                v.g_sca[i][c] += sca * g;
+            }
+        }
+    }
+    v
+}
+
+/// Voxel sizes per axis (m).
+fn voxel_size(grid: &DensityGrid) -> [f64; 3] {
+    std::array::from_fn(|a| (grid.max_m[a] - grid.min_m[a]) / grid.dims[a] as f64)
+}
+
+/// Optical depth towards the sun at every voxel centre, per channel, by an upwind sweep along
+/// the light's direction of travel `l` (module docs, step 1).
+fn sun_depths(grid: &DensityGrid, ext: &[[f64; 3]], l: DVec3) -> Vec<[f64; 3]> {
+    let dims = grid.dims;
+    let h = voxel_size(grid);
+    let a = (0..3)
+        .max_by(|&i, &j| l[i].abs().total_cmp(&l[j].abs()))
+        .expect("three axes");
+    let (b, c) = ((a + 1) % 3, (a + 2) % 3);
+    let stride = [1, dims[0], dims[0] * dims[1]];
+    let ds = h[a] / l[a].abs();
+    // The point one layer back, in voxel units along b and c.
+    let (shift_b, shift_c) = (-ds * l[b] / h[b], -ds * l[c] / h[c]);
+    let mut tau = vec![[0.0f64; 3]; ext.len()];
+    let layers: Vec<usize> = if l[a] > 0.0 {
+        (0..dims[a]).collect()
+    } else {
+        (0..dims[a]).rev().collect()
+    };
+    for (step, &k) in layers.iter().enumerate() {
+        let prev = (step > 0).then(|| layers[step - 1]);
+        // Bilinear value of `f` in layer `layer` at continuous (u, v) (voxel centres at
+        // integers), or None outside it (clear air beyond the box).
+        let sample_layer =
+            |layer: usize, u: f64, v: f64, f: &dyn Fn(usize) -> [f64; 3]| -> Option<[f64; 3]> {
+                let (nb, nc) = (dims[b] as f64, dims[c] as f64);
+                if u < -0.5 || v < -0.5 || u > nb - 0.5 || v > nc - 0.5 {
+                    return None;
+                }
+                let (u, v) = (u.clamp(0.0, nb - 1.0), v.clamp(0.0, nc - 1.0));
+                let (u0, v0) = (u.floor() as usize, v.floor() as usize);
+                let (u1, v1) = ((u0 + 1).min(dims[b] - 1), (v0 + 1).min(dims[c] - 1));
+                let (s, t) = (u - u0 as f64, v - v0 as f64);
+                let at =
+                    |ub: usize, vc: usize| f(layer * stride[a] + ub * stride[b] + vc * stride[c]);
+                let (p00, p10, p01, p11) = (at(u0, v0), at(u1, v0), at(u0, v1), at(u1, v1));
+                Some(std::array::from_fn(|ch| {
+                    (1.0 - s) * (1.0 - t) * p00[ch]
+                        + s * (1.0 - t) * p10[ch]
+                        + (1.0 - s) * t * p01[ch]
+                        + s * t * p11[ch]
+                }))
+            };
+        let layer: Vec<(usize, [f64; 3])> = (0..dims[b] * dims[c])
+            .into_par_iter()
+            .map(|m| {
+                let (ub, vc) = (m % dims[b], m / dims[b]);
+                let i = k * stride[a] + ub * stride[b] + vc * stride[c];
+                let here = ext[i];
+                let back = prev.and_then(|p| {
+                    let (u, v) = (ub as f64 + shift_b, vc as f64 + shift_c);
+                    let t = sample_layer(p, u, v, &|j| tau[j])?;
+                    let e = sample_layer(p, u, v, &|j| ext[j])?;
+                    Some((t, e))
+                });
+                let value = match back {
+                    Some((t, e)) => std::array::from_fn(|ch| t[ch] + 0.5 * ds * (here[ch] + e[ch])),
+                    // From the box's face (or clear air) half a voxel back.
+                    None => here.map(|x| 0.5 * ds * x),
+                };
+                (i, value)
+            })
+            .collect();
+        for (i, v) in layer {
+            tau[i] = v;
+        }
+    }
+    tau
+}
+
+/// Trilinear interpolation of per-voxel `values` at `p` (voxel centres; clamped at the box's
+/// edge voxels), over the voxels `active` says (all if `None`), renormalized over them; zero
+/// outside the box or where no active voxel contributes.
+fn trilinear(
+    grid: &DensityGrid,
+    values: &[[f64; 3]],
+    active: Option<&[bool]>,
+    p: DVec3,
+) -> [f64; 3] {
+    if !grid.contains(p) {
+        return [0.0; 3];
+    }
+    let dims = grid.dims;
+    let mut i0 = [0usize; 3];
+    let mut t = [0.0f64; 3];
+    for a in 0..3 {
+        let n = dims[a];
+        let u = (p[a] - grid.min_m[a]) / (grid.max_m[a] - grid.min_m[a]) * n as f64 - 0.5;
+        let u = u.clamp(0.0, (n - 1) as f64);
+        let lo = (u.floor() as usize).min(n.saturating_sub(2));
+        i0[a] = lo;
+        t[a] = if n > 1 { u - lo as f64 } else { 0.0 };
+    }
+    let mut out = [0.0; 3];
+    let mut total = 0.0;
+    for corner in 0..8 {
+        let d = [corner & 1, (corner >> 1) & 1, (corner >> 2) & 1];
+        let w: f64 = (0..3)
+            .map(|a| if d[a] == 1 { t[a] } else { 1.0 - t[a] })
+            .product();
+        if w == 0.0 {
+            continue;
+        }
+        let idx: [usize; 3] = std::array::from_fn(|a| (i0[a] + d[a]).min(dims[a] - 1));
+        let i = idx[0] + dims[0] * (idx[1] + dims[1] * idx[2]);
+        if active.is_some_and(|m| !m[i]) {
+            continue;
+        }
+        total += w;
+        for c in 0..3 {
+            out[c] += w * values[i][c];
+        }
+    }
+    if active.is_some() && total > 0.0 {
+        out.iter_mut().for_each(|v| *v /= total);
+    }
+    out
+}
+
+/// The fraction of the sunlight the volume leaves at `p` along the sun direction `sun`, by a
+/// ray march of half-voxel steps (for points outside the box: the ground).
+fn transmittance_to_sun(
+    fields: &[&FieldTable],
+    grid: &DensityGrid,
+    p: DVec3,
+    sun: DVec3,
+) -> [f64; 3] {
+    let Some((t0, t1)) = box_span(grid.min_m, grid.max_m, p, sun) else {
+        return [1.0; 3];
+    };
+    let step = 0.5
+        * voxel_size(grid)
+            .iter()
+            .copied()
+            .fold(f64::INFINITY, f64::min);
+    let n = (((t1 - t0) / step).ceil() as usize).max(1);
+    let dt = (t1 - t0) / n as f64;
+    let mut tau = [0.0; 3];
+    for i in 0..n {
+        let rho = grid.sample(p + (t0 + (i as f64 + 0.5) * dt) * sun);
+        let (ext, _) = coefficients(fields, &rho);
+        for c in 0..3 {
+            tau[c] += ext[c] * dt;
+        }
+    }
+    tau.map(|t| (-t).exp())
+}
+
+/// Directions of the skylight: a Fibonacci set of equal solid angles 4π/[`SKY_DIRECTIONS`].
+pub const SKY_DIRECTIONS: usize = 32;
+
+/// The reduced skylight per voxel and channel (module docs, step 2): its mean radiance over
+/// the sphere (1/4π)∫ L_sky T dω and its flux over 4π, (1/4π)∫ L_sky T ω dω (ω the direction
+/// of travel).
+struct Sky {
+    mean: Vec<[f64; 3]>,
+    flux: Vec<[DVec3; 3]>,
+}
+
+fn reduced_sky(frame: &Frame, ext: &[[f64; 3]]) -> Sky {
+    let n = ext.len();
+    let mut sky = Sky {
+        mean: vec![[0.0; 3]; n],
+        flux: vec![[DVec3::ZERO; 3]; n],
+    };
+    let grid = &frame.grid;
+    let sun = frame.sun.direction();
+    // The sky's radiance as seen from the middle of the box (Eqs. 11–15).
+    let y = 0.5 * (grid.min_m.y + grid.max_m.y);
+    let omega = 4.0 * PI / SKY_DIRECTIONS as f64;
+    let golden = PI * (3.0 - 5f64.sqrt());
+    for i in 0..SKY_DIRECTIONS {
+        let z = 1.0 - (2.0 * i as f64 + 1.0) / SKY_DIRECTIONS as f64;
+        let r = (1.0 - z * z).sqrt();
+        let phi = golden * i as f64;
+        // Towards the sky (y up).
+        let s = DVec3::new(r * phi.cos(), z, r * phi.sin());
+        let k_end = if s.y < 0.0 { y / -s.y } else { f64::INFINITY };
+        let l = frame.atmosphere.inscatter(y, s.y, k_end, sun.y, s.dot(sun));
+        let radiance: [f64; 3] = std::array::from_fn(|c| frame.sun.irradiance[c] * l[c]);
+        if radiance.iter().all(|&v| v <= 0.0) {
+            continue;
+        }
+        let tau = sun_depths(grid, ext, -s);
+        for (j, t) in tau.iter().enumerate() {
+            for c in 0..3 {
+                let w = radiance[c] * (-t[c]).exp() * omega / (4.0 * PI);
+                sky.mean[j][c] += w;
+                sky.flux[j][c] -= w * s;
+            }
+        }
+    }
+    sky
+}
+
+/// G(D) = e^{−D(1−α)} − e^{−D}: the fraction of the light a segment of optical depth D
+/// scatters at least once (all orders i ≥ 1, each weighted α^i).
+fn scattered(d: f64, albedo: f64) -> f64 {
+    if d <= 0.0 {
+        return 0.0;
+    }
+    (-d).exp() * (d * albedo).exp_m1()
+}
+
+/// Renders `frame` with the `max` model; the report splits the time by stage.
+pub fn render(
+    tables: &Tables,
+    frame: &Frame,
+    settings: &MaxSettings,
+) -> Result<(Image, MaxReport), FrameError> {
+    frame.check_view()?;
+    settings.check()?;
+    check_fields(tables, frame)?;
+    if frame.haze.is_some() {
+        return Err(FrameError(
+            "--model max does not model the [haze] layer; use --model miyazaki or truth".into(),
+        ));
+    }
+    for f in &tables.fields {
+        if f.poisson.is_none() || f.transport_factor.is_none() {
+            return Err(FrameError(format!(
+                "field {:?}'s bake has no Poisson table or transport factor (written before \
+                 they existed): bake it again",
+                f.name
+            )));
+        }
+    }
+    let depth_max = tables
+        .fields
+        .iter()
+        .filter_map(|f| f.poisson.as_ref())
+        .map(|p| *p.depths.last().expect("checked"))
+        .fold(f64::INFINITY, f64::min);
+    let fields: Vec<&FieldTable> = tables.fields.iter().collect();
+    let grid = &frame.grid;
+    let h = voxel_size(grid);
+    let sun_dir = frame.sun.direction();
+    let light = -sun_dir;
+    let l_y = sun_dir[1];
+    let mut report = MaxReport::default();
+
+    // 1, 2: reduced sunlight and first-scattered sources.
+    let start = Instant::now();
+    let v = voxels(&fields, grid);
+    let tau_sun = sun_depths(grid, &v.ext, light);
+    let dims = grid.dims;
+    let centre = |i: usize| {
+        let c = [
+            i % dims[0],
+            (i / dims[0]) % dims[1],
+            i / (dims[0] * dims[1]),
+        ];
+        DVec3::from_array(std::array::from_fn(|a| {
+            grid.min_m[a] + (c[a] as f64 + 0.5) * h[a]
+        }))
+    };
+    // E T_sun S_atm per voxel: the reduced sunlight's irradiance.
+    let reduced: Vec<[f64; 3]> = (0..tau_sun.len())
+        .into_par_iter()
+        .map(|i| {
+            let s_atm = frame.atmosphere.sunlight(centre(i).y, l_y);
+            std::array::from_fn(|c| frame.sun.irradiance[c] * s_atm[c] * (-tau_sun[i][c]).exp())
+        })
+        .collect();
+    let sky = reduced_sky(frame, &v.ext);
+    report.propagation_s = start.elapsed().as_secs_f64();
+
+    // 3: diffusion per channel.
+    let start = Instant::now();
+    let active: Vec<bool> = v.ext.iter().map(|e| e[1] > 0.0).collect();
+    let mut i0 = vec![[0.0f64; 3]; v.ext.len()];
+    for c in 0..3 {
+        let problem = Problem {
+            dims,
+            h,
+            kappa_tr: v.transport.iter().map(|t| t[c]).collect(),
+            kappa_a: v
+                .ext
+                .iter()
+                .zip(&v.sca)
+                .map(|(e, s)| (e[c] - s[c]).max(0.0))
+                .collect(),
+            q0: (0..v.sca.len())
+                .map(|i| v.sca[i][c] * (reduced[i][c] / (4.0 * PI) + sky.mean[i][c]))
+                .collect(),
+            q1: (0..v.sca.len())
+                .map(|i| {
+                    let flux = light * reduced[i][c] / (4.0 * PI) + sky.flux[i][c];
+                    (flux * v.g_sca[i][c]).to_array()
+                })
+                .collect(),
+        };
+        let s = diffusion::solve(&problem, settings.tolerance, settings.max_iterations)
+            .map_err(|e| FrameError(format!("channel {}: {e}", ["R", "G", "B"][c])))?;
+        report.iterations[c] = s.iterations;
+        report.residual[c] = s.residual;
+        report.unknowns = s.unknowns;
+        report.levels = s.levels;
+        for (out, v) in i0.iter_mut().zip(&s.i0) {
+            out[c] = *v;
+        }
+    }
+    report.diffusion_s = start.elapsed().as_secs_f64();
+
+    // 4, 5: the final gather.
+    let start = Instant::now();
+    let (forward, right, up) = frame.camera.axes().expect("checked by check_view");
+    let tan_half = (frame.camera.fov_deg.to_radians() / 2.0).tan();
+    let eye = frame.camera.position_m;
+    let (w, hgt) = (frame.width, frame.height);
+    let step = 0.5 * h.iter().copied().fold(f64::INFINITY, f64::min);
+    let h_voxel = (h[0] * h[1] * h[2]).cbrt();
+    let t_sun: Vec<[f64; 3]> = tau_sun.iter().map(|t| t.map(|x| (-x).exp())).collect();
+    let gathered: Vec<([f32; 3], f32, f64)> = (0..w * hgt)
+        .into_par_iter()
+        .map(|px| {
+            let d = crate::camera::pixel_ray(
+                (forward, right, up),
+                tan_half,
+                (px % w, px / w),
+                (w, hgt),
+            );
+            let cos_theta = -light.dot(d);
+            let mut l_vol = [0.0f64; 3];
+            let mut tr = [1.0f64; 3];
+            let mut largest: f64 = 0.0;
+            if let Some((t0, t1)) = box_span(grid.min_m, grid.max_m, eye, d) {
+                let t0 = t0.max(0.0);
+                let n = (((t1 - t0) / step).ceil() as usize).max(1);
+                let dt = (t1 - t0) / n as f64;
+                let mut edge = [0.0f64; 3];
+                for k in 0..n {
+                    let p = eye + (t0 + (k as f64 + 0.5) * dt) * d;
+                    let rho: [f64; MAX_FIELDS] = grid.sample(p);
+                    let (ext, sca) = coefficients(&fields, &rho);
+                    if ext.iter().all(|&e| e <= 0.0) {
+                        continue;
+                    }
+                    let w_edge = settings.edge_share(ext[1] * h_voxel);
+                    let s_atm = frame.atmosphere.sunlight(p.y, l_y);
+                    let ts = trilinear(grid, &t_sun, None, p);
+                    let sun: [f64; 3] =
+                        std::array::from_fn(|c| frame.sun.irradiance[c] * s_atm[c] * ts[c]);
+                    // Diffuse light: the diffusion solution and the reduced skylight, isotropic.
+                    let i0_here = trilinear(grid, &i0, Some(&active), p);
+                    let sky_here = trilinear(grid, &sky.mean, None, p);
+                    // (P1's I_0 can dip below zero where the first-scattered light's flux
+                    // term dominates, in optically thin voxels: no radiance is negative.)
+                    let diffuse: [f64; 3] =
+                        std::array::from_fn(|c| i0_here[c].max(0.0) + sky_here[c]);
+                    let p1 = sample::mix(&fields, &rho, tables.theta_step_deg, 1.0, cos_theta);
+                    let before: [f64; 3] = std::array::from_fn(|c| edge[c] * w_edge);
+                    let after: [f64; 3] = std::array::from_fn(|c| before[c] + w_edge * ext[c] * dt);
+                    let (m_before, m_after) = if w_edge > 0.0 {
+                        (
+                            sample::poisson_mix(
+                                &fields,
+                                &rho,
+                                tables.theta_step_deg,
+                                before,
+                                cos_theta,
+                            ),
+                            sample::poisson_mix(
+                                &fields,
+                                &rho,
+                                tables.theta_step_deg,
+                                after,
+                                cos_theta,
+                            ),
+                        )
+                    } else {
+                        ([0.0; 3], [0.0; 3])
+                    };
+                    for c in 0..3 {
+                        if ext[c] <= 0.0 {
+                            continue;
+                        }
+                        let albedo = sca[c] / ext[c];
+                        let dtau = ext[c] * dt;
+                        let slab = (-dtau).exp();
+                        // Dense share: diffusion plus exact single scattering of the sun.
+                        let dense =
+                            (1.0 - w_edge) * (1.0 - slab) * albedo * (diffuse[c] + p1[c] * sun[c]);
+                        // Edge share: the segment's increment, seen from its entry.
+                        let (g0, g1) = (scattered(before[c], albedo), scattered(after[c], albedo));
+                        let edge_light =
+                            (g1 * m_after[c] - g0 * m_before[c]) * sun[c] + (g1 - g0) * diffuse[c];
+                        let entry = tr[c] * before[c].exp();
+                        l_vol[c] += tr[c] * dense + entry * edge_light;
+                        tr[c] *= slab;
+                        edge[c] = after[c];
+                        largest = largest.max(after[c]);
+                    }
+                    if tr.iter().all(|&t| t < 1e-9) {
+                        break;
+                    }
+                }
+            }
+            let ground_lit = |g: DVec3| transmittance_to_sun(&fields, grid, g, sun_dir);
+            let rgb = compose(frame, eye, d, l_vol, tr, ground_lit);
+            (rgb, tr[1] as f32, largest)
+        })
+        .collect();
+    report.largest_edge_depth = gathered.iter().map(|g| g.2).fold(0.0, f64::max);
+    if report.largest_edge_depth > depth_max {
+        return Err(FrameError(format!(
+            "an edge segment reached optical depth {:.3}, beyond the bake's Poisson table \
+             (poisson_max_depth = {depth_max}): bake with a larger [scene] poisson_max_depth or \
+             lower [render] max_threshold",
+            report.largest_edge_depth
+        )));
+    }
+    report.gather_s = start.elapsed().as_secs_f64();
+    Ok((
+        Image {
+            width: w,
+            height: hgt,
+            rgb: gathered.iter().map(|g| g.0).collect(),
+            transparency: gathered.iter().map(|g| g.1).collect(),
+        },
+        report,
+    ))
+}

@@ -1,0 +1,283 @@
+//! The `max` model (Max et al. 2004): its thin limit is single scattering whichever treatment
+//! (dense or edge) a voxel gets, its image is continuous across the threshold T, and it
+//! refuses what it cannot do before any work.
+
+use std::path::Path;
+
+use render::max::{MaxSettings, cpu};
+use render::riley::cpu::box_span;
+use render::{Frame, RenderScene};
+use runtime::Tables;
+use runtime::sample;
+
+#[path = "../../tests/common/mod.rs"]
+mod common;
+
+use common::bake;
+
+fn fields() -> String {
+    common::scene("max", 8, common::CLOUD)
+}
+
+/// A uniform 4³ box of cloud, 1 km wide, 5 km ahead, of optical depth `tau` across (green).
+fn uniform_box(tables: &Tables, dir: &Path, tau: f64, sky: bool) -> Frame {
+    let cloud = tables.field("cloud").unwrap();
+    let density = tau / 1000.0 / cloud.sigma_ext_m2[1];
+    let ones: Vec<u8> = (0..64).flat_map(|_| 1f32.to_le_bytes()).collect();
+    std::fs::write(dir.join("ones.f32"), ones).unwrap();
+    let text = format!(
+        r#"{}
+[render]
+width = 32
+height = 32
+grid_resolution = 32
+
+[camera]
+position_m = [0, 1500, 0]
+look_at_m = [0, 1500, 5000]
+fov_deg = 20
+
+[sun]
+elevation_deg = 30
+azimuth_deg = 160
+
+[sky]
+enabled = {sky}
+
+[[volume]]
+field = "cloud"
+shape = "grid"
+number_density_per_m3 = {density}
+file = "ones.f32"
+dims = [4, 4, 4]
+min_m = [-500, 1000, 4500]
+max_m = [500, 2000, 5500]
+"#,
+        fields()
+    );
+    RenderScene::parse(&text, "box", dir)
+        .unwrap()
+        .frame(tables)
+        .unwrap()
+}
+
+/// A soft ball of cloud, 32³ voxels over a 1 km box, `tau` through its centre, side-lit.
+fn ball(tables: &Tables, dir: &Path, tau: f64) -> Frame {
+    let n = 32;
+    let mut bytes = Vec::with_capacity(4 * n * n * n);
+    for z in 0..n {
+        for y in 0..n {
+            for x in 0..n {
+                let c = |i: usize| (i as f64 + 0.5) / n as f64 * 2.0 - 1.0;
+                let r = (c(x).powi(2) + c(y).powi(2) + c(z).powi(2)).sqrt();
+                bytes.extend_from_slice(&((1.0 - r).max(0.0).sqrt() as f32).to_le_bytes());
+            }
+        }
+    }
+    std::fs::write(dir.join("ball.f32"), bytes).unwrap();
+    let density = tau / (0.666 * 1000.0 * tables.field("cloud").unwrap().sigma_ext_m2[1]);
+    let text = format!(
+        r#"{}
+[render]
+width = 40
+height = 40
+grid_resolution = 32
+
+[camera]
+position_m = [0, 500, -2500]
+look_at_m = [0, 500, 500]
+fov_deg = 30
+
+[sun]
+elevation_deg = 20
+azimuth_deg = 70
+
+[[volume]]
+field = "cloud"
+shape = "grid"
+file = "ball.f32"
+dims = [{n}, {n}, {n}]
+min_m = [-500, 0, 0]
+max_m = [500, 1000, 1000]
+number_density_per_m3 = {density}
+"#,
+        fields()
+    );
+    RenderScene::parse(&text, "ball", dir)
+        .unwrap()
+        .frame(tables)
+        .unwrap()
+}
+
+/// Worst relative difference of a `max` render of the uniform box of optical depth `tau`
+/// from single scattering, over the pixels whose chord is ≥ 500 m, at threshold T.
+fn thin_box_error(tables: &Tables, dir: &Path, tau: f64, threshold: f64) -> (f64, usize) {
+    let cloud = tables.field("cloud").unwrap();
+    let frame = uniform_box(tables, dir, tau, false);
+    let eye = frame.camera.position_m;
+    let (forward, right, up) = frame.camera.axes().unwrap();
+    let tan_half = (frame.camera.fov_deg.to_radians() / 2.0).tan();
+    let light = -frame.sun.direction();
+    let settings = MaxSettings {
+        threshold,
+        ..MaxSettings::default()
+    };
+    let (image, _) = cpu::render(tables, &frame, &settings).unwrap();
+    let (mut checked, mut worst) = (0, 0f64);
+    for j in 0..frame.height {
+        for i in 0..frame.width {
+            let d = render::camera::pixel_ray(
+                (forward, right, up),
+                tan_half,
+                (i, j),
+                (frame.width, frame.height),
+            );
+            let Some((t0, t1)) = box_span(frame.grid.min_m, frame.grid.max_m, eye, d) else {
+                continue;
+            };
+            let chord = t1 - t0;
+            if chord < 500.0 {
+                continue;
+            }
+            let p1 = sample::ams(cloud, tables.theta_step_deg, 1.0, -light.dot(d));
+            for c in 0..3 {
+                // The rasterized grid's optical depth along the chord, by fine quadrature.
+                let steps = 2000;
+                let tau = (0..steps)
+                    .map(|s| {
+                        let t = t0 + (s as f64 + 0.5) / steps as f64 * chord;
+                        frame.grid.sample(eye + t * d)[0]
+                    })
+                    .sum::<f64>()
+                    * cloud.sigma_ext_m2[c]
+                    * chord
+                    / steps as f64;
+                let want = p1[c] * cloud.albedo[c] * (1.0 - (-tau).exp());
+                let got = f64::from(image.rgb[i + frame.width * j][c]);
+                worst = worst.max(((got - want) / want).abs());
+            }
+            checked += 1;
+        }
+    }
+    (worst, checked)
+}
+
+#[test]
+fn a_thin_box_gives_single_scattering_in_both_treatments() {
+    let (tmp, dir) = bake(&fields());
+    let tables = Tables::open(&dir).unwrap();
+    // A voxel of these boxes has optical depth ≤ 2.5e-4: T = 1e-7 puts it all in the dense
+    // treatment, T = 1 all in the edge treatment. Both are single scattering of the sun plus
+    // the diffuse light I_0, which P1 diffusion overestimates in thin media (it is O(τ)).
+    for (threshold, what) in [(1e-7, "dense"), (1.0, "edge")] {
+        let (e3, checked) = thin_box_error(&tables, tmp.path(), 1e-3, threshold);
+        let (e5, _) = thin_box_error(&tables, tmp.path(), 1e-5, threshold);
+        eprintln!(
+            "{what} treatment (T = {threshold}), {checked} pixels: worst relative difference \
+             from single scattering {e3:.2e} at τ = 1e-3, {e5:.2e} at τ = 1e-5"
+        );
+        assert!(checked > 200, "only {checked} pixels crossed the box");
+        // Measured 6.9e-5 (dense) and 7.2e-5 (edge), a hundredth of the τ = 1e-3 values:
+        // all that is left is the diffuse light's share, O(τ), which vanishes with τ.
+        assert!(e5 < 8e-5, "{what}: {e5:e}");
+        assert!(e3 > 50.0 * e5, "{what}: {e3:e} vs {e5:e}");
+    }
+}
+
+#[test]
+fn the_image_is_continuous_across_the_threshold() {
+    let (tmp, dir) = bake(&fields());
+    let tables = Tables::open(&dir).unwrap();
+    let frame = ball(&tables, tmp.path(), 30.0);
+    let render_at = |threshold: f64| {
+        let settings = MaxSettings {
+            threshold,
+            ..MaxSettings::default()
+        };
+        cpu::render(&tables, &frame, &settings).unwrap().0
+    };
+    let total = |image: &render::Image| -> f64 { image.rgb.iter().map(|p| f64::from(p[1])).sum() };
+    let worst_change = |a: &render::Image, b: &render::Image| {
+        let scale = a.rgb.iter().map(|p| p[1]).fold(0.0f32, f32::max) as f64;
+        a.rgb
+            .iter()
+            .zip(&b.rgb)
+            .map(|(x, y)| (f64::from(x[1]) - f64::from(y[1])).abs() / scale)
+            .fold(0.0, f64::max)
+    };
+    // Voxels of the ball run from optical depth 0 to ~1.5: T = 0.5 splits them.
+    let base = render_at(0.5);
+    let near = render_at(0.5 * (1.0 + 1e-3));
+    let far = render_at(1.0);
+    let (small, large) = (worst_change(&base, &near), worst_change(&base, &far));
+    eprintln!(
+        "T 0.5 → 0.5005: worst pixel change {small:.2e} of the brightest; T 0.5 → 1: {large:.2e}; \
+         totals {:.4} / {:.4} / {:.4}",
+        total(&base),
+        total(&near),
+        total(&far)
+    );
+    // A change of T by 1e-3 moves no pixel by more than a small multiple of 1e-3 (a jump at a
+    // segment's start or end would move some by ~the edge light itself), while a change of T by
+    // 2× does move them: the check can fail.
+    assert!(small < 1e-3, "{small:e}"); // measured 5.1e-4
+    assert!(large > 20.0 * small, "{large:e} vs {small:e}");
+}
+
+#[test]
+fn bad_settings_and_short_tables_are_refused() {
+    let (tmp, dir) = bake(&fields());
+    let tables = Tables::open(&dir).unwrap();
+    let frame = ball(&tables, tmp.path(), 30.0);
+    for (settings, key) in [
+        (
+            MaxSettings {
+                threshold: 0.0,
+                ..MaxSettings::default()
+            },
+            "max_threshold = 0",
+        ),
+        (
+            MaxSettings {
+                threshold: -1.0,
+                ..MaxSettings::default()
+            },
+            "max_threshold = -1",
+        ),
+        (
+            MaxSettings {
+                tolerance: 0.0,
+                ..MaxSettings::default()
+            },
+            "diffusion_tolerance = 0",
+        ),
+        (
+            MaxSettings {
+                max_iterations: 1,
+                tolerance: 1e-9,
+                ..MaxSettings::default()
+            },
+            "did not converge",
+        ),
+    ] {
+        let e = cpu::render(&tables, &frame, &settings)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains(key), "{key}: {e}");
+    }
+    // A threshold above every voxel's optical depth puts the whole ball in edge segments of
+    // optical depth ~30 per ray: beyond a table baked to D = 5.
+    let (_tmp5, dir5) = bake(&fields().replace("n_max = 8", "n_max = 8\npoisson_max_depth = 5"));
+    let short = Tables::open(&dir5).unwrap();
+    let settings = MaxSettings {
+        threshold: 100.0,
+        ..MaxSettings::default()
+    };
+    let e = cpu::render(&short, &frame, &settings)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("beyond the bake's Poisson table") && e.contains("poisson_max_depth = 5"),
+        "{e}"
+    );
+}
