@@ -70,9 +70,15 @@ struct RenderBench {
     cpu: bool,
     /// `riley` or `miyazaki` (frame times on the GPU), `both` (the two side by side in one
     /// run, interleaved, with their ratio), or `truth` (the path tracer at --size: paths per
-    /// second, the noise reached in --spp samples per pixel and the time to 1 % noise).
-    #[arg(long, default_value = "riley", value_parser = ["riley", "miyazaki", "both", "truth"])]
+    /// second, the noise reached in --spp samples per pixel and the time to 1 % noise), or
+    /// `max` (the diffusion model on the CPU: its time split into reduced light, diffusion
+    /// solve and final gather, at each of --grids and --sizes).
+    #[arg(long, default_value = "riley", value_parser = ["riley", "miyazaki", "both", "truth", "max"])]
     model: String,
+    /// --model max: grid resolutions (voxels along the box's longest side) at which to time
+    /// the diffusion solve, comma-separated.
+    #[arg(long, value_delimiter = ',', default_value = "64,128,256")]
+    grids: Vec<usize>,
     /// --model truth: samples per pixel of the timed run.
     #[arg(long, default_value_t = 64)]
     spp: usize,
@@ -440,6 +446,64 @@ fn bench_crystal(c: CrystalBench) -> Result<()> {
 /// `bench render --model truth`: one timed path-traced frame. The noise n is the median
 /// relative standard error of the volume's pixels (green); it falls as 1/√spp, so the time to
 /// 1 % is t·(n / 0.01)².
+/// `bench render --model max`: the stages' times against grid resolution (at the base size)
+/// and against image size (at the scene's grid), so that the solve's growth is measured.
+fn bench_max(b: RenderBench) -> Result<()> {
+    let mut rows = Vec::new();
+    let mut settings: Vec<(usize, Option<usize>)> =
+        b.grids.iter().map(|&g| (b.size, Some(g))).collect();
+    settings.extend(b.sizes.iter().map(|&n| (n, None)));
+    for (size, grid) in settings {
+        let (scene, tables) = super::render::prepare(
+            "max",
+            b.scene.as_deref(),
+            b.tables.clone(),
+            Some(&b.quality),
+            true,
+            |r| {
+                if let Some(g) = grid {
+                    r.grid_resolution = g;
+                }
+            },
+        )?;
+        let mut frame = scene.frame(&tables)?;
+        frame.width = size;
+        frame.height = size;
+        let start = Instant::now();
+        let (_, report) = render::max::cpu::render(&tables, &frame, &scene.max)?;
+        let total = start.elapsed().as_secs_f64();
+        let row = json!({
+            "width": size, "height": size, "grid": frame.grid.dims,
+            "unknowns": report.unknowns, "levels": report.levels,
+            "iterations": report.iterations, "residual": report.residual,
+            "propagation_s": report.propagation_s, "diffusion_s": report.diffusion_s,
+            "gather_s": report.gather_s, "total_s": total,
+        });
+        if !b.json {
+            println!(
+                "{size:>5}² grid {:>15}: {:>9} unknowns, {} levels, CG {:?}: reduced light {:7.2} s, \
+                 diffusion {:7.2} s, gather {:6.2} s, total {:7.2} s",
+                format!("{:?}", frame.grid.dims),
+                report.unknowns,
+                report.levels,
+                report.iterations,
+                report.propagation_s,
+                report.diffusion_s,
+                report.gather_s,
+                total
+            );
+        }
+        rows.push(row);
+    }
+    if b.json {
+        let report = json!({
+            "model": "max", "threads": rayon::current_num_threads(), "frames": rows,
+        });
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    }
+    Ok(())
+}
+
 fn bench_truth(b: RenderBench) -> Result<()> {
     let (scene, tables) = super::render::prepare(
         "truth",
@@ -483,6 +547,9 @@ fn bench_truth(b: RenderBench) -> Result<()> {
 fn bench_render(b: RenderBench) -> Result<()> {
     if b.model == "truth" {
         return bench_truth(b);
+    }
+    if b.model == "max" {
+        return bench_max(b);
     }
     use render::miyazaki::gpu::Renderer as SvsRenderer;
     use render::riley::{cpu, gpu::Renderer};

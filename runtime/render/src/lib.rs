@@ -11,11 +11,14 @@
 //! - [`miyazaki`]: Miyazaki, Dobashi & Nishita's shadow-view slices — single scattering with
 //!   a constant k_multi, a shadow surface for the clouds' shadows on the ground and in the air
 //!   (`--model miyazaki`).
+//! - [`max`]: Max, Schussman, Miyazaki, Iwasaki & Nishita 2004 — a diffusion solve in the
+//!   dense core, Poisson-weighted multiple anisotropic scattering from the bake's M(D, θ) at the
+//!   edges (`--model max`, CPU).
 //! - [`truth`]: an unbiased spectral Monte Carlo path tracer of the full radiative transfer on
 //!   the same scene (`--model truth`), the reference every fast model is measured against.
 //!
-//! A new model (Max et al.'s diffusion, Biri's analytic single scattering) goes beside them as
-//! `src/<model>/`, using the same scene, volumes, sky, camera and image.
+//! A new model (Biri's analytic single scattering) goes beside them as `src/<model>/`, using
+//! the same scene, volumes, sky, camera and image.
 //!
 //! Units: radiance per unit solar irradiance outside the atmosphere (1/sr) per channel; lengths
 //! in metres, y up, sea level at y = 0.

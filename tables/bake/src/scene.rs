@@ -316,6 +316,8 @@ impl Scene {
             .map(|j| {
                 if j + 1 == POISSON_DEPTHS {
                     self.poisson_max_depth
+                } else if j == 0 {
+                    POISSON_MIN_DEPTH
                 } else {
                     (a + (b - a) * j as f64 / (POISSON_DEPTHS - 1) as f64).exp()
                 }

@@ -35,6 +35,9 @@ pub struct MaxReport {
     pub largest_edge_depth: f64,
 }
 
+/// Voxels of smaller optical depth β_ext h (green) are left out of the diffusion solve.
+pub const MIN_DIFFUSION_VOXEL_DEPTH: f64 = 1e-4;
+
 /// Per-voxel optics of the grid, per channel.
 struct Voxels {
     ext: Vec<[f64; 3]>,
@@ -352,13 +355,26 @@ pub fn render(
 
     // 3: diffusion per channel.
     let start = Instant::now();
-    let active: Vec<bool> = v.ext.iter().map(|e| e[1] > 0.0).collect();
+    let h_voxel = (h[0] * h[1] * h[2]).cbrt();
+    // Voxels thinner than MIN_DIFFUSION_VOXEL_DEPTH take no part in the solve: a grid's
+    // interpolated fringe holds densities down to 1e-19 of the core's, whose D = 1/(3κ_tr)
+    // would couple them 10¹⁶ times more strongly than the core and stall any iterative solver.
+    let active: Vec<bool> = v
+        .ext
+        .iter()
+        .map(|e| e[1] * h_voxel >= MIN_DIFFUSION_VOXEL_DEPTH)
+        .collect();
     let mut i0 = vec![[0.0f64; 3]; v.ext.len()];
     for c in 0..3 {
         let problem = Problem {
             dims,
             h,
-            kappa_tr: v.transport.iter().map(|t| t[c]).collect(),
+            kappa_tr: v
+                .transport
+                .iter()
+                .zip(&active)
+                .map(|(t, &on)| if on { t[c] } else { 0.0 })
+                .collect(),
             kappa_a: v
                 .ext
                 .iter()
@@ -394,7 +410,6 @@ pub fn render(
     let eye = frame.camera.position_m;
     let (w, hgt) = (frame.width, frame.height);
     let step = 0.5 * h.iter().copied().fold(f64::INFINITY, f64::min);
-    let h_voxel = (h[0] * h[1] * h[2]).cbrt();
     let t_sun: Vec<[f64; 3]> = tau_sun.iter().map(|t| t.map(|x| (-x).exp())).collect();
     let gathered: Vec<([f32; 3], f32, f64)> = (0..w * hgt)
         .into_par_iter()

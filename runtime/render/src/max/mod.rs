@@ -16,7 +16,9 @@
 //!    [`cpu::SKY_DIRECTIONS`] equal-solid-angle directions (the paper's 96 cube bins), each
 //!    reduced through the grid by its own sweep, adds β_sca S and g β_sca F_sky, S its mean
 //!    over the sphere and F_sky its flux over 4π.
-//! 3. **Diffusion** (Eqs. 4, 7) per channel on the voxels with β_ext > 0 ([`diffusion`]), with
+//! 3. **Diffusion** (Eqs. 4, 7) per channel on the voxels of optical depth β_ext h ≥
+//!    [`cpu::MIN_DIFFUSION_VOXEL_DEPTH`] ([`diffusion`]; the thinner fringe a grid's
+//!    interpolation leaves, down to 10⁻¹⁹ of the core, would stall the solver), with
 //!    κ_tr = β_ext (σ_tr/σ_t), the bake's `transport_factor` mixed over the fields by their
 //!    extinction, solved to [`MaxSettings::tolerance`] by multigrid-preconditioned CG.
 //! 4. **Final gather** (§4) along each pixel's ray in steps of half a voxel, front to back:
