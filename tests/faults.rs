@@ -90,9 +90,12 @@ fn stage_next_generation(lock: &BakeLock) -> Staging<'_> {
         entry.bytes = bytes.len() as u64;
         entry.crc32 = format::crc32_hex(&bytes);
         stage.write(&entry.file, &bytes).unwrap();
-        if let Some(single) = &entry.single_scattering {
-            let same = fs::read(dir.join(&single.file)).unwrap();
-            stage.write(&single.file, &same).unwrap();
+        for extra in [&entry.single_scattering, &entry.poisson]
+            .into_iter()
+            .flatten()
+        {
+            let same = fs::read(dir.join(&extra.file)).unwrap();
+            stage.write(&extra.file, &same).unwrap();
         }
     }
     stage
@@ -107,7 +110,8 @@ fn a_writer_killed_at_any_step_of_its_commit_never_shows_a_mix() {
     let dir = work.join("tables");
     bake_into(&scene("a", &["cloud", "rain"]), &dir).unwrap();
     let before = snapshot(&dir);
-    let files = before.len(); // cloud.exr, cloud.single.exr, manifest.json, rain.exr, rain.single.exr
+    // cloud.exr, cloud.poisson.exr, cloud.single.exr, manifest.json, and rain's three
+    let files = before.len();
 
     // Killed while staging (before the commit point): the previous bake is untouched, and
     // the next writer removes the stage.
@@ -357,9 +361,10 @@ fn a_full_disk_leaves_the_previous_bake_as_it_was() {
     let work = workdir("faults-full-disk");
     let dir = work.join("tables");
     fs::create_dir_all(&dir).unwrap();
-    // A 512 KiB tmpfs: room for a one-field bake of 4 orders, not for two fields of 60.
+    // A 3 MiB tmpfs: room for a one-field bake of 4 orders (1.7 MB with its Poisson table and
+    // cache record), not for two fields of 60 (6.9 MB).
     let mounted = Command::new("mount")
-        .args(["-t", "tmpfs", "-o", "size=512k", "tmpfs"])
+        .args(["-t", "tmpfs", "-o", "size=3m", "tmpfs"])
         .arg(&dir)
         .output();
     match mounted {

@@ -7,6 +7,8 @@
 //!   and a blurred Legendre series, n_iso(ε)) and [`ams::AmsMixture`], the per-wavelength
 //!   mixture an RGB channel is.
 //! - [`spectral`]: the wavelengths of a bake and their CIE × solar → linear sRGB weights.
+//! - [`biri`]: Biri et al. 2006's point-light in-scattering kernel for a tabulated phase
+//!   function — its exact primitive over the angle and the paper's quartic fit.
 //!
 //! The file format of a bake is `photometeor-format`; scenes, the bake planner and its cache
 //! are `photometeor-bake`.
@@ -14,6 +16,7 @@
 #![warn(missing_docs)]
 
 pub mod ams;
+pub mod biri;
 pub mod legendre;
 pub mod spectral;
 

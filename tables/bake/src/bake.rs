@@ -79,7 +79,8 @@ struct Record {
     sigma_ext_m2: Vec<f64>,
     albedo: Vec<f64>,
     poisson_depths: Vec<f64>,
-    poisson_rows: Vec<f64>,
+    /// As f32, the precision of the EXR they are written to (the bytes are the same).
+    poisson_rows: Vec<f32>,
 }
 
 impl Record {
@@ -96,7 +97,7 @@ impl Record {
             sigma_ext_m2: field.single.sigma_ext_m2.clone(),
             albedo: field.single.albedo.clone(),
             poisson_depths: field.poisson.depths.clone(),
-            poisson_rows: field.poisson.rows.iter().copied().collect(),
+            poisson_rows: field.poisson.rows.iter().map(|&v| v as f32).collect(),
         }
     }
 
@@ -111,7 +112,7 @@ impl Record {
         .ok()?;
         let poisson_rows = Array3::from_shape_vec(
             (3, self.poisson_depths.len(), self.angle_count),
-            self.poisson_rows,
+            self.poisson_rows.into_iter().map(f64::from).collect(),
         )
         .ok()?;
         Some(BakedField {
