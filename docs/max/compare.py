@@ -77,6 +77,9 @@ azimuth_deg = {azimuth}
 [sky]
 enabled = false
 
+[ground]
+albedo = 0.0
+
 [[volume]]
 field = "cloud"
 shape = "grid"

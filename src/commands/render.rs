@@ -194,8 +194,9 @@ pub fn run(a: RenderArgs) -> Result<()> {
             eprintln!(
                 "diffusion + Poisson edges (CPU, {} threads): {}×{}, grid {:?}: reduced sunlight \
                  {:.2} s, diffusion {:.2} s ({} unknowns, {} levels, {:?} CG iterations to \
-                 residuals {:.1e}/{:.1e}/{:.1e}), final gather {:.2} s; largest edge depth {:.2} \
-                 (grid built in {raster:.2} s)",
+                 residuals {:.1e}/{:.1e}/{:.1e}), clear-air propagation and second solve {:.2} s \
+                 (mean light across clear air {:.2e}), final gather {:.2} s; largest edge depth \
+                 {:.2} (grid built in {raster:.2} s)",
                 rayon::current_num_threads(),
                 frame.width,
                 frame.height,
@@ -208,6 +209,8 @@ pub fn run(a: RenderArgs) -> Result<()> {
                 report.residual[0],
                 report.residual[1],
                 report.residual[2],
+                report.clear_air_s,
+                report.clear_air_mean,
                 report.gather_s,
                 report.largest_edge_depth
             );

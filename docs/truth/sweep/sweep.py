@@ -79,6 +79,9 @@ azimuth_deg = {azimuth}
 [sky]
 enabled = false
 
+[ground]
+albedo = 0.0
+
 [[volume]]
 field = "{field}"
 shape = "grid"

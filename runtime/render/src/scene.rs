@@ -18,9 +18,10 @@
 //! max_threshold = 1.0       # --model max: voxel optical depth where diffusion takes over, > 0
 //! diffusion_tolerance = 1e-6       # --model max: relative residual of the solve, (0, 0.1]
 //! max_diffusion_iterations = 500   # --model max: CG iteration cap, [1, 100000]
+//! clear_air_iterations = 1  # --model max: §3's propagation across clear air, [0, 4]
 //!
 //! [ground]
-//! albedo = 0.0              # Lambertian ground at y = 0, [0, 1]; 0: black (--model truth only)
+//! albedo = 0.1              # Lambertian ground at y = 0, [0, 1] (default 0.1); 0: black
 //!
 //! [[light]]                 # point or spot light (--model truth only)
 //! position_m = [0, 50, 0]   # y > 0
@@ -98,6 +99,10 @@ struct File {
     haze: Option<HazeKeys>,
 }
 
+/// The ground's albedo when a scene has no `[ground] albedo` (issue 15: a grey ground, not a
+/// black one, for every model).
+pub const DEFAULT_GROUND_ALBEDO: f64 = 0.1;
+
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct HazeKeys {
@@ -152,6 +157,7 @@ struct RenderKeys {
     max_threshold: Option<f64>,
     diffusion_tolerance: Option<f64>,
     max_diffusion_iterations: Option<usize>,
+    clear_air_iterations: Option<usize>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -225,7 +231,8 @@ pub struct RenderScene {
     pub atmosphere: Atmosphere,
     /// The `[[volume]]` tables, at least one.
     pub volumes: Vec<Volume>,
-    /// `[ground] albedo`: a Lambertian ground at y = 0, [0, 1] (default 0, black).
+    /// `[ground] albedo`: a Lambertian ground at y = 0, [0, 1] (default
+    /// [`DEFAULT_GROUND_ALBEDO`]; 0 is black).
     pub ground_albedo: f64,
     /// The `[[light]]` tables.
     pub lights: Vec<crate::truth::Light>,
@@ -344,7 +351,10 @@ impl RenderScene {
                 "[render] grid_resolution = {grid_resolution} is outside the allowed range [2, 512]"
             )));
         }
-        let ground_albedo = file.ground.and_then(|g| g.albedo).unwrap_or(0.0);
+        let ground_albedo = file
+            .ground
+            .and_then(|g| g.albedo)
+            .unwrap_or(DEFAULT_GROUND_ALBEDO);
         if !(0.0..=1.0).contains(&ground_albedo) {
             return Err(err(format!(
                 "[ground] albedo = {ground_albedo} is outside the allowed range [0, 1]"
@@ -385,6 +395,9 @@ impl RenderScene {
             max_iterations: render
                 .max_diffusion_iterations
                 .unwrap_or(max_defaults.max_iterations),
+            clear_air_iterations: render
+                .clear_air_iterations
+                .unwrap_or(max_defaults.clear_air_iterations),
         };
         max.check().map_err(|e| err(e.0))?;
         let haze = match file.haze {

@@ -74,7 +74,8 @@ fn thin_uniform_box_gives_single_scattering_with_k_multi() {
             "[render]\nwidth = 32\nheight = 32\nslices = 256\nlight_resolution = 32\n\
              svs_a = 1.5\nk_multi = {k_multi}\nsvs_phase = \"{name}\"\n\n\
              [camera]\nposition_m = [0, 1500, 0]\nlook_at_m = [0, 1500, 5000]\nfov_deg = 20\n\n\
-             [sun]\nelevation_deg = 30\nazimuth_deg = 160\n\n[sky]\nenabled = false"
+             [sun]\nelevation_deg = 30\nazimuth_deg = 160\n\n[sky]\nenabled = false\n\n\
+             [ground]\nalbedo = 0.0"
         );
         let (scene, _) = uniform_box(
             tmp.path(),
@@ -311,6 +312,7 @@ fn a_shadow_in_the_haze_removes_its_single_scattering() {
             "[render]\nwidth = 16\nheight = 8\nslices = 512\nlight_resolution = 256\n\n\
              [camera]\nposition_m = [0, 300, 0]\nlook_at_m = [0, 300, 1000]\nfov_deg = 4\n\n\
              [sun]\nelevation_deg = 30\nazimuth_deg = 90\n\n[sky]\nenabled = false\n\n\
+             [ground]\nalbedo = 0.0\n\n\
              [haze]\nfield = \"haze\"\nnumber_density_per_m3 = {n0}\nscale_height_m = 1500"
         )
     };

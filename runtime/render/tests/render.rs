@@ -131,6 +131,9 @@ azimuth_deg = 160
 [sky]
 enabled = false
 
+[ground]
+albedo = 0.0
+
 [[volume]]
 field = "cloud"
 shape = "grid"
@@ -226,6 +229,9 @@ azimuth_deg = 90
 
 [sky]
 enabled = false
+
+[ground]
+albedo = 0.0
 
 [[volume]]
 field = "cloud"

@@ -98,6 +98,9 @@ azimuth_deg = 90
 [sky]
 enabled = false
 
+[ground]
+albedo = 0.0
+
 [haze]
 field = "haze"
 number_density_per_m3 = {n0}

@@ -18,7 +18,7 @@ use crate::scene::Field;
 pub const COMPUTE_VERSION: u32 = 7;
 
 /// Version of the record layout; a record of another layout is recomputed.
-const RECORD_LAYOUT: u32 = 3;
+const RECORD_LAYOUT: u32 = 4;
 
 /// Hash of every input that affects the field's result, lowercase hex.
 pub fn content_hash(plan: &BakePlan, field: &Field) -> String {

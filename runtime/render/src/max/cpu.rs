@@ -23,7 +23,12 @@ pub struct MaxReport {
     pub diffusion_s: f64,
     /// Seconds for the final gather and composition (steps 4, 5).
     pub gather_s: f64,
-    /// Conjugate-gradient iterations per channel.
+    /// Seconds for §3's clear-air propagation and the solve after it.
+    pub clear_air_s: f64,
+    /// The mean radiance (green) that reached a cloud voxel across clear air from other
+    /// parts (0 without the propagation).
+    pub clear_air_mean: f64,
+    /// Conjugate-gradient iterations per channel (over every solve).
     pub iterations: [usize; 3],
     /// Relative residual reached per channel.
     pub residual: [f64; 3],
@@ -86,9 +91,15 @@ fn voxel_size(grid: &DensityGrid) -> [f64; 3] {
     std::array::from_fn(|a| (grid.max_m[a] - grid.min_m[a]) / grid.dims[a] as f64)
 }
 
-/// Optical depth towards the sun at every voxel centre, per channel, by an upwind sweep along
-/// the light's direction of travel `l` (module docs, step 1).
-fn sun_depths(grid: &DensityGrid, ext: &[[f64; 3]], l: DVec3) -> Vec<[f64; 3]> {
+/// A state of N numbers per voxel centre, computed layer by layer along the direction of
+/// travel `l` (an upwind sweep): each voxel's state is `update(i, back, ds)` from the state
+/// `back` at the point one layer back along −l (bilinear in that layer; `None` beyond the box,
+/// where the light comes from clear air), `ds` the path length between the two.
+fn sweep<const N: usize>(
+    grid: &DensityGrid,
+    l: DVec3,
+    update: impl Fn(usize, Option<[f64; N]>, f64) -> [f64; N] + Sync,
+) -> Vec<[f64; N]> {
     let dims = grid.dims;
     let h = voxel_size(grid);
     let a = (0..3)
@@ -99,7 +110,7 @@ fn sun_depths(grid: &DensityGrid, ext: &[[f64; 3]], l: DVec3) -> Vec<[f64; 3]> {
     let ds = h[a] / l[a].abs();
     // The point one layer back, in voxel units along b and c.
     let (shift_b, shift_c) = (-ds * l[b] / h[b], -ds * l[c] / h[c]);
-    let mut tau = vec![[0.0f64; 3]; ext.len()];
+    let mut state = vec![[0.0f64; N]; grid.data.len()];
     let layers: Vec<usize> = if l[a] > 0.0 {
         (0..dims[a]).collect()
     } else {
@@ -107,53 +118,99 @@ fn sun_depths(grid: &DensityGrid, ext: &[[f64; 3]], l: DVec3) -> Vec<[f64; 3]> {
     };
     for (step, &k) in layers.iter().enumerate() {
         let prev = (step > 0).then(|| layers[step - 1]);
-        // Bilinear value of `f` in layer `layer` at continuous (u, v) (voxel centres at
-        // integers), or None outside it (clear air beyond the box).
-        let sample_layer =
-            |layer: usize, u: f64, v: f64, f: &dyn Fn(usize) -> [f64; 3]| -> Option<[f64; 3]> {
-                let (nb, nc) = (dims[b] as f64, dims[c] as f64);
-                if u < -0.5 || v < -0.5 || u > nb - 0.5 || v > nc - 0.5 {
-                    return None;
-                }
-                let (u, v) = (u.clamp(0.0, nb - 1.0), v.clamp(0.0, nc - 1.0));
-                let (u0, v0) = (u.floor() as usize, v.floor() as usize);
-                let (u1, v1) = ((u0 + 1).min(dims[b] - 1), (v0 + 1).min(dims[c] - 1));
-                let (s, t) = (u - u0 as f64, v - v0 as f64);
-                let at =
-                    |ub: usize, vc: usize| f(layer * stride[a] + ub * stride[b] + vc * stride[c]);
-                let (p00, p10, p01, p11) = (at(u0, v0), at(u1, v0), at(u0, v1), at(u1, v1));
-                Some(std::array::from_fn(|ch| {
-                    (1.0 - s) * (1.0 - t) * p00[ch]
-                        + s * (1.0 - t) * p10[ch]
-                        + (1.0 - s) * t * p01[ch]
-                        + s * t * p11[ch]
-                }))
-            };
-        let layer: Vec<(usize, [f64; 3])> = (0..dims[b] * dims[c])
+        let (nb, nc) = (dims[b] as f64, dims[c] as f64);
+        let back_of = |layer: usize, u: f64, v: f64| -> Option<[f64; N]> {
+            if u < -0.5 || v < -0.5 || u > nb - 0.5 || v > nc - 0.5 {
+                return None;
+            }
+            let (u, v) = (u.clamp(0.0, nb - 1.0), v.clamp(0.0, nc - 1.0));
+            let (u0, v0) = (u.floor() as usize, v.floor() as usize);
+            let (u1, v1) = ((u0 + 1).min(dims[b] - 1), (v0 + 1).min(dims[c] - 1));
+            let (s, t) = (u - u0 as f64, v - v0 as f64);
+            let at =
+                |ub: usize, vc: usize| &state[layer * stride[a] + ub * stride[b] + vc * stride[c]];
+            let (p00, p10, p01, p11) = (at(u0, v0), at(u1, v0), at(u0, v1), at(u1, v1));
+            Some(std::array::from_fn(|n| {
+                (1.0 - s) * (1.0 - t) * p00[n]
+                    + s * (1.0 - t) * p10[n]
+                    + (1.0 - s) * t * p01[n]
+                    + s * t * p11[n]
+            }))
+        };
+        let layer: Vec<(usize, [f64; N])> = (0..dims[b] * dims[c])
             .into_par_iter()
             .map(|m| {
                 let (ub, vc) = (m % dims[b], m / dims[b]);
                 let i = k * stride[a] + ub * stride[b] + vc * stride[c];
-                let here = ext[i];
-                let back = prev.and_then(|p| {
-                    let (u, v) = (ub as f64 + shift_b, vc as f64 + shift_c);
-                    let t = sample_layer(p, u, v, &|j| tau[j])?;
-                    let e = sample_layer(p, u, v, &|j| ext[j])?;
-                    Some((t, e))
-                });
-                let value = match back {
-                    Some((t, e)) => std::array::from_fn(|ch| t[ch] + 0.5 * ds * (here[ch] + e[ch])),
-                    // From the box's face (or clear air) half a voxel back.
-                    None => here.map(|x| 0.5 * ds * x),
-                };
-                (i, value)
+                let back = prev.and_then(|p| back_of(p, ub as f64 + shift_b, vc as f64 + shift_c));
+                (i, update(i, back, ds))
             })
             .collect();
         for (i, v) in layer {
-            tau[i] = v;
+            state[i] = v;
         }
     }
-    tau
+    state
+}
+
+/// Optical depth towards the light at every voxel centre, per channel (module docs, step 1):
+/// the depth one layer back plus the trapezoid of β_ext over the step (from the box's face, or
+/// clear air, half a voxel back for the first).
+fn sun_depths(grid: &DensityGrid, ext: &[[f64; 3]], l: DVec3) -> Vec<[f64; 3]> {
+    // State: τ per channel, then β_ext per channel (for the trapezoid).
+    let state = sweep::<6>(grid, l, |i, back, ds| {
+        let here = ext[i];
+        std::array::from_fn(|n| match (n, back) {
+            (0..=2, Some(b)) => b[n] + 0.5 * ds * (here[n] + b[n + 3]),
+            (0..=2, None) => 0.5 * ds * here[n],
+            _ => here[n - 3],
+        })
+    });
+    state.iter().map(|s| [s[0], s[1], s[2]]).collect()
+}
+
+/// Clear air shorter than this many sweep steps does not separate two parts of a cloud: the
+/// sweep's bilinear interpolation smears a part's own outgoing light one step into empty
+/// space beside its silhouette, which would otherwise come back as light "from another part".
+pub const MIN_CLEAR_AIR_STEPS: f64 = 2.0;
+
+/// §3's clear-air propagation for one direction of travel `l`: the radiance arriving at every
+/// voxel along `l` that left another part of the cloud and crossed clear air on the way. In a
+/// full voxel the light emitted so far by the current part (E, from `emission` per unit
+/// optical depth) grows and the light from other parts (A) is attenuated; in an empty voxel
+/// E becomes pending light P, which joins A when the ray enters a part again after at least
+/// [`MIN_CLEAR_AIR_STEPS`] of clear air (and is dropped otherwise). So a part's own light never
+/// counts as its incident light (its diffusion carries that).
+fn clear_air_light(
+    grid: &DensityGrid,
+    ext: &[[f64; 3]],
+    full: &[bool],
+    emission: impl Fn(usize) -> [f64; 3] + Sync,
+    l: DVec3,
+) -> Vec<[f64; 3]> {
+    // State: A (0..3), P (3..6), E (6..9), the clear-air length so far (9).
+    let state = sweep::<10>(grid, l, |i, back, ds| {
+        let b = back.unwrap_or([0.0; 10]);
+        let mut out = [0.0; 10];
+        if full[i] {
+            let crossed = b[9] >= MIN_CLEAR_AIR_STEPS * ds;
+            let em = emission(i);
+            for c in 0..3 {
+                let keep = (-ext[i][c] * ds).exp();
+                let a = b[c] + if crossed { b[3 + c] } else { 0.0 };
+                out[c] = a * keep;
+                out[6 + c] = b[6 + c] * keep + (1.0 - keep) * em[c];
+            }
+        } else {
+            for c in 0..3 {
+                out[c] = b[c];
+                out[3 + c] = b[3 + c] + b[6 + c];
+            }
+            out[9] = b[9] + ds;
+        }
+        out
+    });
+    state.iter().map(|s| [s[0], s[1], s[2]]).collect()
 }
 
 /// Trilinear interpolation of per-voxel `values` at `p` (voxel centres; clamped at the box's
@@ -245,24 +302,49 @@ struct Sky {
     flux: Vec<[DVec3; 3]>,
 }
 
+/// The [`SKY_DIRECTIONS`] directions (towards the sky, y up), a Fibonacci set.
+fn sky_directions() -> Vec<DVec3> {
+    let golden = PI * (3.0 - 5f64.sqrt());
+    (0..SKY_DIRECTIONS)
+        .map(|i| {
+            let z = 1.0 - (2.0 * i as f64 + 1.0) / SKY_DIRECTIONS as f64;
+            let r = (1.0 - z * z).sqrt();
+            let phi = golden * i as f64;
+            DVec3::new(r * phi.cos(), z, r * phi.sin())
+        })
+        .collect()
+}
+
+impl Sky {
+    fn zero(n: usize) -> Self {
+        Self {
+            mean: vec![[0.0; 3]; n],
+            flux: vec![[DVec3::ZERO; 3]; n],
+        }
+    }
+
+    /// Adds `radiance` per voxel arriving from direction `s` (travelling along −s) over the
+    /// solid angle 4π/[`SKY_DIRECTIONS`].
+    fn add(&mut self, s: DVec3, radiance: impl Fn(usize) -> [f64; 3]) {
+        let omega = 4.0 * PI / SKY_DIRECTIONS as f64;
+        for j in 0..self.mean.len() {
+            let r = radiance(j);
+            for c in 0..3 {
+                let w = r[c] * omega / (4.0 * PI);
+                self.mean[j][c] += w;
+                self.flux[j][c] -= w * s;
+            }
+        }
+    }
+}
+
 fn reduced_sky(frame: &Frame, ext: &[[f64; 3]]) -> Sky {
-    let n = ext.len();
-    let mut sky = Sky {
-        mean: vec![[0.0; 3]; n],
-        flux: vec![[DVec3::ZERO; 3]; n],
-    };
+    let mut sky = Sky::zero(ext.len());
     let grid = &frame.grid;
     let sun = frame.sun.direction();
     // The sky's radiance as seen from the middle of the box (Eqs. 11–15).
     let y = 0.5 * (grid.min_m.y + grid.max_m.y);
-    let omega = 4.0 * PI / SKY_DIRECTIONS as f64;
-    let golden = PI * (3.0 - 5f64.sqrt());
-    for i in 0..SKY_DIRECTIONS {
-        let z = 1.0 - (2.0 * i as f64 + 1.0) / SKY_DIRECTIONS as f64;
-        let r = (1.0 - z * z).sqrt();
-        let phi = golden * i as f64;
-        // Towards the sky (y up).
-        let s = DVec3::new(r * phi.cos(), z, r * phi.sin());
+    for s in sky_directions() {
         let k_end = if s.y < 0.0 { y / -s.y } else { f64::INFINITY };
         let l = frame.atmosphere.inscatter(y, s.y, k_end, sun.y, s.dot(sun));
         let radiance: [f64; 3] = std::array::from_fn(|c| frame.sun.irradiance[c] * l[c]);
@@ -270,13 +352,9 @@ fn reduced_sky(frame: &Frame, ext: &[[f64; 3]]) -> Sky {
             continue;
         }
         let tau = sun_depths(grid, ext, -s);
-        for (j, t) in tau.iter().enumerate() {
-            for c in 0..3 {
-                let w = radiance[c] * (-t[c]).exp() * omega / (4.0 * PI);
-                sky.mean[j][c] += w;
-                sky.flux[j][c] -= w * s;
-            }
-        }
+        sky.add(s, |j| {
+            std::array::from_fn(|c| radiance[c] * (-tau[j][c]).exp())
+        });
     }
     sky
 }
@@ -350,7 +428,7 @@ pub fn render(
             std::array::from_fn(|c| frame.sun.irradiance[c] * s_atm[c] * (-tau_sun[i][c]).exp())
         })
         .collect();
-    let sky = reduced_sky(frame, &v.ext);
+    let mut sky = reduced_sky(frame, &v.ext);
     report.propagation_s = start.elapsed().as_secs_f64();
 
     // 3: diffusion per channel.
@@ -364,44 +442,95 @@ pub fn render(
         .iter()
         .map(|e| e[1] * h_voxel >= MIN_DIFFUSION_VOXEL_DEPTH)
         .collect();
-    let mut i0 = vec![[0.0f64; 3]; v.ext.len()];
-    for c in 0..3 {
-        let problem = Problem {
-            dims,
-            h,
-            kappa_tr: v
-                .transport
-                .iter()
-                .zip(&active)
-                .map(|(t, &on)| if on { t[c] } else { 0.0 })
-                .collect(),
-            kappa_a: v
-                .ext
-                .iter()
-                .zip(&v.sca)
-                .map(|(e, s)| (e[c] - s[c]).max(0.0))
-                .collect(),
-            q0: (0..v.sca.len())
-                .map(|i| v.sca[i][c] * (reduced[i][c] / (4.0 * PI) + sky.mean[i][c]))
-                .collect(),
-            q1: (0..v.sca.len())
-                .map(|i| {
-                    let flux = light * reduced[i][c] / (4.0 * PI) + sky.flux[i][c];
-                    (flux * v.g_sca[i][c]).to_array()
-                })
-                .collect(),
-        };
-        let s = diffusion::solve(&problem, settings.tolerance, settings.max_iterations)
-            .map_err(|e| FrameError(format!("channel {}: {e}", ["R", "G", "B"][c])))?;
-        report.iterations[c] = s.iterations;
-        report.residual[c] = s.residual;
-        report.unknowns = s.unknowns;
-        report.levels = s.levels;
-        for (out, v) in i0.iter_mut().zip(&s.i0) {
-            out[c] = *v;
+    // One solve per channel with the reduced sun and the incident light `sky` (skylight, and
+    // after §3's propagation the clouds' light across clear air).
+    let solve = |sky: &Sky, report: &mut MaxReport| -> Result<Vec<[f64; 3]>, FrameError> {
+        let mut i0 = vec![[0.0f64; 3]; v.ext.len()];
+        for c in 0..3 {
+            let problem = Problem {
+                dims,
+                h,
+                kappa_tr: v
+                    .transport
+                    .iter()
+                    .zip(&active)
+                    .map(|(t, &on)| if on { t[c] } else { 0.0 })
+                    .collect(),
+                kappa_a: v
+                    .ext
+                    .iter()
+                    .zip(&v.sca)
+                    .map(|(e, s)| (e[c] - s[c]).max(0.0))
+                    .collect(),
+                q0: (0..v.sca.len())
+                    .map(|i| v.sca[i][c] * (reduced[i][c] / (4.0 * PI) + sky.mean[i][c]))
+                    .collect(),
+                q1: (0..v.sca.len())
+                    .map(|i| {
+                        let flux = light * reduced[i][c] / (4.0 * PI) + sky.flux[i][c];
+                        (flux * v.g_sca[i][c]).to_array()
+                    })
+                    .collect(),
+            };
+            let s = diffusion::solve(&problem, settings.tolerance, settings.max_iterations)
+                .map_err(|e| FrameError(format!("channel {}: {e}", ["R", "G", "B"][c])))?;
+            report.iterations[c] += s.iterations;
+            report.residual[c] = s.residual;
+            report.unknowns = s.unknowns;
+            report.levels = s.levels;
+            for (out, v) in i0.iter_mut().zip(&s.i0) {
+                out[c] = *v;
+            }
         }
-    }
+        Ok(i0)
+    };
+    let mut i0 = solve(&sky, &mut report)?;
     report.diffusion_s = start.elapsed().as_secs_f64();
+
+    // §3: the clouds' own light carried across clear air into other parts, then solved again.
+    let start = Instant::now();
+    for _ in 0..settings.clear_air_iterations {
+        let full: Vec<bool> = v.ext.iter().map(|e| e[1] > 0.0).collect();
+        let mut across = Sky::zero(v.ext.len());
+        for s_dir in sky_directions() {
+            // What a voxel sends along −s_dir per unit optical depth: α (I_0 + S) and the
+            // reduced sun scattered into −s_dir.
+            let rho_of = |i: usize| -> [f64; MAX_FIELDS] {
+                std::array::from_fn(|f| f64::from(grid.data[i][f]))
+            };
+            let cos = light.dot(-s_dir);
+            let emission = |i: usize| -> [f64; 3] {
+                let rho = rho_of(i);
+                let p1 = sample::mix(&fields, &rho, tables.theta_step_deg, 1.0, cos);
+                std::array::from_fn(|c| {
+                    let a = if v.ext[i][c] > 0.0 {
+                        v.sca[i][c] / v.ext[i][c]
+                    } else {
+                        0.0
+                    };
+                    a * (i0[i][c].max(0.0) + sky.mean[i][c] + p1[c] * reduced[i][c])
+                })
+            };
+            let l = clear_air_light(grid, &v.ext, &full, emission, -s_dir);
+            across.add(s_dir, |j| l[j]);
+        }
+        for (j, (m, f)) in across.mean.iter().zip(&across.flux).enumerate() {
+            for c in 0..3 {
+                sky.mean[j][c] += m[c];
+                sky.flux[j][c] += f[c];
+            }
+        }
+        report.clear_air_mean = across
+            .mean
+            .iter()
+            .zip(&full)
+            .filter(|(_, f)| **f)
+            .map(|(m, _)| m[1])
+            .sum::<f64>()
+            / full.iter().filter(|f| **f).count().max(1) as f64;
+        i0 = solve(&sky, &mut report)?;
+    }
+    report.clear_air_s = start.elapsed().as_secs_f64();
 
     // 4, 5: the final gather.
     let start = Instant::now();

@@ -21,7 +21,15 @@
 //!    interpolation leaves, down to 10⁻¹⁹ of the core, would stall the solver), with
 //!    κ_tr = β_ext (σ_tr/σ_t), the bake's `transport_factor` mixed over the fields by their
 //!    extinction, solved to [`MaxSettings::tolerance`] by multigrid-preconditioned CG.
-//! 4. **Final gather** (§4) along each pixel's ray in steps of half a voxel, front to back:
+//! 4. **Clear-air propagation** (§3, `[render] clear_air_iterations`, default 1 as the
+//!    paper): for each sky direction a second sweep carries the light the clouds send out (α
+//!    times I_0, the skylight and the sun scattered into that direction) across empty voxels
+//!    into other parts of the cloud, where it joins the incident light; then the diffusion is
+//!    solved again. The paper renders viewing cubes at the empty border voxels; the sweep is
+//!    the same idea along 32 directions. A part's own light never comes back to it: light
+//!    that re-enters after less than [`cpu::MIN_CLEAR_AIR_STEPS`] of clear air is dropped
+//!    (the sweep's interpolation smears a silhouette's light that far).
+//! 5. **Final gather** (§4) along each pixel's ray in steps of half a voxel, front to back:
 //!    - a voxel's share in the *dense* treatment emits α(I_0 + S + Ams_1(θ) E T_sun): the
 //!      diffusion solution, the reduced skylight scattered as if isotropic, and exact single
 //!      scattering of the reduced sun with the exact phase function (the bake's Ams_1);
@@ -33,7 +41,7 @@
 //!    - the share is w_edge = clamp(1.5 − τ_v/T, 0, 1), τ_v the voxel's optical depth β_ext h
 //!      (green) and T = [`MaxSettings::threshold`]: all edge below T/2, all dense above 3T/2,
 //!      linear between (the paper's "density dependent interpolation of the two").
-//! 5. The pixel is composed with the air, sun disk and ground as the other slicing models
+//! 6. The pixel is composed with the air, sun disk and ground as the other slicing models
 //!    ([`crate::riley`]); the ground is lit through the volume's T_sun along the sun's ray.
 //!
 //! # Where this departs from the paper
@@ -51,7 +59,7 @@
 //!   knows), without a cube; so like the paper it counts part of the multiply-scattered light
 //!   both in M and in I_0.
 //! - **Skylight** is scattered as if isotropic in the final gather (its directions enter the
-//!   diffusion's Q_1), and §3's clear-air propagation between cloud parts is not yet built.
+//!   diffusion's Q_1); so is the light that crossed clear air.
 //!
 //! Units: radiance per unit solar irradiance outside the atmosphere (1/sr) per channel.
 
@@ -71,6 +79,9 @@ pub struct MaxSettings {
     pub tolerance: f64,
     /// Conjugate-gradient iterations allowed, [1, 100000]. Default 500.
     pub max_iterations: usize,
+    /// Iterations of §3's clear-air propagation (the clouds' light carried across empty voxels
+    /// into other parts, then the diffusion solved again), [0, 4]. Default 1, as the paper.
+    pub clear_air_iterations: usize,
 }
 
 impl Default for MaxSettings {
@@ -79,6 +90,7 @@ impl Default for MaxSettings {
             threshold: 1.0,
             tolerance: 1e-6,
             max_iterations: 500,
+            clear_air_iterations: 1,
         }
     }
 }
@@ -104,6 +116,12 @@ impl MaxSettings {
             return Err(FrameError(format!(
                 "[render] max_diffusion_iterations = {} is outside the allowed range [1, 100000]",
                 self.max_iterations
+            )));
+        }
+        if self.clear_air_iterations > 4 {
+            return Err(FrameError(format!(
+                "[render] clear_air_iterations = {} is outside the allowed range [0, 4]",
+                self.clear_air_iterations
             )));
         }
         Ok(())

@@ -37,8 +37,8 @@
 //!   channel, attenuated by the air (and by the volumes, by ratio tracking). A camera ray that
 //!   leaves the scene without a collision inside the 0.5° disk sees I_s/Ω_disk, as the fast
 //!   models draw it.
-//! - **Ground.** A Lambertian plane at y = 0 of albedo `[ground] albedo` (0: black, as the
-//!   fast models' ground).
+//! - **Ground.** A Lambertian plane at y = 0 of albedo `[ground] albedo` (default 0.1, 0 is
+//!   black), the same ground as the fast models'.
 //! - **Lights.** Point lights of intensity I (per channel, the image's unit × m²/sr), spot
 //!   lights with a hard cone; I/r² times the transmittance.
 //! - **Estimators.** Next-event estimation toward the sun and every light at every scattering
