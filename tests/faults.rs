@@ -90,7 +90,7 @@ fn stage_next_generation(lock: &BakeLock) -> Staging<'_> {
         entry.bytes = bytes.len() as u64;
         entry.crc32 = format::crc32_hex(&bytes);
         stage.write(&entry.file, &bytes).unwrap();
-        for extra in [&entry.single_scattering, &entry.poisson]
+        for extra in [&entry.single_scattering, &entry.poisson, &entry.biri_kernel]
             .into_iter()
             .flatten()
         {
@@ -110,7 +110,8 @@ fn a_writer_killed_at_any_step_of_its_commit_never_shows_a_mix() {
     let dir = work.join("tables");
     bake_into(&scene("a", &["cloud", "rain"]), &dir).unwrap();
     let before = snapshot(&dir);
-    // cloud.exr, cloud.poisson.exr, cloud.single.exr, manifest.json, and rain's three
+    // cloud.exr, cloud.biri.exr, cloud.poisson.exr, cloud.single.exr, manifest.json, and
+    // rain's four
     let files = before.len();
 
     // Killed while staging (before the commit point): the previous bake is untouched, and
@@ -361,10 +362,10 @@ fn a_full_disk_leaves_the_previous_bake_as_it_was() {
     let work = workdir("faults-full-disk");
     let dir = work.join("tables");
     fs::create_dir_all(&dir).unwrap();
-    // A 3 MiB tmpfs: room for a one-field bake of 4 orders (1.7 MB with its Poisson table and
-    // cache record), not for two fields of 60 (6.9 MB).
+    // A 4 MiB tmpfs: room for a one-field bake of 4 orders (2.4 MB with its Poisson and Biri
+    // tables and cache record), not for two fields of 60 (8.3 MB).
     let mounted = Command::new("mount")
-        .args(["-t", "tmpfs", "-o", "size=3m", "tmpfs"])
+        .args(["-t", "tmpfs", "-o", "size=4m", "tmpfs"])
         .arg(&dir)
         .output();
     match mounted {

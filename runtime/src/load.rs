@@ -14,7 +14,7 @@
 
 use std::path::{Path, PathBuf};
 
-use format::{BakeDir, FieldImage, PoissonTable, SingleScatter};
+use format::{BakeDir, BiriTable, FieldImage, PoissonTable, SingleScatter};
 use grid::ThetaGrid;
 use ndarray::Axis;
 use thiserror::Error;
@@ -60,6 +60,9 @@ pub struct FieldTable {
     /// σ_tr/σ_t = 1 − α g per channel (the diffusion equation's transport cross-section over
     /// the extinction); `None` for bakes written before it existed.
     pub transport_factor: Option<[f64; 3]>,
+    /// Biri et al.'s point-light kernel of the field's Ams_1 (`<name>.biri.exr`); `None` for
+    /// bakes written before it existed.
+    pub biri: Option<BiriTable>,
 }
 
 impl FieldTable {
@@ -229,6 +232,13 @@ impl Tables {
                     file: path,
                 }
             })?;
+            let biri = bake.read_biri(entry).map_err(|e| {
+                let path = dir.join(format::biri_file_name(&entry.name));
+                LoadError {
+                    check: strip_path(&e.to_string(), &path),
+                    file: path,
+                }
+            })?;
             let ext = entry.sigma_ext_m2.as_array().map(|&v| v);
             let alb = entry.albedo.as_array().map(|&v| v);
             fields.push(FieldTable {
@@ -240,6 +250,7 @@ impl Tables {
                 albedo: alb,
                 single,
                 poisson,
+                biri,
                 transport_factor: entry
                     .transport_factor
                     .as_ref()

@@ -18,10 +18,10 @@
 //! - [`KernelTable::primitive`]: C(τ_h, θ_k) = ∫_{−π/2}^{θ_k} K(τ_h, θ') dθ', with the phase
 //!   function piecewise constant over its bins (as the tables define it) and the exponential
 //!   factor integrated by 8-point Gauss–Legendre over each half-bin, so Γ(P) is exact to the
-//!   interpolation between θ_k. Stored scaled by e^{τ_h} (the exponential's value at θ = 0), so
-//!   that f32 holds it for any τ_h.
+//!   interpolation between θ_k. Unscaled: the kernel is largest, e^{−τ_h g} → 1, at θ → −π/2
+//!   (g → 0), so C accumulates its O(p Δθ) start there and f32 holds it for any τ_h.
 //! - [`KernelTable::polynomial`]: the paper's c_0..c_4, K ≈ Σ c_j θ^j, by least squares over
-//!   θ ∈ [−π/2, π/2] (uniform weight), also scaled by e^{τ_h}; and
+//!   θ ∈ [−π/2, π/2] (uniform weight); and
 //!   [`KernelTable::polynomial_error`]: max_θ |C_poly(θ) − C(θ)| / C(π/2), the error of the
 //!   polynomial's primitive as a fraction of the whole ray's integral.
 //!
@@ -53,14 +53,14 @@ pub fn exponent_factor(theta: f64) -> f64 {
     (0.5 * theta + std::f64::consts::FRAC_PI_4).tan()
 }
 
-/// The kernel K(τ_h, θ) e^{τ_h} of one phase function given as bin averages on `grid`
-/// (module docs): θ ∈ [−π/2, π/2].
-pub fn kernel_scaled(grid: &ThetaGrid, bins: &[f64], tau: f64, theta: f64) -> f64 {
+/// The kernel K(τ_h, θ) of one phase function given as bin averages on `grid` (module docs):
+/// θ ∈ [−π/2, π/2].
+pub fn kernel(grid: &ThetaGrid, bins: &[f64], tau: f64, theta: f64) -> f64 {
     let alpha = (theta + std::f64::consts::FRAC_PI_2).to_degrees();
     let k = ((alpha / grid.step_deg()).round() as usize).min(bins.len() - 1);
     let g = exponent_factor(theta);
     let e = if g.is_finite() {
-        (-tau * (g - 1.0)).exp()
+        (-tau * g).exp()
     } else if tau == 0.0 {
         1.0
     } else {
@@ -74,9 +74,9 @@ pub fn kernel_scaled(grid: &ThetaGrid, bins: &[f64], tau: f64, theta: f64) -> f6
 pub struct KernelTable {
     /// τ_h values.
     pub depths: Vec<f64>,
-    /// `primitive[[j, k]]` = C(τ_j, θ_k) e^{τ_j}, θ_k = k Δθ − π/2.
+    /// `primitive[[j, k]]` = C(τ_j, θ_k), θ_k = k Δθ − π/2.
     pub primitive: Array2<f64>,
-    /// `polynomial[[j, i]]` = c_i(τ_j) e^{τ_j}, i = 0..=4, θ in radians.
+    /// `polynomial[[j, i]]` = c_i(τ_j), i = 0..=4, θ in radians.
     pub polynomial: Array2<f64>,
     /// Per τ_j: max_θ |C_poly − C| / C(π/2).
     pub polynomial_error: Vec<f64>,
@@ -94,18 +94,14 @@ const GAUSS8: [(f64, f64); 8] = [
     (0.960_289_856_497_536_3, 0.101_228_536_290_376_26),
 ];
 
-/// ∫_a^b e^{−τ (g(θ) − 1)} dθ by 8-point Gauss–Legendre.
+/// ∫_a^b e^{−τ g(θ)} dθ by 8-point Gauss–Legendre.
 fn exponential_integral(tau: f64, a: f64, b: f64) -> f64 {
     let (m, r) = (0.5 * (a + b), 0.5 * (b - a));
     GAUSS8
         .iter()
         .map(|(x, w)| {
             let g = exponent_factor(m + r * x);
-            w * if g.is_finite() {
-                (-tau * (g - 1.0)).exp()
-            } else {
-                0.0
-            }
+            w * if g.is_finite() { (-tau * g).exp() } else { 0.0 }
         })
         .sum::<f64>()
         * r
@@ -161,7 +157,7 @@ pub fn kernel_table(grid: &ThetaGrid, bins: &[f64]) -> KernelTable {
     }
 }
 
-/// Least squares of K e^{τ} by Σ c_i θ^i over [−π/2, π/2] (uniform weight, sampled at 16
+/// Least squares of K by Σ c_i θ^i over [−π/2, π/2] (uniform weight, sampled at 16
 /// points per bin), and the error of its primitive against `exact` (C at the bin centres)
 /// relative to the whole integral `total`.
 fn fit_polynomial(
@@ -182,7 +178,7 @@ fn fit_polynomial(
     for s in 0..samples {
         let x = -1.0 + (s as f64 + 0.5) * dx;
         let theta = x * FRAC_PI_2;
-        let k = kernel_scaled(grid, bins, tau, theta);
+        let k = kernel(grid, bins, tau, theta);
         let p = legendre5(x);
         for a in 0..5 {
             rhs[a] += p[a] * k * dx;
@@ -294,7 +290,8 @@ mod tests {
         let grid = ThetaGrid::new(0.18).unwrap();
         let bins = vec![1.0; grid.len()];
         for tau in [0.1, 1.0, 3.0] {
-            let f = |t: f64| kernel_scaled(&grid, &bins, tau, t);
+            // Our kernel over e^{−τ}: the expansion's bracket.
+            let f = |t: f64| kernel(&grid, &bins, tau, t) * tau.exp();
             let h = 1e-3;
             let d1 = (f(h) - f(-h)) / (2.0 * h);
             let d2 = (f(h) - 2.0 * f(0.0) + f(-h)) / (h * h);
@@ -351,7 +348,7 @@ mod tests {
             let table = kernel_table(&grid, &bins);
             let mut worst: f64 = 0.0;
             for (j, &tau) in table.depths.iter().enumerate().step_by(9) {
-                let f = |u: f64| (-tau * (u - 1.0)).exp() * p(u);
+                let f = |u: f64| (-tau * u).exp() * p(u);
                 let tail = if tau == 0.0 { p(1e9) } else { 0.0 };
                 let total = quadrature_in_u(&f, FRAC_PI_2, tail);
                 // θ up to 80° (u ≤ 11): beyond, the Simpson step in u is too coarse for τ = 100.

@@ -104,6 +104,7 @@ fn tables_spectral(
             single: Some(single),
             poisson: None,
             transport_factor: None,
+            biri: None,
         }],
         spectrum: Some(spectrum),
     }

@@ -290,6 +290,15 @@ pub fn run(plan: &BakePlan, progress: &dyn Progress) -> Result<BakeReport, BakeE
             bytes: poisson_bytes.len() as u64,
             crc32: format::crc32_hex(&poisson_bytes),
         });
+        // Biri's point-light kernel from Ams_1 per channel (cheap: not cached).
+        let biri_file = format::biri_file_name(&field.name);
+        let biri_bytes = format::biri_exr_bytes(&biri_kernel(&result.image))?;
+        stage.write(&biri_file, &biri_bytes)?;
+        entry.biri_kernel = Some(format::manifest::FileRef {
+            file: biri_file,
+            bytes: biri_bytes.len() as u64,
+            crc32: format::crc32_hex(&biri_bytes),
+        });
         entries.push(entry);
     }
     entries.extend(kept);
@@ -313,7 +322,8 @@ pub fn run(plan: &BakePlan, progress: &dyn Progress) -> Result<BakeReport, BakeE
             let stale = !manifest.fields.iter().any(|f| f.file == old.file);
             if stale {
                 let _ = std::fs::remove_file(plan.out_dir.join(&old.file));
-                for extra in [&old.single_scattering, &old.poisson].into_iter().flatten() {
+                let extras = [&old.single_scattering, &old.poisson, &old.biri_kernel];
+                for extra in extras.into_iter().flatten() {
                     let _ = std::fs::remove_file(plan.out_dir.join(&extra.file));
                 }
             }
@@ -432,6 +442,27 @@ fn field_entry(
         transport_factor: Some(PerChannel::from_array(std::array::from_fn(|c| {
             1.0 - s.albedo[c] * s.g[c]
         }))),
+        biri_kernel: None,
+    }
+}
+
+/// Biri et al.'s point-light kernel tables (`tables::biri`) of a field's Ams_1 per channel.
+pub fn biri_kernel(image: &FieldImage) -> format::BiriTable {
+    let grid = ThetaGrid::new(image.theta_step_deg).expect("a bake's own grid");
+    let tables: Vec<tables::biri::KernelTable> = (0..3)
+        .into_par_iter()
+        .map(|c| tables::biri::kernel_table(&grid, &image.row(c, 0).to_vec()))
+        .collect();
+    let depths = tables[0].depths.clone();
+    format::BiriTable {
+        field: image.field.clone(),
+        theta_step_deg: image.theta_step_deg,
+        primitive: Array3::from_shape_fn((3, depths.len(), grid.len()), |(c, j, k)| {
+            tables[c].primitive[[j, k]]
+        }),
+        polynomial: std::array::from_fn(|c| tables[c].polynomial.iter().copied().collect()),
+        polynomial_error: std::array::from_fn(|c| tables[c].polynomial_error.clone()),
+        depths,
     }
 }
 

@@ -388,3 +388,34 @@ fn the_poisson_table_and_transport_factor_are_written_and_read_back() {
         }
     }
 }
+
+#[test]
+fn the_biri_kernel_is_written_from_ams1_and_read_back() {
+    let dir = tempfile::tempdir().unwrap();
+    bake(SCENE, dir.path());
+    let bake_dir = format::BakeDir::open(dir.path()).unwrap();
+    let grid = ThetaGrid::new(0.18).unwrap();
+    for entry in &bake_dir.manifest.fields {
+        let table = bake_dir.read_biri(entry).unwrap().expect("a kernel table");
+        let image = read_field_exr(dir.path().join(&entry.file)).unwrap();
+        let rows = rows_of(&image);
+        for c in 0..3 {
+            // The kernel of the EXR's own Ams_1 (f32), recomputed: the same to f32 rounding
+            // of the inputs (the bake used the f64 rows).
+            let again = tables::biri::kernel_table(&grid, &rows[c][0]);
+            let mut worst: f64 = 0.0;
+            for j in 0..table.depths.len() {
+                let total = again.primitive[[j, grid.len() - 1]];
+                for k in 0..grid.len() {
+                    let d = (table.primitive[[c, j, k]] - again.primitive[[j, k]]).abs() / total;
+                    worst = worst.max(d);
+                }
+            }
+            assert!(worst < 1e-6, "{} channel {c}: {worst:e}", entry.name);
+            assert_eq!(table.polynomial_error[c].len(), table.depths.len());
+            // At τ_h = 0 the whole-ray integral of p(θ + π/2) dθ is ∫ p dα over [0, π]:
+            // not 1 (that is ∫ p dΩ), but positive and finite.
+            assert!(table.primitive[[c, 0, grid.len() - 1]] > 0.0);
+        }
+    }
+}

@@ -4,7 +4,8 @@
 //! one [`FieldEntry`] per particle field) and one OpenEXR file per field ([`exr`]: rows
 //! Ams_1..Ams_N × columns θ_k = k·Δθ, channels R, G, B in 1/sr, F_1..F_N in the header), and
 //! beside it the field's single-scattering optics per wavelength ([`single`]) and its Poisson
-//! mixtures of all scattering orders ([`poisson`]).
+//! mixtures of all scattering orders ([`poisson`]) and Biri et al.'s point-light kernel
+//! ([`biri`]).
 //! Writers go through [`write_file_atomically`]; readers through [`read_regular_file`], so a
 //! FIFO or a device is never read and no file is read past a size bound. Every reader checks
 //! what it reads against the contract, naming the file and the failed check.
@@ -15,6 +16,7 @@
 #![warn(missing_docs)]
 
 pub mod atomic;
+pub mod biri;
 pub mod commit;
 pub mod exr;
 pub mod manifest;
@@ -22,6 +24,7 @@ pub mod poisson;
 pub mod single;
 
 pub use atomic::{read_regular_file, write_file_atomically};
+pub use biri::{BiriTable, biri_exr_bytes, biri_file_name, decode_biri_exr};
 pub use commit::{
     BakeLock, CommitError, Staging, check_no_pending_commit, crc32_hex, roll_forward,
 };

@@ -153,6 +153,10 @@ pub struct FieldEntry {
     /// over the extinction cross-section (Max et al. 2004 §2); absent in older bakes.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub transport_factor: Option<PerChannel<f64>>,
+    /// The point-light kernel of the field's Ams_1 (`crate::biri`), for the `biri` model;
+    /// absent in bakes written before it existed.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub biri_kernel: Option<FileRef>,
 }
 
 /// A further file of a field: its name in the bake directory, size and CRC-32.
@@ -290,6 +294,15 @@ impl Manifest {
                     "poisson file {:?} is not the bake's own name, expected {:?}",
                     poisson.file,
                     crate::poisson::poisson_file_name(&f.name)
+                )));
+            }
+            if let Some(b) = &f.biri_kernel
+                && b.file != crate::biri::biri_file_name(&f.name)
+            {
+                return Err(at(format!(
+                    "biri_kernel file {:?} is not the bake's own name, expected {:?}",
+                    b.file,
+                    crate::biri::biri_file_name(&f.name)
                 )));
             }
             if let Some(t) = &f.transport_factor
@@ -586,6 +599,42 @@ impl BakeDir {
             )));
         }
         same_generation(&bytes, single.bytes, &single.crc32).map_err(mismatch)?;
+        Ok(Some(table))
+    }
+
+    /// Reads the point-light kernel EXR of `entry` (`crate::biri`), if the bake has one, and
+    /// checks it: the contract, then the field name, Δθ, K, and last its size and CRC-32.
+    pub fn read_biri(
+        &self,
+        entry: &FieldEntry,
+    ) -> Result<Option<crate::BiriTable>, crate::IoError> {
+        use crate::{ContractError, IoError};
+        let Some(file) = &entry.biri_kernel else {
+            return Ok(None);
+        };
+        let path = self.dir.join(&file.file);
+        let bytes = crate::exr::read_exr_bytes(&path)?;
+        let table = crate::biri::decode_biri_exr(&bytes, &path)?;
+        let mismatch = |what: String| IoError::Contract {
+            path: path.clone(),
+            check: ContractError::Manifest(what),
+        };
+        if table.field != entry.name
+            || table.theta_step_deg != self.manifest.theta_step_deg
+            || table.primitive.dim().2 != self.manifest.angle_count
+        {
+            return Err(mismatch(format!(
+                "field {:?} at Δθ = {}° with {} angles, manifest.json lists it for field {:?} at \
+                 {}° with {}",
+                table.field,
+                table.theta_step_deg,
+                table.primitive.dim().2,
+                entry.name,
+                self.manifest.theta_step_deg,
+                self.manifest.angle_count
+            )));
+        }
+        same_generation(&bytes, file.bytes, &file.crc32).map_err(mismatch)?;
         Ok(Some(table))
     }
 

@@ -127,18 +127,7 @@ pub fn poisson_exr_bytes(t: &PoissonTable) -> Result<Vec<u8>, IoError> {
         what: format!("Poisson table: {what}"),
     })?;
     let (_, j, k) = t.rows.dim();
-    let channel = |c: usize| -> Vec<f32> {
-        t.rows
-            .index_axis(ndarray::Axis(0), c)
-            .iter()
-            .map(|&v| v as f32)
-            .collect()
-    };
-    let channels = vec![
-        (Text::from("R"), channel(0)),
-        (Text::from("G"), channel(1)),
-        (Text::from("B"), channel(2)),
-    ];
+    let channels = rgb_channels(&t.rows);
     let attributes = vec![
         (attr::SCHEMA, AttributeValue::I32(POISSON_SCHEMA_VERSION)),
         (attr::FIELD, AttributeValue::Text(utf8_text(&t.field))),
@@ -154,6 +143,39 @@ pub fn poisson_exr_bytes(t: &PoissonTable) -> Result<Vec<u8>, IoError> {
 /// Decodes and checks the bytes of a Poisson-mixture EXR; `path` names it in errors.
 pub fn decode_poisson_exr(bytes: &[u8], path: &Path) -> Result<PoissonTable, IoError> {
     let file = Checked::read(bytes, path)?;
+    let rows = read_rgb_rows(&file)?;
+    file.schema(attr::SCHEMA, POISSON_SCHEMA_VERSION)?;
+    let field = file.text(attr::FIELD)?;
+    let theta_step_deg = file.double(attr::THETA_STEP_DEG)?;
+    let depths = file.f64_list(attr::DEPTHS, "comma-separated decimals")?;
+    let t = PoissonTable {
+        field,
+        theta_step_deg,
+        depths,
+        rows,
+    };
+    t.check()
+        .map_err(|why| file.contract(ContractError::Size(why)))?;
+    Ok(t)
+}
+
+/// The `R`, `G`, `B` channels of `rows` (channel, row, column) as f32, rows top to bottom.
+pub(crate) fn rgb_channels(rows: &Array3<f64>) -> Vec<(Text, Vec<f32>)> {
+    let channel = |c: usize| -> Vec<f32> {
+        rows.index_axis(ndarray::Axis(0), c)
+            .iter()
+            .map(|&v| v as f32)
+            .collect()
+    };
+    vec![
+        (Text::from("R"), channel(0)),
+        (Text::from("G"), channel(1)),
+        (Text::from("B"), channel(2)),
+    ]
+}
+
+/// The `R`, `G`, `B` 32-bit channels of `file` (exactly those) as (channel, row, column).
+pub(crate) fn read_rgb_rows(file: &Checked) -> Result<Array3<f64>, IoError> {
     let mut names = file.channel_names();
     names.sort();
     if names != ["B", "G", "R"] {
@@ -162,10 +184,6 @@ pub fn decode_poisson_exr(bytes: &[u8], path: &Path) -> Result<PoissonTable, IoE
         }));
     }
     file.check_sample_types()?;
-    file.schema(attr::SCHEMA, POISSON_SCHEMA_VERSION)?;
-    let field = file.text(attr::FIELD)?;
-    let theta_step_deg = file.double(attr::THETA_STEP_DEG)?;
-    let depths = file.f64_list(attr::DEPTHS, "comma-separated decimals")?;
     let (width, height) = (file.header().layer_size.0, file.header().layer_size.1);
     let channels = file.channels()?;
     let samples = |name: &str| {
@@ -176,18 +194,9 @@ pub fn decode_poisson_exr(bytes: &[u8], path: &Path) -> Result<PoissonTable, IoE
             .1
     };
     let planes = [samples("R"), samples("G"), samples("B")];
-    let rows = Array3::from_shape_fn((3, height, width), |(c, j, k)| {
+    Ok(Array3::from_shape_fn((3, height, width), |(c, j, k)| {
         f64::from(planes[c][j * width + k])
-    });
-    let t = PoissonTable {
-        field,
-        theta_step_deg,
-        depths,
-        rows,
-    };
-    t.check()
-        .map_err(|why| file.contract(ContractError::Size(why)))?;
-    Ok(t)
+    }))
 }
 
 #[cfg(test)]

@@ -584,6 +584,7 @@ fn sample_manifest() -> Manifest {
         single_scattering: None,
         poisson: None,
         transport_factor: None,
+        biri_kernel: None,
     };
     Manifest {
         schema: 2,
