@@ -208,13 +208,17 @@ impl Tables {
                     }
                 }
             }
-            let single = bake.read_single(entry).map_err(|e| {
-                let path = dir.join(format::single_file_name(&entry.name));
-                LoadError {
+            // A further file's failure, named by the file.
+            let side = |file: String| {
+                let path = dir.join(file);
+                move |e: format::IoError| LoadError {
                     check: strip_path(&e.to_string(), &path),
-                    file: path,
+                    file: path.clone(),
                 }
-            })?;
+            };
+            let single = bake
+                .read_single(entry)
+                .map_err(side(format::single_file_name(&entry.name)))?;
             if let (Some(t), Some(s)) = (&single, &spectrum)
                 && t.wavelengths_nm != s.wavelengths_nm
             {
@@ -225,20 +229,12 @@ impl Tables {
                     s.wavelengths_nm
                 )));
             }
-            let poisson = bake.read_poisson(entry).map_err(|e| {
-                let path = dir.join(format::poisson_file_name(&entry.name));
-                LoadError {
-                    check: strip_path(&e.to_string(), &path),
-                    file: path,
-                }
-            })?;
-            let biri = bake.read_biri(entry).map_err(|e| {
-                let path = dir.join(format::biri_file_name(&entry.name));
-                LoadError {
-                    check: strip_path(&e.to_string(), &path),
-                    file: path,
-                }
-            })?;
+            let poisson = bake
+                .read_poisson(entry)
+                .map_err(side(format::poisson_file_name(&entry.name)))?;
+            let biri = bake
+                .read_biri(entry)
+                .map_err(side(format::biri_file_name(&entry.name)))?;
             let ext = entry.sigma_ext_m2.as_array().map(|&v| v);
             let alb = entry.albedo.as_array().map(|&v| v);
             fields.push(FieldTable {

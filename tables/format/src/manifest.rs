@@ -570,109 +570,77 @@ impl BakeDir {
         &self,
         entry: &FieldEntry,
     ) -> Result<Option<crate::SingleScatter>, crate::IoError> {
-        use crate::{ContractError, IoError};
-        let Some(single) = &entry.single_scattering else {
-            return Ok(None);
-        };
-        let path = self.dir.join(&single.file);
-        let bytes = crate::exr::read_exr_bytes(&path)?;
-        let table = crate::single::decode_single_exr(&bytes, &path)?;
-        let mismatch = |what: String| IoError::Contract {
-            path: path.clone(),
-            check: ContractError::Manifest(what),
-        };
-        if table.field != entry.name {
-            return Err(mismatch(format!(
-                "field attribute {:?}, but manifest.json lists this file for field {:?}",
-                table.field, entry.name
-            )));
-        }
-        if table.theta_step_deg != self.manifest.theta_step_deg
-            || table.bins.ncols() != self.manifest.angle_count
-        {
-            return Err(mismatch(format!(
-                "Δθ = {}° with {} angles, manifest.json says {}° with {}",
-                table.theta_step_deg,
-                table.bins.ncols(),
-                self.manifest.theta_step_deg,
-                self.manifest.angle_count
-            )));
-        }
-        same_generation(&bytes, single.bytes, &single.crc32).map_err(mismatch)?;
-        Ok(Some(table))
-    }
-
-    /// Reads the point-light kernel EXR of `entry` (`crate::biri`), if the bake has one, and
-    /// checks it: the contract, then the field name, Δθ, K, and last its size and CRC-32.
-    pub fn read_biri(
-        &self,
-        entry: &FieldEntry,
-    ) -> Result<Option<crate::BiriTable>, crate::IoError> {
-        use crate::{ContractError, IoError};
-        let Some(file) = &entry.biri_kernel else {
-            return Ok(None);
-        };
-        let path = self.dir.join(&file.file);
-        let bytes = crate::exr::read_exr_bytes(&path)?;
-        let table = crate::biri::decode_biri_exr(&bytes, &path)?;
-        let mismatch = |what: String| IoError::Contract {
-            path: path.clone(),
-            check: ContractError::Manifest(what),
-        };
-        if table.field != entry.name
-            || table.theta_step_deg != self.manifest.theta_step_deg
-            || table.primitive.dim().2 != self.manifest.angle_count
-        {
-            return Err(mismatch(format!(
-                "field {:?} at Δθ = {}° with {} angles, manifest.json lists it for field {:?} at \
-                 {}° with {}",
-                table.field,
-                table.theta_step_deg,
-                table.primitive.dim().2,
-                entry.name,
-                self.manifest.theta_step_deg,
-                self.manifest.angle_count
-            )));
-        }
-        same_generation(&bytes, file.bytes, &file.crc32).map_err(mismatch)?;
-        Ok(Some(table))
+        self.read_side_file(
+            &entry.single_scattering,
+            entry,
+            crate::single::decode_single_exr,
+            |t| (t.field.as_str(), t.theta_step_deg, t.bins.ncols()),
+        )
     }
 
     /// Reads the Poisson-mixture EXR of `entry` (`crate::poisson`), if the bake has one, and
-    /// checks it: the contract, then the field name, Δθ, K, and last its size and CRC-32.
+    /// checks it as [`Self::read_single`] does.
     pub fn read_poisson(
         &self,
         entry: &FieldEntry,
     ) -> Result<Option<crate::PoissonTable>, crate::IoError> {
+        self.read_side_file(
+            &entry.poisson,
+            entry,
+            crate::poisson::decode_poisson_exr,
+            |t| (t.field.as_str(), t.theta_step_deg, t.rows.dim().2),
+        )
+    }
+
+    /// Reads the point-light kernel EXR of `entry` (`crate::biri`), if the bake has one, and
+    /// checks it as [`Self::read_single`] does.
+    pub fn read_biri(
+        &self,
+        entry: &FieldEntry,
+    ) -> Result<Option<crate::BiriTable>, crate::IoError> {
+        self.read_side_file(
+            &entry.biri_kernel,
+            entry,
+            crate::biri::decode_biri_exr,
+            |t| (t.field.as_str(), t.theta_step_deg, t.primitive.dim().2),
+        )
+    }
+
+    /// A further file of `entry` (`file`, if listed): decoded by `decode` (the contract), then
+    /// its field name, Δθ and angle count (`identity`) against the manifest, and last its size
+    /// and CRC-32.
+    fn read_side_file<T>(
+        &self,
+        file: &Option<FileRef>,
+        entry: &FieldEntry,
+        decode: fn(&[u8], &Path) -> Result<T, crate::IoError>,
+        identity: impl Fn(&T) -> (&str, f64, usize),
+    ) -> Result<Option<T>, crate::IoError> {
         use crate::{ContractError, IoError};
-        let Some(poisson) = &entry.poisson else {
+        let Some(file) = file else {
             return Ok(None);
         };
-        let path = self.dir.join(&poisson.file);
+        let path = self.dir.join(&file.file);
         let bytes = crate::exr::read_exr_bytes(&path)?;
-        let table = crate::poisson::decode_poisson_exr(&bytes, &path)?;
+        let table = decode(&bytes, &path)?;
         let mismatch = |what: String| IoError::Contract {
             path: path.clone(),
             check: ContractError::Manifest(what),
         };
-        if table.field != entry.name {
+        let (field, step, angles) = identity(&table);
+        if field != entry.name {
             return Err(mismatch(format!(
-                "field attribute {:?}, but manifest.json lists this file for field {:?}",
-                table.field, entry.name
+                "field attribute {field:?}, but manifest.json lists this file for field {:?}",
+                entry.name
             )));
         }
-        if table.theta_step_deg != self.manifest.theta_step_deg
-            || table.rows.dim().2 != self.manifest.angle_count
-        {
+        if step != self.manifest.theta_step_deg || angles != self.manifest.angle_count {
             return Err(mismatch(format!(
-                "Δθ = {}° with {} angles, manifest.json says {}° with {}",
-                table.theta_step_deg,
-                table.rows.dim().2,
-                self.manifest.theta_step_deg,
-                self.manifest.angle_count
+                "Δθ = {step}° with {angles} angles, manifest.json says {}° with {}",
+                self.manifest.theta_step_deg, self.manifest.angle_count
             )));
         }
-        same_generation(&bytes, poisson.bytes, &poisson.crc32).map_err(mismatch)?;
+        same_generation(&bytes, file.bytes, &file.crc32).map_err(mismatch)?;
         Ok(Some(table))
     }
 }
