@@ -82,6 +82,37 @@ pub struct KernelTable {
     pub polynomial_error: Vec<f64>,
 }
 
+impl KernelTable {
+    /// C(τ_h, θ) between the tabulated values: linear in θ between the bin centres; in τ_h,
+    /// quadratic in ln τ_h through the three nearest depths (linear in τ_h below the first
+    /// positive one, from the row at 0). τ_h beyond the last depth is clamped to it.
+    pub fn primitive_at(&self, grid: &ThetaGrid, tau: f64, theta: f64) -> f64 {
+        let step = grid.step_deg().to_radians();
+        let u = ((theta + std::f64::consts::FRAC_PI_2) / step).clamp(0.0, (grid.len() - 1) as f64);
+        let k0 = (u.floor() as usize).min(grid.len() - 2);
+        let t = u - k0 as f64;
+        let row = |j: usize| self.primitive[[j, k0]] * (1.0 - t) + self.primitive[[j, k0 + 1]] * t;
+        let d = &self.depths;
+        let tau = tau.clamp(0.0, *d.last().expect("depths"));
+        if tau <= d[1] {
+            let s = tau / d[1];
+            return row(0) * (1.0 - s) + row(1) * s;
+        }
+        // The three positive depths nearest to τ in ln τ.
+        let j = d.partition_point(|&x| x <= tau).clamp(2, d.len() - 1);
+        let (a, b, c) = if j + 1 < d.len() {
+            (j - 1, j, j + 1)
+        } else {
+            (j - 2, j - 1, j)
+        };
+        let x = tau.ln();
+        let (xa, xb, xc) = (d[a].ln(), d[b].ln(), d[c].ln());
+        row(a) * (x - xb) * (x - xc) / ((xa - xb) * (xa - xc))
+            + row(b) * (x - xa) * (x - xc) / ((xb - xa) * (xb - xc))
+            + row(c) * (x - xa) * (x - xb) / ((xc - xa) * (xc - xb))
+    }
+}
+
 /// Gauss–Legendre nodes and weights on [−1, 1], 8 points.
 const GAUSS8: [(f64, f64); 8] = [
     (-0.960_289_856_497_536_3, 0.101_228_536_290_376_26),
@@ -412,5 +443,60 @@ mod tests {
             "{:?}",
             iso.polynomial_error
         );
+    }
+
+    #[test]
+    fn the_table_gives_the_single_scattering_integral_of_eq_1() {
+        // A point light at distance h from a view ray in a homogeneous medium: Eq. 1's
+        // in-scattering ∫ e^{−k x} e^{−k r} p(α)/r² dx by Simpson in x, against
+        // (e^{−k t}/h) [C(τ_h, θ_d) − C(τ_h, θ_0)] from the table, τ_h = k h between its rows.
+        let grid = ThetaGrid::new(0.18).unwrap();
+        let edges = grid.edge_theta_rad();
+        let g: f64 = 0.85;
+        let hg: Vec<f64> = (0..grid.len())
+            .map(|k| {
+                let (a, b) = (edges[k].cos(), edges[k + 1].cos());
+                let prim =
+                    |m: f64| (1.0 - g * g) / (4.0 * PI * g * (1.0 + g * g - 2.0 * g * m).sqrt());
+                (prim(a) - prim(b)) / (a - b)
+            })
+            .collect();
+        let bin = |bins: &[f64], alpha: f64| {
+            bins[((alpha.to_degrees() / grid.step_deg()).round() as usize).min(bins.len() - 1)]
+        };
+        for (name, bins) in [("isotropic", isotropic(&grid)), ("HG 0.85", hg)] {
+            let table = kernel_table(&grid, &bins);
+            let mut worst: f64 = 0.0;
+            for (k_t, h, t, d) in [
+                (1e-3, 50.0, 100.0, 300.0),
+                (0.02, 30.0, 40.0, 200.0),
+                (0.3, 7.0, 5.0, 60.0),
+            ] {
+                let n = 400_000;
+                let dx = d / n as f64;
+                let f = |x: f64| {
+                    let r = (h * h + (x - t) * (x - t)).sqrt();
+                    let alpha = (-(x - t) / r).acos();
+                    (-k_t * (x + r)).exp() / (r * r) * bin(&bins, alpha)
+                };
+                let mut sum = f(0.0) + f(d);
+                for i in 1..n {
+                    sum += if i % 2 == 1 { 4.0 } else { 2.0 } * f(i as f64 * dx);
+                }
+                let direct = sum * dx / 3.0;
+                let (th0, thd) = ((-t / h).atan(), ((d - t) / h).atan());
+                let tau = k_t * h;
+                let ours = (-k_t * t).exp() / h
+                    * (table.primitive_at(&grid, tau, thd) - table.primitive_at(&grid, tau, th0));
+                let rel = ((ours - direct) / direct).abs();
+                eprintln!(
+                    "{name}: k_t {k_t}, h {h} (τ_h {tau}): table {ours:.6e}, Eq. 1 {direct:.6e}, {rel:.1e}"
+                );
+                worst = worst.max(rel);
+            }
+            // Measured ≤ 2.6e-4 (HG at τ_h = 2.1): the table's interpolation in θ and τ_h;
+            // the issue asks 1e-3.
+            assert!(worst < 3e-4, "{name}: {worst:e}");
+        }
     }
 }
