@@ -293,6 +293,18 @@ mod tests {
         vec![0.25 / PI; grid.len()]
     }
 
+    /// Henyey–Greenstein bin averages (exact, from its primitive in μ).
+    fn hg_bins(grid: &ThetaGrid, g: f64) -> Vec<f64> {
+        let edges = grid.edge_theta_rad();
+        let prim = |m: f64| (1.0 - g * g) / (4.0 * PI * g * (1.0 + g * g - 2.0 * g * m).sqrt());
+        (0..grid.len())
+            .map(|k| {
+                let (a, b) = (edges[k].cos(), edges[k + 1].cos());
+                (prim(a) - prim(b)) / (a - b)
+            })
+            .collect()
+    }
+
     /// ∫_{−π/2}^{θ} f(θ') dθ' by composite Simpson in u = tan(θ'/2 + π/4) ∈ [0, ∞)
     /// (dθ = 2 du/(1 + u²)), a different variable and rule from the table's, with `f` given
     /// as a function of u; the tail beyond u = 10⁴ is added analytically for τ = 0 (f → const).
@@ -406,16 +418,7 @@ mod tests {
         let grid = ThetaGrid::new(0.18).unwrap();
         let iso = kernel_table(&grid, &isotropic(&grid));
         // Henyey–Greenstein g = 0.9 bins: a forward peak a few degrees wide.
-        let edges = grid.edge_theta_rad();
-        let g: f64 = 0.9;
-        let hg: Vec<f64> = (0..grid.len())
-            .map(|k| {
-                let (a, b) = (edges[k].cos(), edges[k + 1].cos());
-                let prim =
-                    |m: f64| (1.0 - g * g) / (4.0 * PI * g * (1.0 + g * g - 2.0 * g * m).sqrt());
-                (prim(a) - prim(b)) / (a - b)
-            })
-            .collect();
+        let hg = hg_bins(&grid, 0.9);
         let peaked = kernel_table(&grid, &hg);
         for (j, &tau) in iso.depths.iter().enumerate().step_by(9) {
             eprintln!(
@@ -451,16 +454,7 @@ mod tests {
         // in-scattering ∫ e^{−k x} e^{−k r} p(α)/r² dx by Simpson in x, against
         // (e^{−k t}/h) [C(τ_h, θ_d) − C(τ_h, θ_0)] from the table, τ_h = k h between its rows.
         let grid = ThetaGrid::new(0.18).unwrap();
-        let edges = grid.edge_theta_rad();
-        let g: f64 = 0.85;
-        let hg: Vec<f64> = (0..grid.len())
-            .map(|k| {
-                let (a, b) = (edges[k].cos(), edges[k + 1].cos());
-                let prim =
-                    |m: f64| (1.0 - g * g) / (4.0 * PI * g * (1.0 + g * g - 2.0 * g * m).sqrt());
-                (prim(a) - prim(b)) / (a - b)
-            })
-            .collect();
+        let hg = hg_bins(&grid, 0.85);
         let bin = |bins: &[f64], alpha: f64| {
             bins[((alpha.to_degrees() / grid.step_deg()).round() as usize).min(bins.len() - 1)]
         };

@@ -64,8 +64,21 @@ impl DensityGrid {
 
     /// Trilinear density at `p` (voxel centres, clamped to the edge voxels inside the box).
     pub fn sample(&self, p: DVec3) -> [f64; MAX_FIELDS] {
+        let mut out = [0.0; MAX_FIELDS];
+        for (i, w) in self.taps(p).into_iter().flatten().flatten() {
+            for f in 0..MAX_FIELDS {
+                out[f] += w * self.data[i][f] as f64;
+            }
+        }
+        out
+    }
+
+    /// The voxels (indices into `data`, x fastest) and weights of a trilinear lookup at `p`
+    /// (voxel centres, clamped to the edge voxels inside the box), or `None` outside the box.
+    /// Zero-weight corners are left out (`None` entries).
+    pub fn taps(&self, p: DVec3) -> Option<[Option<(usize, f64)>; 8]> {
         if !self.contains(p) {
-            return [0.0; MAX_FIELDS];
+            return None;
         }
         let mut i0 = [0usize; 3];
         let mut t = [0f64; 3];
@@ -78,29 +91,15 @@ impl DensityGrid {
             t[a] = if n > 1 { u - lo as f64 } else { 0.0 };
         }
         let [nx, ny, _] = self.dims;
-        let at = |x: usize, y: usize, z: usize| self.data[x + nx * (y + ny * z)];
         let step = |a: usize| usize::from(self.dims[a] > 1);
-        let mut out = [0.0; MAX_FIELDS];
-        for corner in 0..8 {
-            let (dx, dy, dz) = (corner & 1, (corner >> 1) & 1, (corner >> 2) & 1);
-            let w = [dx, dy, dz]
-                .iter()
-                .enumerate()
-                .map(|(a, &d)| if d == 1 { t[a] } else { 1.0 - t[a] })
-                .product::<f64>();
-            if w == 0.0 {
-                continue;
-            }
-            let v = at(
-                i0[0] + dx * step(0),
-                i0[1] + dy * step(1),
-                i0[2] + dz * step(2),
-            );
-            for f in 0..MAX_FIELDS {
-                out[f] += w * v[f] as f64;
-            }
-        }
-        out
+        Some(std::array::from_fn(|corner| {
+            let d = [corner & 1, (corner >> 1) & 1, (corner >> 2) & 1];
+            let w: f64 = (0..3)
+                .map(|a| if d[a] == 1 { t[a] } else { 1.0 - t[a] })
+                .product();
+            let at = |a: usize| i0[a] + d[a] * step(a);
+            (w != 0.0).then(|| (at(0) + nx * (at(1) + ny * at(2)), w))
+        }))
     }
 
     /// Largest density per field.

@@ -67,17 +67,7 @@ max_m = [500, 2000, 5500]
 /// A soft ball of cloud, 32³ voxels over a 1 km box, `tau` through its centre, side-lit.
 fn ball(tables: &Tables, dir: &Path, tau: f64) -> Frame {
     let n = 32;
-    let mut bytes = Vec::with_capacity(4 * n * n * n);
-    for z in 0..n {
-        for y in 0..n {
-            for x in 0..n {
-                let c = |i: usize| (i as f64 + 0.5) / n as f64 * 2.0 - 1.0;
-                let r = (c(x).powi(2) + c(y).powi(2) + c(z).powi(2)).sqrt();
-                bytes.extend_from_slice(&((1.0 - r).max(0.0).sqrt() as f32).to_le_bytes());
-            }
-        }
-    }
-    std::fs::write(dir.join("ball.f32"), bytes).unwrap();
+    common::write_soft_ball(&dir.join("ball.f32"), n);
     let density = tau / (0.666 * 1000.0 * tables.field("cloud").unwrap().sigma_ext_m2[1]);
     let text = format!(
         r#"{}

@@ -195,17 +195,7 @@ fn side_lit_ball(
     let n = 48;
     let file = dir.join("ball.f32");
     if !file.exists() {
-        let mut bytes = Vec::with_capacity(4 * n * n * n);
-        for z in 0..n {
-            for y in 0..n {
-                for x in 0..n {
-                    let c = |i: usize| (i as f64 + 0.5) / n as f64 * 2.0 - 1.0;
-                    let r = (c(x).powi(2) + c(y).powi(2) + c(z).powi(2)).sqrt();
-                    bytes.extend_from_slice(&((1.0 - r).max(0.0).sqrt() as f32).to_le_bytes());
-                }
-            }
-        }
-        std::fs::write(&file, bytes).unwrap();
+        common::write_soft_ball(&file, n);
     }
     // ∫ sqrt(1 − |x|) over the diameter of the unit box's ball: 2·(2/3) of the box side / 2.
     let density = tau / (0.666 * 1000.0 * tables.field("cloud").unwrap().sigma_ext_m2[1]);

@@ -166,3 +166,20 @@ pub fn assert_gpu_matches_cpu(
     assert!(seen > 100, "{what}: the volumes cover only {seen} pixels");
     worst
 }
+
+/// Writes an n³ little-endian f32 density file of a soft ball, sqrt(1 − r) over the unit
+/// ball of the grid's box (the τ sweep's and the light-buffer tests' ball).
+#[allow(dead_code)]
+pub fn write_soft_ball(path: &std::path::Path, n: usize) {
+    let mut bytes = Vec::with_capacity(4 * n * n * n);
+    for z in 0..n {
+        for y in 0..n {
+            for x in 0..n {
+                let c = |i: usize| (i as f64 + 0.5) / n as f64 * 2.0 - 1.0;
+                let r = (c(x).powi(2) + c(y).powi(2) + c(z).powi(2)).sqrt();
+                bytes.extend_from_slice(&((1.0 - r).max(0.0).sqrt() as f32).to_le_bytes());
+            }
+        }
+    }
+    std::fs::write(path, bytes).unwrap();
+}

@@ -278,32 +278,31 @@ impl Manifest {
                     f.file, f.name
                 )));
             }
-            if let Some(single) = &f.single_scattering
-                && single.file != crate::single::single_file_name(&f.name)
-            {
-                return Err(at(format!(
-                    "single_scattering file {:?} is not the bake's own name, expected {:?}",
-                    single.file,
-                    crate::single::single_file_name(&f.name)
-                )));
-            }
-            if let Some(poisson) = &f.poisson
-                && poisson.file != crate::poisson::poisson_file_name(&f.name)
-            {
-                return Err(at(format!(
-                    "poisson file {:?} is not the bake's own name, expected {:?}",
-                    poisson.file,
-                    crate::poisson::poisson_file_name(&f.name)
-                )));
-            }
-            if let Some(b) = &f.biri_kernel
-                && b.file != crate::biri::biri_file_name(&f.name)
-            {
-                return Err(at(format!(
-                    "biri_kernel file {:?} is not the bake's own name, expected {:?}",
-                    b.file,
-                    crate::biri::biri_file_name(&f.name)
-                )));
+            for (key, file, own) in [
+                (
+                    "single_scattering",
+                    &f.single_scattering,
+                    crate::single::single_file_name(&f.name),
+                ),
+                (
+                    "poisson",
+                    &f.poisson,
+                    crate::poisson::poisson_file_name(&f.name),
+                ),
+                (
+                    "biri_kernel",
+                    &f.biri_kernel,
+                    crate::biri::biri_file_name(&f.name),
+                ),
+            ] {
+                if let Some(file) = file
+                    && file.file != own
+                {
+                    return Err(at(format!(
+                        "{key} file {:?} is not the bake's own name, expected {own:?}",
+                        file.file
+                    )));
+                }
             }
             if let Some(t) = &f.transport_factor
                 && let Some((c, v)) = ["R", "G", "B"]

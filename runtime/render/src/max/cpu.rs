@@ -222,32 +222,12 @@ fn trilinear(
     active: Option<&[bool]>,
     p: DVec3,
 ) -> [f64; 3] {
-    if !grid.contains(p) {
+    let Some(taps) = grid.taps(p) else {
         return [0.0; 3];
-    }
-    let dims = grid.dims;
-    let mut i0 = [0usize; 3];
-    let mut t = [0.0f64; 3];
-    for a in 0..3 {
-        let n = dims[a];
-        let u = (p[a] - grid.min_m[a]) / (grid.max_m[a] - grid.min_m[a]) * n as f64 - 0.5;
-        let u = u.clamp(0.0, (n - 1) as f64);
-        let lo = (u.floor() as usize).min(n.saturating_sub(2));
-        i0[a] = lo;
-        t[a] = if n > 1 { u - lo as f64 } else { 0.0 };
-    }
+    };
     let mut out = [0.0; 3];
     let mut total = 0.0;
-    for corner in 0..8 {
-        let d = [corner & 1, (corner >> 1) & 1, (corner >> 2) & 1];
-        let w: f64 = (0..3)
-            .map(|a| if d[a] == 1 { t[a] } else { 1.0 - t[a] })
-            .product();
-        if w == 0.0 {
-            continue;
-        }
-        let idx: [usize; 3] = std::array::from_fn(|a| (i0[a] + d[a]).min(dims[a] - 1));
-        let i = idx[0] + dims[0] * (idx[1] + dims[1] * idx[2]);
+    for (i, w) in taps.into_iter().flatten() {
         if active.is_some_and(|m| !m[i]) {
             continue;
         }
