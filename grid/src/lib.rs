@@ -223,6 +223,49 @@ impl ThetaGrid {
     }
 }
 
+/// Interpolation weights in an optical depth τ over a table's ascending `depths` (`depths[0]
+/// = 0`, then positive values spaced evenly in ln τ): quadratic in ln τ through the three
+/// nearest positive depths; linear in τ between the rows at 0 and `depths[1]`; τ beyond the
+/// last depth is clamped to it. Shared by every table over (τ, θ) (Biri's kernel: the bake's
+/// check and the renderers' lookup) so both read it the same way. Returns three
+/// (row, weight) pairs whose weights sum to 1.
+pub fn depth_weights(depths: &[f64], tau: f64) -> [(usize, f64); 3] {
+    assert!(
+        depths.len() >= 4 && depths[0] == 0.0,
+        "0 and ≥ 3 positive depths"
+    );
+    let tau = tau.clamp(0.0, depths[depths.len() - 1]);
+    if tau <= depths[1] {
+        let s = tau / depths[1];
+        return [(0, 1.0 - s), (1, s), (2, 0.0)];
+    }
+    let j = depths
+        .partition_point(|&x| x <= tau)
+        .clamp(2, depths.len() - 1);
+    let (a, b, c) = if j + 1 < depths.len() {
+        (j - 1, j, j + 1)
+    } else {
+        (j - 2, j - 1, j)
+    };
+    let x = tau.ln();
+    let (xa, xb, xc) = (depths[a].ln(), depths[b].ln(), depths[c].ln());
+    [
+        (a, (x - xb) * (x - xc) / ((xa - xb) * (xa - xc))),
+        (b, (x - xa) * (x - xc) / ((xb - xa) * (xb - xc))),
+        (c, (x - xa) * (x - xb) / ((xc - xa) * (xc - xb))),
+    ]
+}
+
+/// The column k₀ and weight t of a kernel angle θ ∈ [−π/2, π/2] on a table whose columns are
+/// the scattering angles θ + π/2 of a `grid` (θ_k = k·Δθ − π/2): the value there is
+/// (1 − t)·v[k₀] + t·v[k₀ + 1].
+pub fn kernel_column(grid: &ThetaGrid, theta: f64) -> (usize, f64) {
+    let step = grid.step_deg().to_radians();
+    let u = ((theta + std::f64::consts::FRAC_PI_2) / step).clamp(0.0, (grid.len() - 1) as f64);
+    let k0 = (u.floor() as usize).min(grid.len() - 2);
+    (k0, u - k0 as f64)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -144,3 +144,55 @@ pub fn poisson_mix(
         poisson(f, theta_step_deg, depth, cos_theta).unwrap_or([0.0; 3])
     })
 }
+
+/// Biri et al.'s kernel primitive C(τ_h, θ) of channel `c` (`format::biri`; θ ∈ [−π/2, π/2]
+/// the angle at the light from the ray's foot point, radians). The table holds C at the bin
+/// centres θ_k; within bin k the phase function is the constant Ams_1 bin value p_k (the
+/// tables' own definition), so C(θ) = C(θ_k) + p_k ∫_{θ_k}^{θ} e^{−τ_h g}, the integral by
+/// the midpoint rule over less than half a bin: exact to the bins, where a line between
+/// centres would miss the kink at each bin edge (up to ~3·10⁻³ of a ray's light where the
+/// ray's end sees a fog's forward lobe). C(θ_k) is quadratic in ln τ_h between the depths
+/// (`grid::depth_weights`). `None` if the bake has no kernel table.
+pub fn biri_primitive(
+    field: &FieldTable,
+    grid: &grid::ThetaGrid,
+    c: usize,
+    tau_h: f64,
+    theta: f64,
+) -> Option<f64> {
+    use std::f64::consts::FRAC_PI_2;
+    let t = field.biri.as_ref()?;
+    let step = grid.step_deg().to_radians();
+    let theta = theta.clamp(-FRAC_PI_2, FRAC_PI_2);
+    let k = (((theta + FRAC_PI_2) / step).round() as usize).min(grid.len() - 1);
+    let centre = k as f64 * step - FRAC_PI_2;
+    let at_centre: f64 = grid::depth_weights(&t.depths, tau_h)
+        .iter()
+        .map(|&(j, w)| w * t.primitive[[c, j, k]])
+        .sum();
+    // e^{−τ_h g} at the middle of [θ_k, θ] (g = tan(θ/2 + π/4) → ∞ at π/2).
+    let g = (0.25 * (theta + centre) + std::f64::consts::FRAC_PI_4).tan();
+    let e = if tau_h == 0.0 {
+        1.0
+    } else if g.is_finite() {
+        (-tau_h.min(*t.depths.last().expect("depths")) * g).exp()
+    } else {
+        0.0
+    };
+    Some(at_centre + field.image.ams[[c, 0, k]] * e * (theta - centre))
+}
+
+/// The paper's quartic coefficients c_0..c_4 (Biri et al. 2006 Eq. 2, θ in radians) of channel
+/// `c` at τ_h, interpolated in τ_h as [`biri_primitive`]. `None` if the bake has no kernel
+/// table.
+pub fn biri_polynomial(field: &FieldTable, c: usize, tau_h: f64) -> Option<[f64; 5]> {
+    let t = field.biri.as_ref()?;
+    let rows = &t.polynomial[c];
+    let mut out = [0.0; 5];
+    for (j, w) in grid::depth_weights(&t.depths, tau_h) {
+        for (i, o) in out.iter_mut().enumerate() {
+            *o += w * rows[5 * j + i];
+        }
+    }
+    Some(out)
+}

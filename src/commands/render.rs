@@ -64,9 +64,16 @@ pub struct RenderArgs {
     /// k_multi, shadows on the ground and in the air, an aerosol [haze] layer) or `max` (Max et
     /// al. 2004: a diffusion solve in the dense core, Poisson-weighted multiple anisotropic
     /// scattering from the bake's M(D, θ) at the tenuous edges; CPU, all cores; [render]
-    /// max_threshold, diffusion_tolerance, max_diffusion_iterations).
-    #[arg(long, default_value = "riley", value_parser = ["riley", "truth", "miyazaki", "max"])]
+    /// max_threshold, diffusion_tolerance, max_diffusion_iterations) or `biri` (Biri, Arquès &
+    /// Michelin 2006: single scattering of [[light]]s in homogeneous [[medium]]s in closed
+    /// form, volumetric shadows of [[occluder]]s from their silhouette planes; CPU).
+    #[arg(long, default_value = "riley", value_parser = ["riley", "truth", "miyazaki", "max", "biri"])]
     model: String,
+    /// --model biri: the kernel's integral, `exact` (the bake's primitive C(τ_h, θ),
+    /// interpolated) or `polynomial` (the paper's degree-4 fit, Eq. 2); overrides [render]
+    /// biri_kernel.
+    #[arg(long, value_parser = ["exact", "polynomial"])]
+    biri_kernel: Option<String>,
     /// --model truth: samples (paths) per pixel, [1, 1048576] (overrides [render] spp).
     #[arg(long)]
     spp: Option<usize>,
@@ -180,10 +187,41 @@ pub fn run(a: RenderArgs) -> Result<()> {
                 r.light_update = u;
             }
             r.seed = a.seed.unwrap_or(r.seed);
+            if let Some(k) = a
+                .biri_kernel
+                .as_deref()
+                .and_then(render::biri::Kernel::parse)
+            {
+                r.biri.kernel = k;
+            }
         },
     )?;
     if a.model == "truth" {
         return run_truth(&a, &render, &tables);
+    }
+    if a.model == "biri" {
+        let t = Instant::now();
+        let (image, report) = render::biri::cpu::render(&tables, &render)?;
+        if !a.quiet {
+            let all = t.elapsed().as_secs_f64();
+            let share = |s: f64| 100.0 * s / all.max(1e-12);
+            eprintln!(
+                "analytic single scattering (CPU reference, {} threads, {} kernel): {}×{}, {} \
+                 light(s), {} shadow planes, {:.2} crossings per ray and light: {all:.3} s \
+                 (silhouettes {:.1} %, surfaces {:.1} %, medium and shadow planes {:.1} %)",
+                rayon::current_num_threads(),
+                render.biri.kernel.name(),
+                image.width,
+                image.height,
+                render.lights.len(),
+                report.shadow_planes,
+                report.crossings_per_ray,
+                share(report.silhouettes_s),
+                share(report.surfaces_s),
+                share(report.medium_s)
+            );
+        }
+        return write_outputs(&a, &render, &image, Vec::new());
     }
     let started = Instant::now();
     let frame: Frame = render.frame(&tables)?;

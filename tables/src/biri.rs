@@ -87,29 +87,13 @@ impl KernelTable {
     /// quadratic in ln τ_h through the three nearest depths (linear in τ_h below the first
     /// positive one, from the row at 0). τ_h beyond the last depth is clamped to it.
     pub fn primitive_at(&self, grid: &ThetaGrid, tau: f64, theta: f64) -> f64 {
-        let step = grid.step_deg().to_radians();
-        let u = ((theta + std::f64::consts::FRAC_PI_2) / step).clamp(0.0, (grid.len() - 1) as f64);
-        let k0 = (u.floor() as usize).min(grid.len() - 2);
-        let t = u - k0 as f64;
-        let row = |j: usize| self.primitive[[j, k0]] * (1.0 - t) + self.primitive[[j, k0 + 1]] * t;
-        let d = &self.depths;
-        let tau = tau.clamp(0.0, *d.last().expect("depths"));
-        if tau <= d[1] {
-            let s = tau / d[1];
-            return row(0) * (1.0 - s) + row(1) * s;
-        }
-        // The three positive depths nearest to τ in ln τ.
-        let j = d.partition_point(|&x| x <= tau).clamp(2, d.len() - 1);
-        let (a, b, c) = if j + 1 < d.len() {
-            (j - 1, j, j + 1)
-        } else {
-            (j - 2, j - 1, j)
-        };
-        let x = tau.ln();
-        let (xa, xb, xc) = (d[a].ln(), d[b].ln(), d[c].ln());
-        row(a) * (x - xb) * (x - xc) / ((xa - xb) * (xa - xc))
-            + row(b) * (x - xa) * (x - xc) / ((xb - xa) * (xb - xc))
-            + row(c) * (x - xa) * (x - xb) / ((xc - xa) * (xc - xb))
+        let (k0, t) = grid::kernel_column(grid, theta);
+        grid::depth_weights(&self.depths, tau)
+            .iter()
+            .map(|&(j, w)| {
+                w * (self.primitive[[j, k0]] * (1.0 - t) + self.primitive[[j, k0 + 1]] * t)
+            })
+            .sum()
     }
 }
 

@@ -17,14 +17,18 @@
 //! - [`truth`]: an unbiased spectral Monte Carlo path tracer of the full radiative transfer on
 //!   the same scene (`--model truth`), the reference every fast model is measured against.
 //!
-//! A new model (Biri's analytic single scattering) goes beside them as `src/<model>/`, using
-//! the same scene, volumes, sky, camera and image.
+//! - [`biri`]: Biri, Arquès & Michelin 2006 — single scattering of point and spot lights in
+//!   homogeneous media in closed form per ray, volumetric shadows from the occluders'
+//!   silhouette planes (`--model biri`, CPU).
+//!
+//! A new model goes beside them as `src/<model>/`, using the same scene, camera and image.
 //!
 //! Units: radiance per unit solar irradiance outside the atmosphere (1/sr) per channel; lengths
 //! in metres, y up, sea level at y = 0.
 
 #![warn(missing_docs)]
 
+pub mod biri;
 pub mod camera;
 pub mod error_map;
 pub mod image;

@@ -19,15 +19,34 @@
 //! diffusion_tolerance = 1e-6       # --model max: relative residual of the solve, (0, 0.1]
 //! max_diffusion_iterations = 500   # --model max: CG iteration cap, [1, 100000]
 //! clear_air_iterations = 1  # --model max: §3's propagation across clear air, [0, 4]
+//! biri_kernel = "exact"     # --model biri: "exact" (the kernel's primitive) or "polynomial" (Eq. 2)
 //!
 //! [ground]
 //! albedo = 0.1              # Lambertian ground at y = 0, [0, 1] (default 0.1); 0: black
 //!
-//! [[light]]                 # point or spot light (--model truth only)
-//! position_m = [0, 50, 0]   # y > 0
-//! intensity = [1e4, 1e4, 1e4]   # per channel: irradiance I/r² in the image's unit at r metres
+//! [[light]]                 # point or spot light (--model truth, biri)
+//! position_m = [0, 50, 0]   # y > 0, outside every occluder
+//! intensity = [1e4, 1e4, 1e4]   # per channel, ≥ 0: irradiance I/r² in the image's unit at r metres
 //! spot_direction = [0, -1, 0]   # optional: a spot's axis
-//! spot_half_angle_deg = 30      # with spot_direction, (0, 180]
+//! spot_half_angle_deg = 30      # with spot_direction, (0, 180)
+//!
+//! [[medium]]                # --model biri: a homogeneous medium of a baked field
+//! field = "fog"             # a [[field]] of the scene
+//! number_density_per_m3 = 1e8   # > 0; β_ext = N σ_ext
+//! min_m = [-10, 0, -10]     # optional box (both corners); absent: the whole scene
+//! max_m = [10, 8, 10]
+//! ambient = [0, 0, 0]       # optional ambient fog radiance (image's unit), ≥ 0 (Biri §3)
+//!
+//! [[occluder]]              # --model biri: a Lambertian shadow caster
+//! shape = "box"             # box | sphere | mesh
+//! min_m = [0, 0, 0]         # box
+//! max_m = [1, 4, 1]
+//! center_m = [0, 2, 0]      # sphere
+//! radius_m = 1
+//! file = "statue.obj"       # mesh: Wavefront OBJ (v, f), relative to the scene
+//! offset_m = [0, 0, 0]      # mesh: added to its vertices after scale
+//! scale = 1.0               # mesh: multiplies its vertices, > 0
+//! albedo = 0.5              # [0, 1]
 //!
 //! [camera]
 //! position_m = [0, 2, 0]    # metres, y up, sea level y = 0
@@ -97,6 +116,34 @@ struct File {
     lights: Vec<LightKeys>,
     #[serde(default)]
     haze: Option<HazeKeys>,
+    #[serde(default, rename = "medium")]
+    media: Vec<MediumKeys>,
+    #[serde(default, rename = "occluder")]
+    occluders: Vec<OccluderKeys>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct MediumKeys {
+    field: String,
+    number_density_per_m3: f64,
+    min_m: Option<[f64; 3]>,
+    max_m: Option<[f64; 3]>,
+    ambient: Option<[f64; 3]>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct OccluderKeys {
+    shape: String,
+    min_m: Option<[f64; 3]>,
+    max_m: Option<[f64; 3]>,
+    center_m: Option<[f64; 3]>,
+    radius_m: Option<f64>,
+    file: Option<String>,
+    offset_m: Option<[f64; 3]>,
+    scale: Option<f64>,
+    albedo: Option<f64>,
 }
 
 /// The ground's albedo when a scene has no `[ground] albedo` (issue 15: a grey ground, not a
@@ -158,6 +205,7 @@ struct RenderKeys {
     diffusion_tolerance: Option<f64>,
     max_diffusion_iterations: Option<usize>,
     clear_air_iterations: Option<usize>,
+    biri_kernel: Option<String>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -247,6 +295,8 @@ pub struct RenderScene {
     pub max: crate::max::MaxSettings,
     /// `[haze]`, if any.
     pub haze: Option<HazeKeysChecked>,
+    /// `[[medium]]`, `[[occluder]]` and `[render] biri_kernel` for `--model biri`.
+    pub biri: crate::biri::BiriSettings,
 }
 
 /// A render scene that cannot be used, naming the file, the key or volume, and the allowed range.
@@ -303,9 +353,17 @@ impl RenderScene {
         let camera = file
             .camera
             .ok_or_else(|| err("no [camera] table (position_m, look_at_m, fov_deg)".into()))?;
-        let sun = file
-            .sun
-            .ok_or_else(|| err("no [sun] table (elevation_deg, azimuth_deg)".into()))?;
+        // A scene of homogeneous media lit by lamps (--model biri) may have no sun: then it
+        // is dark, straight overhead.
+        let sun = match file.sun {
+            Some(s) => s,
+            None if !file.media.is_empty() => SunKeys {
+                elevation_deg: 90.0,
+                azimuth_deg: 0.0,
+                irradiance: Some([0.0; 3]),
+            },
+            None => return Err(err("no [sun] table (elevation_deg, azimuth_deg)".into())),
+        };
         let sky = file.sky.unwrap_or_default();
         let mut atmosphere = Atmosphere::default();
         if let Some(b) = sky.beta_sea_level_per_m {
@@ -423,9 +481,35 @@ impl RenderScene {
                 })
             }
         };
-        if file.volumes.is_empty() {
-            return Err(err("no [[volume]] table: nothing to render".into()));
+        if file.volumes.is_empty() && file.media.is_empty() {
+            return Err(err(
+                "no [[volume]] (or [[medium]]) table: nothing to render".into(),
+            ));
         }
+        let biri = crate::biri::BiriSettings {
+            kernel: match render.biri_kernel.as_deref() {
+                None => crate::biri::Kernel::default(),
+                Some(name) => crate::biri::Kernel::parse(name).ok_or_else(|| {
+                    err(format!(
+                        "[render] biri_kernel = {name:?} is not one of \"exact\", \"polynomial\""
+                    ))
+                })?,
+            },
+            media: file
+                .media
+                .iter()
+                .enumerate()
+                .map(|(i, m)| medium(m).map_err(|e| err(format!("[[medium]] {}: {e}", i + 1))))
+                .collect::<Result<_, _>>()?,
+            occluders: file
+                .occluders
+                .iter()
+                .enumerate()
+                .map(|(i, o)| {
+                    occluder(o, base).map_err(|e| err(format!("[[occluder]] {}: {e}", i + 1)))
+                })
+                .collect::<Result<_, _>>()?,
+        };
         let volumes = file
             .volumes
             .into_iter()
@@ -460,11 +544,23 @@ impl RenderScene {
             svs,
             max,
             haze,
+            biri,
         })
     }
 
     /// Refuses what a model cannot draw: Riley's model has sunlight and Rayleigh air only.
     pub fn check_model(&self, model: &str) -> Result<(), FrameError> {
+        if model == "biri" {
+            return self.check_biri();
+        }
+        if !self.biri.media.is_empty() || !self.biri.occluders.is_empty() {
+            return Err(FrameError(format!(
+                "the scene has {} [[medium]] and {} [[occluder]] table(s), which only --model \
+                 biri draws",
+                self.biri.media.len(),
+                self.biri.occluders.len()
+            )));
+        }
         if model == "truth" {
             return Ok(());
         }
@@ -486,6 +582,33 @@ impl RenderScene {
             )));
         }
         Ok(())
+    }
+
+    /// What `--model biri` refuses: density volumes, haze and sunlight (it draws point and
+    /// spot lights in homogeneous media), and the checks of its own settings.
+    fn check_biri(&self) -> Result<(), FrameError> {
+        if !self.volumes.is_empty() {
+            return Err(FrameError(format!(
+                "the scene has {} [[volume]] table(s); --model biri draws homogeneous \
+                 [[medium]] tables only (render volumes with riley, miyazaki, max or truth)",
+                self.volumes.len()
+            )));
+        }
+        if let Some(h) = &self.haze {
+            return Err(FrameError(format!(
+                "the scene has a [haze] layer (field {:?}); --model biri draws homogeneous \
+                 [[medium]] tables only",
+                h.field
+            )));
+        }
+        if self.sun.irradiance.iter().any(|&v| v > 0.0) {
+            return Err(FrameError(format!(
+                "[sun] irradiance = {:?}: --model biri draws point and spot lights only; set \
+                 it to [0, 0, 0] or leave out [sun]",
+                self.sun.irradiance
+            )));
+        }
+        self.biri.check(&self.lights).map_err(|e| FrameError(e.0))
     }
 
     /// The path tracer's settings from the scene (spp, seed, ground, lights).
@@ -510,6 +633,16 @@ impl RenderScene {
     /// tracer's ranges (`truth::check`), and allows a camera inside the volumes.
     pub fn check_for(&self, model: &str) -> Result<(), FrameError> {
         self.check_model(model)?;
+        if model == "biri" {
+            let mut frame = self.frame_with(super::DensityGrid {
+                min_m: DVec3::ZERO,
+                max_m: DVec3::ONE,
+                dims: [1, 1, 1],
+                data: vec![[0.0; super::MAX_FIELDS]],
+            });
+            frame.sun.elevation_deg = 90.0; // biri has no sun
+            return frame.check_view();
+        }
         let (lo, hi) = joint_bounds(&self.volumes);
         let grid = super::DensityGrid {
             min_m: lo,
@@ -566,6 +699,11 @@ impl RenderScene {
         {
             names.push(h.field.clone());
         }
+        for m in &self.biri.media {
+            if !names.contains(&m.field) {
+                names.push(m.field.clone());
+            }
+        }
         names
     }
 
@@ -616,9 +754,10 @@ fn light(l: &LightKeys) -> Result<crate::truth::Light, String> {
                     d
                 ));
             }
-            if !(a > 0.0 && a <= 180.0) {
+            if !(a > 0.0 && a < 180.0) {
                 return Err(format!(
-                    "spot_half_angle_deg = {a} is outside the allowed range (0, 180]"
+                    "spot_half_angle_deg = {a} is outside the allowed range (0, 180) degrees \
+                     (a light shining everywhere is a point light: leave out the spot keys)"
                 ));
             }
             Some((d.normalize(), a))
@@ -632,6 +771,101 @@ fn light(l: &LightKeys) -> Result<crate::truth::Light, String> {
         intensity: l.intensity,
         spot,
     })
+}
+
+fn medium(m: &MediumKeys) -> Result<crate::biri::Medium, String> {
+    let n = m.number_density_per_m3;
+    if !(n.is_finite() && n > 0.0) {
+        return Err(format!(
+            "number_density_per_m3 = {n} must be finite and > 0 (particles per m³)"
+        ));
+    }
+    let region = match (m.min_m, m.max_m) {
+        (None, None) => crate::biri::Region::Everywhere,
+        (Some(lo), Some(hi)) => {
+            if (0..3).any(|a| !(lo[a].is_finite() && hi[a].is_finite() && lo[a] < hi[a])) {
+                return Err(format!(
+                    "min_m = {lo:?} must lie below max_m = {hi:?} on every axis (a medium is \
+                     a convex, axis-aligned box)"
+                ));
+            }
+            crate::biri::Region::Box {
+                min_m: DVec3::from_array(lo),
+                max_m: DVec3::from_array(hi),
+            }
+        }
+        _ => {
+            return Err(
+                "a medium box needs both min_m and max_m (neither: the whole scene)".into(),
+            );
+        }
+    };
+    let ambient = m.ambient.unwrap_or([0.0; 3]);
+    if ambient.iter().any(|v| !(v.is_finite() && *v >= 0.0)) {
+        return Err(format!(
+            "ambient = {ambient:?} must be ≥ 0 (radiance per channel)"
+        ));
+    }
+    Ok(crate::biri::Medium {
+        field: m.field.clone(),
+        number_density_per_m3: n,
+        region,
+        ambient,
+    })
+}
+
+fn occluder(o: &OccluderKeys, base: &Path) -> Result<crate::biri::Occluder, String> {
+    use crate::biri::geometry::{Mesh, Sphere, read_obj};
+    let albedo = o.albedo.unwrap_or(0.5);
+    if !(0.0..=1.0).contains(&albedo) {
+        return Err(format!(
+            "albedo = {albedo} is outside the allowed range [0, 1]"
+        ));
+    }
+    let finite = |v: Option<[f64; 3]>, what: &str| {
+        v.filter(|v| v.iter().all(|x| x.is_finite()))
+            .map(DVec3::from_array)
+            .ok_or_else(|| format!("shape {:?} needs a finite {what} = [x, y, z]", o.shape))
+    };
+    let shape = match o.shape.as_str() {
+        "box" => {
+            let (lo, hi) = (finite(o.min_m, "min_m")?, finite(o.max_m, "max_m")?);
+            if !lo.cmplt(hi).all() {
+                return Err(format!(
+                    "min_m = {:?} must lie below max_m = {:?} on every axis",
+                    lo.to_array(),
+                    hi.to_array()
+                ));
+            }
+            crate::biri::Shape::Mesh(Mesh::cuboid(lo, hi))
+        }
+        "sphere" => {
+            let center = finite(o.center_m, "center_m")?;
+            let radius = o.radius_m.ok_or("shape \"sphere\" needs radius_m")?;
+            positive("radius_m", radius)?;
+            crate::biri::Shape::Sphere(Sphere { center, radius })
+        }
+        "mesh" => {
+            let file = o
+                .file
+                .as_ref()
+                .ok_or("shape \"mesh\" needs file (a Wavefront OBJ)")?;
+            let scale = o.scale.unwrap_or(1.0);
+            positive("scale", scale)?;
+            let offset = match o.offset_m {
+                None => DVec3::ZERO,
+                Some(v) => finite(Some(v), "offset_m")?,
+            };
+            let mut mesh = read_obj(&base.join(file))?;
+            let vertices = mesh.vertices.iter().map(|v| *v * scale + offset).collect();
+            mesh = Mesh::new(vertices, std::mem::take(&mut mesh.triangles));
+            crate::biri::Shape::Mesh(mesh)
+        }
+        other => {
+            return Err(format!("shape = {other:?} is not one of box, sphere, mesh"));
+        }
+    };
+    Ok(crate::biri::Occluder { shape, albedo })
 }
 
 fn volume(v: VolumeKeys, base: &Path) -> Result<Volume, String> {

@@ -128,6 +128,10 @@ struct SceneFile {
     _light: Option<toml::Value>,
     #[serde(default, rename = "haze")]
     _haze: Option<toml::Value>,
+    #[serde(default, rename = "medium")]
+    _medium: Option<toml::Value>,
+    #[serde(default, rename = "occluder")]
+    _occluder: Option<toml::Value>,
 }
 
 #[derive(Debug, Deserialize)]
