@@ -11,7 +11,7 @@ share of pixels within 3σ of the truth.
 
 Run from the repository root after `cargo build --release`:
     python3 docs/biri/compare.py        # writes docs/biri/compare.json, compare.md and PNGs
-BIRI_TRUTH_SPP sets the truth's samples per pixel (default 1024).
+BIRI_TRUTH_SPP sets the truth's samples per pixel (default 512).
 """
 import json, os, subprocess, sys, time
 
@@ -19,8 +19,8 @@ ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)
 BIN = os.environ.get("PHOTOMETEOR_BIN", os.path.join(ROOT, "target", "release", "photometeor"))
 WORK = os.environ.get("BIRI_WORK", "/tmp/photometeor-biri")
 SCENE = os.path.join(ROOT, "data", "scenes", "beams.toml")
-SIZE = (200, 150)
-SPP = int(os.environ.get("BIRI_TRUTH_SPP", "1024"))
+SIZE = (160, 120)
+SPP = int(os.environ.get("BIRI_TRUTH_SPP", "512"))
 OUT = os.path.dirname(os.path.abspath(__file__))
 
 
@@ -44,7 +44,9 @@ def main():
     no_ambient = f"{WORK}/beams-no-ambient.toml"
     text = open(SCENE).read()
     text = "\n".join(l for l in text.splitlines() if not l.replace(" ", "").startswith("ambient="))
-    open(no_ambient, "w").write(text.replace('file = "beams/', f'file = "{ROOT}/data/scenes/beams/') + "\n")
+    # The mesh's path is relative to the scene: make it absolute for the copy in WORK.
+    text = text.replace('file = "beams/', f'file = "{ROOT}/data/scenes/beams/')
+    open(no_ambient, "w").write(text + "\n")
     truths = {}
     for label, extra in [("single", ["--max-scatterings", "1"]), ("full", [])]:
         exr = f"{WORK}/truth-{label}.exr"

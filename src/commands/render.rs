@@ -91,6 +91,11 @@ pub struct RenderArgs {
     /// wavelength per path, the simple baseline.
     #[arg(long, default_value_t = 0)]
     wavelengths_per_path: usize,
+    /// --model truth: scatterings after which a path ends, 1–1000000; 1 is exact single
+    /// scattering (what --model biri and miyazaki's k_multi = 0 model); 0: the default bound
+    /// (1000000, far beyond any table order).
+    #[arg(long, default_value_t = 0)]
+    max_scatterings: usize,
     /// Accuracy preset of the bake, overriding the scene's.
     #[arg(long, value_parser = ["draft", "standard", "reference"])]
     quality: Option<String>,
@@ -366,6 +371,7 @@ fn run_truth(a: &RenderArgs, render: &RenderScene, tables: &Tables) -> Result<()
     let mut settings = render.truth_settings();
     settings.target_noise = a.noise;
     settings.wavelengths_per_path = a.wavelengths_per_path;
+    settings.max_scatterings = a.max_scatterings;
     let bar = crate::progress::SampleBar::new(a.quiet, settings.spp as u64);
     let truth = render::truth::render(tables, &frame, &settings, &bar)?;
     bar.finish();

@@ -553,16 +553,19 @@ impl RenderScene {
         if model == "biri" {
             return self.check_biri();
         }
+        if model == "truth" {
+            return self
+                .biri
+                .check_lights(&self.lights)
+                .map_err(|e| FrameError(e.0));
+        }
         if !self.biri.media.is_empty() || !self.biri.occluders.is_empty() {
             return Err(FrameError(format!(
                 "the scene has {} [[medium]] and {} [[occluder]] table(s), which only --model \
-                 biri draws",
+                 biri and --model truth draw",
                 self.biri.media.len(),
                 self.biri.occluders.len()
             )));
-        }
-        if model == "truth" {
-            return Ok(());
         }
         if model == "miyazaki" && self.lights.is_empty() {
             return Ok(()); // sunlight over a Lambertian ground, through haze
@@ -619,6 +622,9 @@ impl RenderScene {
             seed: self.seed,
             lights: self.lights.clone(),
             wavelengths_per_path: 0,
+            media: self.biri.media.clone(),
+            occluders: self.biri.occluders.clone(),
+            max_scatterings: 0,
         }
     }
 
@@ -643,12 +649,16 @@ impl RenderScene {
             frame.sun.elevation_deg = 90.0; // biri has no sun
             return frame.check_view();
         }
-        let (lo, hi) = joint_bounds(&self.volumes);
-        let grid = super::DensityGrid {
-            min_m: lo,
-            max_m: hi,
-            dims: [1, 1, 1],
-            data: vec![[0.0; super::MAX_FIELDS]],
+        let grid = if self.volumes.is_empty() {
+            empty_grid()
+        } else {
+            let (lo, hi) = joint_bounds(&self.volumes);
+            super::DensityGrid {
+                min_m: lo,
+                max_m: hi,
+                dims: [1, 1, 1],
+                data: vec![[0.0; super::MAX_FIELDS]],
+            }
         };
         let frame = self.frame_with(grid);
         match model {
@@ -721,7 +731,11 @@ impl RenderScene {
                 .position(|f| f.name == name)
                 .expect("checked above")
         };
-        let grid = rasterize(&self.volumes, self.grid_resolution, index)?;
+        let grid = if self.volumes.is_empty() {
+            empty_grid() // a scene of [[medium]] tables only
+        } else {
+            rasterize(&self.volumes, self.grid_resolution, index)?
+        };
         let mut frame = self.frame_with(grid);
         frame.haze = self.haze.as_ref().map(|h| crate::Haze {
             field: index(&h.field),
@@ -729,6 +743,17 @@ impl RenderScene {
             scale_height_m: h.scale_height_m,
         });
         Ok(frame)
+    }
+}
+
+/// A grid of no particles, one voxel of a millimetre at the origin: what a scene without
+/// [[volume]] tables (media only) has.
+fn empty_grid() -> super::DensityGrid {
+    super::DensityGrid {
+        min_m: DVec3::ZERO,
+        max_m: DVec3::splat(1e-3),
+        dims: [1, 1, 1],
+        data: vec![[0.0; super::MAX_FIELDS]],
     }
 }
 

@@ -442,3 +442,76 @@ fn bad_scenes_are_refused_naming_the_value_file_and_line() {
     );
     assert!(e.contains("bad.obj:4:") && e.contains("\"x\""), "{e}");
 }
+
+/// The path tracer restricted to single scattering (one scattering or surface event per
+/// path, next-event estimation to each light) on the shadows scene: biri's exact kernel
+/// must agree with it to its noise, pixel by pixel. With full multiple scattering it is
+/// brighter: what the ambient term stands in for.
+#[test]
+fn the_truth_restricted_to_single_scattering_agrees() {
+    let (_tmp, dir) = common::bake(&fields());
+    let tables = Tables::open(&dir).unwrap();
+    let rest = format!(
+        r#"{LIGHTS}
+[[light]]
+position_m = [2, 6, 9]
+intensity = [20, 20, 20]
+spot_direction = [-0.2, -1, -0.5]
+spot_half_angle_deg = 25
+
+[[occluder]]
+shape = "box"
+min_m = [-1.5, 0, 2]
+max_m = [-0.7, 6, 2.8]
+albedo = 0.4
+
+[[occluder]]
+shape = "sphere"
+center_m = [1.4, 2.2, 3.5]
+radius_m = 0.7
+albedo = 0.6
+"#
+    );
+    let mut s = scene(
+        &dir,
+        "[[medium]]\nfield = \"fog\"\nnumber_density_per_m3 = 3e8\n",
+        &rest,
+    );
+    s.ground_albedo = 0.3;
+    let (model, _) = cpu::render(&tables, &s).unwrap();
+    let frame = s.frame(&tables).unwrap();
+    let mut settings = s.truth_settings();
+    settings.spp = 2048;
+    settings.max_scatterings = 1;
+    let single = render::truth::render(&tables, &frame, &settings, &()).unwrap();
+    let (mut worst_z, mut sum_z2, mut n) = (0.0f64, 0.0, 0);
+    for (p, (m, t)) in model.rgb.iter().zip(&single.image.rgb).enumerate() {
+        for c in 0..3 {
+            let se = single.std_error[p][c] as f64;
+            let z = (m[c] - t[c]) as f64 / se.max(1e-12);
+            worst_z = worst_z.max(z.abs());
+            sum_z2 += z * z;
+            n += 1;
+        }
+    }
+    let mean_z2 = sum_z2 / n as f64;
+    settings.max_scatterings = 0;
+    settings.spp = 256;
+    let full = render::truth::render(&tables, &frame, &settings, &()).unwrap();
+    let sum = |i: &render::Image| i.rgb.iter().map(|p| p[1] as f64).sum::<f64>();
+    let extra = sum(&full.image) / sum(&single.image) - 1.0;
+    eprintln!(
+        "truth, single scattering ({} spp, noise {:.2} %): worst |z| {worst_z:.2}, mean z² \
+         {mean_z2:.2}; multiple scattering adds {:.1} % (green, whole image)",
+        single.spp,
+        single.noise * 100.0,
+        extra * 100.0
+    );
+    // Measured: worst |z| 2.6 over 324 values, mean z² 0.99 (its own noise ±0.08).
+    assert!(
+        worst_z < 4.0 && (0.7..1.4).contains(&mean_z2),
+        "{worst_z} {mean_z2}"
+    );
+    // Measured: +23.2 % (the truth's noise on the image's sum is well below 1 %).
+    assert!((0.2..0.27).contains(&extra), "{extra}");
+}

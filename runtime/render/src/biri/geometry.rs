@@ -36,6 +36,73 @@ pub struct Mesh {
     pub edges: Vec<Edge>,
     /// Axis-aligned bounds.
     pub bounds: (DVec3, DVec3),
+    /// A bounding-volume hierarchy over the triangles (`triangles` is in its leaf order).
+    bvh: Vec<Node>,
+}
+
+/// A BVH node: its box, and either a leaf's range of triangles or two children (the next
+/// node and `right`).
+#[derive(Debug, Clone, PartialEq)]
+struct Node {
+    lo: DVec3,
+    hi: DVec3,
+    /// Leaf: first triangle and count; inner: count 0.
+    first: usize,
+    count: usize,
+    right: usize,
+}
+
+/// Triangles per BVH leaf at most.
+const LEAF: usize = 4;
+
+fn triangle_bounds(v: &[DVec3], t: &[usize; 3]) -> (DVec3, DVec3) {
+    let [a, b, c] = t.map(|i| v[i]);
+    (a.min(b).min(c), a.max(b).max(c))
+}
+
+/// Builds the BVH of `tris` (reordered in place) by median splits along the widest axis of
+/// the centroids; returns the root's index in `nodes`.
+fn build(v: &[DVec3], tris: &mut [[usize; 3]], offset: usize, nodes: &mut Vec<Node>) -> usize {
+    let (mut lo, mut hi) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
+    let (mut clo, mut chi) = (lo, hi);
+    for t in tris.iter() {
+        let (a, b) = triangle_bounds(v, t);
+        lo = lo.min(a);
+        hi = hi.max(b);
+        let c = 0.5 * (a + b);
+        clo = clo.min(c);
+        chi = chi.max(c);
+    }
+    let index = nodes.len();
+    nodes.push(Node {
+        lo,
+        hi,
+        first: offset,
+        count: tris.len(),
+        right: 0,
+    });
+    if tris.len() > LEAF {
+        let ext = chi - clo;
+        let axis = if ext.x >= ext.y && ext.x >= ext.z {
+            0
+        } else if ext.y >= ext.z {
+            1
+        } else {
+            2
+        };
+        let mid = tris.len() / 2;
+        let key = |t: &[usize; 3]| {
+            let (a, b) = triangle_bounds(v, t);
+            a[axis] + b[axis]
+        };
+        tris.select_nth_unstable_by(mid, |a, b| key(a).total_cmp(&key(b)));
+        let (left, right) = tris.split_at_mut(mid);
+        build(v, left, offset, nodes);
+        let r = build(v, right, offset + mid, nodes);
+        nodes[index].count = 0;
+        nodes[index].right = r;
+    }
+    index
 }
 
 /// An edge of a [`Mesh`] and the triangles on it: with each, the vertex opposite the edge.
@@ -78,11 +145,41 @@ impl Mesh {
             lo = lo.min(*v);
             hi = hi.max(*v);
         }
+        let mut triangles = triangles;
+        let mut bvh = Vec::new();
+        if !triangles.is_empty() {
+            build(&vertices, &mut triangles, 0, &mut bvh);
+        }
         Self {
             vertices,
             triangles,
             edges,
             bounds: (lo, hi),
+            bvh,
+        }
+    }
+
+    /// Calls `visit` with each triangle whose leaf box the ray o + x d, x ∈ [0, limit], meets;
+    /// `visit` may shorten the limit (to the nearest hit so far).
+    fn traverse(&self, o: DVec3, d: DVec3, x_max: f64, mut visit: impl FnMut(usize, &mut f64)) {
+        let mut limit = x_max;
+        let mut stack = Vec::with_capacity(32);
+        if !self.bvh.is_empty() {
+            stack.push(0);
+        }
+        while let Some(i) = stack.pop() {
+            let n = &self.bvh[i];
+            if !ray_box(o, d, n.lo, n.hi).is_some_and(|(a, b)| b >= 0.0 && a <= limit) {
+                continue;
+            }
+            if n.count > 0 {
+                for t in n.first..n.first + n.count {
+                    visit(t, &mut limit);
+                }
+            } else {
+                stack.push(n.right);
+                stack.push(i + 1);
+            }
         }
     }
 
@@ -115,21 +212,18 @@ impl Mesh {
     /// The nearest hit of the ray o + x d with x in (ε, `x_max`): distance and unit normal
     /// facing the ray.
     pub fn hit(&self, o: DVec3, d: DVec3, x_max: f64) -> Option<(f64, DVec3)> {
-        if !ray_box(o, d, self.bounds.0, self.bounds.1).is_some_and(|(a, b)| b >= 0.0 && a <= x_max)
-        {
-            return None;
-        }
         let mut best: Option<(f64, DVec3)> = None;
-        for t in &self.triangles {
-            let [a, b, c] = t.map(|i| self.vertices[i]);
+        self.traverse(o, d, x_max, |t, limit| {
+            let [a, b, c] = self.triangles[t].map(|i| self.vertices[i]);
             if let Some(x) = ray_triangle(o, d, a, b, c)
                 && x > SURFACE_EPSILON_M
-                && x < best.map_or(x_max, |h| h.0)
+                && x < *limit
             {
                 let n = (b - a).cross(c - a).normalize();
                 best = Some((x, if n.dot(d) > 0.0 { -n } else { n }));
+                *limit = x;
             }
-        }
+        });
         best
     }
 
@@ -141,17 +235,16 @@ impl Mesh {
             return 0;
         }
         let d = d / len;
-        if !ray_box(p, d, self.bounds.0, self.bounds.1).is_some_and(|(a, b)| b >= 0.0 && a <= len) {
-            return 0;
-        }
-        self.triangles
-            .iter()
-            .filter(|t| {
-                let [a, b, c] = t.map(|i| self.vertices[i]);
-                ray_triangle(p, d, a, b, c)
-                    .is_some_and(|x| x > SURFACE_EPSILON_M && x < len - SURFACE_EPSILON_M)
-            })
-            .count()
+        let mut count = 0;
+        self.traverse(p, d, len, |t, _| {
+            let [a, b, c] = self.triangles[t].map(|i| self.vertices[i]);
+            if ray_triangle(p, d, a, b, c)
+                .is_some_and(|x| x > SURFACE_EPSILON_M && x < len - SURFACE_EPSILON_M)
+            {
+                count += 1;
+            }
+        });
+        count
     }
 
     /// Whether `p` is inside the mesh: an odd number of crossings along a fixed skew ray

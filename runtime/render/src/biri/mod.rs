@@ -149,6 +149,17 @@ impl Occluder {
         }
     }
 
+    /// Axis-aligned bounds.
+    pub fn bounds(&self) -> (DVec3, DVec3) {
+        match &self.shape {
+            Shape::Mesh(m) => m.bounds,
+            Shape::Sphere(s) => (
+                s.center - DVec3::splat(s.radius),
+                s.center + DVec3::splat(s.radius),
+            ),
+        }
+    }
+
     /// Whether `p` is inside (a closed mesh's parity, a sphere's radius).
     pub fn contains(&self, p: DVec3) -> bool {
         match &self.shape {
@@ -229,16 +240,21 @@ impl BiriSettings {
                 }
             }
         }
+        self.check_lights(lights)
+    }
+
+    /// Refuses a light inside an occluder (for every model that draws occluders).
+    pub fn check_lights(&self, lights: &[crate::truth::Light]) -> Result<(), SettingsError> {
         for (i, l) in lights.iter().enumerate() {
             for (k, o) in self.occluders.iter().enumerate() {
                 if o.contains(l.position_m) {
-                    return bad(format!(
+                    return Err(SettingsError(format!(
                         "[[light]] {}: position_m = {:?} is inside [[occluder]] {}: its light \
                          could never leave it",
                         i + 1,
                         l.position_m.to_array(),
                         k + 1
-                    ));
+                    )));
                 }
             }
         }

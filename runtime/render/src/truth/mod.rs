@@ -41,6 +41,12 @@
 //!   black), the same ground as the fast models'.
 //! - **Lights.** Point lights of intensity I (per channel, the image's unit × m²/sr), spot
 //!   lights with a hard cone; I/r² times the transmittance.
+//! - **Media and occluders** (`[[medium]]`, `[[occluder]]`, the scenes of `--model biri`):
+//!   a homogeneous medium adds its field's density N inside its box (or everywhere) to the
+//!   grid's, tracked by the same delta tracking (the majorant gains the densest medium's
+//!   extinction; a medium filling the scene is tracked out to 30 free paths beyond
+//!   everything in it, where e^{−30} of the light is left); occluders are Lambertian surfaces
+//!   like the ground that end free paths and block shadow rays.
 //! - **Estimators.** Next-event estimation toward the sun and every light at every scattering
 //!   vertex, weighted by the exact tabulated phase function (the bin the angle falls into).
 //!   All light sources here are δ distributions in direction (the sun is collimated, lights
@@ -122,6 +128,13 @@ pub struct TruthSettings {
     /// Wavelengths each camera path carries, 1…[`MAX_CARRIED`]; 0: the default (all of an
     /// `rgb3` bake's three, else [`MAX_CARRIED`]). 1 is one wavelength per path.
     pub wavelengths_per_path: usize,
+    /// Homogeneous media (`[[medium]]`) and Lambertian occluders (`[[occluder]]`).
+    pub media: Vec<crate::biri::Medium>,
+    /// Lambertian occluders (`[[occluder]]`).
+    pub occluders: Vec<crate::biri::Occluder>,
+    /// Scatterings after which a path ends, [1, [`MAX_BOUNCES`]]; 0: [`MAX_BOUNCES`]. 1 is
+    /// exact single scattering.
+    pub max_scatterings: usize,
 }
 
 impl Default for TruthSettings {
@@ -132,6 +145,9 @@ impl Default for TruthSettings {
             seed: 1,
             lights: Vec::new(),
             wavelengths_per_path: 0,
+            media: Vec::new(),
+            occluders: Vec::new(),
+            max_scatterings: 0,
         }
     }
 }
@@ -231,8 +247,9 @@ enum Event {
     Volume(usize),
     /// A collision with the air.
     Air,
-    /// The ground at y = 0.
-    Ground,
+    /// A Lambertian surface (the ground at y = 0, or an occluder): its unit normal on the
+    /// side the path came from and its albedo.
+    Surface(DVec3, f64),
     /// Nothing: the path leaves the scene.
     Escape,
 }
@@ -293,6 +310,12 @@ pub struct Tracer<'a> {
     disk_sr: f64,
     ground_albedo: f64,
     lights: Vec<Light>,
+    /// Homogeneous media: region, number density, field.
+    media: Vec<(crate::biri::Region, f64, usize)>,
+    occluders: Vec<crate::biri::Occluder>,
+    /// The box delta tracking covers: the grid's and the media's.
+    track_min: DVec3,
+    track_max: DVec3,
     /// Radiance (per channel, the image's unit) of everything a path leaves into: 0 for the
     /// scenes (black space); 1 makes the white-furnace test.
     pub background: [f64; 3],
@@ -340,7 +363,24 @@ impl<'a> Tracer<'a> {
             }
         }
         let max = frame.grid.max_density();
-        if max.iter().all(|&m| m <= 0.0) {
+        let media: Vec<(crate::biri::Region, f64, usize)> = settings
+            .media
+            .iter()
+            .map(|m| {
+                let field = tables
+                    .fields
+                    .iter()
+                    .position(|f| f.name == m.field)
+                    .ok_or_else(|| {
+                        FrameError(format!(
+                            "a [[medium]] uses field {:?}, which the tables do not hold",
+                            m.field
+                        ))
+                    })?;
+                Ok((m.region, m.number_density_per_m3, field))
+            })
+            .collect::<Result<_, FrameError>>()?;
+        if max.iter().all(|&m| m <= 0.0) && media.is_empty() {
             return bad(
                 "the density grid holds no particles (every voxel is 0): nothing scatters, \
                  refusing to trace an empty scene"
@@ -393,11 +433,17 @@ impl<'a> Tracer<'a> {
                     }
                 })
                 .collect();
-            majorant = fields
+            // Media do not overlap each other: the densest one's extinction bounds theirs.
+            let media_max = media
+                .iter()
+                .map(|&(_, n, f)| n * fields[f].sigma_ext)
+                .fold(0.0, f64::max);
+            majorant = (fields
                 .iter()
                 .zip(&max)
                 .map(|(f, m)| f.sigma_ext * m)
                 .sum::<f64>()
+                + media_max)
                 .max(majorant);
             let (haze_ext_sl, haze_sca_sl) = frame.haze.map_or((0.0, 0.0), |h| {
                 let f = &fields[h.field];
@@ -418,6 +464,39 @@ impl<'a> Tracer<'a> {
             *c /= acc;
         }
         let cos_disk = (SUN_DIAMETER_DEG / 2.0).to_radians().cos();
+        // The tracked box: the grid's, the media boxes', and for a medium everywhere all the
+        // scene's contents (camera, lights, occluders, grid) and 30 of its free paths more.
+        let mut track = (frame.grid.min_m, frame.grid.max_m);
+        let grow = |t: &mut (DVec3, DVec3), a: DVec3, b: DVec3| {
+            t.0 = t.0.min(a);
+            t.1 = t.1.max(b);
+        };
+        for &(region, _, _) in &media {
+            if let crate::biri::Region::Box { min_m, max_m } = region {
+                grow(&mut track, min_m, max_m);
+            }
+        }
+        if let Some(&(_, n, f)) = media
+            .iter()
+            .find(|m| m.0 == crate::biri::Region::Everywhere)
+        {
+            let p = frame.camera.position_m;
+            grow(&mut track, p, p);
+            for l in &settings.lights {
+                grow(&mut track, l.position_m, l.position_m);
+            }
+            for o in &settings.occluders {
+                let (a, b) = o.bounds();
+                grow(&mut track, a, b);
+            }
+            let thinnest = bands
+                .iter()
+                .map(|b| n * b.fields[f].sigma_ext)
+                .fold(f64::INFINITY, f64::min);
+            let margin = DVec3::splat(30.0 / thinnest.max(1e-12));
+            track = (track.0 - margin, track.1 + margin);
+        }
+        let (track_min, track_max) = track;
         let mut sigma_ext_g = [0.0; MAX_FIELDS];
         for (i, f) in tables.fields.iter().enumerate() {
             sigma_ext_g[i] = f.sigma_ext_m2[1];
@@ -441,9 +520,21 @@ impl<'a> Tracer<'a> {
             disk_sr: 2.0 * PI * (1.0 - cos_disk),
             ground_albedo: frame.ground_albedo,
             lights: settings.lights.clone(),
+            media,
+            occluders: settings.occluders.clone(),
+            track_min,
+            track_max,
             background: [0.0; 3],
-            max_scatterings: MAX_BOUNCES,
-            guide: GUIDE_SHARE,
+            max_scatterings: match settings.max_scatterings {
+                0 => MAX_BOUNCES,
+                n => n,
+            },
+            // Guiding towards the sun helps only where it shines.
+            guide: if frame.sun.irradiance.iter().any(|&v| v > 0.0) {
+                GUIDE_SHARE
+            } else {
+                0.0
+            },
             sigma_ext_g,
         })
     }
@@ -485,6 +576,35 @@ impl<'a> Tracer<'a> {
     /// The optics of the `m`-th carried wavelength.
     fn band_of(&self, c: &Carried, m: usize) -> &Band {
         &self.bands[c.band[m]]
+    }
+
+    /// The number densities at `p`: the grid's, plus a medium's where it is.
+    fn density(&self, p: DVec3) -> [f64; MAX_FIELDS] {
+        let mut rho = self.grid.sample(p);
+        for &(region, n, f) in &self.media {
+            if region.contains(p) {
+                rho[f] += n;
+            }
+        }
+        rho
+    }
+
+    /// The nearest surface along p + t d, t > 0: distance, normal facing the path, albedo,
+    /// and whether it is the ground.
+    fn surface(&self, p: DVec3, d: DVec3) -> Option<(f64, DVec3, f64, bool)> {
+        let mut best =
+            (d.y < 0.0).then(|| ((p.y / -d.y).max(0.0), DVec3::Y, self.ground_albedo, true));
+        for o in &self.occluders {
+            if let Some((t, n)) = o.hit(p, d, best.map_or(f64::INFINITY, |b| b.0)) {
+                best = Some((t, n, o.albedo, false));
+            }
+        }
+        best
+    }
+
+    /// Whether no occluder lies on p + t d, t ∈ (0, limit).
+    fn unoccluded(&self, p: DVec3, d: DVec3, limit: f64) -> bool {
+        self.occluders.iter().all(|o| o.hit(p, d, limit).is_none())
     }
 
     /// Volume extinction at densities `rho` for each carried wavelength.
@@ -578,7 +698,7 @@ impl<'a> Tracer<'a> {
         limit: f64,
         rng: &mut Rng,
     ) -> Option<(f64, [f64; MAX_FIELDS])> {
-        let (t0, t1) = box_span(self.grid.min_m, self.grid.max_m, p, d)?;
+        let (t0, t1) = box_span(self.track_min, self.track_max, p, d)?;
         let end = t1.min(limit);
         let mu = self.majorant;
         let mut t = t0;
@@ -587,7 +707,7 @@ impl<'a> Tracer<'a> {
             if t >= end {
                 return None;
             }
-            let rho = self.grid.sample(p + t * d);
+            let rho = self.density(p + t * d);
             let e = self.extinctions(c, &rho);
             if rng.uniform() * mu < e[0] {
                 return Some((t, rho));
@@ -610,7 +730,7 @@ impl<'a> Tracer<'a> {
         rng: &mut Rng,
     ) -> [f64; MAX_CARRIED] {
         let mut tr = [1.0; MAX_CARRIED];
-        let Some((t0, t1)) = box_span(self.grid.min_m, self.grid.max_m, p, d) else {
+        let Some((t0, t1)) = box_span(self.track_min, self.track_max, p, d) else {
             return tr;
         };
         let end = t1.min(limit);
@@ -621,7 +741,7 @@ impl<'a> Tracer<'a> {
             if t >= end {
                 return tr;
             }
-            let e = self.extinctions(c, &self.grid.sample(p + t * d));
+            let e = self.extinctions(c, &self.density(p + t * d));
             let mut largest: f64 = 0.0;
             for m in 0..c.n {
                 tr[m] *= 1.0 - e[m] / mu;
@@ -652,7 +772,7 @@ impl<'a> Tracer<'a> {
     ) {
         let mut add = |dir: DVec3, limit: f64, source: [f64; 3], rng: &mut Rng| {
             let w = weight(dir);
-            if w[..c.n].iter().all(|&w| w <= 0.0) {
+            if w[..c.n].iter().all(|&w| w <= 0.0) || !self.unoccluded(p, dir, limit) {
                 return;
             }
             let tv = self.volume_transmittance(c, p, dir, limit, rng);
@@ -692,11 +812,8 @@ impl<'a> Tracer<'a> {
     /// every carried wavelength's f and p for it. At a volume collision the hero chooses the
     /// scattering field by its share of β_sca, and f gains β_sca,f (the albedo weighting).
     fn next_event(&self, c: &mut Carried, p: &mut DVec3, d: DVec3, rng: &mut Rng) -> Event {
-        let t_ground = if d.y < 0.0 {
-            (p.y / -d.y).max(0.0)
-        } else {
-            f64::INFINITY
-        };
+        let surface = self.surface(*p, d);
+        let t_ground = surface.map_or(f64::INFINITY, |s| s.0);
         let t_air = self.sample_air(self.band_of(c, 0), *p, d, rng);
         let t_haze = self.sample_haze(self.band_of(c, 0), *p, d, rng);
         if let Some((t, rho)) = self.track(c, *p, d, t_ground.min(t_air).min(t_haze), rng) {
@@ -757,9 +874,15 @@ impl<'a> Tracer<'a> {
         } else if t_ground.is_finite() {
             self.air_ratios(c, *p, d, t_ground, false);
             self.haze_ratios(c, *p, d, t_ground, false);
+            let (_, normal, albedo, ground) = surface.expect("finite");
             *p += t_ground * d;
-            p.y = 0.0;
-            Event::Ground
+            if ground {
+                p.y = 0.0;
+            } else {
+                // Off the occluder, so that the next free path and shadow rays leave it.
+                *p += normal * (1e-6 * (1.0 + p.length()));
+            }
+            Event::Surface(normal, albedo)
         } else {
             self.air_ratios(c, *p, d, f64::INFINITY, false);
             self.haze_ratios(c, *p, d, f64::INFINITY, false);
@@ -885,12 +1008,11 @@ impl<'a> Tracer<'a> {
                     let weight = |w: DVec3| [rayleigh(d.dot(w)); MAX_CARRIED];
                     self.direct(&c, p, &coef, weight, &mut sum, rng);
                 }
-                Event::Ground => {
-                    let a = self.ground_albedo;
+                Event::Surface(normal, a) => {
                     if a == 0.0 {
                         break;
                     }
-                    let weight = |w: DVec3| [a / PI * w.y.max(0.0); MAX_CARRIED];
+                    let weight = |w: DVec3| [a / PI * w.dot(normal).max(0.0); MAX_CARRIED];
                     self.direct(&c, p, &coef, weight, &mut sum, rng);
                 }
                 Event::Escape => {
@@ -911,16 +1033,16 @@ impl<'a> Tracer<'a> {
             }
             d = match event {
                 Event::Volume(field) => self.continue_volume(&mut c, field, d, self.guide, rng),
-                Event::Ground => {
+                Event::Surface(normal, a) => {
                     for f in c.f.iter_mut() {
-                        *f *= self.ground_albedo;
+                        *f *= a;
                     }
-                    // Cosine-weighted about +y.
+                    // Cosine-weighted about the normal.
                     let (r, phi) = (rng.uniform().sqrt(), 2.0 * PI * rng.uniform());
-                    let (e1, e2) = basis(DVec3::Y);
+                    let (e1, e2) = basis(normal);
                     (r * phi.cos() * e1
                         + r * phi.sin() * e2
-                        + (1.0 - r * r).max(0.0).sqrt() * DVec3::Y)
+                        + (1.0 - r * r).max(0.0).sqrt() * normal)
                         .normalize()
                 }
                 _ => {
@@ -947,7 +1069,7 @@ impl<'a> Tracer<'a> {
         for _ in 0..self.max_scatterings {
             let event = self.next_event(&mut c, &mut p, d, rng);
             d = match event {
-                Event::Ground | Event::Escape => return Some((d, c.f[0])),
+                Event::Surface(..) | Event::Escape => return Some((d, c.f[0])),
                 Event::Volume(field) => self.continue_volume(&mut c, field, d, 0.0, rng),
                 Event::Air => {
                     let mu = sample_rayleigh(rng.uniform());
@@ -1004,6 +1126,13 @@ pub fn check(frame: &Frame, settings: &TruthSettings) -> Result<(), FrameError> 
             "wavelengths per path = {} is outside the allowed range [1, {MAX_CARRIED}] (0: the \
              default)",
             settings.wavelengths_per_path
+        ));
+    }
+    if settings.max_scatterings > MAX_BOUNCES {
+        return bad(format!(
+            "max scatterings = {} is outside the allowed range [1, {MAX_BOUNCES}] (0: the \
+             default)",
+            settings.max_scatterings
         ));
     }
     for (i, l) in settings.lights.iter().enumerate() {
