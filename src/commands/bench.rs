@@ -72,8 +72,10 @@ struct RenderBench {
     /// run, interleaved, with their ratio), or `truth` (the path tracer at --size: paths per
     /// second, the noise reached in --spp samples per pixel and the time to 1 % noise), or
     /// `max` (the diffusion model on the CPU: its time split into reduced light, diffusion
-    /// solve and final gather, at each of --grids and --sizes).
-    #[arg(long, default_value = "riley", value_parser = ["riley", "miyazaki", "both", "truth", "max"])]
+    /// solve and final gather, at each of --grids and --sizes), or `biri` (Biri et al.'s
+    /// model at the scene's own size, both kernels, on the GPU and the CPU reference: the
+    /// frame split into the paper's stages, silhouettes, surfaces, medium and shadow planes).
+    #[arg(long, default_value = "riley", value_parser = ["riley", "miyazaki", "both", "truth", "max", "biri"])]
     model: String,
     /// --model max: grid resolutions (voxels along the box's longest side) at which to time
     /// the diffusion solve, comma-separated.
@@ -545,9 +547,110 @@ fn bench_truth(b: RenderBench) -> Result<()> {
     Ok(())
 }
 
+/// `bench render --model biri`: at the scene's size, for each kernel, the GPU frame (best
+/// of --repeat) and the same dispatch with stage 2 alone, so that stages 3–5 are the
+/// difference; stage 1 (silhouettes, on the CPU) with the upload; and the CPU reference's
+/// own stage times.
+fn bench_biri(b: RenderBench) -> Result<()> {
+    use runtime::gpu::Gpu;
+    let (mut scene, tables) = super::render::prepare(
+        "biri",
+        b.scene.as_deref(),
+        b.tables.clone(),
+        Some(&b.quality),
+        true,
+        |_| {},
+    )?;
+    let gpu = Gpu::new().context(
+        "no GPU adapter: install a driver (on Debian, mesa-vulkan-drivers gives lavapipe)",
+    )?;
+    let renderer = render::biri::gpu::Renderer::new(&gpu);
+    let mut rows = Vec::new();
+    for kernel in [
+        render::biri::Kernel::Exact,
+        render::biri::Kernel::Polynomial,
+    ] {
+        scene.biri.kernel = kernel;
+        // One frame first: a driver may compile the pipeline at its first dispatch.
+        renderer.render(&gpu, &tables, &scene)?;
+        let (mut full, mut surfaces, mut upload) = (f64::INFINITY, f64::INFINITY, f64::INFINITY);
+        let (mut cpu, mut cpu_report) = (f64::INFINITY, None);
+        for _ in 0..b.repeat.max(1) {
+            let (_, t) = renderer.render_stages(&gpu, &tables, &scene, false)?;
+            full = full.min(t.frame);
+            upload = upload.min(t.upload);
+            let (_, t) = renderer.render_stages(&gpu, &tables, &scene, true)?;
+            surfaces = surfaces.min(t.frame);
+            let start = Instant::now();
+            let (_, report) = render::biri::cpu::render(&tables, &scene)?;
+            let s = start.elapsed().as_secs_f64();
+            if s < cpu {
+                cpu = s;
+                cpu_report = Some(report);
+            }
+        }
+        let r = cpu_report.expect("one run");
+        let total = upload + full;
+        let row = json!({
+            "kernel": kernel.name(), "width": scene.width, "height": scene.height,
+            "gpu": gpu.describe(), "gpu_stage1_and_upload_s": upload,
+            "gpu_stage2_s": surfaces, "gpu_frame_s": full,
+            "gpu_shares": {
+                "stage1_and_upload": upload / total,
+                "stage2": surfaces / total,
+                "stages3_5": (full - surfaces).max(0.0) / total,
+            },
+            "cpu_s": cpu, "cpu_threads": rayon::current_num_threads(),
+            "cpu_shares": {
+                "silhouettes": r.silhouettes_s / cpu, "surfaces": r.surfaces_s / cpu,
+                "medium_and_shadow_planes": r.medium_s / cpu,
+            },
+            "shadow_planes": r.shadow_planes, "crossings_per_ray": r.crossings_per_ray,
+        });
+        if !b.json {
+            println!(
+                "{} kernel, {}×{}: {}: stage 1 + upload {:.1} ms ({:.1} %), stage 2 {:.1} ms \
+                 ({:.1} %), stages 3–5 {:.1} ms ({:.1} %), frame {:.1} ms ({:.1} fps); CPU \
+                 reference ({} threads) {:.3} s: silhouettes {:.1} %, surfaces {:.1} %, medium \
+                 and shadow planes {:.1} %; {} shadow planes, {:.2} crossings per ray and light",
+                kernel.name(),
+                scene.width,
+                scene.height,
+                gpu.describe(),
+                upload * 1e3,
+                100.0 * upload / total,
+                surfaces * 1e3,
+                100.0 * surfaces / total,
+                (full - surfaces).max(0.0) * 1e3,
+                100.0 * (full - surfaces).max(0.0) / total,
+                full * 1e3,
+                1.0 / full,
+                rayon::current_num_threads(),
+                cpu,
+                100.0 * r.silhouettes_s / cpu,
+                100.0 * r.surfaces_s / cpu,
+                100.0 * r.medium_s / cpu,
+                r.shadow_planes,
+                r.crossings_per_ray
+            );
+        }
+        rows.push(row);
+    }
+    if b.json {
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&json!({"model": "biri", "frames": rows}))?
+        );
+    }
+    Ok(())
+}
+
 fn bench_render(b: RenderBench) -> Result<()> {
     if b.model == "truth" {
         return bench_truth(b);
+    }
+    if b.model == "biri" {
+        return bench_biri(b);
     }
     if b.model == "max" {
         return bench_max(b);

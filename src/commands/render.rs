@@ -66,7 +66,7 @@ pub struct RenderArgs {
     /// scattering from the bake's M(D, θ) at the tenuous edges; CPU, all cores; [render]
     /// max_threshold, diffusion_tolerance, max_diffusion_iterations) or `biri` (Biri, Arquès &
     /// Michelin 2006: single scattering of [[light]]s in homogeneous [[medium]]s in closed
-    /// form, volumetric shadows of [[occluder]]s from their silhouette planes; CPU).
+    /// form, volumetric shadows of [[occluder]]s from their silhouette planes; GPU, or --cpu).
     #[arg(long, default_value = "riley", value_parser = ["riley", "truth", "miyazaki", "max", "biri"])]
     model: String,
     /// --model biri: the kernel's integral, `exact` (the bake's primitive C(τ_h, θ),
@@ -203,6 +203,29 @@ pub fn run(a: RenderArgs) -> Result<()> {
     )?;
     if a.model == "truth" {
         return run_truth(&a, &render, &tables);
+    }
+    if a.model == "biri" && !a.cpu {
+        let gpu = Gpu::new().context(
+            "no GPU adapter: install a driver (on Debian, mesa-vulkan-drivers gives lavapipe, a \
+             software Vulkan) or render with --cpu",
+        )?;
+        let renderer = render::biri::gpu::Renderer::new(&gpu);
+        let (image, t) = renderer.render(&gpu, &tables, &render)?;
+        if !a.quiet {
+            eprintln!(
+                "analytic single scattering ({}, {} kernel): {}×{}, {} light(s): silhouettes \
+                 and upload {:.1} ms, frame {:.1} ms, readback {:.1} ms",
+                gpu.describe(),
+                render.biri.kernel.name(),
+                image.width,
+                image.height,
+                render.lights.len(),
+                t.upload * 1e3,
+                t.frame * 1e3,
+                t.readback * 1e3
+            );
+        }
+        return write_outputs(&a, &render, &image, Vec::new());
     }
     if a.model == "biri" {
         let t = Instant::now();

@@ -19,7 +19,7 @@
 //!
 //! - [`biri`]: Biri, Arquès & Michelin 2006 — single scattering of point and spot lights in
 //!   homogeneous media in closed form per ray, volumetric shadows from the occluders'
-//!   silhouette planes (`--model biri`, CPU).
+//!   silhouette planes (`--model biri`, GPU and CPU reference).
 //!
 //! A new model goes beside them as `src/<model>/`, using the same scene, camera and image.
 //!

@@ -10,7 +10,8 @@
 //! Taylor coefficients for four analytic phase functions only.
 //!
 //! # Where this departs from the paper
-//! - The stencil passes (§5.1.5) are replaced by their per-pixel equivalent on the CPU: the
+//! - The stencil passes (§5.1.5) are replaced by their per-pixel equivalent (the CPU
+//!   reference, [`cpu`], and the GPU's compute shader, [`gpu`], alike): the
 //!   list of the view ray's crossings with the silhouette planes, sorted by distance, the
 //!   shadow count summed from its value at the eye ([`geometry`]'s module docs). This
 //!   handles the camera in shadow (the paper's "slightly different strategy") and shadows in
@@ -29,6 +30,7 @@
 
 pub mod cpu;
 pub mod geometry;
+pub mod gpu;
 
 use glam::DVec3;
 

@@ -1,0 +1,467 @@
+// Biri, Arquès & Michelin 2006 on the GPU: one invocation per pixel does what the CPU
+// reference (cpu.rs) does per ray — the first surface (§5.1.2), then for each light the lit
+// pieces of the ray from its sorted crossings with the silhouette planes (the stencil count,
+// §5.1.4–5.1.5), the spheres' tangent cones and the spot cone, each piece's Γ(F) − Γ(E) from
+// the bake's kernel (Eq. 2: exact primitive or quartic), and the ambient fog (§3). f32
+// throughout; the buffers' layouts are written by gpu.rs.
+
+struct Params {
+    eye: vec4<f32>,      // xyz, tan(fov_y / 2)
+    forward: vec4<f32>,  // xyz, aspect
+    right: vec4<f32>,    // xyz, ground albedo
+    up: vec4<f32>,       // xyz, Δθ (radians)
+    counts: vec4<u32>,   // width, height, lights, media
+    counts2: vec4<u32>,  // spheres, meshes, kernel (0 exact, 1 polynomial), K (angles)
+    counts3: vec4<u32>,  // J (depths), offset of the depths, 1: surfaces only (stage 2), 0
+    depth_max: vec4<f32>, // last depth, 0, 0, 0
+}
+
+@group(0) @binding(0) var<uniform> P: Params;
+// Per light 4 vec4: position (xyz, shadow count at the eye), intensity (rgb, spot: 1/0),
+// spot axis (xyz, cos half-angle), (first plane, plane count, sphere-blocked bits, 0) as bits.
+@group(0) @binding(1) var<storage, read> lights: array<vec4<f32>>;
+// Per shadow plane 3 vec4: a (xyz, weight), b (xyz, 0), normal (xyz, 0).
+@group(0) @binding(2) var<storage, read> planes: array<vec4<f32>>;
+// Per sphere 1 vec4: centre, radius; albedo in spheres_albedo.
+@group(0) @binding(3) var<storage, read> spheres: array<vec4<f32>>;
+// Per mesh 2 vec4: lo (xyz, first triangle bits), hi (xyz, triangle count bits); albedo in
+// the w of its first triangle's first vertex row.
+@group(0) @binding(4) var<storage, read> meshes: array<vec4<f32>>;
+// Per triangle 3 vec4: a (xyz, albedo), b, c.
+@group(0) @binding(5) var<storage, read> tris: array<vec4<f32>>;
+// Per medium 5 vec4: lo (xyz, 1 box / 0 everywhere), hi (xyz, field bits), β_ext (rgb),
+// β_sca (rgb), ambient (rgb).
+@group(0) @binding(6) var<storage, read> media: array<vec4<f32>>;
+// Per field: for channel c, J × K primitive, then K Ams_1 bins, then J × 5 coefficients;
+// then the J depths at the end (offset in counts3.y).
+@group(0) @binding(7) var<storage, read> kernel: array<f32>;
+@group(0) @binding(8) var<storage, read_write> image: array<vec4<f32>>;
+
+const EPS: f32 = 1e-4;
+const MAX_EVENTS: u32 = 64u;
+
+fn box_span(o: vec3<f32>, d: vec3<f32>, lo: vec3<f32>, hi: vec3<f32>) -> vec2<f32> {
+    // Entry and exit distances; entry > exit when missed.
+    var a = -1e30;
+    var b = 1e30;
+    for (var k = 0; k < 3; k++) {
+        if (abs(d[k]) < 1e-30) {
+            if (o[k] < lo[k] || o[k] > hi[k]) { return vec2<f32>(1.0, -1.0); }
+        } else {
+            let t0 = (lo[k] - o[k]) / d[k];
+            let t1 = (hi[k] - o[k]) / d[k];
+            a = max(a, min(t0, t1));
+            b = min(b, max(t0, t1));
+        }
+    }
+    return vec2<f32>(a, b);
+}
+
+fn ray_triangle(o: vec3<f32>, d: vec3<f32>, a: vec3<f32>, b: vec3<f32>, c: vec3<f32>) -> f32 {
+    let e1 = b - a;
+    let e2 = c - a;
+    let p = cross(d, e2);
+    let det = dot(e1, p);
+    if (abs(det) < 1e-20) { return -1.0; }
+    let inv = 1.0 / det;
+    let t = o - a;
+    let u = dot(t, p) * inv;
+    if (u < 0.0 || u > 1.0) { return -1.0; }
+    let q = cross(t, e1);
+    let v = dot(d, q) * inv;
+    if (v < 0.0 || u + v > 1.0) { return -1.0; }
+    return dot(e2, q) * inv;
+}
+
+fn ray_sphere(o: vec3<f32>, d: vec3<f32>, s: vec4<f32>) -> vec2<f32> {
+    let w = o - s.xyz;
+    let b = dot(w, d);
+    let disc = b * b - (dot(w, w) - s.w * s.w);
+    if (disc < 0.0) { return vec2<f32>(1.0, -1.0); }
+    let q = sqrt(disc);
+    return vec2<f32>(-b - q, -b + q);
+}
+
+struct Hit { x: f32, n: vec3<f32>, albedo: f32 }
+
+// The first surface along o + x d: the ground, a sphere, a mesh triangle.
+fn surface(o: vec3<f32>, d: vec3<f32>) -> Hit {
+    var h = Hit(1e30, vec3<f32>(0.0, 1.0, 0.0), 0.0);
+    if (d.y < 0.0) { h = Hit(-o.y / d.y, vec3<f32>(0.0, 1.0, 0.0), P.right.w); }
+    for (var i = 0u; i < P.counts2.x; i++) {
+        let s = spheres[2u * i];
+        let r = ray_sphere(o, d, s);
+        var x = r.x;
+        if (x <= EPS) { x = r.y; }
+        if (r.x <= r.y && x > EPS && x < h.x) {
+            var n = (o + x * d - s.xyz) / s.w;
+            if (dot(n, d) > 0.0) { n = -n; }
+            h = Hit(x, n, spheres[2u * i + 1u].x);
+        }
+    }
+    for (var m = 0u; m < P.counts2.y; m++) {
+        let lo = meshes[2u * m];
+        let hi = meshes[2u * m + 1u];
+        let span = box_span(o, d, lo.xyz, hi.xyz);
+        if (span.x > span.y || span.y < 0.0 || span.x > h.x) { continue; }
+        let first = bitcast<u32>(lo.w);
+        let count = bitcast<u32>(hi.w);
+        for (var t = first; t < first + count; t++) {
+            let a = tris[3u * t];
+            let b = tris[3u * t + 1u].xyz;
+            let c = tris[3u * t + 2u].xyz;
+            let x = ray_triangle(o, d, a.xyz, b, c);
+            if (x > EPS && x < h.x) {
+                var n = normalize(cross(b - a.xyz, c - a.xyz));
+                if (dot(n, d) > 0.0) { n = -n; }
+                h = Hit(x, n, a.w);
+            }
+        }
+    }
+    return h;
+}
+
+// Whether the segment p → q passes no occluder.
+fn visible(p: vec3<f32>, q: vec3<f32>) -> bool {
+    let dv = q - p;
+    let len = length(dv);
+    let d = dv / len;
+    for (var i = 0u; i < P.counts2.x; i++) {
+        let r = ray_sphere(p, d, spheres[2u * i]);
+        if (r.x <= r.y && r.y > EPS && r.x < len - EPS) { return false; }
+    }
+    for (var m = 0u; m < P.counts2.y; m++) {
+        let lo = meshes[2u * m];
+        let hi = meshes[2u * m + 1u];
+        let span = box_span(p, d, lo.xyz, hi.xyz);
+        if (span.x > span.y || span.y < 0.0 || span.x > len) { continue; }
+        let first = bitcast<u32>(lo.w);
+        let count = bitcast<u32>(hi.w);
+        for (var t = first; t < first + count; t++) {
+            let x = ray_triangle(p, d, tris[3u * t].xyz, tris[3u * t + 1u].xyz, tris[3u * t + 2u].xyz);
+            if (x > EPS && x < len - EPS) { return false; }
+        }
+    }
+    return true;
+}
+
+fn medium_span(i: u32, o: vec3<f32>, d: vec3<f32>, x_max: f32) -> vec2<f32> {
+    let lo = media[5u * i];
+    let hi = media[5u * i + 1u];
+    if (lo.w == 0.0) { return vec2<f32>(0.0, x_max); }
+    let s = box_span(o, d, lo.xyz, hi.xyz);
+    return vec2<f32>(max(s.x, 0.0), min(s.y, x_max));
+}
+
+fn medium_contains(i: u32, p: vec3<f32>) -> bool {
+    let lo = media[5u * i];
+    let hi = media[5u * i + 1u];
+    return lo.w == 0.0 || (all(p >= lo.xyz) && all(p <= hi.xyz));
+}
+
+// Optical depth per channel along p + x u, x ∈ [0, len], without medium `skip`.
+fn depth(p: vec3<f32>, u: vec3<f32>, len: f32, skip: u32) -> vec3<f32> {
+    var tau = vec3<f32>(0.0);
+    for (var i = 0u; i < P.counts.w; i++) {
+        if (i == skip) { continue; }
+        let s = medium_span(i, p, u, len);
+        if (s.x < s.y) { tau += media[5u * i + 2u].xyz * (s.y - s.x); }
+    }
+    return tau;
+}
+
+fn in_spot(l: u32, u: vec3<f32>) -> bool {
+    if (lights[4u * l + 1u].w == 0.0) { return true; }
+    let axis = lights[4u * l + 2u];
+    return dot(u, axis.xyz) >= axis.w * length(u);
+}
+
+// The roots x > 0 of ((X − S)·a)² = c²|X − S|² on X = o + x d on the nappe of sign `nappe`.
+fn nappe_roots(s: vec3<f32>, a: vec3<f32>, cos2: f32, o: vec3<f32>, d: vec3<f32>, nappe: f32) -> vec2<f32> {
+    let w = o - s;
+    let da = dot(d, a);
+    let wa = dot(w, a);
+    let qa = da * da - cos2;
+    let qb = 2.0 * (da * wa - cos2 * dot(d, w));
+    let qc = wa * wa - cos2 * dot(w, w);
+    var r = vec2<f32>(-1.0, -1.0);
+    if (abs(qa) < 1e-7) {
+        if (qb != 0.0) { r.x = -qc / qb; }
+    } else {
+        let disc = qb * qb - 4.0 * qa * qc;
+        if (disc < 0.0) { return r; }
+        let q = -0.5 * (qb + select(-1.0, 1.0, qb >= 0.0) * sqrt(disc));
+        if (q != 0.0) { r = vec2<f32>(q / qa, qc / q); }
+    }
+    if (r.x > r.y) { r = r.yx; }
+    if (!(r.x > 0.0 && dot(w + r.x * d, a) * nappe > 0.0)) { r.x = -1.0; }
+    if (!(r.y > 0.0 && dot(w + r.y * d, a) * nappe > 0.0)) { r.y = -1.0; }
+    return r;
+}
+
+// Quadratic-in-ln τ weights over the depths (grid::depth_weights): rows and weights.
+struct Weights { j: vec3<u32>, w: vec3<f32> }
+
+fn depth_weights(tau_in: f32) -> Weights {
+    let n = P.counts3.x;
+    let base = P.counts3.y;
+    let tau = clamp(tau_in, 0.0, P.depth_max.x);
+    let d1 = kernel[base + 1u];
+    if (tau <= d1) {
+        let s = tau / d1;
+        return Weights(vec3<u32>(0u, 1u, 2u), vec3<f32>(1.0 - s, s, 0.0));
+    }
+    var j = 2u;
+    while (j < n - 1u && kernel[base + j] <= tau) { j++; }
+    var a = j - 1u;
+    var b = j;
+    var c = j + 1u;
+    if (j + 1u >= n) { a = j - 2u; b = j - 1u; c = j; }
+    let x = log(tau);
+    let xa = log(kernel[base + a]);
+    let xb = log(kernel[base + b]);
+    let xc = log(kernel[base + c]);
+    return Weights(vec3<u32>(a, b, c), vec3<f32>(
+        (x - xb) * (x - xc) / ((xa - xb) * (xa - xc)),
+        (x - xa) * (x - xc) / ((xb - xa) * (xb - xc)),
+        (x - xa) * (x - xb) / ((xc - xa) * (xc - xb))));
+}
+
+fn field_offset(field: u32, c: u32) -> u32 {
+    let k = P.counts2.w;
+    let j = P.counts3.x;
+    let per_channel = j * k + k + 5u * j;
+    return (3u * field + c) * per_channel;
+}
+
+// C(τ_h, θ) exact to the bins (sample::biri_primitive).
+fn primitive(field: u32, c: u32, tau: f32, theta_in: f32) -> f32 {
+    let k_len = P.counts2.w;
+    let j_len = P.counts3.x;
+    let step = P.up.w;
+    let half_pi = 1.5707963267948966;
+    let theta = clamp(theta_in, -half_pi, half_pi);
+    let k = min(u32(round((theta + half_pi) / step)), k_len - 1u);
+    let centre = f32(k) * step - half_pi;
+    let off = field_offset(field, c);
+    let w = depth_weights(tau);
+    var at = 0.0;
+    for (var i = 0; i < 3; i++) { at += w.w[i] * kernel[off + w.j[i] * k_len + k]; }
+    let g = tan(0.25 * (theta + centre) + 0.7853981633974483);
+    var e = 1.0;
+    if (tau > 0.0) { e = exp(-min(tau, P.depth_max.x) * g); }
+    return at + kernel[off + j_len * k_len + k] * e * (theta - centre);
+}
+
+fn polynomial(field: u32, c: u32, tau: f32, t0: f32, t1: f32) -> f32 {
+    let k_len = P.counts2.w;
+    let j_len = P.counts3.x;
+    let off = field_offset(field, c) + j_len * k_len + k_len;
+    let w = depth_weights(tau);
+    var sum = 0.0;
+    var p0 = t0;
+    var p1 = t1;
+    for (var i = 0u; i < 5u; i++) {
+        var ci = 0.0;
+        for (var r = 0; r < 3; r++) { ci += w.w[r] * kernel[off + 5u * w.j[r] + i]; }
+        sum += ci * (p1 - p0) / f32(i + 1u);
+        p0 *= t0;
+        p1 *= t1;
+    }
+    return sum;
+}
+
+// Γ(x1) − Γ(x0) of medium m for light l over a lit piece (cpu.rs, gamma).
+fn gamma(m: u32, l: u32, o: vec3<f32>, d: vec3<f32>, entry: f32, x0: f32, x1: f32, front: vec3<f32>) -> vec3<f32> {
+    let s = lights[4u * l].xyz;
+    let t = dot(s - o, d);
+    let h = max(length(s - (o + t * d)), 1e-3);
+    let th0 = atan((x0 - t) / h);
+    let th1 = atan((x1 - t) / h);
+    let mid = o + 0.5 * (x0 + x1) * d;
+    let to = mid - s;
+    let r = length(to);
+    let u = to / r;
+    var r0 = 0.0;
+    if (!medium_contains(m, s)) {
+        let sp = medium_span(m, s, u, r);
+        r0 = select(r, sp.x, sp.x < sp.y);
+    }
+    let others = depth(s, u, r, m);
+    let field = bitcast<u32>(media[5u * m + 1u].w);
+    let beta = media[5u * m + 2u].xyz;
+    let sca = media[5u * m + 3u].xyz;
+    let intensity = lights[4u * l + 1u].xyz;
+    var out = vec3<f32>(0.0);
+    for (var c = 0u; c < 3u; c++) {
+        let tau = beta[c] * h;
+        if (tau > P.depth_max.x) { continue; }
+        var delta = 0.0;
+        if (P.counts2.z == 0u) {
+            delta = primitive(field, c, tau, th1) - primitive(field, c, tau, th0);
+        } else {
+            delta = polynomial(field, c, tau, th0, th1);
+        }
+        if (delta == 0.0) { continue; }
+        let ex = min(-beta[c] * (t - entry - r0) - front[c] - others[c], 80.0);
+        out[c] = sca[c] / h * intensity[c] * exp(ex) * delta;
+    }
+    return out;
+}
+
+@compute @workgroup_size(8, 8)
+fn render(@builtin(global_invocation_id) id: vec3<u32>) {
+    let w = P.counts.x;
+    let hgt = P.counts.y;
+    if (id.x >= w || id.y >= hgt) { return; }
+    let sx = (2.0 * (f32(id.x) + 0.5) / f32(w) - 1.0) * P.eye.w * P.forward.w;
+    let sy = (1.0 - 2.0 * (f32(id.y) + 0.5) / f32(hgt)) * P.eye.w;
+    let d = normalize(P.forward.xyz + sx * P.right.xyz + sy * P.up.xyz);
+    let o = P.eye.xyz;
+
+    // Stage 2: the surface, shaded and attenuated.
+    let hit = surface(o, d);
+    var rgb = vec3<f32>(0.0);
+    if (hit.x < 1e29) {
+        let p = o + hit.x * d;
+        var lsum = vec3<f32>(0.0);
+        for (var l = 0u; l < P.counts.z; l++) {
+            let s = lights[4u * l].xyz;
+            let to = s - p;
+            let r = length(to);
+            let u = to / r;
+            let cosine = dot(hit.n, u);
+            if (cosine <= 0.0 || !in_spot(l, -u)) { continue; }
+            if (!visible(p + hit.n * 1e-4 * (1.0 + r), s)) { continue; }
+            let tau = depth(s, -u, r, 0xffffffffu);
+            lsum += hit.albedo * lights[4u * l + 1u].xyz * cosine / (3.141592653589793 * r * r) * exp(-tau);
+        }
+        rgb = lsum * exp(-depth(o, d, hit.x, 0xffffffffu));
+    }
+    let x_end = hit.x;
+    if (P.counts3.z == 1u) {
+        image[id.y * w + id.x] = vec4<f32>(rgb, 1.0);
+        return;
+    }
+
+    // Stages 3–5: each light's lit pieces and their Γ differences.
+    var events: array<vec2<f32>, MAX_EVENTS>;
+    for (var l = 0u; l < P.counts.z; l++) {
+        let s = lights[4u * l].xyz;
+        var count = i32(lights[4u * l].w);
+        let rec = lights[4u * l + 3u];
+        let first = bitcast<u32>(rec.x);
+        let n_planes = bitcast<u32>(rec.y);
+        let blocked = bitcast<u32>(rec.z);
+        var n = 0u;
+        for (var i = first; i < first + n_planes; i++) {
+            let a = planes[3u * i];
+            let b = planes[3u * i + 1u].xyz;
+            let nm = planes[3u * i + 2u].xyz;
+            let dn = dot(d, nm);
+            if (dn == 0.0) { continue; }
+            let x = dot(s - o, nm) / dn;
+            if (x <= 0.0 || x >= x_end) { continue; }
+            let q = o + x * d - s;
+            let uu = dot(a.xyz - s, a.xyz - s);
+            let uv = dot(a.xyz - s, b - s);
+            let vv = dot(b - s, b - s);
+            let pu = dot(q, a.xyz - s);
+            let pv = dot(q, b - s);
+            let det = uu * vv - uv * uv;
+            if (det <= 0.0) { continue; }
+            let al = (pu * vv - pv * uv) / det;
+            let be = (pv * uu - pu * uv) / det;
+            if (al >= 0.0 && be >= 0.0 && al + be >= 1.0 && n < MAX_EVENTS) {
+                events[n] = vec2<f32>(x, select(-a.w, a.w, dn > 0.0));
+                n++;
+            }
+        }
+        for (var i = 0u; i < P.counts2.x; i++) {
+            let sp = spheres[2u * i];
+            let axis_v = sp.xyz - s;
+            let dist = length(axis_v);
+            if (dist <= sp.w) { continue; }
+            let axis = axis_v / dist;
+            let cos2 = 1.0 - (sp.w / dist) * (sp.w / dist);
+            let roots = nappe_roots(s, axis, cos2, o, d, 1.0);
+            var on = ((blocked >> i) & 1u) == 1u;
+            for (var k = 0; k < 2; k++) {
+                let x = roots[k];
+                if (x > 0.0 && x < x_end && dot(o + x * d - s, axis) > dist * cos2 && n < MAX_EVENTS) {
+                    on = !on;
+                    events[n] = vec2<f32>(x, select(-1.0, 1.0, on));
+                    n++;
+                }
+            }
+        }
+        if (lights[4u * l + 1u].w != 0.0) {
+            let ax = lights[4u * l + 2u];
+            var inside = in_spot(l, o - s);
+            if (!inside) { count += 1; }
+            var roots = vec2<f32>(-1.0, -1.0);
+            if (abs(ax.w) < 1e-6) {
+                let da = dot(d, ax.xyz);
+                if (da != 0.0) { roots.x = -dot(o - s, ax.xyz) / da; }
+            } else {
+                roots = nappe_roots(s, ax.xyz, ax.w * ax.w, o, d, sign(ax.w));
+            }
+            for (var k = 0; k < 2; k++) {
+                let x = roots[k];
+                if (x > 0.0 && x < x_end && n < MAX_EVENTS) {
+                    inside = !inside;
+                    events[n] = vec2<f32>(x, select(1.0, -1.0, inside));
+                    n++;
+                }
+            }
+        }
+        // Insertion sort by distance.
+        for (var i = 1u; i < n; i++) {
+            let e = events[i];
+            var j = i;
+            while (j > 0u && events[j - 1u].x > e.x) {
+                events[j] = events[j - 1u];
+                j--;
+            }
+            events[j] = e;
+        }
+        var start = -1.0;
+        if (count <= 0) { start = 0.0; }
+        for (var i = 0u; i <= n; i++) {
+            var x = x_end;
+            var closing = true;
+            if (i < n) {
+                x = events[i].x;
+                count += i32(events[i].y);
+                closing = count > 0 && start >= 0.0;
+            }
+            if (closing && start >= 0.0) {
+                // A lit piece [start, x]: each medium's part of it.
+                for (var m = 0u; m < P.counts.w; m++) {
+                    let span = medium_span(m, o, d, x_end);
+                    let x0 = max(start, span.x);
+                    let x1 = min(x, span.y);
+                    if (x0 < x1) {
+                        let front = depth(o, d, span.x, m);
+                        rgb += gamma(m, l, o, d, span.x, x0, x1, front);
+                    }
+                }
+                start = -1.0;
+            } else if (i < n && count <= 0 && start < 0.0) {
+                start = x;
+            }
+        }
+    }
+    // The ambient fog, and the media's transparency.
+    var tau_all = vec3<f32>(0.0);
+    for (var m = 0u; m < P.counts.w; m++) {
+        let span = medium_span(m, o, d, x_end);
+        if (span.x < span.y) {
+            let front = depth(o, d, span.x, 0xffffffffu);
+            let own = media[5u * m + 2u].xyz * (span.y - span.x);
+            rgb += media[5u * m + 4u].xyz * exp(-front) * (1.0 - exp(-own));
+            tau_all += own;
+        }
+    }
+    image[id.y * w + id.x] = vec4<f32>(rgb, exp(-tau_all.y));
+}

@@ -1,0 +1,387 @@
+//! Biri et al. 2006 on wgpu: stage 1 (silhouettes, §5.1.1, and each light's shadow count at
+//! the eye) on the CPU, stages 2–5 in one compute dispatch of `biri.wgsl`, one invocation per
+//! pixel, the same per-ray algorithm as [`super::cpu`] in f32. Bind group 0: the params
+//! uniform, then lights, shadow planes, spheres, meshes, triangles, media and the kernel
+//! tables (read-only storage), and the image (rgb, T).
+
+use std::time::Instant;
+
+use glam::DVec3;
+use runtime::Tables;
+use runtime::gpu::{Gpu, GpuError};
+use wgpu::util::DeviceExt;
+
+use super::{Region, Shape};
+use crate::riley::gpu::Timings;
+use crate::{FrameError, Image};
+
+/// The model's WGSL.
+pub const BIRI_WGSL: &str = include_str!("biri.wgsl");
+
+/// Spheres one GPU frame can hold (their shadow states at the eye are one u32's bits).
+pub const MAX_GPU_SPHERES: usize = 32;
+
+/// Why a GPU frame failed.
+#[derive(Debug, thiserror::Error)]
+pub enum BiriGpuError {
+    /// The scene or the tables cannot be rendered.
+    #[error(transparent)]
+    Frame(#[from] FrameError),
+    /// The device failed, or a buffer exceeds its limits.
+    #[error(transparent)]
+    Gpu(#[from] GpuError),
+}
+
+/// The pipeline, built once.
+pub struct Renderer {
+    layout: wgpu::BindGroupLayout,
+    pipeline: wgpu::ComputePipeline,
+}
+
+fn v4(v: DVec3, w: f32) -> [f32; 4] {
+    [v.x as f32, v.y as f32, v.z as f32, w]
+}
+
+fn c4(v: [f64; 3], w: f32) -> [f32; 4] {
+    [v[0] as f32, v[1] as f32, v[2] as f32, w]
+}
+
+impl Renderer {
+    /// Compiles `biri.wgsl` and builds the pipeline.
+    pub fn new(gpu: &Gpu) -> Self {
+        let device = &gpu.device;
+        let entry = |binding: u32, ty: wgpu::BufferBindingType| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: wgpu::ShaderStages::COMPUTE,
+            ty: wgpu::BindingType::Buffer {
+                ty,
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
+            count: None,
+        };
+        use wgpu::BufferBindingType::{Storage, Uniform};
+        let entries: Vec<_> = (0..9)
+            .map(|b| match b {
+                0 => entry(0, Uniform),
+                8 => entry(8, Storage { read_only: false }),
+                b => entry(b, Storage { read_only: true }),
+            })
+            .collect();
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("photometeor biri layout"),
+            entries: &entries,
+        });
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("photometeor biri"),
+            source: wgpu::ShaderSource::Wgsl(BIRI_WGSL.into()),
+        });
+        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("photometeor biri pipeline layout"),
+            bind_group_layouts: &[Some(&layout)],
+            immediate_size: 0,
+        });
+        let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some("render"),
+            layout: Some(&pipeline_layout),
+            module: &module,
+            entry_point: Some("render"),
+            compilation_options: Default::default(),
+            cache: None,
+        });
+        Self { layout, pipeline }
+    }
+
+    /// Renders `scene` (as [`super::cpu::render`]); `Timings::upload` includes stage 1.
+    pub fn render(
+        &self,
+        gpu: &Gpu,
+        tables: &Tables,
+        scene: &crate::RenderScene,
+    ) -> Result<(Image, Timings), BiriGpuError> {
+        self.render_stages(gpu, tables, scene, false)
+    }
+
+    /// [`Renderer::render`], or with `surfaces_only` stage 2 alone (the surfaces, shaded and
+    /// attenuated; no medium contribution): what `bench render --model biri` times to split
+    /// the frame into the paper's stages.
+    pub fn render_stages(
+        &self,
+        gpu: &Gpu,
+        tables: &Tables,
+        scene: &crate::RenderScene,
+        surfaces_only: bool,
+    ) -> Result<(Image, Timings), BiriGpuError> {
+        let settings = &scene.biri;
+        settings.check(&scene.lights).map_err(|e| FrameError(e.0))?;
+        let start = Instant::now();
+        let device = &gpu.device;
+        let o = scene.camera.position_m;
+        let (forward, right, up) = scene
+            .camera
+            .axes()
+            .ok_or_else(|| FrameError("camera look_at_m equals position_m".into()))?;
+        let spheres: Vec<(&super::geometry::Sphere, f64)> = settings
+            .occluders
+            .iter()
+            .filter_map(|oc| match &oc.shape {
+                Shape::Sphere(s) => Some((s, oc.albedo)),
+                Shape::Mesh(_) => None,
+            })
+            .collect();
+        if spheres.len() > MAX_GPU_SPHERES {
+            return Err(FrameError(format!(
+                "the scene has {} sphere occluders; the GPU path holds at most \
+                 {MAX_GPU_SPHERES} (render it with --cpu)",
+                spheres.len()
+            ))
+            .into());
+        }
+        // Stage 1: silhouettes and the shadow count at the eye, per light.
+        let mut lights: Vec<[f32; 4]> = Vec::new();
+        let mut planes: Vec<[f32; 4]> = Vec::new();
+        for l in &scene.lights {
+            let s = l.position_m;
+            let first = planes.len() / 3;
+            for oc in &settings.occluders {
+                if let Shape::Mesh(m) = &oc.shape {
+                    for p in m.silhouette(s) {
+                        planes.push(v4(p.a, p.weight as f32));
+                        planes.push(v4(p.b, 0.0));
+                        planes.push(v4(p.normal, 0.0));
+                    }
+                }
+            }
+            let count: usize = settings.occluders.iter().map(|oc| oc.blockers(o, s)).sum();
+            let blocked = spheres.iter().enumerate().fold(0u32, |b, (i, (sp, _))| {
+                b | (u32::from(sp.blocks(o, s)) << i)
+            });
+            lights.push(v4(s, count as f32));
+            lights.push(c4(l.intensity, if l.spot.is_some() { 1.0 } else { 0.0 }));
+            let (axis, cos) = l
+                .spot
+                .map_or((DVec3::Y, 1.0), |(a, half)| (a, half.to_radians().cos()));
+            lights.push(v4(axis, cos as f32));
+            lights.push([
+                f32::from_bits(first as u32),
+                f32::from_bits((planes.len() / 3 - first) as u32),
+                f32::from_bits(blocked),
+                0.0,
+            ]);
+        }
+        let mut sphere_rows: Vec<[f32; 4]> = Vec::new();
+        for (s, albedo) in &spheres {
+            sphere_rows.push(v4(s.center, s.radius as f32));
+            sphere_rows.push([*albedo as f32, 0.0, 0.0, 0.0]);
+        }
+        let mut mesh_rows: Vec<[f32; 4]> = Vec::new();
+        let mut tri_rows: Vec<[f32; 4]> = Vec::new();
+        for oc in &settings.occluders {
+            if let Shape::Mesh(m) = &oc.shape {
+                let first = tri_rows.len() / 3;
+                for t in &m.triangles {
+                    let [a, b, c] = t.map(|i| m.vertices[i]);
+                    tri_rows.push(v4(a, oc.albedo as f32));
+                    tri_rows.push(v4(b, 0.0));
+                    tri_rows.push(v4(c, 0.0));
+                }
+                mesh_rows.push(v4(m.bounds.0, f32::from_bits(first as u32)));
+                mesh_rows.push(v4(m.bounds.1, f32::from_bits(m.triangles.len() as u32)));
+            }
+        }
+        // Media and the kernel tables of their fields.
+        let mut fields: Vec<usize> = Vec::new();
+        let mut media_rows: Vec<[f32; 4]> = Vec::new();
+        for m in &settings.media {
+            let index = tables
+                .fields
+                .iter()
+                .position(|f| f.name == m.field)
+                .ok_or_else(|| {
+                    FrameError(format!(
+                        "a [[medium]] uses field {:?}, which the tables do not hold",
+                        m.field
+                    ))
+                })?;
+            let slot = fields.iter().position(|&f| f == index).unwrap_or_else(|| {
+                fields.push(index);
+                fields.len() - 1
+            });
+            let f = &tables.fields[index];
+            let n = m.number_density_per_m3;
+            let (lo, hi, is_box) = match m.region {
+                Region::Everywhere => (DVec3::ZERO, DVec3::ZERO, 0.0),
+                Region::Box { min_m, max_m } => (min_m, max_m, 1.0),
+            };
+            media_rows.push(v4(lo, is_box));
+            media_rows.push(v4(hi, f32::from_bits(slot as u32)));
+            media_rows.push(c4(f.sigma_ext_m2.map(|s| n * s), 0.0));
+            media_rows.push(c4(f.sigma_sca_m2.map(|s| n * s), 0.0));
+            media_rows.push(c4(m.ambient, 0.0));
+        }
+        let mut kernel: Vec<f32> = Vec::new();
+        let mut depths: Vec<f64> = Vec::new();
+        for &index in &fields {
+            let f = &tables.fields[index];
+            let b = f.biri.as_ref().ok_or_else(|| {
+                FrameError(format!(
+                    "field {:?} of the bake in {} has no Biri kernel table ({}.biri.exr): bake \
+                     it again",
+                    f.name,
+                    tables.dir.display(),
+                    f.name
+                ))
+            })?;
+            depths = b.depths.clone();
+            let (_, j_len, k_len) = b.primitive.dim();
+            for c in 0..3 {
+                for j in 0..j_len {
+                    for k in 0..k_len {
+                        kernel.push(b.primitive[[c, j, k]] as f32);
+                    }
+                }
+                for k in 0..k_len {
+                    kernel.push(f.image.ams[[c, 0, k]] as f32);
+                }
+                kernel.extend(b.polynomial[c].iter().map(|&v| v as f32));
+            }
+        }
+        let base = kernel.len();
+        kernel.extend(depths.iter().map(|&d| d as f32));
+        let k_len = fields
+            .first()
+            .and_then(|&i| tables.fields[i].biri.as_ref())
+            .map_or(0, |b| b.primitive.dim().2);
+        let (w, h) = (scene.width, scene.height);
+        let u = |v: [u32; 4]| v.map(f32::from_bits);
+        let params: Vec<[f32; 4]> = vec![
+            v4(o, (0.5 * scene.camera.fov_deg).to_radians().tan() as f32),
+            v4(forward, (w as f64 / h as f64) as f32),
+            v4(right, scene.ground_albedo as f32),
+            v4(up, tables.theta_step_deg.to_radians() as f32),
+            u([
+                w as u32,
+                h as u32,
+                scene.lights.len() as u32,
+                settings.media.len() as u32,
+            ]),
+            u([
+                spheres.len() as u32,
+                mesh_rows.len() as u32 / 2,
+                u32::from(settings.kernel == super::Kernel::Polynomial),
+                k_len as u32,
+            ]),
+            u([
+                depths.len() as u32,
+                base as u32,
+                u32::from(surfaces_only),
+                0,
+            ]),
+            [*depths.last().unwrap_or(&0.0) as f32, 0.0, 0.0, 0.0],
+        ];
+        let limit = device.limits().max_storage_buffer_binding_size;
+        let image_bytes = 16 * (w * h) as u64;
+        for (what, bytes) in [
+            ("image bytes", image_bytes),
+            ("kernel table bytes", 4 * kernel.len() as u64),
+            ("triangle bytes", 16 * tri_rows.len() as u64),
+        ] {
+            if bytes > limit {
+                return Err(GpuError::Limit {
+                    what,
+                    value: bytes,
+                    limit,
+                }
+                .into());
+            }
+        }
+        // wgpu refuses empty storage buffers: pad each with one zero row.
+        let buffer = |label: &str, rows: &[[f32; 4]], usage: wgpu::BufferUsages| {
+            let mut bytes: Vec<u8> = bytemuck::cast_slice(rows).to_vec();
+            if bytes.is_empty() {
+                bytes = vec![0; 16];
+            }
+            device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some(label),
+                contents: &bytes,
+                usage,
+            })
+        };
+        let storage = wgpu::BufferUsages::STORAGE;
+        let params = buffer("biri params", &params, wgpu::BufferUsages::UNIFORM);
+        let lights = buffer("biri lights", &lights, storage);
+        let planes = buffer("biri planes", &planes, storage);
+        let spheres = buffer("biri spheres", &sphere_rows, storage);
+        let meshes = buffer("biri meshes", &mesh_rows, storage);
+        let tris = buffer("biri triangles", &tri_rows, storage);
+        let media = buffer("biri media", &media_rows, storage);
+        let kernel = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("biri kernel"),
+            contents: bytemuck::cast_slice(&kernel),
+            usage: storage,
+        });
+        let image = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("biri image"),
+            size: image_bytes,
+            usage: storage | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
+        });
+        let all = [
+            &params, &lights, &planes, &spheres, &meshes, &tris, &media, &kernel, &image,
+        ];
+        let entries: Vec<wgpu::BindGroupEntry> = all
+            .iter()
+            .enumerate()
+            .map(|(i, b)| wgpu::BindGroupEntry {
+                binding: i as u32,
+                resource: b.as_entire_binding(),
+            })
+            .collect();
+        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("photometeor biri bindings"),
+            layout: &self.layout,
+            entries: &entries,
+        });
+        let wait = || {
+            device
+                .poll(wgpu::PollType::wait_indefinitely())
+                .map_err(|e| GpuError::Readback(e.to_string()))
+        };
+        gpu.queue.submit([]);
+        wait()?;
+        let upload = start.elapsed().as_secs_f64();
+
+        let start = Instant::now();
+        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+            label: Some("photometeor biri frame"),
+        });
+        {
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("photometeor biri"),
+                timestamp_writes: None,
+            });
+            pass.set_pipeline(&self.pipeline);
+            pass.set_bind_group(0, &bind_group, &[]);
+            pass.dispatch_workgroups(w.div_ceil(8) as u32, h.div_ceil(8) as u32, 1);
+        }
+        gpu.queue.submit([encoder.finish()]);
+        wait()?;
+        let frame = start.elapsed().as_secs_f64();
+
+        let start = Instant::now();
+        let texels = runtime::gpu::read_back(gpu, &image, image_bytes)?;
+        Ok((
+            Image {
+                width: w,
+                height: h,
+                rgb: texels.iter().map(|c| [c[0], c[1], c[2]]).collect(),
+                transparency: texels.iter().map(|c| c[3]).collect(),
+            },
+            Timings {
+                upload,
+                frame,
+                readback: start.elapsed().as_secs_f64(),
+            },
+        ))
+    }
+}
