@@ -445,7 +445,10 @@ fn the_beams_scene_renders_with_both_kernels_and_other_models_refuse_it() {
     let scene = scene.to_str().unwrap();
     for model in ["riley", "miyazaki", "max"] {
         assert_refused_before_any_work(
-            &["render", scene, "--model", model, "--cpu", "--out", "bad.exr", "--tables", "tables"],
+            &[
+                "render", scene, "--model", model, "--cpu", "--out", "bad.exr", "--tables",
+                "tables",
+            ],
             &cwd,
             "only --model biri and --model truth draw",
         );
@@ -455,12 +458,30 @@ fn the_beams_scene_renders_with_both_kernels_and_other_models_refuse_it() {
         let out = format!("{kernel}.exr");
         let run = photometeor(
             &[
-                "render", scene, "--model", "biri", "--biri-kernel", kernel, "--quality", "draft",
-                "--width", "40", "--height", "30", "--out", &out, "--tables", "tables",
+                "render",
+                scene,
+                "--model",
+                "biri",
+                "--biri-kernel",
+                kernel,
+                "--quality",
+                "draft",
+                "--width",
+                "40",
+                "--height",
+                "30",
+                "--out",
+                &out,
+                "--tables",
+                "tables",
             ],
             &cwd,
         );
-        assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
+        assert!(
+            run.status.success(),
+            "{}",
+            String::from_utf8_lossy(&run.stderr)
+        );
         let stderr = String::from_utf8_lossy(&run.stderr);
         assert!(stderr.contains(&format!("{kernel} kernel")), "{stderr}");
         let (w, h, rgba) = read_rgba(&cwd.join(&out));
@@ -469,5 +490,10 @@ fn the_beams_scene_renders_with_both_kernels_and_other_models_refuse_it() {
     }
     // The exact image is positive and lit; the quartic differs from it.
     assert!(images[0][1].iter().all(|&v| v > 0.0));
-    assert!(images[0][1].iter().zip(&images[1][1]).any(|(a, b)| (a - b).abs() > 0.1 * a));
+    assert!(
+        images[0][1]
+            .iter()
+            .zip(&images[1][1])
+            .any(|(a, b)| (a - b).abs() > 0.1 * a)
+    );
 }
