@@ -149,16 +149,7 @@ fn optics(tables: &Tables, settings: &BiriSettings) -> Result<Vec<Optics>, Frame
         .media
         .iter()
         .map(|m| {
-            let field = tables
-                .fields
-                .iter()
-                .position(|f| f.name == m.field)
-                .ok_or_else(|| {
-                    FrameError(format!(
-                        "a [[medium]] uses field {:?}, which the tables do not hold",
-                        m.field
-                    ))
-                })?;
+            let field = super::field_index(tables, &m.field)?;
             let f = &tables.fields[field];
             if f.biri.is_none() {
                 return Err(FrameError(format!(

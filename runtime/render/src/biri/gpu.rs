@@ -193,16 +193,7 @@ impl Renderer {
         let mut fields: Vec<usize> = Vec::new();
         let mut media_rows: Vec<[f32; 4]> = Vec::new();
         for m in &settings.media {
-            let index = tables
-                .fields
-                .iter()
-                .position(|f| f.name == m.field)
-                .ok_or_else(|| {
-                    FrameError(format!(
-                        "a [[medium]] uses field {:?}, which the tables do not hold",
-                        m.field
-                    ))
-                })?;
+            let index = super::field_index(tables, &m.field)?;
             let slot = fields.iter().position(|&f| f == index).unwrap_or_else(|| {
                 fields.push(index);
                 fields.len() - 1

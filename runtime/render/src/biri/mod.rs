@@ -182,6 +182,19 @@ pub struct BiriSettings {
     pub occluders: Vec<Occluder>,
 }
 
+/// The index in `tables` of the field a `[[medium]]` uses.
+pub fn field_index(tables: &runtime::Tables, name: &str) -> Result<usize, crate::FrameError> {
+    tables
+        .fields
+        .iter()
+        .position(|f| f.name == name)
+        .ok_or_else(|| {
+            crate::FrameError(format!(
+                "a [[medium]] uses field {name:?}, which the tables do not hold"
+            ))
+        })
+}
+
 /// A setting the model cannot use, named with its allowed range.
 #[derive(Debug, thiserror::Error)]
 #[error("{0}")]

@@ -367,16 +367,7 @@ impl<'a> Tracer<'a> {
             .media
             .iter()
             .map(|m| {
-                let field = tables
-                    .fields
-                    .iter()
-                    .position(|f| f.name == m.field)
-                    .ok_or_else(|| {
-                        FrameError(format!(
-                            "a [[medium]] uses field {:?}, which the tables do not hold",
-                            m.field
-                        ))
-                    })?;
+                let field = crate::biri::field_index(tables, &m.field)?;
                 Ok((m.region, m.number_density_per_m3, field))
             })
             .collect::<Result<_, FrameError>>()?;
