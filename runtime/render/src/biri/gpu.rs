@@ -333,46 +333,16 @@ impl Renderer {
             layout: &self.layout,
             entries: &entries,
         });
-        let wait = || {
-            device
-                .poll(wgpu::PollType::wait_indefinitely())
-                .map_err(|e| GpuError::Readback(e.to_string()))
-        };
-        gpu.queue.submit([]);
-        wait()?;
-        let upload = start.elapsed().as_secs_f64();
-
-        let start = Instant::now();
-        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
-            label: Some("photometeor biri frame"),
-        });
-        {
-            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some("photometeor biri"),
-                timestamp_writes: None,
-            });
-            pass.set_pipeline(&self.pipeline);
-            pass.set_bind_group(0, &bind_group, &[]);
-            pass.dispatch_workgroups(w.div_ceil(8) as u32, h.div_ceil(8) as u32, 1);
-        }
-        gpu.queue.submit([encoder.finish()]);
-        wait()?;
-        let frame = start.elapsed().as_secs_f64();
-
-        let start = Instant::now();
-        let texels = runtime::gpu::read_back(gpu, &image, image_bytes)?;
-        Ok((
-            Image {
-                width: w,
-                height: h,
-                rgb: texels.iter().map(|c| [c[0], c[1], c[2]]).collect(),
-                transparency: texels.iter().map(|c| c[3]).collect(),
+        Ok(crate::riley::gpu::timed_frame(
+            gpu,
+            start,
+            |pass| {
+                pass.set_pipeline(&self.pipeline);
+                pass.set_bind_group(0, &bind_group, &[]);
+                pass.dispatch_workgroups(w.div_ceil(8) as u32, h.div_ceil(8) as u32, 1);
             },
-            Timings {
-                upload,
-                frame,
-                readback: start.elapsed().as_secs_f64(),
-            },
-        ))
+            &image,
+            (w, h),
+        )?)
     }
 }

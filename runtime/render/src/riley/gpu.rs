@@ -242,6 +242,42 @@ pub(crate) fn run_slices(
     image: &wgpu::Buffer,
     size: (usize, usize),
 ) -> Result<(Image, Timings), GpuError> {
+    let groups = |(x, y): (usize, usize)| (x.div_ceil(8) as u32, y.div_ceil(8) as u32);
+    timed_frame(
+        gpu,
+        start,
+        |pass| {
+            pass.set_bind_group(0, &gpu_tables.bind_group, &[]);
+            pass.set_bind_group(1, bind_group, &[0]);
+            let run = |d: &Dispatch, pass: &mut wgpu::ComputePass| {
+                let (x, y) = groups(d.1);
+                pass.set_pipeline(d.0);
+                pass.dispatch_workgroups(x, y, 1);
+            };
+            run(&clear, pass);
+            for k in 0..slices {
+                pass.set_bind_group(1, bind_group, &[(k * stride) as u32]);
+                for d in per_slice {
+                    run(d, pass);
+                }
+            }
+            run(&composite, pass);
+        },
+        image,
+        size,
+    )
+}
+
+/// A frame once its buffers are created (timed from `start`): waits for the uploads,
+/// records `record` into one compute pass, submits and waits (the frame time), and reads the
+/// (rgb, T) image of `size` back. Shared by every GPU model.
+pub(crate) fn timed_frame(
+    gpu: &Gpu,
+    start: Instant,
+    record: impl FnOnce(&mut wgpu::ComputePass),
+    image: &wgpu::Buffer,
+    size: (usize, usize),
+) -> Result<(Image, Timings), GpuError> {
     let device = &gpu.device;
     let wait = || {
         device
@@ -253,30 +289,15 @@ pub(crate) fn run_slices(
     let upload = start.elapsed().as_secs_f64();
 
     let start = Instant::now();
-    let groups = |(x, y): (usize, usize)| (x.div_ceil(8) as u32, y.div_ceil(8) as u32);
     let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
         label: Some("photometeor frame"),
     });
     {
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-            label: Some("photometeor slices"),
+            label: Some("photometeor frame"),
             timestamp_writes: None,
         });
-        pass.set_bind_group(0, &gpu_tables.bind_group, &[]);
-        pass.set_bind_group(1, bind_group, &[0]);
-        let run = |d: &Dispatch, pass: &mut wgpu::ComputePass| {
-            let (x, y) = groups(d.1);
-            pass.set_pipeline(d.0);
-            pass.dispatch_workgroups(x, y, 1);
-        };
-        run(&clear, &mut pass);
-        for k in 0..slices {
-            pass.set_bind_group(1, bind_group, &[(k * stride) as u32]);
-            for d in per_slice {
-                run(d, &mut pass);
-            }
-        }
-        run(&composite, &mut pass);
+        record(&mut pass);
     }
     gpu.queue.submit([encoder.finish()]);
     wait()?;
