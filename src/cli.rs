@@ -7,8 +7,8 @@ use mie::Material;
 use num_complex::Complex64;
 
 use crate::commands::{
-    bake, bench, compare, compare_render, inspect, mie as mie_cmd, phase, plot, render, tradeoff,
-    validate,
+    bake, bench, compare, compare_render, inspect, mie as mie_cmd, phase, plot, render, shaders,
+    tradeoff, validate,
 };
 
 /// Phase functions of cloud droplets, raindrops, ice and snow, and the multiple-scattering
@@ -39,6 +39,7 @@ impl Args {
             Command::Validate(a) => validate::run(a),
             Command::Tradeoff(a) => tradeoff::run(a),
             Command::Plot(a) => plot::run(a),
+            Command::Shaders(a) => shaders::run(a),
         }
     }
 }
@@ -85,6 +86,10 @@ enum Command {
     CompareRender(compare_render::CompareRenderArgs),
     /// Time photometeor's Mie workloads (and miepython's, side by side, when available).
     Bench(bench::BenchArgs),
+    /// Write the GPU sampling functions (ams, forward_fraction, ams_mix) in every engine's
+    /// language: WGSL, HLSL (SM 5.1), GLSL 450 and ES 310, MSL 2.0 and SPIR-V, translated by
+    /// naga from the one WGSL source, each with a header stating its bindings.
+    Shaders(shaders::ShadersArgs),
 }
 
 /// A particle material on the command line.

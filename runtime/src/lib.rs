@@ -14,5 +14,6 @@
 pub mod gpu;
 pub mod load;
 pub mod sample;
+pub mod shaders;
 
 pub use load::{FieldTable, LoadError, Spectrum, Tables};

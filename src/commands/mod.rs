@@ -9,5 +9,6 @@ pub mod mie;
 pub mod phase;
 pub mod plot;
 pub mod render;
+pub mod shaders;
 pub mod tradeoff;
 pub mod validate;
