@@ -369,24 +369,8 @@ pub fn evaluate(
     queries: &[Query],
 ) -> Result<Vec<[f32; 4]>, GpuError> {
     let device = &gpu.device;
-    let source = format!(
-        "{WGSL}\n{}",
-        r#"
-@group(1) @binding(0) var<storage, read> queries: array<vec4<f32>>;
-@group(1) @binding(1) var<storage, read_write> results: array<vec4<f32>>;
-
-@compute @workgroup_size(64)
-fn evaluate_queries(@builtin(global_invocation_id) id: vec3<u32>) {
-    let i = id.x;
-    if (i >= arrayLength(&queries)) {
-        return;
-    }
-    let q = queries[i];
-    let field = u32(q.x);
-    results[i] = vec4<f32>(ams(field, q.y, q.z), forward_fraction(field, q.y).g);
-}
-"#
-    );
+    // The sampling functions and the reference kernel `evaluate_queries` (shaders.rs).
+    let source = crate::shaders::source();
     let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
         label: Some("photometeor table queries"),
         source: wgpu::ShaderSource::Wgsl(source.into()),
@@ -415,7 +399,7 @@ fn evaluate_queries(@builtin(global_invocation_id) id: vec3<u32>) {
         label: Some("photometeor query pipeline"),
         layout: Some(&pipeline_layout),
         module: &module,
-        entry_point: Some("evaluate_queries"),
+        entry_point: Some(crate::shaders::ENTRY_POINT),
         compilation_options: Default::default(),
         cache: None,
     });

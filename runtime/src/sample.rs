@@ -160,13 +160,41 @@ pub fn biri_primitive(
     tau_h: f64,
     theta: f64,
 ) -> Option<f64> {
-    use std::f64::consts::FRAC_PI_2;
     let t = field.biri.as_ref()?;
+    let weights = grid::depth_weights(&t.depths, tau_h);
+    Some(primitive_with(field, t, grid, c, &weights, tau_h, theta))
+}
+
+/// C(τ_h, θ_1) − C(τ_h, θ_0), as [`biri_primitive`] with the depth weights found once: a lit
+/// piece of a ray. `None` if the bake has no kernel table.
+pub fn biri_primitive_difference(
+    field: &FieldTable,
+    grid: &grid::ThetaGrid,
+    c: usize,
+    tau_h: f64,
+    (theta0, theta1): (f64, f64),
+) -> Option<f64> {
+    let t = field.biri.as_ref()?;
+    let weights = grid::depth_weights(&t.depths, tau_h);
+    let at = |theta| primitive_with(field, t, grid, c, &weights, tau_h, theta);
+    Some(at(theta1) - at(theta0))
+}
+
+fn primitive_with(
+    field: &FieldTable,
+    t: &format::BiriTable,
+    grid: &grid::ThetaGrid,
+    c: usize,
+    weights: &[(usize, f64); 3],
+    tau_h: f64,
+    theta: f64,
+) -> f64 {
+    use std::f64::consts::FRAC_PI_2;
     let step = grid.step_deg().to_radians();
     let theta = theta.clamp(-FRAC_PI_2, FRAC_PI_2);
     let k = (((theta + FRAC_PI_2) / step).round() as usize).min(grid.len() - 1);
     let centre = k as f64 * step - FRAC_PI_2;
-    let at_centre: f64 = grid::depth_weights(&t.depths, tau_h)
+    let at_centre: f64 = weights
         .iter()
         .map(|&(j, w)| w * t.primitive[[c, j, k]])
         .sum();
@@ -179,7 +207,7 @@ pub fn biri_primitive(
     } else {
         0.0
     };
-    Some(at_centre + field.image.ams[[c, 0, k]] * e * (theta - centre))
+    at_centre + field.image.ams[[c, 0, k]] * e * (theta - centre)
 }
 
 /// The paper's quartic coefficients c_0..c_4 (Biri et al. 2006 Eq. 2, θ in radians) of channel

@@ -640,12 +640,7 @@ impl RenderScene {
     pub fn check_for(&self, model: &str) -> Result<(), FrameError> {
         self.check_model(model)?;
         if model == "biri" {
-            let mut frame = self.frame_with(super::DensityGrid {
-                min_m: DVec3::ZERO,
-                max_m: DVec3::ONE,
-                dims: [1, 1, 1],
-                data: vec![[0.0; super::MAX_FIELDS]],
-            });
+            let mut frame = self.frame_with(empty_grid());
             frame.sun.elevation_deg = 90.0; // biri has no sun
             return frame.check_view();
         }

@@ -162,7 +162,7 @@ fn worst_error(
         .fold(0.0, f64::max)
 }
 
-fn unlit_nowhere(_: DVec3, _: &render::truth::Light) -> bool {
+fn lit_everywhere(_: DVec3, _: &render::truth::Light) -> bool {
     true
 }
 
@@ -228,9 +228,9 @@ fn the_exact_kernel_equals_quadrature_of_eq_1_and_the_polynomial_does_not() {
     for (field, density, poly_floor) in [("fog", 3e8, 1.0), ("haze", 3e10, 0.01)] {
         let media = format!("[[medium]]\nfield = \"{field}\"\nnumber_density_per_m3 = {density}\n");
         let mut s = scene(&dir, &media, LIGHTS);
-        let exact = worst_error(&tables, &s, &ground, &unlit_nowhere);
+        let exact = worst_error(&tables, &s, &ground, &lit_everywhere);
         s.biri.kernel = Kernel::Polynomial;
-        let poly = worst_error(&tables, &s, &ground, &unlit_nowhere);
+        let poly = worst_error(&tables, &s, &ground, &lit_everywhere);
         eprintln!("{field}: worst error exact {exact:.2e}, polynomial {poly:.2e}");
         // Measured worst: fog 1.3·10⁻⁴, haze 1.6·10⁻⁶ of the brightest pixel.
         assert!(exact < 2e-4, "{field}: exact kernel off by {exact:e}");
@@ -299,14 +299,14 @@ max_m = [4, 8, 12]
 "#;
     let inside = "[[light]]\nposition_m = [0.5, 4.0, 5]\nintensity = [40, 34, 24]\n";
     let s = scene(&dir, fog, inside);
-    let exact = worst_error(&tables, &s, &ground, &unlit_nowhere);
+    let exact = worst_error(&tables, &s, &ground, &lit_everywhere);
     // With a box of haze around the camera in front of it, and the light outside both.
     let both = format!(
         "{fog}\n[[medium]]\nfield = \"haze\"\nnumber_density_per_m3 = 3e10\nmin_m = [-4, 0, -12]\nmax_m = [4, 8, -0.5]\n"
     );
     let outside = "[[light]]\nposition_m = [-6, 4.0, 5]\nintensity = [40, 34, 24]\n";
     let s = scene(&dir, &both, outside);
-    let approx = worst_error(&tables, &s, &ground, &unlit_nowhere);
+    let approx = worst_error(&tables, &s, &ground, &lit_everywhere);
     eprintln!("box media: light inside {exact:.2e}, outside {approx:.2e}");
     // Measured: 4.4·10⁻⁴ and 3.9·10⁻³.
     assert!(exact < 5e-4, "{exact:e}");

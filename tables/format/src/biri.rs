@@ -44,14 +44,10 @@ pub fn biri_file_name(name: &str) -> String {
 
 /// Names of the header attributes.
 pub mod attr {
-    /// `int`: [`super::BIRI_SCHEMA_VERSION`].
-    pub const SCHEMA: &str = "photometeor/schema";
-    /// `string`: the field's name.
-    pub const FIELD: &str = "photometeor/field";
-    /// `double`: Δθ in degrees.
-    pub const THETA_STEP_DEG: &str = "photometeor/theta_step_deg";
-    /// `string`: τ_h values.
-    pub const DEPTHS: &str = "photometeor/depths";
+    /// `photometeor/schema` (`int`: [`super::BIRI_SCHEMA_VERSION`]), `/field` (`string`),
+    /// `/theta_step_deg` (`double`: Δθ in degrees) and `/depths` (`string`: the τ_h values),
+    /// named as in the Poisson file.
+    pub use crate::poisson::attr::{DEPTHS, FIELD, SCHEMA, THETA_STEP_DEG};
     /// `string`: polynomial coefficients per channel.
     pub const POLY: [&str; 3] = [
         "photometeor/poly_R",

@@ -36,6 +36,10 @@ struct Prepared {
     light: Light,
     planes: Vec<ShadowPlane>,
     spheres: Vec<Sphere>,
+    /// The shadow count at the eye (triangles and spheres between it and the light), and
+    /// per sphere whether it blocks the eye: the same for every pixel.
+    count_at_eye: i32,
+    sphere_blocks_eye: Vec<bool>,
 }
 
 /// What a render measured, per stage (the paper's Table 1 on the CPU).
@@ -88,8 +92,15 @@ pub fn render(
                     Shape::Sphere(s) => spheres.push(*s),
                 }
             }
+            let s = l.position_m;
             Prepared {
                 light: *l,
+                count_at_eye: settings
+                    .occluders
+                    .iter()
+                    .map(|oc| oc.blockers(o, s) as i32)
+                    .sum(),
+                sphere_blocks_eye: spheres.iter().map(|sp| sp.blocks(o, s)).collect(),
                 planes,
                 spheres,
             }
@@ -257,17 +268,18 @@ impl Context<'_> {
     ) -> ([f64; 3], f64, usize) {
         let mut out = [0.0; 3];
         let mut crossings = 0;
-        let spans: Vec<Option<(f64, f64)>> = self
-            .media
-            .iter()
-            .map(|m| m.region.span(o, d, x_end))
+        // Each medium's span of the ray and the other media's optical depth before it.
+        let spans: Vec<Option<(f64, f64, [f64; 3])>> = (0..self.media.len())
+            .map(|m| {
+                let (a, b) = self.media[m].region.span(o, d, x_end)?;
+                Some((a, b, self.depth(o, d, a, Some(m))))
+            })
             .collect();
         for pl in lights {
             let (lit, n) = self.lit_pieces(pl, o, d, x_end);
             crossings += n;
-            for (m, span) in self.media.iter().zip(&spans).enumerate() {
-                let Some((a, b)) = *span.1 else { continue };
-                let front = self.depth(o, d, a, Some(m));
+            for (m, span) in spans.iter().enumerate() {
+                let Some((a, b, front)) = *span else { continue };
                 for &(x0, x1) in &lit {
                     let (x0, x1) = (x0.max(a), x1.min(b));
                     if x0 < x1 {
@@ -281,9 +293,8 @@ impl Context<'_> {
         }
         let mut tau_all = [0.0; 3];
         for (m, span) in self.media.iter().zip(&spans) {
-            let Some((a, b)) = *span else { continue };
             // The media in front of this one's span (they do not overlap it).
-            let front = self.depth(o, d, a, None);
+            let Some((a, b, front)) = *span else { continue };
             for c in 0..3 {
                 let own = m.beta_ext[c] * (b - a);
                 out[c] += m.ambient[c] * (-front[c]).exp() * -(-own).exp_m1();
@@ -305,12 +316,7 @@ impl Context<'_> {
     ) -> (Vec<(f64, f64)>, usize) {
         let s = pl.light.position_m;
         let mut events: Vec<(f64, i32)> = Vec::new();
-        let mut count: i32 = self
-            .settings
-            .occluders
-            .iter()
-            .map(|oc| oc.blockers(o, s) as i32)
-            .sum();
+        let mut count = pl.count_at_eye;
         for plane in &pl.planes {
             if let Some((x, w)) = plane.crossing(s, o, d)
                 && x < x_end
@@ -319,10 +325,10 @@ impl Context<'_> {
             }
         }
         let mut roots = Vec::new();
-        for sphere in &pl.spheres {
+        for (sphere, &blocks) in pl.spheres.iter().zip(&pl.sphere_blocks_eye) {
             roots.clear();
             sphere.shadow_crossings(s, o, d, &mut roots);
-            let mut on = sphere.blocks(o, s);
+            let mut on = blocks;
             for &x in roots.iter().filter(|&&x| x < x_end) {
                 on = !on;
                 events.push((x, if on { 1 } else { -1 }));
@@ -411,9 +417,8 @@ impl Context<'_> {
             }
             let delta = match self.settings.kernel {
                 Kernel::Exact => {
-                    let at =
-                        |th| sample::biri_primitive(field, self.grid, c, tau_h, th).unwrap_or(0.0);
-                    at(th1) - at(th0)
+                    sample::biri_primitive_difference(field, self.grid, c, tau_h, (th0, th1))
+                        .unwrap_or(0.0)
                 }
                 Kernel::Polynomial => {
                     let k = sample::biri_polynomial(field, c, tau_h).unwrap_or([0.0; 5]);

@@ -8,11 +8,10 @@ use std::time::Instant;
 
 use glam::DVec3;
 use runtime::Tables;
-use runtime::gpu::{Gpu, GpuError};
-use wgpu::util::DeviceExt;
+use runtime::gpu::Gpu;
 
 use super::{Region, Shape};
-use crate::riley::gpu::Timings;
+use crate::riley::gpu::{RenderError, Timings, a4, check_sizes, entry, filled, v4};
 use crate::{FrameError, Image};
 
 /// The model's WGSL.
@@ -21,51 +20,28 @@ pub const BIRI_WGSL: &str = include_str!("biri.wgsl");
 /// Spheres one GPU frame can hold (their shadow states at the eye are one u32's bits).
 pub const MAX_GPU_SPHERES: usize = 32;
 
-/// Why a GPU frame failed.
-#[derive(Debug, thiserror::Error)]
-pub enum BiriGpuError {
-    /// The scene or the tables cannot be rendered.
-    #[error(transparent)]
-    Frame(#[from] FrameError),
-    /// The device failed, or a buffer exceeds its limits.
-    #[error(transparent)]
-    Gpu(#[from] GpuError),
-}
-
 /// The pipeline, built once.
 pub struct Renderer {
     layout: wgpu::BindGroupLayout,
     pipeline: wgpu::ComputePipeline,
 }
 
-fn v4(v: DVec3, w: f32) -> [f32; 4] {
-    [v.x as f32, v.y as f32, v.z as f32, w]
-}
-
-fn c4(v: [f64; 3], w: f32) -> [f32; 4] {
-    [v[0] as f32, v[1] as f32, v[2] as f32, w]
+/// A vector and a u32 (the bits of the row's w) as one vec4<f32> row.
+fn with_bits(v: DVec3, bits: u32) -> [f32; 4] {
+    let [x, y, z, _] = v4(v, 0.0);
+    [x, y, z, f32::from_bits(bits)]
 }
 
 impl Renderer {
     /// Compiles `biri.wgsl` and builds the pipeline.
     pub fn new(gpu: &Gpu) -> Self {
         let device = &gpu.device;
-        let entry = |binding: u32, ty: wgpu::BufferBindingType| wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility: wgpu::ShaderStages::COMPUTE,
-            ty: wgpu::BindingType::Buffer {
-                ty,
-                has_dynamic_offset: false,
-                min_binding_size: None,
-            },
-            count: None,
-        };
         use wgpu::BufferBindingType::{Storage, Uniform};
         let entries: Vec<_> = (0..9)
             .map(|b| match b {
-                0 => entry(0, Uniform),
-                8 => entry(8, Storage { read_only: false }),
-                b => entry(b, Storage { read_only: true }),
+                0 => entry(0, Uniform, false),
+                8 => entry(8, Storage { read_only: false }, false),
+                b => entry(b, Storage { read_only: true }, false),
             })
             .collect();
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
@@ -98,7 +74,7 @@ impl Renderer {
         gpu: &Gpu,
         tables: &Tables,
         scene: &crate::RenderScene,
-    ) -> Result<(Image, Timings), BiriGpuError> {
+    ) -> Result<(Image, Timings), RenderError> {
         self.render_stages(gpu, tables, scene, false)
     }
 
@@ -111,7 +87,7 @@ impl Renderer {
         tables: &Tables,
         scene: &crate::RenderScene,
         surfaces_only: bool,
-    ) -> Result<(Image, Timings), BiriGpuError> {
+    ) -> Result<(Image, Timings), RenderError> {
         let settings = &scene.biri;
         settings.check(&scene.lights).map_err(|e| FrameError(e.0))?;
         let start = Instant::now();
@@ -146,7 +122,7 @@ impl Renderer {
             for oc in &settings.occluders {
                 if let Shape::Mesh(m) = &oc.shape {
                     for p in m.silhouette(s) {
-                        planes.push(v4(p.a, p.weight as f32));
+                        planes.push(v4(p.a, p.weight as f64));
                         planes.push(v4(p.b, 0.0));
                         planes.push(v4(p.normal, 0.0));
                     }
@@ -156,12 +132,12 @@ impl Renderer {
             let blocked = spheres.iter().enumerate().fold(0u32, |b, (i, (sp, _))| {
                 b | (u32::from(sp.blocks(o, s)) << i)
             });
-            lights.push(v4(s, count as f32));
-            lights.push(c4(l.intensity, if l.spot.is_some() { 1.0 } else { 0.0 }));
+            lights.push(v4(s, count as f64));
+            lights.push(a4(l.intensity, if l.spot.is_some() { 1.0 } else { 0.0 }));
             let (axis, cos) = l
                 .spot
                 .map_or((DVec3::Y, 1.0), |(a, half)| (a, half.to_radians().cos()));
-            lights.push(v4(axis, cos as f32));
+            lights.push(v4(axis, cos));
             lights.push([
                 f32::from_bits(first as u32),
                 f32::from_bits((planes.len() / 3 - first) as u32),
@@ -171,7 +147,7 @@ impl Renderer {
         }
         let mut sphere_rows: Vec<[f32; 4]> = Vec::new();
         for (s, albedo) in &spheres {
-            sphere_rows.push(v4(s.center, s.radius as f32));
+            sphere_rows.push(v4(s.center, s.radius));
             sphere_rows.push([*albedo as f32, 0.0, 0.0, 0.0]);
         }
         let mut mesh_rows: Vec<[f32; 4]> = Vec::new();
@@ -181,12 +157,12 @@ impl Renderer {
                 let first = tri_rows.len() / 3;
                 for t in &m.triangles {
                     let [a, b, c] = t.map(|i| m.vertices[i]);
-                    tri_rows.push(v4(a, oc.albedo as f32));
+                    tri_rows.push(v4(a, oc.albedo));
                     tri_rows.push(v4(b, 0.0));
                     tri_rows.push(v4(c, 0.0));
                 }
-                mesh_rows.push(v4(m.bounds.0, f32::from_bits(first as u32)));
-                mesh_rows.push(v4(m.bounds.1, f32::from_bits(m.triangles.len() as u32)));
+                mesh_rows.push(with_bits(m.bounds.0, first as u32));
+                mesh_rows.push(with_bits(m.bounds.1, m.triangles.len() as u32));
             }
         }
         // Media and the kernel tables of their fields.
@@ -201,14 +177,14 @@ impl Renderer {
             let f = &tables.fields[index];
             let n = m.number_density_per_m3;
             let (lo, hi, is_box) = match m.region {
-                Region::Everywhere => (DVec3::ZERO, DVec3::ZERO, 0.0),
+                Region::Everywhere => (DVec3::ZERO, DVec3::ZERO, 0.0f64),
                 Region::Box { min_m, max_m } => (min_m, max_m, 1.0),
             };
             media_rows.push(v4(lo, is_box));
-            media_rows.push(v4(hi, f32::from_bits(slot as u32)));
-            media_rows.push(c4(f.sigma_ext_m2.map(|s| n * s), 0.0));
-            media_rows.push(c4(f.sigma_sca_m2.map(|s| n * s), 0.0));
-            media_rows.push(c4(m.ambient, 0.0));
+            media_rows.push(with_bits(hi, slot as u32));
+            media_rows.push(a4(f.sigma_ext_m2.map(|s| n * s), 0.0));
+            media_rows.push(a4(f.sigma_sca_m2.map(|s| n * s), 0.0));
+            media_rows.push(a4(m.ambient, 0.0));
         }
         let mut kernel: Vec<f32> = Vec::new();
         let mut depths: Vec<f64> = Vec::new();
@@ -246,10 +222,10 @@ impl Renderer {
         let (w, h) = (scene.width, scene.height);
         let u = |v: [u32; 4]| v.map(f32::from_bits);
         let params: Vec<[f32; 4]> = vec![
-            v4(o, (0.5 * scene.camera.fov_deg).to_radians().tan() as f32),
-            v4(forward, (w as f64 / h as f64) as f32),
-            v4(right, scene.ground_albedo as f32),
-            v4(up, tables.theta_step_deg.to_radians() as f32),
+            v4(o, (0.5 * scene.camera.fov_deg).to_radians().tan()),
+            v4(forward, w as f64 / h as f64),
+            v4(right, scene.ground_albedo),
+            v4(up, tables.theta_step_deg.to_radians()),
             u([
                 w as u32,
                 h as u32,
@@ -270,33 +246,24 @@ impl Renderer {
             ]),
             [*depths.last().unwrap_or(&0.0) as f32, 0.0, 0.0, 0.0],
         ];
-        let limit = device.limits().max_storage_buffer_binding_size;
         let image_bytes = 16 * (w * h) as u64;
-        for (what, bytes) in [
-            ("image bytes", image_bytes),
-            ("kernel table bytes", 4 * kernel.len() as u64),
-            ("triangle bytes", 16 * tri_rows.len() as u64),
-        ] {
-            if bytes > limit {
-                return Err(GpuError::Limit {
-                    what,
-                    value: bytes,
-                    limit,
-                }
-                .into());
-            }
-        }
+        check_sizes(
+            device,
+            &[
+                ("image bytes", image_bytes),
+                ("kernel table bytes", 4 * kernel.len() as u64),
+                ("triangle bytes", 16 * tri_rows.len() as u64),
+            ],
+        )?;
         // wgpu refuses empty storage buffers: pad each with one zero row.
         let buffer = |label: &str, rows: &[[f32; 4]], usage: wgpu::BufferUsages| {
-            let mut bytes: Vec<u8> = bytemuck::cast_slice(rows).to_vec();
-            if bytes.is_empty() {
-                bytes = vec![0; 16];
-            }
-            device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some(label),
-                contents: &bytes,
+            let bytes: &[u8] = bytemuck::cast_slice(rows);
+            filled(
+                device,
+                label,
+                if bytes.is_empty() { &[0; 16] } else { bytes },
                 usage,
-            })
+            )
         };
         let storage = wgpu::BufferUsages::STORAGE;
         let params = buffer("biri params", &params, wgpu::BufferUsages::UNIFORM);
@@ -306,11 +273,12 @@ impl Renderer {
         let meshes = buffer("biri meshes", &mesh_rows, storage);
         let tris = buffer("biri triangles", &tri_rows, storage);
         let media = buffer("biri media", &media_rows, storage);
-        let kernel = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("biri kernel"),
-            contents: bytemuck::cast_slice(&kernel),
-            usage: storage,
-        });
+        let kernel = filled(
+            device,
+            "biri kernel",
+            bytemuck::cast_slice(&kernel),
+            storage,
+        );
         let image = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("biri image"),
             size: image_bytes,

@@ -12,8 +12,8 @@ use runtime::gpu::{Gpu, GpuTables};
 
 use super::{SvsPhase, SvsSettings};
 use crate::riley::gpu::{
-    Dispatch, RenderError, Timings, bind, build, check_sizes, filled, run_slices, slice_uniforms,
-    storage, v4,
+    Dispatch, RenderError, Timings, a4, bind, build, check_sizes, filled, run_slices,
+    slice_uniforms, storage, v4,
 };
 use crate::{Frame, Image, MAX_FIELDS, SUN_DIAMETER_DEG};
 
@@ -27,10 +27,6 @@ pub struct Renderer {
     shadow: wgpu::ComputePipeline,
     eye: wgpu::ComputePipeline,
     composite: wgpu::ComputePipeline,
-}
-
-fn a4(v: [f64; 3], w: f64) -> [f32; 4] {
-    [v[0] as f32, v[1] as f32, v[2] as f32, w as f32]
 }
 
 impl Renderer {

@@ -52,7 +52,11 @@ pub struct Renderer {
 }
 
 /// A compute-visible buffer binding of bind group 1.
-fn entry(binding: u32, ty: wgpu::BufferBindingType, dynamic: bool) -> wgpu::BindGroupLayoutEntry {
+pub(crate) fn entry(
+    binding: u32,
+    ty: wgpu::BufferBindingType,
+    dynamic: bool,
+) -> wgpu::BindGroupLayoutEntry {
     wgpu::BindGroupLayoutEntry {
         binding,
         visibility: wgpu::ShaderStages::COMPUTE,
@@ -63,6 +67,11 @@ fn entry(binding: u32, ty: wgpu::BufferBindingType, dynamic: bool) -> wgpu::Bind
         },
         count: None,
     }
+}
+
+/// Three channels and a scalar as one vec4<f32> row.
+pub(crate) fn a4(v: [f64; 3], w: f64) -> [f32; 4] {
+    [v[0] as f32, v[1] as f32, v[2] as f32, w as f32]
 }
 
 /// A vector and a scalar as one vec4<f32> uniform row.
