@@ -7,8 +7,8 @@ use mie::Material;
 use num_complex::Complex64;
 
 use crate::commands::{
-    bake, bench, compare, compare_render, inspect, mie as mie_cmd, phase, plot, render, shaders,
-    tradeoff, validate,
+    bake, bench, compare, compare_render, export, inspect, mie as mie_cmd, phase, plot, render,
+    shaders, tradeoff, validate,
 };
 
 /// Phase functions of cloud droplets, raindrops, ice and snow, and the multiple-scattering
@@ -40,6 +40,7 @@ impl Args {
             Command::Tradeoff(a) => tradeoff::run(a),
             Command::Plot(a) => plot::run(a),
             Command::Shaders(a) => shaders::run(a),
+            Command::Export(a) => export::run(a),
         }
     }
 }
@@ -90,6 +91,12 @@ enum Command {
     /// language: WGSL, HLSL (SM 5.1), GLSL 450 and ES 310, MSL 2.0 and SPIR-V, translated by
     /// naga from the one WGSL source, each with a header stating its bindings.
     Shaders(shaders::ShadersArgs),
+    /// Write a bake's Ams_n rows in the formats other programs load: Bevy's chromatic phase
+    /// texture (KTX2 and EXR, N × 1 Rgba32Float linear in cos θ), Mitsuba 3's tabphase, NumPy
+    /// arrays or CSV. Resampling to a grid in cos θ conserves each row's energy; the command
+    /// reports the light it moves to a wrong θ bin and the forward peak's height kept, and by
+    /// default takes the fewest samples that keep the moved light under --max-loss.
+    Export(export::ExportArgs),
 }
 
 /// A particle material on the command line.

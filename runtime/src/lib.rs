@@ -11,6 +11,7 @@
 
 #![warn(missing_docs)]
 
+pub mod export;
 pub mod gpu;
 pub mod load;
 pub mod sample;

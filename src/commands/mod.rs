@@ -4,6 +4,7 @@ pub mod bake;
 pub mod bench;
 pub mod compare;
 pub mod compare_render;
+pub mod export;
 pub mod inspect;
 pub mod mie;
 pub mod phase;

@@ -18,6 +18,7 @@
 pub mod atomic;
 pub mod biri;
 pub mod commit;
+pub mod export;
 pub mod exr;
 pub mod manifest;
 pub mod poisson;

@@ -1,0 +1,548 @@
+//! `photometeor export`: a bake's Ams_n rows in the formats other programs load (Bevy's
+//! chromatic phase texture as KTX2 and EXR, Mitsuba 3's `tabphase`, NumPy arrays, CSV), with
+//! what the conversion costs in accuracy (`runtime::export`).
+//!
+//! Everything is computed and checked first; the files are written into a staging directory
+//! beside `--out`, which then replaces it in one rename, so a failure leaves nothing
+//! half-written.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result, bail};
+use clap::{Args, ValueEnum};
+use runtime::export::{Cost, cost, resample, samples_for, strip_forward_peak};
+use runtime::{FieldTable, Tables};
+use serde_json::json;
+
+/// Where the files go.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum ExportFormat {
+    /// `<field>.ams<n>.ktx2` and `.exr`: Bevy's chromatic phase texture, N × 1 Rgba32Float,
+    /// columns linear in cos θ from θ = 180° (first) to 0° (last), A = 1; and
+    /// `phase_curve.wgsl`, a WGSL function that samples it.
+    Bevy,
+    /// `<field>.xml` (one `tabphase` per order and channel, values linear in cos θ from −1 to
+    /// 1, and a homogeneous medium) and `mitsuba.json` (the same values, for Python).
+    Mitsuba,
+    /// `theta_deg.npy` and `<field>.ams.npy` (orders × R, G, B × θ bins, 1/sr) on the bake's
+    /// own grid, no resampling.
+    Npy,
+    /// `<field>.csv`: θ in degrees, then Ams_n per order and channel, on the bake's own grid.
+    Csv,
+}
+
+/// What to do with the forward peak a grid in cos θ cannot hold.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum ForwardPeak {
+    /// Export the row as it is (the peak is spread over the last cell; its cost is reported).
+    Keep,
+    /// δ-scaling: take the peak's excess f over the next bin out, renormalise, and report the
+    /// medium's scaled σ_ext (1 − α f) and albedo α (1 − f)/(1 − α f) to use with it.
+    Strip,
+}
+
+#[derive(Debug, Args)]
+pub struct ExportArgs {
+    /// A bake directory (holding manifest.json).
+    dir: PathBuf,
+    /// Output format.
+    #[arg(long, value_enum)]
+    format: ExportFormat,
+    /// Output directory (created; an earlier export there is replaced, any other non-empty
+    /// directory is refused).
+    #[arg(long)]
+    out: PathBuf,
+    /// Fields to export, comma-separated (default: every field of the bake).
+    #[arg(long, value_delimiter = ',')]
+    fields: Vec<String>,
+    /// Scattering orders n of Ams_n, comma-separated, each in [1, N] (N: the bake's rows).
+    #[arg(long, value_delimiter = ',', default_value = "1")]
+    orders: Vec<usize>,
+    /// Values per table on the cos θ grid (bevy, mitsuba), in [2, the format's limit: 8192
+    /// texels for bevy, wgpu's default texture width; 262145 for mitsuba]. Default: the
+    /// smallest 2^k + 1 that keeps the light moved to a wrong bin under --max-loss.
+    #[arg(long)]
+    samples: Option<usize>,
+    /// The most light a resampling may move to a wrong θ bin, as a fraction of the scattered
+    /// light (0, 1); chooses --samples when it is not given.
+    #[arg(long, default_value_t = 0.01)]
+    max_loss: f64,
+    /// What to do with the forward peak a grid in cos θ cannot hold (bevy, mitsuba).
+    #[arg(long, value_enum, default_value_t = ForwardPeak::Keep)]
+    forward_peak: ForwardPeak,
+    /// Print the report as JSON (it is also written to OUT/export.json).
+    #[arg(long)]
+    json: bool,
+}
+
+impl ExportFormat {
+    fn name(self) -> &'static str {
+        match self {
+            ExportFormat::Bevy => "bevy",
+            ExportFormat::Mitsuba => "mitsuba",
+            ExportFormat::Npy => "npy",
+            ExportFormat::Csv => "csv",
+        }
+    }
+
+    /// The most values a table may have on the cos θ grid; `None`: the bake's own grid.
+    fn max_samples(self) -> Option<usize> {
+        match self {
+            ExportFormat::Bevy => Some(8192),
+            ExportFormat::Mitsuba => Some((1 << 18) + 1),
+            ExportFormat::Npy | ExportFormat::Csv => None,
+        }
+    }
+}
+
+const CHANNELS: [&str; 3] = ["R", "G", "B"];
+
+/// One field's rows to export: per order, per channel, the row (after --forward-peak) and the
+/// forward peak taken out.
+struct FieldRows<'a> {
+    field: &'a FieldTable,
+    rows: Vec<[Vec<f64>; 3]>,
+    stripped: Vec<[f64; 3]>,
+}
+
+fn rows_of<'a>(t: &'a Tables, field: &'a FieldTable, a: &ExportArgs) -> FieldRows<'a> {
+    let mut rows = Vec::new();
+    let mut stripped = Vec::new();
+    for &n in &a.orders {
+        let mut r: [Vec<f64>; 3] = Default::default();
+        let mut s = [0.0; 3];
+        for c in 0..3 {
+            let row: Vec<f64> = (0..t.angle_count)
+                .map(|k| field.image.ams[[c, n - 1, k]])
+                .collect();
+            (r[c], s[c]) = match a.forward_peak {
+                ForwardPeak::Keep => (row, 0.0),
+                ForwardPeak::Strip => strip_forward_peak(&row, t.theta_step_deg),
+            };
+        }
+        rows.push(r);
+        stripped.push(s);
+    }
+    FieldRows {
+        field,
+        rows,
+        stripped,
+    }
+}
+
+/// Refuses bad arguments before any work, naming the value and the allowed range.
+fn check(a: &ExportArgs, t: &Tables) -> Result<()> {
+    if !(a.max_loss > 0.0 && a.max_loss < 1.0) {
+        bail!("--max-loss {} is outside (0, 1)", a.max_loss);
+    }
+    if a.orders.is_empty() {
+        bail!("--orders is empty: give at least one order n ≥ 1");
+    }
+    for name in &a.fields {
+        if t.field(name).is_none() {
+            let have: Vec<&str> = t.fields.iter().map(|f| f.name.as_str()).collect();
+            bail!(
+                "--fields: the bake has no field {name:?} (it has {})",
+                have.join(", ")
+            );
+        }
+    }
+    for f in selected(t, a) {
+        for &n in &a.orders {
+            if n < 1 || n > f.n_max() {
+                bail!(
+                    "--orders: n = {n} is outside [1, {}], the rows of field {:?}",
+                    f.n_max(),
+                    f.name
+                );
+            }
+        }
+    }
+    match (a.samples, a.format.max_samples()) {
+        (Some(s), Some(max)) if !(2..=max).contains(&s) => bail!(
+            "--samples {s} is outside [2, {max}] for --format {}",
+            a.format.name()
+        ),
+        (Some(_), None) => bail!(
+            "--samples applies to bevy and mitsuba; --format {} writes the bake's own θ grid",
+            a.format.name()
+        ),
+        _ => {}
+    }
+    if a.out.exists() {
+        if !a.out.is_dir() {
+            bail!("--out {} exists and is not a directory", a.out.display());
+        }
+        let earlier = a.out.join("export.json").is_file();
+        let empty = std::fs::read_dir(&a.out)?.next().is_none();
+        if !earlier && !empty {
+            bail!(
+                "--out {} is a non-empty directory that holds no earlier export (no export.json); \
+                 refusing to replace it",
+                a.out.display()
+            );
+        }
+    }
+    Ok(())
+}
+
+fn selected<'a>(t: &'a Tables, a: &ExportArgs) -> Vec<&'a FieldTable> {
+    if a.fields.is_empty() {
+        t.fields.iter().collect()
+    } else {
+        a.fields.iter().filter_map(|n| t.field(n)).collect()
+    }
+}
+
+/// One table's values on the cos θ grid and its cost per channel.
+struct Resampled {
+    values: [Vec<f64>; 3],
+    cost: [Cost; 3],
+}
+
+pub fn run(a: ExportArgs) -> Result<()> {
+    let t = Tables::open(&a.dir)?;
+    check(&a, &t)?;
+    let step = t.theta_step_deg;
+    let fields: Vec<FieldRows> = selected(&t, &a)
+        .into_iter()
+        .map(|f| rows_of(&t, f, &a))
+        .collect();
+    let stage = staging_dir(&a.out)?;
+    let result = write_all(&a, &t, step, &fields, &stage);
+    match result {
+        Ok(report) => {
+            replace_dir(&stage, &a.out)?;
+            if a.json {
+                println!("{}", serde_json::to_string_pretty(&report)?);
+            }
+            Ok(())
+        }
+        Err(e) => {
+            let _ = std::fs::remove_dir_all(&stage);
+            Err(e)
+        }
+    }
+}
+
+fn write_all(
+    a: &ExportArgs,
+    t: &Tables,
+    step: f64,
+    fields: &[FieldRows],
+    stage: &Path,
+) -> Result<serde_json::Value> {
+    let write = |name: &str, bytes: &[u8]| -> Result<()> {
+        std::fs::write(stage.join(name), bytes).with_context(|| format!("writing {name}"))
+    };
+    let mut report_fields = serde_json::Map::new();
+    let mut text = String::new();
+    let version = env!("CARGO_PKG_VERSION");
+    let writer = format!("photometeor {version}");
+    if a.format == ExportFormat::Bevy {
+        write(
+            "phase_curve.wgsl",
+            runtime::export::PHASE_CURVE_WGSL.as_bytes(),
+        )?;
+    }
+    if a.format == ExportFormat::Npy {
+        let k = t.angle_count;
+        let theta: Vec<f64> = (0..k).map(|i| i as f64 * step).collect();
+        write(
+            "theta_deg.npy",
+            &format::export::npy_f64_bytes(&[k], &theta),
+        )?;
+    }
+    let mut mitsuba_json = serde_json::Map::new();
+    for fr in fields {
+        let f = fr.field;
+        let (n, resampled) = match a.format.max_samples() {
+            None => (t.angle_count, None),
+            Some(max) => {
+                let all: Vec<&[f64]> = fr
+                    .rows
+                    .iter()
+                    .flat_map(|r| r.iter().map(|v| v.as_slice()))
+                    .collect();
+                let n = match a.samples {
+                    Some(s) => s,
+                    None => samples_for(&all, step, a.max_loss, max).0,
+                };
+                let tables: Vec<Resampled> = fr
+                    .rows
+                    .iter()
+                    .map(|r| {
+                        let values = std::array::from_fn(|c| resample(&r[c], step, n));
+                        let cost = std::array::from_fn(|c| cost(&r[c], step, &values[c]));
+                        Resampled { values, cost }
+                    })
+                    .collect();
+                (n, Some(tables))
+            }
+        };
+        let mut orders_report = serde_json::Map::new();
+        let mut xml = String::new();
+        let mut mj = serde_json::Map::new();
+        let mut npy_data = Vec::new();
+        for (oi, &order) in a.orders.iter().enumerate() {
+            let base = format!("{}.ams{order}", f.name);
+            let mut files = Vec::new();
+            match a.format {
+                ExportFormat::Bevy => {
+                    let r = &resampled.as_ref().unwrap()[oi];
+                    let texels: Vec<[f32; 4]> = (0..n)
+                        .map(|i| {
+                            [
+                                r.values[0][i] as f32,
+                                r.values[1][i] as f32,
+                                r.values[2][i] as f32,
+                                1.0,
+                            ]
+                        })
+                        .collect();
+                    let n_text = order.to_string();
+                    let meta = [
+                        ("photometeor/field", f.name.as_str()),
+                        ("photometeor/order", n_text.as_str()),
+                        (
+                            "photometeor/layout",
+                            "column i: cos θ = -1 + 2i/(width-1), θ = 180° first; RGB 1/sr, A = 1",
+                        ),
+                    ];
+                    write(
+                        &format!("{base}.ktx2"),
+                        &format::export::ktx2_rgba32f_bytes(&texels, &writer, &meta),
+                    )?;
+                    write(
+                        &format!("{base}.exr"),
+                        &format::export::curve_exr_bytes(&base, &texels, &meta)?,
+                    )?;
+                    files.push(format!("{base}.ktx2"));
+                    files.push(format!("{base}.exr"));
+                }
+                ExportFormat::Mitsuba => {
+                    let r = &resampled.as_ref().unwrap()[oi];
+                    let mut per = serde_json::Map::new();
+                    for (c, ch) in CHANNELS.iter().enumerate() {
+                        let values: Vec<String> = r.values[c]
+                            .iter()
+                            .map(|&v| format!("{}", v as f32))
+                            .collect();
+                        let _ = writeln!(
+                            xml,
+                            "    <phase type=\"tabphase\" id=\"{}_ams{order}_{ch}\">\n        \
+                             <string name=\"values\" value=\"{}\"/>\n    </phase>",
+                            f.name,
+                            values.join(", ")
+                        );
+                        let f32s: Vec<f32> = r.values[c].iter().map(|&v| v as f32).collect();
+                        per.insert(ch.to_string(), json!(f32s));
+                    }
+                    mj.insert(order.to_string(), serde_json::Value::Object(per));
+                    files.push(format!("{}.xml", f.name));
+                }
+                ExportFormat::Npy => {
+                    for c in 0..3 {
+                        npy_data.extend_from_slice(&fr.rows[oi][c]);
+                    }
+                    files.push(format!("{}.ams.npy", f.name));
+                }
+                ExportFormat::Csv => files.push(format!("{}.csv", f.name)),
+            }
+            let mut channels = serde_json::Map::new();
+            for (c, ch) in CHANNELS.iter().enumerate() {
+                let mut e = serde_json::Map::new();
+                if let Some(r) = &resampled {
+                    let k = &r[oi].cost[c];
+                    e.insert("moved".into(), json!(k.moved));
+                    e.insert("peak_kept".into(), json!(k.peak_kept));
+                    e.insert("energy_change".into(), json!(k.energy_change));
+                } else {
+                    e.insert("moved".into(), json!(0.0));
+                }
+                if a.forward_peak == ForwardPeak::Strip {
+                    let fs = fr.stripped[oi][c];
+                    let al = f.albedo[c];
+                    e.insert("forward_peak_stripped".into(), json!(fs));
+                    e.insert(
+                        "scaled_sigma_ext_m2".into(),
+                        json!(f.sigma_ext_m2[c] * (1.0 - al * fs)),
+                    );
+                    e.insert(
+                        "scaled_albedo".into(),
+                        json!(al * (1.0 - fs) / (1.0 - al * fs)),
+                    );
+                }
+                channels.insert(ch.to_string(), serde_json::Value::Object(e));
+            }
+            if let Some(r) = &resampled {
+                let worst = r[oi].cost.iter().map(|c| c.moved).fold(0.0, f64::max);
+                let peak = r[oi].cost.iter().map(|c| c.peak_kept).fold(1.0, f64::min);
+                let _ = writeln!(
+                    text,
+                    "{:<10} Ams_{order:<3} {n:>8} values  moved {:>7.3} %  forward peak kept {:>9.3e}{}",
+                    f.name,
+                    worst * 100.0,
+                    peak,
+                    if worst > a.max_loss {
+                        format!("  (above --max-loss {} %)", a.max_loss * 100.0)
+                    } else {
+                        String::new()
+                    }
+                );
+            }
+            orders_report.insert(
+                order.to_string(),
+                json!({ "files": files, "channels": channels }),
+            );
+        }
+        match a.format {
+            ExportFormat::Mitsuba => {
+                let al = f.albedo;
+                let s = f.sigma_ext_m2;
+                let snippet = format!(
+                    "<!-- photometeor {version}: field {name} ({kind}), tabphase per order n and channel.\n     \
+                     Mitsuba's tabphase is one scalar table: render one channel at a time, or pick G.\n     \
+                     values: linear in cos θ from -1 (θ = 180°) to 1 (θ = 0°); Mitsuba normalises them,\n     \
+                     and they already integrate to 1. sigma_t below is for one particle per m³:\n     \
+                     set 'scale' to the number density (1/m³). -->\n\
+                     <scene version=\"3.0.0\">\n{xml}    <medium type=\"homogeneous\" id=\"{name}_medium\">\n        \
+                     <rgb name=\"albedo\" value=\"{:.6}, {:.6}, {:.6}\"/>\n        \
+                     <rgb name=\"sigma_t\" value=\"{:.6e}, {:.6e}, {:.6e}\"/>\n        \
+                     <float name=\"scale\" value=\"1\"/>\n        \
+                     <ref id=\"{name}_ams{first}_G\"/>\n    </medium>\n</scene>\n",
+                    al[0],
+                    al[1],
+                    al[2],
+                    s[0],
+                    s[1],
+                    s[2],
+                    name = f.name,
+                    kind = f.kind,
+                    first = a.orders[0],
+                );
+                write(&format!("{}.xml", f.name), snippet.as_bytes())?;
+                mitsuba_json.insert(f.name.clone(), serde_json::Value::Object(mj));
+            }
+            ExportFormat::Npy => {
+                let k = t.angle_count;
+                write(
+                    &format!("{}.ams.npy", f.name),
+                    &format::export::npy_f64_bytes(&[a.orders.len(), 3, k], &npy_data),
+                )?;
+            }
+            ExportFormat::Csv => {
+                let mut csv = String::from("theta_deg");
+                for &o in &a.orders {
+                    for ch in CHANNELS {
+                        let _ = write!(csv, ",ams{o}_{ch}");
+                    }
+                }
+                csv.push('\n');
+                for k in 0..t.angle_count {
+                    let _ = write!(csv, "{}", k as f64 * step);
+                    for r in &fr.rows {
+                        for row in r {
+                            let _ = write!(csv, ",{:e}", row[k]);
+                        }
+                    }
+                    csv.push('\n');
+                }
+                write(&format!("{}.csv", f.name), csv.as_bytes())?;
+            }
+            ExportFormat::Bevy => {}
+        }
+        report_fields.insert(
+            f.name.clone(),
+            json!({
+                "kind": f.kind,
+                "samples": n,
+                "sigma_ext_m2": f.sigma_ext_m2,
+                "albedo": f.albedo,
+                "orders": orders_report,
+            }),
+        );
+    }
+    if a.format == ExportFormat::Mitsuba {
+        write(
+            "mitsuba.json",
+            serde_json::to_string(&json!({
+                "layout": "values linear in cos θ from -1 (θ = 180°) to 1 (θ = 0°), 1/sr",
+                "fields": mitsuba_json,
+            }))?
+            .as_bytes(),
+        )?;
+    }
+    let grid = match a.format.max_samples() {
+        Some(_) => json!({
+            "kind": "cos_theta",
+            "layout": "value i at cos θ = -1 + 2i/(n-1): θ = 180° first, θ = 0° last; read back \
+                       linear in cos θ between values",
+        }),
+        None => json!({
+            "kind": "theta_bins",
+            "theta_step_deg": step,
+            "layout": "column k: the average over θ ∈ [kΔθ − Δθ/2, kΔθ + Δθ/2] ∩ [0°, 180°] in solid angle",
+        }),
+    };
+    let report = json!({
+        "tool": "photometeor",
+        "tool_version": version,
+        "source": a.dir.display().to_string(),
+        "format": a.format.name(),
+        "grid": grid,
+        "max_loss": a.max_loss,
+        "forward_peak": match a.forward_peak { ForwardPeak::Keep => "keep", ForwardPeak::Strip => "strip" },
+        "cost": "moved: the share of the scattered light the resampled table puts in a wrong θ bin of the \
+                 bake (½ Σ Ω_k |p̂_k − p_k|); peak_kept: its value at θ = 0 over the bake's bin 0",
+        "fields": report_fields,
+    });
+    write(
+        "export.json",
+        serde_json::to_string_pretty(&report)?.as_bytes(),
+    )?;
+    if !a.json {
+        if text.is_empty() {
+            println!(
+                "{}: {} on the bake's own θ grid (Δθ = {step}°), nothing resampled",
+                a.out.display(),
+                a.format.name()
+            );
+        } else {
+            print!("{text}");
+        }
+        println!("wrote {} (report: export.json)", a.out.display());
+    }
+    Ok(report)
+}
+
+/// A fresh staging directory beside `out`.
+fn staging_dir(out: &Path) -> Result<PathBuf> {
+    let parent = match out.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    std::fs::create_dir_all(&parent).with_context(|| format!("creating {}", parent.display()))?;
+    let name = out
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "export".into());
+    let stage = parent.join(format!(".{name}.stage-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&stage);
+    std::fs::create_dir(&stage).with_context(|| format!("creating {}", stage.display()))?;
+    Ok(stage)
+}
+
+/// Puts `stage` where `out` was (an earlier export there is removed once the new one is in).
+fn replace_dir(stage: &Path, out: &Path) -> Result<()> {
+    if out.exists() {
+        let old = stage.with_extension("old");
+        std::fs::rename(out, &old).with_context(|| format!("moving {} aside", out.display()))?;
+        std::fs::rename(stage, out).with_context(|| format!("writing {}", out.display()))?;
+        std::fs::remove_dir_all(&old).with_context(|| format!("removing {}", old.display()))?;
+    } else {
+        std::fs::rename(stage, out).with_context(|| format!("writing {}", out.display()))?;
+    }
+    Ok(())
+}
