@@ -70,6 +70,8 @@ fn bevy_ktx2_reads_back_with_the_ktx2_crate_and_the_reported_cost_is_the_cost() 
         out.to_str().unwrap(),
         "--orders",
         "1,4",
+        "--samples",
+        "2049",
     ]));
     let t = Tables::open(bake()).unwrap();
     let r = report(&out);
@@ -288,6 +290,10 @@ fn bad_arguments_are_refused_naming_the_value_and_nothing_is_written() {
             &["--format", "npy", "--samples", "100"],
             "--samples applies to bevy and mitsuba",
         ),
+        (
+            &["--format", "bevy", "--fields", "rain"],
+            "--max-loss 0.01 cannot be met for field \"rain\" within 8192 values, the bevy limit",
+        ),
     ];
     for (args, want) in cases {
         let mut all = args.to_vec();
@@ -296,6 +302,26 @@ fn bad_arguments_are_refused_naming_the_value_and_nothing_is_written() {
         let e = String::from_utf8_lossy(&o.stderr);
         assert!(!o.status.success() && e.contains(want), "{args:?}: {e}");
         assert!(!out.exists(), "{args:?} wrote {}", out.display());
+    }
+    // A directory that is not a bake, and a format that does not exist.
+    let not_bake = root.join("empty");
+    fs::create_dir_all(&not_bake).unwrap();
+    for (args, want) in [
+        (
+            vec!["export", not_bake.to_str().unwrap(), "--format", "csv"],
+            "manifest.json",
+        ),
+        (
+            vec!["export", bake().to_str().unwrap(), "--format", "fbx"],
+            "invalid value 'fbx'",
+        ),
+    ] {
+        let mut args = args;
+        args.extend_from_slice(&["--out", out.to_str().unwrap()]);
+        let o = photometeor(&args, Path::new("."));
+        let e = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success() && e.contains(want), "{args:?}: {e}");
+        assert!(!out.exists());
     }
     // A directory that is not an earlier export is not replaced.
     fs::create_dir_all(&out).unwrap();
@@ -352,6 +378,8 @@ fn the_bevy_texture_sampled_by_its_wgsl_on_a_gpu_matches_the_cpu() {
         out.to_str().unwrap(),
         "--fields",
         "cloud",
+        "--samples",
+        "8192",
     ]));
     let snippet = fs::read_to_string(out.join("phase_curve.wgsl")).unwrap();
     let bytes = fs::read(out.join("cloud.ams1.ktx2")).unwrap();
@@ -493,4 +521,34 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {{
         worst_table * 100.0
     );
     assert!(worst < 2e-7, "{worst}");
+}
+
+#[test]
+fn hg_lobes_are_fitted_with_what_they_lose() {
+    let out = workdir("export_hg").join("hg");
+    let text = ok(&export(&["--format", "hg", "--out", out.to_str().unwrap()]));
+    let r = report(&out);
+    let t = Tables::open(bake()).unwrap();
+    for field in ["cloud", "rain"] {
+        assert!(out.join(format!("{field}.lobes.png")).exists());
+        for (c, ch) in ["R", "G", "B"].iter().enumerate() {
+            let e = &r["fields"][field]["orders"]["1"]["channels"][ch];
+            let moved = |k: &str| e[k]["moved"].as_f64().unwrap();
+            // The table's own g, and two fits that each do at least as well as the one before.
+            let g = runtime::export::asymmetry(&row(&t, field, c, 1), t.theta_step_deg);
+            assert_eq!(e["hg_at_g"]["g1"].as_f64().unwrap(), g);
+            assert!(
+                moved("hg") <= moved("hg_at_g") && moved("dual_hg") <= moved("hg"),
+                "{e}"
+            );
+            assert!(moved("dual_hg") > 0.0 && moved("hg_at_g") < 1.0);
+        }
+    }
+    // HG has no rainbow: a lobe keeps little of the bow's height.
+    let bow = r["fields"]["rain"]["orders"]["1"]["channels"]["G"]["hg"]["features"]
+        ["primary rainbow"]["kept"]
+        .as_f64()
+        .unwrap();
+    assert!(bow < 0.5, "{bow}");
+    assert!(text.contains("best dual HG"), "{text}");
 }

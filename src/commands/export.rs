@@ -11,7 +11,10 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
 use clap::{Args, ValueEnum};
-use runtime::export::{Cost, cost, resample, samples_for, strip_forward_peak};
+use runtime::export::{
+    Cost, Lobes, asymmetry, cost, fit_dual_hg, fit_hg, resample, rms_relative, samples_for,
+    strip_forward_peak,
+};
 use runtime::{FieldTable, Tables};
 use serde_json::json;
 
@@ -30,6 +33,12 @@ pub enum ExportFormat {
     Npy,
     /// `<field>.csv`: θ in degrees, then Ams_n per order and channel, on the bake's own grid.
     Csv,
+    /// Henyey–Greenstein at the table's own g, and the best-fit lobe and dual lobe
+    /// w HG(g1) + (1 − w) HG(g2) per field, order and channel (the phase functions Unreal, Unity HDRP and Godot expose), fitted for
+    /// the least light in a wrong θ bin, with what they lose: that light, the rms relative
+    /// error for θ ≥ 1°, and the height kept of each optical feature (rainbow, glory, fogbow,
+    /// halos, forward peak); `<field>.lobes.png` and `.svg` draw them against Ams_n.
+    Hg,
 }
 
 /// What to do with the forward peak a grid in cos θ cannot hold.
@@ -65,7 +74,8 @@ pub struct ExportArgs {
     #[arg(long)]
     samples: Option<usize>,
     /// The most light a resampling may move to a wrong θ bin, as a fraction of the scattered
-    /// light (0, 1); chooses --samples when it is not given.
+    /// light (0, 1); chooses --samples when it is not given, and the export is refused when no
+    /// sample count within the format's limit meets it.
     #[arg(long, default_value_t = 0.01)]
     max_loss: f64,
     /// What to do with the forward peak a grid in cos θ cannot hold (bevy, mitsuba).
@@ -83,6 +93,7 @@ impl ExportFormat {
             ExportFormat::Mitsuba => "mitsuba",
             ExportFormat::Npy => "npy",
             ExportFormat::Csv => "csv",
+            ExportFormat::Hg => "hg",
         }
     }
 
@@ -91,7 +102,7 @@ impl ExportFormat {
         match self {
             ExportFormat::Bevy => Some(8192),
             ExportFormat::Mitsuba => Some((1 << 18) + 1),
-            ExportFormat::Npy | ExportFormat::Csv => None,
+            ExportFormat::Npy | ExportFormat::Csv | ExportFormat::Hg => None,
         }
     }
 }
@@ -210,7 +221,11 @@ pub fn run(a: ExportArgs) -> Result<()> {
         .map(|f| rows_of(&t, f, &a))
         .collect();
     let stage = staging_dir(&a.out)?;
-    let result = write_all(&a, &t, step, &fields, &stage);
+    let result = if a.format == ExportFormat::Hg {
+        write_lobes(&a, &t, step, &fields, &stage)
+    } else {
+        write_all(&a, &t, step, &fields, &stage)
+    };
     match result {
         Ok(report) => {
             replace_dir(&stage, &a.out)?;
@@ -267,7 +282,20 @@ fn write_all(
                     .collect();
                 let n = match a.samples {
                     Some(s) => s,
-                    None => samples_for(&all, step, a.max_loss, max).0,
+                    None => {
+                        let (n, worst) = samples_for(&all, step, a.max_loss, max);
+                        if worst.moved > a.max_loss {
+                            bail!(
+                                "--max-loss {} cannot be met for field {:?} within {max} values, the {} limit: there {:.2} % of the light lands in a wrong θ bin; allow at least --max-loss {:.4}, take the loss with --samples N, or try --forward-peak strip",
+                                a.max_loss,
+                                f.name,
+                                a.format.name(),
+                                worst.moved * 100.0,
+                                (worst.moved * 1e4).ceil() / 1e4
+                            );
+                        }
+                        n
+                    }
                 };
                 let tables: Vec<Resampled> = fr
                     .rows
@@ -349,6 +377,7 @@ fn write_all(
                     files.push(format!("{}.ams.npy", f.name));
                 }
                 ExportFormat::Csv => files.push(format!("{}.csv", f.name)),
+                ExportFormat::Hg => unreachable!("--format hg is written by write_lobes"),
             }
             let mut channels = serde_json::Map::new();
             for (c, ch) in CHANNELS.iter().enumerate() {
@@ -451,7 +480,7 @@ fn write_all(
                 }
                 write(&format!("{}.csv", f.name), csv.as_bytes())?;
             }
-            ExportFormat::Bevy => {}
+            ExportFormat::Bevy | ExportFormat::Hg => {}
         }
         report_fields.insert(
             f.name.clone(),
@@ -545,4 +574,214 @@ fn replace_dir(stage: &Path, out: &Path) -> Result<()> {
         std::fs::rename(stage, out).with_context(|| format!("writing {}", out.display()))?;
     }
     Ok(())
+}
+
+/// The optical features whose height a lobe should keep, per field kind: name and the θ range
+/// (degrees) where the row's largest value is the feature's peak.
+fn features(kind: &str) -> Vec<(&'static str, f64, f64)> {
+    let mut v = vec![("forward peak", 0.0, 0.0)];
+    match kind {
+        "rain" => v.push(("primary rainbow", 130.0, 145.0)),
+        "cloud" => {
+            v.push(("fogbow", 130.0, 145.0));
+            v.push(("glory", 175.0, 180.0));
+        }
+        "ice" | "snow" => {
+            v.push(("22° halo", 21.0, 24.0));
+            v.push(("46° halo", 44.5, 47.5));
+        }
+        _ => {}
+    }
+    v
+}
+
+/// `--format hg`: the fitted lobes and what they lose (see [`ExportFormat::Hg`]).
+fn write_lobes(
+    a: &ExportArgs,
+    t: &Tables,
+    step: f64,
+    fields: &[FieldRows],
+    stage: &Path,
+) -> Result<serde_json::Value> {
+    let k_len = t.angle_count;
+    let mut report_fields = serde_json::Map::new();
+    let mut text = String::new();
+    for fr in fields {
+        let f = fr.field;
+        let feats = features(&f.kind);
+        let mut orders = serde_json::Map::new();
+        let mut plot_rows = None;
+        for (oi, &order) in a.orders.iter().enumerate() {
+            let mut channels = serde_json::Map::new();
+            for (c, ch) in CHANNELS.iter().enumerate() {
+                let row = &fr.rows[oi][c];
+                let describe = |l: &Lobes| {
+                    let bins = l.bins(step, k_len);
+                    let kept: serde_json::Map<String, serde_json::Value> = feats
+                        .iter()
+                        .map(|&(name, from, to)| {
+                            let ks = (from / step).round() as usize..=((to / step).round() as usize).min(k_len - 1);
+                            let k = ks.max_by(|&x, &y| row[x].total_cmp(&row[y])).unwrap();
+                            (name.to_string(), json!({"theta_deg": k as f64 * step, "table": row[k], "lobes": bins[k], "kept": bins[k] / row[k]}))
+                        })
+                        .collect();
+                    let rms = rms_relative(row, &bins, step, 1.0);
+                    (
+                        bins,
+                        json!({"g1": l.g1, "g2": l.g2, "w": l.w, "moved": l.moved, "rms_relative_from_1deg": rms, "features": kept}),
+                        rms,
+                    )
+                };
+                let (single, dual) = (fit_hg(row, step), fit_dual_hg(row, step));
+                // HG at the table's own g: what an engine's `anisotropy` usually gets.
+                let g = asymmetry(row, step);
+                let moment = Lobes {
+                    g1: g,
+                    g2: 0.0,
+                    w: 1.0,
+                    moved: runtime::export::moved(
+                        row,
+                        &runtime::export::hg_bins(g, step, k_len),
+                        step,
+                    ),
+                };
+                let (moment_bins, moment_json, moment_rms) = describe(&moment);
+                let (single_bins, single_json, single_rms) = describe(&single);
+                let (dual_bins, dual_json, dual_rms) = describe(&dual);
+                if c == 1 {
+                    let kept = |j: &serde_json::Value| {
+                        feats
+                            .iter()
+                            .map(|(name, _, _)| {
+                                format!(
+                                    "{name} {:.1} %",
+                                    100.0 * j["features"][*name]["kept"].as_f64().unwrap()
+                                )
+                            })
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    };
+                    let _ = writeln!(
+                        text,
+                        "{:<10} Ams_{order:<3} G  g = {:.4}\n    HG at that g: moves {:.1} %, rms {:.0} %; kept: {}\n    best HG g = {:.4}: moves {:.1} %, rms {:.0} %; kept: {}\n    best dual HG {:.4}/{:.4}, w = {:.3}: moves {:.1} %, rms {:.0} %; kept: {}",
+                        f.name,
+                        g,
+                        moment.moved * 100.0,
+                        moment_rms * 100.0,
+                        kept(&moment_json),
+                        single.g1,
+                        single.moved * 100.0,
+                        single_rms * 100.0,
+                        kept(&single_json),
+                        dual.g1,
+                        dual.g2,
+                        dual.w,
+                        dual.moved * 100.0,
+                        dual_rms * 100.0,
+                        kept(&dual_json),
+                    );
+                    if oi == 0 {
+                        plot_rows = Some((
+                            row.clone(),
+                            [moment_bins, single_bins, dual_bins],
+                            [moment, single, dual],
+                        ));
+                    }
+                }
+                channels.insert(
+                    ch.to_string(),
+                    json!({"g": g, "hg_at_g": moment_json, "hg": single_json, "dual_hg": dual_json}),
+                );
+            }
+            orders.insert(order.to_string(), json!({ "channels": channels }));
+        }
+        if let Some((row, [moment, single, dual], [m, s, d])) = plot_rows {
+            use crate::commands::plot::{CHANNEL_COLOURS, LinePlot, Series, save};
+            let pts = |v: &[f64]| -> Vec<(f64, f64)> {
+                v.iter()
+                    .enumerate()
+                    .map(|(k, &p)| (k as f64 * step, p))
+                    .filter(|&(th, p)| th > 0.0 && p > 0.0)
+                    .collect()
+            };
+            let order = a.orders[0];
+            let plot = LinePlot {
+                title: format!(
+                    "{} ({}): Ams_{order} (G) against Henyey–Greenstein lobes",
+                    f.name, f.kind
+                ),
+                x_label: "scattering angle θ (°)".into(),
+                y_label: "phase function (1/sr)".into(),
+                x_range: (0.0, 180.0),
+                log_x: false,
+                log_y: true,
+                series: vec![
+                    Series {
+                        label: format!("Ams_{order}, photometeor"),
+                        colour: CHANNEL_COLOURS[1],
+                        width: 2,
+                        points: pts(&row),
+                    },
+                    Series {
+                        label: format!(
+                            "HG at the table's g = {:.3}: {:.1} % moved",
+                            m.g1,
+                            m.moved * 100.0
+                        ),
+                        colour: plotters::style::RGBColor(148, 103, 189),
+                        width: 1,
+                        points: pts(&moment),
+                    },
+                    Series {
+                        label: format!("best HG g = {:.3}: {:.1} % moved", s.g1, s.moved * 100.0),
+                        colour: plotters::style::RGBColor(0, 0, 0),
+                        width: 1,
+                        points: pts(&single),
+                    },
+                    Series {
+                        label: format!(
+                            "best dual HG {:.3}/{:.3}, w {:.2}: {:.1} % moved",
+                            d.g1,
+                            d.g2,
+                            d.w,
+                            d.moved * 100.0
+                        ),
+                        colour: plotters::style::RGBColor(255, 127, 14),
+                        width: 1,
+                        points: pts(&dual),
+                    },
+                ],
+            };
+            save(&plot, stage, &format!("{}.lobes", f.name))?;
+        }
+        report_fields.insert(
+            f.name.clone(),
+            json!({"kind": f.kind, "sigma_ext_m2": f.sigma_ext_m2, "albedo": f.albedo, "orders": orders}),
+        );
+    }
+    let report = json!({
+        "tool": "photometeor",
+        "tool_version": env!("CARGO_PKG_VERSION"),
+        "source": a.dir.display().to_string(),
+        "format": "hg",
+        "forward_peak": match a.forward_peak { ForwardPeak::Keep => "keep", ForwardPeak::Strip => "strip" },
+        "lobes": "HG(g) = (1 - g²)/(4π (1 + g² - 2g cos θ)^1.5), g > 0 forward; dual: w HG(g1) + (1 - w) HG(g2); \
+                  fitted per channel for the least light in a wrong θ bin of the bake",
+        "cost": "moved: ½ Σ Ω_k |HG_k - p_k| over the bake's θ bins; rms_relative_from_1deg: over the bins θ ≥ 1°; \
+                 features: the lobes' value at each feature's peak over the table's (kept)",
+        "fields": report_fields,
+    });
+    std::fs::write(
+        stage.join("export.json"),
+        serde_json::to_string_pretty(&report)?,
+    )
+    .context("writing export.json")?;
+    if !a.json {
+        print!("{text}");
+        println!(
+            "wrote {} (report: export.json, plots: <field>.lobes.png)",
+            a.out.display()
+        );
+    }
+    Ok(report)
 }

@@ -26,7 +26,8 @@ pub struct PlotArgs {
     tradeoff: Option<PathBuf>,
 }
 
-const CHANNEL_COLOURS: [RGBColor; 3] = [RGBColor(214, 39, 40), RGBColor(44, 160, 44), BLUE_1];
+pub(crate) const CHANNEL_COLOURS: [RGBColor; 3] =
+    [RGBColor(214, 39, 40), RGBColor(44, 160, 44), BLUE_1];
 const BLUE_1: RGBColor = RGBColor(31, 119, 180);
 const FAMILY_COLOURS: [RGBColor; 6] = [
     RGBColor(0, 0, 0),
@@ -38,22 +39,22 @@ const FAMILY_COLOURS: [RGBColor; 6] = [
 ];
 
 /// One curve of a plot: a line, or dots where `width` is 0.
-struct Series {
-    label: String,
-    colour: RGBColor,
-    width: u32,
-    points: Vec<(f64, f64)>,
+pub(crate) struct Series {
+    pub(crate) label: String,
+    pub(crate) colour: RGBColor,
+    pub(crate) width: u32,
+    pub(crate) points: Vec<(f64, f64)>,
 }
 
 /// A plot whose axes are each linear or logarithmic.
-struct LinePlot {
-    title: String,
-    x_label: String,
-    y_label: String,
-    x_range: (f64, f64),
-    log_x: bool,
-    log_y: bool,
-    series: Vec<Series>,
+pub(crate) struct LinePlot {
+    pub(crate) title: String,
+    pub(crate) x_label: String,
+    pub(crate) y_label: String,
+    pub(crate) x_range: (f64, f64),
+    pub(crate) log_x: bool,
+    pub(crate) log_y: bool,
+    pub(crate) series: Vec<Series>,
 }
 
 /// Runs `photometeor plot`.
@@ -342,7 +343,7 @@ fn plot_tradeoff(path: &Path, out: &Path) -> Result<Vec<PathBuf>> {
 }
 
 /// Writes `plot` as `<name>.png` and `<name>.svg` under `out`.
-fn save(plot: &LinePlot, out: &Path, name: &str) -> Result<Vec<PathBuf>> {
+pub(crate) fn save(plot: &LinePlot, out: &Path, name: &str) -> Result<Vec<PathBuf>> {
     let png = out.join(format!("{name}.png"));
     let svg = out.join(format!("{name}.svg"));
     draw(
