@@ -175,11 +175,7 @@ pub struct Cost {
 /// The cost of `values` (a resampling of `row`, step Δθ degrees), module docs.
 pub fn cost(row: &[f64], step: f64, values: &[f64]) -> Cost {
     let k_len = row.len();
-    let rec = reconstruct_bins(values, step, k_len);
-    let moved = 0.5
-        * (0..k_len)
-            .map(|k| bin_solid_angle(k, k_len, step) * (rec[k] - row[k]).abs())
-            .sum::<f64>();
+    let moved = moved(row, &reconstruct_bins(values, step, k_len), step);
     let n = values.len();
     let h = 2.0 / (n - 1) as f64;
     let trapezoid = 2.0 * PI * h * (values.iter().sum::<f64>() - 0.5 * (values[0] + values[n - 1]));

@@ -86,6 +86,15 @@ pub struct ExportArgs {
     json: bool,
 }
 
+impl ForwardPeak {
+    fn name(self) -> &'static str {
+        match self {
+            ForwardPeak::Keep => "keep",
+            ForwardPeak::Strip => "strip",
+        }
+    }
+}
+
 impl ExportFormat {
     fn name(self) -> &'static str {
         match self {
@@ -522,7 +531,7 @@ fn write_all(
         "format": a.format.name(),
         "grid": grid,
         "max_loss": a.max_loss,
-        "forward_peak": match a.forward_peak { ForwardPeak::Keep => "keep", ForwardPeak::Strip => "strip" },
+        "forward_peak": a.forward_peak.name(),
         "cost": "moved: the share of the scattered light the resampled table puts in a wrong θ bin of the \
                  bake (½ Σ Ω_k |p̂_k − p_k|); peak_kept: its value at θ = 0 over the bake's bin 0",
         "fields": report_fields,
@@ -764,7 +773,7 @@ fn write_lobes(
         "tool_version": env!("CARGO_PKG_VERSION"),
         "source": a.dir.display().to_string(),
         "format": "hg",
-        "forward_peak": match a.forward_peak { ForwardPeak::Keep => "keep", ForwardPeak::Strip => "strip" },
+        "forward_peak": a.forward_peak.name(),
         "lobes": "HG(g) = (1 - g²)/(4π (1 + g² - 2g cos θ)^1.5), g > 0 forward; dual: w HG(g1) + (1 - w) HG(g2); \
                   fitted per channel for the least light in a wrong θ bin of the bake",
         "cost": "moved: ½ Σ Ω_k |HG_k - p_k| over the bake's θ bins; rms_relative_from_1deg: over the bins θ ≥ 1°; \

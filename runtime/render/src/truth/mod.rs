@@ -957,35 +957,29 @@ impl<'a> Tracer<'a> {
         next
     }
 
-    /// Russian roulette on the path's largest effective weight n·W_m (module docs, "Paths"):
-    /// survivors are scaled so that it becomes [`ROULETTE_WEIGHT`]; false when the path ends.
-    fn roulette(c: &mut Carried, rng: &mut Rng) -> bool {
+    /// The weight window on the path's largest effective weight n·W_m (module docs, "Paths"),
+    /// computed once: below [`ROULETTE_WEIGHT`] Russian roulette (survivors scaled so that it
+    /// becomes that weight); with `split`, above [`SPLIT_WEIGHT`] k = ⌈n·W_m⌉ branches (at most
+    /// [`MAX_SPLIT`]) of 1/k of the weight each. The number of branches, 0 when the path ends.
+    fn weight_window(c: &mut Carried, rng: &mut Rng, split: bool) -> usize {
         let w = c.weights();
         let largest = c.n as f64 * w[..c.n].iter().fold(0.0f64, |a, &b| a.max(b));
         let mut kept = largest;
         if !roulette(&mut kept, rng) {
-            return false;
+            return 0;
         }
-        if kept != largest {
-            for f in c.f.iter_mut() {
+        let k = if split && kept > SPLIT_WEIGHT {
+            (kept.ceil() as usize).min(MAX_SPLIT)
+        } else {
+            1
+        };
+        for f in c.f.iter_mut() {
+            if kept != largest {
                 *f *= kept / largest;
             }
-        }
-        true
-    }
-
-    /// Splitting on the path's largest effective weight n·W_m (module docs, "Paths"): above
-    /// [`SPLIT_WEIGHT`] the path becomes k = ⌈n·W_m⌉ branches (at most [`MAX_SPLIT`]) of
-    /// 1/k of its weight each; the number of branches.
-    fn split(c: &mut Carried) -> usize {
-        let w = c.weights();
-        let largest = c.n as f64 * w[..c.n].iter().fold(0.0f64, |a, &b| a.max(b));
-        if largest <= SPLIT_WEIGHT {
-            return 1;
-        }
-        let k = (largest.ceil() as usize).min(MAX_SPLIT);
-        for f in c.f.iter_mut() {
-            *f /= k as f64;
+            if k > 1 {
+                *f /= k as f64;
+            }
         }
         k
     }
@@ -1072,10 +1066,13 @@ impl<'a> Tracer<'a> {
                         rotate(d, 1.0 - mu, (1.0 - mu * mu).max(0.0).sqrt(), rng.uniform())
                     }
                 };
-                if bounce + 1 >= self.max_scatterings || !Self::roulette(&mut c, rng) {
+                if bounce + 1 >= self.max_scatterings {
                     break;
                 }
-                let k = Self::split(&mut c);
+                let k = Self::weight_window(&mut c, rng, true);
+                if k == 0 {
+                    break;
+                }
                 for _ in 1..k {
                     branches.push((c, p, d, bounce + 1));
                 }
@@ -1103,7 +1100,7 @@ impl<'a> Tracer<'a> {
                     rotate(d, 1.0 - mu, (1.0 - mu * mu).max(0.0).sqrt(), rng.uniform())
                 }
             };
-            if !Self::roulette(&mut c, rng) {
+            if Self::weight_window(&mut c, rng, false) == 0 {
                 return None;
             }
         }
