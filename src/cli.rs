@@ -87,9 +87,10 @@ enum Command {
     CompareRender(compare_render::CompareRenderArgs),
     /// Time photometeor's Mie workloads (and miepython's, side by side, when available).
     Bench(bench::BenchArgs),
-    /// Write the GPU sampling functions (ams, forward_fraction, ams_mix) in every engine's
-    /// language: WGSL, HLSL (SM 5.1), GLSL 450 and ES 310, MSL 2.0 and SPIR-V, translated by
-    /// naga from the one WGSL source, each with a header stating its bindings.
+    /// Write the GPU sampling functions (ams, forward_fraction, ams_mix; the render models'
+    /// poisson and biri_primitive) in every engine's language: WGSL, HLSL (SM 5.1), GLSL 450
+    /// and ES 310, MSL 2.0 and SPIR-V, translated by naga from the one WGSL source, each with a
+    /// header stating its bindings. θ in radians inside the shaders, optical depths unitless.
     Shaders(shaders::ShadersArgs),
     /// Write a bake's Ams_n rows in the formats other programs load: Bevy's chromatic phase
     /// texture (KTX2 and EXR, N × 1 Rgba32Float linear in cos θ), Mitsuba 3's tabphase, NumPy

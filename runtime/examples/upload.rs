@@ -36,24 +36,25 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         gpu.describe()
     );
     // One query per field and a few angles: GPU against the CPU reference.
-    let queries: Vec<Query> = (0..tables.fields.len() as u32)
+    let cases: Vec<(u32, f32, f32)> = (0..tables.fields.len() as u32)
         .flat_map(|field| {
             [1.0f32, 2.5, 26.0].into_iter().flat_map(move |n| {
-                [0.5f64, 22.0, 138.0, 179.0].map(move |deg| Query {
-                    field,
-                    n,
-                    cos_theta: deg.to_radians().cos() as f32,
-                })
+                [0.5f64, 22.0, 138.0, 179.0]
+                    .map(move |deg| (field, n, deg.to_radians().cos() as f32))
             })
         })
         .collect();
+    let queries: Vec<Query> = cases
+        .iter()
+        .map(|&(field, n, cos_theta)| Query::ams(field, n, cos_theta))
+        .collect();
     let got = evaluate(&gpu, &uploaded, &queries)?;
-    let worst = queries
+    let worst = cases
         .iter()
         .zip(&got)
-        .map(|(q, g)| {
-            let f = &tables.fields[q.field as usize];
-            let want = ams(f, tables.theta_step_deg, q.n as f64, q.cos_theta as f64);
+        .map(|(&(field, n, cos_theta), g)| {
+            let f = &tables.fields[field as usize];
+            let want = ams(f, tables.theta_step_deg, n as f64, cos_theta as f64);
             (0..3)
                 .map(|c| ((g[c] as f64 - want[c]) / want[c]).abs())
                 .fold(0.0, f64::max)

@@ -12,9 +12,18 @@
 //!   index i·N_max + n − 1.
 //! - binding 2, `ams_field_info`: storage `array<vec4<f32>>`, (N, σ_sca R, G, B) per field.
 //! - binding 3, `ams_params`: uniform (K, N_max, field count, 1/Δθ in 1/rad).
+//! - binding 4, `model_table`: `texture_2d_array<f32>`, width K, height J_P + J_B (the largest
+//!   over the fields), one layer per field, `Rgba32Float`: rows 0..J_P the Poisson mixtures
+//!   M(D_j, θ_k) (`format::poisson`, Max et al. 2004), rows J_P..J_P + J_B Biri et al.'s
+//!   kernel primitive C(τ_j, θ_k − 90°) (`format::biri`), RGB (A = 0). 32-bit always: the
+//!   primitive's differences are what a renderer uses.
+//! - binding 5, `model_depths`: storage `array<f32>`: per field i the header
+//!   (J_P, J_B, index of its first Poisson depth, index of its first Biri depth) at 4i..4i + 3,
+//!   then the depths; J_P = J_B = 0 for a field whose bake has no such table (a bake from
+//!   before the render models).
 //!
-//! The WGSL functions (`ams`, `forward_fraction`, `ams_mix`) are specified by
-//! [`crate::sample`], their CPU reference.
+//! The WGSL functions (`ams`, `forward_fraction`, `ams_mix`, `poisson`, `biri_primitive`)
+//! are specified by [`crate::sample`], their CPU reference.
 
 use std::time::Instant;
 
@@ -117,6 +126,10 @@ pub struct GpuTables {
     pub field_info: wgpu::Buffer,
     /// (K, N_max, field count, 1/Δθ in 1/rad) uniform (binding 3).
     pub params: wgpu::Buffer,
+    /// The Poisson mixtures and Biri kernel primitives (binding 4), `Rgba32Float`.
+    pub model_texture: wgpu::Texture,
+    /// Their depths, after a header per field (binding 5).
+    pub model_depths: wgpu::Buffer,
     /// The layout of bind group 0.
     pub layout: wgpu::BindGroupLayout,
     /// Bind group 0, binding the four resources above.
@@ -246,6 +259,8 @@ impl GpuTables {
         };
         let forward_fraction = storage("photometeor F_n", &ff);
         let field_info = storage("photometeor field info", &info);
+        let (model_texture, models) = upload_models(gpu, tables)?;
+        let model_depths = storage("photometeor model depths", &models.depths);
         let inv_step = 1.0 / tables.theta_step_deg.to_radians();
         let params_words: [u32; 8] = [
             k_len as u32,
@@ -263,11 +278,15 @@ impl GpuTables {
             usage: wgpu::BufferUsages::UNIFORM,
         });
         let layout = Self::bind_group_layout(device);
-        let view = texture.create_view(&wgpu::TextureViewDescriptor {
-            label: Some("photometeor Ams_n table view"),
-            dimension: Some(wgpu::TextureViewDimension::D2Array),
-            ..Default::default()
-        });
+        let array_view = |texture: &wgpu::Texture, label| {
+            texture.create_view(&wgpu::TextureViewDescriptor {
+                label: Some(label),
+                dimension: Some(wgpu::TextureViewDimension::D2Array),
+                ..Default::default()
+            })
+        };
+        let view = array_view(&texture, "photometeor Ams_n table view");
+        let model_view = array_view(&model_texture, "photometeor model table view");
         let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("photometeor tables"),
             layout: &layout,
@@ -288,6 +307,14 @@ impl GpuTables {
                     binding: 3,
                     resource: params.as_entire_binding(),
                 },
+                wgpu::BindGroupEntry {
+                    binding: 4,
+                    resource: wgpu::BindingResource::TextureView(&model_view),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 5,
+                    resource: model_depths.as_entire_binding(),
+                },
             ],
         });
         gpu.queue.submit([]);
@@ -300,6 +327,8 @@ impl GpuTables {
             forward_fraction,
             field_info,
             params,
+            model_texture,
+            model_depths,
             layout,
             bind_group,
             n_stride,
@@ -320,19 +349,20 @@ impl GpuTables {
             },
             count: None,
         };
+        let texture_array = |binding| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility,
+            ty: wgpu::BindingType::Texture {
+                sample_type: wgpu::TextureSampleType::Float { filterable: false },
+                view_dimension: wgpu::TextureViewDimension::D2Array,
+                multisampled: false,
+            },
+            count: None,
+        };
         device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("photometeor tables layout"),
             entries: &[
-                wgpu::BindGroupLayoutEntry {
-                    binding: 0,
-                    visibility,
-                    ty: wgpu::BindingType::Texture {
-                        sample_type: wgpu::TextureSampleType::Float { filterable: false },
-                        view_dimension: wgpu::TextureViewDimension::D2Array,
-                        multisampled: false,
-                    },
-                    count: None,
-                },
+                texture_array(0),
                 storage(1),
                 storage(2),
                 wgpu::BindGroupLayoutEntry {
@@ -345,24 +375,202 @@ impl GpuTables {
                     },
                     count: None,
                 },
+                texture_array(4),
+                storage(5),
             ],
         })
     }
 }
 
-/// One query of [`evaluate`]: `ams(field, n, cos θ)` and `forward_fraction(field, n)`.
+/// The contents of bindings 4 and 5 (module docs), as plain arrays.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ModelArrays {
+    /// Rows per layer, J_P + J_B at most over the fields (at least 1).
+    pub rows: usize,
+    /// RGBA texels, layer by layer, row by row, K per row (`model_table`).
+    pub texels: Vec<f32>,
+    /// The headers, then the depths (`model_depths`).
+    pub depths: Vec<f32>,
+}
+
+/// Lays out the Poisson mixtures and Biri kernel primitives of `tables` for bindings 4 and 5:
+/// zeros (and J_P = J_B = 0) where a field has no such table.
+pub fn model_arrays(tables: &Tables) -> ModelArrays {
+    let k_len = tables.angle_count;
+    let counts = |f: &crate::load::FieldTable| {
+        (
+            f.poisson.as_ref().map_or(0, |p| p.depths.len()),
+            f.biri.as_ref().map_or(0, |b| b.depths.len()),
+        )
+    };
+    let rows = tables
+        .fields
+        .iter()
+        .map(|f| counts(f).0 + counts(f).1)
+        .max()
+        .unwrap_or(0)
+        .max(1);
+    let layer = 4 * k_len * rows;
+    let mut texels = vec![0f32; layer * tables.fields.len().max(1)];
+    let mut header = Vec::with_capacity(4 * tables.fields.len());
+    let mut depths = Vec::new();
+    let first = 4 * tables.fields.len();
+    for (i, f) in tables.fields.iter().enumerate() {
+        let (j_p, j_b) = counts(f);
+        let at_p = first + depths.len();
+        header.extend([j_p as f32, j_b as f32, at_p as f32, (at_p + j_p) as f32]);
+        let texels = &mut texels[i * layer..(i + 1) * layer];
+        let mut put = |row: usize, values: &ndarray::Array3<f64>, j: usize| {
+            for k in 0..k_len {
+                for c in 0..3 {
+                    texels[4 * (row * k_len + k) + c] = values[[c, j, k]] as f32;
+                }
+            }
+        };
+        if let Some(p) = &f.poisson {
+            depths.extend(p.depths.iter().map(|&d| d as f32));
+            for j in 0..j_p {
+                put(j, &p.rows, j);
+            }
+        }
+        if let Some(b) = &f.biri {
+            depths.extend(b.depths.iter().map(|&d| d as f32));
+            for j in 0..j_b {
+                put(j_p + j, &b.primitive, j);
+            }
+        }
+    }
+    header.extend(depths);
+    if header.is_empty() {
+        header.extend([0f32; 4]);
+    }
+    ModelArrays {
+        rows,
+        texels,
+        depths: header,
+    }
+}
+
+/// The model table texture (binding 4), filled from [`model_arrays`], and the arrays.
+fn upload_models(gpu: &Gpu, tables: &Tables) -> Result<(wgpu::Texture, ModelArrays), GpuError> {
+    let device = &gpu.device;
+    let k_len = tables.angle_count;
+    let arrays = model_arrays(tables);
+    let rows = arrays.rows;
+    let limit = device.limits().max_texture_dimension_2d;
+    if rows as u64 > limit as u64 {
+        return Err(GpuError::Limit {
+            what: "model table rows J_P + J_B",
+            value: rows as u64,
+            limit: limit as u64,
+        });
+    }
+    let layers = tables.fields.len().max(1);
+    let texture = device.create_texture(&wgpu::TextureDescriptor {
+        label: Some("photometeor model table array"),
+        size: wgpu::Extent3d {
+            width: k_len as u32,
+            height: rows as u32,
+            depth_or_array_layers: layers as u32,
+        },
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format: wgpu::TextureFormat::Rgba32Float,
+        usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+        view_formats: &[],
+    });
+    gpu.queue.write_texture(
+        wgpu::TexelCopyTextureInfo {
+            texture: &texture,
+            mip_level: 0,
+            origin: wgpu::Origin3d::ZERO,
+            aspect: wgpu::TextureAspect::All,
+        },
+        bytemuck::cast_slice(&arrays.texels),
+        wgpu::TexelCopyBufferLayout {
+            offset: 0,
+            bytes_per_row: Some((k_len * 16) as u32),
+            rows_per_image: Some(rows as u32),
+        },
+        wgpu::Extent3d {
+            width: k_len as u32,
+            height: rows as u32,
+            depth_or_array_layers: layers as u32,
+        },
+    );
+    Ok((texture, arrays))
+}
+
+/// What one query of [`evaluate`] looks up.
+#[derive(Debug, Clone, Copy)]
+pub enum Lookup {
+    /// `ams(field, n, cos θ)` and `forward_fraction(field, n)`: scattering order n, fractional
+    /// (n < 1 samples Ams_1); θ the scattering angle.
+    Ams {
+        /// The order n.
+        n: f32,
+        /// cos θ.
+        cos_theta: f32,
+    },
+    /// `poisson(field, D, cos θ)`: Max et al.'s mixture at optical depth D in every channel.
+    Poisson {
+        /// The segment's optical depth D.
+        depth: f32,
+        /// cos θ.
+        cos_theta: f32,
+    },
+    /// `biri_primitive(field, τ_h, θ)`: Biri et al.'s kernel primitive.
+    BiriPrimitive {
+        /// Optical depth τ_h from the light to the ray's foot point.
+        tau_h: f32,
+        /// The angle at the light from the foot point, radians in [−π/2, π/2].
+        theta_rad: f32,
+    },
+}
+
+/// One query of [`evaluate`].
 #[derive(Debug, Clone, Copy)]
 pub struct Query {
     /// Index into [`Tables::fields`].
     pub field: u32,
-    /// Scattering order n, fractional (n < 1 samples Ams_1).
-    pub n: f32,
-    /// cos θ, θ the scattering angle.
-    pub cos_theta: f32,
+    /// What to look up.
+    pub lookup: Lookup,
 }
 
-/// Evaluates `ams` and `forward_fraction` for each query in a compute shader and reads the
-/// results back: [Ams R, G, B, F_n G] per query. Used by the tests and `photometeor` checks.
+impl Query {
+    /// `ams(field, n, cos θ)` and `forward_fraction(field, n)`.
+    pub fn ams(field: u32, n: f32, cos_theta: f32) -> Self {
+        let lookup = Lookup::Ams { n, cos_theta };
+        Self { field, lookup }
+    }
+
+    /// `poisson(field, D, cos θ)`, D in every channel.
+    pub fn poisson(field: u32, depth: f32, cos_theta: f32) -> Self {
+        let lookup = Lookup::Poisson { depth, cos_theta };
+        Self { field, lookup }
+    }
+
+    /// `biri_primitive(field, τ_h, θ)`, τ_h in every channel, θ in radians.
+    pub fn biri_primitive(field: u32, tau_h: f32, theta_rad: f32) -> Self {
+        let lookup = Lookup::BiriPrimitive { tau_h, theta_rad };
+        Self { field, lookup }
+    }
+
+    /// The kernel's vec4 (field, a, b, kind) (shaders::QUERY_KERNEL).
+    fn words(&self) -> [f32; 4] {
+        let field = self.field as f32;
+        match self.lookup {
+            Lookup::Ams { n, cos_theta } => [field, n, cos_theta, 0.0],
+            Lookup::Poisson { depth, cos_theta } => [field, depth, cos_theta, 1.0],
+            Lookup::BiriPrimitive { tau_h, theta_rad } => [field, tau_h, theta_rad, 2.0],
+        }
+    }
+}
+
+/// Evaluates each query's lookup in a compute shader and reads the results back: per query
+/// [Ams R, G, B, F_n G], [M R, G, B, 0] or [C R, G, B, 0]. Used by the tests and
+/// `photometeor` checks.
 pub fn evaluate(
     gpu: &Gpu,
     tables: &GpuTables,
@@ -403,10 +611,7 @@ pub fn evaluate(
         compilation_options: Default::default(),
         cache: None,
     });
-    let data: Vec<f32> = queries
-        .iter()
-        .flat_map(|q| [q.field as f32, q.n, q.cos_theta, 0.0])
-        .collect();
+    let data: Vec<f32> = queries.iter().flat_map(Query::words).collect();
     let query_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
         label: Some("photometeor queries"),
         contents: bytemuck::cast_slice(&data),

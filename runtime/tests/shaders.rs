@@ -67,6 +67,8 @@ fn every_output_passes_a_validator() {
         "void evaluate_queries(",
         "register(t0)",
         "register(b3)",
+        "register(t4)",
+        "register(t5)",
         "register(u1, space1)",
     ] {
         assert!(hlsl.contains(want), "HLSL lacks {want:?}");
@@ -75,19 +77,27 @@ fn every_output_passes_a_validator() {
     for want in [
         "kernel void evaluate_queries(",
         "ams_table [[texture(0)]]",
-        "results [[buffer(4)]]",
-        "_buffer_sizes [[buffer(5)]]",
+        "model_table [[texture(1)]]",
+        "model_depths [[buffer(3)]]",
+        "results [[buffer(5)]]",
+        "_buffer_sizes [[buffer(6)]]",
     ] {
         assert!(msl.contains(want), "MSL lacks {want:?}");
     }
-    // The three functions survive into every text output (under naga's names).
+    // The five functions survive into every text output (under naga's names).
     for name in [
         "photometeor.hlsl",
         "photometeor.comp.glsl",
         "photometeor.metal",
     ] {
         let text = std::fs::read_to_string(at(name)).unwrap();
-        for f in ["ams(", "forward_fraction(", "ams_mix("] {
+        for f in [
+            "ams(",
+            "forward_fraction(",
+            "ams_mix(",
+            "poisson(",
+            "biri_primitive(",
+        ] {
             assert!(text.contains(f), "{name} lacks {f}");
         }
     }
@@ -96,12 +106,14 @@ fn every_output_passes_a_validator() {
 /// The checked-in GLSL 450 (`shaders/photometeor.comp.glsl`, what Godot- or OpenGL-based
 /// engines include), compiled by an OpenGL driver (Mesa's llvmpipe, headless through EGL, via
 /// the `moderngl` package; runtime/tests/run_glsl.py) and run on the tables `GpuTables`
-/// uploads, against the CPU sampler on a few thousand queries: the same inputs as the WGSL on
-/// wgpu (tests/gpu.rs, f32 against f64); measured worst 1.6·10⁻⁵ relative.
+/// uploads, against the CPU sampler on a few thousand queries of each lookup: the same inputs
+/// as the WGSL on wgpu (tests/gpu.rs, f32 against f64). Ams_n relative to the value (floored at
+/// 10⁻⁷ of the largest Ams_1), the Poisson mixtures likewise (floor 10⁻⁶ of the largest M),
+/// Biri's primitive relative to its whole integral C(τ_h, 90°), each with its own tolerance.
 #[test]
 fn the_glsl_runs_in_opengl_and_matches_the_cpu_sampler() {
     use format::export::npy_f64_bytes;
-    use runtime::sample::{ams, forward_fraction};
+    use runtime::sample::{ams, biri_primitive, forward_fraction, poisson};
     let (_tmp, dir) = common::bake(&common::cloud_and_rain("glsl", 6));
     let tables = runtime::Tables::open(&dir).unwrap();
     let k_len = tables.angle_count;
@@ -130,29 +142,81 @@ fn the_glsl_runs_in_opengl_and_matches_the_cpu_sampler() {
         layers as f64,
         1.0 / tables.theta_step_deg.to_radians(),
     ];
-    let (mut queries, mut expected, mut scale) = (Vec::new(), Vec::new(), Vec::new());
+    let models = runtime::gpu::model_arrays(&tables);
+    let grid = grid::ThetaGrid::new(tables.theta_step_deg).unwrap();
+    let (mut queries, mut expected) = (Vec::new(), Vec::new());
+    let (mut denominator, mut tolerance) = (Vec::new(), Vec::new());
+    // Measured worst on llvmpipe OpenGL: Ams_n 1.6·10⁻⁵, M 5.0·10⁻⁶, C 1.0·10⁻⁶ of the whole.
+    let (ams_tol, poisson_tol, biri_tol) = (3e-5, 1e-5, 2e-6);
     for (field, f) in tables.fields.iter().enumerate() {
+        let field = field as f64;
         let top = f.image.row(1, 0).iter().copied().fold(0.0, f64::max);
         for n in [0.5f32, 1.0, 1.5, 2.75, 6.0, 9.0] {
             for i in 0..=400 {
-                let cos = (i as f64 * 0.45).to_radians().cos() as f32;
-                queries.extend([field as f64, n as f64, cos as f64, 0.0]);
-                let a = ams(f, tables.theta_step_deg, n as f64, cos as f64);
+                let cos = (i as f64 * 0.45).to_radians().cos() as f32 as f64;
+                queries.extend([field, n as f64, cos, 0.0]);
+                let a = ams(f, tables.theta_step_deg, n as f64, cos);
                 expected.extend([a[0], a[1], a[2], forward_fraction(f, n as f64)[1]]);
-                scale.push(top);
+                denominator.extend(a.map(|v| v.abs() + 1e-7 * top));
+                tolerance.push(ams_tol);
+            }
+        }
+        let top_m = f
+            .poisson
+            .as_ref()
+            .unwrap()
+            .rows
+            .iter()
+            .copied()
+            .fold(0.0, f64::max);
+        for depth in [4e-4f32, 0.0137, 2.0, 29.0, 45.0] {
+            for i in 0..=200 {
+                let cos = (i as f64 * 0.9).to_radians().cos() as f32 as f64;
+                let d = depth as f64;
+                queries.extend([field, d, cos, 1.0]);
+                let m = poisson(f, tables.theta_step_deg, [d; 3], cos).unwrap();
+                expected.extend([m[0], m[1], m[2], 0.0]);
+                denominator.extend(m.map(|v| v.abs() + 1e-6 * top_m));
+                tolerance.push(poisson_tol);
+            }
+        }
+        for tau_h in [0.0f32, 0.031, 1.7, 55.0, 140.0] {
+            let whole: [f64; 3] = std::array::from_fn(|c| {
+                biri_primitive(f, &grid, c, tau_h as f64, std::f64::consts::FRAC_PI_2).unwrap()
+            });
+            for i in 0..=200 {
+                let theta = (-90.0 + 0.9 * i as f64).to_radians() as f32 as f64;
+                queries.extend([field, tau_h as f64, theta, 2.0]);
+                let c: [f64; 3] = std::array::from_fn(|c| {
+                    biri_primitive(f, &grid, c, tau_h as f64, theta).unwrap()
+                });
+                expected.extend([c[0], c[1], c[2], 0.0]);
+                denominator.extend(whole);
+                tolerance.push(biri_tol);
             }
         }
     }
-    let q = scale.len();
+    let q = tolerance.len();
     let inputs = tempfile::tempdir().unwrap();
     for (name, shape, data) in [
         ("texture", vec![layers, n_stride, k_len, 4], &texture),
         ("forward_fraction", vec![layers * n_stride, 4], &ff),
         ("field_info", vec![layers, 4], &info),
         ("params", vec![4], &params.to_vec()),
+        (
+            "model_texture",
+            vec![layers, models.rows, k_len, 4],
+            &models.texels.iter().map(|&v| v as f64).collect(),
+        ),
+        (
+            "model_depths",
+            vec![models.depths.len()],
+            &models.depths.iter().map(|&v| v as f64).collect(),
+        ),
         ("queries", vec![q, 4], &queries),
         ("expected", vec![q, 4], &expected),
-        ("scale", vec![q], &scale),
+        ("denominator", vec![q, 3], &denominator),
+        ("tolerance", vec![q], &tolerance),
     ] {
         std::fs::write(
             inputs.path().join(format!("{name}.npy")),
@@ -165,13 +229,12 @@ fn the_glsl_runs_in_opengl_and_matches_the_cpu_sampler() {
         .arg(&script)
         .arg(repo_shaders().join("photometeor.comp.glsl"))
         .arg(inputs.path())
-        .arg("3e-5")
         .output()
         .unwrap_or_else(|e| panic!("cannot run python3 ({e})"));
     let stdout = String::from_utf8_lossy(&out.stdout);
     eprintln!("{stdout}");
     assert!(
-        out.status.success() && stdout.starts_with("OK"),
+        out.status.success() && stdout.contains("\nOK: "),
         "{}\n{stdout}\n{}\n(needs `python3 -m pip install moderngl numpy` and Debian's libegl1 \
          libgl1-mesa-dri)",
         script.display(),

@@ -552,7 +552,7 @@ fn bench_truth(b: RenderBench) -> Result<()> {
 /// difference; stage 1 (silhouettes, on the CPU) with the upload; and the CPU reference's
 /// own stage times.
 fn bench_biri(b: RenderBench) -> Result<()> {
-    use runtime::gpu::Gpu;
+    use runtime::gpu::{Gpu, GpuTables, TexelFormat};
     let (mut scene, tables) = super::render::prepare(
         "biri",
         b.scene.as_deref(),
@@ -564,7 +564,8 @@ fn bench_biri(b: RenderBench) -> Result<()> {
     let gpu = Gpu::new().context(
         "no GPU adapter: install a driver (on Debian, mesa-vulkan-drivers gives lavapipe)",
     )?;
-    let renderer = render::biri::gpu::Renderer::new(&gpu);
+    let uploaded = GpuTables::upload(&gpu, &tables, TexelFormat::F32)?;
+    let renderer = render::biri::gpu::Renderer::new(&gpu, &uploaded);
     let mut rows = Vec::new();
     for kernel in [
         render::biri::Kernel::Exact,
@@ -572,14 +573,14 @@ fn bench_biri(b: RenderBench) -> Result<()> {
     ] {
         scene.biri.kernel = kernel;
         // One frame first: a driver may compile the pipeline at its first dispatch.
-        renderer.render(&gpu, &tables, &scene)?;
+        renderer.render(&gpu, &tables, &uploaded, &scene)?;
         let (mut full, mut surfaces, mut upload) = (f64::INFINITY, f64::INFINITY, f64::INFINITY);
         let (mut cpu, mut cpu_report) = (f64::INFINITY, None);
         for _ in 0..b.repeat.max(1) {
-            let (_, t) = renderer.render_stages(&gpu, &tables, &scene, false)?;
+            let (_, t) = renderer.render_stages(&gpu, &tables, &uploaded, &scene, false)?;
             full = full.min(t.frame);
             upload = upload.min(t.upload);
-            let (_, t) = renderer.render_stages(&gpu, &tables, &scene, true)?;
+            let (_, t) = renderer.render_stages(&gpu, &tables, &uploaded, &scene, true)?;
             surfaces = surfaces.min(t.frame);
             let start = Instant::now();
             let (_, report) = render::biri::cpu::render(&tables, &scene)?;

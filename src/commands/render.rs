@@ -209,8 +209,10 @@ pub fn run(a: RenderArgs) -> Result<()> {
             "no GPU adapter: install a driver (on Debian, mesa-vulkan-drivers gives lavapipe, a \
              software Vulkan) or render with --cpu",
         )?;
-        let renderer = render::biri::gpu::Renderer::new(&gpu);
-        let (image, t) = renderer.render(&gpu, &tables, &render)?;
+        // 32-bit texels: the exact kernel adds Ams_1 bin values to the primitive.
+        let gpu_tables = GpuTables::upload(&gpu, &tables, TexelFormat::F32)?;
+        let renderer = render::biri::gpu::Renderer::new(&gpu, &gpu_tables);
+        let (image, t) = renderer.render(&gpu, &tables, &gpu_tables, &render)?;
         if !a.quiet {
             eprintln!(
                 "analytic single scattering ({}, {} kernel): {}×{}, {} light(s): silhouettes \

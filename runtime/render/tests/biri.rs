@@ -528,11 +528,13 @@ max_m = [4, 8, -0.5]
     s.width = 48;
     s.height = 36;
     s.ground_albedo = 0.3;
-    let renderer = render::biri::gpu::Renderer::new(&gpu);
+    let uploaded =
+        runtime::gpu::GpuTables::upload(&gpu, &tables, runtime::gpu::TexelFormat::F32).unwrap();
+    let renderer = render::biri::gpu::Renderer::new(&gpu, &uploaded);
     for (kernel, tolerance) in [(Kernel::Exact, 2e-4), (Kernel::Polynomial, 3e-3)] {
         s.biri.kernel = kernel;
         let (cpu, _) = cpu::render(&tables, &s).unwrap();
-        let (gpu_image, _) = renderer.render(&gpu, &tables, &s).unwrap();
+        let (gpu_image, _) = renderer.render(&gpu, &tables, &uploaded, &s).unwrap();
         let scale = cpu
             .rgb
             .iter()

@@ -3,39 +3,41 @@
 // pieces of the ray from its sorted crossings with the silhouette planes (the stencil count,
 // §5.1.4–5.1.5), the spheres' tangent cones and the spot cone, each piece's Γ(F) − Γ(E) from
 // the bake's kernel (Eq. 2: exact primitive or quartic), and the ambient fog (§3). f32
-// throughout; the buffers' layouts are written by gpu.rs.
+// throughout; the buffers' layouts are written by gpu.rs. Compiled after the tables' WGSL
+// (runtime::gpu::WGSL, bind group 0), whose `biri_primitive` is the exact kernel; this
+// model's own resources are bind group 1.
 
 struct Params {
     eye: vec4<f32>,      // xyz, tan(fov_y / 2)
     forward: vec4<f32>,  // xyz, aspect
     right: vec4<f32>,    // xyz, ground albedo
-    up: vec4<f32>,       // xyz, Δθ (radians)
+    up: vec4<f32>,       // xyz, 0
     counts: vec4<u32>,   // width, height, lights, media
-    counts2: vec4<u32>,  // spheres, meshes, kernel (0 exact, 1 polynomial), K (angles)
-    counts3: vec4<u32>,  // J (depths), offset of the depths, 1: surfaces only (stage 2), 0
+    counts2: vec4<u32>,  // spheres, meshes, kernel (0 exact, 1 polynomial), 0
+    counts3: vec4<u32>,  // 0, 0, 1: surfaces only (stage 2), 0
     depth_max: vec4<f32>, // last depth, 0, 0, 0
 }
 
-@group(0) @binding(0) var<uniform> P: Params;
+@group(1) @binding(0) var<uniform> P: Params;
 // Per light 4 vec4: position (xyz, shadow count at the eye), intensity (rgb, spot: 1/0),
 // spot axis (xyz, cos half-angle), (first plane, plane count, sphere-blocked bits, 0) as bits.
-@group(0) @binding(1) var<storage, read> lights: array<vec4<f32>>;
+@group(1) @binding(1) var<storage, read> lights: array<vec4<f32>>;
 // Per shadow plane 3 vec4: a (xyz, weight), b (xyz, 0), normal (xyz, 0).
-@group(0) @binding(2) var<storage, read> planes: array<vec4<f32>>;
+@group(1) @binding(2) var<storage, read> planes: array<vec4<f32>>;
 // Per sphere 1 vec4: centre, radius; albedo in spheres_albedo.
-@group(0) @binding(3) var<storage, read> spheres: array<vec4<f32>>;
+@group(1) @binding(3) var<storage, read> spheres: array<vec4<f32>>;
 // Per mesh 2 vec4: lo (xyz, first triangle bits), hi (xyz, triangle count bits); albedo in
 // the w of its first triangle's first vertex row.
-@group(0) @binding(4) var<storage, read> meshes: array<vec4<f32>>;
+@group(1) @binding(4) var<storage, read> meshes: array<vec4<f32>>;
 // Per triangle 3 vec4: a (xyz, albedo), b, c.
-@group(0) @binding(5) var<storage, read> tris: array<vec4<f32>>;
+@group(1) @binding(5) var<storage, read> tris: array<vec4<f32>>;
 // Per medium 5 vec4: lo (xyz, 1 box / 0 everywhere), hi (xyz, field bits), β_ext (rgb),
 // β_sca (rgb), ambient (rgb).
-@group(0) @binding(6) var<storage, read> media: array<vec4<f32>>;
-// Per field: for channel c, J × K primitive, then K Ams_1 bins, then J × 5 coefficients;
-// then the J depths at the end (offset in counts3.y).
-@group(0) @binding(7) var<storage, read> kernel: array<f32>;
-@group(0) @binding(8) var<storage, read_write> image: array<vec4<f32>>;
+@group(1) @binding(6) var<storage, read> media: array<vec4<f32>>;
+// The quartic's coefficients (Eq. 2) of field f of the tables, at its Biri depths: from index
+// polynomials[f], for channel c and depth j the five c_0..c_4 at (c J + j) 5.
+@group(1) @binding(7) var<storage, read> polynomials: array<f32>;
+@group(1) @binding(8) var<storage, read_write> image: array<vec4<f32>>;
 
 const EPS: f32 = 1e-4;
 const MAX_EVENTS: u32 = 64u;
@@ -199,71 +201,18 @@ fn nappe_roots(s: vec3<f32>, a: vec3<f32>, cos2: f32, o: vec3<f32>, d: vec3<f32>
     return r;
 }
 
-// Quadratic-in-ln τ weights over the depths (grid::depth_weights): rows and weights.
-struct Weights { j: vec3<u32>, w: vec3<f32> }
-
-fn depth_weights(tau_in: f32) -> Weights {
-    let n = P.counts3.x;
-    let base = P.counts3.y;
-    let tau = clamp(tau_in, 0.0, P.depth_max.x);
-    let d1 = kernel[base + 1u];
-    if (tau <= d1) {
-        let s = tau / d1;
-        return Weights(vec3<u32>(0u, 1u, 2u), vec3<f32>(1.0 - s, s, 0.0));
-    }
-    var j = 2u;
-    while (j < n - 1u && kernel[base + j] <= tau) { j++; }
-    var a = j - 1u;
-    var b = j;
-    var c = j + 1u;
-    if (j + 1u >= n) { a = j - 2u; b = j - 1u; c = j; }
-    let x = log(tau);
-    let xa = log(kernel[base + a]);
-    let xb = log(kernel[base + b]);
-    let xc = log(kernel[base + c]);
-    return Weights(vec3<u32>(a, b, c), vec3<f32>(
-        (x - xb) * (x - xc) / ((xa - xb) * (xa - xc)),
-        (x - xa) * (x - xc) / ((xb - xa) * (xb - xc)),
-        (x - xa) * (x - xb) / ((xc - xa) * (xc - xb))));
-}
-
-fn field_offset(field: u32, c: u32) -> u32 {
-    let k = P.counts2.w;
-    let j = P.counts3.x;
-    let per_channel = j * k + k + 5u * j;
-    return (3u * field + c) * per_channel;
-}
-
-// C(τ_h, θ) exact to the bins (sample::biri_primitive).
-fn primitive(field: u32, c: u32, tau: f32, theta_in: f32) -> f32 {
-    let k_len = P.counts2.w;
-    let j_len = P.counts3.x;
-    let step = P.up.w;
-    let half_pi = 1.5707963267948966;
-    let theta = clamp(theta_in, -half_pi, half_pi);
-    let k = min(u32(round((theta + half_pi) / step)), k_len - 1u);
-    let centre = f32(k) * step - half_pi;
-    let off = field_offset(field, c);
-    let w = depth_weights(tau);
-    var at = 0.0;
-    for (var i = 0; i < 3; i++) { at += w.w[i] * kernel[off + w.j[i] * k_len + k]; }
-    let g = tan(0.25 * (theta + centre) + 0.7853981633974483);
-    var e = 1.0;
-    if (tau > 0.0) { e = exp(-min(tau, P.depth_max.x) * g); }
-    return at + kernel[off + j_len * k_len + k] * e * (theta - centre);
-}
-
+// ∫_{θ0}^{θ1} of the quartic (Eq. 2) of channel c at τ, its coefficients quadratic in ln τ
+// between the depths as the exact primitive's (biri_depth_weights).
 fn polynomial(field: u32, c: u32, tau: f32, t0: f32, t1: f32) -> f32 {
-    let k_len = P.counts2.w;
-    let j_len = P.counts3.x;
-    let off = field_offset(field, c) + j_len * k_len + k_len;
-    let w = depth_weights(tau);
+    let j_len = model_header(field).y;
+    let off = u32(polynomials[field]) + 5u * c * j_len;
+    let w = biri_depth_weights(field, tau);
     var sum = 0.0;
     var p0 = t0;
     var p1 = t1;
     for (var i = 0u; i < 5u; i++) {
         var ci = 0.0;
-        for (var r = 0; r < 3; r++) { ci += w.w[r] * kernel[off + 5u * w.j[r] + i]; }
+        for (var r = 0; r < 3; r++) { ci += w.w[r] * polynomials[off + 5u * w.j[r] + i]; }
         sum += ci * (p1 - p0) / f32(i + 1u);
         p0 *= t0;
         p1 *= t1;
@@ -292,16 +241,17 @@ fn gamma(m: u32, l: u32, o: vec3<f32>, d: vec3<f32>, entry: f32, x0: f32, x1: f3
     let beta = media[5u * m + 2u].xyz;
     let sca = media[5u * m + 3u].xyz;
     let intensity = lights[4u * l + 1u].xyz;
+    let taus = beta * h;
+    var deltas = vec3<f32>(0.0);
+    if (P.counts2.z == 0u) {
+        deltas = biri_primitive(field, taus, th1) - biri_primitive(field, taus, th0);
+    } else {
+        for (var c = 0u; c < 3u; c++) { deltas[c] = polynomial(field, c, taus[c], th0, th1); }
+    }
     var out = vec3<f32>(0.0);
     for (var c = 0u; c < 3u; c++) {
-        let tau = beta[c] * h;
-        if (tau > P.depth_max.x) { continue; }
-        var delta = 0.0;
-        if (P.counts2.z == 0u) {
-            delta = primitive(field, c, tau, th1) - primitive(field, c, tau, th0);
-        } else {
-            delta = polynomial(field, c, tau, th0, th1);
-        }
+        if (taus[c] > P.depth_max.x) { continue; }
+        let delta = deltas[c];
         if (delta == 0.0) { continue; }
         let ex = min(-beta[c] * (t - entry - r0) - front[c] - others[c], 80.0);
         out[c] = sca[c] / h * intensity[c] * exp(ex) * delta;

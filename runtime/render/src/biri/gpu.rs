@@ -1,20 +1,21 @@
 //! Biri et al. 2006 on wgpu: stage 1 (silhouettes, §5.1.1, and each light's shadow count at
 //! the eye) on the CPU, stages 2–5 in one compute dispatch of `biri.wgsl`, one invocation per
-//! pixel, the same per-ray algorithm as [`super::cpu`] in f32. Bind group 0: the params
-//! uniform, then lights, shadow planes, spheres, meshes, triangles, media and the kernel
-//! tables (read-only storage), and the image (rgb, T).
+//! pixel, the same per-ray algorithm as [`super::cpu`] in f32. Bind group 0: the tables
+//! ([`GpuTables`], uploaded with 32-bit texels; the exact kernel is their `biri_primitive`).
+//! Bind group 1: the params uniform, then lights, shadow planes, spheres, meshes, triangles,
+//! media and the quartic's coefficients (read-only storage), and the image (rgb, T).
 
 use std::time::Instant;
 
 use glam::DVec3;
 use runtime::Tables;
-use runtime::gpu::Gpu;
+use runtime::gpu::{Gpu, GpuTables, WGSL};
 
 use super::{Region, Shape};
 use crate::riley::gpu::{RenderError, Timings, a4, check_sizes, entry, filled, v4};
 use crate::{FrameError, Image};
 
-/// The model's WGSL.
+/// The model's WGSL (after [`WGSL`]).
 pub const BIRI_WGSL: &str = include_str!("biri.wgsl");
 
 /// Spheres one GPU frame can hold (their shadow states at the eye are one u32's bits).
@@ -33,8 +34,9 @@ fn with_bits(v: DVec3, bits: u32) -> [f32; 4] {
 }
 
 impl Renderer {
-    /// Compiles `biri.wgsl` and builds the pipeline.
-    pub fn new(gpu: &Gpu) -> Self {
+    /// Compiles `biri.wgsl` after the tables' WGSL and builds the pipeline, `tables`' layout
+    /// as bind group 0.
+    pub fn new(gpu: &Gpu, tables: &GpuTables) -> Self {
         let device = &gpu.device;
         use wgpu::BufferBindingType::{Storage, Uniform};
         let entries: Vec<_> = (0..9)
@@ -50,11 +52,11 @@ impl Renderer {
         });
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("photometeor biri"),
-            source: wgpu::ShaderSource::Wgsl(BIRI_WGSL.into()),
+            source: wgpu::ShaderSource::Wgsl(format!("{WGSL}\n{BIRI_WGSL}").into()),
         });
         let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("photometeor biri pipeline layout"),
-            bind_group_layouts: &[Some(&layout)],
+            bind_group_layouts: &[Some(&tables.layout), Some(&layout)],
             immediate_size: 0,
         });
         let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
@@ -68,14 +70,17 @@ impl Renderer {
         Self { layout, pipeline }
     }
 
-    /// Renders `scene` (as [`super::cpu::render`]); `Timings::upload` includes stage 1.
+    /// Renders `scene` (as [`super::cpu::render`]) with `gpu_tables`, `tables` uploaded with
+    /// [`runtime::gpu::TexelFormat::F32`] (half floats would round the kernel's Ams_1 bins);
+    /// `Timings::upload` includes stage 1.
     pub fn render(
         &self,
         gpu: &Gpu,
         tables: &Tables,
+        gpu_tables: &GpuTables,
         scene: &crate::RenderScene,
     ) -> Result<(Image, Timings), RenderError> {
-        self.render_stages(gpu, tables, scene, false)
+        self.render_stages(gpu, tables, gpu_tables, scene, false)
     }
 
     /// [`Renderer::render`], or with `surfaces_only` stage 2 alone (the surfaces, shaded and
@@ -85,6 +90,7 @@ impl Renderer {
         &self,
         gpu: &Gpu,
         tables: &Tables,
+        gpu_tables: &GpuTables,
         scene: &crate::RenderScene,
         surfaces_only: bool,
     ) -> Result<(Image, Timings), RenderError> {
@@ -165,30 +171,13 @@ impl Renderer {
                 mesh_rows.push(with_bits(m.bounds.1, m.triangles.len() as u32));
             }
         }
-        // Media and the kernel tables of their fields.
+        // Media, and the quartic's coefficients of their fields (the exact primitive is in
+        // `gpu_tables`).
         let mut fields: Vec<usize> = Vec::new();
         let mut media_rows: Vec<[f32; 4]> = Vec::new();
+        let mut depth_max = 0f64;
         for m in &settings.media {
             let index = super::field_index(tables, &m.field)?;
-            let slot = fields.iter().position(|&f| f == index).unwrap_or_else(|| {
-                fields.push(index);
-                fields.len() - 1
-            });
-            let f = &tables.fields[index];
-            let n = m.number_density_per_m3;
-            let (lo, hi, is_box) = match m.region {
-                Region::Everywhere => (DVec3::ZERO, DVec3::ZERO, 0.0f64),
-                Region::Box { min_m, max_m } => (min_m, max_m, 1.0),
-            };
-            media_rows.push(v4(lo, is_box));
-            media_rows.push(with_bits(hi, slot as u32));
-            media_rows.push(a4(f.sigma_ext_m2.map(|s| n * s), 0.0));
-            media_rows.push(a4(f.sigma_sca_m2.map(|s| n * s), 0.0));
-            media_rows.push(a4(m.ambient, 0.0));
-        }
-        let mut kernel: Vec<f32> = Vec::new();
-        let mut depths: Vec<f64> = Vec::new();
-        for &index in &fields {
             let f = &tables.fields[index];
             let b = f.biri.as_ref().ok_or_else(|| {
                 FrameError(format!(
@@ -199,33 +188,37 @@ impl Renderer {
                     f.name
                 ))
             })?;
-            depths = b.depths.clone();
-            let (_, j_len, k_len) = b.primitive.dim();
+            depth_max = depth_max.max(*b.depths.last().expect("depths"));
+            if !fields.contains(&index) {
+                fields.push(index);
+            }
+            let n = m.number_density_per_m3;
+            let (lo, hi, is_box) = match m.region {
+                Region::Everywhere => (DVec3::ZERO, DVec3::ZERO, 0.0f64),
+                Region::Box { min_m, max_m } => (min_m, max_m, 1.0),
+            };
+            media_rows.push(v4(lo, is_box));
+            media_rows.push(with_bits(hi, index as u32));
+            media_rows.push(a4(f.sigma_ext_m2.map(|s| n * s), 0.0));
+            media_rows.push(a4(f.sigma_sca_m2.map(|s| n * s), 0.0));
+            media_rows.push(a4(m.ambient, 0.0));
+        }
+        // polynomials[f] = where field f's coefficients start; fields without media get none.
+        let mut polynomials = vec![0f32; tables.fields.len()];
+        for &index in &fields {
+            polynomials[index] = polynomials.len() as f32;
+            let b = tables.fields[index].biri.as_ref().expect("checked above");
             for c in 0..3 {
-                for j in 0..j_len {
-                    for k in 0..k_len {
-                        kernel.push(b.primitive[[c, j, k]] as f32);
-                    }
-                }
-                for k in 0..k_len {
-                    kernel.push(f.image.ams[[c, 0, k]] as f32);
-                }
-                kernel.extend(b.polynomial[c].iter().map(|&v| v as f32));
+                polynomials.extend(b.polynomial[c].iter().map(|&v| v as f32));
             }
         }
-        let base = kernel.len();
-        kernel.extend(depths.iter().map(|&d| d as f32));
-        let k_len = fields
-            .first()
-            .and_then(|&i| tables.fields[i].biri.as_ref())
-            .map_or(0, |b| b.primitive.dim().2);
         let (w, h) = (scene.width, scene.height);
         let u = |v: [u32; 4]| v.map(f32::from_bits);
         let params: Vec<[f32; 4]> = vec![
             v4(o, (0.5 * scene.camera.fov_deg).to_radians().tan()),
             v4(forward, w as f64 / h as f64),
             v4(right, scene.ground_albedo),
-            v4(up, tables.theta_step_deg.to_radians()),
+            v4(up, 0.0),
             u([
                 w as u32,
                 h as u32,
@@ -236,22 +229,17 @@ impl Renderer {
                 spheres.len() as u32,
                 mesh_rows.len() as u32 / 2,
                 u32::from(settings.kernel == super::Kernel::Polynomial),
-                k_len as u32,
-            ]),
-            u([
-                depths.len() as u32,
-                base as u32,
-                u32::from(surfaces_only),
                 0,
             ]),
-            [*depths.last().unwrap_or(&0.0) as f32, 0.0, 0.0, 0.0],
+            u([0, 0, u32::from(surfaces_only), 0]),
+            [depth_max as f32, 0.0, 0.0, 0.0],
         ];
         let image_bytes = 16 * (w * h) as u64;
         check_sizes(
             device,
             &[
                 ("image bytes", image_bytes),
-                ("kernel table bytes", 4 * kernel.len() as u64),
+                ("polynomial bytes", 4 * polynomials.len() as u64),
                 ("triangle bytes", 16 * tri_rows.len() as u64),
             ],
         )?;
@@ -273,10 +261,14 @@ impl Renderer {
         let meshes = buffer("biri meshes", &mesh_rows, storage);
         let tris = buffer("biri triangles", &tri_rows, storage);
         let media = buffer("biri media", &media_rows, storage);
-        let kernel = filled(
+        let polynomials = filled(
             device,
-            "biri kernel",
-            bytemuck::cast_slice(&kernel),
+            "biri polynomials",
+            bytemuck::cast_slice(if polynomials.is_empty() {
+                &[0f32]
+            } else {
+                &polynomials[..]
+            }),
             storage,
         );
         let image = device.create_buffer(&wgpu::BufferDescriptor {
@@ -286,7 +278,15 @@ impl Renderer {
             mapped_at_creation: false,
         });
         let all = [
-            &params, &lights, &planes, &spheres, &meshes, &tris, &media, &kernel, &image,
+            &params,
+            &lights,
+            &planes,
+            &spheres,
+            &meshes,
+            &tris,
+            &media,
+            &polynomials,
+            &image,
         ];
         let entries: Vec<wgpu::BindGroupEntry> = all
             .iter()
@@ -306,7 +306,8 @@ impl Renderer {
             start,
             |pass| {
                 pass.set_pipeline(&self.pipeline);
-                pass.set_bind_group(0, &bind_group, &[]);
+                pass.set_bind_group(0, &gpu_tables.bind_group, &[]);
+                pass.set_bind_group(1, &bind_group, &[]);
                 pass.dispatch_workgroups(w.div_ceil(8) as u32, h.div_ceil(8) as u32, 1);
             },
             &image,
