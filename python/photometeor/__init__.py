@@ -30,6 +30,7 @@ before any work starts; a file the system cannot read raises OSError (FileNotFou
 
 from __future__ import annotations
 
+import collections.abc
 import json
 import os
 import sys
@@ -233,7 +234,7 @@ def _print_progress(field: str, done: int, total: int, message: str) -> None:
 def _scene_arguments(scene: _Scene) -> Dict[str, Any]:
     if scene is None:
         return {}
-    if isinstance(scene, Mapping):
+    if isinstance(scene, collections.abc.Mapping):
         return {"scene_json": json.dumps(scene)}
     if isinstance(scene, os.PathLike):
         return {"scene_path": os.fspath(scene)}

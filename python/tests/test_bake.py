@@ -102,7 +102,7 @@ def test_load_reads_a_bake_and_refuses_a_tampered_file(baked, tmp_path):
         photometeor.load(tmp_path / "t")
 
 
-def test_progress_reaches_a_callback_in_order(baked, tmp_path):
+def test_progress_reaches_a_callback_in_order(baked, tmp_path, capfd):
     _, scene = baked
     calls = []
     photometeor.bake(scene, tmp_path / "p", progress=lambda *a: calls.append(a))
@@ -123,6 +123,10 @@ def test_progress_reaches_a_callback_in_order(baked, tmp_path):
     with pytest.raises(KeyError, match="stop here"):
         photometeor.bake(scene, tmp_path / "q", progress=failing)
     assert len(seen) == 1
+    # progress=True draws a bar per field on stderr.
+    photometeor.bake(scene, tmp_path / "r", progress=True)
+    err = capfd.readouterr().err
+    assert "   cloud [" in err and "6/6 done" in err
 
 
 def ticks_while(work) -> tuple[int, float]:
