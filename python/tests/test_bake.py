@@ -153,7 +153,7 @@ def ticks_while(work) -> tuple[int, float]:
 def test_the_gil_is_released_during_long_work(baked, tmp_path):
     _, scene = baked
     for work in (
-        lambda: photometeor.mie(1.333 + 1e-8j, [2e5] * 6, angles_step_deg=0.18),
+        lambda: photometeor.mie(1.333 + 1e-8j, [2e5] * 12, angles_step_deg=0.18),
         lambda: photometeor.bake(scene, tmp_path / "gil"),
     ):
         ticks, seconds = ticks_while(work)
