@@ -45,7 +45,7 @@ pub mod trace;
 use serde::{Deserialize, Serialize};
 
 pub use geometry::Prism;
-pub use trace::{TraceResult, TraceSettings, trace};
+pub use trace::{Sampling, TraceResult, TraceSettings, trace};
 
 use crate::distribution::SizeDistribution;
 use crate::error::MieError;
@@ -154,13 +154,38 @@ fn diffraction_bin_energy(x: f64, grid: ThetaGrid) -> Vec<f64> {
         .collect()
 }
 
-/// Phase function of `field` at `wavelength_nm` on `grid`, from `rays` traced rays.
+/// How many rays a crystal phase function is traced with, and how they are drawn
+/// ([`trace`] module docs, "Sampling").
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Rays {
+    /// Rays that hit the crystal.
+    pub count: u64,
+    /// Seed of the random streams or scrambles.
+    pub seed: u64,
+    /// Pseudo-random or scrambled Sobol'.
+    pub sampling: Sampling,
+    /// Directions in the prism's fundamental domain only.
+    pub symmetric: bool,
+}
+
+impl Rays {
+    /// `count` plain Monte Carlo rays over the whole sphere of directions.
+    pub fn random(count: u64, seed: u64) -> Self {
+        Self {
+            count,
+            seed,
+            sampling: Sampling::Random,
+            symmetric: false,
+        }
+    }
+}
+
+/// Phase function of `field` at `wavelength_nm` on `grid`, from the traced `rays`.
 pub fn crystal_phase(
     field: &CrystalField,
     wavelength_nm: f64,
     grid: ThetaGrid,
-    rays: u64,
-    seed: u64,
+    rays: Rays,
 ) -> Result<PhaseFunction, MieError> {
     let field = field.validated()?;
     let m = Material::Ice.refractive_index(wavelength_nm, -20.0)?;
@@ -187,7 +212,8 @@ pub fn crystal_phase(
         m.re,
         alpha,
         grid,
-        TraceSettings::new(rays, seed, field.roughness),
+        TraceSettings::new(rays.count, rays.seed, field.roughness)
+            .sampled(rays.sampling, rays.symmetric),
     );
     let go_scattered = t.scattered();
 

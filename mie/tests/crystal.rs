@@ -2,7 +2,7 @@
 //! Diedenhoven et al. 2014 (VD14, docs/physics.md §5), halo peak angles against prism minimum
 //! deviation, snow's featureless phase function, energy bookkeeping, determinism.
 
-use mie::crystal::{CrystalField, Prism, TraceSettings, crystal_phase, trace};
+use mie::crystal::{CrystalField, Prism, Rays, TraceSettings, crystal_phase, trace};
 use mie::{Material, ThetaGrid};
 
 fn grid(step: f64) -> ThetaGrid {
@@ -215,7 +215,7 @@ fn snow_is_featureless_with_g_between_0_70_and_0_80() {
         sigma_g: 1.5,
         roughness: 0.7,
     };
-    let p = crystal_phase(&snow, 550.0, grid(0.18), 2_000_000, 23).unwrap();
+    let p = crystal_phase(&snow, 550.0, grid(0.18), Rays::random(2_000_000, 23)).unwrap();
     println!(
         "snow: g {:.4} ± {:.4}, albedo {}",
         p.g,
@@ -242,7 +242,7 @@ fn snow_is_featureless_with_g_between_0_70_and_0_80() {
         aspect_ratio: 2.0,
         ..snow
     };
-    let q = crystal_phase(&pristine, 550.0, grid(0.18), 2_000_000, 23).unwrap();
+    let q = crystal_phase(&pristine, 550.0, grid(0.18), Rays::random(2_000_000, 23)).unwrap();
     let k = (22.2 / 0.18f64).round() as usize;
     let bump = (q.bins[k] - 0.5 * (q.bins[k - 6] + q.bins[k + 6]))
         / q.crystal().unwrap().bins_std_error[k];
@@ -262,7 +262,7 @@ fn energy_is_accounted_for_and_phase_functions_integrate_to_one() {
             sigma_g: 1.4,
             roughness: delta,
         };
-        let p = crystal_phase(&field, 550.0, g, 400_000, 3).unwrap();
+        let p = crystal_phase(&field, 550.0, g, Rays::random(400_000, 3)).unwrap();
         let integral: f64 = p
             .bins
             .iter()

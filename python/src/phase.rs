@@ -465,7 +465,10 @@ pub fn crystal_phase<'py>(
             wavelengths_nm
                 .iter()
                 .enumerate()
-                .map(|(j, &lambda)| trace_crystals(&field, lambda, grid, rays, seed ^ j as u64))
+                .map(|(j, &lambda)| {
+                    let rays = mie::crystal::Rays::random(rays, seed ^ j as u64);
+                    trace_crystals(&field, lambda, grid, rays)
+                })
                 .collect::<Result<_, _>>()
         })
         .map_err(|e| to_py(&e))?;

@@ -66,7 +66,12 @@ pub fn run(a: TradeoffArgs) -> Result<()> {
         None => {
             let dir = a.out.join("reference");
             eprintln!("tradeoff: baking the reference ({})", dir.display());
-            bake_variant(&scene, &dir, Quality::Reference, Quality::Reference.knobs())?;
+            bake_variant(
+                &scene,
+                &dir,
+                Quality::Reference,
+                Quality::Reference.knobs_for(&scene.spectral),
+            )?;
             dir
         }
     };
@@ -74,7 +79,7 @@ pub fn run(a: TradeoffArgs) -> Result<()> {
 
     let is_drop = |k: FieldKind| matches!(k, FieldKind::Cloud | FieldKind::Rain | FieldKind::Haze);
     let has = |drops: bool| scene.fields.iter().any(|f| is_drop(f.kind) == drops);
-    let standard = Quality::Standard.knobs();
+    let standard = Quality::Standard.knobs_for(&scene.spectral);
     let mut variants = Vec::new();
     for drops in [true, false] {
         if !has(drops) {
@@ -85,7 +90,7 @@ pub fn run(a: TradeoffArgs) -> Result<()> {
                 knob: "preset",
                 value: format!("{q:?}").to_lowercase(),
                 drops,
-                knobs: q.knobs(),
+                knobs: q.knobs_for(&scene.spectral),
                 wavelengths: None,
             });
         }
@@ -116,13 +121,13 @@ pub fn run(a: TradeoffArgs) -> Result<()> {
                 wavelengths: None,
             });
         }
-        for b in pick(vec![0.25, 1.0], vec![1.0]) {
+        for b in pick(vec![0.25, 0.5, 1.0], vec![0.5]) {
             variants.push(Variant {
-                knob: "peak blur (bins)",
+                knob: "j ≥ 2 terms: steps blurred by (bins)",
                 value: format!("{b}"),
                 drops: true,
                 knobs: Knobs {
-                    blur_bins: b,
+                    reconstruction: tables::ams::Reconstruction::HeatKernel { blur_bins: b },
                     ..standard
                 },
                 wavelengths: None,
@@ -148,6 +153,28 @@ pub fn run(a: TradeoffArgs) -> Result<()> {
                 drops: false,
                 knobs: Knobs {
                     rays: r as u64,
+                    ..standard
+                },
+                wavelengths: None,
+            });
+        }
+        // The tracer's variance-reduction levers, each alone (mie::crystal::trace docs).
+        use mie::crystal::Sampling;
+        for (value, sampling, symmetric) in [
+            ("sobol", Sampling::Sobol, false),
+            ("random, fundamental domain", Sampling::Random, true),
+            ("sobol, fundamental domain", Sampling::Sobol, true),
+        ] {
+            if a.quick && value != "sobol, fundamental domain" {
+                continue;
+            }
+            variants.push(Variant {
+                knob: "ray sampling",
+                value: value.to_string(),
+                drops: false,
+                knobs: Knobs {
+                    ray_sampling: sampling,
+                    ray_symmetric: symmetric,
                     ..standard
                 },
                 wavelengths: None,

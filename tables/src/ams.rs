@@ -21,16 +21,36 @@
 //! row is a true bin average of its series. Because Σ_k W_lk = 2δ_l0, each row's energy
 //! Σ_k Ams_n,k Ω_k is 1 to rounding whatever the truncation degree L.
 //!
-//! # Resolution and truncation
-//! Q is known only as bin averages. Read as a piecewise-constant function its Legendre spectrum
-//! does not decay: the steps between bins put peaks near l = 2π m/Δθ (every 2000 degrees at
-//! 0.18°), so no truncation of the j ≥ 2 series is safe. Q's coefficients are therefore blurred
-//! with the spherical heat kernel, χ_l → χ_l exp(−l(l+1) s²/2) with s = Δθ/2 (0.09° at the
-//! default grid): a Gaussian blur of half a bin. The heat kernel is a positive convolution, so
-//! the blurred Q^{∗j} stay ≥ 0 and cannot ring; the series is cut where the blur factor falls
-//! below 1e-17 (l ≈ 8.7/s, 5600 at 0.18°), which leaves nothing to truncate. The j = 0, 1 terms
-//! are not blurred. The effect on the j ≥ 2 terms is a smoothing by 0.09°·√j, below the table's
-//! resolution; the tests measure it against an exactly known case.
+//! # Resolution: what Q is between the bin averages
+//! Q is known only as bin averages; the j ≥ 2 terms need a function. Read as a piecewise-constant
+//! function (the steps) its Legendre spectrum does not decay: the steps put peaks near
+//! l = 2π m/Δθ (every 2000 degrees at 0.18°), so no truncation of the j ≥ 2 series is safe; and
+//! below those peaks the steps are the true Q smoothed twice by a bin (averaging, then holding),
+//! a factor sinc²(u/2) on χ_l, u = (l + ½)Δθ, 8 % at u = 1.
+//!
+//! [`Reconstruction::Spline`] (the default) takes instead the cubic spline in θ with knots at the
+//! bin centres whose bin averages are the given ones (histopolation). On a uniform grid both are
+//! linear, shift-invariant maps of the same averages, so their spectra differ by a factor: with
+//! the spline's box average at the knots, S(u) = (115 + 76 cos u + cos 2u)/192 (the centred
+//! degree-4 B-spline at −2..2),
+//!
+//!   χ_l(spline) = χ_l(steps) · sinc³(u/2) / S(u),
+//!
+//! which is 1 − O(u⁶) at low degrees (the spline reproduces cubics: 0.45 % low at u = 1.6, l = 500
+//! at 0.18°) and vanishes at the steps' peaks u = 2π m, where sinc(u/2) = 0. On the sphere, whose
+//! bins are uniform in θ, the factor holds for lθ ≫ 1, i.e. away from the poles' first bins. The
+//! spline is smooth (C²), so its spectrum falls as l⁻⁴; the series is cut by a flat taper
+//! e^{−(u/2π)⁸} (10⁻⁵ at u = 1.6, e^{−1} at the first peak) at u = 4π, where it is e^{−256}:
+//! l_max = ⌈4π/Δθ⌉, 4000 at 0.18°. A spline can overshoot next to a jump of the bins (a halo's
+//! edge), so it is not positive by construction; the tests check the rows stay ≥ 0.
+//!
+//! [`Reconstruction::HeatKernel`] is the earlier method, kept to measure against: the steps
+//! blurred by the spherical heat kernel, χ_l → χ_l exp(−l(l+1) s²/2) (s = half a bin by
+//! default), a positive convolution that cannot ring, cut where the factor is below 1e-17
+//! (l ≈ 8.7/s, 5600 at 0.18°). It smooths the j ≥ 2 terms by the blur on top of the steps': on a
+//! cloud's diffraction lobe Ams_2 comes out 2–4 % high at 1.6–2.5° (tests/ams_exact.rs).
+//!
+//! The j = 0, 1 terms use neither: they are the bins themselves.
 //!
 //! # Forward fractions
 //! F_n = ∫_{μ>0} Ams_n dΩ (Eq. 23) from the same split: f^n + n f^{n−1}(1 − f) F(Q) +
@@ -56,20 +76,68 @@ use ndarray::Array2;
 use crate::TablesError;
 use crate::legendre::bins::BinIntegrals;
 
+/// What the j ≥ 2 terms take Q to be between its bin averages (module docs, "Resolution").
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case", tag = "kind")]
+pub enum Reconstruction {
+    /// The cubic spline in θ whose bin averages are Q's (histopolation).
+    Spline,
+    /// The bins as steps, blurred by the heat kernel of width `blur_bins` bins.
+    HeatKernel {
+        /// The Gaussian blur s as a fraction of Δθ (the earlier default 0.5).
+        blur_bins: f64,
+    },
+}
+
+impl Reconstruction {
+    /// The factor χ_l(Q) is multiplied by at degree l on a grid of step `step_rad`, and the
+    /// degree beyond which every factor is 0 to double precision.
+    fn factors(self, step_rad: f64) -> (impl Fn(usize) -> f64, usize) {
+        use std::f64::consts::PI;
+        let l_max = match self {
+            Reconstruction::Spline => (4.0 * PI / step_rad).ceil() as usize,
+            // exp(−l(l+1)s²/2) < 1e-17 ⇔ l(l+1) > 2·39.1/s²
+            Reconstruction::HeatKernel { blur_bins } => {
+                ((78.2f64).sqrt() / (blur_bins * step_rad)).ceil() as usize
+            }
+        };
+        let factor = move |l: usize| match self {
+            // χ_0 = 1 exactly: every row's energy rests on it.
+            Reconstruction::Spline if l == 0 => 1.0,
+            Reconstruction::Spline => {
+                let u = (l as f64 + 0.5) * step_rad;
+                let sinc = if u == 0.0 {
+                    1.0
+                } else {
+                    (0.5 * u).sin() / (0.5 * u)
+                };
+                let s = (115.0 + 76.0 * u.cos() + (2.0 * u).cos()) / 192.0;
+                sinc.powi(3) / s * (-(u / (2.0 * PI)).powi(8)).exp()
+            }
+            Reconstruction::HeatKernel { blur_bins } => {
+                let s = blur_bins * step_rad;
+                let lf = l as f64;
+                (-0.5 * lf * (lf + 1.0) * s * s).exp()
+            }
+        };
+        (factor, l_max)
+    }
+}
+
 /// Settings of the Ams_n computation.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct AmsSettings {
     /// Number of scattering orders N (rows Ams_1..Ams_N).
     pub n_max: usize,
-    /// Gaussian blur s applied to Q in the j ≥ 2 terms, as a fraction of Δθ (default 0.5).
-    pub blur_bins: f64,
+    /// What Q is between its bins in the j ≥ 2 terms (default: the spline).
+    pub reconstruction: Reconstruction,
 }
 
 impl Default for AmsSettings {
     fn default() -> Self {
         Self {
             n_max: 26,
-            blur_bins: 0.5,
+            reconstruction: Reconstruction::Spline,
         }
     }
 }
@@ -86,12 +154,12 @@ pub struct AmsTable {
     pub forward_peak_fraction: f64,
     /// Σ_k v_k Ω_k − 1 of the input before it was renormalized.
     pub input_energy_error: f64,
-    /// Legendre degree at which the series stops (blur factor < 1e-17 beyond).
+    /// Legendre degree at which the series stops (every reconstruction factor 0 beyond).
     pub l_max: usize,
 }
 
-/// The split P = f δ + (1 − f) Q of one phase function and Q's blurred Legendre coefficients:
-/// everything needed to evaluate any row Ams_n (module docs).
+/// The split P = f δ + (1 − f) Q of one phase function and the Legendre coefficients of Q's
+/// reconstruction: everything needed to evaluate any row Ams_n (module docs).
 #[derive(Debug, Clone, PartialEq)]
 pub struct AmsSeries {
     grid: ThetaGrid,
@@ -99,7 +167,7 @@ pub struct AmsSeries {
     f: f64,
     /// Q's bin averages (normalized).
     q: Vec<f64>,
-    /// χ_l(Q) blurred, l = 0..=l_max.
+    /// χ_l of Q's reconstruction, l = 0..=l_max.
     chi: Vec<f64>,
     /// max_{l' ≥ l} |χ_l'|: bounds what the series beyond l can still add.
     chi_tail: Vec<f64>,
@@ -108,12 +176,12 @@ pub struct AmsSeries {
 
 impl AmsSeries {
     /// Splits a [`PhaseFunction`]'s bins and expands Q (see [`Self::new`]).
-    pub fn from_phase(phase: &PhaseFunction, blur_bins: f64) -> Self {
-        Self::new(&phase.grid, &phase.bins, blur_bins)
+    pub fn from_phase(phase: &PhaseFunction, reconstruction: Reconstruction) -> Self {
+        Self::new(&phase.grid, &phase.bins, reconstruction)
     }
 
-    /// Splits the bin averages `bins` (1/sr) on `grid` and expands Q.
-    pub fn new(grid: &ThetaGrid, bins: &[f64], blur_bins: f64) -> Self {
+    /// Splits the bin averages `bins` (1/sr) on `grid` and expands Q's reconstruction.
+    pub fn new(grid: &ThetaGrid, bins: &[f64], reconstruction: Reconstruction) -> Self {
         assert_eq!(bins.len(), grid.len(), "one value per bin");
         let omega = grid.bin_solid_angles();
         let energy: f64 = bins.iter().zip(&omega).map(|(v, o)| v * o).sum();
@@ -131,19 +199,15 @@ impl AmsSeries {
         for x in q.iter_mut() {
             *x /= 1.0 - f;
         }
-        // χ_l(Q) = 2π Σ_k q_k W_lk, blurred by the heat kernel (module docs).
-        let s_rad = (blur_bins * grid.step_deg()).to_radians();
-        // exp(−l(l+1)s²/2) < 1e-17 ⇔ l(l+1) > 2·39.1/s²
-        let l_max = ((78.2f64).sqrt() / s_rad).ceil() as usize;
+        // χ_l of the steps, 2π Σ_k q_k W_lk, times the reconstruction's factor (module docs).
+        let (factor, l_max) = reconstruction.factors(grid.step_deg().to_radians());
         let mut chi = Vec::with_capacity(l_max + 1);
         let mut w = BinIntegrals::new(grid);
         for l in 0..=l_max {
             if l > 0 {
                 w.advance();
             }
-            let lf = l as f64;
-            let blur = (-0.5 * lf * (lf + 1.0) * s_rad * s_rad).exp();
-            chi.push(2.0 * std::f64::consts::PI * dot(&q, w.values()) * blur);
+            chi.push(2.0 * std::f64::consts::PI * dot(&q, w.values()) * factor(l));
         }
         let mut chi_tail = chi.iter().map(|c| c.abs()).collect::<Vec<_>>();
         for l in (0..chi_tail.len().saturating_sub(1)).rev() {
@@ -491,7 +555,7 @@ fn powers_of(f: f64, n: usize) -> Vec<f64> {
 
 /// Computes Ams_n and F_n for n = 1..N from bin averages `bins` (1/sr) on `grid`.
 pub fn ams_table(grid: &ThetaGrid, bins: &[f64], settings: AmsSettings) -> AmsTable {
-    let series = AmsSeries::new(grid, bins, settings.blur_bins);
+    let series = AmsSeries::new(grid, bins, settings.reconstruction);
     let orders: Vec<usize> = (1..=settings.n_max).collect();
     AmsTable {
         rows: series.rows(&orders),
@@ -586,7 +650,7 @@ mod tests {
     #[test]
     fn mixtures_refuse_bad_weights_and_grids() {
         let grid = ThetaGrid::new(1.0).unwrap();
-        let s = AmsSeries::new(&grid, &hg_bins(&grid, 0.5), 0.5);
+        let s = AmsSeries::new(&grid, &hg_bins(&grid, 0.5), Reconstruction::Spline);
         assert_eq!(
             AmsMixture::new(Vec::new()).unwrap_err(),
             TablesError::EmptyMixture
@@ -601,7 +665,7 @@ mod tests {
         let e = AmsMixture::new(vec![(0.0, s.clone())]).unwrap_err();
         assert!(e.to_string().contains("positive sum"), "{e}");
         let other = ThetaGrid::new(2.0).unwrap();
-        let t = AmsSeries::new(&other, &hg_bins(&other, 0.5), 0.5);
+        let t = AmsSeries::new(&other, &hg_bins(&other, 0.5), Reconstruction::Spline);
         let e = AmsMixture::new(vec![(1.0, s.clone()), (1.0, t)]).unwrap_err();
         assert!(
             matches!(e, TablesError::GridMismatch { index: 1, .. }),
@@ -655,15 +719,16 @@ mod tests {
                 })
                 .sum();
             let expected = bins_g(&grid, &bins).powi(i as i32 + 1);
-            // The half-bin blur of the j ≥ 2 terms lowers χ_1 by 1 − e^{−s²} = 2.5e-6 per
-            // factor (s = 0.09°): measured deviation ≤ 3.3e-6 at n = 2 … 6 (exact at n = 1).
+            // The spline reconstruction's χ_1 is the bins' to O(Δθ⁶); measured deviation
+            // ≤ 1.4e-6 at n = 2 … 6 (exact at n = 1; the half-bin heat-kernel blur, which
+            // lowers χ_1 by 1 − e^{−s²} = 2.5e-6 per factor, gave 3.3e-6).
             eprintln!(
                 "n = {}: ⟨μ⟩ {mean} vs g^n {expected}: {:.2e}",
                 i + 1,
                 mean - expected
             );
             assert!(
-                (mean - expected).abs() < 4e-6,
+                (mean - expected).abs() < 2e-6,
                 "n = {}: {mean} vs {expected}",
                 i + 1
             );
@@ -712,9 +777,10 @@ mod tests {
                 .map(|(a, b)| ((a - b) / b).abs())
                 .fold(0.0, f64::max);
             eprintln!("HG g = 0.85, n = {n}: worst relative error for θ ≥ 1°: {worst:.2e}");
-            // Measured 2.3e-4 (n = 2) falling to 4.8e-6 (n = 26): the half-bin blur and the
-            // bin-0 split near the peak.
-            assert!(worst < 3e-4, "n = {n}: {worst:e}");
+            // Measured 4.0e-6 (n = 2) falling to 2.4e-7 (n = 26) with the spline (the half-bin
+            // heat-kernel blur gave 2.3e-4 to 4.8e-6): the bin-0 split near the peak and the
+            // spline's O(u⁶) near the grid's resolution.
+            assert!(worst < 5e-6, "n = {n}: {worst:e}");
         }
     }
 
@@ -784,7 +850,7 @@ mod tests {
         let grid = ThetaGrid::new(0.18).unwrap();
         let mut bins = hg_bins(&grid, 0.9);
         bins[0] += 0.3 / grid.bin_solid_angles()[0];
-        let series = AmsSeries::new(&grid, &bins, 0.5);
+        let series = AmsSeries::new(&grid, &bins, Reconstruction::Spline);
         assert!(series.forward_peak_fraction() > 0.2);
         let omega = grid.bin_solid_angles();
         let depths = [1e-6, 0.1, 2.0, 10.0, 30.0];
@@ -831,7 +897,7 @@ mod tests {
         // an independent check of the series and its blur.
         let grid = ThetaGrid::new(0.18).unwrap();
         let g: f64 = 0.85;
-        let series = AmsSeries::new(&grid, &hg_bins(&grid, g), 0.5);
+        let series = AmsSeries::new(&grid, &hg_bins(&grid, g), Reconstruction::Spline);
         let first = (1.0 / grid.step_deg()).ceil() as usize;
         let depths = [0.5, 5.0, 30.0];
         let rows = series.poisson_rows(&depths);
@@ -855,8 +921,9 @@ mod tests {
                 .map(|(a, b)| ((a - b) / b).abs())
                 .fold(0.0, f64::max);
             eprintln!("HG g = 0.85, D = {d}: worst relative error for θ ≥ 1°: {worst:.2e}");
-            // Measured ≤ 1.0e-4 (D = 5): the half-bin blur, as for the rows Ams_n.
-            assert!(worst < 1.5e-4, "D = {d}: {worst:e}");
+            // Measured ≤ 2.6e-6 (D = 5), as for the rows Ams_n (the half-bin heat-kernel blur
+            // gave 1.0e-4).
+            assert!(worst < 3e-6, "D = {d}: {worst:e}");
         }
     }
 }

@@ -129,7 +129,7 @@ fn rain_rainbow_fades_with_scattering_order() {
     assert_fades("rainbow contrast", &c);
 
     // Riley et al. claim rain is isotropic within 1e-6 by n = 26; report what the table says.
-    let series = AmsSeries::new(&grid, &bins, AmsSettings::default().blur_bins);
+    let series = AmsSeries::new(&grid, &bins, AmsSettings::default().reconstruction);
     let n_iso: Vec<Option<usize>> = [1e-2, 1e-4, 1e-6]
         .iter()
         .map(|&eps| series.isotropic_order(eps, 100_000))

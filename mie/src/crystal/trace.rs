@@ -1,5 +1,18 @@
 //! Monte Carlo geometric-optics ray tracing through one randomly oriented prism (module docs of
 //! [`crate::crystal`] give the model).
+//!
+//! # Sampling
+//! A ray is a point of the unit cube: dimensions 0–1 its incident direction, 2–3 its entry point
+//! on the disc across it, 4–19 the tilts of the eight facets (distorted crystals). The points
+//! come from [`Sampling::Random`] (independent pseudo-random numbers: plain Monte Carlo, error
+//! ∝ N^{−1/2}) or [`Sampling::Sobol`] (randomized quasi-Monte Carlo: each chunk of rays an
+//! independently Owen-scrambled Sobol' sequence, Burley 2020, so the chunks stay independent,
+//! unbiased estimates and their spread still gives the standard errors). A miss (an entry point
+//! outside the projected prism) takes the next point. With `symmetric` the directions cover
+//! only the prism's fundamental domain, 1/24 of the sphere (z ≥ 0 and azimuth 0–30° between a
+//! vertex and a face normal: the prism's 24 symmetries, D6h, map it onto the whole sphere, and
+//! the facet tilts are drawn symmetrically), which gives the same distribution of scattering
+//! angles and lets the quasi-random points fill a smaller domain.
 
 use rand_xoshiro::Xoshiro256PlusPlus;
 use rand_xoshiro::rand_core::{RngCore, SeedableRng};
@@ -28,10 +41,25 @@ pub struct TraceSettings {
     pub max_interactions: u32,
     /// A path stops when its weight falls below this; its weight is reported as lost.
     pub min_weight: f64,
+    /// How the rays' directions, entry points and tilts are drawn (module docs).
+    pub sampling: Sampling,
+    /// Directions only in the prism's fundamental domain (module docs).
+    pub symmetric: bool,
+}
+
+/// How a trace draws its rays (module docs, "Sampling").
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Sampling {
+    /// Independent pseudo-random numbers (xoshiro256++ per chunk).
+    Random,
+    /// An Owen-scrambled Sobol' sequence per chunk (randomized quasi-Monte Carlo).
+    Sobol,
 }
 
 impl TraceSettings {
-    /// Settings with at most 1000 interactions per path and a weight cut-off of 1e-7.
+    /// Settings with at most 1000 interactions per path and a weight cut-off of 1e-7, plain
+    /// Monte Carlo over the whole sphere of directions.
     pub fn new(rays: u64, seed: u64, roughness: f64) -> Self {
         Self {
             rays,
@@ -39,6 +67,17 @@ impl TraceSettings {
             roughness,
             max_interactions: 1000,
             min_weight: 1e-7,
+            sampling: Sampling::Random,
+            symmetric: false,
+        }
+    }
+
+    /// These settings with `sampling` and, if `symmetric`, directions in the fundamental domain.
+    pub fn sampled(self, sampling: Sampling, symmetric: bool) -> Self {
+        Self {
+            sampling,
+            symmetric,
+            ..self
         }
     }
 }
@@ -82,6 +121,8 @@ impl TraceResult {
 
 #[derive(Clone)]
 struct Tally {
+    /// cos θ of the inner bin edges, falling: bin k holds cos θ in (edge[k], edge[k − 1]].
+    edges: std::sync::Arc<Vec<f64>>,
     bins: Vec<f64>,
     delta: f64,
     external: f64,
@@ -93,9 +134,10 @@ struct Tally {
 }
 
 impl Tally {
-    fn new(k: usize) -> Self {
+    fn new(edges: std::sync::Arc<Vec<f64>>) -> Self {
         Self {
-            bins: vec![0.0; k],
+            bins: vec![0.0; edges.len() + 1],
+            edges,
             delta: 0.0,
             external: 0.0,
             absorbed: 0.0,
@@ -107,12 +149,63 @@ impl Tally {
     }
 }
 
-struct Rng(Xoshiro256PlusPlus);
+/// Sobol' points one scramble holds (sobol_burley's limit); past it a chunk takes the next
+/// scramble.
+const SOBOL_POINTS: u32 = 1 << 16;
+
+/// The numbers a chunk's rays are made of (module docs, "Sampling").
+struct Rng {
+    random: Xoshiro256PlusPlus,
+    sobol: Option<SobolPoint>,
+}
+
+/// The current point of a chunk's scrambled Sobol' sequence and the next dimension to read.
+struct SobolPoint {
+    chunk_seed: u64,
+    scramble: u32,
+    next_index: u64,
+    index: u32,
+    dim: u32,
+}
 
 impl Rng {
-    /// Uniform in [0, 1).
+    fn new(sampling: Sampling, chunk_seed: u64) -> Self {
+        let sobol = (sampling == Sampling::Sobol).then_some(SobolPoint {
+            chunk_seed,
+            scramble: 0,
+            next_index: 0,
+            index: 0,
+            dim: 0,
+        });
+        Self {
+            random: Xoshiro256PlusPlus::seed_from_u64(chunk_seed),
+            sobol,
+        }
+    }
+
+    /// Starts the next point: a new ray, or a new try after a miss.
+    fn next_point(&mut self) {
+        if let Some(p) = &mut self.sobol {
+            let segment = p.next_index / SOBOL_POINTS as u64;
+            // Each segment of 2^16 points its own scramble, derived from the chunk's seed.
+            let mixed = p.chunk_seed ^ segment.wrapping_mul(0xD1B5_4A32_D192_ED03);
+            p.scramble = (mixed ^ (mixed >> 32)) as u32;
+            p.index = (p.next_index % SOBOL_POINTS as u64) as u32;
+            p.next_index += 1;
+            p.dim = 0;
+        }
+    }
+
+    /// Uniform in [0, 1): the point's next dimension, or the next pseudo-random number.
     fn uniform(&mut self) -> f64 {
-        (self.0.next_u64() >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
+        match &mut self.sobol {
+            Some(p) => {
+                let u = sobol_burley::sample(p.index, p.dim, p.scramble) as f64;
+                p.dim += 1;
+                u
+            }
+            None => (self.random.next_u64() >> 11) as f64 * (1.0 / (1u64 << 53) as f64),
+        }
     }
 }
 
@@ -130,19 +223,37 @@ fn fresnel(cos_i: f64, eta: f64) -> (f64, f64) {
 }
 
 /// The facet normals of one distorted crystal: each face's outward normal tilted by an angle
-/// uniform in [0, δ·90°] about a uniform azimuth (the true normals when δ = 0).
-fn distorted_normals(rng: &mut Rng, prism: &Prism, roughness: f64) -> [DVec3; 8] {
-    let mut normals = prism.faces.map(|f| f.normal);
-    if roughness > 0.0 {
-        for n in normals.iter_mut() {
-            let (e1, e2) = basis(*n);
-            let tilt = roughness * std::f64::consts::FRAC_PI_2 * rng.uniform();
-            let phi = 2.0 * std::f64::consts::PI * rng.uniform();
-            let (s, c) = tilt.sin_cos();
-            *n = c * *n + s * phi.cos() * e1 + s * phi.sin() * e2;
+/// uniform in [0, δ·90°] about a uniform azimuth (the true normals when δ = 0), each drawn when
+/// the ray first meets its facet (a ray meets about half of them).
+struct Facets {
+    normals: [DVec3; 8],
+    drawn: u8,
+    roughness: f64,
+}
+
+impl Facets {
+    fn new(prism: &Prism, roughness: f64) -> Self {
+        Self {
+            normals: prism.faces.map(|f| f.normal),
+            drawn: if roughness > 0.0 { 0 } else { u8::MAX },
+            roughness,
         }
     }
-    normals
+
+    /// The tilted outward normal of facet `f`.
+    fn normal(&mut self, f: usize, rng: &mut Rng) -> DVec3 {
+        if self.drawn & (1 << f) == 0 {
+            self.drawn |= 1 << f;
+            let n = self.normals[f];
+            let (e1, e2) = basis(n);
+            let tilt = self.roughness * std::f64::consts::FRAC_PI_2 * rng.uniform();
+            let phi = 2.0 * std::f64::consts::PI * rng.uniform();
+            let (s, c) = tilt.sin_cos();
+            let (sp, cp) = phi.sin_cos();
+            self.normals[f] = c * n + s * cp * e1 + s * sp * e2;
+        }
+        self.normals[f]
+    }
 }
 
 /// The normal an entering ray meets at a facet (outward normal `tilted`, true normal
@@ -167,6 +278,7 @@ pub fn trace(
 ) -> TraceResult {
     let k_len = grid.len();
     let step = grid.step_deg();
+    let edges = std::sync::Arc::new(inner_edge_cosines(grid));
     let chunks = settings.rays.div_ceil(CHUNK_RAYS).max(1);
     let tallies: Vec<Tally> = (0..chunks)
         .into_par_iter()
@@ -175,10 +287,10 @@ pub fn trace(
             let seed = settings
                 .seed
                 .wrapping_add((c + 1).wrapping_mul(0x9E37_79B9_7F4A_7C15));
-            let mut rng = Rng(Xoshiro256PlusPlus::seed_from_u64(seed));
-            let mut tally = Tally::new(k_len);
+            let mut rng = Rng::new(settings.sampling, seed);
+            let mut tally = Tally::new(edges.clone());
             for _ in 0..rays {
-                trace_one(prism, n_re, alpha, step, settings, &mut rng, &mut tally);
+                trace_one(prism, n_re, alpha, settings, &mut rng, &mut tally);
             }
             tally
         })
@@ -188,7 +300,7 @@ pub fn trace(
     let cast: u64 = tallies.iter().map(|t| t.cast).sum();
     let total = hits as f64;
     let mut bin_energy = vec![0.0; k_len];
-    let mut sum = Tally::new(0);
+    let mut sum = Tally::new(std::sync::Arc::new(Vec::new()));
     for t in &tallies {
         for (a, b) in bin_energy.iter_mut().zip(&t.bins) {
             *a += b;
@@ -239,19 +351,46 @@ pub fn trace(
     }
 }
 
-/// Bin of the table grid holding scattering angle θ (degrees).
-fn bin_of(theta_deg: f64, step: f64, k_len: usize) -> usize {
-    ((theta_deg / step + 0.5).floor() as usize).min(k_len - 1)
+/// cos θ of the K − 1 inner bin edges (k + ½)Δθ, falling with k.
+fn inner_edge_cosines(grid: ThetaGrid) -> Vec<f64> {
+    grid.edge_theta_rad()[1..grid.len()]
+        .iter()
+        .map(|t| t.cos())
+        .collect()
 }
 
-fn emit(tally: &mut Tally, d_in: DVec3, d_out: DVec3, w: f64, step: f64) {
+/// Bin of the table grid holding cos θ = `c`: the number of inner edges whose cosine is ≥ c
+/// (bin k is (k − ½)Δθ ≤ θ < (k + ½)Δθ), found from a first guess by the angle (a polynomial
+/// acos good to 10⁻⁴ rad) and settled by comparing c with the edges' cosines: exact, without a
+/// libm acos per exit.
+fn bin_of(c: f64, edges: &[f64]) -> usize {
+    let step = std::f64::consts::PI / edges.len() as f64;
+    let mut k = ((fast_acos(c) / step + 0.5) as usize).min(edges.len());
+    while k > 0 && edges[k - 1] < c {
+        k -= 1;
+    }
+    while k < edges.len() && edges[k] >= c {
+        k += 1;
+    }
+    k
+}
+
+/// acos(x) to about 7·10⁻⁵ rad (Abramowitz & Stegun 4.4.45): a first guess only.
+fn fast_acos(x: f64) -> f64 {
+    let a = x.abs().min(1.0);
+    let r =
+        (1.0 - a).sqrt() * (1.570_728_8 + a * (-0.212_114_4 + a * (0.074_261_0 - 0.018_729_3 * a)));
+    if x < 0.0 { std::f64::consts::PI - r } else { r }
+}
+
+fn emit(tally: &mut Tally, d_in: DVec3, d_out: DVec3, w: f64) {
     let c = d_in.dot(d_out).clamp(-1.0, 1.0);
     tally.cos_sum += w * c;
     if c > 1.0 - 1e-12 {
         tally.delta += w;
     } else {
-        let k_len = tally.bins.len();
-        tally.bins[bin_of(c.acos().to_degrees(), step, k_len)] += w;
+        let k = bin_of(c, &tally.edges);
+        tally.bins[k] += w;
     }
 }
 
@@ -259,7 +398,6 @@ fn trace_one(
     prism: &Prism,
     n_re: f64,
     alpha: f64,
-    step: f64,
     s: TraceSettings,
     rng: &mut Rng,
     tally: &mut Tally,
@@ -268,8 +406,16 @@ fn trace_one(
     // across it: orientation averaging with projected-area weighting.
     let radius = prism.bounding_radius();
     let (d_in, mut p, face) = loop {
-        let z = 1.0 - 2.0 * rng.uniform();
-        let phi = 2.0 * std::f64::consts::PI * rng.uniform();
+        rng.next_point();
+        let (z, phi) = if s.symmetric {
+            // z ≥ 0, azimuth between a vertex (0°) and a face normal (30°).
+            (rng.uniform(), std::f64::consts::FRAC_PI_6 * rng.uniform())
+        } else {
+            (
+                1.0 - 2.0 * rng.uniform(),
+                2.0 * std::f64::consts::PI * rng.uniform(),
+            )
+        };
         let rho = (1.0 - z * z).max(0.0).sqrt();
         let d = DVec3::new(rho * phi.cos(), rho * phi.sin(), z);
         let (e1, e2) = basis(d);
@@ -282,15 +428,15 @@ fn trace_one(
         }
     };
     tally.hits += 1;
-    let normals = distorted_normals(rng, prism, s.roughness);
+    let mut facets = Facets::new(prism, s.roughness);
 
     // External interaction.
     let eta_in = 1.0 / n_re;
-    let m = entry_normal(normals[face], prism.faces[face].normal, d_in);
+    let m = entry_normal(facets.normal(face, rng), prism.faces[face].normal, d_in);
     let cos_i = -d_in.dot(m);
     let (refl, cos_t) = fresnel(cos_i, eta_in);
     let reflected = d_in + 2.0 * cos_i * m;
-    emit(tally, d_in, reflected.normalize(), refl, step);
+    emit(tally, d_in, reflected.normalize(), refl);
     tally.external += refl;
     let mut w = 1.0 - refl;
     let mut d = (eta_in * d_in + (eta_in * cos_i - cos_t) * m).normalize();
@@ -301,22 +447,30 @@ fn trace_one(
         let (t, f) = prism.exit(p, d);
         p += t * d;
         if alpha > 0.0 {
-            let kept = w * (-alpha * t).exp();
+            // e^{−x} by its series where x is small (ice in the visible: x ~ 10⁻⁶; the
+            // remainder x⁴/24 < 4·10⁻¹⁴ below 10⁻³), else exp.
+            let x = alpha * t;
+            let kept = w * if x < 1e-3 {
+                1.0 - x * (1.0 - x * (0.5 - x / 6.0))
+            } else {
+                (-x).exp()
+            };
             tally.absorbed += w - kept;
             w = kept;
         }
         // Turned against the ray. A tilted surface facing back at the ray cannot be crossed:
         // total reflection about the true normal, which keeps the ray inside.
-        let (m, cos_i, (refl, cos_t)) = if d.dot(normals[f]) > 0.0 {
-            let cos_i = d.dot(normals[f]);
-            (-normals[f], cos_i, fresnel(cos_i, eta_out))
+        let normal = facets.normal(f, rng);
+        let (m, cos_i, (refl, cos_t)) = if d.dot(normal) > 0.0 {
+            let cos_i = d.dot(normal);
+            (-normal, cos_i, fresnel(cos_i, eta_out))
         } else {
             let m = -prism.faces[f].normal;
             (m, -d.dot(m), (1.0, 0.0))
         };
         if refl < 1.0 {
             let out = (eta_out * d + (eta_out * cos_i - cos_t) * m).normalize();
-            emit(tally, d_in, out, w * (1.0 - refl), step);
+            emit(tally, d_in, out, w * (1.0 - refl));
         }
         w *= refl;
         d = (d + 2.0 * cos_i * m).normalize();
@@ -326,4 +480,37 @@ fn trace_one(
         }
     }
     tally.lost += w;
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bins_from_edge_cosines_equal_bins_from_the_angle() {
+        for step in [0.18, 0.25, 1.0, 30.0] {
+            let grid = ThetaGrid::new(step).unwrap();
+            let edges = inner_edge_cosines(grid);
+            let by_angle = |c: f64| {
+                let theta = c.acos().to_degrees();
+                ((theta / step + 0.5).floor() as usize).min(grid.len() - 1)
+            };
+            let mut rng = Rng::new(Sampling::Random, 5);
+            for _ in 0..200_000 {
+                let c = 1.0 - 2.0 * rng.uniform();
+                assert_eq!(bin_of(c, &edges), by_angle(c), "step {step}, cos θ {c}");
+            }
+            for (k, &e) in edges.iter().enumerate() {
+                // On an edge the bin above it (θ = (k + ½)Δθ belongs to bin k + 1).
+                assert_eq!(bin_of(e, &edges), k + 1, "step {step}, edge {k}");
+                assert_eq!(
+                    bin_of(e.next_up(), &edges),
+                    k,
+                    "step {step}, above edge {k}"
+                );
+            }
+            assert_eq!(bin_of(1.0, &edges), 0);
+            assert_eq!(bin_of(-1.0, &edges), grid.len() - 1);
+        }
+    }
 }

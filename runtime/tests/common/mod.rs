@@ -38,12 +38,16 @@ pub fn cloud_and_rain(name: &str, n_max: usize) -> String {
 }
 
 /// Bakes the scene `text` into `<tmp>/tables`; keep the `TempDir` alive while using the path.
+/// The preset's knobs as stated for 31 wavelengths (`Quality::knobs`), not scaled up for rgb3:
+/// these tests need tables, not the preset's accuracy.
 pub fn bake(text: &str) -> (tempfile::TempDir, PathBuf) {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path().join("tables");
     let scene = Scene::parse(text, "test").unwrap();
     let quality = scene.quality;
-    run(&BakePlan::for_preset(scene, dir.clone(), quality), &Silent).unwrap();
+    let mut plan = BakePlan::for_preset(scene, dir.clone(), quality);
+    plan.knobs = quality.knobs();
+    run(&plan, &Silent).unwrap();
     (tmp, dir)
 }
 

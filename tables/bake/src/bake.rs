@@ -501,10 +501,22 @@ pub fn phase_functions(
         (None, Some(crystal)) => {
             let rays = ray_allocation(weights, knobs.rays);
             for (j, &lambda) in lambdas.iter().enumerate() {
-                // Each wavelength its own random stream: a channel averages J independent traces.
-                let seed = CRYSTAL_SEED ^ (j as u64);
-                let p = crystal_phase(&crystal, lambda, grid, rays[j], seed)
-                    .map_err(mie_error(format!(" at {lambda} nm")))?;
+                // Each wavelength its own random stream: a channel averages J independent traces;
+                // another knob seed gives other streams (independent bakes).
+                let seed =
+                    CRYSTAL_SEED ^ knobs.seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ (j as u64);
+                let p = crystal_phase(
+                    &crystal,
+                    lambda,
+                    grid,
+                    mie::crystal::Rays {
+                        count: rays[j],
+                        seed,
+                        sampling: knobs.ray_sampling,
+                        symmetric: knobs.ray_symmetric,
+                    },
+                )
+                .map_err(mie_error(format!(" at {lambda} nm")))?;
                 per_wavelength.push(p);
                 advance();
             }
@@ -542,7 +554,7 @@ pub fn compute_field(
     bar.message("Legendre series per wavelength");
     let series: Vec<AmsSeries> = per_wavelength
         .par_iter()
-        .map(|p| AmsSeries::from_phase(p, knobs.blur_bins))
+        .map(|p| AmsSeries::from_phase(p, knobs.reconstruction))
         .collect();
     bar.message("RGB and Ams_n");
     let orders: Vec<usize> = (1..=plan.scene.n_max).collect();
@@ -651,6 +663,7 @@ fn nodes_per_bin(d: &mie::SizeDistribution, lambda_nm: f64, knobs: Knobs, step_d
 /// channel's noise is Σ_j a_j² / n_j, smallest for n_j ∝ a_j: wavelengths a channel leans on get
 /// the rays, those at the spectrum's ends (weights ~10⁻³) few.
 pub fn ray_allocation(weights: &ChannelWeights, per_wavelength: u64) -> Vec<u64> {
+    // ray_shares is the same rule without the rounding.
     let j_len = weights.wavelengths_nm.len();
     let floor = per_wavelength / 10;
     let total = per_wavelength * j_len as u64;
@@ -665,7 +678,21 @@ pub fn ray_allocation(weights: &ChannelWeights, per_wavelength: u64) -> Vec<u64>
         .collect()
 }
 
-/// Seed of the crystal traces (wavelength j uses CRYSTAL_SEED ^ j).
+/// Each wavelength's share of [`ray_allocation`]'s rays, per ray per wavelength (J in all): a
+/// tenth at least, the rest in proportion to the largest weight any channel gives it.
+pub fn ray_shares(weights: &ChannelWeights) -> Vec<f64> {
+    let j_len = weights.wavelengths_nm.len();
+    let importance: Vec<f64> = (0..j_len)
+        .map(|j| (0..3).map(|c| weights.weights[c][j]).fold(0.0, f64::max))
+        .collect();
+    let sum: f64 = importance.iter().sum();
+    importance
+        .iter()
+        .map(|m| 0.1 + 0.9 * j_len as f64 * m / sum)
+        .collect()
+}
+
+/// Seed of the crystal traces (wavelength j uses CRYSTAL_SEED ^ j with the knobs' seed 0).
 const CRYSTAL_SEED: u64 = 0x7068_6f74_6f6d_6574;
 
 /// One channel's tables.

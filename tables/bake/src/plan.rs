@@ -5,6 +5,8 @@ use std::path::PathBuf;
 
 use serde::Serialize;
 
+use tables::spectral::{ChannelWeights, SpectralMode};
+
 use crate::scene::{Quality, Scene};
 
 /// Node counts a preset stands for (chosen from the measured trade, docs/accuracy.md).
@@ -16,14 +18,81 @@ pub struct Knobs {
     pub nodes_per_panel: usize,
     /// Mass fraction left outside the truncated size range.
     pub tail_mass: f64,
-    /// Heat-kernel blur of the j ≥ 2 Ams terms, in bins.
-    pub blur_bins: f64,
+    /// What Q is between its bins in the j ≥ 2 Ams terms (`tables::ams` module docs).
+    pub reconstruction: tables::ams::Reconstruction,
     /// Geometric-optics rays per wavelength for ice and snow.
     pub rays: u64,
+    /// Seed of the crystal tracer's random streams (0 for the presets): bakes with different
+    /// seeds are independent estimates, whose difference measures their noise.
+    pub seed: u64,
+    /// How the crystal tracer draws its rays: pseudo-random (the presets) or scrambled Sobol'
+    /// (`mie::crystal::trace` docs; measured by `photometeor tradeoff`).
+    pub ray_sampling: mie::crystal::Sampling,
+    /// Whether the tracer's directions cover only the prism's fundamental domain.
+    pub ray_symmetric: bool,
+}
+
+/// The spectral mode the presets' per-wavelength counts are stated for: the default scene's 31
+/// wavelengths over 400–700 nm.
+pub const PRESET_SPECTRUM: SpectralMode = SpectralMode::Spectral {
+    count: 31,
+    min_nm: 400.0,
+    max_nm: 700.0,
+};
+
+/// The worst channel's sampling noise, as the variance factor max_c Σ_j a_cj² / n_j, of a mode
+/// whose wavelength j gets `share(weights, j)` samples per unit of a knob (a_cj the channel
+/// weights; each wavelength an independent estimate).
+fn channel_noise(weights: &ChannelWeights, share: impl Fn(&ChannelWeights, usize) -> f64) -> f64 {
+    (0..3)
+        .map(|c| {
+            weights.weights[c]
+                .iter()
+                .enumerate()
+                .filter(|(_, a)| **a > 0.0)
+                .map(|(j, a)| a * a / share(weights, j))
+                .sum::<f64>()
+        })
+        .fold(0.0, f64::max)
+}
+
+/// Drops: every wavelength the same number of sizes.
+fn size_share(_: &ChannelWeights, _: usize) -> f64 {
+    1.0
+}
+
+/// Crystals: rays shared as [`crate::bake::ray_allocation`] shares them, per ray per wavelength.
+fn ray_share(weights: &ChannelWeights, j: usize) -> f64 {
+    crate::bake::ray_shares(weights)[j]
 }
 
 impl Quality {
-    /// The node counts of this preset.
+    /// The node counts of this preset for a scene of `spectrum`: those of [`Quality::knobs`]
+    /// (stated for [`PRESET_SPECTRUM`]) scaled so that the worst channel's sampling noise is the
+    /// same whatever the spectral mode. A channel of `rgb3` is one wavelength, where a channel of
+    /// the 31-wavelength mode averages the independent estimates of about ten, so `rgb3` takes
+    /// about ten times the sizes and rays per wavelength (and about the same time for its three
+    /// wavelengths as the 31).
+    pub fn knobs_for(self, spectrum: &SpectralMode) -> Knobs {
+        let base = self.knobs();
+        let (Ok(reference), Ok(scene)) = (
+            ChannelWeights::new(&PRESET_SPECTRUM),
+            ChannelWeights::new(spectrum),
+        ) else {
+            return base;
+        };
+        let scale = |share: fn(&ChannelWeights, usize) -> f64, count: f64| {
+            let factor = channel_noise(&scene, share) / channel_noise(&reference, share);
+            (count * factor).ceil().max(1.0)
+        };
+        Knobs {
+            sizes: scale(size_share, base.sizes as f64) as usize,
+            rays: scale(ray_share, base.rays as f64) as u64,
+            ..base
+        }
+    }
+
+    /// The node counts of this preset for [`PRESET_SPECTRUM`].
     pub fn knobs(self) -> Knobs {
         let (sizes, nodes_per_panel, rays) = match self {
             Quality::Draft => (32, 2, 40_000),
@@ -34,8 +103,11 @@ impl Quality {
             sizes,
             nodes_per_panel,
             tail_mass: 1e-3,
-            blur_bins: 0.5,
+            reconstruction: tables::ams::Reconstruction::Spline,
             rays,
+            seed: 0,
+            ray_sampling: mie::crystal::Sampling::Random,
+            ray_symmetric: false,
         }
     }
 }
@@ -73,14 +145,61 @@ pub struct BakePlan {
 }
 
 impl BakePlan {
-    /// A bake at `quality`'s preset knobs.
+    /// A bake at `quality`'s preset knobs for the scene's spectral mode
+    /// ([`Quality::knobs_for`]).
     pub fn for_preset(scene: Scene, out_dir: PathBuf, quality: Quality) -> Self {
+        let knobs = quality.knobs_for(&scene.spectral);
         Self {
             scene,
             out_dir,
             quality,
-            knobs: quality.knobs(),
+            knobs,
             prune: true,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn knobs_scale_with_the_wavelengths_a_channel_mixes() {
+        for q in [Quality::Draft, Quality::Standard, Quality::Reference] {
+            assert_eq!(q.knobs_for(&PRESET_SPECTRUM), q.knobs(), "{q:?}");
+        }
+        let reference = ChannelWeights::new(&PRESET_SPECTRUM).unwrap();
+        for mode in [
+            SpectralMode::Rgb3,
+            SpectralMode::Spectral {
+                count: 8,
+                min_nm: 400.0,
+                max_nm: 700.0,
+            },
+            SpectralMode::Spectral {
+                count: 61,
+                min_nm: 400.0,
+                max_nm: 700.0,
+            },
+        ] {
+            let weights = ChannelWeights::new(&mode).unwrap();
+            let (base, k) = (
+                Quality::Standard.knobs(),
+                Quality::Standard.knobs_for(&mode),
+            );
+            // The worst channel's noise variance, per size or ray, equal to the preset's own.
+            let drops = channel_noise(&weights, size_share) / k.sizes as f64;
+            let want = channel_noise(&reference, size_share) / base.sizes as f64;
+            let rays = channel_noise(&weights, ray_share) / k.rays as f64;
+            let want_rays = channel_noise(&reference, ray_share) / base.rays as f64;
+            eprintln!(
+                "{mode:?}: {} sizes, {} rays per wavelength (preset {} and {})",
+                k.sizes, k.rays, base.sizes, base.rays
+            );
+            assert!(drops <= want && drops > want * (1.0 - 1.0 / k.sizes as f64));
+            assert!(rays <= want_rays && rays > want_rays * (1.0 - 1.0 / k.rays as f64));
+        }
+        // rgb3: one wavelength per channel, so many more nodes per wavelength.
+        assert!(Quality::Standard.knobs_for(&SpectralMode::Rgb3).sizes > 4 * 400);
     }
 }
