@@ -71,8 +71,9 @@ struct RenderBench {
     /// `riley` or `miyazaki` (frame times on the GPU), `both` (the two side by side in one
     /// run, interleaved, with their ratio), or `truth` (the path tracer at --size: paths per
     /// second, the noise reached in --spp samples per pixel and the time to 1 % noise), or
-    /// `max` (the diffusion model on the CPU: its time split into reduced light, diffusion
-    /// solve and final gather, at each of --grids and --sizes), or `biri` (Biri et al.'s
+    /// `max` (the diffusion model: its time on the CPU split into reduced light, diffusion
+    /// solve and final gather, and the gather again on the GPU from the same lighting, what a
+    /// moving camera repeats, at each of --grids and --sizes), or `biri` (Biri et al.'s
     /// model at the scene's own size, both kernels, on the GPU and the CPU reference: the
     /// frame split into the paper's stages, silhouettes, surfaces, medium and shadow planes).
     #[arg(long, default_value = "riley", value_parser = ["riley", "miyazaki", "both", "truth", "max", "biri"])]
@@ -451,7 +452,18 @@ fn bench_crystal(c: CrystalBench) -> Result<()> {
 /// `bench render --model max`: the stages' times against grid resolution (at the base size)
 /// and against image size (at the scene's grid), so that the solve's growth is measured.
 fn bench_max(b: RenderBench) -> Result<()> {
+    use runtime::gpu::{Gpu, GpuTables, TexelFormat};
     let mut rows = Vec::new();
+    let device = match Gpu::new() {
+        Ok(g) => {
+            eprintln!("gather also on {}", g.describe());
+            Some(g)
+        }
+        Err(e) => {
+            eprintln!("no GPU gather ({e})");
+            None
+        }
+    };
     let mut settings: Vec<(usize, Option<usize>)> =
         b.grids.iter().map(|&g| (b.size, Some(g))).collect();
     settings.extend(b.sizes.iter().map(|&n| (n, None)));
@@ -471,20 +483,47 @@ fn bench_max(b: RenderBench) -> Result<()> {
         let mut frame = scene.frame(&tables)?;
         frame.width = size;
         frame.height = size;
+        let gpu = match &device {
+            Some(g) => {
+                let uploaded = GpuTables::upload(g, &tables, TexelFormat::F32)?;
+                let renderer = render::max::gpu::Renderer::new(g, &uploaded);
+                Some((g, renderer, uploaded))
+            }
+            None => None,
+        };
         let start = Instant::now();
-        let (_, report) = render::max::cpu::render(&tables, &frame, &scene.max)?;
+        let lighting = render::max::cpu::light(&tables, &frame, &scene.max)?;
+        let (_, report) = render::max::cpu::gather(&tables, &frame, &scene.max, &lighting)?;
         let total = start.elapsed().as_secs_f64();
+        // The gather again on the GPU from the same lighting (what a moving camera repeats):
+        // one frame first (a driver may compile the pipeline at its first dispatch), then the
+        // best of --repeat.
+        let gpu_gather = match &gpu {
+            Some((gpu, renderer, uploaded)) => {
+                renderer.gather(gpu, &tables, uploaded, &frame, &scene.max, &lighting)?;
+                let mut best = f64::INFINITY;
+                for _ in 0..b.repeat.max(1) {
+                    let (_, t, _) =
+                        renderer.gather(gpu, &tables, uploaded, &frame, &scene.max, &lighting)?;
+                    best = best.min(t.upload + t.frame + t.readback);
+                }
+                Some(best)
+            }
+            None => None,
+        };
         let row = json!({
             "width": size, "height": size, "grid": frame.grid.dims,
             "unknowns": report.unknowns, "levels": report.levels,
             "iterations": report.iterations, "residual": report.residual,
             "propagation_s": report.propagation_s, "diffusion_s": report.diffusion_s,
             "clear_air_s": report.clear_air_s, "gather_s": report.gather_s, "total_s": total,
+            "gpu_gather_s": gpu_gather,
         });
         if !b.json {
             println!(
                 "{size:>5}² grid {:>15}: {:>9} unknowns, {} levels, CG {:?}: reduced light {:7.2} s, \
-                 diffusion {:7.2} s, clear air + solve {:7.2} s, gather {:6.2} s, total {:7.2} s",
+                 diffusion {:7.2} s, clear air + solve {:7.2} s, gather {:6.2} s (GPU {}), total \
+                 {:7.2} s",
                 format!("{:?}", frame.grid.dims),
                 report.unknowns,
                 report.levels,
@@ -493,6 +532,7 @@ fn bench_max(b: RenderBench) -> Result<()> {
                 report.diffusion_s,
                 report.clear_air_s,
                 report.gather_s,
+                gpu_gather.map_or("—".into(), |s| format!("{s:.3} s")),
                 total
             );
         }

@@ -63,8 +63,9 @@ pub struct RenderArgs {
     /// (Miyazaki, Dobashi & Nishita's shadow-view slices: single scattering plus a constant
     /// k_multi, shadows on the ground and in the air, an aerosol [haze] layer) or `max` (Max et
     /// al. 2004: a diffusion solve in the dense core, Poisson-weighted multiple anisotropic
-    /// scattering from the bake's M(D, θ) at the tenuous edges; CPU, all cores; [render]
-    /// max_threshold, diffusion_tolerance, max_diffusion_iterations) or `biri` (Biri, Arquès &
+    /// scattering from the bake's M(D, θ) at the tenuous edges; the lighting on the CPU, all
+    /// cores, the final gather on the GPU or --cpu; [render] max_threshold,
+    /// diffusion_tolerance, max_diffusion_iterations) or `biri` (Biri, Arquès &
     /// Michelin 2006: single scattering of [[light]]s in homogeneous [[medium]]s in closed
     /// form, volumetric shadows of [[occluder]]s from their silhouette planes; GPU, or --cpu).
     #[arg(long, default_value = "riley", value_parser = ["riley", "truth", "miyazaki", "max", "biri"])]
@@ -257,10 +258,30 @@ pub fn run(a: RenderArgs) -> Result<()> {
     let frame: Frame = render.frame(&tables)?;
     let raster = started.elapsed().as_secs_f64();
     if a.model == "max" {
-        let (image, report) = render::max::cpu::render(&tables, &frame, &render.max)?;
+        // Steps 1–4 on the CPU; the gather on the GPU unless --cpu (the per-view part).
+        let lighting = render::max::cpu::light(&tables, &frame, &render.max)?;
+        let (image, report, on) = if a.cpu {
+            let (image, report) =
+                render::max::cpu::gather(&tables, &frame, &render.max, &lighting)?;
+            (image, report, "CPU".to_string())
+        } else {
+            let gpu = Gpu::new().context(
+                "no GPU adapter: install a driver (on Debian, mesa-vulkan-drivers gives \
+                 lavapipe, a software Vulkan) or render with --cpu",
+            )?;
+            let gpu_tables = GpuTables::upload(&gpu, &tables, TexelFormat::F32)?;
+            let renderer = render::max::gpu::Renderer::new(&gpu, &gpu_tables);
+            let (image, t, largest) =
+                renderer.gather(&gpu, &tables, &gpu_tables, &frame, &render.max, &lighting)?;
+            let mut report = lighting.report.clone();
+            report.gather_s = t.upload + t.frame + t.readback;
+            report.largest_edge_depth = largest;
+            (image, report, gpu.describe())
+        };
         if !a.quiet {
             eprintln!(
-                "diffusion + Poisson edges (CPU, {} threads): {}×{}, grid {:?}: reduced sunlight \
+                "diffusion + Poisson edges (lighting on the CPU, {} threads; gather on {on}): \
+                 {}×{}, grid {:?}: reduced sunlight \
                  {:.2} s, diffusion {:.2} s ({} unknowns, {} levels, {:?} CG iterations to \
                  residuals {:.1e}/{:.1e}/{:.1e}), clear-air propagation and second solve {:.2} s \
                  (mean light across clear air {:.2e}), final gather {:.2} s; largest edge depth \

@@ -348,12 +348,62 @@ fn scattered(d: f64, albedo: f64) -> f64 {
     (-d).exp() * (d * albedo).exp_m1()
 }
 
-/// Renders `frame` with the `max` model; the report splits the time by stage.
+/// What the final gather reads per voxel: everything of a frame that depends on the sun, the sky,
+/// the grid and the tables but not on the camera (steps 1–4 of the [module docs](super)), so a
+/// moving camera needs only the gather again ([`gather`], or `super::gpu` on a GPU).
+#[derive(Debug, Clone)]
+pub struct Lighting {
+    /// T_sun per voxel and channel: the sunlight the volume leaves there (step 1).
+    pub t_sun: Vec<[f64; 3]>,
+    /// I_0 per voxel and channel: the diffusion solution (step 3, after step 4).
+    pub i0: Vec<[f64; 3]>,
+    /// Whether a voxel took part in the solve; I_0 is interpolated over these only.
+    pub active: Vec<bool>,
+    /// The reduced skylight's mean radiance per voxel and channel, with the light that crossed
+    /// clear air (step 4).
+    pub sky_mean: Vec<[f64; 3]>,
+    /// The grid's dimensions and the sun's direction this lighting was computed for.
+    pub dims: [usize; 3],
+    /// Unit vector towards the sun.
+    pub sun_dir: DVec3,
+    /// The time, iterations and residuals of steps 1–4.
+    pub report: MaxReport,
+}
+
+impl Lighting {
+    /// Checks that `frame` has the grid and sun this lighting was computed for.
+    pub fn check_frame(&self, frame: &Frame) -> Result<(), FrameError> {
+        if frame.grid.dims != self.dims || frame.sun.direction() != self.sun_dir {
+            return Err(FrameError(format!(
+                "the max lighting was computed for a {:?} grid and the sun towards {:?}; this                  frame has {:?} and {:?}: light it again",
+                self.dims,
+                self.sun_dir,
+                frame.grid.dims,
+                frame.sun.direction()
+            )));
+        }
+        Ok(())
+    }
+}
+
+/// Renders `frame` with the `max` model ([`light`], then [`gather`]); the report splits the
+/// time by stage.
 pub fn render(
     tables: &Tables,
     frame: &Frame,
     settings: &MaxSettings,
 ) -> Result<(Image, MaxReport), FrameError> {
+    let lighting = light(tables, frame, settings)?;
+    gather(tables, frame, settings, &lighting)
+}
+
+/// Checks what a `max` frame needs of `tables` and `frame`, and returns the Poisson tables'
+/// largest depth.
+pub(crate) fn check(
+    tables: &Tables,
+    frame: &Frame,
+    settings: &MaxSettings,
+) -> Result<f64, FrameError> {
     frame.check_view()?;
     settings.check()?;
     check_fields(tables, frame)?;
@@ -371,12 +421,22 @@ pub fn render(
             )));
         }
     }
-    let depth_max = tables
+    Ok(tables
         .fields
         .iter()
         .filter_map(|f| f.poisson.as_ref())
         .map(|p| *p.depths.last().expect("checked"))
-        .fold(f64::INFINITY, f64::min);
+        .fold(f64::INFINITY, f64::min))
+}
+
+/// Steps 1–4 of the [module docs](super): reduced sun and sky, the diffusion solve and §3's
+/// clear-air propagation.
+pub fn light(
+    tables: &Tables,
+    frame: &Frame,
+    settings: &MaxSettings,
+) -> Result<Lighting, FrameError> {
+    check(tables, frame, settings)?;
     let fields: Vec<&FieldTable> = tables.fields.iter().collect();
     let grid = &frame.grid;
     let h = voxel_size(grid);
@@ -511,15 +571,49 @@ pub fn render(
         i0 = solve(&sky, &mut report)?;
     }
     report.clear_air_s = start.elapsed().as_secs_f64();
+    Ok(Lighting {
+        t_sun: tau_sun.iter().map(|t| t.map(|x| (-x).exp())).collect(),
+        i0,
+        active,
+        sky_mean: sky.mean,
+        dims,
+        sun_dir,
+        report,
+    })
+}
 
-    // 4, 5: the final gather.
+/// The size of a voxel as one length, (h_x h_y h_z)^{1/3} (m).
+pub(crate) fn voxel_length(grid: &DensityGrid) -> f64 {
+    let h = voxel_size(grid);
+    (h[0] * h[1] * h[2]).cbrt()
+}
+
+/// Steps 5–6 of the [module docs](super): the final gather along every pixel's ray and the
+/// composition, from `lighting` ([`light`] of a frame with the same grid and sun).
+pub fn gather(
+    tables: &Tables,
+    frame: &Frame,
+    settings: &MaxSettings,
+    lighting: &Lighting,
+) -> Result<(Image, MaxReport), FrameError> {
+    let depth_max = check(tables, frame, settings)?;
+    lighting.check_frame(frame)?;
+    let fields: Vec<&FieldTable> = tables.fields.iter().collect();
+    let grid = &frame.grid;
+    let h = voxel_size(grid);
+    let h_voxel = voxel_length(grid);
+    let sun_dir = frame.sun.direction();
+    let light = -sun_dir;
+    let l_y = sun_dir[1];
+    let (t_sun, i0, active) = (&lighting.t_sun, &lighting.i0, &lighting.active);
+    let sky_mean = &lighting.sky_mean;
+    let mut report = lighting.report.clone();
     let start = Instant::now();
     let (forward, right, up) = frame.camera.axes().expect("checked by check_view");
     let tan_half = (frame.camera.fov_deg.to_radians() / 2.0).tan();
     let eye = frame.camera.position_m;
     let (w, hgt) = (frame.width, frame.height);
     let step = 0.5 * h.iter().copied().fold(f64::INFINITY, f64::min);
-    let t_sun: Vec<[f64; 3]> = tau_sun.iter().map(|t| t.map(|x| (-x).exp())).collect();
     let gathered: Vec<([f32; 3], f32, f64)> = (0..w * hgt)
         .into_par_iter()
         .map(|px| {
@@ -547,12 +641,12 @@ pub fn render(
                     }
                     let w_edge = settings.edge_share(ext[1] * h_voxel);
                     let s_atm = frame.atmosphere.sunlight(p.y, l_y);
-                    let ts = trilinear(grid, &t_sun, None, p);
+                    let ts = trilinear(grid, t_sun, None, p);
                     let sun: [f64; 3] =
                         std::array::from_fn(|c| frame.sun.irradiance[c] * s_atm[c] * ts[c]);
                     // Diffuse light: the diffusion solution and the reduced skylight, isotropic.
-                    let i0_here = trilinear(grid, &i0, Some(&active), p);
-                    let sky_here = trilinear(grid, &sky.mean, None, p);
+                    let i0_here = trilinear(grid, i0, Some(active), p);
+                    let sky_here = trilinear(grid, sky_mean, None, p);
                     // (P1's I_0 can dip below zero where the first-scattered light's flux
                     // term dominates, in optically thin voxels: no radiance is negative.)
                     let diffuse: [f64; 3] =

@@ -2,6 +2,15 @@
 //! Scattering for Global Illumination in Clouds": the diffusion approximation in the dense
 //! core, Poisson-weighted multiple anisotropic scattering at the tenuous edges (`--model max`).
 //!
+//! # Where it runs
+//! Steps 1–4 below ([`cpu::light`]) depend on the sun, the sky, the cloud and the tables, not
+//! on the camera: they run on the CPU (all cores) and give a [`cpu::Lighting`]. Steps 5–6, the
+//! final gather, are the per-view part: [`cpu::gather`] on the CPU, or [`gpu::Renderer`] (one
+//! compute invocation per pixel, the same march in f32, `gather.wgsl`), which a moving camera
+//! repeats from the same lighting. `photometeor render --model max` gathers on the GPU unless
+//! `--cpu`. The solve and the sweeps stay on the CPU: they are sequential along their
+//! direction (the sweeps) or a multigrid hierarchy (the solve), and they run once per light.
+//!
 //! # The model, as [`cpu::render`] computes it
 //! 1. **Reduced sunlight** (Eq. 2): the fraction T_sun(x) of the sunlight left at every voxel
 //!    centre after the volume, per channel, by an upwind sweep through the grid along the
@@ -65,6 +74,7 @@
 
 pub mod cpu;
 pub mod diffusion;
+pub mod gpu;
 
 use crate::FrameError;
 

@@ -1,0 +1,206 @@
+// Max et al. 2004's final gather (§4) on the GPU: one invocation per pixel does what
+// runtime::render::max::cpu::gather does per ray, in f32, from the per-voxel lighting the CPU
+// computed (T_sun, the diffusion solution I_0 and the reduced skylight: steps 1–4 of the
+// module docs), then composes the pixel with the air, the sun disk and the ground. Included
+// after tables.wgsl (bind group 0: Ams_1 by `ams_mix`, the Poisson mixtures by `poisson`) and
+// slicing.wgsl (grid sampling, camera rays, the sky).
+
+struct MaxParams {
+    eye: vec4<f32>,          // xyz; w = the march's step (m)
+    forward: vec4<f32>,      // xyz; w = tan(fov_y / 2)
+    right: vec4<f32>,        // xyz; w = aspect
+    up: vec4<f32>,           // xyz; w = the voxel length (h_x h_y h_z)^{1/3} (m)
+    grid_min: vec4<f32>,     // xyz; w = ground albedo
+    grid_max: vec4<f32>,     // xyz; w = the threshold T (voxel optical depth)
+    grid_dims: vec4<u32>,    // nx, ny, nz, field count
+    sizes: vec4<u32>,        // width, height, 0, 0
+    sigma_ext: array<vec4<f32>, 4>,  // per field, m² per channel
+    sky_beta: vec4<f32>,     // β at sea level per channel (1/m); w = γ (1/m)
+    sun: vec4<f32>,          // unit vector towards the sun; w = cos(disk radius)
+    irradiance: vec4<f32>,   // per channel; w = disk solid angle (sr)
+}
+
+@group(1) @binding(0) var<uniform> rp: MaxParams;
+@group(1) @binding(1) var<storage, read> density: array<vec4<f32>>;
+// Per voxel three rows: (T_sun rgb, 1 if in the diffusion solve), (I_0 rgb, 0), (sky rgb, 0).
+@group(1) @binding(2) var<storage, read> lighting: array<vec4<f32>>;
+@group(1) @binding(3) var<storage, read_write> image: array<vec4<f32>>;  // rgb, T_vol (green)
+// The largest optical depth an edge segment reached, as the bits of a non-negative f32 (whose
+// order is the u32 order).
+@group(1) @binding(4) var<storage, read_write> largest_edge: atomic<u32>;
+
+// Row `row` of the lighting trilinear at p (voxel centres, clamped to the edge voxels, as
+// DensityGrid::taps), over the voxels in the solve only when `masked` (renormalized over them);
+// zero outside the box or where no such voxel contributes.
+fn lit(p: vec3<f32>, row: u32, masked: bool) -> vec3<f32> {
+    if (!inside_box(p)) {
+        return vec3<f32>(0.0);
+    }
+    let dims = vec3<f32>(rp.grid_dims.xyz);
+    let u = clamp((p - rp.grid_min.xyz) / (rp.grid_max.xyz - rp.grid_min.xyz) * dims - 0.5,
+        vec3<f32>(0.0), dims - 1.0);
+    let top = max(vec3<i32>(rp.grid_dims.xyz) - 2, vec3<i32>(0));
+    let lo = vec3<u32>(min(vec3<i32>(floor(u)), top));
+    let t = select(vec3<f32>(0.0), u - vec3<f32>(lo), rp.grid_dims.xyz > vec3<u32>(1u));
+    let s = vec3<u32>(rp.grid_dims.xyz > vec3<u32>(1u));
+    var sum = vec3<f32>(0.0);
+    var total = 0.0;
+    for (var corner = 0u; corner < 8u; corner = corner + 1u) {
+        let d = vec3<u32>(corner & 1u, (corner >> 1u) & 1u, (corner >> 2u) & 1u);
+        let w3 = select(1.0 - t, t, d == vec3<u32>(1u));
+        let w = w3.x * w3.y * w3.z;
+        if (w == 0.0) {
+            continue;
+        }
+        let at = lo + d * s;
+        let i = at.x + rp.grid_dims.x * (at.y + rp.grid_dims.y * at.z);
+        if (masked && lighting[3u * i].w == 0.0) {
+            continue;
+        }
+        total = total + w;
+        sum = sum + w * lighting[3u * i + row].rgb;
+    }
+    if (masked) {
+        return select(vec3<f32>(0.0), sum / total, total > 0.0);
+    }
+    return sum;
+}
+
+fn scattering_of(rho: vec4<f32>) -> vec3<f32> {
+    var s = vec3<f32>(0.0);
+    for (var i = 0u; i < rp.grid_dims.w; i = i + 1u) {
+        s = s + rho[i] * ams_field_info[i].yzw;
+    }
+    return s;
+}
+
+// M(D, θ) of the mixture, weighted by ρ σ_sca like Eq. 6 (runtime::sample::poisson_mix).
+fn poisson_mix(rho: vec4<f32>, depth: vec3<f32>, cos_theta: f32) -> vec3<f32> {
+    var num = vec3<f32>(0.0);
+    var den = vec3<f32>(0.0);
+    for (var i = 0u; i < min(rp.grid_dims.w, 4u); i = i + 1u) {
+        if (rho[i] > 0.0) {
+            let w = rho[i] * ams_field_info[i].yzw;
+            num = num + w * poisson(i, depth, cos_theta);
+            den = den + w;
+        }
+    }
+    return select(vec3<f32>(0.0), num / den, den > vec3<f32>(0.0));
+}
+
+// e^{−D}(e^{Dα} − 1): the light a segment of optical depth D scatters at albedo α.
+fn scattered(d: f32, albedo: f32) -> f32 {
+    if (d <= 0.0) {
+        return 0.0;
+    }
+    return exp(-d) * expm1(d * albedo);
+}
+
+// The share of a voxel of optical depth τ the edge treatment takes (MaxSettings::edge_share).
+fn edge_share(tau_voxel: f32) -> f32 {
+    return clamp(1.5 - tau_voxel / rp.grid_max.w, 0.0, 1.0);
+}
+
+// The sunlight the volume leaves at p (outside the box: the ground) along the sun, by a march
+// of half-voxel steps.
+fn transmittance_to_sun(p: vec3<f32>) -> vec3<f32> {
+    let span = box_span(p, rp.sun.xyz);
+    if (span.y < 0.0) {
+        return vec3<f32>(1.0);
+    }
+    let n = max(u32(ceil((span.y - span.x) / rp.eye.w)), 1u);
+    let dt = (span.y - span.x) / f32(n);
+    var tau = vec3<f32>(0.0);
+    for (var k = 0u; k < n; k = k + 1u) {
+        tau = tau + extinction(densities(p + (span.x + (f32(k) + 0.5) * dt) * rp.sun.xyz)) * dt;
+    }
+    return exp(-tau);
+}
+
+@compute @workgroup_size(8, 8)
+fn gather(@builtin(global_invocation_id) id: vec3<u32>) {
+    if (id.x >= rp.sizes.x || id.y >= rp.sizes.y) {
+        return;
+    }
+    let d = pixel_ray(id.x, id.y);
+    let eye = rp.eye.xyz;
+    let l_y = rp.sun.y;
+    let cos_theta = dot(rp.sun.xyz, d);
+    var l_vol = vec3<f32>(0.0);
+    var tr = vec3<f32>(1.0);
+    var largest = 0.0;
+    let span = box_span(eye, d);
+    if (span.y >= 0.0) {
+        let n = max(u32(ceil((span.y - span.x) / rp.eye.w)), 1u);
+        let dt = (span.y - span.x) / f32(n);
+        var edge = vec3<f32>(0.0);
+        for (var k = 0u; k < n; k = k + 1u) {
+            let p = eye + (span.x + (f32(k) + 0.5) * dt) * d;
+            let rho = densities(p);
+            let ext = extinction(rho);
+            if (all(ext <= vec3<f32>(0.0))) {
+                continue;
+            }
+            let sca = scattering_of(rho);
+            let w_edge = edge_share(ext.g * rp.up.w);
+            let sun = rp.irradiance.rgb * sunlight(p.y, l_y) * lit(p, 0u, false);
+            // Diffuse light: the diffusion solution (never below zero) and the skylight.
+            let diffuse = max(lit(p, 1u, true), vec3<f32>(0.0)) + lit(p, 2u, false);
+            let p1 = ams_mix(rho, 1.0, cos_theta);
+            let before = edge * w_edge;
+            let after = before + w_edge * ext * dt;
+            var m_before = vec3<f32>(0.0);
+            var m_after = vec3<f32>(0.0);
+            if (w_edge > 0.0) {
+                m_before = poisson_mix(rho, before, cos_theta);
+                m_after = poisson_mix(rho, after, cos_theta);
+            }
+            for (var c = 0u; c < 3u; c = c + 1u) {
+                if (ext[c] <= 0.0) {
+                    continue;
+                }
+                let albedo = sca[c] / ext[c];
+                let slab = exp(-ext[c] * dt);
+                // Dense share: diffusion plus exact single scattering of the sun.
+                let dense = (1.0 - w_edge) * (1.0 - slab) * albedo * (diffuse[c] + p1[c] * sun[c]);
+                // Edge share: the segment's increment, seen from its entry.
+                let g0 = scattered(before[c], albedo);
+                let g1 = scattered(after[c], albedo);
+                let edge_light = (g1 * m_after[c] - g0 * m_before[c]) * sun[c] + (g1 - g0) * diffuse[c];
+                l_vol[c] = l_vol[c] + tr[c] * dense + tr[c] * exp(before[c]) * edge_light;
+                tr[c] = tr[c] * slab;
+                edge[c] = after[c];
+                largest = max(largest, after[c]);
+            }
+            if (all(tr < vec3<f32>(1e-9))) {
+                break;
+            }
+        }
+    }
+    atomicMax(&largest_edge, bitcast<u32>(largest));
+
+    // Composition (riley::cpu::compose), the ground lit through the volume.
+    let y = eye.y;
+    var k_mid = select(0.0, 0.5 * (span.x + span.y), span.y >= 0.0);
+    // K < 0 stands for ∞ (the ray leaves the atmosphere without meeting the ground).
+    var k_end = -1.0;
+    if (d.y < 0.0) {
+        k_end = select(0.0, y / -d.y, y > 0.0);
+        k_mid = min(k_mid, k_end);
+    }
+    let cos_sun = dot(d, rp.sun.xyz);
+    let front = inscatter(y, d.y, k_mid, cos_sun, l_y);
+    let all_sky = inscatter(y, d.y, k_end, cos_sun, l_y);
+    let t_mid = air_transparency(y, d.y, k_mid);
+    let i_s = rp.irradiance.rgb;
+    var v = i_s * (front + tr * (all_sky - front)) + t_mid * l_vol;
+    if (k_end < 0.0 && cos_sun >= rp.sun.w) {
+        v = v + tr * i_s * air_transparency(y, d.y, -1.0) / rp.irradiance.w;
+    }
+    if (rp.grid_min.w > 0.0 && k_end > 0.0) {
+        let lit_ground = transmittance_to_sun(eye + k_end * d);
+        v = v + tr * i_s * (rp.grid_min.w / 3.14159265358979 * l_y) * sunlight(0.0, l_y)
+            * lit_ground * air_transparency(y, d.y, k_end);
+    }
+    image[id.x + rp.sizes.x * id.y] = vec4<f32>(v, tr.g);
+}
