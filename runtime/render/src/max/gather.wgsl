@@ -2,8 +2,8 @@
 // runtime::render::max::cpu::gather does per ray, in f32, from the per-voxel lighting the CPU
 // computed (T_sun, the diffusion solution I_0 and the reduced skylight: steps 1–4 of the
 // module docs), then composes the pixel with the air, the sun disk and the ground. Included
-// after tables.wgsl (bind group 0: Ams_1 by `ams_mix`, the Poisson mixtures by `poisson`) and
-// slicing.wgsl (grid sampling, camera rays, the sky).
+// after tables.wgsl (bind group 0: Ams_1 by `ams_mix`, the Poisson mixtures by `poisson`),
+// slicing.wgsl (grid sampling, camera rays, the sky) and riley's compose.wgsl.
 
 struct MaxParams {
     eye: vec4<f32>,          // xyz; w = the march's step (m)
@@ -180,27 +180,11 @@ fn gather(@builtin(global_invocation_id) id: vec3<u32>) {
     atomicMax(&largest_edge, bitcast<u32>(largest));
 
     // Composition (riley::cpu::compose), the ground lit through the volume.
-    let y = eye.y;
-    var k_mid = select(0.0, 0.5 * (span.x + span.y), span.y >= 0.0);
-    // K < 0 stands for ∞ (the ray leaves the atmosphere without meeting the ground).
-    var k_end = -1.0;
-    if (d.y < 0.0) {
-        k_end = select(0.0, y / -d.y, y > 0.0);
-        k_mid = min(k_mid, k_end);
-    }
-    let cos_sun = dot(d, rp.sun.xyz);
-    let front = inscatter(y, d.y, k_mid, cos_sun, l_y);
-    let all_sky = inscatter(y, d.y, k_end, cos_sun, l_y);
-    let t_mid = air_transparency(y, d.y, k_mid);
-    let i_s = rp.irradiance.rgb;
-    var v = i_s * (front + tr * (all_sky - front)) + t_mid * l_vol;
-    if (k_end < 0.0 && cos_sun >= rp.sun.w) {
-        v = v + tr * i_s * air_transparency(y, d.y, -1.0) / rp.irradiance.w;
-    }
+    var lit = vec3<f32>(1.0);
+    let k_end = ground_distance(d);
     if (rp.grid_min.w > 0.0 && k_end > 0.0) {
-        let lit_ground = transmittance_to_sun(eye + k_end * d);
-        v = v + tr * i_s * (rp.grid_min.w / 3.14159265358979 * l_y) * sunlight(0.0, l_y)
-            * lit_ground * air_transparency(y, d.y, k_end);
+        lit = transmittance_to_sun(eye + k_end * d);
     }
+    let v = compose(d, l_vol, tr, lit);
     image[id.x + rp.sizes.x * id.y] = vec4<f32>(v, tr.g);
 }

@@ -18,11 +18,12 @@ use runtime::gpu::{Gpu, GpuTables, WGSL, read_back};
 use super::MaxSettings;
 use super::cpu::{Lighting, check, voxel_length};
 use crate::riley::gpu::{
-    RenderError, SLICING_WGSL, Timings, check_sizes, entry, filled, storage, timed_frame, v4,
+    COMPOSE_WGSL, RenderError, SLICING_WGSL, Timings, check_sizes, entry, filled, storage,
+    timed_frame, v4,
 };
 use crate::{Frame, FrameError, Image, MAX_FIELDS, SUN_DIAMETER_DEG};
 
-/// The gather's WGSL (after [`WGSL`] and [`SLICING_WGSL`]).
+/// The gather's WGSL (after [`WGSL`], [`SLICING_WGSL`] and [`COMPOSE_WGSL`]).
 pub const GATHER_WGSL: &str = include_str!("gather.wgsl");
 
 /// The gather's pipeline, built once.
@@ -51,7 +52,7 @@ impl Renderer {
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("photometeor max gather"),
             source: wgpu::ShaderSource::Wgsl(
-                format!("{WGSL}\n{SLICING_WGSL}\n{GATHER_WGSL}").into(),
+                format!("{WGSL}\n{SLICING_WGSL}\n{COMPOSE_WGSL}\n{GATHER_WGSL}").into(),
             ),
         });
         let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {

@@ -14,11 +14,15 @@ use runtime::gpu::{Gpu, GpuError, GpuTables, WGSL, read_back};
 
 use crate::{Frame, FrameError, Image, MAX_FIELDS, SUN_DIAMETER_DEG};
 
-/// The renderer's WGSL (after [`WGSL`] and [`SLICING_WGSL`]).
+/// The renderer's WGSL (after [`WGSL`], [`SLICING_WGSL`] and [`COMPOSE_WGSL`]).
 pub const RENDER_WGSL: &str = include_str!("render.wgsl");
 
 /// The pieces the slicing renderers' shaders share (grid sampling, camera rays, the sky).
 pub const SLICING_WGSL: &str = include_str!("../slicing.wgsl");
+
+/// The pixel around a volume's light (the air, the sun disk, the ground), shared by this
+/// renderer's composite and `max`'s gather (after [`SLICING_WGSL`]).
+pub const COMPOSE_WGSL: &str = include_str!("compose.wgsl");
 
 /// Why a GPU render failed.
 #[derive(Debug, thiserror::Error)]
@@ -339,7 +343,7 @@ impl Renderer {
             gpu,
             tables,
             "photometeor render",
-            RENDER_WGSL,
+            &format!("{COMPOSE_WGSL}\n{RENDER_WGSL}"),
             6,
             &["clear", "eye_slice", "light_slice", "composite"],
         );

@@ -1,6 +1,6 @@
 // photometeor's renderer (runtime::render docs): half-angle slicing with a light buffer and an
 // eye buffer, Riley et al. 2004 Eqs. 6, 21/22, 25, 26 and the analytic sky (Eqs. 11–15).
-// Included after tables.wgsl (bind group 0) and slicing.wgsl. The CPU reference is
+// Included after tables.wgsl (bind group 0), slicing.wgsl and compose.wgsl. The CPU reference is
 // runtime::render::riley::cpu.
 
 struct RenderParams {
@@ -185,37 +185,18 @@ fn composite(@builtin(global_invocation_id) id: vec3<u32>) {
     let d = pixel_ray(id.x, id.y);
     let l_vol = eye_buffer[2u * i].rgb;
     let t_vol = eye_buffer[2u * i + 1u].rgb;
-    let y = rp.eye.y;
-    let span = box_span(rp.eye.xyz, d);
-    var k_mid = select(0.0, 0.5 * (span.x + span.y), span.y >= 0.0);
-    // K < 0 stands for ∞ (the ray leaves the atmosphere without meeting the ground).
-    var k_end = -1.0;
-    if (d.y < 0.0) {
-        k_end = select(0.0, y / -d.y, y > 0.0);
-        k_mid = min(k_mid, k_end);
-    }
-    let cos_sun = dot(d, rp.sun.xyz);
-    let front = inscatter(y, d.y, k_mid, cos_sun, rp.light_texel.z);
-    let all_sky = inscatter(y, d.y, k_end, cos_sun, rp.light_texel.z);
-    let t_mid = air_transparency(y, d.y, k_mid);
-    let i_s = rp.irradiance.rgb;
-    var v = i_s * (front + t_vol * (all_sky - front)) + t_mid * l_vol;
-    if (k_end < 0.0 && cos_sun >= rp.sun.w) {
-        v = v + t_vol * i_s * air_transparency(y, d.y, -1.0) / rp.irradiance.w;
-    }
+    // The ground lit through the final light buffer (1 outside it).
+    var lit = vec3<f32>(1.0);
+    let k_end = ground_distance(d);
     if (rp.grid_min.w > 0.0 && k_end > 0.0) {
-        // The ground, lit through the air and the final light buffer (1 outside it).
         let g = rp.eye.xyz + k_end * d;
         let res = f32(rp.sizes.z);
         let u = (dot(rp.light_u.xyz, g) - rp.light_u.w) / rp.light_texel.x - 0.5;
         let w = (dot(rp.light_w.xyz, g) - rp.light_w.w) / rp.light_texel.y - 0.5;
-        var lit = vec3<f32>(1.0);
         if (u >= -0.5 && u <= res - 0.5 && w >= -0.5 && w <= res - 0.5) {
             lit = light_at(g).rgb;
         }
-        let l_y = rp.light_texel.z;
-        v = v + t_vol * i_s * (rp.grid_min.w / 3.14159265358979 * l_y) * sunlight(0.0, rp.light_texel.z) * lit
-            * air_transparency(y, d.y, k_end);
     }
+    let v = compose(d, l_vol, t_vol, lit);
     image[i] = vec4<f32>(v, t_vol.g);
 }
