@@ -50,10 +50,9 @@ fn main() {
             ] {
                 let t = Instant::now();
                 let rays = Rays {
-                    count,
-                    seed: 7,
                     sampling,
                     symmetric,
+                    ..Rays::random(count, 7)
                 };
                 let p = crystal_phase(&field, 550.0, grid, rays).unwrap();
                 let secs = t.elapsed().as_secs_f64();

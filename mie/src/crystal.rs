@@ -45,7 +45,7 @@ pub mod trace;
 use serde::{Deserialize, Serialize};
 
 pub use geometry::Prism;
-pub use trace::{Sampling, TraceResult, TraceSettings, trace};
+pub use trace::{Sampling, Trace, TraceResult, TraceSettings, trace};
 
 use crate::distribution::SizeDistribution;
 use crate::error::MieError;
@@ -140,6 +140,22 @@ fn encircled_energy(u: f64) -> f64 {
     1.0 - j0 * j0 - j1 * j1
 }
 
+/// The rms over the bins θ ≥ 1° of each bin's relative standard error (a bin with no value
+/// counts as 1: nothing reached it yet).
+pub fn relative_noise(grid: ThetaGrid, bins: &[f64], std_error: &[f64]) -> f64 {
+    let rel: Vec<f64> = (0..grid.len())
+        .filter(|&k| grid.theta_deg(k) >= 1.0)
+        .map(|k| {
+            if bins[k] > 0.0 && std_error[k].is_finite() {
+                std_error[k] / bins[k]
+            } else {
+                1.0
+            }
+        })
+        .collect();
+    (rel.iter().map(|r| r * r).sum::<f64>() / rel.len().max(1) as f64).sqrt()
+}
+
 /// Energy fraction of the diffraction of a circle with size parameter x in each bin of `grid`
 /// (forward hemisphere, normalized there).
 fn diffraction_bin_energy(x: f64, grid: ThetaGrid) -> Vec<f64> {
@@ -158,8 +174,15 @@ fn diffraction_bin_energy(x: f64, grid: ThetaGrid) -> Vec<f64> {
 /// ([`trace`] module docs, "Sampling").
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Rays {
-    /// Rays that hit the crystal.
+    /// Rays that hit the crystal; with a `target`, the first round's.
     pub count: u64,
+    /// If set: after the first round, [`crystal_phase`] carries the trace on
+    /// ([`CrystalTracer::carry_on`]) until the rms over the bins θ ≥ 1° of each bin's relative
+    /// standard error (from the spread between chunks; a bin no ray reached counts as 100 %)
+    /// is at most this, or until `max_count` rays.
+    pub target: Option<f64>,
+    /// The most rays a `target` may take.
+    pub max_count: u64,
     /// Seed of the random streams or scrambles.
     pub seed: u64,
     /// Pseudo-random or scrambled Sobol'.
@@ -173,6 +196,8 @@ impl Rays {
     pub fn random(count: u64, seed: u64) -> Self {
         Self {
             count,
+            target: None,
+            max_count: count,
             seed,
             sampling: Sampling::Random,
             symmetric: false,
@@ -180,100 +205,173 @@ impl Rays {
     }
 }
 
-/// Phase function of `field` at `wavelength_nm` on `grid`, from the traced `rays`.
+/// Phase function of `field` at `wavelength_nm` on `grid`, from the traced `rays` (carried on
+/// to `rays.target` if it is set).
 pub fn crystal_phase(
     field: &CrystalField,
     wavelength_nm: f64,
     grid: ThetaGrid,
     rays: Rays,
 ) -> Result<PhaseFunction, MieError> {
-    let field = field.validated()?;
-    let m = Material::Ice.refractive_index(wavelength_nm, -20.0)?;
-    let wavelength_um = wavelength_nm / 1000.0;
-    let (dims, weights) = field.sizes(32);
-    let areas: Vec<f64> = dims
-        .iter()
-        .map(|&d| Prism::new(field.aspect_ratio, d).surface_area() / 4.0)
-        .collect();
-    let mean_area: f64 = areas.iter().zip(&weights).map(|(a, w)| a * w).sum();
-    let d_ref: f64 = dims
-        .iter()
-        .zip(&areas)
-        .zip(&weights)
-        .map(|((d, a), w)| d * a * w)
-        .sum::<f64>()
-        / mean_area;
-
-    // Geometric optics at the area-weighted mean dimension (µm), absorption 4πκ/λ per µm.
-    let prism = Prism::new(field.aspect_ratio, d_ref);
-    let alpha = 4.0 * std::f64::consts::PI * m.im / wavelength_um;
-    let t = trace(
-        &prism,
-        m.re,
-        alpha,
-        grid,
-        TraceSettings::new(rays.count, rays.seed, field.roughness)
-            .sampled(rays.sampling, rays.symmetric),
-    );
-    let go_scattered = t.scattered();
-
-    // Diffraction, size by size, weighted by projected area.
-    let k_len = grid.len();
-    let mut diffraction = vec![0.0; k_len];
-    let mut g_diffraction = 0.0;
-    for (&a, &w) in areas.iter().zip(&weights) {
-        let radius = (a / std::f64::consts::PI).sqrt();
-        let x = 2.0 * std::f64::consts::PI * radius / wavelength_um;
-        for (k, e) in diffraction_bin_energy(x, grid).into_iter().enumerate() {
-            diffraction[k] += w * a / mean_area * e;
-            g_diffraction += w * a / mean_area * e * grid.theta_deg(k).to_radians().cos();
+    let mut tracer = CrystalTracer::new(field, wavelength_nm, grid, rays)?;
+    loop {
+        let phase = tracer.phase();
+        let Some(target) = rays.target else {
+            return Ok(phase);
+        };
+        let origin = phase.crystal().expect("a crystal's phase function");
+        let noise = relative_noise(grid, &phase.bins, &origin.bins_std_error);
+        if noise <= target || !tracer.carry_on(noise / target) {
+            return Ok(phase);
         }
     }
+}
 
-    let sigma_diff = mean_area;
-    let sigma_go = mean_area * go_scattered;
-    let sigma_sca = sigma_diff + sigma_go;
-    let (f_diff, f_go) = (sigma_diff / sigma_sca, sigma_go / sigma_sca);
-    let mut bins = Vec::with_capacity(k_len);
-    let mut bins_std_error = Vec::with_capacity(k_len);
-    for k in 0..k_len {
-        // Ω_k as the cosine difference, not `ThetaGrid::bin_solid_angles` (which avoids its
-        // ~1e-13 relative cancellation): the crystal tables of compute version 5 were made
-        // this way, and the next change of the crystal tracer's numbers moves both together.
-        let (lo, hi) = grid.bin_edges_deg(k);
-        let omega = 2.0 * std::f64::consts::PI * (lo.to_radians().cos() - hi.to_radians().cos());
-        let mut go = t.bin_energy[k] / go_scattered;
-        if k == 0 {
-            go += t.delta / go_scattered;
+/// One wavelength's trace of a crystal field, with its diffraction: a phase function at any
+/// point of the trace ([`CrystalTracer::phase`]), so a caller can trace several wavelengths on
+/// until a statistic of their mixture is reached (the bake's noise target per RGB channel).
+pub struct CrystalTracer {
+    wavelength_nm: f64,
+    grid: ThetaGrid,
+    m: num_complex::Complex64,
+    mean_area: f64,
+    diffraction: Vec<f64>,
+    g_diffraction: f64,
+    trace: Trace,
+    max_chunks: u64,
+}
+
+impl CrystalTracer {
+    /// Checks the field, computes the diffraction and traces the first `rays.count` rays (its
+    /// target is not used here: see [`CrystalTracer::carry_on`]).
+    pub fn new(
+        field: &CrystalField,
+        wavelength_nm: f64,
+        grid: ThetaGrid,
+        rays: Rays,
+    ) -> Result<Self, MieError> {
+        let field = field.validated()?;
+        let m = Material::Ice.refractive_index(wavelength_nm, -20.0)?;
+        let wavelength_um = wavelength_nm / 1000.0;
+        let (dims, weights) = field.sizes(32);
+        let areas: Vec<f64> = dims
+            .iter()
+            .map(|&d| Prism::new(field.aspect_ratio, d).surface_area() / 4.0)
+            .collect();
+        let mean_area: f64 = areas.iter().zip(&weights).map(|(a, w)| a * w).sum();
+        let d_ref: f64 = dims
+            .iter()
+            .zip(&areas)
+            .zip(&weights)
+            .map(|((d, a), w)| d * a * w)
+            .sum::<f64>()
+            / mean_area;
+
+        // Diffraction, size by size, weighted by projected area.
+        let mut diffraction = vec![0.0; grid.len()];
+        let mut g_diffraction = 0.0;
+        for (&a, &w) in areas.iter().zip(&weights) {
+            let radius = (a / std::f64::consts::PI).sqrt();
+            let x = 2.0 * std::f64::consts::PI * radius / wavelength_um;
+            for (k, e) in diffraction_bin_energy(x, grid).into_iter().enumerate() {
+                diffraction[k] += w * a / mean_area * e;
+                g_diffraction += w * a / mean_area * e * grid.theta_deg(k).to_radians().cos();
+            }
         }
-        bins.push((f_diff * diffraction[k] + f_go * go) / omega);
-        bins_std_error.push(f_go * t.bin_energy_std_error[k] / go_scattered / omega);
+
+        // Geometric optics at the area-weighted mean dimension (µm), absorption 4πκ/λ per µm.
+        let prism = Prism::new(field.aspect_ratio, d_ref);
+        let alpha = 4.0 * std::f64::consts::PI * m.im / wavelength_um;
+        let settings = TraceSettings::new(rays.count, rays.seed, field.roughness)
+            .sampled(rays.sampling, rays.symmetric);
+        let mut trace = Trace::new(prism, m.re, alpha, grid, settings);
+        let chunk = Trace::CHUNK_RAYS;
+        trace.run_to(rays.count.div_ceil(chunk).max(1));
+        Ok(Self {
+            wavelength_nm,
+            grid,
+            m,
+            mean_area,
+            diffraction,
+            g_diffraction,
+            trace,
+            max_chunks: rays.max_count.max(rays.count).div_ceil(chunk),
+        })
     }
-    const UM2_TO_M2: f64 = 1e-12;
-    Ok(PhaseFunction {
-        wavelength_nm,
-        m_re: m.re,
-        m_im: m.im,
-        sigma_ext_m2: 2.0 * mean_area * UM2_TO_M2,
-        sigma_sca_m2: sigma_sca * UM2_TO_M2,
-        albedo: sigma_sca / (2.0 * mean_area),
-        g: f_diff * g_diffraction + f_go * t.g,
-        grid,
-        bins,
-        forward_delta_fraction: f_go * t.delta / go_scattered,
-        points: Vec::new(),
-        origin: Origin::Crystal(CrystalOrigin {
-            g_std_error: f_go * t.g_std_error,
-            bins_std_error,
-            diffraction_fraction: f_diff,
-            trace: TraceSummary {
-                rays: t.rays_hit,
-                external_reflection: t.external_reflection,
-                delta: t.delta,
-                absorbed: t.absorbed,
-                lost: t.lost,
-                g_geometric: t.g,
-            },
-        }),
-    })
+
+    /// Carries the trace on by `ratio`² of its rays, 10 % over (noise ∝ 1/√rays, `ratio` the
+    /// noise over its target), at least one chunk and at most 4× per call (a first round's empty
+    /// bins count as 100 % and overstate the need), up to `Rays::max_count`. False once the
+    /// trace is at that limit and nothing was traced.
+    pub fn carry_on(&mut self, ratio: f64) -> bool {
+        let chunks = self.trace.chunks();
+        if chunks >= self.max_chunks {
+            return false;
+        }
+        let need = (chunks as f64 * 1.1 * ratio * ratio).ceil() as u64;
+        self.trace
+            .run_to(need.clamp(chunks + 1, 4 * chunks).min(self.max_chunks));
+        true
+    }
+
+    /// Rays traced so far (those that hit the crystal).
+    pub fn rays(&self) -> u64 {
+        self.trace.result().rays_hit
+    }
+
+    /// The phase function of the rays traced so far: geometric optics and diffraction combined
+    /// per wavelength (module docs, "Combination"), with each bin's standard error.
+    pub fn phase(&self) -> PhaseFunction {
+        let grid = self.grid;
+        let k_len = grid.len();
+        let t = self.trace.result();
+        let go_scattered = t.scattered();
+        let sigma_diff = self.mean_area;
+        let sigma_go = self.mean_area * go_scattered;
+        let sigma_sca = sigma_diff + sigma_go;
+        let (f_diff, f_go) = (sigma_diff / sigma_sca, sigma_go / sigma_sca);
+        let mut bins = Vec::with_capacity(k_len);
+        let mut bins_std_error = Vec::with_capacity(k_len);
+        for k in 0..k_len {
+            // Ω_k as the cosine difference, not `ThetaGrid::bin_solid_angles` (which avoids its
+            // ~1e-13 relative cancellation): the crystal tables of compute version 5 were made
+            // this way, and the next change of the crystal tracer's numbers moves both together.
+            let (lo, hi) = grid.bin_edges_deg(k);
+            let omega =
+                2.0 * std::f64::consts::PI * (lo.to_radians().cos() - hi.to_radians().cos());
+            let mut go = t.bin_energy[k] / go_scattered;
+            if k == 0 {
+                go += t.delta / go_scattered;
+            }
+            bins.push((f_diff * self.diffraction[k] + f_go * go) / omega);
+            bins_std_error.push(f_go * t.bin_energy_std_error[k] / go_scattered / omega);
+        }
+        const UM2_TO_M2: f64 = 1e-12;
+        PhaseFunction {
+            wavelength_nm: self.wavelength_nm,
+            m_re: self.m.re,
+            m_im: self.m.im,
+            sigma_ext_m2: 2.0 * self.mean_area * UM2_TO_M2,
+            sigma_sca_m2: sigma_sca * UM2_TO_M2,
+            albedo: sigma_sca / (2.0 * self.mean_area),
+            g: f_diff * self.g_diffraction + f_go * t.g,
+            grid,
+            bins,
+            forward_delta_fraction: f_go * t.delta / go_scattered,
+            points: Vec::new(),
+            origin: Origin::Crystal(CrystalOrigin {
+                g_std_error: f_go * t.g_std_error,
+                bins_std_error,
+                diffraction_fraction: f_diff,
+                trace: TraceSummary {
+                    rays: t.rays_hit,
+                    external_reflection: t.external_reflection,
+                    delta: t.delta,
+                    absorbed: t.absorbed,
+                    lost: t.lost,
+                    g_geometric: t.g,
+                },
+            }),
+        }
+    }
 }

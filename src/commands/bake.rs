@@ -27,9 +27,10 @@ pub struct BakeArgs {
     /// Print the summary as JSON (fields computed and cached, seconds, peak memory).
     #[arg(long)]
     json: bool,
-    /// Seed of the crystal tracer's random streams, an integer ≥ 0 (default 0, the presets').
-    /// Two bakes with different seeds are independent estimates: their difference measures the
-    /// Monte Carlo noise of ice and snow (drops have none to vary).
+    /// Seed of the crystal tracer's random streams and of the drops' size nodes, an integer ≥ 0
+    /// (default 0, the presets'). Two bakes with different seeds are independent estimates:
+    /// their difference measures the sampling noise (the Monte Carlo noise of ice and snow, the
+    /// Mie ripple's of drops).
     #[arg(long, default_value_t = 0)]
     seed: u64,
 }

@@ -146,13 +146,26 @@ pub fn run(a: TradeoffArgs) -> Result<()> {
         }
     }
     if has(false) {
-        for r in pick(vec![1.5e5, 2.4e6], vec![1.5e5]) {
+        for n in pick(vec![0.02, 0.0045], vec![0.02]) {
             variants.push(Variant {
-                knob: "rays per λ",
+                knob: "crystal noise target",
+                value: format!("{n}"),
+                drops: false,
+                knobs: Knobs {
+                    crystal_noise: n,
+                    ..standard
+                },
+                wavelengths: None,
+            });
+        }
+        for r in pick(vec![1.5e5, 6e5, 2.4e6], vec![1.5e5]) {
+            variants.push(Variant {
+                knob: "rays per λ (no noise target)",
                 value: format!("{r:e}"),
                 drops: false,
                 knobs: Knobs {
                     rays: r as u64,
+                    crystal_noise: 0.0,
                     ..standard
                 },
                 wavelengths: None,
@@ -175,6 +188,8 @@ pub fn run(a: TradeoffArgs) -> Result<()> {
                 knobs: Knobs {
                     ray_sampling: sampling,
                     ray_symmetric: symmetric,
+                    rays: 600_000,
+                    crystal_noise: 0.0,
                     ..standard
                 },
                 wavelengths: None,

@@ -276,32 +276,96 @@ pub fn trace(
     grid: ThetaGrid,
     settings: TraceSettings,
 ) -> TraceResult {
+    let mut t = Trace::new(prism.clone(), n_re, alpha, grid, settings);
+    t.run_to(settings.rays.div_ceil(CHUNK_RAYS).max(1));
+    t.result()
+}
+
+/// A trace that can be carried on: chunks of rays, each its own stream, added in order, so a
+/// caller can trace until a statistic of the [`Trace::result`] is reached and the result is the
+/// same for any thread count.
+pub struct Trace {
+    prism: Prism,
+    n_re: f64,
+    alpha: f64,
+    grid: ThetaGrid,
+    settings: TraceSettings,
+    edges: std::sync::Arc<Vec<f64>>,
+    tallies: Vec<Tally>,
+}
+
+impl Trace {
+    /// A trace with no rays yet; `settings.rays` bounds the rays of the last chunk only (chunks
+    /// beyond it are whole).
+    pub fn new(
+        prism: Prism,
+        n_re: f64,
+        alpha: f64,
+        grid: ThetaGrid,
+        settings: TraceSettings,
+    ) -> Self {
+        Self {
+            prism,
+            n_re,
+            alpha,
+            grid,
+            settings,
+            edges: std::sync::Arc::new(inner_edge_cosines(grid)),
+            tallies: Vec::new(),
+        }
+    }
+
+    /// Rays per chunk.
+    pub const CHUNK_RAYS: u64 = CHUNK_RAYS;
+
+    /// Chunks traced so far.
+    pub fn chunks(&self) -> u64 {
+        self.tallies.len() as u64
+    }
+
+    /// Traces chunks up to `chunks` in all (in parallel; chunk c its own stream).
+    pub fn run_to(&mut self, chunks: u64) {
+        let (prism, n_re, alpha, settings) = (&self.prism, self.n_re, self.alpha, self.settings);
+        let edges = &self.edges;
+        let more: Vec<Tally> = (self.chunks()..chunks)
+            .into_par_iter()
+            .map(|c| {
+                let left = settings.rays.saturating_sub(c * CHUNK_RAYS);
+                let rays = if left == 0 {
+                    CHUNK_RAYS
+                } else {
+                    CHUNK_RAYS.min(left)
+                };
+                let seed = settings
+                    .seed
+                    .wrapping_add((c + 1).wrapping_mul(0x9E37_79B9_7F4A_7C15));
+                let mut rng = Rng::new(settings.sampling, seed);
+                let mut tally = Tally::new(edges.clone());
+                for _ in 0..rays {
+                    trace_one(prism, n_re, alpha, settings, &mut rng, &mut tally);
+                }
+                tally
+            })
+            .collect();
+        self.tallies.extend(more);
+    }
+
+    /// The tallies so far, summed in chunk order, with standard errors from the spread between
+    /// chunks.
+    pub fn result(&self) -> TraceResult {
+        summarize(&self.prism, self.grid, &self.tallies)
+    }
+}
+
+fn summarize(prism: &Prism, grid: ThetaGrid, tallies: &[Tally]) -> TraceResult {
     let k_len = grid.len();
     let step = grid.step_deg();
-    let edges = std::sync::Arc::new(inner_edge_cosines(grid));
-    let chunks = settings.rays.div_ceil(CHUNK_RAYS).max(1);
-    let tallies: Vec<Tally> = (0..chunks)
-        .into_par_iter()
-        .map(|c| {
-            let rays = CHUNK_RAYS.min(settings.rays - c * CHUNK_RAYS);
-            let seed = settings
-                .seed
-                .wrapping_add((c + 1).wrapping_mul(0x9E37_79B9_7F4A_7C15));
-            let mut rng = Rng::new(settings.sampling, seed);
-            let mut tally = Tally::new(edges.clone());
-            for _ in 0..rays {
-                trace_one(prism, n_re, alpha, settings, &mut rng, &mut tally);
-            }
-            tally
-        })
-        .collect();
-
     let hits: u64 = tallies.iter().map(|t| t.hits).sum();
     let cast: u64 = tallies.iter().map(|t| t.cast).sum();
     let total = hits as f64;
     let mut bin_energy = vec![0.0; k_len];
     let mut sum = Tally::new(std::sync::Arc::new(Vec::new()));
-    for t in &tallies {
+    for t in tallies {
         for (a, b) in bin_energy.iter_mut().zip(&t.bins) {
             *a += b;
         }

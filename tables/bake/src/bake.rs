@@ -14,7 +14,7 @@ use format::{
 };
 use grid::ThetaGrid;
 use mie::PhaseFunction;
-use mie::crystal::crystal_phase;
+use mie::crystal::CrystalTracer;
 use mie::ensemble::bulk_at;
 use ndarray::{Array2, Array3, s};
 use rayon::prelude::*;
@@ -500,26 +500,46 @@ pub fn phase_functions(
         }
         (None, Some(crystal)) => {
             let rays = ray_allocation(weights, knobs.rays);
+            let mut tracers = Vec::with_capacity(j_len);
             for (j, &lambda) in lambdas.iter().enumerate() {
                 // Each wavelength its own random stream: a channel averages J independent traces;
                 // another knob seed gives other streams (independent bakes).
                 let seed =
                     CRYSTAL_SEED ^ knobs.seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ (j as u64);
-                let p = crystal_phase(
-                    &crystal,
-                    lambda,
-                    grid,
-                    mie::crystal::Rays {
-                        count: rays[j],
-                        seed,
-                        sampling: knobs.ray_sampling,
-                        symmetric: knobs.ray_symmetric,
-                    },
-                )
-                .map_err(mie_error(format!(" at {lambda} nm")))?;
-                per_wavelength.push(p);
+                let rays = mie::crystal::Rays {
+                    count: rays[j],
+                    target: None,
+                    max_count: rays[j].max(knobs.rays) * MAX_RAY_ROUNDS,
+                    seed,
+                    sampling: knobs.ray_sampling,
+                    symmetric: knobs.ray_symmetric,
+                };
+                tracers.push(
+                    CrystalTracer::new(&crystal, lambda, grid, rays)
+                        .map_err(mie_error(format!(" at {lambda} nm")))?,
+                );
                 advance();
             }
+            // Every wavelength carried on by one factor (the first round's shares kept) until
+            // the worst channel's noise is at the target.
+            let mut phases: Vec<PhaseFunction> = tracers.iter().map(|t| t.phase()).collect();
+            let target = knobs.crystal_noise;
+            loop {
+                let noise = channel_noise(&phases, weights, grid);
+                if target <= 0.0 || noise <= target {
+                    break;
+                }
+                let ratio = noise / target;
+                let mut traced = false;
+                for t in tracers.iter_mut() {
+                    traced |= t.carry_on(ratio);
+                }
+                if !traced {
+                    break;
+                }
+                phases = tracers.iter().map(|t| t.phase()).collect();
+            }
+            per_wavelength = phases;
         }
         (None, None) => {
             return Err(BakeError::Incompatible(format!(
@@ -663,7 +683,6 @@ fn nodes_per_bin(d: &mie::SizeDistribution, lambda_nm: f64, knobs: Knobs, step_d
 /// channel's noise is Σ_j a_j² / n_j, smallest for n_j ∝ a_j: wavelengths a channel leans on get
 /// the rays, those at the spectrum's ends (weights ~10⁻³) few.
 pub fn ray_allocation(weights: &ChannelWeights, per_wavelength: u64) -> Vec<u64> {
-    // ray_shares is the same rule without the rounding.
     let j_len = weights.wavelengths_nm.len();
     let floor = per_wavelength / 10;
     let total = per_wavelength * j_len as u64;
@@ -678,18 +697,41 @@ pub fn ray_allocation(weights: &ChannelWeights, per_wavelength: u64) -> Vec<u64>
         .collect()
 }
 
-/// Each wavelength's share of [`ray_allocation`]'s rays, per ray per wavelength (J in all): a
-/// tenth at least, the rest in proportion to the largest weight any channel gives it.
-pub fn ray_shares(weights: &ChannelWeights) -> Vec<f64> {
-    let j_len = weights.wavelengths_nm.len();
-    let importance: Vec<f64> = (0..j_len)
-        .map(|j| (0..3).map(|c| weights.weights[c][j]).fold(0.0, f64::max))
-        .collect();
-    let sum: f64 = importance.iter().sum();
-    importance
+/// A noise target's trace stops at this many times its first round's rays (or the preset's
+/// rays per wavelength) whatever its noise.
+const MAX_RAY_ROUNDS: u64 = 64;
+
+/// The worst channel's sampling noise of crystal phase functions per wavelength: per channel c
+/// the rms over the bins θ ≥ 1° of √(Σ_j a_cj² SE_jk²) / Σ_j a_cj P_jk, with the bake's mixing
+/// weights a_cj ∝ w_cj σ_sca,j and SE_jk each bin's standard error (a bin nothing reached
+/// counts as 100 %).
+fn channel_noise(phases: &[PhaseFunction], weights: &ChannelWeights, grid: ThetaGrid) -> f64 {
+    let errors: Vec<&[f64]> = phases
         .iter()
-        .map(|m| 0.1 + 0.9 * j_len as f64 * m / sum)
-        .collect()
+        .map(|p| p.crystal().map_or(&[][..], |o| &o.bins_std_error[..]))
+        .collect();
+    (0..3)
+        .map(|c| {
+            let raw: Vec<f64> = phases
+                .iter()
+                .zip(&weights.weights[c])
+                .map(|(p, w)| w * p.sigma_sca_m2)
+                .collect();
+            let total: f64 = raw.iter().sum();
+            let a: Vec<f64> = raw.iter().map(|x| x / total).collect();
+            let mut bins = vec![0.0; grid.len()];
+            let mut variance = vec![0.0; grid.len()];
+            for ((p, se), &a) in phases.iter().zip(&errors).zip(&a) {
+                for k in 0..grid.len() {
+                    bins[k] += a * p.bins[k];
+                    let e = se.get(k).copied().unwrap_or(0.0);
+                    variance[k] += a * a * if e.is_finite() { e * e } else { 0.0 };
+                }
+            }
+            let std_error: Vec<f64> = variance.iter().map(|v| v.sqrt()).collect();
+            mie::crystal::relative_noise(grid, &bins, &std_error)
+        })
+        .fold(0.0, f64::max)
 }
 
 /// Seed of the crystal traces (wavelength j uses CRYSTAL_SEED ^ j with the knobs' seed 0).

@@ -20,10 +20,16 @@ pub struct Knobs {
     pub tail_mass: f64,
     /// What Q is between its bins in the j ≥ 2 Ams terms (`tables::ams` module docs).
     pub reconstruction: tables::ams::Reconstruction,
-    /// Geometric-optics rays per wavelength for ice and snow.
+    /// Geometric-optics rays per wavelength for ice and snow: the first round (shared among the
+    /// wavelengths as [`crate::bake::ray_allocation`] does), carried on until `crystal_noise`.
     pub rays: u64,
-    /// Seed of the crystal tracer's random streams (0 for the presets): bakes with different
-    /// seeds are independent estimates, whose difference measures their noise.
+    /// The rms relative standard error over θ ≥ 1° the crystal tables' channels are traced to
+    /// (each wavelength j to crystal_noise / √m_j, m_j its largest channel weight, so that a
+    /// channel's Σ_j a_j² s_j² stays below crystal_noise²); 0: `rays` alone.
+    pub crystal_noise: f64,
+    /// Seed of the crystal tracer's random streams and of the drops' size nodes (0 for the
+    /// presets): bakes with different seeds are independent estimates, whose difference
+    /// measures their noise.
     pub seed: u64,
     /// How the crystal tracer draws its rays: pseudo-random (the presets) or scrambled Sobol'
     /// (`mie::crystal::trace` docs; measured by `photometeor tradeoff`).
@@ -61,18 +67,14 @@ fn size_share(_: &ChannelWeights, _: usize) -> f64 {
     1.0
 }
 
-/// Crystals: rays shared as [`crate::bake::ray_allocation`] shares them, per ray per wavelength.
-fn ray_share(weights: &ChannelWeights, j: usize) -> f64 {
-    crate::bake::ray_shares(weights)[j]
-}
-
 impl Quality {
     /// The node counts of this preset for a scene of `spectrum`: those of [`Quality::knobs`]
-    /// (stated for [`PRESET_SPECTRUM`]) scaled so that the worst channel's sampling noise is the
-    /// same whatever the spectral mode. A channel of `rgb3` is one wavelength, where a channel of
-    /// the 31-wavelength mode averages the independent estimates of about ten, so `rgb3` takes
-    /// about ten times the sizes and rays per wavelength (and about the same time for its three
-    /// wavelengths as the 31).
+    /// (stated for [`PRESET_SPECTRUM`]) with the sizes scaled so that the worst channel's
+    /// sampling noise is the same whatever the spectral mode. A channel of `rgb3` is one
+    /// wavelength, where a channel of the 31-wavelength mode averages the independent estimates
+    /// of about ten, so `rgb3` takes about eight times the sizes per wavelength (and less time
+    /// for its three wavelengths than the 31 take). Crystals need no scaling: their noise
+    /// target is per channel already.
     pub fn knobs_for(self, spectrum: &SpectralMode) -> Knobs {
         let base = self.knobs();
         let (Ok(reference), Ok(scene)) = (
@@ -87,17 +89,17 @@ impl Quality {
         };
         Knobs {
             sizes: scale(size_share, base.sizes as f64) as usize,
-            rays: scale(ray_share, base.rays as f64) as u64,
             ..base
         }
     }
 
     /// The node counts of this preset for [`PRESET_SPECTRUM`].
     pub fn knobs(self) -> Knobs {
-        let (sizes, nodes_per_panel, rays) = match self {
-            Quality::Draft => (32, 2, 40_000),
-            Quality::Standard => (400, 2, 600_000),
-            Quality::Reference => (4096, 2, 6_000_000),
+        // Crystals: a first round of rays, then traced on to the noise target (docs/accuracy.md).
+        let (sizes, nodes_per_panel, rays, crystal_noise) = match self {
+            Quality::Draft => (32, 2, 65_536, 0.04),
+            Quality::Standard => (400, 2, 131_072, 0.009),
+            Quality::Reference => (4096, 2, 524_288, 0.0035),
         };
         Knobs {
             sizes,
@@ -105,6 +107,7 @@ impl Quality {
             tail_mass: 1e-3,
             reconstruction: tables::ams::Reconstruction::Spline,
             rays,
+            crystal_noise,
             seed: 0,
             ray_sampling: mie::crystal::Sampling::Random,
             ray_symmetric: false,
@@ -114,15 +117,18 @@ impl Quality {
 
 impl Knobs {
     /// The size nodes wavelength j of `j_len` uses: joint sampling of size and wavelength, each
-    /// wavelength's nodes shifted by (j + ½)/J of a step in ln r, so a channel that mixes J
-    /// wavelengths sees J·sizes distinct radii.
+    /// wavelength's nodes shifted by (j + ½)/J of a step in ln r (plus the seed's fraction), so
+    /// a channel that mixes J wavelengths sees J·sizes distinct radii.
     pub fn size_quadrature(
         &self,
         distribution: &mie::SizeDistribution,
         j: usize,
         j_len: usize,
     ) -> mie::SizeQuadrature {
-        let shift = (j as f64 + 0.5) / j_len as f64;
+        // Another seed moves every wavelength's nodes by a golden-ratio fraction of a step: an
+        // independent set of radii (seed 0: the presets' own).
+        let golden = 0.618_033_988_749_894_9 * self.seed as f64;
+        let shift = ((j as f64 + 0.5) / j_len as f64 + golden).fract();
         distribution.quadrature_shifted(self.sizes, self.tail_mass, shift)
     }
 }
@@ -187,17 +193,16 @@ mod tests {
                 Quality::Standard.knobs(),
                 Quality::Standard.knobs_for(&mode),
             );
-            // The worst channel's noise variance, per size or ray, equal to the preset's own.
+            // The worst channel's noise variance per size equal to the preset's own.
             let drops = channel_noise(&weights, size_share) / k.sizes as f64;
             let want = channel_noise(&reference, size_share) / base.sizes as f64;
-            let rays = channel_noise(&weights, ray_share) / k.rays as f64;
-            let want_rays = channel_noise(&reference, ray_share) / base.rays as f64;
             eprintln!(
-                "{mode:?}: {} sizes, {} rays per wavelength (preset {} and {})",
-                k.sizes, k.rays, base.sizes, base.rays
+                "{mode:?}: {} sizes per wavelength (preset {})",
+                k.sizes, base.sizes
             );
             assert!(drops <= want && drops > want * (1.0 - 1.0 / k.sizes as f64));
-            assert!(rays <= want_rays && rays > want_rays * (1.0 - 1.0 / k.rays as f64));
+            // Crystals: the noise target is per channel already.
+            assert_eq!((k.rays, k.crystal_noise), (base.rays, base.crystal_noise));
         }
         // rgb3: one wavelength per channel, so many more nodes per wavelength.
         assert!(Quality::Standard.knobs_for(&SpectralMode::Rgb3).sizes > 4 * 400);
