@@ -314,9 +314,20 @@ impl CrystalTracer {
         true
     }
 
-    /// Rays traced so far (those that hit the crystal).
-    pub fn rays(&self) -> u64 {
-        self.trace.result().rays_hit
+    /// Chunks of [`Trace::CHUNK_RAYS`] rays traced so far.
+    pub fn chunks(&self) -> u64 {
+        self.trace.chunks()
+    }
+
+    /// Carries the trace on to `chunks` in all, up to `Rays::max_count`; false if it traced
+    /// nothing (already there, or at that limit).
+    pub fn run_to(&mut self, chunks: u64) -> bool {
+        let to = chunks.min(self.max_chunks);
+        if to <= self.trace.chunks() {
+            return false;
+        }
+        self.trace.run_to(to);
+        true
     }
 
     /// The phase function of the rays traced so far: geometric optics and diffraction combined
