@@ -255,10 +255,9 @@ impl SizeDistribution {
 
     /// Nodes at fraction `shift` ∈ [0, 1) of each equal step in ln r (0.5: midpoints).
     ///
-    /// Joint sampling of size and wavelength: giving each wavelength of a spectral bake its own
-    /// shift (j + ½)/J stratifies the sizes across wavelengths, so a channel that sums J
-    /// wavelengths sees J × `sizes` distinct radii and the Mie ripple averages out J times
-    /// faster than with shared nodes.
+    /// A channel that sums J wavelengths averages J independent estimates whether or not
+    /// each wavelength has its own shift: the same radii are other size parameters at each
+    /// wavelength (measured: `mie/examples/size_levers.rs`, docs/accuracy.md "Mie sizes").
     pub fn quadrature_shifted(&self, sizes: usize, tail_mass: f64, shift: f64) -> SizeQuadrature {
         if let Self::Monodisperse { radius_um } = *self {
             return SizeQuadrature {
@@ -270,7 +269,25 @@ impl SizeDistribution {
         let (lo, hi) = self.truncation(tail_mass);
         let (a, b) = (lo.ln(), hi.ln());
         let h = (b - a) / sizes as f64;
-        let ln_r: Vec<f64> = (0..sizes).map(|i| a + (i as f64 + shift) * h).collect();
+        self.weighted((0..sizes).map(|i| a + (i as f64 + shift) * h).collect())
+    }
+
+    /// Nodes at `fractions` ∈ [0, 1) of the truncated range in ln r, weighted by the number
+    /// density per unit ln r and normalized (self-normalized importance weights: any set of
+    /// fractions, e.g. independent uniform ones for a plain Monte Carlo average over sizes).
+    pub fn quadrature_at(&self, fractions: &[f64], tail_mass: f64) -> SizeQuadrature {
+        if let Self::Monodisperse { radius_um } = *self {
+            return SizeQuadrature {
+                radius_um: vec![radius_um],
+                weight: vec![1.0],
+            };
+        }
+        let (lo, hi) = self.truncation(tail_mass);
+        let (a, b) = (lo.ln(), hi.ln());
+        self.weighted(fractions.iter().map(|f| a + f * (b - a)).collect())
+    }
+
+    fn weighted(&self, ln_r: Vec<f64>) -> SizeQuadrature {
         let raw: Vec<f64> = ln_r.iter().map(|&t| self.per_log_radius(t)).collect();
         let total: f64 = raw.iter().sum();
         SizeQuadrature {

@@ -116,9 +116,10 @@ impl Quality {
 }
 
 impl Knobs {
-    /// The size nodes wavelength j of `j_len` uses: joint sampling of size and wavelength, each
-    /// wavelength's nodes shifted by (j + ½)/J of a step in ln r (plus the seed's fraction), so
-    /// a channel that mixes J wavelengths sees J·sizes distinct radii.
+    /// The size nodes wavelength j of `j_len` uses: each wavelength's nodes shifted by
+    /// (j + ½)/J of a step in ln r (plus the seed's fraction). The shift itself buys nothing
+    /// measurable (docs/accuracy.md, "Mie sizes": the wavelengths' size parameters differ at
+    /// the same radii already); the seed's offset rides on it.
     pub fn size_quadrature(
         &self,
         distribution: &mie::SizeDistribution,
