@@ -313,3 +313,35 @@ fn result_is_identical_for_any_thread_count() {
     };
     assert_eq!(run(1), run(2));
 }
+
+/// The noise the tracer reports (rms over θ ≥ 1° of each bin's relative standard error, what
+/// the bake's noise targets use) is what two independent traces differ by, also when the rays
+/// are not a whole number of chunks (the last chunk short: it counts by its rays).
+#[test]
+fn reported_noise_matches_the_spread_of_independent_traces() {
+    let ice = CrystalField {
+        aspect_ratio: 2.0,
+        max_dimension_um: 100.0,
+        sigma_g: 1.5,
+        roughness: 0.0,
+    };
+    // Sixteen whole chunks of 2^14 rays and a short one of 300.
+    let rays = 16 * 16_384 + 300;
+    let g = grid(0.18);
+    let a = crystal_phase(&ice, 550.0, g, Rays::random(rays, 101)).unwrap();
+    let b = crystal_phase(&ice, 550.0, g, Rays::random(rays, 202)).unwrap();
+    let reported = mie::crystal::relative_noise(g, &a.bins, &a.crystal().unwrap().bins_std_error);
+    let keep: Vec<usize> = (0..g.len()).filter(|&k| g.theta_deg(k) >= 1.0).collect();
+    let actual = (keep
+        .iter()
+        .map(|&k| (a.bins[k] / b.bins[k] - 1.0).powi(2))
+        .sum::<f64>()
+        / keep.len() as f64
+        / 2.0)
+        .sqrt();
+    println!("reported {reported:.4}, actual {actual:.4}");
+    assert!(
+        (0.9..1.1).contains(&(reported / actual)),
+        "reported noise {reported:.4} against the spread's {actual:.4}"
+    );
+}

@@ -378,17 +378,21 @@ fn summarize(prism: &Prism, grid: ThetaGrid, tallies: &[Tally]) -> TraceResult {
     bin_energy.iter_mut().for_each(|b| *b /= total);
     let scattered = bin_energy.iter().sum::<f64>() + sum.delta / total;
     let g = sum.cos_sum / total / scattered;
-    // Standard errors from the chunk-to-chunk spread of per-ray means (chunks weighted by rays).
+    // Standard errors from the chunk-to-chunk spread, chunks weighted by their rays: the
+    // estimate is a ratio of totals, μ = Σ_c S_c / Σ_c n_c, whose variance is
+    // m/(m − 1) Σ_c (S_c − n_c μ)² / (Σ_c n_c)² (S_c a chunk's total, n_c its rays that hit).
+    // For equal chunks it is the spread of the chunks' means over √m; a short chunk (the last
+    // of a round that is not a whole number of chunks) counts by its rays, where the unweighted
+    // spread let its few rays' noisy mean inflate the error (a draft bake's ice 2.8-3.6 % for
+    // a true 2.1 %).
     let (bin_energy_std_error, g_std_error) = if tallies.len() > 1 {
         let m = tallies.len() as f64;
-        let per_chunk = |t: &Tally, f: &dyn Fn(&Tally) -> f64| f(t) / t.hits.max(1) as f64;
         let se = |f: &dyn Fn(&Tally) -> f64, mean: f64| -> f64 {
-            let var: f64 = tallies
+            let spread: f64 = tallies
                 .iter()
-                .map(|t| (per_chunk(t, f) - mean).powi(2))
-                .sum::<f64>()
-                / (m - 1.0);
-            (var / m).sqrt()
+                .map(|t| (f(t) - t.hits as f64 * mean).powi(2))
+                .sum();
+            (m / (m - 1.0) * spread).sqrt() / total
         };
         let bins_se = (0..k_len)
             .map(|k| se(&|t: &Tally| t.bins[k], bin_energy[k]))
