@@ -77,7 +77,7 @@ def crystal_phase(
     dimension_sigma_g: float = 1.5,
     roughness: Optional[float] = None,
     rays: int = 600000,
-    seed: Optional[int] = None,
+    seed: int = 0,
     angles_step_deg: float = 0.18,
 ) -> Dict[str, Any]:
     """Ice crystals and snow by ray tracing, per wavelength: sigma_ext_m2, albedo, g, bins."""

@@ -23,9 +23,16 @@ const ADAPTIVE_MAX_SIZES: usize = 1 << 14;
 /// Rays per wavelength allowed for crystals: below 1000 the standard errors are meaningless,
 /// above 10¹⁰ a call runs for hours.
 const RAYS_RANGE: (u64, u64) = (1_000, 10_000_000_000);
-/// The bake's crystal seed (`photometeor-bake`, CRYSTAL_SEED): wavelength j traces with
-/// seed ^ j there and here.
+/// The bake's crystal seed (`photometeor-bake`, CRYSTAL_SEED): with `bake --seed s` wavelength
+/// j traces the stream CRYSTAL_SEED ^ s·φ ^ j (φ = 0x9E37_79B9_7F4A_7C15), there and here.
 const BAKE_CRYSTAL_SEED: u64 = 0x7068_6f74_6f6d_6574;
+
+/// Wavelength j's stream for seed `s`, as the bake's: s·φ spreads the seeds over all 64 bits,
+/// so no two (seed, wavelength) pairs share a stream (with seed ^ j, seed 1's first wavelength
+/// was seed 2's fourth, and two seeds' difference no measure of the noise).
+fn crystal_stream(seed: u64, j: usize) -> u64 {
+    BAKE_CRYSTAL_SEED ^ seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ j as u64
+}
 
 /// The size distribution from the mutually exclusive keyword groups (the CLI's
 /// `distribution_from`), or from a scene-style mapping `{"kind": …, …}`.
@@ -370,10 +377,12 @@ pub fn phase<'py>(
 /// roughness : float, optional
 ///     Macke's distortion δ, [0, 1] (0 pristine: halos; 0.7 snow).
 /// rays : int
-///     Rays traced per wavelength, [1000, 1e10] (default 600000, the ``standard`` preset's).
-/// seed : int, optional
-///     Seed of the random streams, [0, 2⁶⁴); wavelength j uses seed ^ j. Default: the seed
-///     the bake traces with (each wavelength with its own share of the preset's rays there).
+///     Rays traced per wavelength, [1000, 1e10] (default 600000; the bake's presets trace to a
+///     noise target instead).
+/// seed : int
+///     Seed of the random streams, [0, 2⁶⁴), as ``photometeor bake --seed``: 0 (default) traces
+///     the streams the presets' bakes trace (each wavelength its own), another seed other
+///     streams for every wavelength, so two seeds' difference measures the noise.
 /// angles_step_deg : float
 ///     Bin width Δθ in degrees, dividing 180, in [0.01, 30] (default 0.18).
 ///
@@ -403,7 +412,7 @@ pub fn phase<'py>(
     dimension_sigma_g = 1.5,
     roughness = None,
     rays = 600_000,
-    seed = None,
+    seed = 0,
     angles_step_deg = 0.18,
 ))]
 #[allow(clippy::too_many_arguments)]
@@ -417,10 +426,9 @@ pub fn crystal_phase<'py>(
     dimension_sigma_g: f64,
     roughness: Option<f64>,
     rays: u64,
-    seed: Option<u64>,
+    seed: u64,
     angles_step_deg: f64,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let seed = seed.unwrap_or(BAKE_CRYSTAL_SEED);
     let wavelengths_nm = wavelengths(wavelengths_nm)?;
     // The defaults of a scene's ice or snow field (photometeor-bake's scene.rs).
     let snow = match kind {
@@ -466,7 +474,7 @@ pub fn crystal_phase<'py>(
                 .iter()
                 .enumerate()
                 .map(|(j, &lambda)| {
-                    let rays = mie::crystal::Rays::random(rays, seed ^ j as u64);
+                    let rays = mie::crystal::Rays::random(rays, crystal_stream(seed, j));
                     trace_crystals(&field, lambda, grid, rays)
                 })
                 .collect::<Result<_, _>>()

@@ -154,5 +154,22 @@ def test_crystal_traces_are_seeded():
     c = photometeor.crystal_phase(wavelengths_nm=[450, 650], rays=20_000, angles_step_deg=1.0, seed=7)
     np.testing.assert_array_equal(a["bins"], b["bins"])
     assert not np.array_equal(a["bins"], c["bins"])
-    # Each wavelength its own stream (seed ^ j): the two rows are not the same draw.
+    # Each wavelength its own stream: the two rows are not the same draw.
     assert a["g"][0] != a["g"][1]
+
+
+def test_two_seeds_share_no_stream():
+    # Four equal wavelengths: a stream shared between (seed 1, wavelength i) and (seed 2,
+    # wavelength j) would give equal rows, and two seeds' difference would understate the noise.
+    same = [550.0] * 4
+    one = photometeor.crystal_phase(wavelengths_nm=same, rays=2_000, angles_step_deg=1.0, seed=1)
+    two = photometeor.crystal_phase(wavelengths_nm=same, rays=2_000, angles_step_deg=1.0, seed=2)
+    for i in range(4):
+        for j in range(4):
+            assert not np.array_equal(one["bins"][i], two["bins"][j]), (i, j)
+
+
+def test_seed_defaults_to_zero():
+    default = photometeor.crystal_phase(wavelengths_nm=[450, 650], rays=2_000, angles_step_deg=1.0)
+    zero = photometeor.crystal_phase(wavelengths_nm=[450, 650], rays=2_000, angles_step_deg=1.0, seed=0)
+    np.testing.assert_array_equal(default["bins"], zero["bins"])
