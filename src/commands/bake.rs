@@ -16,7 +16,8 @@ pub struct BakeArgs {
     /// Accuracy preset, overriding the scene's: the rms error of Ams_1 (θ ≥ 1°, worst channel)
     /// is ≤ 5 % at draft and ≤ 1 % at standard for every kind and spectral mode (drops by their
     /// size count, scaled with the wavelengths a channel mixes; ice and snow traced until their
-    /// measured noise is 4 % or 0.9 %); README "Presets, measured" has the table and times.
+    /// estimated noise is 4 % or 0.9 %), except rough snow's bin at exactly 180°, whose narrow
+    /// spike few rays carry; README "Presets, measured" has the table and times.
     #[arg(long, value_parser = ["draft", "standard", "reference"])]
     quality: Option<String>,
     /// Worker threads, [1, 256] (default: all cores).
