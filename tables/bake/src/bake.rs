@@ -50,6 +50,20 @@ pub struct FieldSummary {
     pub l_max: usize,
     /// Seconds the field took to compute.
     pub seconds: f64,
+    /// Ice and snow: how far their Monte Carlo went (None for drops).
+    #[serde(default)]
+    pub crystal_sampling: Option<CrystalSampling>,
+}
+
+/// How many rays a crystal field's tables rest on and the noise they were traced to.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct CrystalSampling {
+    /// Rays that hit a crystal, all wavelengths together.
+    pub rays: u64,
+    /// Per channel, the rms relative standard error of Ams_1 over the bins θ ≥ 1°, estimated
+    /// from the spread between independent chunks of rays (the quantity the presets' noise
+    /// targets stop at).
+    pub noise: [f64; 3],
 }
 
 /// One field's bake: its RGB tables and their summary.
@@ -434,7 +448,18 @@ fn field_entry(
         albedo: PerChannel::from_array(s.albedo),
         n_isotropic: PerChannel::from_array([n_iso(0), n_iso(1), n_iso(2)]),
         microphysics: serde_json::to_value(field).unwrap_or_default(),
-        quality: serde_json::json!({ "preset": plan.quality, "knobs": plan.knobs, "legendre_l_max": s.l_max }),
+        quality: match &s.crystal_sampling {
+            None => {
+                serde_json::json!({ "preset": plan.quality, "knobs": plan.knobs, "legendre_l_max": s.l_max })
+            }
+            Some(c) => serde_json::json!({
+                "preset": plan.quality,
+                "knobs": plan.knobs,
+                "legendre_l_max": s.l_max,
+                "crystal_rays": c.rays,
+                "crystal_noise": { "R": c.noise[0], "G": c.noise[1], "B": c.noise[2] },
+            }),
+        },
         content_hash: hash,
         single_scattering: None,
         poisson: None,
@@ -631,6 +656,13 @@ pub fn compute_field(
         n_isotropic: [[None; 3]; 3],
         l_max: 0,
         seconds: 0.0,
+        crystal_sampling: field.crystal.map(|_| CrystalSampling {
+            rays: per_wavelength
+                .iter()
+                .filter_map(|p| p.crystal().map(|o| o.trace.rays))
+                .sum(),
+            noise: channel_noises(&per_wavelength, weights, *grid),
+        }),
     };
     for (c, ch) in channels.into_iter().enumerate() {
         ams.slice_mut(s![c, .., ..]).assign(&ch.rows);
@@ -729,39 +761,44 @@ const MAX_RAY_ROUNDS: u64 = 1024;
 /// weights a_cj ∝ w_cj σ_sca,j and SE_jk each bin's standard error (a bin nothing reached
 /// counts as 100 %).
 fn channel_noise(phases: &[PhaseFunction], weights: &ChannelWeights, grid: ThetaGrid) -> f64 {
+    channel_noises(phases, weights, grid)
+        .into_iter()
+        .fold(0.0, f64::max)
+}
+
+/// [`channel_noise`] of each channel.
+fn channel_noises(phases: &[PhaseFunction], weights: &ChannelWeights, grid: ThetaGrid) -> [f64; 3] {
     let errors: Vec<&[f64]> = phases
         .iter()
         .map(|p| p.crystal().map_or(&[][..], |o| &o.bins_std_error[..]))
         .collect();
-    (0..3)
-        .map(|c| {
-            let raw: Vec<f64> = phases
-                .iter()
-                .zip(&weights.weights[c])
-                .map(|(p, w)| w * p.sigma_sca_m2)
-                .collect();
-            let total: f64 = raw.iter().sum();
-            let a: Vec<f64> = raw.iter().map(|x| x / total).collect();
-            let mut bins = vec![0.0; grid.len()];
-            let mut variance = vec![0.0; grid.len()];
-            for ((p, se), &a) in phases.iter().zip(&errors).zip(&a) {
-                for k in 0..grid.len() {
-                    bins[k] += a * p.bins[k];
-                    // A trace of one chunk has no spread (NaN): its bins count as 100 %.
-                    let e = se.get(k).copied().unwrap_or(f64::NAN);
-                    variance[k] += a
-                        * a
-                        * if e.is_finite() {
-                            e * e
-                        } else {
-                            p.bins[k].powi(2)
-                        };
-                }
+    std::array::from_fn(|c| {
+        let raw: Vec<f64> = phases
+            .iter()
+            .zip(&weights.weights[c])
+            .map(|(p, w)| w * p.sigma_sca_m2)
+            .collect();
+        let total: f64 = raw.iter().sum();
+        let a: Vec<f64> = raw.iter().map(|x| x / total).collect();
+        let mut bins = vec![0.0; grid.len()];
+        let mut variance = vec![0.0; grid.len()];
+        for ((p, se), &a) in phases.iter().zip(&errors).zip(&a) {
+            for k in 0..grid.len() {
+                bins[k] += a * p.bins[k];
+                // A trace of one chunk has no spread (NaN): its bins count as 100 %.
+                let e = se.get(k).copied().unwrap_or(f64::NAN);
+                variance[k] += a
+                    * a
+                    * if e.is_finite() {
+                        e * e
+                    } else {
+                        p.bins[k].powi(2)
+                    };
             }
-            let std_error: Vec<f64> = variance.iter().map(|v| v.sqrt()).collect();
-            mie::crystal::relative_noise(grid, &bins, &std_error)
-        })
-        .fold(0.0, f64::max)
+        }
+        let std_error: Vec<f64> = variance.iter().map(|v| v.sqrt()).collect();
+        mie::crystal::relative_noise(grid, &bins, &std_error)
+    })
 }
 
 /// Seed of the crystal traces (wavelength j uses CRYSTAL_SEED ^ j with the knobs' seed 0).

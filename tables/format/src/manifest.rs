@@ -137,7 +137,8 @@ pub struct FieldEntry {
     pub n_isotropic: PerChannel<BTreeMap<String, Option<u32>>>,
     /// Every microphysics input of the field, as the scene gave it.
     pub microphysics: Value,
-    /// Every quality input (preset and the numbers it set).
+    /// Every quality input (preset and the numbers it set) and, for crystal fields, the rays
+    /// traced (`crystal_rays`) and the noise they reached per channel (`crystal_noise`).
     pub quality: Value,
     /// Hash of every input that affects the field's result, lowercase hex.
     pub content_hash: String,
