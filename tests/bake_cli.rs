@@ -224,6 +224,23 @@ fn inspect_and_compare_read_the_bake() {
         text.contains("cloud") && text.contains("rain") && text.contains("1001 angles"),
         "{text}"
     );
+    // Ice and snow, traced to the standard preset's noise target, say how far they went.
+    assert_eq!(
+        text.matches("rays traced; noise of Ams_1").count(),
+        2,
+        "{text}"
+    );
+    for f in &default_bake().manifest.fields {
+        let noise = &f.quality["crystal_noise"];
+        if f.kind == "ice" || f.kind == "snow" {
+            for c in ["R", "G", "B"] {
+                let n = noise[c].as_f64().unwrap();
+                assert!(n > 0.0 && n <= 0.009, "{} {c}: noise {n}", f.name);
+            }
+        } else {
+            assert!(noise.is_null(), "{}: {noise}", f.name);
+        }
+    }
     let out = photometeor(&["inspect", &dir, "--json"], Path::new("."));
     let parsed: Manifest = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(parsed, default_bake().manifest);

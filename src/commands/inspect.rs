@@ -47,6 +47,22 @@ pub fn run(a: InspectArgs) -> Result<()> {
             f.forward_fraction.g[f.n_max - 1],
             f.n_isotropic.g.get("1e-6").copied().flatten()
         );
+        // Ice and snow: the Monte Carlo behind the tables and the noise it reached.
+        let noise = &f.quality["crystal_noise"];
+        if let (Some(rays), Some(r), Some(g), Some(b)) = (
+            f.quality["crystal_rays"].as_u64(),
+            noise["R"].as_f64(),
+            noise["G"].as_f64(),
+            noise["B"].as_f64(),
+        ) {
+            println!(
+                "  {:<10} {rays:.2e} rays traced; noise of Ams_1 (rms relative standard error, θ ≥ 1°) R {:.2} %, G {:.2} %, B {:.2} %",
+                "",
+                100.0 * r,
+                100.0 * g,
+                100.0 * b
+            );
+        }
     }
     Ok(())
 }
