@@ -230,6 +230,11 @@ fn inspect_and_compare_read_the_bake() {
         2,
         "{text}"
     );
+    assert_eq!(
+        text.matches("sizes per wavelength; noise of Ams_1").count(),
+        2,
+        "{text}"
+    );
     for f in &default_bake().manifest.fields {
         let noise = &f.quality["crystal_noise"];
         if f.kind == "ice" || f.kind == "snow" {
@@ -239,6 +244,11 @@ fn inspect_and_compare_read_the_bake() {
             }
         } else {
             assert!(noise.is_null(), "{}: {noise}", f.name);
+            // Drops: the size sampling's noise, at the standard preset under its 1 %.
+            for c in ["R", "G", "B"] {
+                let n = f.quality["size_noise"][c].as_f64().unwrap();
+                assert!(n > 0.0 && n < 0.01, "{} {c}: size noise {n}", f.name);
+            }
         }
     }
     let out = photometeor(&["inspect", &dir, "--json"], Path::new("."));

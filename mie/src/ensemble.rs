@@ -229,6 +229,31 @@ pub fn bulk_at(
     nodes_per_panel: usize,
     point_cosines: &[f64],
 ) -> Result<PhaseFunction, MieError> {
+    bulk_with_spread(
+        m,
+        wavelength_nm,
+        sizes,
+        grid,
+        nodes_per_panel,
+        point_cosines,
+    )
+    .map(|(p, _)| p)
+}
+
+/// [`bulk_at`] and the standard error of each bin from the size sampling, estimated from the
+/// two interleaved half-sets of the nodes (even and odd indices, each a lattice of half the
+/// step): with A and B the halves' phase functions and p = α A + (1 − α) B their combination
+/// (α the even half's share of σ_sca), SE = |A − B| √((α² + (1 − α)²)/2), the spread of two
+/// estimates taken as independent. The phase function is the same sum as [`bulk_at`]'s, the
+/// sizes' terms accumulated in two halves.
+pub fn bulk_with_spread(
+    m: Complex64,
+    wavelength_nm: f64,
+    sizes: &SizeQuadrature,
+    grid: ThetaGrid,
+    nodes_per_panel: usize,
+    point_cosines: &[f64],
+) -> Result<(PhaseFunction, Vec<f64>), MieError> {
     let wavelength_um = wavelength_nm / 1000.0;
     let k = 2.0 * std::f64::consts::PI / wavelength_um;
     let spheres: Vec<Sphere> = sizes
@@ -256,7 +281,12 @@ pub fn bulk_at(
     let mut sigma_ext = 0.0;
     let mut sigma_sca = 0.0;
     let mut g_sca = 0.0;
-    let mut intensity = vec![0.0; quadrature.mu.len()];
+    // Per half (even, odd node index): Σ w I at each angular node, and Σ w σ_sca.
+    let mut halves = [
+        vec![0.0; quadrature.mu.len()],
+        vec![0.0; quadrature.mu.len()],
+    ];
+    let mut half_sca = [0.0; 2];
     let mut point_intensity = vec![0.0; point_cosines.len()];
     for (chunk, (radii, weights)) in spheres.chunks(SIZE_CHUNK).zip(
         sizes
@@ -275,18 +305,13 @@ pub fn bulk_at(
                 (SphereTerms::new(&c), e.q_ext * area, e.q_sca * area, e.g)
             })
             .collect();
-        for ((_, ext, sca, g), w) in per_size.iter().zip(weights) {
+        for (i, ((_, ext, sca, g), w)) in per_size.iter().zip(weights).enumerate() {
             sigma_ext += w * ext;
             sigma_sca += w * sca;
             g_sca += w * sca * g;
+            half_sca[i % 2] += w * sca;
         }
         let terms: Vec<SphereTerms> = per_size.into_iter().map(|(t, ..)| t).collect();
-        for (acc, v) in intensity
-            .iter_mut()
-            .zip(weighted_intensity(&terms, weights, &node_angles))
-        {
-            *acc += v;
-        }
         if !point_cosines.is_empty() {
             for (acc, v) in
                 point_intensity
@@ -296,10 +321,46 @@ pub fn bulk_at(
                 *acc += v;
             }
         }
+        // SIZE_CHUNK is even, so a size's parity within its chunk is its parity overall.
+        let mut split: [(Vec<SphereTerms>, Vec<f64>); 2] = Default::default();
+        for (i, (t, &w)) in terms.into_iter().zip(weights).enumerate() {
+            split[i % 2].0.push(t);
+            split[i % 2].1.push(w);
+        }
+        for (acc, (t, w)) in halves.iter_mut().zip(&split) {
+            if t.is_empty() {
+                continue;
+            }
+            for (a, v) in acc.iter_mut().zip(weighted_intensity(t, w, &node_angles)) {
+                *a += v;
+            }
+        }
     }
     let scale = 1.0 / (2.0 * k * k * sigma_sca);
-    let node_phase: Vec<f64> = intensity.iter().map(|i| i * scale).collect();
+    let node_phase: Vec<f64> = halves[0]
+        .iter()
+        .zip(&halves[1])
+        .map(|(a, b)| (a + b) * scale)
+        .collect();
     let bins = quadrature.average(&node_phase);
+    // Each half's own phase function (its terms over its σ_sca), then the spread.
+    let half_bins: Vec<Vec<f64>> = (0..2)
+        .map(|h| {
+            if half_sca[h] > 0.0 {
+                let s = 1.0 / (2.0 * k * k * half_sca[h]);
+                quadrature.average(&halves[h].iter().map(|i| i * s).collect::<Vec<_>>())
+            } else {
+                vec![f64::NAN; bins.len()]
+            }
+        })
+        .collect();
+    let alpha = half_sca[0] / sigma_sca;
+    let factor = ((alpha * alpha + (1.0 - alpha) * (1.0 - alpha)) / 2.0).sqrt();
+    let std_error: Vec<f64> = half_bins[0]
+        .iter()
+        .zip(&half_bins[1])
+        .map(|(a, b)| (a - b).abs() * factor)
+        .collect();
     let points: Vec<f64> = point_intensity.iter().map(|i| i * scale).collect();
     const UM2_TO_M2: f64 = 1e-12;
     let mut phase = PhaseFunction {
@@ -325,5 +386,5 @@ pub fn bulk_at(
     if let Origin::Mie(m) = &mut phase.origin {
         m.energy_closure = closure;
     }
-    Ok(phase)
+    Ok((phase, std_error))
 }

@@ -63,6 +63,22 @@ pub fn run(a: InspectArgs) -> Result<()> {
                 100.0 * b
             );
         }
+        // Drops: the noise of the size sampling.
+        let noise = &f.quality["size_noise"];
+        if let (Some(r), Some(g), Some(b)) = (
+            noise["R"].as_f64(),
+            noise["G"].as_f64(),
+            noise["B"].as_f64(),
+        ) {
+            println!(
+                "  {:<10} {} sizes per wavelength; noise of Ams_1 (rms relative standard error, θ ≥ 1°) R {:.2} %, G {:.2} %, B {:.2} %",
+                "",
+                f.quality["knobs"]["sizes"],
+                100.0 * r,
+                100.0 * g,
+                100.0 * b
+            );
+        }
     }
     Ok(())
 }

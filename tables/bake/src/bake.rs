@@ -15,7 +15,7 @@ use format::{
 use grid::ThetaGrid;
 use mie::PhaseFunction;
 use mie::crystal::CrystalTracer;
-use mie::ensemble::bulk_at;
+use mie::ensemble::bulk_with_spread;
 use ndarray::{Array2, Array3, s};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -53,6 +53,11 @@ pub struct FieldSummary {
     /// Ice and snow: how far their Monte Carlo went (None for drops).
     #[serde(default)]
     pub crystal_sampling: Option<CrystalSampling>,
+    /// Drops: per channel, the rms relative standard error of Ams_1 over the bins θ ≥ 1° from
+    /// the finite set of sizes, estimated from the spread between the two interleaved halves
+    /// of each wavelength's size nodes (`mie::ensemble::bulk_with_spread`).
+    #[serde(default)]
+    pub size_noise: Option<[f64; 3]>,
 }
 
 /// How many rays a crystal field's tables rest on and the noise they were traced to.
@@ -448,17 +453,17 @@ fn field_entry(
         albedo: PerChannel::from_array(s.albedo),
         n_isotropic: PerChannel::from_array([n_iso(0), n_iso(1), n_iso(2)]),
         microphysics: serde_json::to_value(field).unwrap_or_default(),
-        quality: match &s.crystal_sampling {
-            None => {
-                serde_json::json!({ "preset": plan.quality, "knobs": plan.knobs, "legendre_l_max": s.l_max })
+        quality: {
+            let mut q = serde_json::json!({ "preset": plan.quality, "knobs": plan.knobs, "legendre_l_max": s.l_max });
+            let rgb = |n: [f64; 3]| serde_json::json!({ "R": n[0], "G": n[1], "B": n[2] });
+            if let Some(c) = &s.crystal_sampling {
+                q["crystal_rays"] = c.rays.into();
+                q["crystal_noise"] = rgb(c.noise);
             }
-            Some(c) => serde_json::json!({
-                "preset": plan.quality,
-                "knobs": plan.knobs,
-                "legendre_l_max": s.l_max,
-                "crystal_rays": c.rays,
-                "crystal_noise": { "R": c.noise[0], "G": c.noise[1], "B": c.noise[2] },
-            }),
+            if let Some(n) = s.size_noise {
+                q["size_noise"] = rgb(n);
+            }
+            q
         },
         content_hash: hash,
         single_scattering: None,
@@ -491,19 +496,22 @@ pub fn biri_kernel(image: &FieldImage) -> format::BiriTable {
     }
 }
 
-/// The phase function of `field` at every wavelength of `weights`, in order.
+/// The phase function of `field` at every wavelength of `weights`, in order, and for drops the
+/// standard error of each bin from the size sampling (empty for crystals, whose phase
+/// functions carry their own).
 pub fn phase_functions(
     plan: &BakePlan,
     field: &Field,
     weights: &ChannelWeights,
     grid: ThetaGrid,
     advance: &dyn Fn(),
-) -> Result<Vec<PhaseFunction>, BakeError> {
+) -> Result<(Vec<PhaseFunction>, Vec<Vec<f64>>), BakeError> {
     let knobs = plan.knobs;
     let lambdas = &weights.wavelengths_nm;
     let j_len = lambdas.len();
     let mie_error = |context: String| mie_error(field, context);
     let mut per_wavelength = Vec::with_capacity(j_len);
+    let mut size_errors = Vec::new();
     match (field.distribution, field.crystal) {
         (Some(distribution), _) => {
             for (j, &lambda) in lambdas.iter().enumerate() {
@@ -518,8 +526,10 @@ pub fn phase_functions(
                     q.radius_um.last().copied().unwrap_or(f64::NAN),
                     knobs.tail_mass
                 );
-                per_wavelength
-                    .push(bulk_at(m, lambda, &q, grid, nodes, &[]).map_err(mie_error(context))?);
+                let (phase, spread) = bulk_with_spread(m, lambda, &q, grid, nodes, &[])
+                    .map_err(mie_error(context))?;
+                per_wavelength.push(phase);
+                size_errors.push(spread);
                 advance();
             }
         }
@@ -594,7 +604,7 @@ pub fn phase_functions(
             )));
         }
     }
-    Ok(per_wavelength)
+    Ok((per_wavelength, size_errors))
 }
 
 /// Phase functions per wavelength → RGB → Ams_n per channel.
@@ -614,7 +624,8 @@ pub fn compute_field(
     } else {
         "Mie per wavelength"
     });
-    let per_wavelength = phase_functions(plan, field, weights, *grid, &|| bar.advance())?;
+    let (per_wavelength, size_errors) =
+        phase_functions(plan, field, weights, *grid, &|| bar.advance())?;
     // Channel c mixes wavelength j with a_cj = w_cj σ_sca,j / Σ_j w_cj σ_sca,j (the scattered
     // light's spectrum); every row is Σ_j a_cj Ams_n[P_j], light keeping its wavelength.
     bar.message("Legendre series per wavelength");
@@ -662,6 +673,10 @@ pub fn compute_field(
                 .filter_map(|p| p.crystal().map(|o| o.trace.rays))
                 .sum(),
             noise: channel_noises(&per_wavelength, weights, *grid),
+        }),
+        size_noise: field.distribution.map(|_| {
+            let errors: Vec<&[f64]> = size_errors.iter().map(|e| &e[..]).collect();
+            mixed_noises(&per_wavelength, &errors, weights, *grid)
         }),
     };
     for (c, ch) in channels.into_iter().enumerate() {
@@ -766,12 +781,23 @@ fn channel_noise(phases: &[PhaseFunction], weights: &ChannelWeights, grid: Theta
         .fold(0.0, f64::max)
 }
 
-/// [`channel_noise`] of each channel.
+/// [`channel_noise`] of each channel, crystal phase functions' own standard errors.
 fn channel_noises(phases: &[PhaseFunction], weights: &ChannelWeights, grid: ThetaGrid) -> [f64; 3] {
     let errors: Vec<&[f64]> = phases
         .iter()
         .map(|p| p.crystal().map_or(&[][..], |o| &o.bins_std_error[..]))
         .collect();
+    mixed_noises(phases, &errors, weights, grid)
+}
+
+/// Per channel, the rms over θ ≥ 1° of the mixed bins' relative standard error, from each
+/// wavelength's bins' standard errors `errors` (NaN or missing: 100 %).
+fn mixed_noises(
+    phases: &[PhaseFunction],
+    errors: &[&[f64]],
+    weights: &ChannelWeights,
+    grid: ThetaGrid,
+) -> [f64; 3] {
     std::array::from_fn(|c| {
         let raw: Vec<f64> = phases
             .iter()
@@ -782,7 +808,7 @@ fn channel_noises(phases: &[PhaseFunction], weights: &ChannelWeights, grid: Thet
         let a: Vec<f64> = raw.iter().map(|x| x / total).collect();
         let mut bins = vec![0.0; grid.len()];
         let mut variance = vec![0.0; grid.len()];
-        for ((p, se), &a) in phases.iter().zip(&errors).zip(&a) {
+        for ((p, se), &a) in phases.iter().zip(errors).zip(&a) {
             for k in 0..grid.len() {
                 bins[k] += a * p.bins[k];
                 // A trace of one chunk has no spread (NaN): its bins count as 100 %.

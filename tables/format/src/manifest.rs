@@ -137,8 +137,9 @@ pub struct FieldEntry {
     pub n_isotropic: PerChannel<BTreeMap<String, Option<u32>>>,
     /// Every microphysics input of the field, as the scene gave it.
     pub microphysics: Value,
-    /// Every quality input (preset and the numbers it set) and, for crystal fields, the rays
-    /// traced (`crystal_rays`) and the noise they reached per channel (`crystal_noise`).
+    /// Every quality input (preset and the numbers it set) and the sampling noise of Ams_1 per
+    /// channel: for crystal fields the rays traced (`crystal_rays`) and the noise they reached
+    /// (`crystal_noise`), for drops the size sampling's (`size_noise`).
     pub quality: Value,
     /// Hash of every input that affects the field's result, lowercase hex.
     pub content_hash: String,
