@@ -67,6 +67,21 @@ fn rms_rel(grid: ThetaGrid, a: &[f64], b: &[f64]) -> f64 {
     (r.iter().map(|x| x * x).sum::<f64>() / r.len() as f64).sqrt()
 }
 
+/// The rms over [`SHIFTS`] of `run(i)`'s error against `reference`, and its mean time (`run`
+/// returns bins and seconds).
+fn over_shifts(
+    grid: ThetaGrid,
+    reference: &[f64],
+    run: impl Fn(usize) -> (Vec<f64>, f64),
+) -> (f64, f64) {
+    let (sq, secs) = (0..SHIFTS.len()).fold((0.0, 0.0), |(sq, secs), i| {
+        let (p, t) = run(i);
+        (sq + rms_rel(grid, &p, reference).powi(2), secs + t)
+    });
+    let n = SHIFTS.len() as f64;
+    ((sq / n).sqrt(), secs / n)
+}
+
 /// A small deterministic generator (SplitMix64) for the Monte Carlo fractions.
 fn uniforms(n: usize, seed: u64) -> Vec<f64> {
     let mut s = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15);
@@ -131,17 +146,10 @@ fn main() {
             100.0 * own
         );
         let row = |label: &str, sizes: usize, nodes: usize, q: &dyn Fn(usize) -> SizeQuadrature| {
-            let mut sq = 0.0;
-            let mut secs = 0.0;
-            for i in 0..SHIFTS.len() {
-                let (p, t) = phase(&q(i), grid, nodes);
-                sq += rms_rel(grid, &p, &ref_a).powi(2);
-                secs += t;
-            }
+            let (error, secs) = over_shifts(grid, &ref_a, |i| phase(&q(i), grid, nodes));
             println!(
-                "{name:5}  {label:15}  {sizes:5}  {nodes:13}  {:17.3} %  {:9.3}",
-                100.0 * (sq / SHIFTS.len() as f64).sqrt(),
-                secs / SHIFTS.len() as f64
+                "{name:5}  {label:15}  {sizes:5}  {nodes:13}  {:17.3} %  {secs:9.3}",
+                100.0 * error
             );
         };
         for &n in &counts {
@@ -174,23 +182,18 @@ fn main() {
     );
     for &n in &counts[..counts.len().min(2)] {
         for (label, per_wavelength) in [("one shift", false), ("shift per λ", true)] {
-            let mut sq = 0.0;
-            let mut secs = 0.0;
-            for &s0 in &SHIFTS {
-                let (p, t) = mixed(&d, n, grid, |j| {
+            let (error, secs) = over_shifts(grid, &reference, |i| {
+                mixed(&d, n, grid, |j| {
                     if per_wavelength {
-                        ((j as f64 + 0.5) / 31.0 + s0).fract()
+                        ((j as f64 + 0.5) / 31.0 + SHIFTS[i]).fract()
                     } else {
-                        s0
+                        SHIFTS[i]
                     }
-                });
-                sq += rms_rel(grid, &p, &reference).powi(2);
-                secs += t;
-            }
+                })
+            });
             println!(
-                "rain, 31 λ  {label:11}  {n:5} per λ  {:8.3} %  {:8.2}",
-                100.0 * (sq / SHIFTS.len() as f64).sqrt(),
-                secs / SHIFTS.len() as f64
+                "rain, 31 λ  {label:11}  {n:5} per λ  {:8.3} %  {secs:8.2}",
+                100.0 * error
             );
         }
     }

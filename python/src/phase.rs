@@ -23,16 +23,6 @@ const ADAPTIVE_MAX_SIZES: usize = 1 << 14;
 /// Rays per wavelength allowed for crystals: below 1000 the standard errors are meaningless,
 /// above 10¹⁰ a call runs for hours.
 const RAYS_RANGE: (u64, u64) = (1_000, 10_000_000_000);
-/// The bake's crystal seed (`photometeor-bake`, CRYSTAL_SEED): with `bake --seed s` wavelength
-/// j traces the stream CRYSTAL_SEED ^ s·φ ^ j (φ = 0x9E37_79B9_7F4A_7C15), there and here.
-const BAKE_CRYSTAL_SEED: u64 = 0x7068_6f74_6f6d_6574;
-
-/// Wavelength j's stream for seed `s`, as the bake's: s·φ spreads the seeds over all 64 bits,
-/// so no two (seed, wavelength) pairs share a stream (with seed ^ j, seed 1's first wavelength
-/// was seed 2's fourth, and two seeds' difference no measure of the noise).
-fn crystal_stream(seed: u64, j: usize) -> u64 {
-    BAKE_CRYSTAL_SEED ^ seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ j as u64
-}
 
 /// The size distribution from the mutually exclusive keyword groups (the CLI's
 /// `distribution_from`), or from a scene-style mapping `{"kind": …, …}`.
@@ -474,7 +464,7 @@ pub fn crystal_phase<'py>(
                 .iter()
                 .enumerate()
                 .map(|(j, &lambda)| {
-                    let rays = mie::crystal::Rays::random(rays, crystal_stream(seed, j));
+                    let rays = mie::crystal::Rays::random(rays, bake::crystal_stream(seed, j));
                     trace_crystals(&field, lambda, grid, rays)
                 })
                 .collect::<Result<_, _>>()

@@ -47,33 +47,18 @@ pub fn run(a: InspectArgs) -> Result<()> {
             f.forward_fraction.g[f.n_max - 1],
             f.n_isotropic.g.get("1e-6").copied().flatten()
         );
-        // Ice and snow: the Monte Carlo behind the tables and the noise it reached.
-        let noise = &f.quality["crystal_noise"];
-        if let (Some(rays), Some(r), Some(g), Some(b)) = (
-            f.quality["crystal_rays"].as_u64(),
-            noise["R"].as_f64(),
-            noise["G"].as_f64(),
-            noise["B"].as_f64(),
-        ) {
+        // The sampling behind the tables and its noise: rays for ice and snow, sizes for drops.
+        let (what, key) = match f.quality["crystal_rays"].as_u64() {
+            Some(rays) => (format!("{rays:.2e} rays traced"), "crystal_noise"),
+            None => (
+                format!("{} sizes per wavelength", f.quality["knobs"]["sizes"]),
+                "size_noise",
+            ),
+        };
+        if let Some([r, g, b]) = rgb(&f.quality[key]) {
             println!(
-                "  {:<10} {rays:.2e} rays traced; noise of Ams_1 (rms relative standard error, θ ≥ 1°) R {:.2} %, G {:.2} %, B {:.2} %",
+                "  {:<10} {what}; noise of Ams_1 (rms relative standard error, θ ≥ 1°) R {:.2} %, G {:.2} %, B {:.2} %",
                 "",
-                100.0 * r,
-                100.0 * g,
-                100.0 * b
-            );
-        }
-        // Drops: the noise of the size sampling.
-        let noise = &f.quality["size_noise"];
-        if let (Some(r), Some(g), Some(b)) = (
-            noise["R"].as_f64(),
-            noise["G"].as_f64(),
-            noise["B"].as_f64(),
-        ) {
-            println!(
-                "  {:<10} {} sizes per wavelength; noise of Ams_1 (rms relative standard error, θ ≥ 1°) R {:.2} %, G {:.2} %, B {:.2} %",
-                "",
-                f.quality["knobs"]["sizes"],
                 100.0 * r,
                 100.0 * g,
                 100.0 * b
@@ -81,4 +66,9 @@ pub fn run(a: InspectArgs) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// An {R, G, B} object of numbers, if that is what `v` is.
+fn rgb(v: &serde_json::Value) -> Option<[f64; 3]> {
+    Some([v["R"].as_f64()?, v["G"].as_f64()?, v["B"].as_f64()?])
 }

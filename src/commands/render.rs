@@ -108,6 +108,14 @@ pub struct RenderArgs {
     quiet: bool,
 }
 
+/// The GPU, or an error that says how to get one (or to render with --cpu).
+fn gpu() -> anyhow::Result<Gpu> {
+    Gpu::new().context(
+        "no GPU adapter: install a driver (on Debian, mesa-vulkan-drivers gives lavapipe, a \
+         software Vulkan) or render with --cpu",
+    )
+}
+
 /// Reads the scene, bakes the fields its volumes use, loads and checks them, builds the frame.
 /// `adjust` overrides the scene's render settings; the result is checked before the bake.
 pub fn prepare(
@@ -206,10 +214,7 @@ pub fn run(a: RenderArgs) -> Result<()> {
         return run_truth(&a, &render, &tables);
     }
     if a.model == "biri" && !a.cpu {
-        let gpu = Gpu::new().context(
-            "no GPU adapter: install a driver (on Debian, mesa-vulkan-drivers gives lavapipe, a \
-             software Vulkan) or render with --cpu",
-        )?;
+        let gpu = gpu()?;
         // 32-bit texels: the exact kernel adds Ams_1 bin values to the primitive.
         let gpu_tables = GpuTables::upload(&gpu, &tables, TexelFormat::F32)?;
         let renderer = render::biri::gpu::Renderer::new(&gpu, &gpu_tables);
@@ -265,10 +270,7 @@ pub fn run(a: RenderArgs) -> Result<()> {
                 render::max::cpu::gather(&tables, &frame, &render.max, &lighting)?;
             (image, report, "CPU".to_string())
         } else {
-            let gpu = Gpu::new().context(
-                "no GPU adapter: install a driver (on Debian, mesa-vulkan-drivers gives \
-                 lavapipe, a software Vulkan) or render with --cpu",
-            )?;
+            let gpu = gpu()?;
             let gpu_tables = GpuTables::upload(&gpu, &tables, TexelFormat::F32)?;
             let renderer = render::max::gpu::Renderer::new(&gpu, &gpu_tables);
             let (image, t, largest) =
@@ -312,10 +314,7 @@ pub fn run(a: RenderArgs) -> Result<()> {
             let image = render::miyazaki::cpu::render(&tables, &frame, &render.svs)?;
             (image, "CPU reference".to_string())
         } else {
-            let gpu = Gpu::new().context(
-                "no GPU adapter: install a driver (on Debian, mesa-vulkan-drivers gives \
-                 lavapipe, a software Vulkan) or render with --cpu",
-            )?;
+            let gpu = gpu()?;
             let gpu_tables = GpuTables::upload(&gpu, &tables, TexelFormat::Auto)?;
             let renderer = render::miyazaki::gpu::Renderer::new(&gpu, &gpu_tables);
             let (image, times) =
@@ -361,10 +360,7 @@ pub fn run(a: RenderArgs) -> Result<()> {
         }
         image
     } else {
-        let gpu = Gpu::new().context(
-            "no GPU adapter: install a driver (on Debian, mesa-vulkan-drivers gives lavapipe, a \
-             software Vulkan) or render with --cpu",
-        )?;
+        let gpu = gpu()?;
         let gpu_tables = GpuTables::upload(&gpu, &tables, TexelFormat::Auto)?;
         let renderer = Renderer::new(&gpu, &gpu_tables);
         let (image, t) = renderer.render(&gpu, &tables, &gpu_tables, &frame)?;

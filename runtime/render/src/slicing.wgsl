@@ -13,11 +13,16 @@ fn voxel(x: u32, y: u32, z: u32) -> vec4<f32> {
     return density[x + rp.grid_dims.x * (y + rp.grid_dims.y * z)];
 }
 
-// Trilinear densities at p, voxel centres, clamped to the edge voxels; zero outside the box.
-fn densities(p: vec3<f32>) -> vec4<f32> {
-    if (!inside_box(p)) {
-        return vec4<f32>(0.0);
-    }
+// The trilinear taps at p inside the box, voxel centres, clamped to the edge voxels: the lower
+// corner voxel `lo`, the step `s` to the upper one per axis (0 on an axis of one voxel) and the
+// upper corner's weight `t` per axis.
+struct Taps {
+    lo: vec3<u32>,
+    s: vec3<u32>,
+    t: vec3<f32>,
+}
+
+fn taps(p: vec3<f32>) -> Taps {
     let dims = vec3<f32>(rp.grid_dims.xyz);
     let u = clamp((p - rp.grid_min.xyz) / (rp.grid_max.xyz - rp.grid_min.xyz) * dims - 0.5,
         vec3<f32>(0.0), dims - 1.0);
@@ -25,6 +30,18 @@ fn densities(p: vec3<f32>) -> vec4<f32> {
     let lo = vec3<u32>(min(vec3<i32>(floor(u)), top));
     let t = select(vec3<f32>(0.0), u - vec3<f32>(lo), rp.grid_dims.xyz > vec3<u32>(1u));
     let s = vec3<u32>(rp.grid_dims.xyz > vec3<u32>(1u));
+    return Taps(lo, s, t);
+}
+
+// Trilinear densities at p, voxel centres, clamped to the edge voxels; zero outside the box.
+fn densities(p: vec3<f32>) -> vec4<f32> {
+    if (!inside_box(p)) {
+        return vec4<f32>(0.0);
+    }
+    let tap = taps(p);
+    let lo = tap.lo;
+    let s = tap.s;
+    let t = tap.t;
     let c00 = mix(voxel(lo.x, lo.y, lo.z), voxel(lo.x + s.x, lo.y, lo.z), t.x);
     let c10 = mix(voxel(lo.x, lo.y + s.y, lo.z), voxel(lo.x + s.x, lo.y + s.y, lo.z), t.x);
     let c01 = mix(voxel(lo.x, lo.y, lo.z + s.z), voxel(lo.x + s.x, lo.y, lo.z + s.z), t.x);

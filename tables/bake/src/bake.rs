@@ -539,8 +539,7 @@ pub fn phase_functions(
             for (j, &lambda) in lambdas.iter().enumerate() {
                 // Each wavelength its own random stream: a channel averages J independent traces;
                 // another knob seed gives other streams (independent bakes).
-                let seed =
-                    CRYSTAL_SEED ^ knobs.seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ (j as u64);
+                let seed = crystal_stream(knobs.seed, j);
                 let rays = mie::crystal::Rays {
                     count: rays[j],
                     target: None,
@@ -829,6 +828,14 @@ fn mixed_noises(
 
 /// Seed of the crystal traces (wavelength j uses CRYSTAL_SEED ^ j with the knobs' seed 0).
 const CRYSTAL_SEED: u64 = 0x7068_6f74_6f6d_6574;
+
+/// The random stream wavelength j of a crystal field traces with the knobs' `seed`:
+/// CRYSTAL_SEED ^ seed·φ ^ j (φ = 0x9E37_79B9_7F4A_7C15). The product spreads the seeds over
+/// all 64 bits, so no two (seed, wavelength) pairs share a stream and two seeds' difference
+/// measures the noise (with seed ^ j, seed 1's first wavelength would be seed 2's fourth).
+pub fn crystal_stream(seed: u64, j: usize) -> u64 {
+    CRYSTAL_SEED ^ seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ j as u64
+}
 
 /// One channel's tables.
 struct ChannelResult {

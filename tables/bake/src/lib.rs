@@ -21,7 +21,7 @@ pub mod progress;
 pub mod scene;
 pub mod validate;
 
-pub use bake::{BakeReport, run};
+pub use bake::{BakeReport, crystal_stream, run};
 pub use error::BakeError;
 pub use plan::{BakePlan, Knobs};
 pub use progress::{Progress, Silent};

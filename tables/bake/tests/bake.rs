@@ -420,6 +420,42 @@ fn the_biri_kernel_is_written_from_ams1_and_read_back() {
     }
 }
 
+/// A draft bake of the one-field scene `text` at `seed`: its manifest's `quality` and its rows.
+fn draft_at_seed(text: &str, seed: u64) -> (serde_json::Value, [Vec<Vec<f64>>; 3]) {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = bake::Scene::parse(text, "test scene").unwrap();
+    let mut plan =
+        bake::BakePlan::for_preset(scene, dir.path().to_path_buf(), bake::Quality::Draft);
+    plan.knobs.seed = seed;
+    run(&plan).unwrap();
+    let manifest: serde_json::Value =
+        serde_json::from_slice(&fs::read(dir.path().join("manifest.json")).unwrap()).unwrap();
+    let field = &manifest["fields"][0];
+    let image = read_field_exr(dir.path().join(field["file"].as_str().unwrap())).unwrap();
+    (field["quality"].clone(), rows_of(&image))
+}
+
+/// An {R, G, B} entry of a manifest's `quality`.
+fn per_channel(quality: &serde_json::Value, key: &str) -> [f64; 3] {
+    ["R", "G", "B"].map(|c| quality[key][c].as_f64().unwrap())
+}
+
+/// The rms relative difference of two bakes' Ams_1 over θ ≥ 1° in channel c, over √2: either
+/// one's noise, when they are independent estimates.
+fn seed_spread(a: &[Vec<Vec<f64>>; 3], b: &[Vec<Vec<f64>>; 3], c: usize) -> f64 {
+    let grid = ThetaGrid::new(0.18).unwrap();
+    let keep: Vec<usize> = (0..grid.len())
+        .filter(|&k| grid.theta_deg(k) >= 1.0)
+        .collect();
+    (keep
+        .iter()
+        .map(|&k| (a[c][0][k] / b[c][0][k] - 1.0).powi(2))
+        .sum::<f64>()
+        / keep.len() as f64
+        / 2.0)
+        .sqrt()
+}
+
 /// A crystal field traced to the draft preset's noise target reports in its manifest the rays
 /// it took and the noise it reached, and that noise is what two bakes at other seeds differ by
 /// (within 10 %: the trace's own estimate was 0.94-1.06 of the spread over seven pairs).
@@ -439,39 +475,13 @@ habit = "column"
 aspect_ratio = 2.0
 max_dimension_um = 100
 "#;
-    let grid = ThetaGrid::new(0.18).unwrap();
-    let bake_at = |seed: u64| {
-        let dir = tempfile::tempdir().unwrap();
-        let scene = bake::Scene::parse(ICE, "test scene").unwrap();
-        let mut plan =
-            bake::BakePlan::for_preset(scene, dir.path().to_path_buf(), bake::Quality::Draft);
-        plan.knobs.seed = seed;
-        run(&plan).unwrap();
-        let manifest: serde_json::Value =
-            serde_json::from_slice(&fs::read(dir.path().join("manifest.json")).unwrap()).unwrap();
-        let quality = &manifest["fields"][0]["quality"];
-        let noise: Vec<f64> = ["R", "G", "B"]
-            .iter()
-            .map(|c| quality["crystal_noise"][c].as_f64().unwrap())
-            .collect();
-        let rays = quality["crystal_rays"].as_u64().unwrap();
-        let image = read_field_exr(dir.path().join("ice.exr")).unwrap();
-        (noise, rays, rows_of(&image))
-    };
-    let (noise, rays, a) = bake_at(1);
-    let (_, _, b) = bake_at(2);
+    let (quality, a) = draft_at_seed(ICE, 1);
+    let (_, b) = draft_at_seed(ICE, 2);
+    let noise = per_channel(&quality, "crystal_noise");
+    let rays = quality["crystal_rays"].as_u64().unwrap();
     let target = bake::Quality::Draft.knobs().crystal_noise;
     for c in 0..3 {
-        let keep: Vec<usize> = (0..grid.len())
-            .filter(|&k| grid.theta_deg(k) >= 1.0)
-            .collect();
-        let spread = (keep
-            .iter()
-            .map(|&k| (a[c][0][k] / b[c][0][k] - 1.0).powi(2))
-            .sum::<f64>()
-            / keep.len() as f64
-            / 2.0)
-            .sqrt();
+        let spread = seed_spread(&a, &b, c);
         println!(
             "channel {c}: reported {:.4}, two seeds' spread {spread:.4}, {rays} rays",
             noise[c]
@@ -508,38 +518,12 @@ name = "rain"
 kind = "rain"
 distribution = { kind = "lognormal", median_radius_um = 500, sigma_g = 1.4 }
 "#;
-    let grid = ThetaGrid::new(0.18).unwrap();
-    let bake_at = |seed: u64| {
-        let dir = tempfile::tempdir().unwrap();
-        let scene = bake::Scene::parse(RAIN, "test scene").unwrap();
-        let mut plan =
-            bake::BakePlan::for_preset(scene, dir.path().to_path_buf(), bake::Quality::Draft);
-        plan.knobs.seed = seed;
-        run(&plan).unwrap();
-        let manifest: serde_json::Value =
-            serde_json::from_slice(&fs::read(dir.path().join("manifest.json")).unwrap()).unwrap();
-        let quality = &manifest["fields"][0]["quality"];
-        let noise: Vec<f64> = ["R", "G", "B"]
-            .iter()
-            .map(|c| quality["size_noise"][c].as_f64().unwrap())
-            .collect();
-        assert!(quality["crystal_noise"].is_null());
-        let image = read_field_exr(dir.path().join("rain.exr")).unwrap();
-        (noise, rows_of(&image))
-    };
-    let (noise, a) = bake_at(1);
-    let (_, b) = bake_at(2);
+    let (quality, a) = draft_at_seed(RAIN, 1);
+    let (_, b) = draft_at_seed(RAIN, 2);
+    assert!(quality["crystal_noise"].is_null());
+    let noise = per_channel(&quality, "size_noise");
     for c in 0..3 {
-        let keep: Vec<usize> = (0..grid.len())
-            .filter(|&k| grid.theta_deg(k) >= 1.0)
-            .collect();
-        let spread = (keep
-            .iter()
-            .map(|&k| (a[c][0][k] / b[c][0][k] - 1.0).powi(2))
-            .sum::<f64>()
-            / keep.len() as f64
-            / 2.0)
-            .sqrt();
+        let spread = seed_spread(&a, &b, c);
         println!(
             "channel {c}: reported {:.4}, two seeds' spread {spread:.4}",
             noise[c]

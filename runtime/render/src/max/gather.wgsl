@@ -36,23 +36,17 @@ fn lit(p: vec3<f32>, row: u32, masked: bool) -> vec3<f32> {
     if (!inside_box(p)) {
         return vec3<f32>(0.0);
     }
-    let dims = vec3<f32>(rp.grid_dims.xyz);
-    let u = clamp((p - rp.grid_min.xyz) / (rp.grid_max.xyz - rp.grid_min.xyz) * dims - 0.5,
-        vec3<f32>(0.0), dims - 1.0);
-    let top = max(vec3<i32>(rp.grid_dims.xyz) - 2, vec3<i32>(0));
-    let lo = vec3<u32>(min(vec3<i32>(floor(u)), top));
-    let t = select(vec3<f32>(0.0), u - vec3<f32>(lo), rp.grid_dims.xyz > vec3<u32>(1u));
-    let s = vec3<u32>(rp.grid_dims.xyz > vec3<u32>(1u));
+    let tap = taps(p);
     var sum = vec3<f32>(0.0);
     var total = 0.0;
     for (var corner = 0u; corner < 8u; corner = corner + 1u) {
         let d = vec3<u32>(corner & 1u, (corner >> 1u) & 1u, (corner >> 2u) & 1u);
-        let w3 = select(1.0 - t, t, d == vec3<u32>(1u));
+        let w3 = select(1.0 - tap.t, tap.t, d == vec3<u32>(1u));
         let w = w3.x * w3.y * w3.z;
         if (w == 0.0) {
             continue;
         }
-        let at = lo + d * s;
+        let at = tap.lo + d * tap.s;
         let i = at.x + rp.grid_dims.x * (at.y + rp.grid_dims.y * at.z);
         if (masked && lighting[3u * i].w == 0.0) {
             continue;

@@ -13,17 +13,17 @@
 use std::time::Instant;
 
 use runtime::Tables;
-use runtime::gpu::{Gpu, GpuTables, WGSL, read_back};
+use runtime::gpu::{Gpu, GpuTables, read_back};
 
 use super::MaxSettings;
 use super::cpu::{Lighting, check, voxel_length};
 use crate::riley::gpu::{
-    COMPOSE_WGSL, RenderError, SLICING_WGSL, Timings, check_sizes, entry, filled, storage,
-    timed_frame, v4,
+    COMPOSE_WGSL, RenderError, Timings, bind, build, check_sizes, field_and_sky_rows, filled,
+    storage, timed_frame, v4,
 };
-use crate::{Frame, FrameError, Image, MAX_FIELDS, SUN_DIAMETER_DEG};
+use crate::{Frame, FrameError, Image, SUN_DIAMETER_DEG};
 
-/// The gather's WGSL (after [`WGSL`], [`SLICING_WGSL`] and [`COMPOSE_WGSL`]).
+/// The gather's WGSL (after [`runtime::gpu::WGSL`], the slicing renderers' WGSL and [`COMPOSE_WGSL`]).
 pub const GATHER_WGSL: &str = include_str!("gather.wgsl");
 
 /// The gather's pipeline, built once.
@@ -36,38 +36,17 @@ impl Renderer {
     /// Compiles `gather.wgsl` after the tables' and the slicing renderers' WGSL, `tables`'
     /// layout as bind group 0.
     pub fn new(gpu: &Gpu, tables: &GpuTables) -> Self {
-        use wgpu::BufferBindingType::{Storage, Uniform};
-        let device = &gpu.device;
-        let entries = [
-            entry(0, Uniform, false),
-            entry(1, Storage { read_only: true }, false),
-            entry(2, Storage { read_only: true }, false),
-            entry(3, Storage { read_only: false }, false),
-            entry(4, Storage { read_only: false }, false),
-        ];
-        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("photometeor max gather layout"),
-            entries: &entries,
-        });
-        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("photometeor max gather"),
-            source: wgpu::ShaderSource::Wgsl(
-                format!("{WGSL}\n{SLICING_WGSL}\n{COMPOSE_WGSL}\n{GATHER_WGSL}").into(),
-            ),
-        });
-        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("photometeor max gather pipeline layout"),
-            bind_group_layouts: &[Some(&tables.layout), Some(&layout)],
-            immediate_size: 0,
-        });
-        let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some("gather"),
-            layout: Some(&pipeline_layout),
-            module: &module,
-            entry_point: Some("gather"),
-            compilation_options: Default::default(),
-            cache: None,
-        });
+        // Bindings: params, densities and lighting (read-only), image, largest edge depth.
+        let (layout, pipelines) = build(
+            gpu,
+            tables,
+            "photometeor max gather",
+            &format!("{COMPOSE_WGSL}\n{GATHER_WGSL}"),
+            5,
+            &[1, 2],
+            &["gather"],
+        );
+        let [pipeline] = <[_; 1]>::try_from(pipelines).expect("one pipeline");
         Self { layout, pipeline }
     }
 
@@ -123,23 +102,7 @@ impl Renderer {
             ]),
             uints([w as u32, h as u32, 0, 0]),
         ];
-        for i in 0..MAX_FIELDS {
-            params.push(
-                tables
-                    .fields
-                    .get(i)
-                    .map_or([0.0; 4], |f| v4(f.sigma_ext_m2.into(), 0.0)),
-            );
-        }
-        params.push(v4(
-            frame.atmosphere.beta_sea_level_per_m.into(),
-            1.0 / frame.atmosphere.scale_height_m,
-        ));
-        params.push(v4(sun_dir, cos_disk));
-        params.push(v4(
-            frame.sun.irradiance.into(),
-            std::f64::consts::TAU * (1.0 - cos_disk),
-        ));
+        params.extend(field_and_sky_rows(tables, frame, sun_dir, cos_disk));
         let rgb = |v: &[f64; 3], w: f32| [v[0] as f32, v[1] as f32, v[2] as f32, w];
         let mut rows: Vec<[f32; 4]> = Vec::with_capacity(3 * voxels);
         for i in 0..voxels {
@@ -175,20 +138,12 @@ impl Renderer {
             &[0u8; 16],
             wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
         );
-        let all = [&params, &density, &lighting_buffer, &image, &largest];
-        let entries: Vec<wgpu::BindGroupEntry> = all
-            .iter()
-            .enumerate()
-            .map(|(i, b)| wgpu::BindGroupEntry {
-                binding: i as u32,
-                resource: b.as_entire_binding(),
-            })
-            .collect();
-        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("photometeor max gather bindings"),
-            layout: &self.layout,
-            entries: &entries,
-        });
+        let bind_group = bind(
+            device,
+            &self.layout,
+            "photometeor max gather bindings",
+            &[&params, &density, &lighting_buffer, &image, &largest],
+        );
         let (image, timings) = timed_frame(
             gpu,
             start,

@@ -38,6 +38,7 @@ impl Renderer {
             "photometeor svs",
             SVS_WGSL,
             7,
+            &[1],
             &["clear", "shadow_slice", "eye_slice", "composite"],
         );
         let [clear, shadow, eye, composite] = <[_; 4]>::try_from(p).expect("four pipelines");

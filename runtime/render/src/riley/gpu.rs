@@ -83,16 +83,48 @@ pub(crate) fn v4(v: glam::DVec3, w: f64) -> [f32; 4] {
     [v[0] as f32, v[1] as f32, v[2] as f32, w as f32]
 }
 
+/// The rows riley's and max's params uniforms end with (their WGSL structs' order): each field's
+/// σ_ext (m², [`MAX_FIELDS`] rows, zero past the last field), the air's β at sea level and
+/// 1/H, the sun's direction and the cosine of its disk's radius `cos_disk`, its irradiance and
+/// the disk's solid angle.
+pub(crate) fn field_and_sky_rows(
+    tables: &Tables,
+    frame: &Frame,
+    sun_dir: glam::DVec3,
+    cos_disk: f64,
+) -> Vec<[f32; 4]> {
+    let mut rows: Vec<[f32; 4]> = (0..MAX_FIELDS)
+        .map(|i| {
+            tables
+                .fields
+                .get(i)
+                .map_or([0.0; 4], |f| v4(f.sigma_ext_m2.into(), 0.0))
+        })
+        .collect();
+    rows.push(v4(
+        frame.atmosphere.beta_sea_level_per_m.into(),
+        1.0 / frame.atmosphere.scale_height_m,
+    ));
+    rows.push(v4(sun_dir, cos_disk));
+    rows.push(v4(
+        frame.sun.irradiance.into(),
+        std::f64::consts::TAU * (1.0 - cos_disk),
+    ));
+    rows
+}
+
 /// Bind group 1's layout and the compute pipelines `names` of a slicing renderer's shader
 /// `wgsl` (compiled after [`WGSL`] and [`SLICING_WGSL`], `tables`' layout as bind group 0).
-/// Bind group 1 has `bindings` buffers: 0 the params uniform, 1 the densities (read-only),
-/// 5 the slice uniforms (dynamic offset), every other one read-write storage.
+/// Bind group 1 has `bindings` buffers: 0 the params uniform, 5 the slice uniforms (dynamic
+/// offset), those in `read_only` read-only storage (1, the densities, always among them),
+/// every other one read-write storage.
 pub(crate) fn build(
     gpu: &Gpu,
     tables: &GpuTables,
     label: &str,
     wgsl: &str,
     bindings: u32,
+    read_only: &[u32],
     names: &[&str],
 ) -> (wgpu::BindGroupLayout, Vec<wgpu::ComputePipeline>) {
     use wgpu::BufferBindingType::{Storage, Uniform};
@@ -100,9 +132,14 @@ pub(crate) fn build(
     let entries: Vec<wgpu::BindGroupLayoutEntry> = (0..bindings)
         .map(|b| match b {
             0 => entry(0, Uniform, false),
-            1 => entry(1, Storage { read_only: true }, false),
             5 => entry(5, Uniform, true),
-            b => entry(b, Storage { read_only: false }, false),
+            b => entry(
+                b,
+                Storage {
+                    read_only: read_only.contains(&b),
+                },
+                false,
+            ),
         })
         .collect();
     let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
@@ -345,6 +382,7 @@ impl Renderer {
             "photometeor render",
             &format!("{COMPOSE_WGSL}\n{RENDER_WGSL}"),
             6,
+            &[1],
             &["clear", "eye_slice", "light_slice", "composite"],
         );
         let [clear, eye, light, composite] = <[_; 4]>::try_from(p).expect("four pipelines");
@@ -412,23 +450,7 @@ impl Renderer {
             tables.fields.len() as u32,
         ]));
         params.push(uints([w as u32, h as u32, res as u32, 0]));
-        for i in 0..MAX_FIELDS {
-            params.push(
-                tables
-                    .fields
-                    .get(i)
-                    .map_or([0.0; 4], |f| v4(f.sigma_ext_m2.into(), 0.0)),
-            );
-        }
-        params.push(v4(
-            frame.atmosphere.beta_sea_level_per_m.into(),
-            1.0 / frame.atmosphere.scale_height_m,
-        ));
-        params.push(v4(sun_dir, cos_disk));
-        params.push(v4(
-            frame.sun.irradiance.into(),
-            std::f64::consts::TAU * (1.0 - cos_disk),
-        ));
+        params.extend(field_and_sky_rows(tables, frame, sun_dir, cos_disk));
         let params = filled(
             device,
             "photometeor render params",
