@@ -1,6 +1,7 @@
 //! The crystal tracer's sampling levers, one by one: for ice (column AR 2, 100 µm) and snow
 //! (AR 1, 2 mm, δ = 0.7) at 550 nm, the rms over bins θ ≥ 1° of each bin's relative standard
-//! error (from the spread between independent chunks) at several ray counts, and the time.
+//! error (from the spread between independent chunks) at several ray counts, and the time; for
+//! snow also the facet tilts split 2, 4 and 8 ways.
 //! `cargo run --release -p photometeor-mie --example crystal_levers`
 
 use std::time::Instant;
@@ -39,19 +40,30 @@ fn main() {
     } else {
         counts
     };
-    println!("field  rays      sampling  symmetric  rms rel SE (θ≥1°)  max rel SE  time s");
+    println!("field  rays      sampling  symmetric  splits  rms rel SE (θ≥1°)  max rel SE  time s");
     for (name, field) in fields {
         for &count in &counts {
-            for (sampling, symmetric) in [
+            // Tilt splitting only acts on distorted crystals.
+            let splits: &[u32] = if field.roughness > 0.0 {
+                &[1, 2, 4, 8]
+            } else {
+                &[1]
+            };
+            let levers = [
                 (Sampling::Random, false),
                 (Sampling::Random, true),
                 (Sampling::Sobol, false),
                 (Sampling::Sobol, true),
-            ] {
+            ]
+            .into_iter()
+            .map(|(sampling, symmetric)| (sampling, symmetric, 1))
+            .chain(splits[1..].iter().map(|&k| (Sampling::Random, false, k)));
+            for (sampling, symmetric, tilt_splits) in levers {
                 let t = Instant::now();
                 let rays = Rays {
                     sampling,
                     symmetric,
+                    tilt_splits,
                     ..Rays::random(count, 7)
                 };
                 let p = crystal_phase(&field, 550.0, grid, rays).unwrap();
@@ -71,7 +83,7 @@ fn main() {
                     100.0 * (r.iter().sum::<f64>() / r.len() as f64).sqrt()
                 };
                 println!(
-                    "{name:5}  {count:8}  {sampling:8?}  {symmetric:9}  {:17.3} %  {:9.2} %  {secs:6.2}   bands 1-10 {:.2} 10-90 {:.2} 90-170 {:.2} 170-179 {:.2} 179-180 {:.2}",
+                    "{name:5}  {count:8}  {sampling:8?}  {symmetric:9}  {tilt_splits:6}  {:17.3} %  {:9.2} %  {secs:6.2}   bands 1-10 {:.2} 10-90 {:.2} 90-170 {:.2} 170-179 {:.2} 179-180 {:.2}",
                     100.0 * rms,
                     100.0 * max,
                     band(1.0, 10.0),

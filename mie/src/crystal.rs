@@ -189,6 +189,9 @@ pub struct Rays {
     pub sampling: Sampling,
     /// Directions in the prism's fundamental domain only.
     pub symmetric: bool,
+    /// Tilts scored per facet a path first meets, distorted crystals only ([`trace`] module
+    /// docs, "Tilt splitting"); 1 = one.
+    pub tilt_splits: u32,
 }
 
 impl Rays {
@@ -201,6 +204,7 @@ impl Rays {
             seed,
             sampling: Sampling::Random,
             symmetric: false,
+            tilt_splits: 1,
         }
     }
 }
@@ -283,7 +287,8 @@ impl CrystalTracer {
         let prism = Prism::new(field.aspect_ratio, d_ref);
         let alpha = 4.0 * std::f64::consts::PI * m.im / wavelength_um;
         let settings = TraceSettings::new(rays.count, rays.seed, field.roughness)
-            .sampled(rays.sampling, rays.symmetric);
+            .sampled(rays.sampling, rays.symmetric)
+            .split(rays.tilt_splits);
         let mut trace = Trace::new(prism, m.re, alpha, grid, settings);
         let chunk = Trace::CHUNK_RAYS;
         trace.run_to(rays.count.div_ceil(chunk).max(1));

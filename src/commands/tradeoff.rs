@@ -195,6 +195,20 @@ pub fn run(a: TradeoffArgs) -> Result<()> {
                 wavelengths: None,
             });
         }
+        for k in pick(vec![1.0, 2.0, 8.0], vec![1.0]) {
+            variants.push(Variant {
+                knob: "tilt splits (distorted crystals)",
+                value: format!("{k}"),
+                drops: false,
+                knobs: Knobs {
+                    tilt_splits: k as u32,
+                    rays: 600_000,
+                    crystal_noise: 0.0,
+                    ..standard
+                },
+                wavelengths: None,
+            });
+        }
     }
 
     let mut rows = Vec::new();

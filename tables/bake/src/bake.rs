@@ -547,6 +547,7 @@ pub fn phase_functions(
                     seed,
                     sampling: knobs.ray_sampling,
                     symmetric: knobs.ray_symmetric,
+                    tilt_splits: knobs.tilt_splits,
                 };
                 tracers.push(
                     CrystalTracer::new(&crystal, lambda, grid, rays)
