@@ -348,7 +348,8 @@ fn reported_noise_matches_the_spread_of_independent_traces() {
     let g = grid(0.18);
     let a = crystal_phase(&ice, 550.0, g, Rays::random(rays, 101)).unwrap();
     let b = crystal_phase(&ice, 550.0, g, Rays::random(rays, 202)).unwrap();
-    let reported = mie::crystal::relative_noise(g, &a.bins, &a.crystal().unwrap().bins_std_error);
+    let reported =
+        mie::crystal::relative_noise(g, &a.bins, &a.crystal().unwrap().bins_std_error, false);
     let keep: Vec<usize> = (0..g.len()).filter(|&k| g.theta_deg(k) >= 1.0).collect();
     let actual = (keep
         .iter()
@@ -388,7 +389,7 @@ fn tilt_splitting_keeps_the_mean_and_lowers_the_noise() {
     let four = run(4, 12);
     let four_again = run(4, 13);
     let noise = |p: &mie::PhaseFunction| {
-        mie::crystal::relative_noise(g, &p.bins, &p.crystal().unwrap().bins_std_error)
+        mie::crystal::relative_noise(g, &p.bins, &p.crystal().unwrap().bins_std_error, false)
     };
     let (n1, n4) = (noise(&one), noise(&four));
     println!("reported noise: one tilt {n1:.4}, four {n4:.4}");

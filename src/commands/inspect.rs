@@ -51,7 +51,13 @@ pub fn run(a: InspectArgs) -> Result<()> {
         let (what, key) = match f.quality["crystal_rays"].as_u64() {
             Some(rays) => (format!("{rays:.2e} rays traced"), "crystal_noise"),
             None => (
-                format!("{} sizes per wavelength", f.quality["knobs"]["sizes"]),
+                format!(
+                    "{} sizes per wavelength",
+                    match &f.quality["sizes"] {
+                        serde_json::Value::Null => &f.quality["knobs"]["sizes"],
+                        n => n,
+                    }
+                ),
                 "size_noise",
             ),
         };

@@ -26,8 +26,10 @@
 //! weight it carries), a ray's energy is kept exactly as in a plain path, and the angular
 //! distribution of the leaving light is sampled K times for about the cost of K − 1 Fresnel
 //! evaluations. Pristine crystals have no tilts and ignore K; with K = 1 the trace is the plain
-//! one, bit for bit. Measured (`mie/examples/crystal_levers.rs`) in the module's
-//! [`crate::crystal`] docs.
+//! one, bit for bit. Measured (`mie/examples/crystal_levers.rs`, snow AR 1, 2 mm, δ 0.7,
+//! 2.1 M rays, one run): the rms relative standard error over θ ≥ 1° 3.73 % in 3.9 s with one
+//! tilt, 2.60 % (5.1 s) with K = 2, 1.77 % (8.3 s) with 4, 1.35 % (13.2 s) with 8: variance per
+//! unit of time 1.6×, 2.1× and 2.3× the plain path's.
 
 use rand_xoshiro::Xoshiro256PlusPlus;
 use rand_xoshiro::rand_core::{RngCore, SeedableRng};
@@ -76,7 +78,7 @@ pub enum Sampling {
 }
 
 impl TraceSettings {
-    /// Settings with at most 1000 interactions per path and a weight cut-off of 1e-7, plain
+    /// Settings with at most 1000 interactions per path and a weight cut-off of 1e-4, plain
     /// Monte Carlo over the whole sphere of directions.
     pub fn new(rays: u64, seed: u64, roughness: f64) -> Self {
         Self {
@@ -84,7 +86,7 @@ impl TraceSettings {
             seed,
             roughness,
             max_interactions: 1000,
-            min_weight: 1e-7,
+            min_weight: 1e-4,
             sampling: Sampling::Random,
             symmetric: false,
             tilt_splits: 1,

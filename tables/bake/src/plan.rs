@@ -27,6 +27,10 @@ pub struct Knobs {
     /// (each wavelength j to crystal_noise / √m_j, m_j its largest channel weight, so that a
     /// channel's Σ_j a_j² s_j² stays below crystal_noise²); 0: `rays` alone.
     pub crystal_noise: f64,
+    /// The rms relative standard error over θ ≥ 1° of Ams_1 the drops' channels are sized for
+    /// (`crate::bake::drop_sizes`: a pilot wavelength at a quarter of `sizes` predicts the
+    /// count, at most 4 × `sizes`); 0: `sizes` alone.
+    pub size_noise: f64,
     /// Seed of the crystal tracer's random streams and of the drops' size nodes (0 for the
     /// presets): bakes with different seeds are independent estimates, whose difference
     /// measures their noise.
@@ -100,10 +104,12 @@ impl Quality {
     /// The node counts of this preset for [`PRESET_SPECTRUM`].
     pub fn knobs(self) -> Knobs {
         // Crystals: a first round of rays, then traced on to the noise target (docs/accuracy.md).
-        let (sizes, nodes_per_panel, rays, crystal_noise) = match self {
-            Quality::Draft => (32, 2, 65_536, 0.04),
-            Quality::Standard => (400, 2, 131_072, 0.009),
-            Quality::Reference => (4096, 2, 524_288, 0.0035),
+        // Drops: sized for their noise target from a pilot (docs/accuracy.md); the reference's
+        // sizes fixed.
+        let (sizes, nodes_per_panel, rays, crystal_noise, size_noise) = match self {
+            Quality::Draft => (32, 2, 65_536, 0.04, 0.035),
+            Quality::Standard => (400, 2, 131_072, 0.009, 0.008),
+            Quality::Reference => (4096, 2, 524_288, 0.0035, 0.0),
         };
         Knobs {
             sizes,
@@ -112,6 +118,7 @@ impl Quality {
             reconstruction: tables::ams::Reconstruction::Spline,
             rays,
             crystal_noise,
+            size_noise,
             seed: 0,
             ray_sampling: mie::crystal::Sampling::Random,
             ray_symmetric: false,
