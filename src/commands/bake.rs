@@ -14,10 +14,11 @@ pub struct BakeArgs {
     #[arg(long, default_value = "photometeor-tables")]
     out: std::path::PathBuf,
     /// Accuracy preset, overriding the scene's: the rms error of Ams_1 (θ ≥ 1°, worst channel)
-    /// is ≤ 5 % at draft and ≤ 1 % at standard for every kind and spectral mode (drops by their
-    /// size count, scaled with the wavelengths a channel mixes; ice and snow traced until their
-    /// estimated noise is 4 % or 0.9 %), except rough snow's bin at exactly 180°, whose narrow
-    /// spike few rays carry; README "Presets, measured" has the table and times.
+    /// is ≤ 5 % at draft and ≤ 1 % at standard for every kind and spectral mode (drops sized
+    /// until their estimated noise is 3.5 % or 0.8 %, ice and snow traced until theirs is 4 % or
+    /// 0.9 %); rough crystals (snow) over 1°–179°, their backscatter spike within 1° of 180°
+    /// being carried by few rays; README "Presets, measured" has the table, that spike's
+    /// error and the times.
     #[arg(long, value_parser = ["draft", "standard", "reference"])]
     quality: Option<String>,
     /// Worker threads, [1, 256] (default: all cores).

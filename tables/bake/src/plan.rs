@@ -23,7 +23,8 @@ pub struct Knobs {
     /// Geometric-optics rays per wavelength for ice and snow: the first round (shared among the
     /// wavelengths as [`crate::bake::ray_allocation`] does), carried on until `crystal_noise`.
     pub rays: u64,
-    /// The rms relative standard error over θ ≥ 1° the crystal tables' channels are traced to
+    /// The rms relative standard error over θ ≥ 1° (rough crystals: 1°–179°,
+    /// `mie::crystal::noise_skips_pole`) the crystal tables' channels are traced to
     /// (each wavelength j to crystal_noise / √m_j, m_j its largest channel weight, so that a
     /// channel's Σ_j a_j² s_j² stays below crystal_noise²); 0: `rays` alone.
     pub crystal_noise: f64,
@@ -107,7 +108,7 @@ impl Quality {
         // Drops: sized for their noise target from a pilot (docs/accuracy.md); the reference's
         // sizes fixed.
         let (sizes, nodes_per_panel, rays, crystal_noise, size_noise) = match self {
-            Quality::Draft => (32, 2, 65_536, 0.04, 0.035),
+            Quality::Draft => (32, 2, 32_768, 0.04, 0.035),
             Quality::Standard => (400, 2, 131_072, 0.009, 0.008),
             Quality::Reference => (4096, 2, 524_288, 0.0035, 0.0),
         };
