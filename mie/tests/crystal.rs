@@ -332,6 +332,27 @@ fn result_is_identical_for_any_thread_count() {
     assert_eq!(run(1), run(2));
 }
 
+/// The rms relative difference of two independent traces over 1° ≤ θ (≤ 179° if `skip_pole`),
+/// over √2: either one's noise.
+fn pair_spread(
+    g: ThetaGrid,
+    a: &mie::PhaseFunction,
+    b: &mie::PhaseFunction,
+    skip_pole: bool,
+) -> f64 {
+    let last = if skip_pole { 179.0 } else { 180.0 };
+    let keep: Vec<usize> = (0..g.len())
+        .filter(|&k| (1.0..=last).contains(&g.theta_deg(k)))
+        .collect();
+    (keep
+        .iter()
+        .map(|&k| (a.bins[k] / b.bins[k] - 1.0).powi(2))
+        .sum::<f64>()
+        / keep.len() as f64
+        / 2.0)
+        .sqrt()
+}
+
 /// The noise the tracer reports (rms over θ ≥ 1° of each bin's relative standard error, what
 /// the bake's noise targets use) is what two independent traces differ by, also when the rays
 /// are not a whole number of chunks (the last chunk short: it counts by its rays).
@@ -350,14 +371,7 @@ fn reported_noise_matches_the_spread_of_independent_traces() {
     let b = crystal_phase(&ice, 550.0, g, Rays::random(rays, 202)).unwrap();
     let reported =
         mie::crystal::relative_noise(g, &a.bins, &a.crystal().unwrap().bins_std_error, false);
-    let keep: Vec<usize> = (0..g.len()).filter(|&k| g.theta_deg(k) >= 1.0).collect();
-    let actual = (keep
-        .iter()
-        .map(|&k| (a.bins[k] / b.bins[k] - 1.0).powi(2))
-        .sum::<f64>()
-        / keep.len() as f64
-        / 2.0)
-        .sqrt();
+    let actual = pair_spread(g, &a, &b, false);
     println!("reported {reported:.4}, actual {actual:.4}");
     assert!(
         (0.9..1.1).contains(&(reported / actual)),
@@ -388,13 +402,18 @@ fn tilt_splitting_keeps_the_mean_and_lowers_the_noise() {
     let one = run(1, 11);
     let four = run(4, 12);
     let four_again = run(4, 13);
+    // Over 1°-179°: the few heavy-tailed bins at the backward pole would make one trace's
+    // noise a noisy figure (`mie::crystal::noise_skips_pole`).
     let noise = |p: &mie::PhaseFunction| {
-        mie::crystal::relative_noise(g, &p.bins, &p.crystal().unwrap().bins_std_error, false)
+        mie::crystal::relative_noise(g, &p.bins, &p.crystal().unwrap().bins_std_error, true)
     };
-    let (n1, n4) = (noise(&one), noise(&four));
-    println!("reported noise: one tilt {n1:.4}, four {n4:.4}");
-    // Measured 0.24 of it.
-    assert!(n4 < 0.3 * n1, "four tilts' noise {n4:.4} against {n1:.4}");
+    let (n1, n4, n4_again) = (noise(&one), noise(&four), noise(&four_again));
+    println!("reported noise: one tilt {n1:.4}, four {n4:.4} and {n4_again:.4}");
+    // Measured 0.38 and 0.43 of it (the two four-tilt traces).
+    assert!(
+        n4.max(n4_again) < 0.5 * n1,
+        "four tilts' noise {n4:.4}, {n4_again:.4} against {n1:.4}"
+    );
 
     // Unbiased: in 10° bands the two estimates differ by less than 4 combined standard errors.
     let (e1, e4) = (
@@ -421,14 +440,7 @@ fn tilt_splitting_keeps_the_mean_and_lowers_the_noise() {
     assert!(worst < 4.0, "bands differ by {worst:.2} standard errors");
 
     // The reported noise of a split trace is the spread of two of them.
-    let keep: Vec<usize> = (0..g.len()).filter(|&k| g.theta_deg(k) >= 1.0).collect();
-    let actual = (keep
-        .iter()
-        .map(|&k| (four.bins[k] / four_again.bins[k] - 1.0).powi(2))
-        .sum::<f64>()
-        / keep.len() as f64
-        / 2.0)
-        .sqrt();
+    let actual = pair_spread(g, &four, &four_again, true);
     println!("four tilts: reported {n4:.4}, actual {actual:.4}");
     assert!(
         (0.85..1.15).contains(&(n4 / actual)),

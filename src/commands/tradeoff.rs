@@ -79,7 +79,12 @@ pub fn run(a: TradeoffArgs) -> Result<()> {
 
     let is_drop = |k: FieldKind| matches!(k, FieldKind::Cloud | FieldKind::Rain | FieldKind::Haze);
     let has = |drops: bool| scene.fields.iter().any(|f| is_drop(f.kind) == drops);
-    let standard = Quality::Standard.knobs_for(&scene.spectral);
+    // One knob moved at a time from the standard preset's, the drops at its fixed size count
+    // (no size noise target, whose pilot would choose the sizes anew for every variant).
+    let standard = Knobs {
+        size_noise: 0.0,
+        ..Quality::Standard.knobs_for(&scene.spectral)
+    };
     let mut variants = Vec::new();
     for drops in [true, false] {
         if !has(drops) {

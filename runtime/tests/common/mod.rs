@@ -47,8 +47,10 @@ pub fn bake(text: &str) -> (tempfile::TempDir, PathBuf) {
     let quality = scene.quality;
     let mut plan = BakePlan::for_preset(scene, dir.clone(), quality);
     plan.knobs = quality.knobs();
-    // Crystals: the preset's first round of rays only, not traced on to its noise target.
+    // Crystals: the preset's first round of rays only, not traced on to its noise target;
+    // drops: the preset's sizes, not sized by a pilot for its noise target.
     plan.knobs.crystal_noise = 0.0;
+    plan.knobs.size_noise = 0.0;
     run(&plan, &Silent).unwrap();
     (tmp, dir)
 }

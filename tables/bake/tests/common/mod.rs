@@ -8,7 +8,8 @@ use format::FieldImage;
 
 /// A bake of the scene `text` into `out` at the scene's own preset, with the preset's knobs as
 /// stated for the default scene's 31 wavelengths (`Quality::knobs`), not scaled up for fewer
-/// wavelengths per channel, and crystals at the first round of rays without the noise target:
+/// wavelengths per channel, crystals at the first round of rays and drops at the preset's sizes,
+/// without their noise targets:
 /// these tests check behaviour and stability, and an rgb3 scene at the scaled knobs would cost
 /// ten times as much (the presets' accuracy is measured by `photometeor tradeoff` and the
 /// README's table).
@@ -17,8 +18,10 @@ pub fn plan(text: &str, out: &std::path::Path) -> Result<BakePlan, BakeError> {
     let quality = scene.quality;
     let mut plan = BakePlan::for_preset(scene, out.to_path_buf(), quality);
     plan.knobs = quality.knobs();
-    // Crystals: the preset's first round of rays only, not traced on to its noise target.
+    // Crystals: the preset's first round of rays only, not traced on to its noise target;
+    // drops: the preset's sizes, not sized by a pilot for its noise target.
     plan.knobs.crystal_noise = 0.0;
+    plan.knobs.size_noise = 0.0;
     Ok(plan)
 }
 
