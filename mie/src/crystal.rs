@@ -158,12 +158,17 @@ pub fn noise_skips_pole(roughness: f64) -> bool {
     roughness > 0.0
 }
 
-/// The rms over the bins 1° ≤ θ_k (≤ 179° if `skip_pole`) of each bin's relative standard
-/// error (a bin with no value counts as 1: nothing reached it yet).
-pub fn relative_noise(grid: ThetaGrid, bins: &[f64], std_error: &[f64], skip_pole: bool) -> f64 {
+/// The bins a noise figure counts: 1° ≤ θ_k, and θ_k ≤ 179° if `skip_pole`
+/// ([`noise_skips_pole`]).
+pub fn noise_bins(grid: ThetaGrid, skip_pole: bool) -> impl Iterator<Item = usize> {
     let last = if skip_pole { 179.0 } else { 180.0 };
-    let rel: Vec<f64> = (0..grid.len())
-        .filter(|&k| grid.theta_deg(k) >= 1.0 && grid.theta_deg(k) <= last)
+    (0..grid.len()).filter(move |&k| (1.0..=last).contains(&grid.theta_deg(k)))
+}
+
+/// The rms over the [`noise_bins`] of each bin's relative standard error (a bin with no value
+/// counts as 1: nothing reached it yet).
+pub fn relative_noise(grid: ThetaGrid, bins: &[f64], std_error: &[f64], skip_pole: bool) -> f64 {
+    let rel: Vec<f64> = noise_bins(grid, skip_pole)
         .map(|k| {
             if bins[k] > 0.0 && std_error[k].is_finite() {
                 std_error[k] / bins[k]

@@ -340,10 +340,7 @@ fn pair_spread(
     b: &mie::PhaseFunction,
     skip_pole: bool,
 ) -> f64 {
-    let last = if skip_pole { 179.0 } else { 180.0 };
-    let keep: Vec<usize> = (0..g.len())
-        .filter(|&k| (1.0..=last).contains(&g.theta_deg(k)))
-        .collect();
+    let keep: Vec<usize> = mie::crystal::noise_bins(g, skip_pole).collect();
     (keep
         .iter()
         .map(|&k| (a.bins[k] / b.bins[k] - 1.0).powi(2))

@@ -444,10 +444,7 @@ fn per_channel(quality: &serde_json::Value, key: &str) -> [f64; 3] {
 /// channel c, over √2: either one's noise, when they are independent estimates.
 fn seed_spread(a: &[Vec<Vec<f64>>; 3], b: &[Vec<Vec<f64>>; 3], c: usize, skip_pole: bool) -> f64 {
     let grid = ThetaGrid::new(0.18).unwrap();
-    let last = if skip_pole { 179.0 } else { 180.0 };
-    let keep: Vec<usize> = (0..grid.len())
-        .filter(|&k| grid.theta_deg(k) >= 1.0 && grid.theta_deg(k) <= last)
-        .collect();
+    let keep: Vec<usize> = mie::crystal::noise_bins(grid, skip_pole).collect();
     (keep
         .iter()
         .map(|&k| (a[c][0][k] / b[c][0][k] - 1.0).powi(2))
