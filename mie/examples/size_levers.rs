@@ -1,15 +1,17 @@
 //! Issue 20, item 6: what buys accuracy per size for drops. For rain (lognormal r_g = 0.5 mm,
 //! σ_g = 1.4) and a cloud (gamma r_eff = 10 µm, v_eff = 0.1) at 550 nm, the rms relative error
 //! over bins θ ≥ 1° of the size-averaged phase function against a reference of many sizes, for
-//! - the bake's nodes: equal steps in ln r at one shift (a rank-1 lattice in size), 2 Gauss
-//!   nodes per angular panel;
-//! - independent uniform fractions (plain Monte Carlo over sizes), same counts;
-//! - the lattice with the angular ripple (period ~π/x in θ) averaged inside each bin by more
+//! - equal steps in ln r at one shift (a rank-1 lattice in size), 2 Gauss nodes per angular
+//!   panel (the bake's nodes before compute version 13);
+//! - equal steps of the cross-section-weighted distribution n(r) r² (the bake's nodes now,
+//!   `SizeDistribution::quadrature_by_area`);
+//! - with `--more`: independent uniform fractions (plain Monte Carlo over sizes), same counts;
+//! - with `--more`: the lattice with the angular ripple (period ~π/x in θ) averaged inside each bin by more
 //!   Gauss nodes per panel (an interference-aware average: each size's bin value smooth in x).
 //!
 //! Each error is the rms over four shifts (or streams), so it is the method's, not one draw's;
 //! the reference's own error is the rms difference of two references at other shifts over √2.
-//! `cargo run --release -p photometeor-mie --example size_levers [--single|--mixed] [SIZES...]`
+//! `cargo run --release -p photometeor-mie --example size_levers [--single|--mixed] [--more] [SIZES...]`
 
 use std::time::Instant;
 
@@ -156,6 +158,13 @@ fn main() {
             row("lattice", n, 2, &|i| {
                 d.quadrature_shifted(n, TAIL, SHIFTS[i])
             });
+            row("area lattice", n, 2, &|i| {
+                d.quadrature_by_area(n, TAIL, SHIFTS[i])
+            });
+
+            if !args.iter().any(|a| a == "--more") {
+                continue;
+            }
             row("monte carlo", n, 2, &|i| {
                 d.quadrature_at(&uniforms(n, 1 + i as u64), TAIL)
             });

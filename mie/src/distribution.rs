@@ -272,6 +272,70 @@ impl SizeDistribution {
         self.weighted((0..sizes).map(|i| a + (i as f64 + shift) * h).collect())
     }
 
+    /// Nodes at equal steps of the cross-section-weighted distribution: node i at quantile
+    /// (i + `shift`)/`sizes` of n(r) r² over the truncated range (in ln r), number weights
+    /// ∝ r_i⁻² (the ratio of the number density to the sampling density), normalized.
+    ///
+    /// A phase function average is Σ w_i σ_sca,i p_i / Σ w_i σ_sca,i, and σ_sca ≈ 2πr² for
+    /// large drops, so these nodes weigh about equally where [`Self::quadrature_shifted`]'s
+    /// (equal steps in ln r, number weights) spend most of their nodes on the tails, whose
+    /// weights are small, and their largest, most expensive sizes on the mass tail.
+    ///
+    /// Measured (`mie/examples/size_levers.rs`, docs/accuracy.md "Mie sizes"): default rain at
+    /// 550 nm 1.33–1.38× less error at equal sizes (two sizes in ln r worth about one here),
+    /// the cloud 1.3–1.9×, and each size cheaper (fewer of the largest); steps of n r^1.5
+    /// instead were no better.
+    pub fn quadrature_by_area(&self, sizes: usize, tail_mass: f64, shift: f64) -> SizeQuadrature {
+        if let Self::Monodisperse { radius_um } = *self {
+            return SizeQuadrature {
+                radius_um: vec![radius_um],
+                weight: vec![1.0],
+            };
+        }
+        let sizes = sizes.max(1);
+        let (lo, hi) = self.truncation(tail_mass);
+        let (a, b) = (lo.ln(), hi.ln());
+        const STEPS: usize = 20_000;
+        let h = (b - a) / STEPS as f64;
+        // Trapezoid sums over ln r of n r² (the sampling density, as a table to invert) and of
+        // n (the number it is normalized by).
+        let area = |t: f64| self.per_log_radius(t) * (2.0 * t).exp();
+        let mut cdf = Vec::with_capacity(STEPS + 1);
+        let (mut total, mut number) = (0.0, 0.0);
+        cdf.push(0.0);
+        let (mut prev, mut prev_n) = (area(a), self.per_log_radius(a));
+        for i in 1..=STEPS {
+            let t = a + i as f64 * h;
+            let (next, next_n) = (area(t), self.per_log_radius(t));
+            total += 0.5 * h * (prev + next);
+            number += 0.5 * h * (prev_n + next_n);
+            cdf.push(total);
+            (prev, prev_n) = (next, next_n);
+        }
+        let ln_r: Vec<f64> = (0..sizes)
+            .map(|i| {
+                let target = (i as f64 + shift) / sizes as f64 * total;
+                let k = cdf.partition_point(|&c| c < target).clamp(1, STEPS);
+                let (c0, c1) = (cdf[k - 1], cdf[k]);
+                let f = if c1 > c0 {
+                    (target - c0) / (c1 - c0)
+                } else {
+                    0.0
+                };
+                a + (k as f64 - 1.0 + f) * h
+            })
+            .collect();
+        // Number weight of node i: its 1/N share of the area over the density's r², divided by
+        // the number in the range: Σ w_i r_i² is the mean area per drop exactly, whatever the
+        // shift (self-normalized weights ∝ r⁻² would carry the lattice's error in Σ r_i⁻²,
+        // 5 % at 64 nodes and shift 0, into σ_ext).
+        let scale = total / (number * sizes as f64);
+        SizeQuadrature {
+            radius_um: ln_r.iter().map(|t| t.exp()).collect(),
+            weight: ln_r.iter().map(|t| scale * (-2.0 * t).exp()).collect(),
+        }
+    }
+
     /// Nodes at `fractions` ∈ [0, 1) of the truncated range in ln r, weighted by the number
     /// density per unit ln r and normalized (self-normalized importance weights: any set of
     /// fractions, e.g. independent uniform ones for a plain Monte Carlo average over sizes).
@@ -329,6 +393,59 @@ fn positive(name: &'static str, value: f64) -> Result<f64, MieError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Nodes by cross-section keep the truncated distribution's mean area per drop exactly at
+    /// any shift; its number (Σ w) and mean volume they estimate within O(1/N) (a lattice
+    /// rule, steep at the ends of the range): at 64 nodes measured worst 6.8 % at one shift,
+    /// 3.5e-3 for the mean of 16 shifts (a lattice of 1024). A lognormal and a gamma, every
+    /// node inside the truncation. (Phase functions and σ rest on Σ w r² alone.)
+    #[test]
+    fn nodes_by_area_keep_the_moments() {
+        let cases = [
+            SizeDistribution::Lognormal {
+                median_radius_um: 500.0,
+                sigma_g: 1.4,
+            },
+            SizeDistribution::Gamma {
+                r_eff_um: 10.0,
+                v_eff: 0.1,
+            },
+        ];
+        for d in cases {
+            let (lo, hi) = d.truncation(1e-3);
+            let reference = d.quadrature(8192, 1e-3);
+            let moment = |q: &SizeQuadrature, p: i32| -> f64 {
+                q.radius_um
+                    .iter()
+                    .zip(&q.weight)
+                    .map(|(r, w)| w * r.powi(p))
+                    .sum()
+            };
+            let shifts: Vec<f64> = (0..16).map(|i| i as f64 / 16.0).collect();
+            let mut mean = [0.0; 3];
+            for &shift in &shifts {
+                let q = d.quadrature_by_area(64, 1e-3, shift);
+                assert_eq!(q.radius_um.len(), 64);
+                assert!(q.radius_um.iter().all(|r| (lo..=hi).contains(r)));
+                let area = (moment(&q, 2) - moment(&reference, 2)) / moment(&reference, 2);
+                assert!(
+                    area.abs() < 1e-8,
+                    "{d:?} shift {shift}: mean area off {area:e}"
+                );
+                for (p, m) in [0, 3].into_iter().zip(&mut mean[1..]) {
+                    let (a, b) = (moment(&q, p), moment(&reference, p));
+                    *m += a / b / shifts.len() as f64;
+                    assert!(
+                        ((a - b) / b).abs() < 0.07,
+                        "{d:?} shift {shift}: moment r^{p} {a} against {b}"
+                    );
+                }
+            }
+            for m in &mean[1..] {
+                assert!((m - 1.0).abs() < 4e-3, "{d:?}: mean over shifts {m}");
+            }
+        }
+    }
 
     #[test]
     fn lognormal_effective_radius_round_trips() {

@@ -129,8 +129,9 @@ impl Quality {
 }
 
 impl Knobs {
-    /// The size nodes wavelength j of `j_len` uses: each wavelength's nodes shifted by
-    /// (j + ½)/J of a step in ln r (plus the seed's fraction). The shift itself buys nothing
+    /// The size nodes wavelength j of `j_len` uses: equal steps of the cross-section-weighted
+    /// distribution (`SizeDistribution::quadrature_by_area`; docs/accuracy.md "Mie sizes"),
+    /// each wavelength's nodes shifted by (j + ½)/J of a step (plus the seed's fraction). The shift itself buys nothing
     /// measurable (docs/accuracy.md, "Mie sizes": the wavelengths' size parameters differ at
     /// the same radii already); the seed's offset rides on it.
     pub fn size_quadrature(
@@ -143,7 +144,7 @@ impl Knobs {
         // independent set of radii (seed 0: the presets' own).
         let golden = 0.618_033_988_749_894_9 * self.seed as f64;
         let shift = ((j as f64 + 0.5) / j_len as f64 + golden).fract();
-        distribution.quadrature_shifted(self.sizes, self.tail_mass, shift)
+        distribution.quadrature_by_area(self.sizes, self.tail_mass, shift)
     }
 }
 
