@@ -182,45 +182,68 @@ impl AmsSeries {
 
     /// Splits the bin averages `bins` (1/sr) on `grid` and expands Q's reconstruction.
     pub fn new(grid: &ThetaGrid, bins: &[f64], reconstruction: Reconstruction) -> Self {
-        assert_eq!(bins.len(), grid.len(), "one value per bin");
+        Self::many(grid, &[bins], reconstruction)
+            .pop()
+            .expect("one series per phase function")
+    }
+
+    /// [`Self::new`] for several phase functions on one grid, in one pass over the degrees
+    /// (the bin integrals W_lk, the costly part, shared).
+    pub fn many(grid: &ThetaGrid, bins: &[&[f64]], reconstruction: Reconstruction) -> Vec<Self> {
         let omega = grid.bin_solid_angles();
-        let energy: f64 = bins.iter().zip(&omega).map(|(v, o)| v * o).sum();
-        let v: Vec<f64> = bins.iter().map(|b| b / energy).collect();
-        // Split the forward delta: energy of bin 0 above the level of bin 1.
-        let f = if v.len() > 1 && v[0] > v[1] {
-            (v[0] - v[1]) * omega[0]
-        } else {
-            0.0
-        };
-        let mut q = v.clone();
-        if f > 0.0 {
-            q[0] = v[1];
-        }
-        for x in q.iter_mut() {
-            *x /= 1.0 - f;
-        }
+        let split: Vec<(f64, Vec<f64>, f64)> = bins
+            .iter()
+            .map(|bins| {
+                assert_eq!(bins.len(), grid.len(), "one value per bin");
+                let energy: f64 = bins.iter().zip(&omega).map(|(v, o)| v * o).sum();
+                let v: Vec<f64> = bins.iter().map(|b| b / energy).collect();
+                // Split the forward delta: energy of bin 0 above the level of bin 1.
+                let f = if v.len() > 1 && v[0] > v[1] {
+                    (v[0] - v[1]) * omega[0]
+                } else {
+                    0.0
+                };
+                let mut q = v;
+                if f > 0.0 {
+                    q[0] = q[1];
+                }
+                for x in q.iter_mut() {
+                    *x /= 1.0 - f;
+                }
+                (f, q, energy)
+            })
+            .collect();
         // χ_l of the steps, 2π Σ_k q_k W_lk, times the reconstruction's factor (module docs).
         let (factor, l_max) = reconstruction.factors(grid.step_deg().to_radians());
-        let mut chi = Vec::with_capacity(l_max + 1);
+        let mut chis: Vec<Vec<f64>> = vec![Vec::with_capacity(l_max + 1); split.len()];
         let mut w = BinIntegrals::new(grid);
         for l in 0..=l_max {
             if l > 0 {
                 w.advance();
             }
-            chi.push(2.0 * std::f64::consts::PI * dot(&q, w.values()) * factor(l));
+            let factor_l = factor(l);
+            for (chi, (_, q, _)) in chis.iter_mut().zip(&split) {
+                chi.push(2.0 * std::f64::consts::PI * dot(q, w.values()) * factor_l);
+            }
         }
-        let mut chi_tail = chi.iter().map(|c| c.abs()).collect::<Vec<_>>();
-        for l in (0..chi_tail.len().saturating_sub(1)).rev() {
-            chi_tail[l] = chi_tail[l].max(chi_tail[l + 1]);
-        }
-        Self {
-            grid: *grid,
-            f,
-            q,
-            chi,
-            chi_tail,
-            input_energy_error: energy - 1.0,
-        }
+        split
+            .into_iter()
+            .zip(chis)
+            .map(|((f, q, energy), chi)| {
+                let mut chi_tail = chi.iter().map(|c| c.abs()).collect::<Vec<_>>();
+                for l in (0..chi_tail.len().saturating_sub(1)).rev() {
+                    chi_tail[l] = chi_tail[l].max(chi_tail[l + 1]);
+                }
+                Self {
+                    grid: *grid,
+                    f,
+                    q,
+                    chi,
+                    chi_tail,
+                    input_energy_error: energy - 1.0,
+                }
+            })
+            .collect()
     }
 
     /// Weight f of the single-scattering forward delta.
@@ -246,7 +269,7 @@ impl AmsSeries {
 
     /// F_n = ∫_{μ>0} Ams_n dΩ from the coefficients (module docs).
     pub fn forward_fraction(&self, n: usize) -> f64 {
-        mixture_forward_fraction(&[(1.0, self)], n)
+        mixture_forward_fractions(&[(1.0, self)], &[n])[0]
     }
 
     /// Bin averages of the Poisson mixture M(D) = Σ_{i≥1} q_i(D) Ams_i / (1 − q_0(D)) for
@@ -320,7 +343,30 @@ impl AmsMixture {
 
     /// F_n = Σ_j a_j F_n[P_j].
     pub fn forward_fraction(&self, n: usize) -> f64 {
-        mixture_forward_fraction(&self.refs(), n)
+        mixture_forward_fractions(&self.refs(), &[n])[0]
+    }
+
+    /// F_n for each n in `orders`, in one pass over the degrees.
+    pub fn forward_fractions(&self, orders: &[usize]) -> Vec<f64> {
+        mixture_forward_fractions(&self.refs(), orders)
+    }
+
+    /// [`Self::rows`] and [`Self::poisson_rows`] in one pass over the degrees.
+    pub fn rows_and_poisson(&self, orders: &[usize], depths: &[f64]) -> (Array2<f64>, Array2<f64>) {
+        assert!(
+            depths.iter().all(|d| d.is_finite() && *d > 0.0),
+            "Poisson depths must be finite and > 0: {depths:?}"
+        );
+        let kinds: Vec<Row> = orders
+            .iter()
+            .map(|&n| Row::Order(n))
+            .chain(depths.iter().map(|&d| Row::Poisson(d)))
+            .collect();
+        let all = series_rows(&self.refs(), &kinds);
+        (
+            all.slice(ndarray::s![..orders.len(), ..]).to_owned(),
+            all.slice(ndarray::s![orders.len().., ..]).to_owned(),
+        )
     }
 
     /// Σ_j a_j M(D)[P_j], as [`AmsSeries::poisson_rows`]: each wavelength's light scatters
@@ -375,12 +421,15 @@ impl Row {
         }
     }
 
-    /// The coefficient of degree l of the j ≥ 2 terms at χ_l = `chi`; `f_pow` holds f^0..
-    /// (Orders only).
-    fn higher(self, f: f64, f_pow: &[f64], chi: f64) -> f64 {
+    /// The j ≥ 2 coefficient of this row at χ_l = `chi` for a part whose forward δ is f:
+    /// `orders` holds c_{n,l} at this χ for n up to [`RECURRENCE_ORDERS`]
+    /// ([`higher_order_coefficients`]), higher orders come from [`high_order_coefficient`],
+    /// `poisson` is this row's [`PoissonScale`] for the part.
+    fn higher(self, f: f64, orders: &[f64], poisson: PoissonScale, chi: f64) -> f64 {
         match self {
-            Row::Order(n) => higher_order_coefficient(f, f_pow, chi, n),
-            Row::Poisson(d) => poisson_higher_coefficient(f, chi, d),
+            Row::Order(n) if n < orders.len() => orders[n],
+            Row::Order(n) => high_order_coefficient(f, chi, n),
+            Row::Poisson(_) => poisson.coefficient(chi),
         }
     }
 
@@ -415,8 +464,18 @@ fn series_rows(parts: &[(f64, &AmsSeries)], kinds: &[Row]) -> Array2<f64> {
     let omega0 = grid.bin_solid_angles()[0];
     let inv_d_mu: Vec<f64> = grid.bin_mu_widths().iter().map(|d| 1.0 / d).collect();
     let l_max = parts.iter().map(|(_, s)| s.l_max()).max().unwrap_or(0);
-    let n_top = kinds.iter().map(|r| r.top_order()).max().unwrap_or(0);
-    let powers: Vec<Vec<f64>> = parts.iter().map(|(_, s)| powers_of(s.f, n_top)).collect();
+    let n_top = kinds
+        .iter()
+        .map(|r| r.top_order())
+        .max()
+        .unwrap_or(0)
+        .min(RECURRENCE_ORDERS);
+    // Per part, each row's Poisson factors (constant in l).
+    let scales: Vec<Vec<PoissonScale>> = parts
+        .iter()
+        .map(|(_, s)| kinds.iter().map(|&r| PoissonScale::new(r, s.f)).collect())
+        .collect();
+    let mut orders = vec![0.0; n_top + 1];
     let mut rows = vec![vec![0.0; k_len]; kinds.len()];
     let mut w = BinIntegrals::new(grid);
     let mut w_over_dmu = vec![0.0; k_len];
@@ -429,17 +488,16 @@ fn series_rows(parts: &[(f64, &AmsSeries)], kinds: &[Row]) -> Array2<f64> {
     let tail_scale = ((l_max + 1) as f64).powi(2) / (4.0 * std::f64::consts::PI);
     for l in 0..=l_max {
         if l % 32 == 0 && l > 0 {
-            let bound: f64 = parts
-                .iter()
-                .zip(&powers)
-                .map(|((a, s), f_pow)| {
-                    let m = s.chi_tail.get(l).copied().unwrap_or(0.0);
-                    kinds
-                        .iter()
-                        .map(|&r| a * r.higher(s.f, f_pow, m))
-                        .fold(0.0, f64::max)
-                })
-                .sum();
+            let mut bound = 0.0;
+            for ((a, s), scale) in parts.iter().zip(&scales) {
+                let m = s.chi_tail.get(l).copied().unwrap_or(0.0);
+                higher_order_coefficients(s.f, m, &mut orders);
+                bound += kinds
+                    .iter()
+                    .zip(scale)
+                    .map(|(&r, &p)| a * r.higher(s.f, &orders, p, m))
+                    .fold(0.0, f64::max);
+            }
             if bound * tail_scale < 1e-17 {
                 break;
             }
@@ -449,10 +507,11 @@ fn series_rows(parts: &[(f64, &AmsSeries)], kinds: &[Row]) -> Array2<f64> {
         }
         let weight = (2.0 * l as f64 + 1.0) / (4.0 * std::f64::consts::PI);
         coefficients.iter_mut().for_each(|c| *c = 0.0);
-        for ((a, s), f_pow) in parts.iter().zip(&powers) {
+        for ((a, s), scale) in parts.iter().zip(&scales) {
             let Some(&chi_l) = s.chi.get(l) else { continue };
-            for (c, &r) in coefficients.iter_mut().zip(kinds) {
-                *c += a * r.higher(s.f, f_pow, chi_l);
+            higher_order_coefficients(s.f, chi_l, &mut orders);
+            for ((c, &r), &p) in coefficients.iter_mut().zip(kinds).zip(scale) {
+                *c += a * r.higher(s.f, &orders, p, chi_l);
             }
         }
         if coefficients.iter().all(|&c| c == 0.0) {
@@ -484,35 +543,83 @@ fn series_rows(parts: &[(f64, &AmsSeries)], kinds: &[Row]) -> Array2<f64> {
     Array2::from_shape_vec((kinds.len(), k_len), rows.concat()).expect("rows are K wide")
 }
 
-/// The j ≥ 2 coefficient of the Poisson mixture at depth D (module docs, "Poisson mixtures"):
-/// e^{−D(1−f)} (e^u − 1 − u) / (1 − e^{−D}), u = D (1 − f) χ.
-fn poisson_higher_coefficient(f: f64, chi: f64, d: f64) -> f64 {
-    let u = d * (1.0 - f) * chi;
-    // e^u − 1 − u, with its series where expm1 would cancel.
-    let tail = if u.abs() < 1e-3 {
-        0.5 * u * u * (1.0 + u / 3.0 * (1.0 + u / 4.0))
-    } else {
-        u.exp_m1() - u
-    };
-    (-d * (1.0 - f)).exp() * tail / -(-d).exp_m1()
+/// The factors of a Poisson row's j ≥ 2 coefficient that do not depend on l, for one part
+/// (module docs, "Poisson mixtures"): e^{−D(1−f)} / (1 − e^{−D}) and D (1 − f).
+#[derive(Debug, Clone, Copy, Default)]
+struct PoissonScale {
+    scale: f64,
+    depth: f64,
 }
 
-fn mixture_forward_fraction(parts: &[(f64, &AmsSeries)], n: usize) -> f64 {
-    let mut total = 0.0;
+impl PoissonScale {
+    fn new(row: Row, f: f64) -> Self {
+        match row {
+            Row::Poisson(d) => Self {
+                scale: (-d * (1.0 - f)).exp() / -(-d).exp_m1(),
+                depth: d * (1.0 - f),
+            },
+            Row::Order(_) => Self::default(),
+        }
+    }
+
+    /// e^{−D(1−f)} (e^u − 1 − u) / (1 − e^{−D}), u = D (1 − f) χ.
+    fn coefficient(self, chi: f64) -> f64 {
+        let u = self.depth * chi;
+        // e^u − 1 − u, with its series where expm1 would cancel.
+        let tail = if u.abs() < 1e-3 {
+            0.5 * u * u * (1.0 + u / 3.0 * (1.0 + u / 4.0))
+        } else {
+            u.exp_m1() - u
+        };
+        self.scale * tail
+    }
+}
+
+fn mixture_forward_fractions(parts: &[(f64, &AmsSeries)], orders: &[usize]) -> Vec<f64> {
+    let n_top = orders
+        .iter()
+        .copied()
+        .max()
+        .unwrap_or(0)
+        .min(RECURRENCE_ORDERS);
+    let mut total = vec![0.0; orders.len()];
+    let mut c = vec![0.0; n_top + 1];
     for (a, s) in parts {
         let f = s.f;
-        let f_pow = powers_of(f, n);
-        let single = n as f64 * f.powi(n as i32 - 1) * (1.0 - f);
-        let mut fwd = f.powi(n as i32) + single * forward_hemisphere(&s.grid, &s.q);
-        // l = 0: ∫_0^1 P_0 = 1, weight 1/2.
-        fwd += 0.5 * higher_order_coefficient(f, &f_pow, s.chi[0], n);
+        let forward_q = forward_hemisphere(&s.grid, &s.q);
+        // The δ and Q terms, then l = 0 (∫_0^1 P_0 = 1, weight 1/2) and l ≥ 1 of the series.
+        let mut fwd: Vec<f64> = orders
+            .iter()
+            .map(|&n| {
+                let single = n as f64 * f.powi(n as i32 - 1) * (1.0 - f);
+                f.powi(n as i32) + single * forward_q
+            })
+            .collect();
+        let coefficient = |c: &[f64], chi: f64, n: usize| {
+            c.get(n)
+                .copied()
+                .unwrap_or_else(|| high_order_coefficient(f, chi, n))
+        };
+        higher_order_coefficients(f, s.chi[0], &mut c);
+        for (x, &n) in fwd.iter_mut().zip(orders) {
+            *x += 0.5 * coefficient(&c, s.chi[0], n);
+        }
         let p_prime_0 = legendre_derivatives_at_zero(s.l_max());
         for l in 1..s.chi.len() {
-            let c = higher_order_coefficient(f, &f_pow, s.chi[l], n);
+            // P'_l(0) = 0 for even l: those degrees add nothing.
+            if p_prime_0[l] == 0.0 {
+                continue;
+            }
+            higher_order_coefficients(f, s.chi[l], &mut c);
             let half_integral = p_prime_0[l] / (l as f64 * (l as f64 + 1.0));
-            fwd += (2.0 * l as f64 + 1.0) / 2.0 * c * half_integral;
+            let weight = (2.0 * l as f64 + 1.0) / 2.0;
+            for (x, &n) in fwd.iter_mut().zip(orders) {
+                *x += weight * coefficient(&c, s.chi[l], n) * half_integral;
+            }
         }
-        total += a * fwd;
+        for (t, x) in total.iter_mut().zip(&fwd) {
+            *t += a * x;
+        }
     }
     total
 }
@@ -542,6 +649,7 @@ fn isotropic_order(parts: &[(f64, &AmsSeries)], epsilon: f64, n_cap: usize) -> O
 }
 
 /// f^0..=f^n (only up to degree 64 are used by the direct sum).
+#[cfg(test)]
 fn powers_of(f: f64, n: usize) -> Vec<f64> {
     let top = n.min(64);
     let mut p = Vec::with_capacity(top + 1);
@@ -559,15 +667,56 @@ pub fn ams_table(grid: &ThetaGrid, bins: &[f64], settings: AmsSettings) -> AmsTa
     let orders: Vec<usize> = (1..=settings.n_max).collect();
     AmsTable {
         rows: series.rows(&orders),
-        forward_fraction: orders.iter().map(|&n| series.forward_fraction(n)).collect(),
+        forward_fraction: mixture_forward_fractions(&[(1.0, &series)], &orders),
         forward_peak_fraction: series.f,
         input_energy_error: series.input_energy_error,
         l_max: series.l_max(),
     }
 }
 
+/// Orders whose coefficients [`higher_order_coefficients`] gives; beyond them
+/// [`high_order_coefficient`] (a bisection for n_iso asks for single orders in the
+/// thousands, which the recurrence would reach in O(n) per degree).
+const RECURRENCE_ORDERS: usize = 64;
+
+/// c_{n,l} for n > [`RECURRENCE_ORDERS`] in closed form: the subtracted terms are ≤ n f^{n−1}
+/// with f^64 ≲ 1e-7 even for ice, so it loses at most ~1e-16 · n f^{n−1} absolute.
+fn high_order_coefficient(f: f64, chi: f64, n: usize) -> f64 {
+    let a = (1.0 - f) * chi;
+    if f == 0.0 {
+        return a.powi(n as i32);
+    }
+    (f + a).powi(n as i32) - f.powi(n as i32) - n as f64 * f.powi(n as i32 - 1) * a
+}
+
+/// c_{n,l} = (f + (1−f)χ)^n − f^n − n f^{n−1}(1−f)χ, the j ≥ 2 part of the binomial
+/// expansion, for n = 0..`out.len()` (0 below n = 2), by the recurrence
+///
+///   c_2 = a²,  c_{n+1} = x c_n + n f^{n−1} a²   (a = (1 − f)χ, x = f + a),
+///
+/// which follows from x^{n+1} = x·x^n; every term is of the size of the result (|x| ≤ 1), so
+/// nothing cancels against the j < 2 terms, and all orders cost O(n) together.
+fn higher_order_coefficients(f: f64, chi: f64, out: &mut [f64]) {
+    let a = (1.0 - f) * chi;
+    let (x, a2) = (f + a, a * a);
+    for c in out.iter_mut().take(2) {
+        *c = 0.0;
+    }
+    if out.len() <= 2 {
+        return;
+    }
+    out[2] = a2;
+    let mut f_pow = f; // f^{n−1}
+    for n in 2..out.len() - 1 {
+        out[n + 1] = x * out[n] + n as f64 * f_pow * a2;
+        f_pow *= f;
+    }
+}
+
 /// c_{n,l} = (f + (1−f)χ)^n − f^n − n f^{n−1}(1−f)χ: the j ≥ 2 part of the binomial expansion.
-/// `f_pow` holds f^0..f^min(n, 64).
+/// `f_pow` holds f^0..f^min(n, 64). The direct sum, O(n) per order: the tests' check of
+/// [`higher_order_coefficients`].
+#[cfg(test)]
 fn higher_order_coefficient(f: f64, f_pow: &[f64], chi: f64, n: usize) -> f64 {
     if n < 2 {
         return 0.0;
@@ -630,6 +779,52 @@ fn dot(a: &[f64], b: &[f64]) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The recurrence gives the binomial sum Σ_{j≥2} C(n,j) f^{n−j} a^j to rounding for
+    /// every order up to 200 (measured worst 6.6e-15 of the largest term), across forward deltas from none to an ice crystal's and χ of
+    /// either sign down to 1e-9 (where the closed form would cancel).
+    #[test]
+    fn coefficient_recurrence_matches_the_binomial_sum() {
+        let mut out = vec![0.0; 201];
+        let mut worst: f64 = 0.0;
+        for f in [0.0, 0.1, 0.5, 0.9, 0.999] {
+            for chi in [-0.95, -0.3, -1e-9, 1e-9, 1e-4, 0.5, 0.99, 0.999_999] {
+                higher_order_coefficients(f, chi, &mut out);
+                let f_pow = powers_of(f, 200);
+                for n in 0..=200 {
+                    // The bake's earlier direct sum up to n = 64 (a closed form above, which
+                    // cancels), the sum term by term beyond.
+                    let direct = if n <= 64 {
+                        higher_order_coefficient(f, &f_pow, chi, n)
+                    } else {
+                        let a = (1.0 - f) * chi;
+                        let mut binom = n as f64 * (n as f64 - 1.0) / 2.0;
+                        let mut sum = 0.0;
+                        for j in 2..=n {
+                            sum += binom * f.powi((n - j) as i32) * a.powi(j as i32);
+                            binom *= (n - j) as f64 / (j + 1) as f64;
+                        }
+                        sum
+                    };
+                    // Relative to the largest term of the sum, |a|² (f + |a|)^{n−2} C(n, 2).
+                    let a = ((1.0 - f) * chi).abs();
+                    let scale = a * a * (f + a).powi(n as i32 - 2) * (n * n) as f64;
+                    let e = if scale > 0.0 {
+                        (out[n] - direct).abs() / scale
+                    } else {
+                        (out[n] - direct).abs()
+                    };
+                    worst = worst.max(e);
+                    assert!(
+                        e < 1e-14,
+                        "f {f}, χ {chi}, n {n}: {} against {direct}",
+                        out[n]
+                    );
+                }
+            }
+        }
+        println!("worst relative difference {worst:.1e}");
+    }
 
     /// Henyey–Greenstein bin averages on a grid, by fine midpoint integration in μ.
     fn hg_bins(grid: &ThetaGrid, g: f64) -> Vec<f64> {

@@ -109,100 +109,202 @@ const GAUSS8: [(f64, f64); 8] = [
     (0.960_289_856_497_536_3, 0.101_228_536_290_376_26),
 ];
 
-/// ∫_a^b e^{−τ g(θ)} dθ by 8-point Gauss–Legendre.
-fn exponential_integral(tau: f64, a: f64, b: f64) -> f64 {
-    let (m, r) = (0.5 * (a + b), 0.5 * (b - a));
-    GAUSS8
-        .iter()
-        .map(|(x, w)| {
-            let g = exponent_factor(m + r * x);
-            w * if g.is_finite() { (-tau * g).exp() } else { 0.0 }
-        })
-        .sum::<f64>()
-        * r
-}
-
 /// The kernel products of the phase function `bins` (bin averages, 1/sr) on `grid`.
 pub fn kernel_table(grid: &ThetaGrid, bins: &[f64]) -> KernelTable {
-    use std::f64::consts::FRAC_PI_2;
-    assert_eq!(bins.len(), grid.len(), "one value per bin");
-    let depths = kernel_depths();
-    let k_len = grid.len();
-    let step = grid.step_deg().to_radians();
-    // θ of bin k's centre and of its edges, clamped to [−π/2, π/2].
-    let centre = |k: usize| k as f64 * step - FRAC_PI_2;
-    let lo = |k: usize| (centre(k) - 0.5 * step).max(-FRAC_PI_2);
-    let hi = |k: usize| (centre(k) + 0.5 * step).min(FRAC_PI_2);
-    let mut primitive = Array2::zeros((depths.len(), k_len));
-    let mut polynomial = Array2::zeros((depths.len(), 5));
-    let mut polynomial_error = Vec::with_capacity(depths.len());
-    for (j, &tau) in depths.iter().enumerate() {
-        // C at each bin centre: the bins below in full, this one's lower half.
-        let mut sum = 0.0;
-        let mut at_centre = vec![0.0; k_len];
-        for k in 0..k_len {
-            let (a, c, b) = (lo(k), centre(k).clamp(-FRAC_PI_2, FRAC_PI_2), hi(k));
-            let lower = if c > a {
-                bins[k] * exponential_integral(tau, a, c)
-            } else {
-                0.0
-            };
-            let upper = if b > c {
-                bins[k] * exponential_integral(tau, c, b)
-            } else {
-                0.0
-            };
-            at_centre[k] = sum + lower;
-            sum += lower + upper;
-        }
-        for k in 0..k_len {
-            primitive[[j, k]] = at_centre[k];
-        }
-        let (c, err) = fit_polynomial(grid, bins, tau, &at_centre, sum);
-        for i in 0..5 {
-            polynomial[[j, i]] = c[i];
-        }
-        polynomial_error.push(err);
+    kernel_tables(grid, &[bins])
+        .pop()
+        .expect("one table per phase function")
+}
+
+/// [`kernel_table`] for several phase functions on one grid (a bake's three channels): the
+/// exponential factor e^{−τ_h g(θ)} at every quadrature node, the costly part, is the same
+/// for all of them and evaluated once per depth.
+pub fn kernel_tables(grid: &ThetaGrid, phases: &[&[f64]]) -> Vec<KernelTable> {
+    for bins in phases {
+        assert_eq!(bins.len(), grid.len(), "one value per bin");
     }
-    KernelTable {
-        depths,
-        primitive,
-        polynomial,
-        polynomial_error,
+    let depths = kernel_depths();
+    let nodes = KernelNodes::new(grid);
+    let per_depth: Vec<Vec<([f64; 5], f64, Vec<f64>)>> = depths
+        .iter()
+        .map(|&tau| {
+            // ∫ e^{−τ g} over each half-bin (lower, upper), by 8-point Gauss–Legendre.
+            let halves: Vec<[f64; 2]> = nodes
+                .halves
+                .iter()
+                .map(|bin| bin.map(|half| half.map_or(0.0, |h| h.integral(tau))))
+                .collect();
+            // e^{−τ g} at the fit's samples.
+            let factor: Vec<f64> = nodes
+                .samples
+                .iter()
+                .map(|s| {
+                    if s.g.is_finite() {
+                        (-tau * s.g).exp()
+                    } else if tau == 0.0 {
+                        1.0
+                    } else {
+                        0.0
+                    }
+                })
+                .collect();
+            phases
+                .iter()
+                .map(|bins| {
+                    // C at each bin centre: the bins below in full, this one's lower half.
+                    let mut sum = 0.0;
+                    let mut at_centre = vec![0.0; bins.len()];
+                    for (k, h) in halves.iter().enumerate() {
+                        let (lower, upper) = (bins[k] * h[0], bins[k] * h[1]);
+                        at_centre[k] = sum + lower;
+                        sum += lower + upper;
+                    }
+                    let (c, err) = fit_polynomial(grid, &nodes, bins, &factor, &at_centre, sum);
+                    (c, err, at_centre)
+                })
+                .collect()
+        })
+        .collect();
+    (0..phases.len())
+        .map(|i| {
+            let mut primitive = Array2::zeros((depths.len(), grid.len()));
+            let mut polynomial = Array2::zeros((depths.len(), 5));
+            let mut polynomial_error = Vec::with_capacity(depths.len());
+            for (j, tables) in per_depth.iter().enumerate() {
+                let (c, err, at_centre) = &tables[i];
+                for (k, v) in at_centre.iter().enumerate() {
+                    primitive[[j, k]] = *v;
+                }
+                for (m, v) in c.iter().enumerate() {
+                    polynomial[[j, m]] = *v;
+                }
+                polynomial_error.push(*err);
+            }
+            KernelTable {
+                depths: depths.clone(),
+                primitive,
+                polynomial,
+                polynomial_error,
+            }
+        })
+        .collect()
+}
+
+/// One half-bin's Gauss–Legendre nodes: g(θ) at the 8 nodes and the half-width r.
+#[derive(Debug, Clone, Copy)]
+struct HalfBin {
+    g: [f64; 8],
+    r: f64,
+}
+
+impl HalfBin {
+    fn new(a: f64, b: f64) -> Self {
+        let (m, r) = (0.5 * (a + b), 0.5 * (b - a));
+        Self {
+            g: GAUSS8.map(|(x, _)| exponent_factor(m + r * x)),
+            r,
+        }
+    }
+
+    /// ∫_a^b e^{−τ g(θ)} dθ by 8-point Gauss–Legendre.
+    fn integral(&self, tau: f64) -> f64 {
+        GAUSS8
+            .iter()
+            .zip(&self.g)
+            .map(|((_, w), &g)| w * if g.is_finite() { (-tau * g).exp() } else { 0.0 })
+            .sum::<f64>()
+            * self.r
+    }
+}
+
+/// One sample of the polynomial fit: its bin, g(θ) and the Legendre basis at x = θ/(π/2).
+#[derive(Debug, Clone, Copy)]
+struct FitSample {
+    bin: usize,
+    g: f64,
+    basis: [f64; 5],
+}
+
+/// What a kernel table needs of the grid whatever the depth and the phase function: each
+/// bin's half-bin nodes (none where a half lies outside [−π/2, π/2]), the fit's samples (16
+/// per bin) and the fit's Gram matrix.
+struct KernelNodes {
+    halves: Vec<[Option<HalfBin>; 2]>,
+    samples: Vec<FitSample>,
+    gram: [[f64; 5]; 5],
+    dx: f64,
+}
+
+impl KernelNodes {
+    fn new(grid: &ThetaGrid) -> Self {
+        use std::f64::consts::FRAC_PI_2;
+        let step = grid.step_deg().to_radians();
+        // θ of bin k's centre and of its edges, clamped to [−π/2, π/2].
+        let centre = |k: usize| k as f64 * step - FRAC_PI_2;
+        let lo = |k: usize| (centre(k) - 0.5 * step).max(-FRAC_PI_2);
+        let hi = |k: usize| (centre(k) + 0.5 * step).min(FRAC_PI_2);
+        let halves = (0..grid.len())
+            .map(|k| {
+                let (a, c, b) = (lo(k), centre(k).clamp(-FRAC_PI_2, FRAC_PI_2), hi(k));
+                [
+                    (c > a).then(|| HalfBin::new(a, c)),
+                    (b > c).then(|| HalfBin::new(c, b)),
+                ]
+            })
+            .collect();
+        // Normal equations in the scaled variable x = θ/(π/2) ∈ [−1, 1], Legendre basis for
+        // conditioning (uniform weight, 16 samples per bin).
+        let n = 16 * grid.len();
+        let dx = 2.0 / n as f64;
+        let mut gram = [[0.0f64; 5]; 5];
+        let samples = (0..n)
+            .map(|s| {
+                let x = -1.0 + (s as f64 + 0.5) * dx;
+                let theta = x * FRAC_PI_2;
+                let alpha = (theta + FRAC_PI_2).to_degrees();
+                let p = legendre5(x);
+                for a in 0..5 {
+                    for b in 0..5 {
+                        gram[a][b] += p[a] * p[b] * dx;
+                    }
+                }
+                FitSample {
+                    bin: ((alpha / grid.step_deg()).round() as usize).min(grid.len() - 1),
+                    g: exponent_factor(theta),
+                    basis: p,
+                }
+            })
+            .collect();
+        Self {
+            halves,
+            samples,
+            gram,
+            dx,
+        }
     }
 }
 
 /// Least squares of K by Σ c_i θ^i over [−π/2, π/2] (uniform weight, sampled at 16
-/// points per bin), and the error of its primitive against `exact` (C at the bin centres)
-/// relative to the whole integral `total`.
+/// points per bin; `factor` the exponential factor at each sample), and the error of its
+/// primitive against `exact` (C at the bin centres) relative to the whole integral `total`.
 fn fit_polynomial(
     grid: &ThetaGrid,
+    nodes: &KernelNodes,
     bins: &[f64],
-    tau: f64,
+    factor: &[f64],
     exact: &[f64],
     total: f64,
 ) -> ([f64; 5], f64) {
     use std::f64::consts::FRAC_PI_2;
     let step = grid.step_deg().to_radians();
-    // Normal equations in the scaled variable x = θ/(π/2) ∈ [−1, 1], Legendre basis for
-    // conditioning, then converted to monomials in θ.
-    let mut gram = [[0.0f64; 5]; 5];
     let mut rhs = [0.0f64; 5];
-    let samples = 16 * grid.len();
-    let dx = 2.0 / samples as f64;
-    for s in 0..samples {
-        let x = -1.0 + (s as f64 + 0.5) * dx;
-        let theta = x * FRAC_PI_2;
-        let k = kernel(grid, bins, tau, theta);
-        let p = legendre5(x);
+    for (s, e) in nodes.samples.iter().zip(factor) {
+        let k = e * bins[s.bin];
         for a in 0..5 {
-            rhs[a] += p[a] * k * dx;
-            for b in 0..5 {
-                gram[a][b] += p[a] * p[b] * dx;
-            }
+            rhs[a] += s.basis[a] * k * nodes.dx;
         }
     }
-    let coef = solve5(gram, rhs);
+    let coef = solve5(nodes.gram, rhs);
     // Σ a_l P_l(x) → Σ c_i θ^i: P_l's monomial coefficients, then x = θ/(π/2).
     const P: [[f64; 5]; 5] = [
         [1.0, 0.0, 0.0, 0.0, 0.0],

@@ -486,10 +486,9 @@ fn field_entry(
 /// Biri et al.'s point-light kernel tables (`tables::biri`) of a field's Ams_1 per channel.
 pub fn biri_kernel(image: &FieldImage) -> format::BiriTable {
     let grid = ThetaGrid::new(image.theta_step_deg).expect("a bake's own grid");
-    let tables: Vec<tables::biri::KernelTable> = (0..3)
-        .into_par_iter()
-        .map(|c| tables::biri::kernel_table(&grid, &image.row(c, 0).to_vec()))
-        .collect();
+    let rows: Vec<Vec<f64>> = (0..3).map(|c| image.row(c, 0).to_vec()).collect();
+    let rows: Vec<&[f64]> = rows.iter().map(|r| &r[..]).collect();
+    let tables = tables::biri::kernel_tables(&grid, &rows);
     let depths = tables[0].depths.clone();
     format::BiriTable {
         field: image.field.clone(),
@@ -717,10 +716,19 @@ pub fn compute_field(
     // Channel c mixes wavelength j with a_cj = w_cj σ_sca,j / Σ_j w_cj σ_sca,j (the scattered
     // light's spectrum); every row is Σ_j a_cj Ams_n[P_j], light keeping its wavelength.
     bar.message("Legendre series per wavelength");
+    // One pass over the degrees per thread, its wavelengths sharing the bin integrals.
+    let per_thread = per_wavelength
+        .len()
+        .div_ceil(rayon::current_num_threads())
+        .max(1);
     let series: Vec<AmsSeries> = per_wavelength
-        .par_iter()
-        .map(|p| AmsSeries::from_phase(p, knobs.reconstruction))
-        .collect();
+        .par_chunks(per_thread)
+        .map(|chunk| {
+            let bins: Vec<&[f64]> = chunk.iter().map(|p| &p.bins[..]).collect();
+            AmsSeries::many(grid, &bins, knobs.reconstruction)
+        })
+        .collect::<Vec<_>>()
+        .concat();
     bar.message("RGB and Ams_n");
     let orders: Vec<usize> = (1..=plan.scene.n_max).collect();
     let depths = plan.scene.poisson_depths();
@@ -990,13 +998,11 @@ fn channel_tables(
     for (slot, &eps) in n_isotropic.iter_mut().zip(&N_ISO_EPSILONS) {
         *slot = mixture.isotropic_order(eps, N_ISO_CAP).map(|n| n as u32);
     }
+    let (rows, poisson) = mixture.rows_and_poisson(orders, depths);
     Ok(ChannelResult {
-        rows: mixture.rows(orders),
-        poisson: mixture.poisson_rows(depths),
-        forward_fraction: orders
-            .iter()
-            .map(|&n| mixture.forward_fraction(n))
-            .collect(),
+        rows,
+        poisson,
+        forward_fraction: mixture.forward_fractions(orders),
         forward_peak_fraction: orders
             .iter()
             .map(|&n| mixture.forward_peak_fraction(n))
