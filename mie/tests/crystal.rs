@@ -174,8 +174,13 @@ fn peak_deg(bins: &[f64], step: f64, lo: f64, hi: f64) -> f64 {
     k as f64 * step
 }
 
+/// Halos start at the prism's minimum deviation: each halo's inner edge (its steepest rise from
+/// one bin to the next) is the bin holding D_min or the next, and the 22° halo's maximum sits
+/// just outside it. The 46° halo of plates is a step followed by a plateau (47.0–47.6° at
+/// 450 nm, ±3 % bin to bin at 4 M rays), whose maximum is the noise's: seeds 17–22 put it
+/// 0.05–0.47° out, where its edge stays within 0.05° for every seed.
 #[test]
-fn halo_maxima_sit_just_outside_minimum_deviation() {
+fn halos_start_at_minimum_deviation() {
     // 0.05° bins; 22° halo from columns (60° prisms), 46° halo from plates (90° prisms).
     for lambda in [450.0, 550.0, 650.0] {
         let n = Material::Ice.refractive_index(lambda, -20.0).unwrap().re;
@@ -196,13 +201,30 @@ fn halo_maxima_sit_just_outside_minimum_deviation() {
                 .map(|(k, e)| e / g.bin_solid_angles()[k])
                 .collect();
             let d_min = minimum_deviation_deg(n, apex);
+            let rise: Vec<f64> = (0..radiance.len())
+                .map(|k| {
+                    if k == 0 {
+                        0.0
+                    } else {
+                        radiance[k] - radiance[k - 1]
+                    }
+                })
+                .collect();
+            let edge = peak_deg(&rise, 0.05, window.0, window.1);
             let peak = peak_deg(&radiance, 0.05, window.0, window.1);
-            println!("{lambda} nm, {apex}° prism: D_min {d_min:.3}°, histogram maximum {peak:.3}°");
-            let outside = peak - d_min;
-            assert!(
-                (-0.025..=0.15 + 0.025).contains(&outside),
-                "{lambda} nm, {apex}°: maximum {peak}° vs D_min {d_min}° (bin half-width 0.025°)"
+            println!(
+                "{lambda} nm, {apex}° prism: D_min {d_min:.3}°, edge {edge:.3}°, maximum {peak:.3}°"
             );
+            assert!(
+                (-0.025..=0.075).contains(&(edge - d_min)),
+                "{lambda} nm, {apex}°: edge {edge}° vs D_min {d_min}° (bin half-width 0.025°)"
+            );
+            if apex == 60.0 {
+                assert!(
+                    (-0.025..=0.15 + 0.025).contains(&(peak - d_min)),
+                    "{lambda} nm, {apex}°: maximum {peak}° vs D_min {d_min}°"
+                );
+            }
         }
     }
 }

@@ -2,6 +2,49 @@
 
 use glam::DVec3;
 
+/// (cos 2πu, sin 2πu) for u ∈ [0, 1] without libm: u is reduced to the nearest quarter turn k/4
+/// (an exact rotation of the result) and the remainder α ∈ [−π/4, π/4] goes through the Taylor
+/// series of sin to α¹⁵ and of cos to α¹⁶ (truncation < 1e-16; measured worst 7.2e-16 against
+/// libm, test). The tracer draws one azimuth per ray and two angles per facet tilt, where
+/// libm's sincos was 8–17 % of a bake's tracing time.
+pub fn turn(u: f64) -> (f64, f64) {
+    let t = 4.0 * u;
+    let k = t.round();
+    let a = (t - k) * std::f64::consts::FRAC_PI_2;
+    let a2 = a * a;
+    let s = a
+        * (1.0
+            - a2 / 6.0
+                * (1.0
+                    - a2 / 20.0
+                        * (1.0
+                            - a2 / 42.0
+                                * (1.0
+                                    - a2 / 72.0
+                                        * (1.0
+                                            - a2 / 110.0
+                                                * (1.0 - a2 / 156.0 * (1.0 - a2 / 210.0)))))));
+    let c = 1.0
+        - a2 / 2.0
+            * (1.0
+                - a2 / 12.0
+                    * (1.0
+                        - a2 / 30.0
+                            * (1.0
+                                - a2 / 56.0
+                                    * (1.0
+                                        - a2 / 90.0
+                                            * (1.0
+                                                - a2 / 132.0
+                                                    * (1.0 - a2 / 182.0 * (1.0 - a2 / 240.0)))))));
+    match (k as i64).rem_euclid(4) {
+        0 => (c, s),
+        1 => (-s, c),
+        2 => (-c, -s),
+        _ => (s, -c),
+    }
+}
+
 /// Two unit vectors completing `d` (unit) to an orthonormal basis.
 pub fn basis(d: DVec3) -> (DVec3, DVec3) {
     let helper = if d.x.abs() < 0.9 { DVec3::X } else { DVec3::Y };
@@ -88,6 +131,94 @@ impl Prism {
             .sum::<f64>()
     }
 
+    /// The largest projected area over all directions. Opposite faces project alike, so
+    /// A(d) = Σ_p A_p |n_p·d| over the four pairs p (three of side faces, one basal), the
+    /// support function of the zonotope Σ_p A_p [−n_p, n_p], whose maximum over unit d is its
+    /// longest vertex: max over signs ε of |Σ_p ε_p A_p n_p|.
+    pub fn max_projected_area(&self) -> f64 {
+        let pairs = [0, 1, 2, 6].map(|f| self.faces[f].area * self.faces[f].normal);
+        (0..16u32)
+            .map(|signs| {
+                pairs
+                    .iter()
+                    .enumerate()
+                    .map(|(i, v)| if signs & (1 << i) == 0 { *v } else { -*v })
+                    .sum::<DVec3>()
+                    .length()
+            })
+            .fold(0.0, f64::max)
+    }
+
+    /// Projected areas A_f max(0, −n_f·d) of the faces a ray along unit `d` can enter by (the
+    /// others 0), and their sum A(d).
+    pub fn entry_areas(&self, d: DVec3) -> ([f64; 8], f64) {
+        let mut areas = [0.0; 8];
+        let mut total = 0.0;
+        for (a, f) in areas.iter_mut().zip(&self.faces) {
+            *a = (-f.area * f.normal.dot(d)).max(0.0);
+            total += *a;
+        }
+        (areas, total)
+    }
+
+    /// An entry point uniform over the prism's silhouette along `d`: face f chosen in
+    /// proportion to `areas` (from [`Self::entry_areas`], summing to `total`) by `u_face`, then
+    /// a point uniform on it from `u`, `v` (and `w`, which of a hexagon's six triangles).
+    /// The faces facing the ray project onto the plane across it without overlap and tile the
+    /// silhouette, each by a linear map of constant Jacobian |n_f·d|, so the point is uniform
+    /// over the silhouette: what a point uniform on a disc across the prism, kept if it hits,
+    /// gives, without the misses. Returns (point, face).
+    pub fn entry_point(
+        &self,
+        areas: &[f64; 8],
+        total: f64,
+        u_face: f64,
+        u: f64,
+        v: f64,
+        w: f64,
+    ) -> (DVec3, usize) {
+        let mut x = u_face * total;
+        let mut face = 0;
+        for (f, &a) in areas.iter().enumerate() {
+            if a > 0.0 {
+                face = f;
+                if x < a {
+                    break;
+                }
+                x -= a;
+            }
+        }
+        let n = self.faces[face].normal;
+        let centre = self.faces[face].offset * n;
+        let point = if face < 6 {
+            // A side face: side a across (along n × z), length L along z.
+            let across = DVec3::new(-n.y, n.x, 0.0);
+            centre + (u - 0.5) * self.side * across + (v - 0.5) * self.length * DVec3::Z
+        } else {
+            // A basal hexagon: one of its six triangles (centre and two neighbouring vertices at
+            // azimuths 60°·j, 60°·(j + 1)), then a point uniform in it.
+            const HALF_ROOT3: f64 = 0.866_025_403_784_438_6;
+            const VERTICES: [(f64, f64); 7] = [
+                (1.0, 0.0),
+                (0.5, HALF_ROOT3),
+                (-0.5, HALF_ROOT3),
+                (-1.0, 0.0),
+                (-0.5, -HALF_ROOT3),
+                (0.5, -HALF_ROOT3),
+                (1.0, 0.0),
+            ];
+            let j = ((w * 6.0) as usize).min(5);
+            let vertex = |i: usize| self.side * DVec3::new(VERTICES[i].0, VERTICES[i].1, 0.0);
+            let (a, b) = if u + v > 1.0 {
+                (1.0 - u, 1.0 - v)
+            } else {
+                (u, v)
+            };
+            centre + a * vertex(j) + b * vertex(j + 1)
+        };
+        (point, face)
+    }
+
     /// Radius of the smallest sphere about the centre that holds the prism.
     pub fn bounding_radius(&self) -> f64 {
         (self.side * self.side + 0.25 * self.length * self.length).sqrt()
@@ -129,5 +260,92 @@ impl Prism {
             }
         }
         best
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// [`turn`] against libm over a million angles and at the quarter turns (measured worst
+    /// 7.2e-16).
+    #[test]
+    fn turn_matches_libm() {
+        let mut worst: f64 = 0.0;
+        for i in 0..=1_000_000 {
+            let u = i as f64 / 1e6;
+            let (c, s) = turn(u);
+            let (sl, cl) = (2.0 * std::f64::consts::PI * u).sin_cos();
+            worst = worst.max((c - cl).abs()).max((s - sl).abs());
+        }
+        println!("worst {worst:.1e}");
+        assert!(worst < 1e-15, "{worst:e}");
+        assert_eq!(turn(0.0), (1.0, 0.0));
+        assert_eq!(turn(0.25), (-0.0, 1.0));
+    }
+
+    /// Entry points lie on the face they name, on its outer side of every other face's plane
+    /// (inside the prism's surface), and the faces come in proportion to their projected
+    /// areas.
+    #[test]
+    fn entry_points_lie_on_the_silhouette() {
+        for aspect_ratio in [0.3, 1.0, 2.0] {
+            let prism = Prism::new(aspect_ratio, 10.0);
+            let d = DVec3::new(0.3, -0.5, 0.81).normalize();
+            let (areas, total) = prism.entry_areas(d);
+            let mut counts = [0usize; 8];
+            let n = 200_000;
+            let mut state = 1u64;
+            let mut uniform = || {
+                state = state
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                (state >> 11) as f64 / (1u64 << 53) as f64
+            };
+            for _ in 0..n {
+                let (u0, u, v, w) = (uniform(), uniform(), uniform(), uniform());
+                let (p, f) = prism.entry_point(&areas, total, u0, u, v, w);
+                counts[f] += 1;
+                let face = prism.faces[f];
+                assert!((face.normal.dot(p) - face.offset).abs() < 1e-9);
+                for other in &prism.faces {
+                    assert!(other.normal.dot(p) <= other.offset + 1e-9);
+                }
+                assert!(
+                    face.normal.dot(d) < 0.0,
+                    "entered through a face turned away"
+                );
+            }
+            for f in 0..8 {
+                let want = areas[f] / total;
+                let got = counts[f] as f64 / n as f64;
+                let sigma = (want * (1.0 - want) / n as f64).sqrt();
+                assert!(
+                    (got - want).abs() <= 5.0 * sigma + 1e-12,
+                    "face {f}: {got} vs {want}"
+                );
+            }
+        }
+    }
+
+    /// The largest projected area bounds A(d) over many directions and is reached by one.
+    #[test]
+    fn max_projected_area_bounds_every_direction() {
+        for aspect_ratio in [0.2, 1.0, 3.0] {
+            let prism = Prism::new(aspect_ratio, 10.0);
+            let max = prism.max_projected_area();
+            let mut seen: f64 = 0.0;
+            for i in 0..400 {
+                for j in 0..400 {
+                    let z = -1.0 + 2.0 * (i as f64 + 0.5) / 400.0;
+                    let (c, s) = turn((j as f64 + 0.5) / 400.0);
+                    let r = (1.0 - z * z).sqrt();
+                    let a = prism.projected_area(DVec3::new(r * c, r * s, z));
+                    assert!(a <= max * (1.0 + 1e-12));
+                    seen = seen.max(a);
+                }
+            }
+            assert!(seen > 0.999 * max, "AR {aspect_ratio}: {seen} of {max}");
+        }
     }
 }

@@ -2,13 +2,18 @@
 //! [`crate::crystal`] give the model).
 //!
 //! # Sampling
-//! A ray is a point of the unit cube: dimensions 0–1 its incident direction, 2–3 its entry point
-//! on the disc across it, 4–19 the tilts of the eight facets (distorted crystals). The points
+//! A ray is a point of the unit cube: dimensions 0–1 its incident direction, 2 whether the
+//! direction is kept (with probability A(d)/A_max, so directions come in proportion to the
+//! projected area A(d)), 3–6 its entry point (a face in proportion to its projected area, a
+//! point uniform on it: uniform over the silhouette, as a point uniform on a disc across the
+//! prism that hits would be, without the misses; 0.87 of the directions are kept for a column
+//! of AR 2 where 0.47 of the disc's points hit), then the tilts of the facets (distorted
+//! crystals). The points
 //! come from [`Sampling::Random`] (independent pseudo-random numbers: plain Monte Carlo, error
 //! ∝ N^{−1/2}) or [`Sampling::Sobol`] (randomized quasi-Monte Carlo: each chunk of rays an
 //! independently Owen-scrambled Sobol' sequence, Burley 2020, so the chunks stay independent,
-//! unbiased estimates and their spread still gives the standard errors). A miss (an entry point
-//! outside the projected prism) takes the next point. With `symmetric` the directions cover
+//! unbiased estimates and their spread still gives the standard errors). A direction not kept
+//! takes the next point. With `symmetric` the directions cover
 //! only the prism's fundamental domain, 1/24 of the sphere (z ≥ 0 and azimuth 0–30° between a
 //! vertex and a face normal: the prism's 24 symmetries, D6h, map it onto the whole sphere, and
 //! the facet tilts are drawn symmetrically), which gives the same distribution of scattering
@@ -37,7 +42,7 @@ use rayon::prelude::*;
 
 use glam::DVec3;
 
-use super::geometry::{Prism, basis};
+use super::geometry::{Prism, basis, turn};
 use crate::grid::ThetaGrid;
 
 /// Rays per chunk: each chunk has its own random stream, and chunks are summed in order, so the
@@ -135,9 +140,10 @@ pub struct TraceResult {
     pub g_std_error: f64,
     /// Rays that hit the crystal.
     pub rays_hit: u64,
-    /// Rays cast in all, misses included.
+    /// Directions drawn in all, those not kept (module docs, "Sampling") included.
     pub rays_cast: u64,
-    /// Mean projected area from the hit fraction: π R² hits / cast (same unit² as the prism).
+    /// Mean projected area from the fraction of directions kept: A_max hits / cast (same unit²
+    /// as the prism).
     pub projected_area: f64,
 }
 
@@ -310,10 +316,9 @@ impl Facets {
     fn draw(&self, f: usize, rng: &mut Rng) -> DVec3 {
         let n = self.normals[f];
         let (e1, e2) = basis(n);
-        let tilt = self.roughness * std::f64::consts::FRAC_PI_2 * rng.uniform();
-        let phi = 2.0 * std::f64::consts::PI * rng.uniform();
-        let (s, c) = tilt.sin_cos();
-        let (sp, cp) = phi.sin_cos();
+        // A tilt uniform in [0, δ·90°] (δ/4 of a turn) about a uniform azimuth.
+        let (c, s) = turn(0.25 * self.roughness * rng.uniform());
+        let (cp, sp) = turn(rng.uniform());
         c * n + s * cp * e1 + s * sp * e2
     }
 }
@@ -389,6 +394,7 @@ impl Trace {
     pub fn run_to(&mut self, chunks: u64) {
         let (prism, n_re, alpha, settings) = (&self.prism, self.n_re, self.alpha, self.settings);
         let edges = &self.edges;
+        let max_area = prism.max_projected_area();
         let more: Vec<Tally> = (self.chunks()..chunks)
             .into_par_iter()
             .map(|c| {
@@ -404,7 +410,7 @@ impl Trace {
                 let mut rng = Rng::new(settings.sampling, seed);
                 let mut tally = Tally::new(edges.clone());
                 for _ in 0..rays {
-                    trace_one(prism, n_re, alpha, settings, &mut rng, &mut tally);
+                    trace_one(prism, max_area, n_re, alpha, settings, &mut rng, &mut tally);
                 }
                 tally
             })
@@ -464,7 +470,6 @@ fn summarize(prism: &Prism, grid: ThetaGrid, tallies: &[Tally]) -> TraceResult {
     } else {
         (vec![f64::NAN; k_len], f64::NAN)
     };
-    let r = prism.bounding_radius();
     TraceResult {
         theta_step_deg: step,
         bin_energy,
@@ -477,7 +482,7 @@ fn summarize(prism: &Prism, grid: ThetaGrid, tallies: &[Tally]) -> TraceResult {
         g_std_error,
         rays_hit: hits,
         rays_cast: cast,
-        projected_area: std::f64::consts::PI * r * r * hits as f64 / cast as f64,
+        projected_area: prism.max_projected_area() * hits as f64 / cast as f64,
     }
 }
 
@@ -526,36 +531,36 @@ fn emit(tally: &mut Tally, d_in: DVec3, d_out: DVec3, w: f64) {
 
 fn trace_one(
     prism: &Prism,
+    max_area: f64,
     n_re: f64,
     alpha: f64,
     s: TraceSettings,
     rng: &mut Rng,
     tally: &mut Tally,
 ) {
-    // A direction uniform on the sphere and an entry point uniform on the disc of radius R
-    // across it: orientation averaging with projected-area weighting.
-    let radius = prism.bounding_radius();
+    // A direction uniform on the sphere, kept with probability A(d)/A_max (so directions come
+    // in proportion to the projected area, as orientation averaging weights them), and an entry
+    // point uniform over the silhouette (Prism::entry_point): the distribution of a point
+    // uniform on a disc across the prism, kept where it hits, without the misses.
     let (d_in, mut p, face) = loop {
         rng.next_point();
-        let (z, phi) = if s.symmetric {
+        let (z, turns) = if s.symmetric {
             // z ≥ 0, azimuth between a vertex (0°) and a face normal (30°).
-            (rng.uniform(), std::f64::consts::FRAC_PI_6 * rng.uniform())
+            (rng.uniform(), rng.uniform() / 12.0)
         } else {
-            (
-                1.0 - 2.0 * rng.uniform(),
-                2.0 * std::f64::consts::PI * rng.uniform(),
-            )
+            (1.0 - 2.0 * rng.uniform(), rng.uniform())
         };
         let rho = (1.0 - z * z).max(0.0).sqrt();
-        let d = DVec3::new(rho * phi.cos(), rho * phi.sin(), z);
-        let (e1, e2) = basis(d);
-        let r = radius * rng.uniform().sqrt();
-        let psi = 2.0 * std::f64::consts::PI * rng.uniform();
-        let start = -2.0 * radius * d + r * psi.cos() * e1 + r * psi.sin() * e2;
+        let (cos_phi, sin_phi) = turn(turns);
+        let d = DVec3::new(rho * cos_phi, rho * sin_phi, z);
         tally.cast += 1;
-        if let Some((t, f)) = prism.enter(start, d) {
-            break (d, start + t * d, f);
+        let (areas, total) = prism.entry_areas(d);
+        if rng.uniform() * max_area >= total {
+            continue;
         }
+        let (u_face, u, v, w) = (rng.uniform(), rng.uniform(), rng.uniform(), rng.uniform());
+        let (p, f) = prism.entry_point(&areas, total, u_face, u, v, w);
+        break (d, p, f);
     };
     tally.hits += 1;
     let mut facets = Facets::new(prism, s.roughness);
