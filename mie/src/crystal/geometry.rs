@@ -247,19 +247,26 @@ impl Prism {
         (face_in != usize::MAX && t_in < t_out && t_in > 0.0).then_some((t_in, face_in))
     }
 
-    /// Exit of a ray p + t d from inside: (t ≥ 0, face index).
+    /// Exit of a ray p + t d from inside: (t ≥ 0, face index). The nearest face ahead is found
+    /// by comparing the fractions gap/(n·d) crosswise (both denominators positive), with one
+    /// division at the end.
     pub fn exit(&self, p: DVec3, d: DVec3) -> (f64, usize) {
-        let mut best = (f64::INFINITY, 0);
+        // The best face so far as its fraction num/den; 1/0 stands for "none yet".
+        let (mut num, mut den, mut face) = (1.0, 0.0, 0);
         for (i, f) in self.faces.iter().enumerate() {
             let nd = f.normal.dot(d);
             if nd > 0.0 {
-                let t = ((f.offset - f.normal.dot(p)) / nd).max(0.0);
-                if t < best.0 {
-                    best = (t, i);
+                let gap = (f.offset - f.normal.dot(p)).max(0.0);
+                if gap * den < num * nd {
+                    (num, den, face) = (gap, nd, i);
                 }
             }
         }
-        best
+        if den > 0.0 {
+            (num / den, face)
+        } else {
+            (f64::INFINITY, 0)
+        }
     }
 }
 
