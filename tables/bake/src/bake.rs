@@ -53,7 +53,8 @@ pub struct FieldSummary {
     /// Ice and snow: how far their Monte Carlo went (None for drops).
     #[serde(default)]
     pub crystal_sampling: Option<CrystalSampling>,
-    /// Drops: the sizes per wavelength they were computed with ([`drop_sizes`]).
+    /// Drops: the sizes per wavelength they were computed with, the mean over the wavelengths
+    /// ([`drop_sizes`]).
     #[serde(default)]
     pub sizes: Option<usize>,
     /// Drops: per channel, the rms relative standard error of Ams_1 over the bins θ ≥ 1° from
@@ -509,7 +510,7 @@ pub struct Phases {
     /// Drops: the standard error of each bin from the size sampling (empty for crystals,
     /// whose phase functions carry their own).
     pub size_errors: Vec<Vec<f64>>,
-    /// Drops: the sizes per wavelength ([`drop_sizes`]).
+    /// Drops: the mean sizes per wavelength ([`drop_sizes`]).
     pub sizes: Option<usize>,
 }
 
@@ -530,12 +531,13 @@ pub fn phase_functions(
     let mut sizes = None;
     match (field.distribution, field.crystal) {
         (Some(distribution), _) => {
-            let knobs = Knobs {
-                sizes: drop_sizes(plan, field, &distribution, weights, grid)?,
-                ..knobs
-            };
-            sizes = Some(knobs.sizes);
+            let counts = drop_sizes(plan, field, &distribution, weights, grid)?;
+            sizes = Some(counts.iter().sum::<usize>().div_ceil(j_len.max(1)));
             for (j, &lambda) in lambdas.iter().enumerate() {
+                let knobs = Knobs {
+                    sizes: counts[j],
+                    ..knobs
+                };
                 let m = field
                     .refractive_index(lambda)
                     .map_err(mie_error(format!(" at {lambda} nm")))?;
@@ -636,31 +638,36 @@ pub fn phase_functions(
 /// The sizes [`drop_sizes`] takes over the count its prediction gives (√1.15: 7 % less noise).
 const SIZE_MARGIN: f64 = 1.15;
 
-/// The sizes per wavelength a drop field is computed with: the knobs' own, or with a
-/// `size_noise` target (and a distribution, not one size) the count that brings the worst
+/// Fewest sizes a wavelength of a sized drop field gets (its two halves give its noise).
+const MIN_SIZES: usize = 8;
+
+/// The sizes each wavelength of a drop field is computed with: the knobs' own, or with a
+/// `size_noise` target (and a distribution, not one size) the counts that bring the worst
 /// channel's noise there, predicted by a pilot. The pilot is the wavelength channels lean on
 /// most, at a quarter of the knobs' sizes; its rms relative standard error s over θ ≥ 1° (from
 /// its two interleaved half-sets, `mie::ensemble::bulk_with_spread`) is taken for every
-/// wavelength, so channel c mixing wavelengths with weights a_cj (Σ_j a_cj = 1) has noise
-/// s √(Σ_j a_cj²) √(N_pilot / N), and the count is [`SIZE_MARGIN`] times the N that puts it at
-/// the target. The noise falls a little faster than N^−1/2 (rain N^−0.53, the cloud N^−0.6 to
-/// −0.75, docs/accuracy.md "Mie sizes"), but a channel's other wavelengths may be noisier than
-/// the pilot (the default scene's rain at standard without the margin: 0.70 / 0.69 / 0.81 %
-/// (R/G/B) for a target of 0.8 %). The count lies in [16, 4 × the knobs' sizes].
+/// wavelength at equal sizes, so wavelength j with n_j sizes has variance s² N_pilot / n_j and
+/// channel c (weights a_cj, Σ_j a_cj = 1) s² N_pilot Σ_j a_cj² / n_j. The n_j follow
+/// [`sample_shares`], a size at wavelength λ costing ∝ 1/λ (the terms of the Mie series ∝ x),
+/// scaled by [`SIZE_MARGIN`] over the total that puts the worst channel at the target. The
+/// noise falls a little faster than N^−1/2 (rain N^−0.53, the cloud N^−0.6 to −0.75,
+/// docs/accuracy.md "Mie sizes"), but a channel's other wavelengths may be noisier than the
+/// pilot (the default scene's rain at standard without the margin: 0.70 / 0.69 / 0.81 %
+/// (R/G/B) for a target of 0.8 %). Each count lies in [[`MIN_SIZES`], 4 × the knobs' sizes].
 pub fn drop_sizes(
     plan: &BakePlan,
     field: &Field,
     distribution: &mie::SizeDistribution,
     weights: &ChannelWeights,
     grid: ThetaGrid,
-) -> Result<usize, BakeError> {
+) -> Result<Vec<usize>, BakeError> {
     let knobs = plan.knobs;
     let target = knobs.size_noise;
-    if target <= 0.0 || matches!(distribution, mie::SizeDistribution::Monodisperse { .. }) {
-        return Ok(knobs.sizes);
-    }
     let lambdas = &weights.wavelengths_nm;
     let j_len = lambdas.len();
+    if target <= 0.0 || matches!(distribution, mie::SizeDistribution::Monodisperse { .. }) {
+        return Ok(vec![knobs.sizes; j_len]);
+    }
     let importance = |j: usize| (0..3).map(|c| weights.weights[c][j]).fold(0.0, f64::max);
     let pilot = (0..j_len)
         .max_by(|&a, &b| importance(a).total_cmp(&importance(b)))
@@ -680,15 +687,26 @@ pub fn drop_sizes(
         format!(" at {lambda} nm (the size count's pilot)"),
     ))?;
     let s = mie::crystal::relative_noise(grid, &phase.bins, &spread, false);
+    let cost: Vec<f64> = lambdas.iter().map(|l| 1.0 / l).collect();
+    let shares = sample_shares(weights, &cost);
+    // The worst channel's Σ_j a_cj² / share_j: its variance is s² N_pilot that over the total.
     let mix = (0..3)
         .map(|c| {
             let w = &weights.weights[c];
             let total: f64 = w.iter().sum();
-            w.iter().map(|a| (a / total).powi(2)).sum::<f64>().sqrt()
+            w.iter()
+                .zip(&shares)
+                .filter(|(a, _)| **a > 0.0)
+                .map(|(a, n)| (a / total).powi(2) / n)
+                .sum::<f64>()
         })
         .fold(0.0, f64::max);
-    let want = SIZE_MARGIN * pilot_knobs.sizes as f64 * (s * mix / target).powi(2);
-    Ok((want.ceil() as usize).clamp(16, 4 * knobs.sizes.max(16)))
+    let total = SIZE_MARGIN * pilot_knobs.sizes as f64 * s * s * mix / (target * target);
+    let most = 4 * knobs.sizes.max(16);
+    Ok(shares
+        .iter()
+        .map(|n| ((total * n).ceil() as usize).clamp(MIN_SIZES, most))
+        .collect())
 }
 
 /// Phase functions per wavelength → RGB → Ams_n per channel.
@@ -848,23 +866,68 @@ fn nodes_per_bin(d: &mie::SizeDistribution, lambda_nm: f64, knobs: Knobs, step_d
     }
 }
 
-/// Rays per wavelength for crystals: `per_wavelength` × J in all, shared in proportion to the
-/// largest weight any channel gives the wavelength (at least a tenth of the mean each). A
-/// channel's noise is Σ_j a_j² / n_j, smallest for n_j ∝ a_j: wavelengths a channel leans on get
-/// the rays, those at the spectrum's ends (weights ~10⁻³) few.
+/// Rays per wavelength for crystals: `per_wavelength` × J in all, shared by [`sample_shares`]
+/// (at least a tenth of the mean each).
 pub fn ray_allocation(weights: &ChannelWeights, per_wavelength: u64) -> Vec<u64> {
     let j_len = weights.wavelengths_nm.len();
     let floor = per_wavelength / 10;
     let total = per_wavelength * j_len as u64;
-    let importance: Vec<f64> = (0..j_len)
-        .map(|j| (0..3).map(|c| weights.weights[c][j]).fold(0.0, f64::max))
-        .collect();
-    let sum: f64 = importance.iter().sum();
     let spare = total.saturating_sub(floor * j_len as u64) as f64;
-    importance
+    sample_shares(weights, &vec![1.0; j_len])
         .iter()
-        .map(|m| floor + (spare * m / sum).round() as u64)
+        .map(|share| floor + (spare * share).round() as u64)
         .collect()
+}
+
+/// Each wavelength's share n_j (Σ_j n_j = 1) of a field's independent samples (rays, sizes)
+/// that makes the worst channel's noise smallest for the cost: channel c's variance is
+/// ∝ Σ_j a_cj²/n_j (a_cj its weights, each wavelength an independent estimate whose variance
+/// falls as 1/n_j), a sample at wavelength j costs `cost[j]`, and the shares minimize
+/// max_c Σ_j a_cj²/n_j · Σ_j cost_j n_j. For given channel multipliers μ_c (on the simplex) the
+/// minimizer is n_j ∝ √(Σ_c μ_c a_cj² / cost_j) (Lagrange); the μ are searched on a grid of
+/// step 1/60. For the default scene's 31 wavelengths the worst channel's variance at equal
+/// cost is 0.63 of equal shares' (the earlier rays ∝ the largest weight: 0.67).
+pub fn sample_shares(weights: &ChannelWeights, cost: &[f64]) -> Vec<f64> {
+    const STEPS: usize = 60;
+    let j_len = weights.wavelengths_nm.len();
+    let a = &weights.weights;
+    let shares_for = |mu: [f64; 3]| -> Vec<f64> {
+        let n: Vec<f64> = (0..j_len)
+            .map(|j| ((0..3).map(|c| mu[c] * a[c][j] * a[c][j]).sum::<f64>() / cost[j]).sqrt())
+            .collect();
+        let total: f64 = n.iter().sum();
+        n.iter().map(|x| x / total).collect()
+    };
+    let objective = |n: &[f64]| -> f64 {
+        let variance = (0..3)
+            .map(|c| {
+                (0..j_len)
+                    .filter(|&j| a[c][j] > 0.0)
+                    .map(|j| a[c][j] * a[c][j] / n[j])
+                    .sum::<f64>()
+            })
+            .fold(0.0, f64::max);
+        variance * n.iter().zip(cost).map(|(n, c)| n * c).sum::<f64>()
+    };
+    let mut best = (f64::INFINITY, vec![1.0 / j_len as f64; j_len]);
+    for i in 0..=STEPS {
+        for k in 0..=STEPS - i {
+            let mu = [
+                i as f64 / STEPS as f64,
+                k as f64 / STEPS as f64,
+                (STEPS - i - k) as f64 / STEPS as f64,
+            ];
+            let n = shares_for(mu);
+            if n.iter().any(|x| !x.is_finite()) {
+                continue;
+            }
+            let v = objective(&n);
+            if v < best.0 {
+                best = (v, n);
+            }
+        }
+    }
+    best.1
 }
 
 /// A noise target's trace stops at this many times its first round's rays (or the preset's

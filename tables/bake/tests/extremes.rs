@@ -171,14 +171,15 @@ fn out_of_range_inputs_are_refused_with_the_range() {
             "[[field]]\nname = \"i\"\nkind = \"ice\"\nroughness = 1.5\n".to_string(),
             "roughness",
         ),
-        // So broad that its mass reaches 2 cm drops, beyond x = 2e5: named with the radii.
+        // So broad that its mass reaches 2 cm drops, beyond x = 2e5: named with the field, the
+        // wavelength (the first the bake meets, the sizes' pilot's), the radii and the range.
         (
             "spectral = \"rgb3\"",
             CLOUD.replace(
                 "{ kind = \"gamma\", r_eff_um = 10, v_eff = 0.1 }",
                 "{ kind = \"lognormal\", median_radius_um = 100, sigma_g = 3 }",
             ),
-            "field \"c\" at 650 nm",
+            "field \"c\" at 440 nm, radius",
         ),
     ];
     for (header, fields, needle) in cases {
