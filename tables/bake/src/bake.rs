@@ -579,9 +579,9 @@ pub fn phase_functions(
                 );
                 advance();
             }
-            // Every wavelength carried on together, the first round's shares kept (rays ∝ the
-            // largest channel weight: ray_allocation), until the worst channel's noise is at the
-            // target: noise ∝ 1/√rays gives the rays still needed, 10 % over and at most 4× the
+            // Every wavelength carried on together, the first round's shares kept
+            // (ray_allocation), until the worst channel's noise is at the
+            // target: noise ∝ 1/√rays gives the rays still needed, 3 % over and at most 4× the
             // rays so far a round.
             let shares: Vec<f64> = {
                 let total: u64 = rays.iter().sum();
@@ -602,7 +602,7 @@ pub fn phase_functions(
                     break;
                 }
                 let now: u64 = tracers.iter().map(|t| t.chunks()).sum();
-                let need = (now as f64 * (1.1 * (noise / target).powi(2)).min(4.0)).ceil();
+                let need = (now as f64 * (1.03 * (noise / target).powi(2)).min(4.0)).ceil();
                 let mut traced = false;
                 for (t, share) in tracers.iter_mut().zip(&shares) {
                     traced |= t.run_to((need * share).ceil() as u64);
