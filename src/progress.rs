@@ -1,11 +1,12 @@
 //! Progress bars for long bakes: drawn on stderr with indicatif, hidden with `--quiet` or when
 //! the `CI` environment variable is set (logs are not terminals).
 
-use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use indicatif::{MultiProgress, ProgressBar, ProgressDrawTarget, ProgressStyle};
 
-/// One bar per field.
+/// One bar per field, drawn together (fields are computed side by side).
 pub struct Bars {
     hidden: bool,
+    multi: MultiProgress,
 }
 
 impl Bars {
@@ -13,6 +14,7 @@ impl Bars {
     pub fn new(quiet: bool) -> Self {
         Self {
             hidden: quiet || std::env::var_os("CI").is_some(),
+            multi: MultiProgress::with_draw_target(ProgressDrawTarget::stderr()),
         }
     }
 }
@@ -36,7 +38,7 @@ impl bake::Progress for Bars {
         if self.hidden {
             return Box::new(Bar(ProgressBar::hidden()));
         }
-        let p = ProgressBar::with_draw_target(Some(steps), ProgressDrawTarget::stderr());
+        let p = self.multi.add(ProgressBar::new(steps));
         p.set_style(
             ProgressStyle::with_template("{prefix:>8} [{bar:30}] {pos}/{len} {msg} ({elapsed})")
                 .expect("valid template")

@@ -216,6 +216,9 @@ pub struct Rays {
     /// Tilts scored per facet a path first meets, distorted crystals only ([`trace`] module
     /// docs, "Tilt splitting"); 1 = one.
     pub tilt_splits: u32,
+    /// Rays per chunk of the trace ([`crate::crystal::trace::TraceSettings::chunk_rays`]):
+    /// two chunks are the fewest rays a trace to a `target` takes.
+    pub chunk_rays: u64,
 }
 
 impl Rays {
@@ -229,6 +232,7 @@ impl Rays {
             sampling: Sampling::Random,
             symmetric: false,
             tilt_splits: 1,
+            chunk_rays: Trace::CHUNK_RAYS,
         }
     }
 }
@@ -313,9 +317,10 @@ impl CrystalTracer {
         let alpha = 4.0 * std::f64::consts::PI * m.im / wavelength_um;
         let settings = TraceSettings::new(rays.count, rays.seed, field.roughness)
             .sampled(rays.sampling, rays.symmetric)
-            .split(rays.tilt_splits);
+            .split(rays.tilt_splits)
+            .chunked(rays.chunk_rays);
         let mut trace = Trace::new(prism, m.re, alpha, grid, settings);
-        let chunk = Trace::CHUNK_RAYS;
+        let chunk = trace.chunk_rays();
         trace.run_to(rays.count.div_ceil(chunk).max(1));
         Ok(Self {
             wavelength_nm,
@@ -344,7 +349,7 @@ impl CrystalTracer {
         true
     }
 
-    /// Chunks of [`Trace::CHUNK_RAYS`] rays traced so far.
+    /// Chunks of [`Rays::chunk_rays`] rays traced so far.
     pub fn chunks(&self) -> u64 {
         self.trace.chunks()
     }

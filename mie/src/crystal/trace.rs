@@ -45,8 +45,8 @@ use glam::DVec3;
 use super::geometry::{Prism, basis, turn};
 use crate::grid::ThetaGrid;
 
-/// Rays per chunk: each chunk has its own random stream, and chunks are summed in order, so the
-/// result does not depend on the thread count.
+/// Rays per chunk by default: each chunk has its own random stream, and chunks are summed in
+/// order, so the result does not depend on the thread count.
 const CHUNK_RAYS: u64 = 1 << 14;
 
 /// How to trace.
@@ -70,6 +70,10 @@ pub struct TraceSettings {
     /// Tilts weighed where a ray meets a facet whose tilt is not yet drawn (distorted crystals;
     /// module docs, "Tilt splitting"), 1 to [`MAX_TILT_SPLITS`]. 1 = the plain path.
     pub tilt_splits: u32,
+    /// Rays per chunk ([`Trace::CHUNK_RAYS`] by default): the unit of the random streams and of
+    /// the spread the standard errors come from, so also the fewest rays a trace with standard
+    /// errors (two chunks) can take.
+    pub chunk_rays: u64,
 }
 
 /// How a trace draws its rays (module docs, "Sampling").
@@ -95,6 +99,15 @@ impl TraceSettings {
             sampling: Sampling::Random,
             symmetric: false,
             tilt_splits: 1,
+            chunk_rays: CHUNK_RAYS,
+        }
+    }
+
+    /// These settings with chunks of `chunk_rays` rays (at least 1).
+    pub fn chunked(self, chunk_rays: u64) -> Self {
+        Self {
+            chunk_rays: chunk_rays.max(1),
+            ..self
         }
     }
 
@@ -350,7 +363,7 @@ pub fn trace(
     settings: TraceSettings,
 ) -> TraceResult {
     let mut t = Trace::new(prism.clone(), n_re, alpha, grid, settings);
-    t.run_to(settings.rays.div_ceil(CHUNK_RAYS).max(1));
+    t.run_to(settings.rays.div_ceil(settings.chunk_rays).max(1));
     t.result()
 }
 
@@ -388,8 +401,13 @@ impl Trace {
         }
     }
 
-    /// Rays per chunk.
+    /// Rays per chunk by default ([`TraceSettings::chunk_rays`]).
     pub const CHUNK_RAYS: u64 = CHUNK_RAYS;
+
+    /// Rays per chunk of this trace.
+    pub fn chunk_rays(&self) -> u64 {
+        self.settings.chunk_rays
+    }
 
     /// Chunks traced so far.
     pub fn chunks(&self) -> u64 {
@@ -405,12 +423,9 @@ impl Trace {
         let more: Vec<Tally> = (self.chunks()..chunks)
             .into_par_iter()
             .map(|c| {
-                let left = settings.rays.saturating_sub(c * CHUNK_RAYS);
-                let rays = if left == 0 {
-                    CHUNK_RAYS
-                } else {
-                    CHUNK_RAYS.min(left)
-                };
+                let chunk = settings.chunk_rays;
+                let left = settings.rays.saturating_sub(c * chunk);
+                let rays = if left == 0 { chunk } else { chunk.min(left) };
                 let seed = settings
                     .seed
                     .wrapping_add((c + 1).wrapping_mul(0x9E37_79B9_7F4A_7C15));

@@ -220,8 +220,9 @@ pub fn run(plan: &BakePlan, progress: &dyn Progress) -> Result<BakeReport, BakeE
     preflight(plan, &weights)?;
     // Compute (or read from the cache) every field first; only then touch the tables, so a
     // failing field leaves the previous bake as it was.
-    let mut done = Vec::new();
-    let mut fresh = Vec::new();
+    // Cached fields first, then the others computed side by side (each field's numbers do not
+    // depend on what runs beside it), in scene order.
+    let mut lookups = Vec::new();
     for field in &plan.scene.fields {
         let hash = content_hash(plan, field);
         let cache_file = cache::record_path(&plan.out_dir, &hash);
@@ -235,17 +236,31 @@ pub fn run(plan: &BakePlan, progress: &dyn Progress) -> Result<BakeReport, BakeE
                 None
             }
         };
-        let result = match cached {
-            Some(r) => {
+        lookups.push((field, hash, cache_file, cached));
+    }
+    let computed: Vec<Result<Option<BakedField>, BakeError>> = lookups
+        .par_iter()
+        .map(|(field, _, _, cached)| match cached {
+            Some(_) => Ok(None),
+            None => compute_field(plan, field, &weights, &grid, progress).map(Some),
+        })
+        .collect();
+    // The first failing field in scene order, whatever finished first.
+    let computed: Vec<Option<BakedField>> = computed.into_iter().collect::<Result<_, _>>()?;
+    let mut done = Vec::new();
+    let mut fresh = Vec::new();
+    for ((field, hash, cache_file, cached), computed) in lookups.into_iter().zip(computed) {
+        let result = match (cached, computed) {
+            (Some(r), _) => {
                 report.cached.push(field.name.clone());
                 r
             }
-            None => {
-                let r = compute_field(plan, field, &weights, &grid, progress)?;
+            (None, Some(r)) => {
                 report.computed.push(field.name.clone());
                 fresh.push((done.len(), cache_file));
                 r
             }
+            (None, None) => unreachable!("a field neither cached nor computed"),
         };
         done.push((field, hash, result));
     }
@@ -572,6 +587,7 @@ pub fn phase_functions(
                     sampling: knobs.ray_sampling,
                     symmetric: knobs.ray_symmetric,
                     tilt_splits: knobs.tilt_splits,
+                    chunk_rays: knobs.chunk_rays,
                 };
                 tracers.push(
                     CrystalTracer::new(&crystal, lambda, grid, rays)

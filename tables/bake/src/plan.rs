@@ -45,6 +45,10 @@ pub struct Knobs {
     /// transmitted part's own estimate, at a fraction of a path's cost (`mie::crystal::trace`
     /// docs, "Tilt splitting"; 4 measured best, docs/accuracy.md).
     pub tilt_splits: u32,
+    /// Rays per chunk of the crystal tracer (`mie::crystal::Rays::chunk_rays`): each
+    /// wavelength takes two chunks at least, which at 31 wavelengths and 16 384 rays was a
+    /// draft's floor (1 M rays of snow for a 4 % target that 0.4 M reach).
+    pub chunk_rays: u64,
 }
 
 /// The spectral mode the presets' per-wavelength counts are stated for: the default scene's 31
@@ -107,10 +111,10 @@ impl Quality {
         // Crystals: a first round of rays, then traced on to the noise target (docs/accuracy.md).
         // Drops: sized for their noise target from a pilot (docs/accuracy.md); the reference's
         // sizes fixed.
-        let (sizes, nodes_per_panel, rays, crystal_noise, size_noise) = match self {
-            Quality::Draft => (32, 2, 32_768, 0.04, 0.035),
-            Quality::Standard => (400, 2, 131_072, 0.009, 0.008),
-            Quality::Reference => (4096, 2, 524_288, 0.0035, 0.0),
+        let (sizes, nodes_per_panel, rays, crystal_noise, size_noise, chunk_rays) = match self {
+            Quality::Draft => (32, 2, 8_192, 0.04, 0.035, 4_096),
+            Quality::Standard => (400, 2, 131_072, 0.009, 0.008, 16_384),
+            Quality::Reference => (4096, 2, 524_288, 0.0035, 0.0, 16_384),
         };
         Knobs {
             sizes,
@@ -124,6 +128,7 @@ impl Quality {
             ray_sampling: mie::crystal::Sampling::Random,
             ray_symmetric: false,
             tilt_splits: 4,
+            chunk_rays,
         }
     }
 }
