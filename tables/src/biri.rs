@@ -125,7 +125,7 @@ pub fn kernel_tables(grid: &ThetaGrid, phases: &[&[f64]]) -> Vec<KernelTable> {
     }
     let depths = kernel_depths();
     let nodes = KernelNodes::new(grid);
-    let per_depth: Vec<Vec<([f64; 5], f64, Vec<f64>)>> = depths
+    let per_depth: Vec<Vec<DepthRow>> = depths
         .iter()
         .map(|&tau| {
             // ∫ e^{−τ g} over each half-bin (lower, upper), by 8-point Gauss–Legendre.
@@ -189,6 +189,10 @@ pub fn kernel_tables(grid: &ThetaGrid, phases: &[&[f64]]) -> Vec<KernelTable> {
         })
         .collect()
 }
+
+/// One phase function's products at one depth: the polynomial's coefficients, its error and C
+/// at the bin centres.
+type DepthRow = ([f64; 5], f64, Vec<f64>);
 
 /// One half-bin's Gauss–Legendre nodes: g(θ) at the 8 nodes and the half-width r.
 #[derive(Debug, Clone, Copy)]
