@@ -159,6 +159,17 @@ impl SizeDistribution {
         Ok(self)
     }
 
+    /// The one node of a monodisperse distribution, or None.
+    fn single(&self) -> Option<SizeQuadrature> {
+        match *self {
+            Self::Monodisperse { radius_um } => Some(SizeQuadrature {
+                radius_um: vec![radius_um],
+                weight: vec![1.0],
+            }),
+            _ => None,
+        }
+    }
+
     /// Number density per unit ln r (unnormalized) at ln r.
     fn per_log_radius(&self, ln_r: f64) -> f64 {
         let r = ln_r.exp();
@@ -220,31 +231,9 @@ impl SizeDistribution {
         if let Self::Monodisperse { radius_um } = *self {
             return (radius_um, radius_um);
         }
-        const STEPS: usize = 20_000;
         let (a, b) = self.bracket();
-        let h = (b - a) / STEPS as f64;
-        let mass = |t: f64| self.per_log_radius(t) * (3.0 * t).exp();
-        let mut cdf = Vec::with_capacity(STEPS + 1);
-        let mut total = 0.0;
-        cdf.push(0.0);
-        let mut prev = mass(a);
-        for i in 1..=STEPS {
-            let next = mass(a + i as f64 * h);
-            total += 0.5 * h * (prev + next);
-            cdf.push(total);
-            prev = next;
-        }
-        let quantile = |q: f64| {
-            let target = q * total;
-            let i = cdf.partition_point(|&c| c < target).clamp(1, STEPS);
-            let (c0, c1) = (cdf[i - 1], cdf[i]);
-            let f = if c1 > c0 {
-                (target - c0) / (c1 - c0)
-            } else {
-                0.0
-            };
-            (a + (i as f64 - 1.0 + f) * h).exp()
-        };
+        let mass = LogCdf::new(a, b, |t| self.per_log_radius(t) * (3.0 * t).exp());
+        let quantile = |q: f64| mass.at(q * mass.total()).exp();
         (quantile(0.5 * tail_mass), quantile(1.0 - 0.5 * tail_mass))
     }
 
@@ -259,11 +248,8 @@ impl SizeDistribution {
     /// each wavelength has its own shift: the same radii are other size parameters at each
     /// wavelength (measured: `mie/examples/size_levers.rs`, docs/accuracy.md "Mie sizes").
     pub fn quadrature_shifted(&self, sizes: usize, tail_mass: f64, shift: f64) -> SizeQuadrature {
-        if let Self::Monodisperse { radius_um } = *self {
-            return SizeQuadrature {
-                radius_um: vec![radius_um],
-                weight: vec![1.0],
-            };
+        if let Some(q) = self.single() {
+            return q;
         }
         let sizes = sizes.max(1);
         let (lo, hi) = self.truncation(tail_mass);
@@ -286,44 +272,20 @@ impl SizeDistribution {
     /// the cloud 1.3–1.9×, and each size cheaper (fewer of the largest); steps of n r^1.5
     /// instead were no better.
     pub fn quadrature_by_area(&self, sizes: usize, tail_mass: f64, shift: f64) -> SizeQuadrature {
-        if let Self::Monodisperse { radius_um } = *self {
-            return SizeQuadrature {
-                radius_um: vec![radius_um],
-                weight: vec![1.0],
-            };
+        if let Some(q) = self.single() {
+            return q;
         }
         let sizes = sizes.max(1);
         let (lo, hi) = self.truncation(tail_mass);
         let (a, b) = (lo.ln(), hi.ln());
-        const STEPS: usize = 20_000;
-        let h = (b - a) / STEPS as f64;
-        // Trapezoid sums over ln r of n r² (the sampling density, as a table to invert) and of
-        // n (the number it is normalized by).
-        let area = |t: f64| self.per_log_radius(t) * (2.0 * t).exp();
-        let mut cdf = Vec::with_capacity(STEPS + 1);
-        let (mut total, mut number) = (0.0, 0.0);
-        cdf.push(0.0);
-        let (mut prev, mut prev_n) = (area(a), self.per_log_radius(a));
-        for i in 1..=STEPS {
-            let t = a + i as f64 * h;
-            let (next, next_n) = (area(t), self.per_log_radius(t));
-            total += 0.5 * h * (prev + next);
-            number += 0.5 * h * (prev_n + next_n);
-            cdf.push(total);
-            (prev, prev_n) = (next, next_n);
-        }
+        // The sampling density n r² as a table to invert, and the number it is normalized by.
+        let area = LogCdf::new(a, b, |t| self.per_log_radius(t) * (2.0 * t).exp());
+        let (total, number) = (
+            area.total(),
+            LogCdf::new(a, b, |t| self.per_log_radius(t)).total(),
+        );
         let ln_r: Vec<f64> = (0..sizes)
-            .map(|i| {
-                let target = (i as f64 + shift) / sizes as f64 * total;
-                let k = cdf.partition_point(|&c| c < target).clamp(1, STEPS);
-                let (c0, c1) = (cdf[k - 1], cdf[k]);
-                let f = if c1 > c0 {
-                    (target - c0) / (c1 - c0)
-                } else {
-                    0.0
-                };
-                a + (k as f64 - 1.0 + f) * h
-            })
+            .map(|i| area.at((i as f64 + shift) / sizes as f64 * total))
             .collect();
         // Number weight of node i: its 1/N share of the area over the density's r², divided by
         // the number in the range: Σ w_i r_i² is the mean area per drop exactly, whatever the
@@ -340,11 +302,8 @@ impl SizeDistribution {
     /// density per unit ln r and normalized (self-normalized importance weights: any set of
     /// fractions, e.g. independent uniform ones for a plain Monte Carlo average over sizes).
     pub fn quadrature_at(&self, fractions: &[f64], tail_mass: f64) -> SizeQuadrature {
-        if let Self::Monodisperse { radius_um } = *self {
-            return SizeQuadrature {
-                radius_um: vec![radius_um],
-                weight: vec![1.0],
-            };
+        if let Some(q) = self.single() {
+            return q;
         }
         let (lo, hi) = self.truncation(tail_mass);
         let (a, b) = (lo.ln(), hi.ln());
@@ -375,6 +334,49 @@ impl SizeDistribution {
             }
             Self::Monodisperse { radius_um } => format!("monodisperse r = {radius_um} µm"),
         }
+    }
+}
+
+/// ∫_a^t f(t') dt' over ln r ∈ [a, b] as a trapezoid table of 20 000 steps, and its inverse.
+struct LogCdf {
+    a: f64,
+    h: f64,
+    cdf: Vec<f64>,
+}
+
+impl LogCdf {
+    const STEPS: usize = 20_000;
+
+    fn new(a: f64, b: f64, f: impl Fn(f64) -> f64) -> Self {
+        let h = (b - a) / Self::STEPS as f64;
+        let mut cdf = Vec::with_capacity(Self::STEPS + 1);
+        let mut total = 0.0;
+        cdf.push(0.0);
+        let mut prev = f(a);
+        for i in 1..=Self::STEPS {
+            let next = f(a + i as f64 * h);
+            total += 0.5 * h * (prev + next);
+            cdf.push(total);
+            prev = next;
+        }
+        Self { a, h, cdf }
+    }
+
+    fn total(&self) -> f64 {
+        self.cdf[Self::STEPS]
+    }
+
+    /// The ln r where the integral reaches `target`, linear between the steps.
+    fn at(&self, target: f64) -> f64 {
+        let cdf = &self.cdf;
+        let i = cdf.partition_point(|&c| c < target).clamp(1, Self::STEPS);
+        let (c0, c1) = (cdf[i - 1], cdf[i]);
+        let f = if c1 > c0 {
+            (target - c0) / (c1 - c0)
+        } else {
+            0.0
+        };
+        self.a + (i as f64 - 1.0 + f) * self.h
     }
 }
 
