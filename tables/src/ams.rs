@@ -584,6 +584,9 @@ fn mixture_forward_fractions(parts: &[(f64, &AmsSeries)], orders: &[usize]) -> V
         .min(RECURRENCE_ORDERS);
     let mut total = vec![0.0; orders.len()];
     let mut c = vec![0.0; n_top + 1];
+    // The parts share a grid and a reconstruction: one table of P'_l(0) for all.
+    let l_max = parts.iter().map(|(_, s)| s.l_max()).max().unwrap_or(0);
+    let p_prime_0 = legendre_derivatives_at_zero(l_max);
     for (a, s) in parts {
         let f = s.f;
         let forward_q = forward_hemisphere(&s.grid, &s.q);
@@ -604,7 +607,6 @@ fn mixture_forward_fractions(parts: &[(f64, &AmsSeries)], orders: &[usize]) -> V
         for (x, &n) in fwd.iter_mut().zip(orders) {
             *x += 0.5 * coefficient(&c, s.chi[0], n);
         }
-        let p_prime_0 = legendre_derivatives_at_zero(s.l_max());
         for l in 1..s.chi.len() {
             // P'_l(0) = 0 for even l: those degrees add nothing.
             if p_prime_0[l] == 0.0 {

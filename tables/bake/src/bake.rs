@@ -706,17 +706,7 @@ pub fn drop_sizes(
     let cost: Vec<f64> = lambdas.iter().map(|l| 1.0 / l).collect();
     let shares = sample_shares(weights, &cost);
     // The worst channel's Σ_j a_cj² / share_j: its variance is s² N_pilot that over the total.
-    let mix = (0..3)
-        .map(|c| {
-            let w = &weights.weights[c];
-            let total: f64 = w.iter().sum();
-            w.iter()
-                .zip(&shares)
-                .filter(|(a, _)| **a > 0.0)
-                .map(|(a, n)| (a / total).powi(2) / n)
-                .sum::<f64>()
-        })
-        .fold(0.0, f64::max);
+    let mix = crate::plan::channel_noise(weights, |_, j| shares[j]);
     let total = SIZE_MARGIN * pilot_knobs.sizes as f64 * s * s * mix / (target * target);
     let most = 4 * knobs.sizes.max(16);
     Ok(shares
@@ -915,14 +905,7 @@ pub fn sample_shares(weights: &ChannelWeights, cost: &[f64]) -> Vec<f64> {
         n.iter().map(|x| x / total).collect()
     };
     let objective = |n: &[f64]| -> f64 {
-        let variance = (0..3)
-            .map(|c| {
-                (0..j_len)
-                    .filter(|&j| a[c][j] > 0.0)
-                    .map(|j| a[c][j] * a[c][j] / n[j])
-                    .sum::<f64>()
-            })
-            .fold(0.0, f64::max);
+        let variance = crate::plan::channel_noise(weights, |_, j| n[j]);
         variance * n.iter().zip(cost).map(|(n, c)| n * c).sum::<f64>()
     };
     let mut best = (f64::INFINITY, vec![1.0 / j_len as f64; j_len]);

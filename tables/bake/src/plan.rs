@@ -62,7 +62,10 @@ pub const PRESET_SPECTRUM: SpectralMode = SpectralMode::Spectral {
 /// The worst channel's sampling noise, as the variance factor max_c Σ_j a_cj² / n_j, of a mode
 /// whose wavelength j gets `share(weights, j)` samples per unit of a knob (a_cj the channel
 /// weights; each wavelength an independent estimate).
-fn channel_noise(weights: &ChannelWeights, share: impl Fn(&ChannelWeights, usize) -> f64) -> f64 {
+pub(crate) fn channel_noise(
+    weights: &ChannelWeights,
+    share: impl Fn(&ChannelWeights, usize) -> f64,
+) -> f64 {
     (0..3)
         .map(|c| {
             weights.weights[c]
