@@ -184,13 +184,23 @@ pub fn relative_noise(grid: ThetaGrid, bins: &[f64], std_error: &[f64], skip_pol
 /// (forward hemisphere, normalized there).
 fn diffraction_bin_energy(x: f64, grid: ThetaGrid) -> Vec<f64> {
     let total = encircled_energy(x);
-    (0..grid.len())
-        .map(|k| {
-            let (lo, hi) = grid.bin_edges_deg(k);
-            let (lo, hi) = (lo.min(90.0), hi.min(90.0));
-            let e = |t: f64| encircled_energy(x * t.to_radians().sin());
-            ((e(hi) - e(lo)) / total).max(0.0)
+    // The encircled energy at each bin edge once (two Bessel functions apiece), up to 90°:
+    // bins beyond hold none.
+    let quarter = std::f64::consts::FRAC_PI_2;
+    let at_edges: Vec<f64> = grid
+        .edge_theta_rad()
+        .iter()
+        .map(|&t| {
+            if t < quarter {
+                encircled_energy(x * t.sin())
+            } else {
+                total
+            }
         })
+        .collect();
+    at_edges
+        .windows(2)
+        .map(|e| ((e[1] - e[0]) / total).max(0.0))
         .collect()
 }
 

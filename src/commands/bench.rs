@@ -101,6 +101,10 @@ struct CrystalBench {
     /// Aspect ratio L/(2a) of the prism.
     #[arg(long, default_value_t = 1.0)]
     aspect_ratio: f64,
+    /// Tilts weighed per facet a path first meets (distorted prisms only; 4 as the bake's
+    /// presets use, 1 = the plain path).
+    #[arg(long, default_value_t = 4)]
+    tilt_splits: u32,
 }
 
 #[derive(Debug, Args)]
@@ -428,7 +432,7 @@ fn bench_crystal(c: CrystalBench) -> Result<()> {
                 n_ice,
                 0.0,
                 grid,
-                TraceSettings::new(c.rays, 1, c.roughness),
+                TraceSettings::new(c.rays, 1, c.roughness).split(c.tilt_splits),
             )
         });
         let seconds = start.elapsed().as_secs_f64();

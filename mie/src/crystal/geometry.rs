@@ -8,35 +8,36 @@ use glam::DVec3;
 /// libm, test). The tracer draws one azimuth per ray and two angles per facet tilt, where
 /// libm's sincos was 8–17 % of a bake's tracing time.
 pub fn turn(u: f64) -> (f64, f64) {
+    // Taylor coefficients (−1)^k/(2k + 1)! of sin α/α and (−1)^k/(2k)! of cos α in α², folded
+    // at compile time so that Horner's rule takes multiplications only (the quotients
+    // a2/6, a2/20, … were a chain of dependent divisions).
+    const SIN: [f64; 8] = [
+        1.0,
+        -1.0 / 6.0,
+        1.0 / 120.0,
+        -1.0 / 5040.0,
+        1.0 / 362_880.0,
+        -1.0 / 39_916_800.0,
+        1.0 / 6_227_020_800.0,
+        -1.0 / 1_307_674_368_000.0,
+    ];
+    const COS: [f64; 9] = [
+        1.0,
+        -1.0 / 2.0,
+        1.0 / 24.0,
+        -1.0 / 720.0,
+        1.0 / 40_320.0,
+        -1.0 / 3_628_800.0,
+        1.0 / 479_001_600.0,
+        -1.0 / 87_178_291_200.0,
+        1.0 / 20_922_789_888_000.0,
+    ];
     let t = 4.0 * u;
     let k = t.round();
     let a = (t - k) * std::f64::consts::FRAC_PI_2;
     let a2 = a * a;
-    let s = a
-        * (1.0
-            - a2 / 6.0
-                * (1.0
-                    - a2 / 20.0
-                        * (1.0
-                            - a2 / 42.0
-                                * (1.0
-                                    - a2 / 72.0
-                                        * (1.0
-                                            - a2 / 110.0
-                                                * (1.0 - a2 / 156.0 * (1.0 - a2 / 210.0)))))));
-    let c = 1.0
-        - a2 / 2.0
-            * (1.0
-                - a2 / 12.0
-                    * (1.0
-                        - a2 / 30.0
-                            * (1.0
-                                - a2 / 56.0
-                                    * (1.0
-                                        - a2 / 90.0
-                                            * (1.0
-                                                - a2 / 132.0
-                                                    * (1.0 - a2 / 182.0 * (1.0 - a2 / 240.0)))))));
+    let s = a * SIN.iter().rev().fold(0.0, |acc, &c| acc * a2 + c);
+    let c = COS.iter().rev().fold(0.0, |acc, &c| acc * a2 + c);
     match (k as i64).rem_euclid(4) {
         0 => (c, s),
         1 => (-s, c),
@@ -72,7 +73,8 @@ pub struct Prism {
     pub side: f64,
     /// Prism length L along the c-axis (unit of `side`).
     pub length: f64,
-    /// The six prism faces, then the basal faces +z and −z.
+    /// The six prism faces (outward normals at azimuths 30° + 60°·i, so face i + 3 is
+    /// opposite face i), then the basal faces +z and −z: [`Prism::exit`] relies on this order.
     pub faces: [Face; 8],
 }
 
@@ -249,19 +251,35 @@ impl Prism {
 
     /// Exit of a ray p + t d from inside: (t ≥ 0, face index). The nearest face ahead is found
     /// by comparing the fractions gap/(n·d) crosswise (both denominators positive), with one
-    /// division at the end.
+    /// division at the end. Opposite faces share a normal up to sign, so the ray is ahead of
+    /// one face of each pair (side faces j and j + 3, basal 6 and 7): three dot products in the
+    /// hexagon's plane and the z component settle all eight, the faces' order being
+    /// [`Prism::new`]'s.
     pub fn exit(&self, p: DVec3, d: DVec3) -> (f64, usize) {
         // The best face so far as its fraction num/den; 1/0 stands for "none yet".
         let (mut num, mut den, mut face) = (1.0, 0.0, 0);
-        for (i, f) in self.faces.iter().enumerate() {
-            let nd = f.normal.dot(d);
-            if nd > 0.0 {
-                let gap = (f.offset - f.normal.dot(p)).max(0.0);
-                if gap * den < num * nd {
-                    (num, den, face) = (gap, nd, i);
-                }
+        let mut consider = |along: f64, across: f64, offset: f64, ahead: usize, behind: usize| {
+            // The pair's face the ray heads for: n·d > 0, gap offset − n·p.
+            let (nd, gap, f) = if along > 0.0 {
+                (along, offset - across, ahead)
+            } else {
+                (-along, offset + across, behind)
+            };
+            if nd > 0.0 && gap.max(0.0) * den < num * nd {
+                (num, den, face) = (gap.max(0.0), nd, f);
             }
+        };
+        for j in 0..3 {
+            let n = self.faces[j].normal;
+            consider(
+                n.x * d.x + n.y * d.y,
+                n.x * p.x + n.y * p.y,
+                self.faces[j].offset,
+                j,
+                j + 3,
+            );
         }
+        consider(d.z, p.z, self.faces[6].offset, 6, 7);
         if den > 0.0 {
             (num / den, face)
         } else {
@@ -327,6 +345,46 @@ mod tests {
                 assert!(
                     (got - want).abs() <= 5.0 * sigma + 1e-12,
                     "face {f}: {got} vs {want}"
+                );
+            }
+        }
+    }
+
+    /// [`Prism::exit`]'s pairwise search finds the face a search over all eight planes finds
+    /// (the nearest plane ahead), from points inside towards random directions.
+    #[test]
+    fn exit_is_the_nearest_plane_ahead() {
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(3);
+        let mut uniform = || (rng.next_u64() >> 11) as f64 / (1u64 << 53) as f64;
+        for aspect_ratio in [0.2, 1.0, 3.0] {
+            let prism = Prism::new(aspect_ratio, 10.0);
+            for _ in 0..100_000 {
+                let d = DVec3::new(
+                    2.0 * uniform() - 1.0,
+                    2.0 * uniform() - 1.0,
+                    2.0 * uniform() - 1.0,
+                )
+                .normalize();
+                // A point inside: shrink a point of the bounding box until every plane holds it.
+                let r = prism.bounding_radius();
+                let mut p = r * DVec3::new(uniform() - 0.5, uniform() - 0.5, uniform() - 0.5);
+                while prism.faces.iter().any(|f| f.normal.dot(p) > f.offset) {
+                    p *= 0.5;
+                }
+                let (t, face) = prism.exit(p, d);
+                let (want_t, want_face) = prism
+                    .faces
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, f)| f.normal.dot(d) > 0.0)
+                    .map(|(i, f)| ((f.offset - f.normal.dot(p)) / f.normal.dot(d), i))
+                    .fold((f64::INFINITY, 0), |a, b| if b.0 < a.0 { b } else { a });
+                assert!((t - want_t).abs() <= 1e-12 * r, "{t} vs {want_t}");
+                let exit = p + t * d;
+                let on = prism.faces[face];
+                assert!(
+                    face == want_face || (on.normal.dot(exit) - on.offset).abs() < 1e-9 * r,
+                    "face {face} vs {want_face}"
                 );
             }
         }

@@ -15,7 +15,7 @@ use crate::plan::BakePlan;
 use crate::scene::Field;
 
 /// Version of everything that changes a baked number; part of every cache key.
-pub const COMPUTE_VERSION: u32 = 13;
+pub const COMPUTE_VERSION: u32 = 14;
 
 /// Version of the record layout; a record of another layout is recomputed.
 const RECORD_LAYOUT: u32 = 4;
