@@ -287,7 +287,7 @@ impl AmsSeries {
     /// n_iso(ε): the smallest n ≤ n_cap with max_k |4π Ams_n − 1| < ε, by bisection on n
     /// (the deviation falls monotonically for the phase functions met here), or None.
     pub fn isotropic_order(&self, epsilon: f64, n_cap: usize) -> Option<usize> {
-        isotropic_order(&[(1.0, self)], epsilon, n_cap)
+        isotropic_orders(&[(1.0, self)], &[epsilon], n_cap, Default::default())[0]
     }
 }
 
@@ -392,7 +392,24 @@ impl AmsMixture {
 
     /// n_iso(ε), as [`AmsSeries::isotropic_order`].
     pub fn isotropic_order(&self, epsilon: f64, n_cap: usize) -> Option<usize> {
-        isotropic_order(&self.refs(), epsilon, n_cap)
+        isotropic_orders(&self.refs(), &[epsilon], n_cap, Default::default())[0]
+    }
+
+    /// n_iso(ε) for each of `epsilons`, searched together (cheaper than one by one), starting
+    /// from `rows` of this mixture already computed for `orders` ([`Self::rows`]).
+    pub fn isotropic_orders(
+        &self,
+        epsilons: &[f64],
+        n_cap: usize,
+        orders: &[usize],
+        rows: &Array2<f64>,
+    ) -> Vec<Option<usize>> {
+        let known = orders
+            .iter()
+            .zip(rows.outer_iter())
+            .map(|(&n, row)| (n, deviation(row)))
+            .collect();
+        isotropic_orders(&self.refs(), epsilons, n_cap, known)
     }
 }
 
@@ -421,15 +438,13 @@ impl Row {
         }
     }
 
-    /// The j ≥ 2 coefficient of this row at χ_l = `chi` for a part whose forward δ is f:
-    /// `orders` holds c_{n,l} at this χ for n up to [`RECURRENCE_ORDERS`]
-    /// ([`higher_order_coefficients`]), higher orders come from [`high_order_coefficient`],
-    /// `poisson` is this row's [`PoissonScale`] for the part.
-    fn higher(self, f: f64, orders: &[f64], poisson: PoissonScale, chi: f64) -> f64 {
+    /// The j ≥ 2 coefficient of this row at χ_l = `chi` for part `j`: orders up to
+    /// [`RECURRENCE_ORDERS`] from `orders` ([`PartOrders`], filled at this degree), higher
+    /// orders and Poisson rows from this row's [`RowFactors`] for the part.
+    fn higher(self, orders: &PartOrders, j: usize, factors: RowFactors, chi: f64) -> f64 {
         match self {
-            Row::Order(n) if n < orders.len() => orders[n],
-            Row::Order(n) => high_order_coefficient(f, chi, n),
-            Row::Poisson(_) => poisson.coefficient(chi),
+            Row::Order(n) if n <= orders.n_top => orders.get(n, j),
+            _ => factors.coefficient(chi),
         }
     }
 
@@ -470,16 +485,35 @@ fn series_rows(parts: &[(f64, &AmsSeries)], kinds: &[Row]) -> Array2<f64> {
         .max()
         .unwrap_or(0)
         .min(RECURRENCE_ORDERS);
-    // Per part, each row's Poisson factors (constant in l).
-    let scales: Vec<Vec<PoissonScale>> = parts
+    // Per part, each row's factors constant in l.
+    let factors: Vec<Vec<RowFactors>> = parts
         .iter()
-        .map(|(_, s)| kinds.iter().map(|&r| PoissonScale::new(r, s.f)).collect())
+        .map(|(_, s)| kinds.iter().map(|&r| RowFactors::new(r, s.f)).collect())
         .collect();
-    let mut orders = vec![0.0; n_top + 1];
-    let mut rows = vec![vec![0.0; k_len]; kinds.len()];
+    let fs: Vec<f64> = parts.iter().map(|(_, s)| s.f).collect();
+    let mut orders = PartOrders::new(&fs, n_top);
+    let mut chis = vec![0.0; parts.len()];
+    let mut rows = Array2::<f64>::zeros((kinds.len(), k_len));
     let mut w = BinIntegrals::new(grid);
-    let mut w_over_dmu = vec![0.0; k_len];
     let mut coefficients = vec![0.0; kinds.len()];
+    // The degrees' terms are rank-one updates rows += c_l ⊗ (w_l/Δμ); BLOCK of them at a time
+    // are one matrix product (C: rows × degrees, W: degrees × bins), which streams the rows
+    // through the cache once per block instead of once per degree.
+    const BLOCK: usize = 32;
+    let mut c_block = Array2::<f64>::zeros((kinds.len(), BLOCK));
+    let mut w_block = Array2::<f64>::zeros((BLOCK, k_len));
+    let mut filled = 0;
+    let flush = |rows: &mut Array2<f64>, c: &Array2<f64>, w: &Array2<f64>, filled: usize| {
+        if filled > 0 {
+            ndarray::linalg::general_mat_mul(
+                1.0,
+                &c.slice(ndarray::s![.., ..filled]),
+                &w.slice(ndarray::s![..filled, ..]),
+                1.0,
+                rows,
+            );
+        }
+    };
     // Σ_{l' ≥ l} (2l'+1)/(4π) |c_{n,l'}| |bin average of P_l'| ≤ B_l (L+1)²/(4π), with
     // B_l = Σ_j a_j c_n(f_j, max_{l' ≥ l} |χ_l'|) (c_n grows with |χ|, and so does the
     // Poisson coefficient): below 1e-17 nothing beyond l can change a row (values ~ 1/(4π)),
@@ -488,14 +522,16 @@ fn series_rows(parts: &[(f64, &AmsSeries)], kinds: &[Row]) -> Array2<f64> {
     let tail_scale = ((l_max + 1) as f64).powi(2) / (4.0 * std::f64::consts::PI);
     for l in 0..=l_max {
         if l % 32 == 0 && l > 0 {
+            for (m, (_, s)) in chis.iter_mut().zip(parts) {
+                *m = s.chi_tail.get(l).copied().unwrap_or(0.0);
+            }
+            orders.at(&chis);
             let mut bound = 0.0;
-            for ((a, s), scale) in parts.iter().zip(&scales) {
-                let m = s.chi_tail.get(l).copied().unwrap_or(0.0);
-                higher_order_coefficients(s.f, m, &mut orders);
+            for (j, ((a, _), row_factors)) in parts.iter().zip(&factors).enumerate() {
                 bound += kinds
                     .iter()
-                    .zip(scale)
-                    .map(|(&r, &p)| a * r.higher(s.f, &orders, p, m))
+                    .zip(row_factors)
+                    .map(|(&r, &p)| a * r.higher(&orders, j, p, chis[j]))
                     .fold(0.0, f64::max);
             }
             if bound * tail_scale < 1e-17 {
@@ -507,30 +543,43 @@ fn series_rows(parts: &[(f64, &AmsSeries)], kinds: &[Row]) -> Array2<f64> {
         }
         let weight = (2.0 * l as f64 + 1.0) / (4.0 * std::f64::consts::PI);
         coefficients.iter_mut().for_each(|c| *c = 0.0);
-        for ((a, s), scale) in parts.iter().zip(&scales) {
-            let Some(&chi_l) = s.chi.get(l) else { continue };
-            higher_order_coefficients(s.f, chi_l, &mut orders);
-            for ((c, &r), &p) in coefficients.iter_mut().zip(kinds).zip(scale) {
-                *c += a * r.higher(s.f, &orders, p, chi_l);
+        // A part whose series ends below l adds nothing (its χ_l taken as 0, whose
+        // coefficients are 0 for every row).
+        for (chi, (_, s)) in chis.iter_mut().zip(parts) {
+            *chi = s.chi.get(l).copied().unwrap_or(0.0);
+        }
+        orders.at(&chis);
+        for (j, ((a, s), row_factors)) in parts.iter().zip(&factors).enumerate() {
+            if l >= s.chi.len() {
+                continue;
+            }
+            for ((c, &r), &p) in coefficients.iter_mut().zip(kinds).zip(row_factors) {
+                *c += a * r.higher(&orders, j, p, chis[j]);
             }
         }
         if coefficients.iter().all(|&c| c == 0.0) {
             continue;
         }
-        for ((x, wl), inv) in w_over_dmu.iter_mut().zip(w.values()).zip(&inv_d_mu) {
-            *x = wl * inv;
+        for (x, (wl, inv)) in w_block
+            .row_mut(filled)
+            .iter_mut()
+            .zip(w.values().iter().zip(&inv_d_mu))
+        {
+            *x = weight * wl * inv;
         }
-        for (row, &c) in rows.iter_mut().zip(&coefficients) {
-            if c == 0.0 {
-                continue;
-            }
-            let s = weight * c;
-            for (r, x) in row.iter_mut().zip(&w_over_dmu) {
-                *r += s * x;
-            }
+        c_block
+            .column_mut(filled)
+            .iter_mut()
+            .zip(&coefficients)
+            .for_each(|(x, c)| *x = *c);
+        filled += 1;
+        if filled == BLOCK {
+            flush(&mut rows, &c_block, &w_block, filled);
+            filled = 0;
         }
     }
-    for (row, &kind) in rows.iter_mut().zip(kinds) {
+    flush(&mut rows, &c_block, &w_block, filled);
+    for (mut row, &kind) in rows.outer_iter_mut().zip(kinds) {
         for (a, s) in parts {
             // j = 1: Q exactly (n f^{n−1}(1 − f) for Ams_n); j = 0: the δ in bin 0.
             let (delta, single) = kind.exact_weights(s.f);
@@ -540,38 +589,124 @@ fn series_rows(parts: &[(f64, &AmsSeries)], kinds: &[Row]) -> Array2<f64> {
             row[0] += a * delta / omega0;
         }
     }
-    Array2::from_shape_vec((kinds.len(), k_len), rows.concat()).expect("rows are K wide")
+    rows
 }
 
-/// The factors of a Poisson row's j ≥ 2 coefficient that do not depend on l, for one part
-/// (module docs, "Poisson mixtures"): e^{−D(1−f)} / (1 − e^{−D}) and D (1 − f).
-#[derive(Debug, Clone, Copy, Default)]
-struct PoissonScale {
-    scale: f64,
-    depth: f64,
+/// The factors of a row's j ≥ 2 coefficient that do not depend on l, for one part whose
+/// forward δ is f: a Poisson row's e^{−D(1−f)} / (1 − e^{−D}) and D (1 − f) (module docs,
+/// "Poisson mixtures"); an order above [`RECURRENCE_ORDERS`]'s f^n and n f^{n−1}
+/// ([`high_order_coefficient`]); nothing for the orders the recurrence gives.
+#[derive(Debug, Clone, Copy)]
+enum RowFactors {
+    Recurrence,
+    Poisson {
+        scale: f64,
+        depth: f64,
+    },
+    High {
+        f: f64,
+        n: i32,
+        f_n: f64,
+        n_f_n1: f64,
+    },
 }
 
-impl PoissonScale {
+impl RowFactors {
     fn new(row: Row, f: f64) -> Self {
         match row {
-            Row::Poisson(d) => Self {
+            Row::Poisson(d) => Self::Poisson {
                 scale: (-d * (1.0 - f)).exp() / -(-d).exp_m1(),
                 depth: d * (1.0 - f),
             },
-            Row::Order(_) => Self::default(),
+            Row::Order(n) if n > RECURRENCE_ORDERS => Self::High {
+                f,
+                n: n as i32,
+                f_n: f.powi(n as i32),
+                n_f_n1: n as f64 * f.powi(n as i32 - 1),
+            },
+            Row::Order(_) => Self::Recurrence,
         }
     }
 
-    /// e^{−D(1−f)} (e^u − 1 − u) / (1 − e^{−D}), u = D (1 − f) χ.
+    /// The j ≥ 2 coefficient at χ: for a Poisson row e^{−D(1−f)} (e^u − 1 − u) / (1 − e^{−D}),
+    /// u = D (1 − f) χ; for a high order [`high_order_coefficient`]'s closed form.
     fn coefficient(self, chi: f64) -> f64 {
-        let u = self.depth * chi;
-        // e^u − 1 − u, with its series where expm1 would cancel.
-        let tail = if u.abs() < 1e-3 {
-            0.5 * u * u * (1.0 + u / 3.0 * (1.0 + u / 4.0))
-        } else {
-            u.exp_m1() - u
-        };
-        self.scale * tail
+        match self {
+            Self::Poisson { scale, depth } => {
+                let u = depth * chi;
+                // e^u − 1 − u, with its series where expm1 would cancel.
+                let tail = if u.abs() < 1e-3 {
+                    0.5 * u * u * (1.0 + u / 3.0 * (1.0 + u / 4.0))
+                } else {
+                    u.exp_m1() - u
+                };
+                scale * tail
+            }
+            Self::High { f, n, f_n, n_f_n1 } => {
+                let a = (1.0 - f) * chi;
+                if f == 0.0 {
+                    a.powi(n)
+                } else {
+                    (f + a).powi(n) - f_n - n_f_n1 * a
+                }
+            }
+            Self::Recurrence => unreachable!("orders up to RECURRENCE_ORDERS come from PartOrders"),
+        }
+    }
+}
+
+/// c_{n,l} of every part at one degree l, n = 0..=n_top, by [`higher_order_coefficients`]'
+/// recurrence run side by side over the parts (the table is order-major, so each step is one
+/// vector operation across the parts; the numbers are the one-part recurrence's).
+struct PartOrders {
+    n_top: usize,
+    fs: Vec<f64>,
+    table: Vec<f64>,
+    x: Vec<f64>,
+    a2: Vec<f64>,
+    f_pow: Vec<f64>,
+}
+
+impl PartOrders {
+    fn new(fs: &[f64], n_top: usize) -> Self {
+        let p = fs.len();
+        Self {
+            n_top,
+            fs: fs.to_vec(),
+            table: vec![0.0; (n_top + 1) * p],
+            x: vec![0.0; p],
+            a2: vec![0.0; p],
+            f_pow: vec![0.0; p],
+        }
+    }
+
+    /// Fills the table at χ_l = `chis[j]` for part j.
+    fn at(&mut self, chis: &[f64]) {
+        let p = self.fs.len();
+        if self.n_top < 2 {
+            return; // c_0 = c_1 = 0, as the table holds
+        }
+        for j in 0..p {
+            let a = (1.0 - self.fs[j]) * chis[j];
+            self.x[j] = self.fs[j] + a;
+            self.a2[j] = a * a;
+            self.f_pow[j] = self.fs[j];
+        }
+        self.table[2 * p..3 * p].copy_from_slice(&self.a2);
+        for n in 2..self.n_top {
+            let (done, next) = self.table.split_at_mut((n + 1) * p);
+            let current = &done[n * p..];
+            let next = &mut next[..p];
+            let nf = n as f64;
+            for j in 0..p {
+                next[j] = self.x[j] * current[j] + nf * self.f_pow[j] * self.a2[j];
+                self.f_pow[j] *= self.fs[j];
+            }
+        }
+    }
+
+    fn get(&self, n: usize, j: usize) -> f64 {
+        self.table[n * self.fs.len() + j]
     }
 }
 
@@ -627,28 +762,108 @@ fn mixture_forward_fractions(parts: &[(f64, &AmsSeries)], orders: &[usize]) -> V
 }
 
 fn anisotropy(parts: &[(f64, &AmsSeries)], n: usize) -> f64 {
-    mixture_rows(parts, &[n])
-        .row(0)
-        .iter()
+    deviation(mixture_rows(parts, &[n]).row(0))
+}
+
+/// max_k |4π v_k − 1| of a row of bin averages: how far it is from isotropic.
+fn deviation(row: ndarray::ArrayView1<f64>) -> f64 {
+    row.iter()
         .map(|v| (4.0 * std::f64::consts::PI * v - 1.0).abs())
         .fold(0.0, f64::max)
 }
 
-fn isotropic_order(parts: &[(f64, &AmsSeries)], epsilon: f64, n_cap: usize) -> Option<usize> {
-    if anisotropy(parts, n_cap) >= epsilon {
-        return None;
-    }
-    let (mut lo, mut hi) = (0usize, n_cap); // anisotropy(hi) < ε; lo fails (or is 0)
-    while hi - lo > 1 {
-        let mid = (lo + hi) / 2;
-        if anisotropy(parts, mid) < epsilon {
-            hi = mid;
-        } else {
-            lo = mid;
+/// n_iso(ε) for each of `epsilons`: the smallest n ≤ n_cap with max_k |4π Ams_n − 1| < ε, or
+/// None, assuming (as a bisection would) that the deviation falls monotonically in n.
+/// `known` holds deviations already measured (the rows a bake computes anyway). The orders are
+/// searched together, a handful per pass over the degrees, where a pass costs about as much as
+/// its rows (the bin integrals and the coefficients' recurrence are shared): for large n the
+/// deviation falls geometrically, as the largest |f + (1 − f)χ_l|^n, so each ε's order is
+/// predicted from the two nearest orders known to fail (or, inside a bracket, from its ends)
+/// and the pass takes orders around the prediction, some spread over the bracket and n_cap.
+/// The default scene's channels take one or two passes of about a dozen rows where a
+/// bisection took about 54 single-row passes.
+fn isotropic_orders(
+    parts: &[(f64, &AmsSeries)],
+    epsilons: &[f64],
+    n_cap: usize,
+    mut known: std::collections::BTreeMap<usize, f64>,
+) -> Vec<Option<usize>> {
+    known.retain(|&n, _| n >= 1 && n <= n_cap);
+    loop {
+        let mut wanted: Vec<usize> = Vec::new();
+        let mut answers = Vec::new();
+        for &eps in epsilons {
+            let hi = known.iter().find(|(_, d)| **d < eps).map(|(n, _)| *n);
+            let below = hi.unwrap_or(n_cap + 1);
+            let lo = known
+                .range(..below)
+                .rev()
+                .find(|(_, d)| **d >= eps)
+                .map(|(n, d)| (*n, *d));
+            let lo_n = lo.map_or(0, |(n, _)| n);
+            if let Some(hi) = hi
+                && hi - lo_n <= 1
+            {
+                answers.push(Some(hi));
+                continue;
+            }
+            if hi.is_none() && lo_n == n_cap {
+                answers.push(None);
+                continue;
+            }
+            answers.push(None);
+            let top = hi.unwrap_or(n_cap);
+            // The geometric rate from the bracket's ends, else from the two orders below lo.
+            let rate = match (lo, hi) {
+                (Some((a, da)), Some(b)) => {
+                    let db = known[&b];
+                    (db / da).powf(1.0 / (b - a) as f64)
+                }
+                (Some((a, da)), None) => known
+                    .range(..a)
+                    .next_back()
+                    .map_or(0.5, |(&m, &dm)| (da / dm).powf(1.0 / (a - m) as f64)),
+                (None, _) => 0.5,
+            };
+            let guess = match lo {
+                Some((a, da)) if rate > 0.0 && rate < 1.0 && da > 0.0 => {
+                    a as f64 + ((eps / da).ln() / rate.ln()).max(0.0)
+                }
+                _ => (lo_n + top) as f64 / 2.0,
+            };
+            let inside = |n: f64| (n.round() as usize).clamp(lo_n + 1, top);
+            let centre = inside(guess.ceil());
+            for k in 0..PREDICTED_ROWS {
+                wanted.push(inside(
+                    centre as f64 + k as f64 - (PREDICTED_ROWS / 2) as f64,
+                ));
+            }
+            // A few orders spread over the bracket, geometrically where it is wide, and the
+            // cap, in case the prediction misses.
+            for i in 1..=SPREAD_ROWS {
+                let t = i as f64 / (SPREAD_ROWS + 1) as f64;
+                let (a, b) = ((lo_n + 1) as f64, top as f64);
+                wanted.push(inside(a * (b / a).powf(t)));
+            }
+            wanted.push(top);
+        }
+        wanted.sort_unstable();
+        wanted.dedup();
+        wanted.retain(|n| !known.contains_key(n));
+        if wanted.is_empty() {
+            return answers;
+        }
+        let rows = mixture_rows(parts, &wanted);
+        for (&n, row) in wanted.iter().zip(rows.outer_iter()) {
+            known.insert(n, deviation(row));
         }
     }
-    Some(hi)
 }
+
+/// Orders an [`isotropic_orders`] pass takes around each ε's predicted order, and spread over
+/// its bracket.
+const PREDICTED_ROWS: usize = 5;
+const SPREAD_ROWS: usize = 4;
 
 /// f^0..=f^n (only up to degree 64 are used by the direct sum).
 #[cfg(test)]
@@ -1003,6 +1218,59 @@ mod tests {
         assert!(dev(200) < 1e-12, "{}", dev(200));
         assert!(dev(50) < dev(20) && dev(20) < dev(5));
         assert!((t.forward_fraction[199] - 0.5).abs() < 1e-12);
+    }
+
+    /// The multi-order search finds what a bisection over single orders finds, for one
+    /// series and for a mixture with a forward δ, at orders below and above
+    /// [`RECURRENCE_ORDERS`], and None where the cap is not isotropic enough.
+    #[test]
+    fn isotropic_orders_equal_a_bisection() {
+        let bisection = |parts: &[(f64, &AmsSeries)], eps: f64, cap: usize| {
+            if anisotropy(parts, cap) >= eps {
+                return None;
+            }
+            let (mut lo, mut hi) = (0usize, cap);
+            while hi - lo > 1 {
+                let mid = (lo + hi) / 2;
+                if anisotropy(parts, mid) < eps {
+                    hi = mid;
+                } else {
+                    lo = mid;
+                }
+            }
+            Some(hi)
+        };
+        let grid = ThetaGrid::new(0.5).unwrap();
+        let mut peaked = hg_bins(&grid, 0.8);
+        peaked[0] *= 40.0;
+        let (a, b, c) = (
+            AmsSeries::new(&grid, &hg_bins(&grid, 0.95), Reconstruction::Spline),
+            AmsSeries::new(&grid, &peaked, Reconstruction::Spline),
+            AmsSeries::new(&grid, &hg_bins(&grid, 0.6), Reconstruction::Spline),
+        );
+        let epsilons = [1e-2, 1e-4, 1e-6, 1e-9];
+        for (parts, cap) in [
+            (vec![(1.0, &a)], 100_000),
+            (vec![(1.0, &c)], 100_000),
+            (vec![(0.3, &a), (0.7, &b)], 100_000),
+            (vec![(0.3, &a), (0.7, &b)], 150),
+        ] {
+            let want: Vec<Option<usize>> = epsilons
+                .iter()
+                .map(|&e| bisection(&parts, e, cap))
+                .collect();
+            let got = isotropic_orders(&parts, &epsilons, cap, Default::default());
+            eprintln!("cap {cap}: {got:?}");
+            assert_eq!(got, want, "cap {cap}");
+            // Starting from the first 26 orders' rows, as a bake does.
+            let orders: Vec<usize> = (1..=26).collect();
+            let known = orders
+                .iter()
+                .zip(mixture_rows(&parts, &orders).outer_iter())
+                .map(|(&n, row)| (n, deviation(row)))
+                .collect();
+            assert_eq!(isotropic_orders(&parts, &epsilons, cap, known), want);
+        }
     }
 
     #[test]

@@ -1056,11 +1056,16 @@ fn channel_tables(
         }
     }
     let mixture = AmsMixture::new(parts)?;
-    let mut n_isotropic = [None; 3];
-    for (slot, &eps) in n_isotropic.iter_mut().zip(&N_ISO_EPSILONS) {
-        *slot = mixture.isotropic_order(eps, N_ISO_CAP).map(|n| n as u32);
-    }
     let (rows, poisson) = mixture.rows_and_poisson(orders, depths);
+    let mut n_isotropic = [None; 3];
+    for (slot, n) in n_isotropic.iter_mut().zip(mixture.isotropic_orders(
+        &N_ISO_EPSILONS,
+        N_ISO_CAP,
+        orders,
+        &rows,
+    )) {
+        *slot = n.map(|n| n as u32);
+    }
     Ok(ChannelResult {
         rows,
         poisson,
