@@ -274,6 +274,10 @@ fn snow_is_featureless_with_g_between_0_70_and_0_80() {
     );
 }
 
+/// Largest roulette net (light added less taken, as a fraction of the rays' energy) the energy
+/// test allows at 400 000 rays: it is zero on average.
+const ROULETTE_NET: f64 = 1e-4; // measured worst 6.7e-5
+
 #[test]
 fn energy_is_accounted_for_and_phase_functions_integrate_to_one() {
     let g = grid(0.18);
@@ -320,13 +324,17 @@ fn energy_is_accounted_for_and_phase_functions_integrate_to_one() {
             + p.crystal().unwrap().trace.absorbed
             + p.crystal().unwrap().trace.lost;
         assert!(balance < 1.0 && p.albedo <= 1.0 && p.albedo > 0.99, "{p:?}");
-        // Every ray's energy is scattered, absorbed or lost (albedo = (1 + scattered) / 2).
+        // Every ray's energy is scattered, absorbed, lost or the roulette's (which adds and
+        // takes light, zero on average), exactly; the albedo is (1 + 1 − absorbed − lost) / 2.
         let t = &p.crystal().unwrap().trace;
-        let sum = 2.0 * p.albedo - 1.0 + t.absorbed + t.lost;
+        let sum = t.scattered + t.absorbed + t.lost - t.roulette;
         assert!(
             (sum - 1.0).abs() < 1e-9,
             "AR {ar} δ {delta} splits {splits}: energy {sum}"
         );
+        println!("  roulette's net {:.1e}", t.roulette);
+        assert!(t.roulette.abs() < ROULETTE_NET, "roulette {}", t.roulette);
+        assert!((2.0 * p.albedo - 1.0 - (1.0 - t.absorbed - t.lost)).abs() < 1e-12);
         // Diffraction is half of the extinction.
         assert!((p.sigma_ext_m2 / p.sigma_sca_m2 * p.albedo - 1.0).abs() < 1e-12);
         assert!(p.bins.iter().all(|&v| v >= 0.0));
@@ -458,12 +466,22 @@ fn tilt_splitting_keeps_the_mean_and_lowers_the_noise() {
     println!("worst band difference: {worst:.2} standard errors");
     assert!(worst < 4.0, "bands differ by {worst:.2} standard errors");
 
-    // The reported noise of a split trace is the spread of two of them.
-    let actual = pair_spread(g, &four, &four_again, true);
-    println!("four tilts: reported {n4:.4}, actual {actual:.4}");
+    // The reported noise of split traces is the spread of pairs of them. One pair's spread
+    // swings by ±20 % with the seeds (a bin that a rare heavy path reaches; with the roulette,
+    // measured 0.79–1.10 of the reported noise over six pairs), so four pairs are pooled.
+    let mut reported = vec![n4, n4_again];
+    let mut spreads = vec![pair_spread(g, &four, &four_again, true)];
+    for pair in 0..3 {
+        let (a, b) = (run(4, 20 + 2 * pair), run(4, 21 + 2 * pair));
+        reported.extend([noise(&a), noise(&b)]);
+        spreads.push(pair_spread(g, &a, &b, true));
+    }
+    let rms = |v: &[f64]| (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt();
+    let (reported, actual) = (rms(&reported), rms(&spreads));
+    println!("four tilts: reported {reported:.4}, actual {actual:.4} (pairs {spreads:.4?})");
     assert!(
-        (0.85..1.15).contains(&(n4 / actual)),
-        "reported noise {n4:.4} against the spread's {actual:.4}"
+        (0.85..1.15).contains(&(reported / actual)),
+        "reported noise {reported:.4} against the spread's {actual:.4}"
     );
 
     let many = Rays {
