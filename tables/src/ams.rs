@@ -215,15 +215,38 @@ impl AmsSeries {
             .collect();
         // χ_l of the steps, 2π Σ_k q_k W_lk, times the reconstruction's factor (module docs).
         let (factor, l_max) = reconstruction.factors(grid.step_deg().to_radians());
+        // Q (wavelengths × bins) against blocks of BLOCK degrees' bin integrals (degrees ×
+        // bins): one matrix product per block instead of a dot product per wavelength and
+        // degree.
+        const BLOCK: usize = 32;
+        let k_len = grid.len();
+        let q_all = Array2::from_shape_fn((split.len(), k_len), |(j, k)| split[j].1[k]);
+        let mut w_block = Array2::<f64>::zeros((BLOCK, k_len));
+        let mut products = Array2::<f64>::zeros((split.len(), BLOCK));
         let mut chis: Vec<Vec<f64>> = vec![Vec::with_capacity(l_max + 1); split.len()];
         let mut w = BinIntegrals::new(grid);
-        for l in 0..=l_max {
-            if l > 0 {
-                w.advance();
+        for start in (0..=l_max).step_by(BLOCK) {
+            let count = BLOCK.min(l_max + 1 - start);
+            for (i, l) in (start..start + count).enumerate() {
+                if l > 0 {
+                    w.advance();
+                }
+                w_block
+                    .row_mut(i)
+                    .assign(&ndarray::ArrayView1::from(w.values()));
             }
-            let factor_l = factor(l);
-            for (chi, (_, q, _)) in chis.iter_mut().zip(&split) {
-                chi.push(2.0 * std::f64::consts::PI * dot(q, w.values()) * factor_l);
+            ndarray::linalg::general_mat_mul(
+                1.0,
+                &q_all,
+                &w_block.slice(ndarray::s![..count, ..]).t(),
+                0.0,
+                &mut products.slice_mut(ndarray::s![.., ..count]),
+            );
+            for (i, l) in (start..start + count).enumerate() {
+                let factor_l = factor(l);
+                for (j, chi) in chis.iter_mut().enumerate() {
+                    chi.push(2.0 * std::f64::consts::PI * products[[j, i]] * factor_l);
+                }
             }
         }
         split
@@ -987,10 +1010,6 @@ fn legendre_derivatives_at_zero(l_max: usize) -> Vec<f64> {
     (0..=l_max)
         .map(|l| if l == 0 { 0.0 } else { l as f64 * p[l - 1] })
         .collect()
-}
-
-fn dot(a: &[f64], b: &[f64]) -> f64 {
-    a.iter().zip(b).map(|(x, y)| x * y).sum()
 }
 
 #[cfg(test)]
