@@ -115,7 +115,7 @@ impl Quality {
         // Drops: sized for their noise target from a pilot (docs/accuracy.md); the reference's
         // sizes fixed.
         let (sizes, nodes_per_panel, rays, crystal_noise, size_noise, chunk_rays) = match self {
-            Quality::Draft => (32, 2, 8_192, 0.04, 0.035, 4_096),
+            Quality::Draft => (32, 2, 8_192, 0.045, 0.035, 4_096),
             Quality::Standard => (400, 2, 131_072, 0.009, 0.008, 16_384),
             Quality::Reference => (4096, 2, 524_288, 0.0035, 0.0, 16_384),
         };
