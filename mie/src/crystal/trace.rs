@@ -45,10 +45,11 @@
 //! `mie/examples/crystal_levers.rs`, 550 nm, 10⁶ rays, one seed, runs alternated; rms relative
 //! standard error² × time over θ ≥ 1°, against the cut-off at 10⁻⁴ the tracer had): w_r = 0.01
 //! 0.78–0.84 (ice column AR 2) / 0.82–0.94 (rough snow, tilts split 4 ways), 0.03 0.74–0.79 /
-//! 0.78–0.82, 0.1 0.62–0.66 / 0.71–0.77, 0.3 0.58–0.63 / 0.71–0.73, 1 (analog: every path weighs
-//! 1) 0.91–1.01 / 1.19–1.30. 0.1 is kept: noise per ray +1.7 % (ice) and +2.6 % (snow), time
-//! −37 % and −31 %; 0.3 gains little more for +7 % and +10 % noise per ray. The energy the roulette adds and takes is tallied ([`TraceResult::roulette`]), so
-//! the bookkeeping still closes exactly.
+//! 0.78–0.82, 0.1 0.62–0.66 / 0.71–0.77, 0.3 0.58–0.63 / 0.71–0.73, and analog tracing (w_r =
+//! 1: every path weighs 1) 0.91–1.01 / 1.19–1.30. 0.1 is kept: noise per ray +1.7 % (ice) and
+//! +2.6 % (snow), time −37 % and −31 %; 0.3 gains little more for +7 % and +10 % noise per ray.
+//! The energy the roulette adds and takes is tallied ([`TraceResult::roulette`]), so the
+//! bookkeeping still closes exactly.
 
 use rand_xoshiro::Xoshiro256PlusPlus;
 use rand_xoshiro::rand_core::{RngCore, SeedableRng};
