@@ -547,8 +547,9 @@ fn inner_edge_cosines(grid: ThetaGrid) -> Vec<f64> {
 /// acos good to 10⁻⁴ rad) and settled by comparing c with the edges' cosines: exact, without a
 /// libm acos per exit.
 fn bin_of(c: f64, edges: &[f64]) -> usize {
-    let step = std::f64::consts::PI / edges.len() as f64;
-    let mut k = ((fast_acos(c) / step + 0.5) as usize).min(edges.len());
+    // Bins per radian, a multiplication (the guess is settled exactly below).
+    let per_rad = edges.len() as f64 * std::f64::consts::FRAC_1_PI;
+    let mut k = ((fast_acos(c) * per_rad + 0.5) as usize).min(edges.len());
     while k > 0 && edges[k - 1] < c {
         k -= 1;
     }
@@ -620,14 +621,15 @@ fn trace_one(
     let eta_in = 1.0 / n_re;
     let mut tilts = [Tilt::default(); MAX_TILT_SPLITS as usize];
     let k = facets.splits(face, s.tilt_splits);
+    let share = 1.0 / k as f64;
     for tilt in &mut tilts[..k] {
         tilt.normal = facets.tilt(face, k, rng);
         tilt.m = entry_normal(tilt.normal, prism.faces[face].normal, d_in);
         tilt.cos_i = -d_in.dot(tilt.m);
         (tilt.refl, tilt.cos_t) = fresnel(tilt.cos_i, eta_in);
         let reflected = d_in + 2.0 * tilt.cos_i * tilt.m;
-        emit(tally, d_in, reflected, tilt.refl / k as f64);
-        tally.external += tilt.refl / k as f64;
+        emit(tally, d_in, reflected, tilt.refl * share);
+        tally.external += tilt.refl * share;
     }
     let (j, mut w) = choose(&tilts[..k], |t| 1.0 - t.refl, rng);
     let Tilt {
@@ -648,7 +650,7 @@ fn trace_one(
             // remainder x⁴/24 < 4·10⁻¹⁴ below 10⁻³), else exp.
             let x = alpha * t;
             let kept = w * if x < 1e-3 {
-                1.0 - x * (1.0 - x * (0.5 - x / 6.0))
+                1.0 - x * (1.0 - x * (0.5 - x * (1.0 / 6.0)))
             } else {
                 (-x).exp()
             };
@@ -656,13 +658,14 @@ fn trace_one(
             w = kept;
         }
         let k = facets.splits(f, s.tilt_splits);
+        let share = 1.0 / k as f64;
         for tilt in &mut tilts[..k] {
             tilt.normal = facets.tilt(f, k, rng);
             (tilt.m, tilt.cos_i, (tilt.refl, tilt.cos_t)) =
                 leave(d, tilt.normal, prism.faces[f].normal, eta_out);
             if tilt.refl < 1.0 {
                 let out = eta_out * d + (eta_out * tilt.cos_i - tilt.cos_t) * tilt.m;
-                emit(tally, d_in, out, w * (1.0 - tilt.refl) / k as f64);
+                emit(tally, d_in, out, w * (1.0 - tilt.refl) * share);
             }
         }
         let (j, kept) = choose(&tilts[..k], |t| t.refl, rng);
