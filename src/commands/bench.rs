@@ -335,6 +335,7 @@ fn bake_once(
     if let Some(j) = jobs {
         cmd.args(["--jobs", &j.to_string()]);
     }
+    let before = MachineTime::now();
     let start = Instant::now();
     let output = cmd.output().context("running photometeor bake")?;
     let wall = start.elapsed().as_secs_f64();
@@ -344,8 +345,43 @@ fn bake_once(
             String::from_utf8_lossy(&output.stderr).trim()
         );
     }
-    let report = serde_json::from_slice(&output.stdout).context("reading the bake summary")?;
+    let mut report: serde_json::Value =
+        serde_json::from_slice(&output.stdout).context("reading the bake summary")?;
+    if let (Some(a), Some(b)) = (before, MachineTime::now()) {
+        report["machine_cpu_s"] = json!(b.busy_s - a.busy_s);
+        report["stolen_share"] = json!((b.steal_s - a.steal_s) / (b.total_s - a.total_s));
+    }
     Ok((wall, report))
+}
+
+/// The machine's CPU time from /proc/stat (Linux; USER_HZ = 100 ticks per second): busy (user,
+/// nice, system, irq, softirq), stolen by the hypervisor for other guests, and in all. On a
+/// shared virtual machine the wall time of a bake depends on what the host's other guests do;
+/// the busy seconds and the stolen share say how much of a run's wall time was ours.
+struct MachineTime {
+    busy_s: f64,
+    steal_s: f64,
+    total_s: f64,
+}
+
+impl MachineTime {
+    fn now() -> Option<Self> {
+        let stat = std::fs::read_to_string("/proc/stat").ok()?;
+        let ticks: Vec<f64> = stat
+            .lines()
+            .next()?
+            .split_whitespace()
+            .skip(1)
+            .map(|t| t.parse().ok())
+            .collect::<Option<_>>()?;
+        let at = |i: usize| ticks.get(i).copied().unwrap_or(0.0) / 100.0;
+        // user nice system idle iowait irq softirq steal
+        Some(Self {
+            busy_s: at(0) + at(1) + at(2) + at(5) + at(6),
+            steal_s: at(7),
+            total_s: (0..8).map(at).sum(),
+        })
+    }
 }
 
 fn bench_bake(b: BakeBench) -> Result<()> {
@@ -381,6 +417,8 @@ fn bench_bake(b: BakeBench) -> Result<()> {
         rows.push(json!({
             "preset": preset,
             "first_s": first,
+            "first_cpu_s": report["machine_cpu_s"],
+            "first_stolen_share": report["stolen_share"],
             "rebake_s": again,
             "rebake_speedup": first / again,
             "peak_rss_mib": report["peak_rss_mib"],
@@ -395,16 +433,21 @@ fn bench_bake(b: BakeBench) -> Result<()> {
         println!("{}", json!({ "threads": threads, "presets": rows }));
         return Ok(());
     }
-    println!("bake benchmark ({threads} threads; wall time of each process):");
     println!(
-        "  {:<10} {:>10} {:>10} {:>10} {:>12} {:>10}",
-        "preset", "first s", "re-bake s", "speed-up", "peak MiB", "EXR KiB"
+        "bake benchmark ({threads} threads; wall time of each process, the machine's busy CPU \
+         seconds during the first bake and the share of its time the host gave other guests):"
+    );
+    println!(
+        "  {:<10} {:>10} {:>10} {:>10} {:>10} {:>10} {:>12} {:>10}",
+        "preset", "first s", "CPU s", "stolen", "re-bake s", "speed-up", "peak MiB", "EXR KiB"
     );
     for r in &rows {
         println!(
-            "  {:<10} {:>10.2} {:>10.3} {:>10.0} {:>12.0} {:>10.0}",
+            "  {:<10} {:>10.2} {:>10.1} {:>9.0}% {:>10.3} {:>10.0} {:>12.0} {:>10.0}",
             r["preset"].as_str().unwrap_or(""),
             r["first_s"].as_f64().unwrap_or(f64::NAN),
+            r["first_cpu_s"].as_f64().unwrap_or(f64::NAN),
+            100.0 * r["first_stolen_share"].as_f64().unwrap_or(f64::NAN),
             r["rebake_s"].as_f64().unwrap_or(f64::NAN),
             r["rebake_speedup"].as_f64().unwrap_or(f64::NAN),
             r["peak_rss_mib"].as_f64().unwrap_or(f64::NAN),
