@@ -40,8 +40,9 @@
 //! at 0.18°) and vanishes at the steps' peaks u = 2π m, where sinc(u/2) = 0. On the sphere, whose
 //! bins are uniform in θ, the factor holds for lθ ≫ 1, i.e. away from the poles' first bins. The
 //! spline is smooth (C²), so its spectrum falls as l⁻⁴; the series is cut by a flat taper
-//! e^{−(u/2π)⁸} (10⁻⁵ at u = 1.6, e^{−1} at the first peak) at u = 4π, where it is e^{−256}:
-//! l_max = ⌈4π/Δθ⌉, 4000 at 0.18°. A spline can overshoot next to a jump of the bins (a halo's
+//! e^{−(u/2π)⁸} (10⁻⁵ at u = 1.6, e^{−1} at the first peak) where the taper falls below 10⁻¹⁷,
+//! u = 2π·39.1^{1/8} ≈ 3.16π: l_max = ⌈3.16π/Δθ⌉, 3162 at 0.18° (it was cut at 4π, 4000, where
+//! the taper is e^{−256}: a fifth of every pass over the degrees added nothing). A spline can overshoot next to a jump of the bins (a halo's
 //! edge), so it is not positive by construction; the tests check the rows stay ≥ 0.
 //!
 //! [`Reconstruction::HeatKernel`] is the earlier method, kept to measure against: the steps
@@ -95,7 +96,8 @@ impl Reconstruction {
     fn factors(self, step_rad: f64) -> (impl Fn(usize) -> f64, usize) {
         use std::f64::consts::PI;
         let l_max = match self {
-            Reconstruction::Spline => (4.0 * PI / step_rad).ceil() as usize,
+            // e^{−(u/2π)⁸} < 1e-17 ⇔ u > 2π·39.1^{1/8} (and sinc³/S ≤ 1.24 beyond)
+            Reconstruction::Spline => (2.0 * PI * 39.1f64.powf(0.125) / step_rad).ceil() as usize,
             // exp(−l(l+1)s²/2) < 1e-17 ⇔ l(l+1) > 2·39.1/s²
             Reconstruction::HeatKernel { blur_bins } => {
                 ((78.2f64).sqrt() / (blur_bins * step_rad)).ceil() as usize
