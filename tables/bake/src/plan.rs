@@ -116,7 +116,7 @@ impl Quality {
         // sizes fixed.
         let (sizes, nodes_per_panel, rays, crystal_noise, size_noise, chunk_rays) = match self {
             Quality::Draft => (32, 2, 8_192, 0.045, 0.035, 4_096),
-            Quality::Standard => (400, 2, 131_072, 0.009, 0.0085, 16_384),
+            Quality::Standard => (400, 2, 131_072, 0.009, 0.008, 16_384),
             Quality::Reference => (4096, 2, 524_288, 0.0035, 0.0, 16_384),
         };
         Knobs {
