@@ -307,36 +307,51 @@ pub fn run(plan: &BakePlan, progress: &dyn Progress) -> Result<BakeReport, BakeE
     }
     // Stage the whole generation, then publish it in one rename (format::commit).
     let mut stage = Staging::begin(&lock)?;
+    // Each field's four EXRs encoded side by side (their deflate and Biri's kernel fit were a
+    // serial tail of every bake), then written in scene order.
+    struct Encoded {
+        table: Vec<u8>,
+        single: Vec<u8>,
+        poisson: Vec<u8>,
+        biri: Vec<u8>,
+    }
+    let encoded: Vec<Encoded> = done
+        .par_iter()
+        .map(|(_, _, result)| -> Result<Encoded, BakeError> {
+            Ok(Encoded {
+                table: field_exr_bytes(&result.image)?,
+                single: format::single_exr_bytes(&result.single)?,
+                poisson: format::poisson_exr_bytes(&result.poisson)?,
+                // Biri's point-light kernel from Ams_1 per channel (cheap: not cached).
+                biri: format::biri_exr_bytes(&biri_kernel(&result.image))?,
+            })
+        })
+        .collect::<Result<_, _>>()?;
     let mut entries = Vec::new();
-    for (field, hash, result) in done {
+    for ((field, hash, result), bytes) in done.into_iter().zip(encoded) {
         let file = format!("{}.exr", field.name);
-        let bytes = field_exr_bytes(&result.image)?;
-        stage.write(&file, &bytes)?;
+        stage.write(&file, &bytes.table)?;
         let single_file = format::single_file_name(&field.name);
-        let single_bytes = format::single_exr_bytes(&result.single)?;
-        stage.write(&single_file, &single_bytes)?;
+        stage.write(&single_file, &bytes.single)?;
         let poisson_file = format::poisson_file_name(&field.name);
-        let poisson_bytes = format::poisson_exr_bytes(&result.poisson)?;
-        stage.write(&poisson_file, &poisson_bytes)?;
-        let mut entry = field_entry(plan, field, &result, file, hash, &bytes);
+        stage.write(&poisson_file, &bytes.poisson)?;
+        let mut entry = field_entry(plan, field, &result, file, hash, &bytes.table);
         entry.single_scattering = Some(format::manifest::FileRef {
             file: single_file,
-            bytes: single_bytes.len() as u64,
-            crc32: format::crc32_hex(&single_bytes),
+            bytes: bytes.single.len() as u64,
+            crc32: format::crc32_hex(&bytes.single),
         });
         entry.poisson = Some(format::manifest::FileRef {
             file: poisson_file,
-            bytes: poisson_bytes.len() as u64,
-            crc32: format::crc32_hex(&poisson_bytes),
+            bytes: bytes.poisson.len() as u64,
+            crc32: format::crc32_hex(&bytes.poisson),
         });
-        // Biri's point-light kernel from Ams_1 per channel (cheap: not cached).
         let biri_file = format::biri_file_name(&field.name);
-        let biri_bytes = format::biri_exr_bytes(&biri_kernel(&result.image))?;
-        stage.write(&biri_file, &biri_bytes)?;
+        stage.write(&biri_file, &bytes.biri)?;
         entry.biri_kernel = Some(format::manifest::FileRef {
             file: biri_file,
-            bytes: biri_bytes.len() as u64,
-            crc32: format::crc32_hex(&biri_bytes),
+            bytes: bytes.biri.len() as u64,
+            crc32: format::crc32_hex(&bytes.biri),
         });
         entries.push(entry);
     }
