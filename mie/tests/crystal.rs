@@ -467,8 +467,9 @@ fn tilt_splitting_keeps_the_mean_and_lowers_the_noise() {
     assert!(worst < 4.0, "bands differ by {worst:.2} standard errors");
 
     // The reported noise of split traces is the spread of pairs of them. One pair's spread
-    // swings by ±20 % with the seeds (a bin that a rare heavy path reaches; with the roulette,
-    // measured 0.79–1.10 of the reported noise over six pairs), so four pairs are pooled.
+    // swings by ±15 % with the seeds (a bin that a rare heavy path reaches; with the roulette,
+    // measured 0.88–1.14 of the reported noise over six pairs of this size), so four pairs are
+    // pooled.
     let mut reported = vec![n4, n4_again];
     let mut spreads = vec![pair_spread(g, &four, &four_again, true)];
     for pair in 0..3 {
