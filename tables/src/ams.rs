@@ -667,22 +667,20 @@ impl RowFactors {
                 };
                 scale * tail
             }
-            Self::High { f, n, f_n, n_f_n1 } => {
-                let a = (1.0 - f) * chi;
-                if f == 0.0 {
-                    a.powi(n)
-                } else {
-                    (f + a).powi(n) - f_n - n_f_n1 * a
-                }
-            }
+            Self::High { f, n, f_n, n_f_n1 } => closed_form(f, chi, n, f_n, n_f_n1),
             Self::Recurrence => unreachable!("orders up to RECURRENCE_ORDERS come from PartOrders"),
         }
     }
 }
 
-/// c_{n,l} of every part at one degree l, n = 0..=n_top, by [`higher_order_coefficients`]'
-/// recurrence run side by side over the parts (the table is order-major, so each step is one
-/// vector operation across the parts; the numbers are the one-part recurrence's).
+/// c_{n,l} = (f + (1−f)χ)^n − f^n − n f^{n−1}(1−f)χ, the j ≥ 2 part of the binomial
+/// expansion, of every part at one degree l, n = 0..=n_top (0 below n = 2), by the recurrence
+///
+///   c_2 = a²,  c_{n+1} = x c_n + n f^{n−1} a²   (a = (1 − f)χ, x = f + a),
+///
+/// which follows from x^{n+1} = x·x^n; every term is of the size of the result (|x| ≤ 1), so
+/// nothing cancels against the j < 2 terms, and all orders cost O(n) together. The parts run
+/// side by side (the table is order-major, so each step is one vector operation across them).
 struct PartOrders {
     n_top: usize,
     fs: Vec<f64>,
@@ -743,7 +741,6 @@ fn mixture_forward_fractions(parts: &[(f64, &AmsSeries)], orders: &[usize]) -> V
         .unwrap_or(0)
         .min(RECURRENCE_ORDERS);
     let mut total = vec![0.0; orders.len()];
-    let mut c = vec![0.0; n_top + 1];
     // The parts share a grid and a reconstruction: one table of P'_l(0) for all.
     let l_max = parts.iter().map(|(_, s)| s.l_max()).max().unwrap_or(0);
     let p_prime_0 = legendre_derivatives_at_zero(l_max);
@@ -758,12 +755,15 @@ fn mixture_forward_fractions(parts: &[(f64, &AmsSeries)], orders: &[usize]) -> V
                 f.powi(n as i32) + single * forward_q
             })
             .collect();
-        let coefficient = |c: &[f64], chi: f64, n: usize| {
-            c.get(n)
-                .copied()
-                .unwrap_or_else(|| high_order_coefficient(f, chi, n))
+        let mut c = PartOrders::new(&[f], n_top);
+        let coefficient = |c: &PartOrders, chi: f64, n: usize| {
+            if n <= c.n_top {
+                c.get(n, 0)
+            } else {
+                high_order_coefficient(f, chi, n)
+            }
         };
-        higher_order_coefficients(f, s.chi[0], &mut c);
+        c.at(&[s.chi[0]]);
         for (x, &n) in fwd.iter_mut().zip(orders) {
             *x += 0.5 * coefficient(&c, s.chi[0], n);
         }
@@ -772,7 +772,7 @@ fn mixture_forward_fractions(parts: &[(f64, &AmsSeries)], orders: &[usize]) -> V
             if p_prime_0[l] == 0.0 {
                 continue;
             }
-            higher_order_coefficients(f, s.chi[l], &mut c);
+            c.at(&[s.chi[l]]);
             let half_integral = p_prime_0[l] / (l as f64 * (l as f64 + 1.0));
             let weight = (2.0 * l as f64 + 1.0) / 2.0;
             for (x, &n) in fwd.iter_mut().zip(orders) {
@@ -916,7 +916,7 @@ pub fn ams_table(grid: &ThetaGrid, bins: &[f64], settings: AmsSettings) -> AmsTa
     }
 }
 
-/// Orders whose coefficients [`higher_order_coefficients`] gives; beyond them
+/// Orders whose coefficients [`PartOrders`] gives; beyond them
 /// [`high_order_coefficient`] (a bisection for n_iso asks for single orders in the
 /// thousands, which the recurrence would reach in O(n) per degree).
 const RECURRENCE_ORDERS: usize = 64;
@@ -924,40 +924,27 @@ const RECURRENCE_ORDERS: usize = 64;
 /// c_{n,l} for n > [`RECURRENCE_ORDERS`] in closed form: the subtracted terms are ≤ n f^{n−1}
 /// with f^64 ≲ 1e-7 even for ice, so it loses at most ~1e-16 · n f^{n−1} absolute.
 fn high_order_coefficient(f: f64, chi: f64, n: usize) -> f64 {
-    let a = (1.0 - f) * chi;
-    if f == 0.0 {
-        return a.powi(n as i32);
-    }
-    (f + a).powi(n as i32) - f.powi(n as i32) - n as f64 * f.powi(n as i32 - 1) * a
+    closed_form(
+        f,
+        chi,
+        n as i32,
+        f.powi(n as i32),
+        n as f64 * f.powi(n as i32 - 1),
+    )
 }
 
-/// c_{n,l} = (f + (1−f)χ)^n − f^n − n f^{n−1}(1−f)χ, the j ≥ 2 part of the binomial
-/// expansion, for n = 0..`out.len()` (0 below n = 2), by the recurrence
-///
-///   c_2 = a²,  c_{n+1} = x c_n + n f^{n−1} a²   (a = (1 − f)χ, x = f + a),
-///
-/// which follows from x^{n+1} = x·x^n; every term is of the size of the result (|x| ≤ 1), so
-/// nothing cancels against the j < 2 terms, and all orders cost O(n) together.
-fn higher_order_coefficients(f: f64, chi: f64, out: &mut [f64]) {
+/// [`high_order_coefficient`] given f^n and n f^{n−1} (which do not depend on χ).
+fn closed_form(f: f64, chi: f64, n: i32, f_n: f64, n_f_n1: f64) -> f64 {
     let a = (1.0 - f) * chi;
-    let (x, a2) = (f + a, a * a);
-    for c in out.iter_mut().take(2) {
-        *c = 0.0;
+    if f == 0.0 {
+        return a.powi(n);
     }
-    if out.len() <= 2 {
-        return;
-    }
-    out[2] = a2;
-    let mut f_pow = f; // f^{n−1}
-    for n in 2..out.len() - 1 {
-        out[n + 1] = x * out[n] + n as f64 * f_pow * a2;
-        f_pow *= f;
-    }
+    (f + a).powi(n) - f_n - n_f_n1 * a
 }
 
 /// c_{n,l} = (f + (1−f)χ)^n − f^n − n f^{n−1}(1−f)χ: the j ≥ 2 part of the binomial expansion.
 /// `f_pow` holds f^0..f^min(n, 64). The direct sum, O(n) per order: the tests' check of
-/// [`higher_order_coefficients`].
+/// [`PartOrders`].
 #[cfg(test)]
 fn higher_order_coefficient(f: f64, f_pow: &[f64], chi: f64, n: usize) -> f64 {
     if n < 2 {
@@ -1023,11 +1010,12 @@ mod tests {
     /// either sign down to 1e-9 (where the closed form would cancel).
     #[test]
     fn coefficient_recurrence_matches_the_binomial_sum() {
-        let mut out = vec![0.0; 201];
         let mut worst: f64 = 0.0;
         for f in [0.0, 0.1, 0.5, 0.9, 0.999] {
             for chi in [-0.95, -0.3, -1e-9, 1e-9, 1e-4, 0.5, 0.99, 0.999_999] {
-                higher_order_coefficients(f, chi, &mut out);
+                let mut orders = PartOrders::new(&[f], 200);
+                orders.at(&[chi]);
+                let out: Vec<f64> = (0..=200).map(|n| orders.get(n, 0)).collect();
                 let f_pow = powers_of(f, 200);
                 for n in 0..=200 {
                     // The bake's earlier direct sum up to n = 64 (a closed form above, which
