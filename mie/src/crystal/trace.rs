@@ -614,6 +614,9 @@ fn trace_one(
     };
     tally.hits += 1;
     let mut facets = Facets::new(prism, tangents, s.roughness);
+    // The share 1/K of each of K split tilts, once per ray rather than a division per exit.
+    let split_share = 1.0 / s.tilt_splits.clamp(1, MAX_TILT_SPLITS) as f64;
+    let share_of = |k: usize| if k == 1 { 1.0 } else { split_share };
 
     // External interaction. With K tilts of a distorted entry facet (module docs, "Tilt
     // splitting") each one's reflection is scored, 1/K of it, and the ray enters through one of
@@ -621,7 +624,7 @@ fn trace_one(
     let eta_in = 1.0 / n_re;
     let mut tilts = [Tilt::default(); MAX_TILT_SPLITS as usize];
     let k = facets.splits(face, s.tilt_splits);
-    let share = 1.0 / k as f64;
+    let share = share_of(k);
     for tilt in &mut tilts[..k] {
         tilt.normal = facets.tilt(face, k, rng);
         tilt.m = entry_normal(tilt.normal, prism.faces[face].normal, d_in);
@@ -658,7 +661,7 @@ fn trace_one(
             w = kept;
         }
         let k = facets.splits(f, s.tilt_splits);
-        let share = 1.0 / k as f64;
+        let share = share_of(k);
         for tilt in &mut tilts[..k] {
             tilt.normal = facets.tilt(f, k, rng);
             (tilt.m, tilt.cos_i, (tilt.refl, tilt.cos_t)) =
