@@ -467,34 +467,34 @@ mod avx512 {
             unsafe {
                 let pi = _mm512_loadu_pd(t.pi.as_ptr());
                 let tau = _mm512_loadu_pd(t.tau.as_ptr());
-                let [ca_re, ca_im, cb_re, cb_im] = *k;
-                let pairs = [
-                    (pi, ca_re),
-                    (pi, ca_im),
-                    (tau, cb_re),
-                    (tau, cb_im),
-                    (pi, cb_re),
-                    (pi, cb_im),
-                    (tau, ca_re),
-                    (tau, ca_im),
-                ];
-                for (q, (v, k)) in pairs.into_iter().enumerate() {
-                    sums[q] = _mm512_fmadd_pd(v, _mm512_set1_pd(k), sums[q]);
-                }
+                let ca_re = _mm512_set1_pd(k[0]);
+                let ca_im = _mm512_set1_pd(k[1]);
+                let cb_re = _mm512_set1_pd(k[2]);
+                let cb_im = _mm512_set1_pd(k[3]);
+                sums[0] = _mm512_fmadd_pd(pi, ca_re, sums[0]);
+                sums[1] = _mm512_fmadd_pd(pi, ca_im, sums[1]);
+                sums[2] = _mm512_fmadd_pd(tau, cb_re, sums[2]);
+                sums[3] = _mm512_fmadd_pd(tau, cb_im, sums[3]);
+                sums[4] = _mm512_fmadd_pd(pi, cb_re, sums[4]);
+                sums[5] = _mm512_fmadd_pd(pi, cb_im, sums[5]);
+                sums[6] = _mm512_fmadd_pd(tau, ca_re, sums[6]);
+                sums[7] = _mm512_fmadd_pd(tau, ca_im, sums[7]);
             }
         }
-        let mut i = 0;
+        let (mut tile, mut terms) = (&tile[..terms.len()], terms);
         if !tile.is_empty() && n0.is_multiple_of(2) {
             add(&mut even, &tile[0], &terms[0]);
-            i = 1;
+            (tile, terms) = (&tile[1..], &terms[1..]);
         }
-        while i + 1 < tile.len() {
-            add(&mut odd, &tile[i], &terms[i]);
-            add(&mut even, &tile[i + 1], &terms[i + 1]);
-            i += 2;
+        // (odd, even) pairs, then a last odd order: exact chunks, so no bounds checks.
+        let (tiles, terms) = (tile.chunks_exact(2), terms.chunks_exact(2));
+        let last = tiles.remainder().first().zip(terms.remainder().first());
+        for (t, k) in tiles.zip(terms) {
+            add(&mut odd, &t[0], &k[0]);
+            add(&mut even, &t[1], &k[1]);
         }
-        if i < tile.len() {
-            add(&mut odd, &tile[i], &terms[i]);
+        if let Some((t, k)) = last {
+            add(&mut odd, t, k);
         }
         let store =
             |a: &mut [f64; LANES], v: __m512d| unsafe { _mm512_storeu_pd(a.as_mut_ptr(), v) };
