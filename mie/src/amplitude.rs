@@ -334,7 +334,17 @@ fn batch_sums(
             .zip(previous.iter_mut())
             .zip(table.chunks_mut(ORDER_TILE))
         {
-            pi_tau(mu, prev, n0, &mut tile[..n1 - n0], recurrence);
+            let tile = &mut tile[..n1 - n0];
+            #[cfg(target_arch = "x86_64")]
+            if simd && std::arch::is_x86_feature_detected!("avx512f") {
+                // SAFETY: the CPU supports AVX-512F (checked at run time just above).
+                #[allow(unsafe_code)]
+                unsafe {
+                    avx512::pi_tau(mu, prev, n0, tile, recurrence)
+                };
+                continue;
+            }
+            pi_tau(mu, prev, n0, tile, recurrence);
         }
         for (sphere, sums) in spheres.iter().zip(sums.iter_mut()) {
             let end = n1.min(sphere.rows.len() + 1);
@@ -442,12 +452,49 @@ fn accumulate(sums: &mut BlockSums, n0: usize, tile: &[PiTau], terms: &[[f64; 4]
 #[allow(unsafe_code)]
 mod avx512 {
     use std::arch::x86_64::{
-        __m512d, _mm512_fmadd_pd, _mm512_loadu_pd, _mm512_set1_pd, _mm512_storeu_pd,
+        __m512d, _mm512_fmadd_pd, _mm512_loadu_pd, _mm512_mul_pd, _mm512_set1_pd, _mm512_storeu_pd,
     };
 
     use super::{BlockSums, LANES, PiTau};
 
     const _: () = assert!(LANES == 8, "the AVX-512 kernel holds 8 lanes per register");
+
+    /// [`super::pi_tau`] in 512-bit operations, the same ones in the same order.
+    #[target_feature(enable = "avx512f")]
+    pub(super) unsafe fn pi_tau(
+        mu: &[f64; LANES],
+        previous: &mut ([f64; LANES], [f64; LANES]),
+        n0: usize,
+        tile: &mut [PiTau],
+        recurrence: &[[f64; 4]],
+    ) {
+        // SAFETY (all loads and stores below): every pointer comes from a [f64; 8] array.
+        let load = |a: &[f64; LANES]| unsafe { _mm512_loadu_pd(a.as_ptr()) };
+        let store =
+            |a: &mut [f64; LANES], v: __m512d| unsafe { _mm512_storeu_pd(a.as_mut_ptr(), v) };
+        let mu = load(mu);
+        let (mut p1, mut p2) = (load(&previous.0), load(&previous.1));
+        for (n, out) in (n0..).zip(tile.iter_mut()) {
+            let [r1, r2, nf, n1f] = recurrence[n];
+            let pi = if n == 1 {
+                _mm512_set1_pd(1.0)
+            } else {
+                // π_n = (r1 μ) π_{n−1} + (−r2 π_{n−2})
+                let r1_mu = _mm512_mul_pd(_mm512_set1_pd(r1), mu);
+                let r2_p2 = _mm512_mul_pd(_mm512_set1_pd(-r2), p2);
+                _mm512_fmadd_pd(r1_mu, p1, r2_p2)
+            };
+            // τ_n = (n μ) π_n + (−(n+1) π_{n−1})
+            let n_mu = _mm512_mul_pd(_mm512_set1_pd(nf), mu);
+            let n1_p1 = _mm512_mul_pd(_mm512_set1_pd(-n1f), p1);
+            store(&mut out.pi, pi);
+            store(&mut out.tau, _mm512_fmadd_pd(n_mu, pi, n1_p1));
+            p2 = p1;
+            p1 = pi;
+        }
+        store(&mut previous.0, p1);
+        store(&mut previous.1, p2);
+    }
 
     #[target_feature(enable = "avx512f")]
     pub(super) unsafe fn accumulate(
