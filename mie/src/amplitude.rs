@@ -185,6 +185,38 @@ pub fn weighted_intensity(
         .collect()
 }
 
+/// [`weighted_intensity`] of the even-indexed spheres and of the odd-indexed ones, from one batch:
+/// the two halves share the recurrence (`batch_sums`), and each half's sums are added in its
+/// spheres' order, as two separate calls would.
+pub fn weighted_intensity_halves(
+    spheres: &[SphereTerms],
+    weights: &[f64],
+    angles: &FoldedAngles,
+) -> [Vec<f64>; 2] {
+    assert_eq!(spheres.len(), weights.len());
+    // Per folded angle: [even +ν, even −ν, odd +ν, odd −ν].
+    let folded: Vec<[f64; 4]> = for_each_pair(
+        spheres,
+        &angles.nu,
+        |rows| vec![[0.0; 4]; rows],
+        |acc, row, sphere, p| {
+            let (w, half) = (weights[sphere], 2 * (sphere % 2));
+            acc[row][half] += w * (p.s1_plus.norm_sqr() + p.s2_plus.norm_sqr());
+            acc[row][half + 1] += w * (p.s1_minus.norm_sqr() + p.s2_minus.norm_sqr());
+        },
+    )
+    .into_iter()
+    .flatten()
+    .collect();
+    [0, 2].map(|half| {
+        angles
+            .map
+            .iter()
+            .map(|&(slot, negative)| folded[slot][half + usize::from(negative)])
+            .collect()
+    })
+}
+
 /// Evaluates every sphere at every folded angle ν and hands each (row, sphere, amplitudes) to
 /// `visit`, in a fixed order per chunk of `ROW_CHUNK` angles. Returns one accumulator per chunk.
 /// Spheres are visited in their given order for each row.

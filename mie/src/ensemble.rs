@@ -19,7 +19,7 @@
 use num_complex::Complex64;
 use rayon::prelude::*;
 
-use crate::amplitude::{FoldedAngles, SphereTerms, weighted_intensity};
+use crate::amplitude::{FoldedAngles, SphereTerms, weighted_intensity, weighted_intensity_halves};
 use crate::distribution::{SizeDistribution, SizeQuadrature};
 use crate::error::MieError;
 use crate::grid::{ThetaGrid, bin_quadrature};
@@ -322,16 +322,12 @@ pub fn bulk_with_spread(
             }
         }
         // SIZE_CHUNK is even, so a size's parity within its chunk is its parity overall.
-        let mut split: [(Vec<SphereTerms>, Vec<f64>); 2] = Default::default();
-        for (i, (t, &w)) in terms.into_iter().zip(weights).enumerate() {
-            split[i % 2].0.push(t);
-            split[i % 2].1.push(w);
-        }
-        for (acc, (t, w)) in halves.iter_mut().zip(&split) {
-            if t.is_empty() {
-                continue;
-            }
-            for (a, v) in acc.iter_mut().zip(weighted_intensity(t, w, &node_angles)) {
+        for (acc, half) in
+            halves
+                .iter_mut()
+                .zip(weighted_intensity_halves(&terms, weights, &node_angles))
+        {
+            for (a, v) in acc.iter_mut().zip(half) {
                 *a += v;
             }
         }
