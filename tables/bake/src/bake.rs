@@ -619,14 +619,19 @@ pub fn phase_functions(
                 rays.iter().map(|&r| r as f64 / total as f64).collect()
             };
             let target = knobs.crystal_noise;
+            // The wavelengths are traced side by side (each tracer's tallies are fixed by its
+            // own chunks' seeds, whatever runs when): one wavelength's few chunks a round would
+            // leave a core idle at its end.
             if target > 0.0 {
                 // Two chunks at least per wavelength: one chunk has no spread to give a standard
                 // error, and a wavelength without one would count as noiseless.
-                for t in tracers.iter_mut() {
+                tracers.par_iter_mut().for_each(|t| {
                     t.run_to(2);
-                }
+                });
             }
-            let mut phases: Vec<PhaseFunction> = tracers.iter().map(|t| t.phase()).collect();
+            let phases_of =
+                |tracers: &[CrystalTracer]| tracers.par_iter().map(|t| t.phase()).collect();
+            let mut phases: Vec<PhaseFunction> = phases_of(&tracers);
             loop {
                 let noise = channel_noise(&phases, weights, grid, skip_pole);
                 if target <= 0.0 || noise <= target {
@@ -634,21 +639,23 @@ pub fn phase_functions(
                 }
                 let now: u64 = tracers.iter().map(|t| t.chunks()).sum();
                 let need = (now as f64 * (1.03 * (noise / target).powi(2)).min(4.0)).ceil();
-                let mut traced = false;
-                for (t, share) in tracers.iter_mut().zip(&shares) {
-                    traced |= t.run_to((need * share).ceil() as u64);
-                }
+                let mut traced = tracers
+                    .par_iter_mut()
+                    .zip(&shares)
+                    .map(|(t, share)| t.run_to((need * share).ceil() as u64))
+                    .reduce(|| false, |a, b| a || b);
                 if !traced {
                     // The shares' rounding left every wavelength where it was: one more chunk
                     // each (or all at their limit).
-                    for t in tracers.iter_mut() {
-                        traced |= t.run_to(t.chunks() + 1);
-                    }
+                    traced = tracers
+                        .par_iter_mut()
+                        .map(|t| t.run_to(t.chunks() + 1))
+                        .reduce(|| false, |a, b| a || b);
                 }
                 if !traced {
                     break;
                 }
-                phases = tracers.iter().map(|t| t.phase()).collect();
+                phases = phases_of(&tracers);
             }
             per_wavelength = phases;
         }
