@@ -238,15 +238,42 @@ pub fn run(plan: &BakePlan, progress: &dyn Progress) -> Result<BakeReport, BakeE
         };
         lookups.push((field, hash, cache_file, cached));
     }
-    let computed: Vec<Result<Option<BakedField>, BakeError>> = lookups
+    // Each field's four EXRs are encoded as soon as it is done, beside the fields still
+    // computing (their deflate and Biri's kernel fit had been a serial tail of every bake);
+    // they are written, in scene order, once every field is done.
+    struct Encoded {
+        table: Vec<u8>,
+        single: Vec<u8>,
+        poisson: Vec<u8>,
+        biri: Vec<u8>,
+    }
+    let encode = |result: &BakedField| -> Result<Encoded, BakeError> {
+        Ok(Encoded {
+            table: field_exr_bytes(&result.image)?,
+            single: format::single_exr_bytes(&result.single)?,
+            poisson: format::poisson_exr_bytes(&result.poisson)?,
+            // Biri's point-light kernel from Ams_1 per channel (cheap: not cached).
+            biri: format::biri_exr_bytes(&biri_kernel(&result.image))?,
+        })
+    };
+    let computed: Vec<Result<(Option<BakedField>, Encoded), BakeError>> = lookups
         .par_iter()
-        .map(|(field, _, _, cached)| match cached {
-            Some(_) => Ok(None),
-            None => compute_field(plan, field, &weights, &grid, progress).map(Some),
+        .map(|(field, _, _, cached)| {
+            let computed = match cached {
+                Some(_) => None,
+                None => Some(compute_field(plan, field, &weights, &grid, progress)?),
+            };
+            let result = computed.as_ref().or(cached.as_ref());
+            let encoded = encode(result.expect("a field cached or computed"))?;
+            Ok((computed, encoded))
         })
         .collect();
     // The first failing field in scene order, whatever finished first.
-    let computed: Vec<Option<BakedField>> = computed.into_iter().collect::<Result<_, _>>()?;
+    let (computed, encoded): (Vec<Option<BakedField>>, Vec<Encoded>) = computed
+        .into_iter()
+        .collect::<Result<Vec<_>, _>>()?
+        .into_iter()
+        .unzip();
     let mut done = Vec::new();
     let mut fresh = Vec::new();
     for ((field, hash, cache_file, cached), computed) in lookups.into_iter().zip(computed) {
@@ -307,26 +334,6 @@ pub fn run(plan: &BakePlan, progress: &dyn Progress) -> Result<BakeReport, BakeE
     }
     // Stage the whole generation, then publish it in one rename (format::commit).
     let mut stage = Staging::begin(&lock)?;
-    // Each field's four EXRs encoded side by side (their deflate and Biri's kernel fit were a
-    // serial tail of every bake), then written in scene order.
-    struct Encoded {
-        table: Vec<u8>,
-        single: Vec<u8>,
-        poisson: Vec<u8>,
-        biri: Vec<u8>,
-    }
-    let encoded: Vec<Encoded> = done
-        .par_iter()
-        .map(|(_, _, result)| -> Result<Encoded, BakeError> {
-            Ok(Encoded {
-                table: field_exr_bytes(&result.image)?,
-                single: format::single_exr_bytes(&result.single)?,
-                poisson: format::poisson_exr_bytes(&result.poisson)?,
-                // Biri's point-light kernel from Ams_1 per channel (cheap: not cached).
-                biri: format::biri_exr_bytes(&biri_kernel(&result.image))?,
-            })
-        })
-        .collect::<Result<_, _>>()?;
     let mut entries = Vec::new();
     for ((field, hash, result), bytes) in done.into_iter().zip(encoded) {
         let file = format!("{}.exr", field.name);
