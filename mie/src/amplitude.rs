@@ -26,6 +26,8 @@ use rayon::prelude::*;
 
 use crate::sphere::{MieCoefficients, Neumaier};
 
+mod fused;
+
 /// Angles per work item; fixed so that results do not depend on the thread count.
 const ROW_CHUNK: usize = 64;
 
@@ -245,7 +247,7 @@ where
                     b
                 })
                 .collect();
-            for (s, sums) in batch_sums(&blocks, spheres, &recurrence, true)
+            for (s, sums) in sphere_sums(&blocks, spheres, &recurrence, true)
                 .iter()
                 .enumerate()
             {
@@ -401,6 +403,20 @@ fn batch_sums(
         n0 = n1;
     }
     sums
+}
+
+/// The sums of every sphere at every block: a lone sphere by the fused kernel
+/// (`fused::block_sums`), a batch by [`batch_sums`].
+fn sphere_sums(
+    blocks: &[[f64; LANES]],
+    spheres: &[SphereTerms],
+    recurrence: &[[f64; 4]],
+    simd: bool,
+) -> Vec<Vec<BlockSums>> {
+    match spheres {
+        [one] => vec![fused::block_sums(blocks, &one.rows, recurrence, simd)],
+        _ => batch_sums(blocks, spheres, recurrence, simd),
+    }
 }
 
 /// π_n (upward recurrence, B&H Eq. 4.47) and τ_n = n μ π_n − (n+1) π_{n−1} of one block for
@@ -619,8 +635,8 @@ mod tests {
     }
 
     /// A sphere's sums do not depend on the batch it is computed in (the orders of the shared
-    /// recurrence's tiles and of the terms are a lone sphere's), and the AVX-512 kernel gives
-    /// the portable one's bits. The sizes span several tiles of orders and end mid-tile.
+    /// recurrence's tiles and of the terms are a lone sphere's, whose fused kernel runs the
+    /// same operations), and the AVX-512 kernels give the portable ones' bits. The sizes span several tiles of orders and end mid-tile.
     #[test]
     fn batched_sums_equal_each_sphere_alone_and_both_kernels_agree() {
         let m = Complex64::new(1.33, 1e-8);
@@ -637,11 +653,15 @@ mod tests {
         let n_max = spheres.iter().map(SphereTerms::n_terms).max().unwrap();
         let recurrence = recurrence_table(n_max);
         let batch = batch_sums(&blocks, &spheres, &recurrence, true);
-        let alone: Vec<Vec<BlockSums>> = spheres
-            .iter()
-            .map(|s| batch_sums(&blocks, std::slice::from_ref(s), &recurrence, true).remove(0))
-            .collect();
-        assert_eq!(sums_bits(&batch), sums_bits(&alone));
+        // Each alone: the fused kernel (sphere_sums with one sphere).
+        let alone = |simd: bool| -> Vec<Vec<BlockSums>> {
+            spheres
+                .iter()
+                .map(|s| sphere_sums(&blocks, std::slice::from_ref(s), &recurrence, simd).remove(0))
+                .collect()
+        };
+        assert_eq!(sums_bits(&batch), sums_bits(&alone(true)));
+        assert_eq!(sums_bits(&batch), sums_bits(&alone(false)));
         let portable = batch_sums(&blocks, &spheres, &recurrence, false);
         assert_eq!(sums_bits(&batch), sums_bits(&portable));
         // Not all zero: the comparison compares something.
