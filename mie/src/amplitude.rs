@@ -490,12 +490,9 @@ fn accumulate(sums: &mut BlockSums, n0: usize, tile: &[PiTau], terms: &[[f64; 4]
     sums.even = even;
 }
 
-/// The same kernel as [`accumulate`] written with explicit 512-bit AVX-512 operations.
-///
-/// Compilers tuned for recent Xeons prefer 256-bit vectors when auto-vectorizing; this kernel
-/// holds its 16 sums of 8 lanes in the 32 zmm registers instead, which measured 2.1× faster.
-/// Same operations in the same order as the portable version (FMA per term), so the two agree
-/// bit for bit.
+/// [`accumulate`] and [`pi_tau`] in explicit 512-bit operations, for the reason the fused
+/// kernel's notes give (`fused`: the compiler's 256-bit choice, 2.1× slower there); the same
+/// operations in the same order as the portable versions, so they agree bit for bit.
 #[cfg(target_arch = "x86_64")]
 #[allow(unsafe_code)]
 mod avx512 {
