@@ -166,55 +166,47 @@ pub fn weighted_intensity(
     weights: &[f64],
     angles: &FoldedAngles,
 ) -> Vec<f64> {
-    assert_eq!(spheres.len(), weights.len());
-    let folded: Vec<[f64; 2]> = for_each_pair(
-        spheres,
-        &angles.nu,
-        |rows| vec![[0.0; 2]; rows],
-        |acc, row, sphere, p| {
-            let w = weights[sphere];
-            acc[row][0] += w * (p.s1_plus.norm_sqr() + p.s2_plus.norm_sqr());
-            acc[row][1] += w * (p.s1_minus.norm_sqr() + p.s2_minus.norm_sqr());
-        },
-    )
-    .into_iter()
-    .flatten()
-    .collect();
-    angles
-        .map
-        .iter()
-        .map(|&(slot, negative)| folded[slot][usize::from(negative)])
-        .collect()
+    let [all] = interleaved_intensity(spheres, weights, angles);
+    all
 }
 
-/// [`weighted_intensity`] of the even-indexed spheres and of the odd-indexed ones, from one batch:
-/// the two halves share the recurrence (`batch_sums`), and each half's sums are added in its
-/// spheres' order, as two separate calls would.
+/// [`weighted_intensity`] of the even-indexed spheres and of the odd-indexed ones, from one batch.
 pub fn weighted_intensity_halves(
     spheres: &[SphereTerms],
     weights: &[f64],
     angles: &FoldedAngles,
 ) -> [Vec<f64>; 2] {
+    interleaved_intensity(spheres, weights, angles)
+}
+
+/// [`weighted_intensity`] of `G` interleaved groups of the spheres (sphere s in group s mod G)
+/// from one batch: the groups share the recurrence (`batch_sums`), and each group's sums are
+/// added in its spheres' order, as separate calls would.
+fn interleaved_intensity<const G: usize>(
+    spheres: &[SphereTerms],
+    weights: &[f64],
+    angles: &FoldedAngles,
+) -> [Vec<f64>; G] {
     assert_eq!(spheres.len(), weights.len());
-    // Per folded angle: [even +ν, even −ν, odd +ν, odd −ν].
-    let folded: Vec<[f64; 4]> = for_each_pair(
+    // Per folded angle and group: [+ν, −ν].
+    let folded: Vec<[[f64; 2]; G]> = for_each_pair(
         spheres,
         &angles.nu,
-        |rows| vec![[0.0; 4]; rows],
+        |rows| vec![[[0.0; 2]; G]; rows],
         |acc, row, sphere, p| {
-            let (w, half) = (weights[sphere], 2 * (sphere % 2));
-            acc[row][half] += w * (p.s1_plus.norm_sqr() + p.s2_plus.norm_sqr());
-            acc[row][half + 1] += w * (p.s1_minus.norm_sqr() + p.s2_minus.norm_sqr());
+            let (w, group) = (weights[sphere], &mut acc[row][sphere % G]);
+            group[0] += w * (p.s1_plus.norm_sqr() + p.s2_plus.norm_sqr());
+            group[1] += w * (p.s1_minus.norm_sqr() + p.s2_minus.norm_sqr());
         },
     )
     .into_iter()
     .flatten()
     .collect();
-    [0, 2].map(|half| {
+    std::array::from_fn(|g| {
         angles
             .map
             .iter()
-            .map(|&(slot, negative)| folded[slot][half + usize::from(negative)])
+            .map(|&(slot, negative)| folded[slot][g][usize::from(negative)])
             .collect()
     })
 }

@@ -42,8 +42,9 @@
 //! spline is smooth (C²), so its spectrum falls as l⁻⁴; the series is cut by a flat taper
 //! e^{−(u/2π)⁸} (10⁻⁵ at u = 1.6, e^{−1} at the first peak) where the taper falls below 10⁻¹⁷,
 //! u = 2π·39.1^{1/8} ≈ 3.16π: l_max = ⌈3.16π/Δθ⌉, 3162 at 0.18° (it was cut at 4π, 4000, where
-//! the taper is e^{−256}: a fifth of every pass over the degrees added nothing). A spline can overshoot next to a jump of the bins (a halo's
-//! edge), so it is not positive by construction; the tests check the rows stay ≥ 0.
+//! the taper is e^{−256}: a fifth of every pass over the degrees added nothing). A spline can
+//! overshoot next to a jump of the bins (a halo's edge), so it is not positive by construction;
+//! the tests check the rows stay ≥ 0.
 //!
 //! [`Reconstruction::HeatKernel`] is the earlier method, kept to measure against: the steps
 //! blurred by the spherical heat kernel, χ_l → χ_l exp(−l(l+1) s²/2) (s = half a bin by

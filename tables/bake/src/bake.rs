@@ -626,15 +626,12 @@ pub fn phase_functions(
                 rays.iter().map(|&r| r as f64 / total as f64).collect()
             };
             let target = knobs.crystal_noise;
-            // The wavelengths are traced side by side (each tracer's tallies are fixed by its
-            // own chunks' seeds, whatever runs when): one wavelength's few chunks a round would
-            // leave a core idle at its end.
+            // The wavelengths are traced side by side (`run_side_by_side`): one wavelength's
+            // few chunks a round would leave a core idle at its end.
             if target > 0.0 {
                 // Two chunks at least per wavelength: one chunk has no spread to give a standard
                 // error, and a wavelength without one would count as noiseless.
-                tracers.par_iter_mut().for_each(|t| {
-                    t.run_to(2);
-                });
+                run_side_by_side(&mut tracers, |_, _| 2);
             }
             let phases_of =
                 |tracers: &[CrystalTracer]| tracers.par_iter().map(|t| t.phase()).collect();
@@ -646,18 +643,12 @@ pub fn phase_functions(
                 }
                 let now: u64 = tracers.iter().map(|t| t.chunks()).sum();
                 let need = (now as f64 * (1.03 * (noise / target).powi(2)).min(4.0)).ceil();
-                let mut traced = tracers
-                    .par_iter_mut()
-                    .zip(&shares)
-                    .map(|(t, share)| t.run_to((need * share).ceil() as u64))
-                    .reduce(|| false, |a, b| a || b);
+                let mut traced =
+                    run_side_by_side(&mut tracers, |_, j| (need * shares[j]).ceil() as u64);
                 if !traced {
                     // The shares' rounding left every wavelength where it was: one more chunk
                     // each (or all at their limit).
-                    traced = tracers
-                        .par_iter_mut()
-                        .map(|t| t.run_to(t.chunks() + 1))
-                        .reduce(|| false, |a, b| a || b);
+                    traced = run_side_by_side(&mut tracers, |t, _| t.chunks() + 1);
                 }
                 if !traced {
                     break;
@@ -678,6 +669,23 @@ pub fn phase_functions(
         size_errors,
         sizes,
     })
+}
+
+/// Carries every wavelength's tracer on to `chunks(tracer, j)` chunks, the wavelengths side by
+/// side (each tracer's tallies are fixed by its own chunks' seeds, whatever runs when); whether
+/// any traced.
+fn run_side_by_side(
+    tracers: &mut [CrystalTracer],
+    chunks: impl Fn(&CrystalTracer, usize) -> u64 + Sync,
+) -> bool {
+    tracers
+        .par_iter_mut()
+        .enumerate()
+        .map(|(j, t)| {
+            let to = chunks(t, j);
+            t.run_to(to)
+        })
+        .reduce(|| false, |a, b| a || b)
 }
 
 /// The sizes [`drop_sizes`] takes over the count its prediction gives (√1.15: 7 % less noise).
