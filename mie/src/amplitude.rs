@@ -438,6 +438,32 @@ fn pi_tau(
     *previous = (p1, p2);
 }
 
+/// Hands `add` the orders n0 .. n0 + len in turn (by their index i from n0), each with the
+/// odd-n or the even-n sums: in (odd, even) pairs, so both stay in registers without a branch
+/// per order. Every kernel walks its orders this way.
+#[inline(always)]
+fn by_parity<S>(
+    n0: usize,
+    len: usize,
+    odd: &mut S,
+    even: &mut S,
+    mut add: impl FnMut(&mut S, usize),
+) {
+    let mut i = 0;
+    if len > 0 && n0.is_multiple_of(2) {
+        add(even, 0);
+        i = 1;
+    }
+    while i + 1 < len {
+        add(odd, i);
+        add(even, i + 1);
+        i += 2;
+    }
+    if i < len {
+        add(odd, i);
+    }
+}
+
 /// Adds the terms of orders n0 .. n0 + tile.len() of one sphere to one block's sums.
 ///
 /// The hot loop: eight fused multiply-adds per order and lane into the odd-n or even-n sums,
@@ -465,19 +491,10 @@ fn accumulate(sums: &mut BlockSums, n0: usize, tile: &[PiTau], terms: &[[f64; 4]
     }
     let mut odd = sums.odd;
     let mut even = sums.even;
-    let mut i = 0;
-    if !tile.is_empty() && n0.is_multiple_of(2) {
-        add(&mut even, &tile[0], &terms[0]);
-        i = 1;
-    }
-    while i + 1 < tile.len() {
-        add(&mut odd, &tile[i], &terms[i]);
-        add(&mut even, &tile[i + 1], &terms[i + 1]);
-        i += 2;
-    }
-    if i < tile.len() {
-        add(&mut odd, &tile[i], &terms[i]);
-    }
+    let terms = &terms[..tile.len()];
+    by_parity(n0, tile.len(), &mut odd, &mut even, |sums, i| {
+        add(sums, &tile[i], &terms[i])
+    });
     sums.odd = odd;
     sums.even = even;
 }
@@ -565,21 +582,10 @@ mod avx512 {
                 sums[7] = _mm512_fmadd_pd(tau, ca_im, sums[7]);
             }
         }
-        let (mut tile, mut terms) = (&tile[..terms.len()], terms);
-        if !tile.is_empty() && n0.is_multiple_of(2) {
-            add(&mut even, &tile[0], &terms[0]);
-            (tile, terms) = (&tile[1..], &terms[1..]);
-        }
-        // (odd, even) pairs, then a last odd order: exact chunks, so no bounds checks.
-        let (tiles, terms) = (tile.chunks_exact(2), terms.chunks_exact(2));
-        let last = tiles.remainder().first().zip(terms.remainder().first());
-        for (t, k) in tiles.zip(terms) {
-            add(&mut odd, &t[0], &k[0]);
-            add(&mut even, &t[1], &k[1]);
-        }
-        if let Some((t, k)) = last {
-            add(&mut odd, t, k);
-        }
+        let terms = &terms[..tile.len()];
+        super::by_parity(n0, tile.len(), &mut odd, &mut even, |sums, i| {
+            add(sums, &tile[i], &terms[i])
+        });
         let store =
             |a: &mut [f64; LANES], v: __m512d| unsafe { _mm512_storeu_pd(a.as_mut_ptr(), v) };
         for q in 0..8 {

@@ -75,7 +75,6 @@ fn run_orders(
     let mut even = st.sums.even;
     let mut p1 = st.pi_prev;
     let mut p2 = st.pi_prev2;
-    let mut n = n0;
     #[inline(always)]
     fn step(
         n: usize,
@@ -113,18 +112,9 @@ fn run_orders(
         *p2 = *p1;
         *p1 = pi;
     }
-    if n < n1 && n.is_multiple_of(2) {
-        step(n, mu, &mut p1, &mut p2, &mut even, terms, recurrence);
-        n += 1;
-    }
-    while n + 1 < n1 {
-        step(n, mu, &mut p1, &mut p2, &mut odd, terms, recurrence);
-        step(n + 1, mu, &mut p1, &mut p2, &mut even, terms, recurrence);
-        n += 2;
-    }
-    if n < n1 {
-        step(n, mu, &mut p1, &mut p2, &mut odd, terms, recurrence);
-    }
+    super::by_parity(n0, n1 - n0, &mut odd, &mut even, |sums, i| {
+        step(n0 + i, mu, &mut p1, &mut p2, sums, terms, recurrence)
+    });
     st.sums.odd = odd;
     st.sums.even = even;
     st.pi_prev = p1;
@@ -207,19 +197,9 @@ mod avx512 {
                 *p1 = pi;
             }
         }
-        let mut n = n0;
-        if n < n1 && n.is_multiple_of(2) {
-            step(n, mu_v, &mut p1, &mut p2, &mut even, terms, recurrence);
-            n += 1;
-        }
-        while n + 1 < n1 {
-            step(n, mu_v, &mut p1, &mut p2, &mut odd, terms, recurrence);
-            step(n + 1, mu_v, &mut p1, &mut p2, &mut even, terms, recurrence);
-            n += 2;
-        }
-        if n < n1 {
-            step(n, mu_v, &mut p1, &mut p2, &mut odd, terms, recurrence);
-        }
+        super::super::by_parity(n0, n1 - n0, &mut odd, &mut even, |sums, i| {
+            step(n0 + i, mu_v, &mut p1, &mut p2, sums, terms, recurrence)
+        });
         let store =
             |a: &mut [f64; LANES], v: __m512d| unsafe { _mm512_storeu_pd(a.as_mut_ptr(), v) };
         for q in 0..8 {
