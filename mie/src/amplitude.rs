@@ -347,6 +347,7 @@ fn batch_sums(
     recurrence: &[[f64; 4]],
     simd: bool,
 ) -> Vec<Vec<BlockSums>> {
+    let avx512 = use_avx512(simd);
     let n_max = spheres.iter().map(SphereTerms::n_terms).max().unwrap_or(0);
     let mut sums = vec![vec![BlockSums::ZERO; blocks.len()]; spheres.len()];
     // π_{n−1}, π_{n−2} per block; before n = 1: π_0 = 0 and a virtual π_{−1} = 0.
@@ -362,8 +363,8 @@ fn batch_sums(
         {
             let tile = &mut tile[..n1 - n0];
             #[cfg(target_arch = "x86_64")]
-            if simd && std::arch::is_x86_feature_detected!("avx512f") {
-                // SAFETY: the CPU supports AVX-512F (checked at run time just above).
+            if avx512 {
+                // SAFETY: the CPU supports AVX-512F (`use_avx512`).
                 #[allow(unsafe_code)]
                 unsafe {
                     avx512::pi_tau(mu, prev, n0, tile, recurrence)
@@ -381,8 +382,8 @@ fn batch_sums(
             for (tile, block) in table.chunks(ORDER_TILE).zip(sums.iter_mut()) {
                 let tile = &tile[..end - n0];
                 #[cfg(target_arch = "x86_64")]
-                if simd && std::arch::is_x86_feature_detected!("avx512f") {
-                    // SAFETY: the CPU supports AVX-512F (checked at run time just above).
+                if avx512 {
+                    // SAFETY: the CPU supports AVX-512F (`use_avx512`).
                     #[allow(unsafe_code)]
                     unsafe {
                         avx512::accumulate(block, n0, tile, terms)
@@ -395,6 +396,18 @@ fn batch_sums(
         n0 = n1;
     }
     sums
+}
+
+/// Whether the AVX-512 kernels run: the CPU has AVX-512F (checked at run time) and `simd` asks
+/// for them (always, except in the test that holds them to the portable kernels' bits).
+fn use_avx512(simd: bool) -> bool {
+    #[cfg(target_arch = "x86_64")]
+    return simd && std::arch::is_x86_feature_detected!("avx512f");
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        let _ = simd;
+        false
+    }
 }
 
 /// The sums of every sphere at every block: a lone sphere by the fused kernel

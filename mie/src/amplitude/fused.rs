@@ -28,6 +28,7 @@ pub(super) fn block_sums(
     recurrence: &[[f64; 4]],
     simd: bool,
 ) -> Vec<BlockSums> {
+    let avx512 = super::use_avx512(simd);
     let mut state: Vec<BlockState> = vec![
         BlockState {
             sums: BlockSums::ZERO,
@@ -42,8 +43,8 @@ pub(super) fn block_sums(
         let n1 = (n0 + N_CHUNK).min(terms.len() + 1);
         for (mu, st) in blocks.iter().zip(state.iter_mut()) {
             #[cfg(target_arch = "x86_64")]
-            if simd && std::arch::is_x86_feature_detected!("avx512f") {
-                // SAFETY: the CPU supports AVX-512F (checked at run time just above).
+            if avx512 {
+                // SAFETY: the CPU supports AVX-512F (`use_avx512`).
                 #[allow(unsafe_code)]
                 unsafe {
                     avx512::run_orders(mu, st, n0, n1, terms, recurrence)
