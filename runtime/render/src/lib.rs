@@ -31,12 +31,16 @@
 pub mod biri;
 pub mod camera;
 pub mod error_map;
+pub mod geometry;
+pub mod gpu;
 pub mod image;
 pub mod max;
 pub mod miyazaki;
+pub mod objects;
 pub mod riley;
 pub mod rng;
 pub mod scene;
+pub mod shading;
 pub mod sky;
 pub mod truth;
 pub mod volume;

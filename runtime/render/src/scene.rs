@@ -283,7 +283,7 @@ pub struct RenderScene {
     /// [`DEFAULT_GROUND_ALBEDO`]; 0 is black).
     pub ground_albedo: f64,
     /// The `[[light]]` tables.
-    pub lights: Vec<crate::truth::Light>,
+    pub lights: Vec<crate::objects::Light>,
     /// `[render] spp` for the path tracer (default 256).
     pub spp: usize,
     /// `[render] seed` for the path tracer (default 1).
@@ -752,7 +752,7 @@ fn empty_grid() -> super::DensityGrid {
     }
 }
 
-fn light(l: &LightKeys) -> Result<crate::truth::Light, String> {
+fn light(l: &LightKeys) -> Result<crate::objects::Light, String> {
     let p = DVec3::from_array(l.position_m);
     if !p.is_finite() || p.y <= 0.0 {
         return Err(format!(
@@ -786,14 +786,14 @@ fn light(l: &LightKeys) -> Result<crate::truth::Light, String> {
             return Err("a spot needs both spot_direction and spot_half_angle_deg".into());
         }
     };
-    Ok(crate::truth::Light {
+    Ok(crate::objects::Light {
         position_m: p,
         intensity: l.intensity,
         spot,
     })
 }
 
-fn medium(m: &MediumKeys) -> Result<crate::biri::Medium, String> {
+fn medium(m: &MediumKeys) -> Result<crate::objects::Medium, String> {
     let n = m.number_density_per_m3;
     if !(n.is_finite() && n > 0.0) {
         return Err(format!(
@@ -801,7 +801,7 @@ fn medium(m: &MediumKeys) -> Result<crate::biri::Medium, String> {
         ));
     }
     let region = match (m.min_m, m.max_m) {
-        (None, None) => crate::biri::Region::Everywhere,
+        (None, None) => crate::objects::Region::Everywhere,
         (Some(lo), Some(hi)) => {
             if (0..3).any(|a| !(lo[a].is_finite() && hi[a].is_finite() && lo[a] < hi[a])) {
                 return Err(format!(
@@ -809,7 +809,7 @@ fn medium(m: &MediumKeys) -> Result<crate::biri::Medium, String> {
                      a convex, axis-aligned box)"
                 ));
             }
-            crate::biri::Region::Box {
+            crate::objects::Region::Box {
                 min_m: DVec3::from_array(lo),
                 max_m: DVec3::from_array(hi),
             }
@@ -826,7 +826,7 @@ fn medium(m: &MediumKeys) -> Result<crate::biri::Medium, String> {
             "ambient = {ambient:?} must be ≥ 0 (radiance per channel)"
         ));
     }
-    Ok(crate::biri::Medium {
+    Ok(crate::objects::Medium {
         field: m.field.clone(),
         number_density_per_m3: n,
         region,
@@ -834,8 +834,8 @@ fn medium(m: &MediumKeys) -> Result<crate::biri::Medium, String> {
     })
 }
 
-fn occluder(o: &OccluderKeys, base: &Path) -> Result<crate::biri::Occluder, String> {
-    use crate::biri::geometry::{Mesh, Sphere, read_obj};
+fn occluder(o: &OccluderKeys, base: &Path) -> Result<crate::objects::Occluder, String> {
+    use crate::geometry::{Mesh, Sphere, read_obj};
     let albedo = o.albedo.unwrap_or(0.5);
     if !(0.0..=1.0).contains(&albedo) {
         return Err(format!(
@@ -857,13 +857,13 @@ fn occluder(o: &OccluderKeys, base: &Path) -> Result<crate::biri::Occluder, Stri
                     hi.to_array()
                 ));
             }
-            crate::biri::Shape::Mesh(Mesh::cuboid(lo, hi))
+            crate::objects::OccluderShape::Mesh(Mesh::cuboid(lo, hi))
         }
         "sphere" => {
             let center = finite(o.center_m, "center_m")?;
             let radius = o.radius_m.ok_or("shape \"sphere\" needs radius_m")?;
             positive("radius_m", radius)?;
-            crate::biri::Shape::Sphere(Sphere { center, radius })
+            crate::objects::OccluderShape::Sphere(Sphere { center, radius })
         }
         "mesh" => {
             let file = o
@@ -879,13 +879,13 @@ fn occluder(o: &OccluderKeys, base: &Path) -> Result<crate::biri::Occluder, Stri
             let mut mesh = read_obj(&base.join(file))?;
             let vertices = mesh.vertices.iter().map(|v| *v * scale + offset).collect();
             mesh = Mesh::new(vertices, std::mem::take(&mut mesh.triangles));
-            crate::biri::Shape::Mesh(mesh)
+            crate::objects::OccluderShape::Mesh(mesh)
         }
         other => {
             return Err(format!("shape = {other:?} is not one of box, sphere, mesh"));
         }
     };
-    Ok(crate::biri::Occluder { shape, albedo })
+    Ok(crate::objects::Occluder { shape, albedo })
 }
 
 fn volume(v: VolumeKeys, base: &Path) -> Result<Volume, String> {

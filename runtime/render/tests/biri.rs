@@ -72,10 +72,10 @@ fn quadrature(
     o: DVec3,
     d: DVec3,
     x_end: f64,
-    lit: &dyn Fn(DVec3, &render::truth::Light) -> bool,
+    lit: &dyn Fn(DVec3, &render::objects::Light) -> bool,
 ) -> [f64; 3] {
     let mut out = [0.0; 3];
-    let beta_of = |m: &render::biri::Medium| {
+    let beta_of = |m: &render::objects::Medium| {
         let f = tables.field(&m.field).unwrap();
         f.sigma_ext_m2.map(|s| m.number_density_per_m3 * s)
     };
@@ -143,7 +143,7 @@ fn worst_error(
     tables: &Tables,
     scene: &RenderScene,
     x_end: &dyn Fn(DVec3, DVec3) -> f64,
-    lit: &dyn Fn(DVec3, &render::truth::Light) -> bool,
+    lit: &dyn Fn(DVec3, &render::objects::Light) -> bool,
 ) -> f64 {
     let (image, _) = cpu::render(tables, scene).unwrap();
     let axes = scene.camera.axes().unwrap();
@@ -162,7 +162,7 @@ fn worst_error(
         .fold(0.0, f64::max)
 }
 
-fn lit_everywhere(_: DVec3, _: &render::truth::Light) -> bool {
+fn lit_everywhere(_: DVec3, _: &render::objects::Light) -> bool {
     true
 }
 
@@ -264,7 +264,7 @@ fn shadows_and_spot_cones_equal_a_shadow_ray_at_every_point() {
             .map(|h| h.0)
             .fold(ground(o, d), f64::min)
     };
-    let lit = |p: DVec3, l: &render::truth::Light| {
+    let lit = |p: DVec3, l: &render::objects::Light| {
         let spot = l.spot.is_none_or(|(axis, half)| {
             (p - l.position_m).normalize().dot(axis) >= half.to_radians().cos()
         });

@@ -4,8 +4,8 @@
 
 use std::path::Path;
 
+use render::geometry::box_span;
 use render::max::{MaxSettings, cpu};
-use render::riley::cpu::box_span;
 use render::{Frame, RenderScene};
 use runtime::Tables;
 use runtime::sample;

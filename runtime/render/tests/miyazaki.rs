@@ -8,9 +8,9 @@
 use std::path::Path;
 
 use glam::DVec3;
+use render::geometry::box_span;
 use render::miyazaki::cpu::{asymmetry, cornette_shanks, render};
 use render::miyazaki::{SvsPhase, setup};
-use render::riley::cpu::box_span;
 use render::{Frame, RenderScene};
 use runtime::{Tables, sample};
 

@@ -5,7 +5,8 @@
 
 use std::path::Path;
 
-use render::riley::cpu::{self, box_span};
+use render::geometry::box_span;
+use render::riley::cpu;
 use render::riley::gpu::Renderer;
 use render::{Frame, LightUpdate, RenderScene};
 use runtime::Tables;

@@ -10,10 +10,11 @@ use rayon::prelude::*;
 
 use runtime::{Tables, sample};
 
-use super::geometry::{ShadowPlane, Sphere, nappe_roots};
-use super::{BiriSettings, Kernel, Region, Shape};
+use super::{BiriSettings, Kernel};
 use crate::camera::pixel_ray;
-use crate::truth::Light;
+use crate::geometry::{ShadowPlane, Sphere, nappe_roots};
+use crate::objects::Light;
+use crate::objects::{OccluderShape, Region};
 use crate::{FrameError, Image};
 
 /// The light's distance h from a ray is taken as at least this (m): Eq. 2's 1/h is singular
@@ -88,8 +89,8 @@ pub fn render(
             let mut spheres = Vec::new();
             for oc in &settings.occluders {
                 match &oc.shape {
-                    Shape::Mesh(m) => planes.extend(m.silhouette(l.position_m)),
-                    Shape::Sphere(s) => spheres.push(*s),
+                    OccluderShape::Mesh(m) => planes.extend(m.silhouette(l.position_m)),
+                    OccluderShape::Sphere(s) => spheres.push(*s),
                 }
             }
             let s = l.position_m;
@@ -160,7 +161,7 @@ fn optics(tables: &Tables, settings: &BiriSettings) -> Result<Vec<Optics>, Frame
         .media
         .iter()
         .map(|m| {
-            let field = super::field_index(tables, &m.field)?;
+            let field = crate::objects::field_index(tables, &m.field)?;
             let f = &tables.fields[field];
             if f.biri.is_none() {
                 return Err(FrameError(format!(

@@ -11,8 +11,8 @@ use glam::DVec3;
 use runtime::Tables;
 use runtime::gpu::{Gpu, GpuTables, WGSL};
 
-use super::{Region, Shape};
-use crate::riley::gpu::{RenderError, Timings, a4, check_sizes, entry, filled, v4};
+use crate::gpu::{RenderError, Timings, a4, check_sizes, entry, filled, v4};
+use crate::objects::{OccluderShape, Region};
 use crate::{FrameError, Image};
 
 /// The model's WGSL (after [`WGSL`]).
@@ -103,12 +103,12 @@ impl Renderer {
             .camera
             .axes()
             .ok_or_else(|| FrameError("camera look_at_m equals position_m".into()))?;
-        let spheres: Vec<(&super::geometry::Sphere, f64)> = settings
+        let spheres: Vec<(&crate::geometry::Sphere, f64)> = settings
             .occluders
             .iter()
             .filter_map(|oc| match &oc.shape {
-                Shape::Sphere(s) => Some((s, oc.albedo)),
-                Shape::Mesh(_) => None,
+                OccluderShape::Sphere(s) => Some((s, oc.albedo)),
+                OccluderShape::Mesh(_) => None,
             })
             .collect();
         if spheres.len() > MAX_GPU_SPHERES {
@@ -126,7 +126,7 @@ impl Renderer {
             let s = l.position_m;
             let first = planes.len() / 3;
             for oc in &settings.occluders {
-                if let Shape::Mesh(m) = &oc.shape {
+                if let OccluderShape::Mesh(m) = &oc.shape {
                     for p in m.silhouette(s) {
                         planes.push(v4(p.a, p.weight as f64));
                         planes.push(v4(p.b, 0.0));
@@ -159,7 +159,7 @@ impl Renderer {
         let mut mesh_rows: Vec<[f32; 4]> = Vec::new();
         let mut tri_rows: Vec<[f32; 4]> = Vec::new();
         for oc in &settings.occluders {
-            if let Shape::Mesh(m) = &oc.shape {
+            if let OccluderShape::Mesh(m) = &oc.shape {
                 let first = tri_rows.len() / 3;
                 for t in &m.triangles {
                     let [a, b, c] = t.map(|i| m.vertices[i]);
@@ -177,7 +177,7 @@ impl Renderer {
         let mut media_rows: Vec<[f32; 4]> = Vec::new();
         let mut depth_max = 0f64;
         for m in &settings.media {
-            let index = super::field_index(tables, &m.field)?;
+            let index = crate::objects::field_index(tables, &m.field)?;
             let f = &tables.fields[index];
             let b = f.biri.as_ref().ok_or_else(|| {
                 FrameError(format!(
@@ -301,7 +301,7 @@ impl Renderer {
             layout: &self.layout,
             entries: &entries,
         });
-        Ok(crate::riley::gpu::timed_frame(
+        Ok(crate::gpu::timed_frame(
             gpu,
             start,
             |pass| {

@@ -29,12 +29,9 @@
 //!   y = 0 among them; hard shadows on them by a shadow ray.
 
 pub mod cpu;
-pub mod geometry;
 pub mod gpu;
 
-use glam::DVec3;
-
-use geometry::{Mesh, Sphere};
+use crate::objects::{Medium, Occluder, Region};
 
 /// Which form of the kernel's integral Γ uses.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -65,112 +62,6 @@ impl Kernel {
     }
 }
 
-/// Where a medium is.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Region {
-    /// Everywhere (§5.1: the scene is covered by the medium).
-    Everywhere,
-    /// The axis-aligned box [min, max] (§5.2).
-    Box {
-        /// Lower corner (m).
-        min_m: DVec3,
-        /// Upper corner (m).
-        max_m: DVec3,
-    },
-}
-
-impl Region {
-    /// The part [a, b] of the ray o + x d, x ∈ [0, x_max], inside the region.
-    pub fn span(&self, o: DVec3, d: DVec3, x_max: f64) -> Option<(f64, f64)> {
-        let (a, b) = match self {
-            Self::Everywhere => (0.0, x_max),
-            Self::Box { min_m, max_m } => {
-                let (a, b) = geometry::ray_box(o, d, *min_m, *max_m)?;
-                (a.max(0.0), b.min(x_max))
-            }
-        };
-        (a < b).then_some((a, b))
-    }
-
-    /// Whether `p` is inside.
-    pub fn contains(&self, p: DVec3) -> bool {
-        match self {
-            Self::Everywhere => true,
-            Self::Box { min_m, max_m } => p.cmpge(*min_m).all() && p.cmple(*max_m).all(),
-        }
-    }
-}
-
-/// A homogeneous medium of one baked field (`[[medium]]`).
-#[derive(Debug, Clone, PartialEq)]
-pub struct Medium {
-    /// The field's name.
-    pub field: String,
-    /// Particles per m³, > 0: β_ext = N σ_ext.
-    pub number_density_per_m3: f64,
-    /// Where it is.
-    pub region: Region,
-    /// The paper's ambient fog (§3, §5.1.2): a radiance per channel (the image's unit) that a
-    /// ray gains in proportion 1 − e^{−τ} of the medium it crosses, standing in for multiple
-    /// scattering. ≥ 0.
-    pub ambient: [f64; 3],
-}
-
-/// An occluder's geometry.
-#[derive(Debug, Clone, PartialEq)]
-pub enum Shape {
-    /// A triangle mesh (a box, or an OBJ file).
-    Mesh(Mesh),
-    /// A sphere.
-    Sphere(Sphere),
-}
-
-/// A shadow caster with a Lambertian surface (`[[occluder]]`).
-#[derive(Debug, Clone, PartialEq)]
-pub struct Occluder {
-    /// Its geometry.
-    pub shape: Shape,
-    /// Lambertian albedo, [0, 1].
-    pub albedo: f64,
-}
-
-impl Occluder {
-    /// The nearest hit of o + x d in (ε, x_max): distance and normal facing the ray.
-    pub fn hit(&self, o: DVec3, d: DVec3, x_max: f64) -> Option<(f64, DVec3)> {
-        match &self.shape {
-            Shape::Mesh(m) => m.hit(o, d, x_max),
-            Shape::Sphere(s) => s.hit(o, d, x_max),
-        }
-    }
-
-    /// How many times the open segment p → q is blocked (triangles crossed; 1 for a sphere).
-    pub fn blockers(&self, p: DVec3, q: DVec3) -> usize {
-        match &self.shape {
-            Shape::Mesh(m) => m.crossings(p, q),
-            Shape::Sphere(s) => s.blocks(p, q) as usize,
-        }
-    }
-
-    /// Axis-aligned bounds.
-    pub fn bounds(&self) -> (DVec3, DVec3) {
-        match &self.shape {
-            Shape::Mesh(m) => m.bounds,
-            Shape::Sphere(s) => (
-                s.center - DVec3::splat(s.radius),
-                s.center + DVec3::splat(s.radius),
-            ),
-        }
-    }
-
-    /// Whether `p` is inside (a closed mesh's parity, a sphere's radius).
-    pub fn contains(&self, p: DVec3) -> bool {
-        match &self.shape {
-            Shape::Mesh(m) => m.contains(p),
-            Shape::Sphere(s) => (p - s.center).length() < s.radius,
-        }
-    }
-}
-
 /// The `--model biri` part of a scene.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct BiriSettings {
@@ -182,19 +73,6 @@ pub struct BiriSettings {
     pub occluders: Vec<Occluder>,
 }
 
-/// The index in `tables` of the field a `[[medium]]` uses.
-pub fn field_index(tables: &runtime::Tables, name: &str) -> Result<usize, crate::FrameError> {
-    tables
-        .fields
-        .iter()
-        .position(|f| f.name == name)
-        .ok_or_else(|| {
-            crate::FrameError(format!(
-                "a [[medium]] uses field {name:?}, which the tables do not hold"
-            ))
-        })
-}
-
 /// A setting the model cannot use, named with its allowed range.
 #[derive(Debug, thiserror::Error)]
 #[error("{0}")]
@@ -203,7 +81,7 @@ pub struct SettingsError(pub String);
 impl BiriSettings {
     /// The checks made before anything is baked: media that overlap or more than one medium
     /// with one everywhere, and lights inside an occluder or a medium box's edge cases.
-    pub fn check(&self, lights: &[crate::truth::Light]) -> Result<(), SettingsError> {
+    pub fn check(&self, lights: &[crate::objects::Light]) -> Result<(), SettingsError> {
         let bad = |s: String| Err(SettingsError(s));
         if self.media.is_empty() {
             return bad(
@@ -259,7 +137,7 @@ impl BiriSettings {
     }
 
     /// Refuses a light inside an occluder (for every model that draws occluders).
-    pub fn check_lights(&self, lights: &[crate::truth::Light]) -> Result<(), SettingsError> {
+    pub fn check_lights(&self, lights: &[crate::objects::Light]) -> Result<(), SettingsError> {
         for (i, l) in lights.iter().enumerate() {
             for (k, o) in self.occluders.iter().enumerate() {
                 if o.contains(l.position_m) {

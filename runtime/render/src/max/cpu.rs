@@ -11,7 +11,8 @@ use runtime::{FieldTable, Tables, sample};
 
 use super::MaxSettings;
 use super::diffusion::{self, Problem};
-use crate::riley::cpu::{box_span, check_fields, coefficients, compose};
+use crate::geometry::box_span;
+use crate::shading::{check_fields, coefficients, compose};
 use crate::{DensityGrid, Frame, FrameError, Image, MAX_FIELDS};
 
 /// What a `max` render spent and found.

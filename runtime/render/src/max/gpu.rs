@@ -17,7 +17,7 @@ use runtime::gpu::{Gpu, GpuTables, read_back};
 
 use super::MaxSettings;
 use super::cpu::{Lighting, check, voxel_length};
-use crate::riley::gpu::{
+use crate::gpu::{
     COMPOSE_WGSL, RenderError, Timings, bind, build, check_sizes, field_and_sky_rows, filled,
     storage, timed_frame, v4,
 };

@@ -10,7 +10,7 @@ use grid::ThetaGrid;
 use runtime::{FieldTable, Tables, sample};
 
 use super::{SvsPhase, SvsSettings, SvsSetup};
-use crate::riley::cpu::{bilinear_taps, check_fields, coefficients, over_footprint};
+use crate::shading::{bilinear_taps, check_fields, coefficients, over_footprint};
 use crate::sky::rayleigh_phase;
 use crate::{Frame, FrameError, Image, MAX_FIELDS, SUN_DIAMETER_DEG};
 

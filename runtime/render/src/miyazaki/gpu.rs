@@ -11,13 +11,13 @@ use runtime::Tables;
 use runtime::gpu::{Gpu, GpuTables};
 
 use super::{SvsPhase, SvsSettings};
-use crate::riley::gpu::{
+use crate::gpu::{
     Dispatch, RenderError, Timings, a4, bind, build, check_sizes, filled, run_slices,
     slice_uniforms, storage, v4,
 };
 use crate::{Frame, Image, MAX_FIELDS, SUN_DIAMETER_DEG};
 
-/// The model's WGSL (after `runtime::gpu::WGSL` and `riley::gpu::SLICING_WGSL`).
+/// The model's WGSL (after `runtime::gpu::WGSL` and `crate::gpu::SLICING_WGSL`).
 pub const SVS_WGSL: &str = include_str!("svs.wgsl");
 
 /// Pipelines and layouts, built once.
@@ -61,7 +61,7 @@ impl Renderer {
         settings: &SvsSettings,
     ) -> Result<(Image, Timings), RenderError> {
         let s = super::setup(frame, settings)?;
-        crate::riley::cpu::check_fields(tables, frame)?;
+        crate::shading::check_fields(tables, frame)?;
         let device = &gpu.device;
         let start = Instant::now();
         let (w, h, res) = (frame.width, frame.height, frame.light_resolution);

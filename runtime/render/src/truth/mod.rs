@@ -94,7 +94,8 @@ use rayon::prelude::*;
 
 use crate::basis;
 use crate::camera::pixel_ray;
-use crate::riley::cpu::box_span;
+use crate::geometry::box_span;
+use crate::objects::Light;
 use crate::{DensityGrid, Frame, FrameError, Image, MAX_FIELDS, SUN_DIAMETER_DEG};
 use phase::{PhaseSampler, rayleigh, rotate, sample_rayleigh};
 use runtime::Tables;
@@ -108,18 +109,6 @@ pub const GUIDE_SHARE: f64 = 0.1;
 
 /// Samples per pixel allowed.
 pub const SPP_RANGE: (usize, usize) = (1, 1 << 20);
-
-/// A point light, optionally a spot.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Light {
-    /// Position (m); above the ground (y > 0).
-    pub position_m: DVec3,
-    /// Radiant intensity per channel, in the image's unit × m² (1/sr per unit solar
-    /// irradiance × m²): at distance r it gives irradiance I/r².
-    pub intensity: [f64; 3],
-    /// A spot's unit axis and half-angle (degrees, (0, 180]); `None`: all directions.
-    pub spot: Option<(DVec3, f64)>,
-}
 
 /// What the path tracer needs besides the frame.
 #[derive(Debug, Clone, PartialEq)]
@@ -136,9 +125,9 @@ pub struct TruthSettings {
     /// `rgb3` bake's three, else [`MAX_CARRIED`]). 1 is one wavelength per path.
     pub wavelengths_per_path: usize,
     /// Homogeneous media (`[[medium]]`) and Lambertian occluders (`[[occluder]]`).
-    pub media: Vec<crate::biri::Medium>,
+    pub media: Vec<crate::objects::Medium>,
     /// Lambertian occluders (`[[occluder]]`).
-    pub occluders: Vec<crate::biri::Occluder>,
+    pub occluders: Vec<crate::objects::Occluder>,
     /// Scatterings after which a path ends, [1, [`MAX_BOUNCES`]]; 0: [`MAX_BOUNCES`]. 1 is
     /// exact single scattering.
     pub max_scatterings: usize,
@@ -324,8 +313,8 @@ pub struct Tracer<'a> {
     ground_albedo: f64,
     lights: Vec<Light>,
     /// Homogeneous media: region, number density, field.
-    media: Vec<(crate::biri::Region, f64, usize)>,
-    occluders: Vec<crate::biri::Occluder>,
+    media: Vec<(crate::objects::Region, f64, usize)>,
+    occluders: Vec<crate::objects::Occluder>,
     /// The box delta tracking covers: the grid's and the media's.
     track_min: DVec3,
     track_max: DVec3,
@@ -357,7 +346,7 @@ impl<'a> Tracer<'a> {
         frame: &'a Frame,
         settings: &TruthSettings,
     ) -> Result<Self, FrameError> {
-        crate::riley::cpu::check_fields(tables, frame)?;
+        crate::shading::check_fields(tables, frame)?;
         let spectrum = tables.spectrum.as_ref().ok_or_else(|| {
             FrameError(format!(
                 "{}: the manifest lists no wavelengths and channel weights; rebake",
@@ -376,11 +365,11 @@ impl<'a> Tracer<'a> {
             }
         }
         let max = frame.grid.max_density();
-        let media: Vec<(crate::biri::Region, f64, usize)> = settings
+        let media: Vec<(crate::objects::Region, f64, usize)> = settings
             .media
             .iter()
             .map(|m| {
-                let field = crate::biri::field_index(tables, &m.field)?;
+                let field = crate::objects::field_index(tables, &m.field)?;
                 Ok((m.region, m.number_density_per_m3, field))
             })
             .collect::<Result<_, FrameError>>()?;
@@ -476,13 +465,13 @@ impl<'a> Tracer<'a> {
             t.1 = t.1.max(b);
         };
         for &(region, _, _) in &media {
-            if let crate::biri::Region::Box { min_m, max_m } = region {
+            if let crate::objects::Region::Box { min_m, max_m } = region {
                 grow(&mut track, min_m, max_m);
             }
         }
         if let Some(&(_, n, f)) = media
             .iter()
-            .find(|m| m.0 == crate::biri::Region::Everywhere)
+            .find(|m| m.0 == crate::objects::Region::Everywhere)
         {
             let p = frame.camera.position_m;
             grow(&mut track, p, p);

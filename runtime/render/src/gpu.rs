@@ -1,0 +1,360 @@
+//! GPU plumbing every model's renderer shares: the bind-group layout and compute pipelines of a
+//! shader compiled after the tables' WGSL, buffers made from bytes, the slice uniforms read
+//! with a dynamic offset, a frame recorded into one compute pass, timed and read back, and the
+//! limits checked before anything is allocated. Device creation is not here
+//! ([`runtime::gpu::Gpu`]): a renderer takes the device it is given.
+
+use std::time::Instant;
+
+use wgpu::util::DeviceExt;
+
+use runtime::Tables;
+use runtime::gpu::{Gpu, GpuError, GpuTables, WGSL, read_back};
+
+use crate::{Frame, FrameError, Image, MAX_FIELDS};
+
+/// The pieces the slicing renderers' shaders share (grid sampling, camera rays, the sky).
+pub const SLICING_WGSL: &str = include_str!("slicing.wgsl");
+
+/// The pixel around a volume's light (the air, the sun disk, the ground), shared by this
+/// renderer's composite and `max`'s gather (after [`SLICING_WGSL`]).
+pub const COMPOSE_WGSL: &str = include_str!("compose.wgsl");
+
+/// Why a GPU render failed.
+#[derive(Debug, thiserror::Error)]
+pub enum RenderError {
+    /// The frame's parameters are out of range or its fields do not fit the tables.
+    #[error(transparent)]
+    Frame(#[from] FrameError),
+    /// The device failed, or a buffer exceeds its limits.
+    #[error(transparent)]
+    Gpu(#[from] GpuError),
+}
+
+/// Wall times of one GPU frame (s).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Timings {
+    /// Density grid and buffers created and uploaded.
+    pub upload: f64,
+    /// Every pass recorded, submitted and waited for: the frame time.
+    pub frame: f64,
+    /// Image copied back and mapped.
+    pub readback: f64,
+}
+
+/// A compute-visible buffer binding of bind group 1.
+pub(crate) fn entry(
+    binding: u32,
+    ty: wgpu::BufferBindingType,
+    dynamic: bool,
+) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Buffer {
+            ty,
+            has_dynamic_offset: dynamic,
+            min_binding_size: None,
+        },
+        count: None,
+    }
+}
+
+/// Three channels and a scalar as one vec4<f32> row.
+pub(crate) fn a4(v: [f64; 3], w: f64) -> [f32; 4] {
+    [v[0] as f32, v[1] as f32, v[2] as f32, w as f32]
+}
+
+/// A vector and a scalar as one vec4<f32> uniform row.
+pub(crate) fn v4(v: glam::DVec3, w: f64) -> [f32; 4] {
+    [v[0] as f32, v[1] as f32, v[2] as f32, w as f32]
+}
+
+/// The rows riley's and max's params uniforms end with (their WGSL structs' order): each field's
+/// σ_ext (m², [`MAX_FIELDS`] rows, zero past the last field), the air's β at sea level and
+/// 1/H, the sun's direction and the cosine of its disk's radius `cos_disk`, its irradiance and
+/// the disk's solid angle.
+pub(crate) fn field_and_sky_rows(
+    tables: &Tables,
+    frame: &Frame,
+    sun_dir: glam::DVec3,
+    cos_disk: f64,
+) -> Vec<[f32; 4]> {
+    let mut rows: Vec<[f32; 4]> = (0..MAX_FIELDS)
+        .map(|i| {
+            tables
+                .fields
+                .get(i)
+                .map_or([0.0; 4], |f| v4(f.sigma_ext_m2.into(), 0.0))
+        })
+        .collect();
+    rows.push(v4(
+        frame.atmosphere.beta_sea_level_per_m.into(),
+        1.0 / frame.atmosphere.scale_height_m,
+    ));
+    rows.push(v4(sun_dir, cos_disk));
+    rows.push(v4(
+        frame.sun.irradiance.into(),
+        std::f64::consts::TAU * (1.0 - cos_disk),
+    ));
+    rows
+}
+
+/// Bind group 1's layout and the compute pipelines `names` of a slicing renderer's shader
+/// `wgsl` (compiled after [`WGSL`] and [`SLICING_WGSL`], `tables`' layout as bind group 0).
+/// Bind group 1 has `bindings` buffers: 0 the params uniform, 5 the slice uniforms (dynamic
+/// offset), those in `read_only` read-only storage (1, the densities, always among them),
+/// every other one read-write storage.
+pub(crate) fn build(
+    gpu: &Gpu,
+    tables: &GpuTables,
+    label: &str,
+    wgsl: &str,
+    bindings: u32,
+    read_only: &[u32],
+    names: &[&str],
+) -> (wgpu::BindGroupLayout, Vec<wgpu::ComputePipeline>) {
+    use wgpu::BufferBindingType::{Storage, Uniform};
+    let device = &gpu.device;
+    let entries: Vec<wgpu::BindGroupLayoutEntry> = (0..bindings)
+        .map(|b| match b {
+            0 => entry(0, Uniform, false),
+            5 => entry(5, Uniform, true),
+            b => entry(
+                b,
+                Storage {
+                    read_only: read_only.contains(&b),
+                },
+                false,
+            ),
+        })
+        .collect();
+    let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some(&format!("{label} layout")),
+        entries: &entries,
+    });
+    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        label: Some(label),
+        source: wgpu::ShaderSource::Wgsl(format!("{WGSL}\n{SLICING_WGSL}\n{wgsl}").into()),
+    });
+    let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+        label: Some(&format!("{label} pipeline layout")),
+        bind_group_layouts: &[Some(&tables.layout), Some(&layout)],
+        immediate_size: 0,
+    });
+    let pipelines = names
+        .iter()
+        .map(|name| {
+            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some(name),
+                layout: Some(&pipeline_layout),
+                module: &module,
+                entry_point: Some(name),
+                compilation_options: Default::default(),
+                cache: None,
+            })
+        })
+        .collect();
+    (layout, pipelines)
+}
+
+/// A buffer holding `bytes`.
+pub(crate) fn filled(
+    device: &wgpu::Device,
+    label: &str,
+    bytes: &[u8],
+    usage: wgpu::BufferUsages,
+) -> wgpu::Buffer {
+    device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some(label),
+        contents: bytes,
+        usage,
+    })
+}
+
+/// A storage buffer of `size` bytes; `readable` adds COPY_SRC for the readback.
+pub(crate) fn storage(
+    device: &wgpu::Device,
+    label: &str,
+    size: u64,
+    readable: bool,
+) -> wgpu::Buffer {
+    let extra = if readable {
+        wgpu::BufferUsages::COPY_SRC
+    } else {
+        wgpu::BufferUsages::empty()
+    };
+    device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some(label),
+        size,
+        usage: wgpu::BufferUsages::STORAGE | extra,
+        mapped_at_creation: false,
+    })
+}
+
+/// Bind group 1: `buffers[i]` at binding i, whole, except the slice uniforms at binding 5,
+/// bound as one 16-byte entry (the dynamic offset picks the slice).
+pub(crate) fn bind(
+    device: &wgpu::Device,
+    layout: &wgpu::BindGroupLayout,
+    label: &str,
+    buffers: &[&wgpu::Buffer],
+) -> wgpu::BindGroup {
+    let entries: Vec<wgpu::BindGroupEntry> = buffers
+        .iter()
+        .enumerate()
+        .map(|(i, buffer)| wgpu::BindGroupEntry {
+            binding: i as u32,
+            resource: if i == 5 {
+                wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                    buffer,
+                    offset: 0,
+                    size: wgpu::BufferSize::new(16),
+                })
+            } else {
+                buffer.as_entire_binding()
+            },
+        })
+        .collect();
+    device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some(label),
+        layout,
+        entries: &entries,
+    })
+}
+
+/// Refuses buffers larger than the device's storage-binding limit, naming the buffer.
+pub(crate) fn check_sizes(
+    device: &wgpu::Device,
+    sizes: &[(&'static str, u64)],
+) -> Result<(), GpuError> {
+    let limit = device.limits().max_storage_buffer_binding_size;
+    for &(what, bytes) in sizes {
+        if bytes > limit {
+            return Err(GpuError::Limit {
+                what,
+                value: bytes,
+                limit,
+            });
+        }
+    }
+    Ok(())
+}
+
+/// The per-slice uniforms (plane value, index) at the device's dynamic-offset stride: the
+/// buffer and the stride.
+pub(crate) fn slice_uniforms(device: &wgpu::Device, planes: &[f64]) -> (wgpu::Buffer, usize) {
+    let stride = device.limits().min_uniform_buffer_offset_alignment.max(16) as usize;
+    let mut bytes = vec![0u8; stride * planes.len()];
+    for (k, &plane) in planes.iter().enumerate() {
+        let entry = &mut bytes[k * stride..k * stride + 16];
+        entry[..4].copy_from_slice(&(plane as f32).to_le_bytes());
+        entry[4..8].copy_from_slice(&(k as u32).to_le_bytes());
+    }
+    let buffer = filled(
+        device,
+        "photometeor slices",
+        &bytes,
+        wgpu::BufferUsages::UNIFORM,
+    );
+    (buffer, stride)
+}
+
+/// A compute pipeline and the grid (x, y) it runs over, in 8 × 8 workgroups.
+pub(crate) struct Dispatch<'a>(pub &'a wgpu::ComputePipeline, pub (usize, usize));
+
+/// The rest of a slicing frame once its buffers are bound: waits for the uploads (timed from
+/// `start`); records `clear`, then for each of `slices` slices every pipeline of `per_slice` in
+/// order (bind group 1 at the slice's uniform offset, `k · stride`), then `composite`, in one
+/// compute pass (each dispatch sees the previous one's writes); submits, waits, and reads the
+/// (rgb, T_vol) image of `size` back.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn run_slices(
+    gpu: &Gpu,
+    gpu_tables: &GpuTables,
+    bind_group: &wgpu::BindGroup,
+    start: Instant,
+    (slices, stride): (usize, usize),
+    (clear, per_slice, composite): (Dispatch, &[Dispatch], Dispatch),
+    image: &wgpu::Buffer,
+    size: (usize, usize),
+) -> Result<(Image, Timings), GpuError> {
+    let groups = |(x, y): (usize, usize)| (x.div_ceil(8) as u32, y.div_ceil(8) as u32);
+    timed_frame(
+        gpu,
+        start,
+        |pass| {
+            pass.set_bind_group(0, &gpu_tables.bind_group, &[]);
+            pass.set_bind_group(1, bind_group, &[0]);
+            let run = |d: &Dispatch, pass: &mut wgpu::ComputePass| {
+                let (x, y) = groups(d.1);
+                pass.set_pipeline(d.0);
+                pass.dispatch_workgroups(x, y, 1);
+            };
+            run(&clear, pass);
+            for k in 0..slices {
+                pass.set_bind_group(1, bind_group, &[(k * stride) as u32]);
+                for d in per_slice {
+                    run(d, pass);
+                }
+            }
+            run(&composite, pass);
+        },
+        image,
+        size,
+    )
+}
+
+/// A frame once its buffers are created (timed from `start`): waits for the uploads,
+/// records `record` into one compute pass, submits and waits (the frame time), and reads the
+/// (rgb, T) image of `size` back. Shared by every GPU model.
+pub(crate) fn timed_frame(
+    gpu: &Gpu,
+    start: Instant,
+    record: impl FnOnce(&mut wgpu::ComputePass),
+    image: &wgpu::Buffer,
+    size: (usize, usize),
+) -> Result<(Image, Timings), GpuError> {
+    let device = &gpu.device;
+    let wait = || {
+        device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map_err(|e| GpuError::Readback(e.to_string()))
+    };
+    gpu.queue.submit([]);
+    wait()?;
+    let upload = start.elapsed().as_secs_f64();
+
+    let start = Instant::now();
+    let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+        label: Some("photometeor frame"),
+    });
+    {
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some("photometeor frame"),
+            timestamp_writes: None,
+        });
+        record(&mut pass);
+    }
+    gpu.queue.submit([encoder.finish()]);
+    wait()?;
+    let frame_time = start.elapsed().as_secs_f64();
+
+    let start = Instant::now();
+    let (w, h) = size;
+    let texels = read_back(gpu, image, 16 * (w * h) as u64)?;
+    let out = Image {
+        width: w,
+        height: h,
+        rgb: texels.iter().map(|c| [c[0], c[1], c[2]]).collect(),
+        transparency: texels.iter().map(|c| c[3]).collect(),
+    };
+    Ok((
+        out,
+        Timings {
+            upload,
+            frame: frame_time,
+            readback: start.elapsed().as_secs_f64(),
+        },
+    ))
+}
