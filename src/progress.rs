@@ -49,19 +49,20 @@ impl bake::Progress for Bars {
     }
 }
 
-/// The path tracer's bar: samples per pixel done, time left, and the current noise.
-pub struct SampleBar(ProgressBar);
+/// The bar of long render work (the path tracer's samples per pixel, with its noise): steps
+/// done, time left, and what the model reports; hidden with `quiet` or in CI.
+pub struct RenderBar(ProgressBar);
 
-impl SampleBar {
-    /// A bar over `total` samples per pixel, hidden with `quiet` or in CI.
-    pub fn new(quiet: bool, total: u64) -> Self {
+impl RenderBar {
+    /// A bar that appears on the first update, unless `quiet` or in CI.
+    pub fn new(quiet: bool) -> Self {
         if quiet || std::env::var_os("CI").is_some() {
             return Self(ProgressBar::hidden());
         }
-        let p = ProgressBar::with_draw_target(Some(total), ProgressDrawTarget::stderr());
+        let p = ProgressBar::with_draw_target(None, ProgressDrawTarget::stderr());
         p.set_style(
             ProgressStyle::with_template(
-                "   truth [{bar:30}] {pos}/{len} spp, noise {msg} ({elapsed}, {eta} left)",
+                "  render [{bar:30}] {pos}/{len} {msg} ({elapsed}, {eta} left)",
             )
             .expect("valid template")
             .progress_chars("=> "),
@@ -75,9 +76,10 @@ impl SampleBar {
     }
 }
 
-impl render::truth::TruthProgress for SampleBar {
-    fn pass(&self, spp: usize, _total: usize, noise: f64, _seconds: f64) {
-        self.0.set_position(spp as u64);
-        self.0.set_message(format!("{:.2} %", noise * 100.0));
+impl render::model::Progress for RenderBar {
+    fn update(&self, done: u64, total: u64, message: &str) {
+        self.0.set_length(total);
+        self.0.set_position(done);
+        self.0.set_message(message.to_string());
     }
 }

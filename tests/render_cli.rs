@@ -103,7 +103,8 @@ fn rainbow_radius_in_the_render_matches_the_tables_primary_peak_red_outside() {
     let mut frame = render.frame(&tables).unwrap();
     frame.width = w;
     frame.height = h;
-    let setup = frame.setup().unwrap();
+    let settings = render::riley::Settings::default();
+    let setup = render::riley::Setup::new(&frame, &settings).unwrap();
     let bin = 0.1;
     let (lo, hi) = (36.0, 48.0);
     let nbins = ((hi - lo) / bin) as usize;
@@ -332,12 +333,16 @@ fn miyazaki_keys_out_of_range_are_refused_before_any_bake() {
     let base = std::fs::read_to_string(scene_path("shafts.toml")).unwrap();
     let cases = [
         (
-            base.replace("svs_a = 1.5", "svs_a = -0.5"),
-            "[render] svs_a = -0.5 is outside the allowed range (0, 2]",
+            base.replace("a = 1.5", "a = -0.5"),
+            "[render.miyazaki] a = -0.5 is outside the allowed range (0, 2]",
         ),
         (
-            base.replace("svs_a = 1.5", "svs_a = 2.5"),
-            "[render] svs_a = 2.5 is outside the allowed range (0, 2]",
+            base.replace("a = 1.5", "a = 2.5"),
+            "[render.miyazaki] a = 2.5 is outside the allowed range (0, 2]",
+        ),
+        (
+            base.replace("a = 1.5", "a = 1.5\nxi = 0.1"),
+            "[render.miyazaki] xi: --model miyazaki has no such setting",
         ),
         (
             base.replace("scale_height_m = 1500", "scale_height_m = 0"),
@@ -389,23 +394,28 @@ fn miyazaki_keys_out_of_range_are_refused_before_any_bake() {
 fn max_keys_out_of_range_are_refused_before_any_bake() {
     let cwd = workdir("render-max-bad");
     let base = std::fs::read_to_string(scene_path("cumulus_dawn.toml")).unwrap();
-    let with = |key: &str| base.replace("[render]\n", &format!("[render]\n{key}\n"));
+    let with = |key: &str| format!("{base}\n[render.max]\n{key}\n");
     let cases = [
         (
-            with("max_threshold = 0"),
-            "[render] max_threshold = 0 is outside the allowed range (0, ∞)",
+            with("threshold = 0"),
+            "[render.max] threshold = 0 is outside the allowed range (0, ∞)",
         ),
         (
-            with("max_threshold = -2"),
-            "[render] max_threshold = -2 is outside the allowed range (0, ∞)",
+            with("threshold = -2"),
+            "[render.max] threshold = -2 is outside the allowed range (0, ∞)",
         ),
         (
             with("diffusion_tolerance = 0.5"),
-            "[render] diffusion_tolerance = 0.5 is outside the allowed range (0, 0.1]",
+            "[render.max] diffusion_tolerance = 0.5 is outside the allowed range (0, 0.1]",
         ),
         (
             with("max_diffusion_iterations = 0"),
-            "[render] max_diffusion_iterations = 0 is outside the allowed range [1, 100000]",
+            "[render.max] max_diffusion_iterations = 0 is outside the allowed range [1, 100000]",
+        ),
+        (
+            base.replace("[render]\n", "[render]\nmax_threshold = 2\n"),
+            "[render] max_threshold: each model's settings live in its own table: write \
+             threshold = 2 under [render.max]",
         ),
         (
             base.replace("n_max = 26", "n_max = 26\npoisson_max_depth = 0"),
@@ -496,4 +506,49 @@ fn the_beams_scene_renders_with_both_kernels_and_other_models_refuse_it() {
             .zip(&images[1][1])
             .any(|(a, b)| (a - b).abs() > 0.1 * a)
     );
+}
+
+#[test]
+fn settings_of_another_model_are_refused_before_any_bake() {
+    let cwd = workdir("render-foreign-settings");
+    std::fs::copy(scene_path("cumulus_dawn.toml"), cwd.join("scene.toml")).unwrap();
+    let cases: [(&str, &[&str], &str); 4] = [
+        (
+            "max",
+            &["--slices", "64"],
+            "--slices: --model max has no setting slices",
+        ),
+        (
+            "riley",
+            &["--spp", "4"],
+            "--spp: --model riley has no setting spp",
+        ),
+        (
+            "truth",
+            &["--set", "k_multi=0.3"],
+            "--set k_multi=0.3: --model truth has no setting k_multi",
+        ),
+        (
+            "miyazaki",
+            &["--set", "k_multi=-1"],
+            "[render.miyazaki] k_multi = -1 must be finite and ≥ 0",
+        ),
+    ];
+    for (model, extra, named) in cases {
+        let mut args = vec![
+            "render",
+            "scene.toml",
+            "--model",
+            model,
+            "--cpu",
+            "--quality",
+            "draft",
+            "--tables",
+            "tables",
+            "--out",
+            "bad.exr",
+        ];
+        args.extend_from_slice(extra);
+        assert_refused_before_any_work(&args, &cwd, named);
+    }
 }

@@ -7,7 +7,7 @@ tau sweep (docs/truth/sweep: sqrt(1 - r) density, 48^3 voxels over a 1 km box, s
 optical depth 32 and 64 through its centre, side-lit (sun 20 deg up, 90 deg from the view) and
 back-lit (behind the camera), 64 x 64. For each: one truth (`--model truth`, --noise 0.03, at
 most SPP samples per pixel), Riley's CPU reference, and `--model max` at several thresholds T
-(`[render] max_threshold`, the voxel optical depth where diffusion takes over); compare-render
+(`[render.max] threshold`, the voxel optical depth where diffusion takes over); compare-render
 gives the mean, median and 95th-percentile relative error and the bias over the volume's pixels.
 
 Run from the repository root after `cargo build --release`:
@@ -60,10 +60,14 @@ distribution = {{ kind = "gamma", r_eff_um = 10, v_eff = 0.1 }}
 [render]
 width = 64
 height = 64
+grid_resolution = 48
+
+[render.riley]
 slices = 256
 light_resolution = 64
-grid_resolution = 48
-max_threshold = {threshold}
+
+[render.max]
+threshold = {threshold}
 
 [camera]
 position_m = [0, 500, -2500]
@@ -92,9 +96,12 @@ number_density_per_m3 = {density}
 
 
 def with_threshold(src, dst, threshold):
-    lines = [l for l in open(src).read().splitlines() if not l.replace(" ", "").startswith("max_threshold=")]
-    i = lines.index("[render]")
-    lines.insert(i + 1, f"max_threshold = {threshold}")
+    """`src` with [render.max] threshold set (the table added if the scene has none)."""
+    lines = [l for l in open(src).read().splitlines() if not l.replace(" ", "").startswith("threshold=")]
+    if "[render.max]" not in lines:
+        lines += ["", "[render.max]"]
+    i = lines.index("[render.max]")
+    lines.insert(i + 1, f"threshold = {threshold}")
     open(dst, "w").write("\n".join(lines) + "\n")
 
 

@@ -33,11 +33,14 @@ def run(args):
 
 
 def scene_with(src, dst, keys):
-    """`src` with these [render] keys set (replacing the scene's own, if any)."""
+    """`src` with these [render.miyazaki] keys set (replacing the scene's own, if any; the
+    table added if the scene has none)."""
     text = open(src).read()
     lines = [l for l in text.splitlines()
              if not any(l.replace(" ", "").startswith(f"{k}=") for k in keys)]
-    i = lines.index("[render]")
+    if "[render.miyazaki]" not in lines:
+        lines += ["", "[render.miyazaki]"]
+    i = lines.index("[render.miyazaki]")
     lines[i + 1:i + 1] = [f"{k} = {json.dumps(v)}" for k, v in keys.items()]
     open(dst, "w").write("\n".join(lines) + "\n")
 
@@ -108,7 +111,7 @@ def main():
 
         def miyazaki(k, phase, keep=False):
             path = f"{WORK}/{name}-svs.toml"
-            scene_with(src, path, {"k_multi": k, "svs_phase": phase})
+            scene_with(src, path, {"k_multi": k, "phase": phase})
             exr = f"{WORK}/{name}-svs.exr"
             t = time.time()
             png = [ "--png", f"{OUT}/{name}-miyazaki-{phase}.png"] if keep else []

@@ -1,5 +1,5 @@
-//! `photometeor render`: bake what a scene's volumes use, then render it (Riley et al. 2004
-//! §4–5) on the GPU, or with the CPU reference.
+//! `photometeor render`: bake what a scene's volumes use, then render it with a model
+//! (`render::model`) on the GPU, or with the model's CPU reference.
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -7,11 +7,9 @@ use std::time::Instant;
 use anyhow::{Context, Result, anyhow, bail};
 use bake::{BakePlan, Quality, Scene};
 use clap::Args as ClapArgs;
-use render::riley::cpu;
-use render::riley::gpu::Renderer;
-use render::{Frame, RenderScene};
+use render::{Frame, Job, ModelSettings, On, RenderScene, Rendered};
 use runtime::Tables;
-use runtime::gpu::{Gpu, GpuTables, TexelFormat};
+use runtime::gpu::Gpu;
 
 use crate::progress::Bars;
 
@@ -20,8 +18,9 @@ pub const DEFAULT_RENDER_SCENE: &str = include_str!("../../data/scenes/rainbow.t
 
 #[derive(Debug, ClapArgs)]
 pub struct RenderArgs {
-    /// Scene file (TOML: [scene], [[field]], [render], [camera], [sun], [sky], [[volume]]; see
-    /// data/scenes/). Default: the embedded rainbow scene (data/scenes/rainbow.toml).
+    /// Scene file (TOML: [scene], [[field]], [render] with a [render.<model>] table per model,
+    /// [camera], [sun], [sky], [[volume]]; see data/scenes/). Default: the embedded rainbow
+    /// scene (data/scenes/rainbow.toml).
     scene: Option<PathBuf>,
     /// HDR output: OpenEXR with R, G, B = linear radiance per unit solar irradiance outside
     /// the atmosphere (1/sr) and A = the volumes' transparency.
@@ -30,23 +29,55 @@ pub struct RenderArgs {
     /// Also write a tone-mapped sRGB PNG.
     #[arg(long)]
     png: Option<PathBuf>,
-    /// Image width in pixels (overrides [render] width).
+    /// Image width in pixels, 1–8192 (overrides [render] width).
     #[arg(long)]
     width: Option<usize>,
-    /// Image height in pixels (overrides [render] height).
+    /// Image height in pixels, 1–8192 (overrides [render] height).
     #[arg(long)]
     height: Option<usize>,
-    /// Half-angle slices through the volumes (overrides [render] slices).
+    /// The render model (each reads its settings from the scene's [render.<model>] table).
+    #[arg(long, default_value = "riley", value_parser = model_parser())]
+    model: String,
+    /// A setting of the model, `KEY=VALUE` in TOML (e.g. `k_multi=0.3`, `phase="tables"`),
+    /// over the scene's [render.<model>]; repeatable. A key the model does not have is refused.
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    set: Vec<String>,
+    /// Half-angle (riley) or shadow-view (miyazaki) slices through the volumes, 1–4096: the
+    /// model's `slices`.
     #[arg(long)]
     slices: Option<usize>,
-    /// Light-buffer texels per side (overrides [render] light_resolution).
+    /// Light-buffer (riley) or shadow-surface (miyazaki) texels per side, 2–4096: the model's
+    /// `light_resolution`.
     #[arg(long)]
     light_resolution: Option<usize>,
-    /// --model riley: the light buffer's update per slab, `continuum` (I ← I e^{−τ(1 − αF)}, the
-    /// default: converges as slices are added) or `riley2004` (Eq. 25 as printed); overrides
-    /// [render] light_update.
+    /// riley: the light buffer's update per slab, `continuum` (I ← I e^{−τ(1 − αF)}, the
+    /// default: converges as slices are added) or `riley2004` (Eq. 25 as printed).
     #[arg(long, value_parser = ["continuum", "riley2004"])]
     light_update: Option<String>,
+    /// biri: the kernel's integral, `exact` (the bake's primitive C(τ_h, θ), interpolated) or
+    /// `polynomial` (the paper's degree-4 fit, Eq. 2).
+    #[arg(long, value_parser = ["exact", "polynomial"])]
+    biri_kernel: Option<String>,
+    /// truth: samples (paths) per pixel, [1, 1048576].
+    #[arg(long)]
+    spp: Option<usize>,
+    /// truth: stop early once the median relative standard error of the volume's pixels
+    /// (green) is at or below this, e.g. 0.01 for 1 %; 0: run all samples.
+    #[arg(long)]
+    noise: Option<f64>,
+    /// truth: seed of the random streams; the image is the same for a seed whatever the
+    /// thread count.
+    #[arg(long)]
+    seed: Option<u64>,
+    /// truth: wavelengths each path carries, 1–4 (hero-wavelength sampling: the first decides
+    /// the path, all of them score it, combined by the balance heuristic); 0, the default,
+    /// carries all three of an rgb3 bake and 4 of a spectral one. 1 is one wavelength per path.
+    #[arg(long)]
+    wavelengths_per_path: Option<usize>,
+    /// truth: scatterings after which a path ends, 1–1000000; 1 is exact single scattering
+    /// (what biri and miyazaki's k_multi = 0 model); 0: the default bound (1000000).
+    #[arg(long)]
+    max_scatterings: Option<usize>,
     /// PNG exposure (multiplies radiance before 1 − e^{−x}); default: the scene's, or automatic.
     #[arg(long)]
     exposure: Option<f64>,
@@ -56,47 +87,6 @@ pub struct RenderArgs {
     /// ~/.cache/photometeor).
     #[arg(long)]
     tables: Option<PathBuf>,
-    /// The render model: `riley` (Riley et al. 2004's half-angle slicing with light and eye
-    /// buffers, the multiple-scattering tables for the angular spread of sunlight) or `truth`
-    /// (an unbiased spectral Monte Carlo path tracer of the same scene on the CPU, all cores;
-    /// its EXR adds stderr.R/G/B, each pixel's standard error; docs/truth.md) or `miyazaki`
-    /// (Miyazaki, Dobashi & Nishita's shadow-view slices: single scattering plus a constant
-    /// k_multi, shadows on the ground and in the air, an aerosol [haze] layer) or `max` (Max et
-    /// al. 2004: a diffusion solve in the dense core, Poisson-weighted multiple anisotropic
-    /// scattering from the bake's M(D, θ) at the tenuous edges; the lighting on the CPU, all
-    /// cores, the final gather on the GPU or --cpu; [render] max_threshold,
-    /// diffusion_tolerance, max_diffusion_iterations) or `biri` (Biri, Arquès &
-    /// Michelin 2006: single scattering of [[light]]s in homogeneous [[medium]]s in closed
-    /// form, volumetric shadows of [[occluder]]s from their silhouette planes; GPU, or --cpu).
-    #[arg(long, default_value = "riley", value_parser = ["riley", "truth", "miyazaki", "max", "biri"])]
-    model: String,
-    /// --model biri: the kernel's integral, `exact` (the bake's primitive C(τ_h, θ),
-    /// interpolated) or `polynomial` (the paper's degree-4 fit, Eq. 2); overrides [render]
-    /// biri_kernel.
-    #[arg(long, value_parser = ["exact", "polynomial"])]
-    biri_kernel: Option<String>,
-    /// --model truth: samples (paths) per pixel, [1, 1048576] (overrides [render] spp).
-    #[arg(long)]
-    spp: Option<usize>,
-    /// --model truth: stop early once the median relative standard error of the volume's
-    /// pixels (green) is at or below this, e.g. 0.01 for 1 %; 0: run all samples.
-    #[arg(long, default_value_t = 0.0)]
-    noise: f64,
-    /// --model truth: seed of the random streams (overrides [render] seed); the image is the
-    /// same for a seed whatever the thread count.
-    #[arg(long)]
-    seed: Option<u64>,
-    /// --model truth: wavelengths each path carries, 1–4 (hero-wavelength sampling: the
-    /// first decides the path, all of them score it, combined by the balance heuristic); the
-    /// default, 0, carries all three of an rgb3 bake and 4 of a spectral one. 1 is one
-    /// wavelength per path, the simple baseline.
-    #[arg(long, default_value_t = 0)]
-    wavelengths_per_path: usize,
-    /// --model truth: scatterings after which a path ends, 1–1000000; 1 is exact single
-    /// scattering (what --model biri and miyazaki's k_multi = 0 model); 0: the default bound
-    /// (1000000, far beyond any table order).
-    #[arg(long, default_value_t = 0)]
-    max_scatterings: usize,
     /// Accuracy preset of the bake, overriding the scene's.
     #[arg(long, value_parser = ["draft", "standard", "reference"])]
     quality: Option<String>,
@@ -108,24 +98,100 @@ pub struct RenderArgs {
     quiet: bool,
 }
 
+/// `--model`'s values, each with its model's one-line description for `--help`.
+pub fn model_parser() -> clap::builder::PossibleValuesParser {
+    clap::builder::PossibleValuesParser::new(
+        render::model::model_descriptions()
+            .into_iter()
+            .map(|(name, about)| clap::builder::PossibleValue::new(name).help(about)),
+    )
+}
+
+impl RenderArgs {
+    /// The model settings the flags give: (flag, key, value), `--set` included.
+    fn overrides(&self) -> Result<Vec<(String, String, toml::Value)>> {
+        let int = |v: usize| toml::Value::Integer(v as i64);
+        let mut out: Vec<(String, String, toml::Value)> = Vec::new();
+        let mut flag = |name: &str, key: &str, v: Option<toml::Value>| {
+            if let Some(v) = v {
+                out.push((format!("--{name}"), key.to_string(), v));
+            }
+        };
+        flag("slices", "slices", self.slices.map(int));
+        flag(
+            "light-resolution",
+            "light_resolution",
+            self.light_resolution.map(int),
+        );
+        let text = |v: &Option<String>| v.clone().map(toml::Value::String);
+        flag("light-update", "light_update", text(&self.light_update));
+        flag("biri-kernel", "kernel", text(&self.biri_kernel));
+        flag("spp", "spp", self.spp.map(int));
+        flag("noise", "noise", self.noise.map(toml::Value::Float));
+        flag(
+            "seed",
+            "seed",
+            self.seed.map(|v| toml::Value::Integer(v as i64)),
+        );
+        let carried = self.wavelengths_per_path.map(int);
+        flag("wavelengths-per-path", "wavelengths_per_path", carried);
+        flag(
+            "max-scatterings",
+            "max_scatterings",
+            self.max_scatterings.map(int),
+        );
+        for kv in &self.set {
+            let (key, value) = parse_setting(kv)?;
+            out.push((format!("--set {kv}"), key, value));
+        }
+        Ok(out)
+    }
+}
+
+/// `KEY=VALUE` with VALUE in TOML (a bare word is taken as a string).
+pub fn parse_setting(kv: &str) -> Result<(String, toml::Value)> {
+    let (key, value) = kv
+        .split_once('=')
+        .ok_or_else(|| anyhow!("--set {kv:?}: expected KEY=VALUE, e.g. k_multi=0.3"))?;
+    let key = key.trim().to_string();
+    let value = value.trim();
+    let parsed = toml::from_str::<toml::Table>(&format!("v = {value}"))
+        .ok()
+        .and_then(|mut t| t.remove("v"))
+        .unwrap_or_else(|| toml::Value::String(value.to_string()));
+    Ok((key, parsed))
+}
+
 /// The GPU, or an error that says how to get one (or to render with --cpu).
-fn gpu() -> anyhow::Result<Gpu> {
+pub fn gpu() -> anyhow::Result<Gpu> {
     Gpu::new().context(
         "no GPU adapter: install a driver (on Debian, mesa-vulkan-drivers gives lavapipe, a \
          software Vulkan) or render with --cpu",
     )
 }
 
-/// Reads the scene, bakes the fields its volumes use, loads and checks them, builds the frame.
-/// `adjust` overrides the scene's render settings; the result is checked before the bake.
+/// What a render needs once the scene is read and its tables baked.
+pub struct Prepared {
+    /// The scene's render part.
+    pub scene: RenderScene,
+    /// The model with its settings, checked against the scene.
+    pub model: ModelSettings,
+    /// The checked tables, field i = grid channel i.
+    pub tables: Tables,
+}
+
+/// Reads the scene, checks the model and its settings (`overrides`: flag, key, value) against
+/// it, bakes the fields its volumes use, loads and checks them. `adjust` overrides the scene's
+/// shared render settings; everything is checked before the bake.
 pub fn prepare(
     model: &str,
+    overrides: &[(String, String, toml::Value)],
     scene_path: Option<&std::path::Path>,
     tables_dir: Option<PathBuf>,
     quality: Option<&str>,
     quiet: bool,
     adjust: impl FnOnce(&mut RenderScene),
-) -> Result<(RenderScene, Tables)> {
+) -> Result<Prepared> {
     let (text, origin, base) = match scene_path {
         Some(p) => (
             std::fs::read_to_string(p).with_context(|| format!("reading scene {}", p.display()))?,
@@ -141,8 +207,25 @@ pub fn prepare(
     let mut scene = Scene::parse(&text, &origin)?;
     let mut render = RenderScene::parse(&text, &origin, &base)?;
     adjust(&mut render);
+    for (flag, key, _) in overrides {
+        if !RenderScene::model_has(model, key) {
+            let keys = render::model::model_keys()
+                .into_iter()
+                .find(|(m, _)| *m == model)
+                .map(|(_, k)| k.join(", "))
+                .unwrap_or_default();
+            bail!("{flag}: --model {model} has no setting {key} (its settings: {keys})");
+        }
+    }
+    let pairs: Vec<(String, toml::Value)> = overrides
+        .iter()
+        .map(|(_, k, v)| (k.clone(), v.clone()))
+        .collect();
+    let settings = render
+        .model(model, &pairs)
+        .map_err(|e| anyhow!("{origin}: {e}"))?;
     render
-        .check_for(model)
+        .check(&settings)
         .map_err(|e| anyhow!("{origin}: {e}"))?;
     let used = render.fields();
     for name in &used {
@@ -169,20 +252,19 @@ pub fn prepare(
     bake::run(&plan, &Bars::new(quiet))?;
     let names: Vec<&str> = used.iter().map(String::as_str).collect();
     let tables = Tables::open_fields(&dir, Some(&names))?;
-    Ok((render, tables))
+    Ok(Prepared {
+        scene: render,
+        model: settings,
+        tables,
+    })
 }
 
 /// Runs `photometeor render`.
 pub fn run(a: RenderArgs) -> Result<()> {
-    if a.wavelengths_per_path > render::truth::MAX_CARRIED {
-        bail!(
-            "--wavelengths-per-path {} is outside the allowed range [1, {}] (0: the default)",
-            a.wavelengths_per_path,
-            render::truth::MAX_CARRIED
-        );
-    }
-    let (render, tables) = prepare(
+    let overrides = a.overrides()?;
+    let p = prepare(
         &a.model,
+        &overrides,
         a.scene.as_deref(),
         a.tables.clone(),
         a.quality.as_deref(),
@@ -190,254 +272,60 @@ pub fn run(a: RenderArgs) -> Result<()> {
         |r| {
             r.width = a.width.unwrap_or(r.width);
             r.height = a.height.unwrap_or(r.height);
-            r.slices = a.slices.unwrap_or(r.slices);
-            r.light_resolution = a.light_resolution.unwrap_or(r.light_resolution);
-            r.spp = a.spp.unwrap_or(r.spp);
-            if let Some(u) = a
-                .light_update
-                .as_deref()
-                .and_then(render::LightUpdate::parse)
-            {
-                r.light_update = u;
-            }
-            r.seed = a.seed.unwrap_or(r.seed);
-            if let Some(k) = a
-                .biri_kernel
-                .as_deref()
-                .and_then(render::biri::Kernel::parse)
-            {
-                r.biri.kernel = k;
-            }
         },
     )?;
-    if a.model == "truth" {
-        return run_truth(&a, &render, &tables);
-    }
-    if a.model == "biri" && !a.cpu {
-        let gpu = gpu()?;
-        // 32-bit texels: the exact kernel adds Ams_1 bin values to the primitive.
-        let gpu_tables = GpuTables::upload(&gpu, &tables, TexelFormat::F32)?;
-        let renderer = render::biri::gpu::Renderer::new(&gpu, &gpu_tables);
-        let (image, t) = renderer.render(&gpu, &tables, &gpu_tables, &render)?;
-        if !a.quiet {
-            eprintln!(
-                "analytic single scattering ({}, {} kernel): {}×{}, {} light(s): silhouettes \
-                 and upload {:.1} ms, frame {:.1} ms, readback {:.1} ms",
-                gpu.describe(),
-                render.biri.kernel.name(),
-                image.width,
-                image.height,
-                render.lights.len(),
-                t.upload * 1e3,
-                t.frame * 1e3,
-                t.readback * 1e3
-            );
-        }
-        return write_outputs(&a, &render, &image, Vec::new());
-    }
-    if a.model == "biri" {
-        let t = Instant::now();
-        let (image, report) = render::biri::cpu::render(&tables, &render)?;
-        if !a.quiet {
-            let all = t.elapsed().as_secs_f64();
-            let share = |s: f64| 100.0 * s / all.max(1e-12);
-            eprintln!(
-                "analytic single scattering (CPU reference, {} threads, {} kernel): {}×{}, {} \
-                 light(s), {} shadow planes, {:.2} crossings per ray and light: {all:.3} s \
-                 (silhouettes {:.1} %, surfaces {:.1} %, medium and shadow planes {:.1} %)",
-                rayon::current_num_threads(),
-                render.biri.kernel.name(),
-                image.width,
-                image.height,
-                render.lights.len(),
-                report.shadow_planes,
-                report.crossings_per_ray,
-                share(report.silhouettes_s),
-                share(report.surfaces_s),
-                share(report.medium_s)
-            );
-        }
-        return write_outputs(&a, &render, &image, Vec::new());
-    }
     let started = Instant::now();
-    let frame: Frame = render.frame(&tables)?;
-    let raster = started.elapsed().as_secs_f64();
-    if a.model == "max" {
-        // Steps 1–4 on the CPU; the gather on the GPU unless --cpu (the per-view part).
-        let lighting = render::max::cpu::light(&tables, &frame, &render.max)?;
-        let (image, report, on) = if a.cpu {
-            let (image, report) =
-                render::max::cpu::gather(&tables, &frame, &render.max, &lighting)?;
-            (image, report, "CPU".to_string())
-        } else {
-            let gpu = gpu()?;
-            let gpu_tables = GpuTables::upload(&gpu, &tables, TexelFormat::F32)?;
-            let renderer = render::max::gpu::Renderer::new(&gpu, &gpu_tables);
-            let (image, t, largest) =
-                renderer.gather(&gpu, &tables, &gpu_tables, &frame, &render.max, &lighting)?;
-            let mut report = lighting.report.clone();
-            report.gather_s = t.upload + t.frame + t.readback;
-            report.largest_edge_depth = largest;
-            (image, report, gpu.describe())
-        };
-        if !a.quiet {
-            eprintln!(
-                "diffusion + Poisson edges (lighting on the CPU, {} threads; gather on {on}): \
-                 {}×{}, grid {:?}: reduced sunlight \
-                 {:.2} s, diffusion {:.2} s ({} unknowns, {} levels, {:?} CG iterations to \
-                 residuals {:.1e}/{:.1e}/{:.1e}), clear-air propagation and second solve {:.2} s \
-                 (mean light across clear air {:.2e}), final gather {:.2} s; largest edge depth \
-                 {:.2} (grid built in {raster:.2} s)",
-                rayon::current_num_threads(),
-                frame.width,
-                frame.height,
-                frame.grid.dims,
-                report.propagation_s,
-                report.diffusion_s,
-                report.unknowns,
-                report.levels,
-                report.iterations,
-                report.residual[0],
-                report.residual[1],
-                report.residual[2],
-                report.clear_air_s,
-                report.clear_air_mean,
-                report.gather_s,
-                report.largest_edge_depth
-            );
-        }
-        return write_outputs(&a, &render, &image, Vec::new());
+    let frame: Frame = p.scene.frame(&p.tables)?;
+    if !a.quiet && !p.scene.volumes.is_empty() {
+        eprintln!(
+            "grid {:?} built in {:.2} s",
+            frame.grid.dims,
+            started.elapsed().as_secs_f64()
+        );
     }
-    if a.model == "miyazaki" {
-        let t = Instant::now();
-        let (image, on) = if a.cpu {
-            let image = render::miyazaki::cpu::render(&tables, &frame, &render.svs)?;
-            (image, "CPU reference".to_string())
-        } else {
-            let gpu = gpu()?;
-            let gpu_tables = GpuTables::upload(&gpu, &tables, TexelFormat::Auto)?;
-            let renderer = render::miyazaki::gpu::Renderer::new(&gpu, &gpu_tables);
-            let (image, times) =
-                renderer.render(&gpu, &tables, &gpu_tables, &frame, &render.svs)?;
-            let on = format!(
-                "{}, frame {:.1} ms (upload {:.1} ms, readback {:.1} ms)",
-                gpu.describe(),
-                times.frame * 1e3,
-                times.upload * 1e3,
-                times.readback * 1e3
-            );
-            (image, on)
-        };
-        if !a.quiet {
-            eprintln!(
-                "shadow-view slices ({on}): {}×{}, {} slices, a = {}, k_multi = {} /sr, shadow \
-                 surface {}²: {:.2} s in all (grid {:?} built in {raster:.2} s)",
-                frame.width,
-                frame.height,
-                frame.slices,
-                render.svs.a,
-                render.svs.k_multi,
-                frame.light_resolution,
-                t.elapsed().as_secs_f64(),
-                frame.grid.dims
-            );
-        }
-        return write_outputs(&a, &render, &image, Vec::new());
-    }
-    let image = if a.cpu {
-        let t = Instant::now();
-        let image = cpu::render(&tables, &frame)?;
-        if !a.quiet {
-            eprintln!(
-                "CPU reference: {}×{}, {} slices, light buffer {}²: {:.2} s (grid {:?} built in {raster:.2} s)",
-                frame.width,
-                frame.height,
-                frame.slices,
-                frame.light_resolution,
-                t.elapsed().as_secs_f64(),
-                frame.grid.dims
-            );
-        }
-        image
+    let bar = crate::progress::RenderBar::new(a.quiet);
+    let job = Job {
+        tables: &p.tables,
+        frame: &frame,
+        progress: &bar,
+    };
+    let rendered = if a.cpu || !p.model.has_gpu() {
+        p.model.render(&job, On::Cpu)?
     } else {
         let gpu = gpu()?;
-        let gpu_tables = GpuTables::upload(&gpu, &tables, TexelFormat::Auto)?;
-        let renderer = Renderer::new(&gpu, &gpu_tables);
-        let (image, t) = renderer.render(&gpu, &tables, &gpu_tables, &frame)?;
+        let prepared = p.model.prepare(&gpu, &p.tables)?;
         if !a.quiet {
             eprintln!(
-                "{}: {}×{}, {} slices, light buffer {}²: tables upload {:.1} ms, grid {:?} built \
-                 {raster:.2} s and uploaded {:.1} ms, frame {:.1} ms, readback {:.1} ms",
+                "tables uploaded to {} in {:.1} ms",
                 gpu.describe(),
-                frame.width,
-                frame.height,
-                frame.slices,
-                frame.light_resolution,
-                gpu_tables.upload_seconds * 1e3,
-                frame.grid.dims,
-                t.upload * 1e3,
-                t.frame * 1e3,
-                t.readback * 1e3
+                prepared.tables().upload_seconds * 1e3
             );
         }
-        image
+        p.model.render(&job, On::Gpu(&gpu, &prepared))?
     };
-    write_outputs(&a, &render, &image, Vec::new())
+    bar.finish();
+    if !a.quiet {
+        eprintln!("{}", rendered.summary);
+    }
+    write_outputs(&a, &p.scene, &rendered)
 }
 
-/// Writes the frame's EXR (with `extra` channels) and, if asked, its PNG; a frame with a
+/// Writes the frame's EXR (with its extra channels) and, if asked, its PNG; a frame with a
 /// non-finite pixel writes nothing.
-fn write_outputs(
-    a: &RenderArgs,
-    render: &RenderScene,
-    image: &render::Image,
-    extra: Vec<(String, Vec<f32>)>,
-) -> Result<()> {
+fn write_outputs(a: &RenderArgs, scene: &RenderScene, rendered: &Rendered) -> Result<()> {
+    let image = &rendered.image;
     if image.rgb.iter().flatten().any(|v| !v.is_finite()) {
         bail!("the render produced a non-finite pixel; nothing written");
     }
-    image.write_exr_with(&a.out, extra)?;
+    image.write_exr_with(&a.out, rendered.extra.clone())?;
     if let Some(png) = &a.png {
         let exposure = a
             .exposure
-            .or(render.exposure)
+            .or(scene.exposure)
             .unwrap_or_else(|| image.auto_exposure());
         image.write_png(png, exposure)?;
     }
     Ok(())
-}
-
-/// `render --model truth`: path-trace, then write the EXR (with stderr.R/G/B) and the PNG.
-fn run_truth(a: &RenderArgs, render: &RenderScene, tables: &Tables) -> Result<()> {
-    let frame: Frame = render.frame(tables)?;
-    let mut settings = render.truth_settings();
-    settings.target_noise = a.noise;
-    settings.wavelengths_per_path = a.wavelengths_per_path;
-    settings.max_scatterings = a.max_scatterings;
-    let bar = crate::progress::SampleBar::new(a.quiet, settings.spp as u64);
-    let truth = render::truth::render(tables, &frame, &settings, &bar)?;
-    bar.finish();
-    if !a.quiet {
-        eprintln!(
-            "path-traced truth: {}×{}, {} spp, noise {:.2} % (median relative standard error, green, volume pixels), {:.1} s, {:.3} M paths/s on {} threads",
-            frame.width,
-            frame.height,
-            truth.spp,
-            truth.noise * 100.0,
-            truth.seconds,
-            truth.paths_per_second / 1e6,
-            rayon::current_num_threads()
-        );
-    }
-    let extra = (0..3)
-        .map(|c| {
-            (
-                format!("stderr.{}", ["R", "G", "B"][c]),
-                truth.std_error.iter().map(|e| e[c]).collect(),
-            )
-        })
-        .collect();
-    write_outputs(a, render, &truth.image, extra)
 }
 
 /// The bake directory of a scene when `--tables` is not given: under the user's cache directory

@@ -62,9 +62,11 @@ kind = "{field}"
 [render]
 width = {SIZE}
 height = {SIZE}
+grid_resolution = 48
+
+[render.riley]
 slices = 256
 light_resolution = {SIZE}
-grid_resolution = 48
 xi = {xi}
 
 [camera]

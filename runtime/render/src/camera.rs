@@ -29,6 +29,11 @@ impl Camera {
         let right = right.normalize();
         Some((forward, right, right.cross(forward)))
     }
+
+    /// tan of half the vertical field of view.
+    pub fn tan_half_fov(&self) -> f64 {
+        (self.fov_deg.to_radians() / 2.0).tan()
+    }
 }
 
 /// The unit ray through the centre of pixel (i, j) (row j = 0 at the top) of a `width` ×

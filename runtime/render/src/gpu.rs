@@ -42,6 +42,27 @@ pub struct Timings {
     pub readback: f64,
 }
 
+impl Timings {
+    /// The three as named passes.
+    pub fn passes(&self) -> Vec<crate::model::Pass> {
+        use crate::model::Pass;
+        vec![
+            Pass {
+                name: "upload",
+                seconds: self.upload,
+            },
+            Pass {
+                name: "frame",
+                seconds: self.frame,
+            },
+            Pass {
+                name: "readback",
+                seconds: self.readback,
+            },
+        ]
+    }
+}
+
 /// A compute-visible buffer binding of bind group 1.
 pub(crate) fn entry(
     binding: u32,

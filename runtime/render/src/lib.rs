@@ -36,6 +36,7 @@ pub mod gpu;
 pub mod image;
 pub mod max;
 pub mod miyazaki;
+pub mod model;
 pub mod objects;
 pub mod riley;
 pub mod rng;
@@ -46,6 +47,7 @@ pub mod truth;
 pub mod volume;
 
 pub use camera::{Camera, Sun};
+pub use model::{Job, Model, ModelSettings, On, Rendered};
 pub use scene::RenderScene;
 pub use sky::Atmosphere;
 pub use volume::DensityGrid;
@@ -74,31 +76,31 @@ pub struct Frame {
     pub sun: Sun,
     /// The analytic sky and aerial perspective (Riley Eqs. 11–15).
     pub atmosphere: Atmosphere,
-    /// Riley's ξ: back-scattered light added to the phase function in the eye pass (1/sr).
-    pub xi: f64,
-    /// How the light buffer loses light per slab (`riley` model).
-    pub light_update: LightUpdate,
     /// Image width, 1…8192 pixels.
     pub width: usize,
     /// Image height, 1…8192 pixels.
     pub height: usize,
-    /// Number S of half-angle slices through the grid's box, [1, 4096].
-    pub slices: usize,
-    /// Light-buffer texels per side.
-    pub light_resolution: usize,
     /// Number densities, channel i = field i of the tables.
     pub grid: DensityGrid,
     /// An aerosol layer over the whole scene (`[haze]`; `miyazaki` and `truth`).
     pub haze: Option<Haze>,
     /// Lambertian albedo of the ground at y = 0 (`[ground] albedo`, [0, 1]; 0 is black).
     pub ground_albedo: f64,
+    /// Point and spot lights (`[[light]]`; `biri` and `truth`).
+    pub lights: Vec<objects::Light>,
+    /// Homogeneous media (`[[medium]]`; `biri` and `truth`).
+    pub media: Vec<objects::Medium>,
+    /// Lambertian occluders (`[[occluder]]`; `biri` and `truth`).
+    pub occluders: Vec<objects::Occluder>,
 }
 
 /// An aerosol layer: field `field` of the tables at N(y) = N_0 e^{−y/H}.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct Haze {
     /// Index of its field in the tables.
     pub field: usize,
+    /// The field's name.
+    pub name: String,
     /// N_0 at y = 0 (1/m³).
     pub number_density_per_m3: f64,
     /// H (m).
@@ -146,11 +148,40 @@ impl Frame {
         }
         Ok(())
     }
+
+    /// Refuses what a sunlit slicing model cannot draw: media and occluders, lights, and
+    /// (unless `haze_ok`) a haze layer, naming the tables and the models that draw them.
+    pub fn sunlight_only(&self, model: &str, haze_ok: bool) -> Result<(), FrameError> {
+        if !self.media.is_empty() || !self.occluders.is_empty() {
+            return Err(FrameError(format!(
+                "the scene has {} [[medium]] and {} [[occluder]] table(s), which only --model \
+                 biri and --model truth draw",
+                self.media.len(),
+                self.occluders.len()
+            )));
+        }
+        if !self.lights.is_empty() {
+            return Err(FrameError(format!(
+                "the scene has {} [[light]] table(s); --model {model} models sunlight only \
+                 (render it with --model truth)",
+                self.lights.len()
+            )));
+        }
+        if let (Some(h), false) = (&self.haze, haze_ok) {
+            return Err(FrameError(format!(
+                "the scene has a [haze] layer (field {:?}); --model {model} draws Rayleigh air \
+                 only (render it with --model miyazaki or truth)",
+                h.name
+            )));
+        }
+        Ok(())
+    }
 }
 
 /// The light buffer's update across a slab of optical depth τ = β_ext Δ_l, with albedo α and
 /// forward fraction F (Riley et al. 2004 Eq. 25 and what this project uses instead).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
 pub enum LightUpdate {
     /// I ← I e^{−τ(1 − αF)}: of the light a slab removes from the beam, the forward-scattered
     /// share αF stays in it. First order in τ, and the same for any slicing (a product of

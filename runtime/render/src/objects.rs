@@ -136,3 +136,63 @@ pub fn field_index(tables: &runtime::Tables, name: &str) -> Result<usize, crate:
             ))
         })
 }
+
+/// Refuses media that overlap, or a medium filling the scene beside others: the models that
+/// draw media attenuate each ray by one medium at a time.
+pub fn check_media(media: &[Medium]) -> Result<(), crate::FrameError> {
+    let bad = |s: String| Err(crate::FrameError(s));
+    let everywhere = media.iter().position(|m| m.region == Region::Everywhere);
+    if let Some(i) = everywhere
+        && media.len() > 1
+    {
+        return bad(format!(
+            "[[medium]] {} fills the whole scene, so it cannot share it with {} other \
+             medium/media (give each a box, min_m and max_m, that do not overlap)",
+            i + 1,
+            media.len() - 1
+        ));
+    }
+    for (i, a) in media.iter().enumerate() {
+        for (j, b) in media.iter().enumerate().skip(i + 1) {
+            if let (
+                Region::Box {
+                    min_m: a0,
+                    max_m: a1,
+                },
+                Region::Box {
+                    min_m: b0,
+                    max_m: b1,
+                },
+            ) = (a.region, b.region)
+                && a0.cmplt(b1).all()
+                && b0.cmplt(a1).all()
+            {
+                return bad(format!(
+                    "[[medium]] {} and [[medium]] {} overlap: the media of one scene must not \
+                     (each ray's attenuation is one medium's at a time)",
+                    i + 1,
+                    j + 1
+                ));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Refuses a light inside an occluder (for every model that draws occluders).
+pub fn check_lights(lights: &[Light], occluders: &[Occluder]) -> Result<(), crate::FrameError> {
+    for (i, l) in lights.iter().enumerate() {
+        for (k, o) in occluders.iter().enumerate() {
+            if o.contains(l.position_m) {
+                return Err(crate::FrameError(format!(
+                    "[[light]] {}: position_m = {:?} is inside [[occluder]] {}: its light could \
+                     never leave it",
+                    i + 1,
+                    l.position_m.to_array(),
+                    k + 1
+                )));
+            }
+        }
+    }
+    Ok(())
+}

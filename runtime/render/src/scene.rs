@@ -1,25 +1,40 @@
 //! The render part of a scene file: the same TOML as the bake's `[scene]`/`[[field]]`, plus
 //!
 //! ```toml
-//! [render]
+//! [render]                  # shared by every model
 //! width = 512               # pixels
 //! height = 512
-//! slices = 256              # half-angle slices through the volumes' box
-//! light_resolution = 512    # light-buffer texels per side
-//! grid_resolution = 128     # voxels along the box's longest side
-//! xi = 0.0                  # Riley's ξ (1/sr), back-scattered light in the eye pass
-//! light_update = "continuum"   # riley: "continuum" (default) or "riley2004" (Eq. 25 as printed)
+//! grid_resolution = 128     # voxels along the volumes' box's longest side
 //! exposure = 0.0            # PNG exposure; 0 or absent: automatic
-//! spp = 256                 # --model truth: samples (paths) per pixel, [1, 2²⁰]
-//! svs_a = 1.5               # --model miyazaki: slice normal splits view:sun angles 1 : a, (0, 2]
-//! k_multi = 0.0             # --model miyazaki: constant multiple scattering of clouds (1/sr), ≥ 0
-//! svs_phase = "tables"      # --model miyazaki: "tables" (Ams_1) or "cornette_shanks" (Eq. 3)
-//! seed = 1                  # --model truth: seed of the random streams
-//! max_threshold = 1.0       # --model max: voxel optical depth where diffusion takes over, > 0
-//! diffusion_tolerance = 1e-6       # --model max: relative residual of the solve, (0, 0.1]
-//! max_diffusion_iterations = 500   # --model max: CG iteration cap, [1, 100000]
-//! clear_air_iterations = 1  # --model max: §3's propagation across clear air, [0, 4]
-//! biri_kernel = "exact"     # --model biri: "exact" (the kernel's primitive) or "polynomial" (Eq. 2)
+//!
+//! [render.riley]            # each model's settings in its own table (crate::model); a key
+//! slices = 256              # another model owns, or none does, is refused naming both
+//! light_resolution = 512    # light-buffer texels per side
+//! xi = 0.0                  # Riley's ξ (1/sr), back-scattered light in the eye pass
+//! light_update = "continuum"   # "continuum" (default) or "riley2004" (Eq. 25 as printed)
+//!
+//! [render.miyazaki]
+//! slices = 256
+//! light_resolution = 512    # shadow-surface texels per side
+//! a = 1.5                   # slice normal splits view:sun angles 1 : a, (0, 2]
+//! k_multi = 0.0             # constant multiple scattering of clouds (1/sr), ≥ 0
+//! phase = "tables"          # "tables" (Ams_1) or "cornette_shanks" (Eq. 3)
+//!
+//! [render.max]
+//! threshold = 1.0           # voxel optical depth where diffusion takes over, > 0
+//! diffusion_tolerance = 1e-6       # relative residual of the solve, (0, 0.1]
+//! max_diffusion_iterations = 500   # CG iteration cap, [1, 100000]
+//! clear_air_iterations = 1  # §3's propagation across clear air, [0, 4]
+//!
+//! [render.biri]
+//! kernel = "exact"          # "exact" (the kernel's primitive) or "polynomial" (Eq. 2)
+//!
+//! [render.truth]
+//! spp = 256                 # samples (paths) per pixel, [1, 2²⁰]
+//! seed = 1                  # seed of the random streams
+//! noise = 0.0               # stop at this median relative standard error; 0: run every sample
+//! max_scatterings = 0       # 1: single scattering only; 0: unbounded
+//! wavelengths_per_path = 0  # hero wavelengths per path, 1–4; 0: all of rgb3, 4 of a spectrum
 //!
 //! [ground]
 //! albedo = 0.1              # Lambertian ground at y = 0, [0, 1] (default 0.1); 0: black
@@ -30,14 +45,14 @@
 //! spot_direction = [0, -1, 0]   # optional: a spot's axis
 //! spot_half_angle_deg = 30      # with spot_direction, (0, 180)
 //!
-//! [[medium]]                # --model biri: a homogeneous medium of a baked field
+//! [[medium]]                # --model biri, truth: a homogeneous medium of a baked field
 //! field = "fog"             # a [[field]] of the scene
 //! number_density_per_m3 = 1e8   # > 0; β_ext = N σ_ext
 //! min_m = [-10, 0, -10]     # optional box (both corners); absent: the whole scene
 //! max_m = [10, 8, 10]
 //! ambient = [0, 0, 0]       # optional ambient fog radiance (image's unit), ≥ 0 (Biri §3)
 //!
-//! [[occluder]]              # --model biri: a Lambertian shadow caster
+//! [[occluder]]              # --model biri, truth: a Lambertian shadow caster
 //! shape = "box"             # box | sphere | mesh
 //! min_m = [0, 0, 0]         # box
 //! max_m = [1, 4, 1]
@@ -86,16 +101,17 @@
 //! seed = 1
 //! ```
 
+use std::collections::BTreeMap;
 use std::path::Path;
 
 use serde::Deserialize;
 
 use glam::DVec3;
 
-use crate::volume::{Shape, Volume, joint_bounds, rasterize};
-
-use crate::volume::VolumeError;
-use crate::{Atmosphere, Camera, Frame, FrameError, Sun};
+use crate::model::{MODEL_NAMES, Model, ModelError, ModelSettings, model_keys};
+use crate::objects::{Light, Medium, Occluder};
+use crate::volume::{Shape, Volume, VolumeError, joint_bounds, rasterize};
+use crate::{Atmosphere, Camera, Frame, FrameError, Haze, Sun};
 use runtime::Tables;
 
 #[derive(Debug, Default, Deserialize)]
@@ -146,8 +162,8 @@ struct OccluderKeys {
     albedo: Option<f64>,
 }
 
-/// The ground's albedo when a scene has no `[ground] albedo` (issue 15: a grey ground, not a
-/// black one, for every model).
+/// The ground's albedo when a scene has no `[ground] albedo`: a grey ground, the same for
+/// every model.
 pub const DEFAULT_GROUND_ALBEDO: f64 = 0.1;
 
 #[derive(Debug, Deserialize)]
@@ -185,28 +201,38 @@ struct LightKeys {
     spot_half_angle_deg: Option<f64>,
 }
 
+/// `[render]`: the keys every model shares, and one table per model (`[render.<model>]`).
 #[derive(Debug, Default, Deserialize)]
-#[serde(deny_unknown_fields)]
 struct RenderKeys {
     width: Option<usize>,
     height: Option<usize>,
-    slices: Option<usize>,
-    light_resolution: Option<usize>,
     grid_resolution: Option<usize>,
-    xi: Option<f64>,
-    light_update: Option<String>,
     exposure: Option<f64>,
-    spp: Option<usize>,
-    seed: Option<u64>,
-    svs_a: Option<f64>,
-    k_multi: Option<f64>,
-    svs_phase: Option<String>,
-    max_threshold: Option<f64>,
-    diffusion_tolerance: Option<f64>,
-    max_diffusion_iterations: Option<usize>,
-    clear_air_iterations: Option<usize>,
-    biri_kernel: Option<String>,
+    #[serde(flatten)]
+    rest: BTreeMap<String, toml::Value>,
 }
+
+/// Keys `[render]` held before each model had its own table: (old key, model, key there).
+const MOVED_KEYS: &[(&str, &str, &str)] = &[
+    ("slices", "riley, miyazaki", "slices"),
+    ("light_resolution", "riley, miyazaki", "light_resolution"),
+    ("xi", "riley", "xi"),
+    ("light_update", "riley", "light_update"),
+    ("spp", "truth", "spp"),
+    ("seed", "truth", "seed"),
+    ("svs_a", "miyazaki", "a"),
+    ("k_multi", "miyazaki", "k_multi"),
+    ("svs_phase", "miyazaki", "phase"),
+    ("max_threshold", "max", "threshold"),
+    ("diffusion_tolerance", "max", "diffusion_tolerance"),
+    (
+        "max_diffusion_iterations",
+        "max",
+        "max_diffusion_iterations",
+    ),
+    ("clear_air_iterations", "max", "clear_air_iterations"),
+    ("biri_kernel", "biri", "kernel"),
+];
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -252,23 +278,16 @@ struct VolumeKeys {
     seed: Option<u64>,
 }
 
-/// What a render needs from a scene file.
+/// What a render needs from a scene file: the parts every model shares, and each model's own
+/// settings table, checked.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RenderScene {
     /// Image width, 1…8192 pixels (default 512).
     pub width: usize,
     /// Image height, 1…8192 pixels (default 512).
     pub height: usize,
-    /// Half-angle slices through the volumes' box, [1, 4096] (default 256).
-    pub slices: usize,
-    /// Light-buffer texels per side, [2, 4096] (default 512).
-    pub light_resolution: usize,
     /// Voxels along the box's longest side, [2, 512] (default 128).
     pub grid_resolution: usize,
-    /// Riley's ξ (1/sr), back-scattered light in the eye pass; ≥ 0 (default 0).
-    pub xi: f64,
-    /// `[render] light_update` (default continuum).
-    pub light_update: crate::LightUpdate,
     /// None: automatic.
     pub exposure: Option<f64>,
     /// From `[camera]`; fov (0, 170) degrees (default 60).
@@ -277,26 +296,21 @@ pub struct RenderScene {
     pub sun: Sun,
     /// From `[sky]`; `enabled = false` sets β_sl to zero (no sky, no aerial perspective).
     pub atmosphere: Atmosphere,
-    /// The `[[volume]]` tables, at least one.
+    /// The `[[volume]]` tables.
     pub volumes: Vec<Volume>,
     /// `[ground] albedo`: a Lambertian ground at y = 0, [0, 1] (default
     /// [`DEFAULT_GROUND_ALBEDO`]; 0 is black).
     pub ground_albedo: f64,
     /// The `[[light]]` tables.
-    pub lights: Vec<crate::objects::Light>,
-    /// `[render] spp` for the path tracer (default 256).
-    pub spp: usize,
-    /// `[render] seed` for the path tracer (default 1).
-    pub seed: u64,
-    /// `[render] svs_a`, `k_multi` and `svs_phase` for `--model miyazaki`.
-    pub svs: crate::miyazaki::SvsSettings,
-    /// `[render] max_threshold`, `diffusion_tolerance`, `max_diffusion_iterations` for
-    /// `--model max`.
-    pub max: crate::max::MaxSettings,
+    pub lights: Vec<Light>,
+    /// The `[[medium]]` tables.
+    pub media: Vec<Medium>,
+    /// The `[[occluder]]` tables.
+    pub occluders: Vec<Occluder>,
     /// `[haze]`, if any.
     pub haze: Option<HazeKeysChecked>,
-    /// `[[medium]]`, `[[occluder]]` and `[render] biri_kernel` for `--model biri`.
-    pub biri: crate::biri::BiriSettings,
+    /// `[render.<model>]` per model that has one, each already checked against its model.
+    pub models: BTreeMap<String, toml::Table>,
 }
 
 /// A render scene that cannot be used, naming the file, the key or volume, and the allowed range.
@@ -340,75 +354,152 @@ fn positive(what: &str, v: f64) -> Result<f64, String> {
     }
 }
 
+/// `[render]`'s shared keys and the model tables, checked.
+struct RenderChecked {
+    width: usize,
+    height: usize,
+    grid_resolution: usize,
+    exposure: Option<f64>,
+    models: BTreeMap<String, toml::Table>,
+}
+
+fn render_keys(render: RenderKeys) -> Result<RenderChecked, String> {
+    let mut models = BTreeMap::new();
+    for (key, value) in render.rest {
+        if let Some(&(_, model, new_key)) = MOVED_KEYS.iter().find(|m| m.0 == key) {
+            return Err(format!(
+                "[render] {key}: each model's settings live in its own table: write \
+                 {new_key} = {value} under [render.{}] (models: {model})",
+                model.split(", ").next().unwrap_or(model)
+            ));
+        }
+        let table = match (MODEL_NAMES.contains(&key.as_str()), value) {
+            (true, toml::Value::Table(t)) => t,
+            (true, _) => return Err(format!("[render] {key} must be a table, [render.{key}]")),
+            (false, _) => {
+                return Err(format!(
+                    "[render] {key} is not a key of [render] (width, height, grid_resolution, \
+                     exposure) nor a model's table ({})",
+                    MODEL_NAMES
+                        .iter()
+                        .map(|m| format!("[render.{m}]"))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ));
+            }
+        };
+        ModelSettings::parse(&key, &table).map_err(|e| e.0)?;
+        models.insert(key, table);
+    }
+    let grid_resolution = render.grid_resolution.unwrap_or(128);
+    if !(2..=512).contains(&grid_resolution) {
+        return Err(format!(
+            "[render] grid_resolution = {grid_resolution} is outside the allowed range [2, 512]"
+        ));
+    }
+    let exposure = match render.exposure {
+        None | Some(0.0) => None,
+        Some(e) => Some(positive("[render] exposure", e)?),
+    };
+    Ok(RenderChecked {
+        width: render.width.unwrap_or(512),
+        height: render.height.unwrap_or(512),
+        grid_resolution,
+        exposure,
+        models,
+    })
+}
+
+fn sky_keys(sky: SkyKeys) -> Result<Atmosphere, String> {
+    let mut atmosphere = Atmosphere::default();
+    if let Some(b) = sky.beta_sea_level_per_m {
+        if b.iter().any(|v| !(v.is_finite() && *v >= 0.0)) {
+            return Err(format!(
+                "[sky] beta_sea_level_per_m = {b:?} must be ≥ 0 (1/m)"
+            ));
+        }
+        atmosphere.beta_sea_level_per_m = b;
+    }
+    if let Some(h) = sky.scale_height_m {
+        atmosphere.scale_height_m = positive("[sky] scale_height_m", h)?;
+    }
+    if sky.enabled == Some(false) {
+        atmosphere.beta_sea_level_per_m = [0.0; 3];
+    }
+    Ok(atmosphere)
+}
+
+/// `[sun]`; a scene of homogeneous media lit by lamps (`--model biri`) may have none: then
+/// it is dark, straight overhead.
+fn sun_keys(sun: Option<SunKeys>, lamps_only: bool) -> Result<Sun, String> {
+    let sun = match sun {
+        Some(s) => s,
+        None if lamps_only => SunKeys {
+            elevation_deg: 90.0,
+            azimuth_deg: 0.0,
+            irradiance: Some([0.0; 3]),
+        },
+        None => return Err("no [sun] table (elevation_deg, azimuth_deg)".into()),
+    };
+    let irradiance = sun.irradiance.unwrap_or([1.0; 3]);
+    if irradiance.iter().any(|v| !(v.is_finite() && *v >= 0.0)) {
+        return Err(format!("[sun] irradiance = {irradiance:?} must be ≥ 0"));
+    }
+    Ok(Sun {
+        elevation_deg: sun.elevation_deg,
+        azimuth_deg: sun.azimuth_deg,
+        irradiance,
+    })
+}
+
+fn haze_keys(h: HazeKeys) -> Result<HazeKeysChecked, String> {
+    if !(h.number_density_per_m3.is_finite() && h.number_density_per_m3 > 0.0) {
+        return Err(format!(
+            "[haze] number_density_per_m3 = {} must be finite and > 0 (particles per m³ at y = 0)",
+            h.number_density_per_m3
+        ));
+    }
+    if !(h.scale_height_m.is_finite() && h.scale_height_m > 0.0) {
+        return Err(format!(
+            "[haze] scale_height_m = {} must be finite and > 0 (m)",
+            h.scale_height_m
+        ));
+    }
+    Ok(HazeKeysChecked {
+        field: h.field,
+        number_density_per_m3: h.number_density_per_m3,
+        scale_height_m: h.scale_height_m,
+    })
+}
+
+/// Each entry of an array of tables through `f`, its errors prefixed `[[name]] i`.
+fn each<K, T>(
+    items: &[K],
+    name: &str,
+    f: impl Fn(&K) -> Result<T, String>,
+) -> Result<Vec<T>, String> {
+    items
+        .iter()
+        .enumerate()
+        .map(|(i, k)| f(k).map_err(|m| format!("[[{name}]] {}: {m}", i + 1)))
+        .collect()
+}
+
 impl RenderScene {
     /// Parses the render tables of a scene; `origin` names it in errors, `base` resolves grid
-    /// files. A scene without `[camera]`, `[sun]` or `[[volume]]` cannot be rendered.
+    /// and mesh files. A scene without `[camera]`, `[sun]` or `[[volume]]` cannot be rendered.
     pub fn parse(text: &str, origin: &str, base: &Path) -> Result<Self, SceneError> {
         let err = |message: String| SceneError::Invalid {
             origin: origin.to_string(),
             message,
         };
         let file: File = toml::from_str(text).map_err(|e| err(e.message().to_string()))?;
-        let render = file.render.unwrap_or_default();
+        let render = render_keys(file.render.unwrap_or_default()).map_err(err)?;
         let camera = file
             .camera
             .ok_or_else(|| err("no [camera] table (position_m, look_at_m, fov_deg)".into()))?;
-        // A scene of homogeneous media lit by lamps (--model biri) may have no sun: then it
-        // is dark, straight overhead.
-        let sun = match file.sun {
-            Some(s) => s,
-            None if !file.media.is_empty() => SunKeys {
-                elevation_deg: 90.0,
-                azimuth_deg: 0.0,
-                irradiance: Some([0.0; 3]),
-            },
-            None => return Err(err("no [sun] table (elevation_deg, azimuth_deg)".into())),
-        };
-        let sky = file.sky.unwrap_or_default();
-        let mut atmosphere = Atmosphere::default();
-        if let Some(b) = sky.beta_sea_level_per_m {
-            if b.iter().any(|v| !(v.is_finite() && *v >= 0.0)) {
-                return Err(err(format!(
-                    "[sky] beta_sea_level_per_m = {b:?} must be ≥ 0 (1/m)"
-                )));
-            }
-            atmosphere.beta_sea_level_per_m = b;
-        }
-        if let Some(h) = sky.scale_height_m {
-            atmosphere.scale_height_m = positive("[sky] scale_height_m", h).map_err(err)?;
-        }
-        if sky.enabled == Some(false) {
-            atmosphere.beta_sea_level_per_m = [0.0; 3];
-        }
-        let irradiance = sun.irradiance.unwrap_or([1.0; 3]);
-        if irradiance.iter().any(|v| !(v.is_finite() && *v >= 0.0)) {
-            return Err(err(format!(
-                "[sun] irradiance = {irradiance:?} must be ≥ 0"
-            )));
-        }
-        let xi = render.xi.unwrap_or(0.0);
-        if !(xi.is_finite() && xi >= 0.0) {
-            return Err(err(format!("[render] xi = {xi} must be ≥ 0 (1/sr)")));
-        }
-        let light_update = match render.light_update.as_deref() {
-            None => crate::LightUpdate::default(),
-            Some(name) => crate::LightUpdate::parse(name).ok_or_else(|| {
-                err(format!(
-                    "[render] light_update = {name:?} is not one of \"continuum\", \"riley2004\""
-                ))
-            })?,
-        };
-        let exposure = match render.exposure {
-            None => None,
-            Some(0.0) => None,
-            Some(e) => Some(positive("[render] exposure", e).map_err(err)?),
-        };
-        let grid_resolution = render.grid_resolution.unwrap_or(128);
-        if !(2..=512).contains(&grid_resolution) {
-            return Err(err(format!(
-                "[render] grid_resolution = {grid_resolution} is outside the allowed range [2, 512]"
-            )));
-        }
+        let sun = sun_keys(file.sun, !file.media.is_empty()).map_err(err)?;
+        let atmosphere = sky_keys(file.sky.unwrap_or_default()).map_err(err)?;
         let ground_albedo = file
             .ground
             .and_then(|g| g.albedo)
@@ -418,234 +509,77 @@ impl RenderScene {
                 "[ground] albedo = {ground_albedo} is outside the allowed range [0, 1]"
             )));
         }
-        let lights = file
-            .lights
-            .iter()
-            .enumerate()
-            .map(|(i, l)| light(l).map_err(|m| err(format!("[[light]] {}: {m}", i + 1))))
-            .collect::<Result<Vec<_>, _>>()?;
-        let spp = render.spp.unwrap_or(256);
-        let (lo, hi) = crate::truth::SPP_RANGE;
-        if !(lo..=hi).contains(&spp) {
-            return Err(err(format!(
-                "[render] spp = {spp} is outside the allowed range [{lo}, {hi}] samples per pixel"
-            )));
-        }
-        let defaults = crate::miyazaki::SvsSettings::default();
-        let svs = crate::miyazaki::SvsSettings {
-            a: render.svs_a.unwrap_or(defaults.a),
-            k_multi: render.k_multi.unwrap_or(defaults.k_multi),
-            phase: match render.svs_phase.as_deref() {
-                None => defaults.phase,
-                Some(name) => crate::miyazaki::SvsPhase::parse(name).ok_or_else(|| {
-                    err(format!(
-                        "[render] svs_phase = {name:?} is not one of \"tables\", \
-                         \"cornette_shanks\""
-                    ))
-                })?,
-            },
-        };
-        crate::miyazaki::check(&svs).map_err(|e| err(e.0))?;
-        let max_defaults = crate::max::MaxSettings::default();
-        let max = crate::max::MaxSettings {
-            threshold: render.max_threshold.unwrap_or(max_defaults.threshold),
-            tolerance: render.diffusion_tolerance.unwrap_or(max_defaults.tolerance),
-            max_iterations: render
-                .max_diffusion_iterations
-                .unwrap_or(max_defaults.max_iterations),
-            clear_air_iterations: render
-                .clear_air_iterations
-                .unwrap_or(max_defaults.clear_air_iterations),
-        };
-        max.check().map_err(|e| err(e.0))?;
-        let haze = match file.haze {
-            None => None,
-            Some(h) => {
-                if !(h.number_density_per_m3.is_finite() && h.number_density_per_m3 > 0.0) {
-                    return Err(err(format!(
-                        "[haze] number_density_per_m3 = {} must be finite and > 0 (particles \
-                         per m³ at y = 0)",
-                        h.number_density_per_m3
-                    )));
-                }
-                if !(h.scale_height_m.is_finite() && h.scale_height_m > 0.0) {
-                    return Err(err(format!(
-                        "[haze] scale_height_m = {} must be finite and > 0 (m)",
-                        h.scale_height_m
-                    )));
-                }
-                Some(HazeKeysChecked {
-                    field: h.field,
-                    number_density_per_m3: h.number_density_per_m3,
-                    scale_height_m: h.scale_height_m,
-                })
-            }
-        };
+        let haze = file.haze.map(haze_keys).transpose().map_err(err)?;
         if file.volumes.is_empty() && file.media.is_empty() {
             return Err(err(
                 "no [[volume]] (or [[medium]]) table: nothing to render".into(),
             ));
         }
-        let biri = crate::biri::BiriSettings {
-            kernel: match render.biri_kernel.as_deref() {
-                None => crate::biri::Kernel::default(),
-                Some(name) => crate::biri::Kernel::parse(name).ok_or_else(|| {
-                    err(format!(
-                        "[render] biri_kernel = {name:?} is not one of \"exact\", \"polynomial\""
-                    ))
-                })?,
-            },
-            media: file
-                .media
-                .iter()
-                .enumerate()
-                .map(|(i, m)| medium(m).map_err(|e| err(format!("[[medium]] {}: {e}", i + 1))))
-                .collect::<Result<_, _>>()?,
-            occluders: file
-                .occluders
-                .iter()
-                .enumerate()
-                .map(|(i, o)| {
-                    occluder(o, base).map_err(|e| err(format!("[[occluder]] {}: {e}", i + 1)))
-                })
-                .collect::<Result<_, _>>()?,
-        };
-        let volumes = file
-            .volumes
-            .into_iter()
-            .enumerate()
-            .map(|(i, v)| volume(v, base).map_err(|m| err(format!("[[volume]] {}: {m}", i + 1))))
-            .collect::<Result<Vec<_>, _>>()?;
+        let lights = each(&file.lights, "light", light).map_err(err)?;
+        let media = each(&file.media, "medium", medium).map_err(err)?;
+        let occluders = each(&file.occluders, "occluder", |o| occluder(o, base)).map_err(err)?;
+        let volumes = each(&file.volumes, "volume", |v| volume(v, base)).map_err(err)?;
         Ok(Self {
-            width: render.width.unwrap_or(512),
-            height: render.height.unwrap_or(512),
-            slices: render.slices.unwrap_or(256),
-            light_resolution: render.light_resolution.unwrap_or(512),
-            grid_resolution,
-            xi,
-            light_update,
-            exposure,
+            width: render.width,
+            height: render.height,
+            grid_resolution: render.grid_resolution,
+            exposure: render.exposure,
             camera: Camera {
                 position_m: DVec3::from_array(camera.position_m),
                 look_at_m: DVec3::from_array(camera.look_at_m),
                 fov_deg: camera.fov_deg.unwrap_or(60.0),
             },
-            sun: Sun {
-                elevation_deg: sun.elevation_deg,
-                azimuth_deg: sun.azimuth_deg,
-                irradiance,
-            },
+            sun,
             atmosphere,
             volumes,
             ground_albedo,
             lights,
-            spp,
-            seed: render.seed.unwrap_or(1),
-            svs,
-            max,
+            media,
+            occluders,
             haze,
-            biri,
+            models: render.models,
         })
     }
 
-    /// Refuses what a model cannot draw: Riley's model has sunlight and Rayleigh air only.
-    pub fn check_model(&self, model: &str) -> Result<(), FrameError> {
-        if model == "biri" {
-            return self.check_biri();
+    /// Model `name` with the scene's `[render.<name>]` settings (defaults where it has none)
+    /// and `overrides` on top (e.g. from the command line: key and value), checked.
+    pub fn model(
+        &self,
+        name: &str,
+        overrides: &[(String, toml::Value)],
+    ) -> Result<ModelSettings, ModelError> {
+        let mut table = self.models.get(name).cloned().unwrap_or_default();
+        for (key, value) in overrides {
+            table.insert(key.clone(), value.clone());
         }
-        if model == "truth" {
-            return self
-                .biri
-                .check_lights(&self.lights)
-                .map_err(|e| FrameError(e.0));
-        }
-        if !self.biri.media.is_empty() || !self.biri.occluders.is_empty() {
-            return Err(FrameError(format!(
-                "the scene has {} [[medium]] and {} [[occluder]] table(s), which only --model \
-                 biri and --model truth draw",
-                self.biri.media.len(),
-                self.biri.occluders.len()
-            )));
-        }
-        if model == "miyazaki" && self.lights.is_empty() {
-            return Ok(()); // sunlight over a Lambertian ground, through haze
-        }
-        if let Some(h) = &self.haze {
-            return Err(FrameError(format!(
-                "the scene has a [haze] layer (field {:?}); --model {model} draws Rayleigh air \
-                 only (render it with --model miyazaki or truth)",
-                h.field
-            )));
-        }
-        if !self.lights.is_empty() {
-            return Err(FrameError(format!(
-                "the scene has {} [[light]] table(s); --model {model} models sunlight only \
-                 (render it with --model truth)",
-                self.lights.len()
-            )));
-        }
-        Ok(())
+        ModelSettings::parse(name, &table)
     }
 
-    /// What `--model biri` refuses: density volumes, haze and sunlight (it draws point and
-    /// spot lights in homogeneous media), and the checks of its own settings.
-    fn check_biri(&self) -> Result<(), FrameError> {
-        if !self.volumes.is_empty() {
-            return Err(FrameError(format!(
-                "the scene has {} [[volume]] table(s); --model biri draws homogeneous \
-                 [[medium]] tables only (render volumes with riley, miyazaki, max or truth)",
-                self.volumes.len()
-            )));
-        }
-        if let Some(h) = &self.haze {
-            return Err(FrameError(format!(
-                "the scene has a [haze] layer (field {:?}); --model biri draws homogeneous \
-                 [[medium]] tables only",
-                h.field
-            )));
-        }
-        if self.sun.irradiance.iter().any(|&v| v > 0.0) {
-            return Err(FrameError(format!(
-                "[sun] irradiance = {:?}: --model biri draws point and spot lights only; set \
-                 it to [0, 0, 0] or leave out [sun]",
-                self.sun.irradiance
-            )));
-        }
-        self.biri.check(&self.lights).map_err(|e| FrameError(e.0))
+    /// Model `M`'s settings from the scene's `[render.<name>]` (defaults where it has none).
+    pub fn settings<M: Model>(&self) -> Result<M::Settings, ModelError> {
+        let table = self.models.get(M::NAME).cloned().unwrap_or_default();
+        crate::model::parse_settings::<M>(&table)
     }
 
-    /// The path tracer's settings from the scene (spp, seed, ground, lights).
-    pub fn truth_settings(&self) -> crate::truth::TruthSettings {
-        crate::truth::TruthSettings {
-            spp: self.spp,
-            target_noise: 0.0,
-            seed: self.seed,
-            lights: self.lights.clone(),
-            wavelengths_per_path: 0,
-            media: self.biri.media.clone(),
-            occluders: self.biri.occluders.clone(),
-            max_scatterings: 0,
-        }
+    /// Model `name` with the scene's settings, checked against the scene ([`Self::check`]).
+    pub fn check_for(&self, name: &str) -> Result<ModelSettings, FrameError> {
+        let model = self.model(name, &[]).map_err(|e| FrameError(e.0))?;
+        self.check(&model)?;
+        Ok(model)
     }
 
-    /// The frame's parameters checked (sizes, camera, sun) before anything is baked: a frame
-    /// over the volumes' bounds without rasterizing them.
-    pub fn check(&self) -> Result<(), FrameError> {
-        self.check_for("riley")
+    /// Whether model `name` has setting `key`.
+    pub fn model_has(name: &str, key: &str) -> bool {
+        model_keys()
+            .iter()
+            .any(|(m, keys)| *m == name && keys.iter().any(|k| k == key))
     }
 
-    /// [`RenderScene::check`] for `model`: `riley` checks its slicing setup and refuses
-    /// lights and a bright ground ([`RenderScene::check_model`]); `truth` checks the path
-    /// tracer's ranges (`truth::check`), and allows a camera inside the volumes.
-    pub fn check_for(&self, model: &str) -> Result<(), FrameError> {
-        self.check_model(model)?;
-        if model == "biri" {
-            let mut frame = self.frame_with(empty_grid());
-            frame.sun.elevation_deg = 90.0; // biri has no sun
-            return frame.check_view();
-        }
+    /// What `model` needs of the scene and refuses in it, checked before anything is baked:
+    /// on a frame over the volumes' bounds without particles.
+    pub fn check(&self, model: &ModelSettings) -> Result<(), FrameError> {
         let grid = if self.volumes.is_empty() {
-            empty_grid()
+            super::DensityGrid::empty()
         } else {
             let (lo, hi) = joint_bounds(&self.volumes);
             super::DensityGrid {
@@ -655,13 +589,10 @@ impl RenderScene {
                 data: vec![[0.0; super::MAX_FIELDS]],
             }
         };
-        let frame = self.frame_with(grid);
-        match model {
-            "truth" => crate::truth::check(&frame, &self.truth_settings()),
-            "miyazaki" => crate::miyazaki::setup(&frame, &self.svs).map(|_| ()),
-            "max" => frame.check_view().and_then(|()| self.max.check()),
-            _ => frame.setup().map(|_| ()),
-        }
+        let mut frame = self.frame_with(grid);
+        let fields = self.fields();
+        frame.haze = self.haze(|name| fields.iter().position(|f| f == name).unwrap_or(0));
+        model.check_frame(&frame)
     }
 
     fn frame_with(&self, grid: super::DensityGrid) -> Frame {
@@ -669,16 +600,24 @@ impl RenderScene {
             camera: self.camera,
             sun: self.sun,
             atmosphere: self.atmosphere,
-            xi: self.xi,
-            light_update: self.light_update,
             width: self.width,
             height: self.height,
-            slices: self.slices,
-            light_resolution: self.light_resolution,
             grid,
             haze: None,
             ground_albedo: self.ground_albedo,
+            lights: self.lights.clone(),
+            media: self.media.clone(),
+            occluders: self.occluders.clone(),
         }
+    }
+
+    fn haze(&self, index: impl Fn(&str) -> usize) -> Option<Haze> {
+        self.haze.as_ref().map(|h| Haze {
+            field: index(&h.field),
+            name: h.field.clone(),
+            number_density_per_m3: h.number_density_per_m3,
+            scale_height_m: h.scale_height_m,
+        })
     }
 
     /// Reads a scene file.
@@ -691,22 +630,21 @@ impl RenderScene {
         Self::parse(&text, &path.display().to_string(), base)
     }
 
-    /// The fields the volumes use, in order of first use, then the haze layer's.
+    /// The fields the volumes use, in order of first use, then the haze layer's, then the
+    /// media's.
     pub fn fields(&self) -> Vec<String> {
         let mut names: Vec<String> = Vec::new();
-        for v in &self.volumes {
-            if !names.contains(&v.field) {
-                names.push(v.field.clone());
-            }
-        }
-        if let Some(h) = &self.haze
-            && !names.contains(&h.field)
+        let haze = self.haze.as_ref().map(|h| &h.field);
+        let media = self.media.iter().map(|m| &m.field);
+        for name in self
+            .volumes
+            .iter()
+            .map(|v| &v.field)
+            .chain(haze)
+            .chain(media)
         {
-            names.push(h.field.clone());
-        }
-        for m in &self.biri.media {
-            if !names.contains(&m.field) {
-                names.push(m.field.clone());
+            if !names.contains(name) {
+                names.push(name.clone());
             }
         }
         names
@@ -727,32 +665,17 @@ impl RenderScene {
                 .expect("checked above")
         };
         let grid = if self.volumes.is_empty() {
-            empty_grid() // a scene of [[medium]] tables only
+            super::DensityGrid::empty() // a scene of [[medium]] tables only
         } else {
             rasterize(&self.volumes, self.grid_resolution, index)?
         };
         let mut frame = self.frame_with(grid);
-        frame.haze = self.haze.as_ref().map(|h| crate::Haze {
-            field: index(&h.field),
-            number_density_per_m3: h.number_density_per_m3,
-            scale_height_m: h.scale_height_m,
-        });
+        frame.haze = self.haze(index);
         Ok(frame)
     }
 }
 
-/// A grid of no particles, one voxel of a millimetre at the origin: what a scene without
-/// [[volume]] tables (media only) has.
-fn empty_grid() -> super::DensityGrid {
-    super::DensityGrid {
-        min_m: DVec3::ZERO,
-        max_m: DVec3::splat(1e-3),
-        dims: [1, 1, 1],
-        data: vec![[0.0; super::MAX_FIELDS]],
-    }
-}
-
-fn light(l: &LightKeys) -> Result<crate::objects::Light, String> {
+fn light(l: &LightKeys) -> Result<Light, String> {
     let p = DVec3::from_array(l.position_m);
     if !p.is_finite() || p.y <= 0.0 {
         return Err(format!(
@@ -786,14 +709,14 @@ fn light(l: &LightKeys) -> Result<crate::objects::Light, String> {
             return Err("a spot needs both spot_direction and spot_half_angle_deg".into());
         }
     };
-    Ok(crate::objects::Light {
+    Ok(Light {
         position_m: p,
         intensity: l.intensity,
         spot,
     })
 }
 
-fn medium(m: &MediumKeys) -> Result<crate::objects::Medium, String> {
+fn medium(m: &MediumKeys) -> Result<Medium, String> {
     let n = m.number_density_per_m3;
     if !(n.is_finite() && n > 0.0) {
         return Err(format!(
@@ -834,7 +757,7 @@ fn medium(m: &MediumKeys) -> Result<crate::objects::Medium, String> {
     })
 }
 
-fn occluder(o: &OccluderKeys, base: &Path) -> Result<crate::objects::Occluder, String> {
+fn occluder(o: &OccluderKeys, base: &Path) -> Result<Occluder, String> {
     use crate::geometry::{Mesh, Sphere, read_obj};
     let albedo = o.albedo.unwrap_or(0.5);
     if !(0.0..=1.0).contains(&albedo) {
@@ -888,7 +811,7 @@ fn occluder(o: &OccluderKeys, base: &Path) -> Result<crate::objects::Occluder, S
     Ok(crate::objects::Occluder { shape, albedo })
 }
 
-fn volume(v: VolumeKeys, base: &Path) -> Result<Volume, String> {
+fn volume(v: &VolumeKeys, base: &Path) -> Result<Volume, String> {
     let need = |what: &str, x: Option<f64>| -> Result<f64, String> {
         let x = x.ok_or_else(|| format!("shape {:?} needs {what}", v.shape))?;
         positive(what, x)
@@ -929,7 +852,7 @@ fn volume(v: VolumeKeys, base: &Path) -> Result<Volume, String> {
             }
         }
         "grid" => {
-            let file = v.file.ok_or("shape \"grid\" needs file")?;
+            let file = v.file.as_ref().ok_or("shape \"grid\" needs file")?;
             let dims = v.dims.ok_or("shape \"grid\" needs dims = [nx, ny, nz]")?;
             let (lo, hi) = (
                 v.min_m.ok_or("shape \"grid\" needs min_m")?,
@@ -961,7 +884,7 @@ fn volume(v: VolumeKeys, base: &Path) -> Result<Volume, String> {
         }
     };
     Ok(Volume {
-        field: v.field,
+        field: v.field.clone(),
         number_density_per_m3: density,
         shape,
         seed: v.seed.unwrap_or(1),

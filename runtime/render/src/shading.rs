@@ -124,3 +124,24 @@ pub(crate) fn compose(
         v as f32
     })
 }
+
+/// The slicing models' settings: `slices` in [1, 4096], `light_resolution` (the sun-side
+/// buffer's texels per side, `buffer` names it) in [2, 4096].
+pub fn check_slicing(
+    slices: usize,
+    light_resolution: usize,
+    buffer: &str,
+) -> Result<(), FrameError> {
+    if !(1..=4096).contains(&slices) {
+        return Err(FrameError(format!(
+            "slices = {slices} is outside the allowed range [1, 4096]"
+        )));
+    }
+    if !(2..=4096).contains(&light_resolution) {
+        return Err(FrameError(format!(
+            "light_resolution = {light_resolution} is outside the allowed range [2, 4096] (the \
+             {buffer}'s texels per side)"
+        )));
+    }
+    Ok(())
+}

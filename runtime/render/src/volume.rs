@@ -24,6 +24,17 @@ pub struct DensityGrid {
 }
 
 impl DensityGrid {
+    /// A grid of no particles, one voxel of a millimetre at the origin: the grid of a scene
+    /// without `[[volume]]` tables (media only).
+    pub fn empty() -> Self {
+        Self {
+            min_m: DVec3::ZERO,
+            max_m: DVec3::splat(1e-3),
+            dims: [1, 1, 1],
+            data: vec![[0.0; MAX_FIELDS]],
+        }
+    }
+
     /// The box's eight corners (m); bit 0, 1, 2 of the index picks max over min in x, y, z.
     pub fn corners(&self) -> [DVec3; 8] {
         std::array::from_fn(|i| {

@@ -8,9 +8,9 @@
 use std::path::Path;
 
 use glam::DVec3;
-use render::RenderScene;
-use render::biri::{Kernel, cpu};
+use render::biri::{Kernel, Settings, cpu};
 use render::camera::pixel_ray;
+use render::{Image, RenderScene};
 use runtime::Tables;
 
 #[path = "../../tests/common/mod.rs"]
@@ -83,7 +83,7 @@ fn quadrature(
     let depth = |p: DVec3, q: DVec3| {
         let len = (q - p).length();
         let mut tau = [0.0; 3];
-        for m in &scene.biri.media {
+        for m in &scene.media {
             let chord = m
                 .region
                 .span(p, (q - p) / len, len)
@@ -95,7 +95,7 @@ fn quadrature(
         }
         tau
     };
-    for m in &scene.biri.media {
+    for m in &scene.media {
         let f = tables.field(&m.field).unwrap();
         let n = m.number_density_per_m3;
         let (beta, sca) = (beta_of(m), f.sigma_sca_m2.map(|s| n * s));
@@ -137,15 +137,22 @@ fn quadrature(
     out
 }
 
+/// Biri's CPU reference of scene `s` with `kernel`.
+fn biri_cpu(tables: &Tables, s: &RenderScene, kernel: Kernel) -> (Image, cpu::BiriReport) {
+    let frame = s.frame(tables).unwrap();
+    cpu::render(tables, &frame, &Settings { kernel }).unwrap()
+}
+
 /// The worst |model − quadrature| over the pixels, relative to the brightest pixel's
 /// quadrature, per kernel.
 fn worst_error(
     tables: &Tables,
     scene: &RenderScene,
+    kernel: Kernel,
     x_end: &dyn Fn(DVec3, DVec3) -> f64,
     lit: &dyn Fn(DVec3, &render::objects::Light) -> bool,
 ) -> f64 {
-    let (image, _) = cpu::render(tables, scene).unwrap();
+    let (image, _) = biri_cpu(tables, scene, kernel);
     let axes = scene.camera.axes().unwrap();
     let tan_half = (0.5 * scene.camera.fov_deg).to_radians().tan();
     let o = scene.camera.position_m;
@@ -227,10 +234,9 @@ fn the_exact_kernel_equals_quadrature_of_eq_1_and_the_polynomial_does_not() {
     let tables = Tables::open(&dir).unwrap();
     for (field, density, poly_floor) in [("fog", 3e8, 1.0), ("haze", 3e10, 0.01)] {
         let media = format!("[[medium]]\nfield = \"{field}\"\nnumber_density_per_m3 = {density}\n");
-        let mut s = scene(&dir, &media, LIGHTS);
-        let exact = worst_error(&tables, &s, &ground, &lit_everywhere);
-        s.biri.kernel = Kernel::Polynomial;
-        let poly = worst_error(&tables, &s, &ground, &lit_everywhere);
+        let s = scene(&dir, &media, LIGHTS);
+        let exact = worst_error(&tables, &s, Kernel::Exact, &ground, &lit_everywhere);
+        let poly = worst_error(&tables, &s, Kernel::Polynomial, &ground, &lit_everywhere);
         eprintln!("{field}: worst error exact {exact:.2e}, polynomial {poly:.2e}");
         // Measured worst: fog 1.3·10⁻⁴, haze 1.6·10⁻⁶ of the brightest pixel.
         assert!(exact < 2e-4, "{field}: exact kernel off by {exact:e}");
@@ -257,8 +263,7 @@ fn shadows_and_spot_cones_equal_a_shadow_ray_at_every_point() {
         &rest,
     );
     let first_hit = |o: DVec3, d: DVec3| {
-        s.biri
-            .occluders
+        s.occluders
             .iter()
             .filter_map(|oc| oc.hit(o, d, f64::INFINITY))
             .map(|h| h.0)
@@ -269,15 +274,14 @@ fn shadows_and_spot_cones_equal_a_shadow_ray_at_every_point() {
             (p - l.position_m).normalize().dot(axis) >= half.to_radians().cos()
         });
         spot && s
-            .biri
             .occluders
             .iter()
             .all(|oc| oc.blockers(p, l.position_m) == 0)
     };
-    let (image, report) = cpu::render(&tables, &s).unwrap();
+    let (image, report) = biri_cpu(&tables, &s, Kernel::Exact);
     assert!(report.crossings_per_ray > 0.5, "{report:?}");
     let _ = image;
-    let worst = worst_error(&tables, &s, &first_hit, &lit);
+    let worst = worst_error(&tables, &s, Kernel::Exact, &first_hit, &lit);
     eprintln!(
         "shadows: worst error {worst:.2e} ({} shadow planes)",
         report.shadow_planes
@@ -299,14 +303,14 @@ max_m = [4, 8, 12]
 "#;
     let inside = "[[light]]\nposition_m = [0.5, 4.0, 5]\nintensity = [40, 34, 24]\n";
     let s = scene(&dir, fog, inside);
-    let exact = worst_error(&tables, &s, &ground, &lit_everywhere);
+    let exact = worst_error(&tables, &s, Kernel::Exact, &ground, &lit_everywhere);
     // With a box of haze around the camera in front of it, and the light outside both.
     let both = format!(
         "{fog}\n[[medium]]\nfield = \"haze\"\nnumber_density_per_m3 = 3e10\nmin_m = [-4, 0, -12]\nmax_m = [4, 8, -0.5]\n"
     );
     let outside = "[[light]]\nposition_m = [-6, 4.0, 5]\nintensity = [40, 34, 24]\n";
     let s = scene(&dir, &both, outside);
-    let approx = worst_error(&tables, &s, &ground, &lit_everywhere);
+    let approx = worst_error(&tables, &s, Kernel::Exact, &ground, &lit_everywhere);
     eprintln!("box media: light inside {exact:.2e}, outside {approx:.2e}");
     // Measured: 4.4·10⁻⁴ and 3.9·10⁻³.
     assert!(exact < 5e-4, "{exact:e}");
@@ -320,9 +324,9 @@ fn the_ground_is_lambertian_and_attenuated_both_ways() {
     let fog = "[[medium]]\nfield = \"fog\"\nnumber_density_per_m3 = 3e8\n";
     let lamp = "[[light]]\nposition_m = [0.5, 4.0, 5]\nintensity = [40, 34, 24]\n";
     let mut s = scene(&dir, fog, lamp);
-    let (dark, _) = cpu::render(&tables, &s).unwrap();
+    let (dark, _) = biri_cpu(&tables, &s, Kernel::Exact);
     s.ground_albedo = 0.5;
-    let (grey, _) = cpu::render(&tables, &s).unwrap();
+    let (grey, _) = biri_cpu(&tables, &s, Kernel::Exact);
     let beta = tables.field("fog").unwrap().sigma_ext_m2.map(|x| 3e8 * x);
     let axes = s.camera.axes().unwrap();
     let tan_half = (0.5 * s.camera.fov_deg).to_radians().tan();
@@ -463,9 +467,9 @@ fn the_truth_restricted_to_single_scattering_agrees() {
         &rest,
     );
     s.ground_albedo = 0.3;
-    let (model, _) = cpu::render(&tables, &s).unwrap();
+    let (model, _) = biri_cpu(&tables, &s, Kernel::Exact);
     let frame = s.frame(&tables).unwrap();
-    let mut settings = s.truth_settings();
+    let mut settings = s.settings::<render::truth::Truth>().unwrap();
     settings.spp = 2048;
     settings.max_scatterings = 1;
     let single = render::truth::render(&tables, &frame, &settings, &()).unwrap();
@@ -532,9 +536,11 @@ max_m = [4, 8, -0.5]
         runtime::gpu::GpuTables::upload(&gpu, &tables, runtime::gpu::TexelFormat::F32).unwrap();
     let renderer = render::biri::gpu::Renderer::new(&gpu, &uploaded);
     for (kernel, tolerance) in [(Kernel::Exact, 2e-4), (Kernel::Polynomial, 3e-3)] {
-        s.biri.kernel = kernel;
-        let (cpu, _) = cpu::render(&tables, &s).unwrap();
-        let (gpu_image, _) = renderer.render(&gpu, &tables, &uploaded, &s).unwrap();
+        let (cpu, _) = biri_cpu(&tables, &s, kernel);
+        let frame = s.frame(&tables).unwrap();
+        let (gpu_image, _) = renderer
+            .render(&gpu, &tables, &uploaded, &frame, &Settings { kernel })
+            .unwrap();
         let scale = cpu
             .rgb
             .iter()

@@ -5,7 +5,7 @@
 use std::path::Path;
 
 use render::geometry::box_span;
-use render::max::{MaxSettings, cpu};
+use render::max::{Settings, cpu};
 use render::{Frame, RenderScene};
 use runtime::Tables;
 use runtime::sample;
@@ -111,9 +111,9 @@ fn thin_box_error(tables: &Tables, dir: &Path, tau: f64, threshold: f64) -> (f64
     let (forward, right, up) = frame.camera.axes().unwrap();
     let tan_half = (frame.camera.fov_deg.to_radians() / 2.0).tan();
     let light = -frame.sun.direction();
-    let settings = MaxSettings {
+    let settings = Settings {
         threshold,
-        ..MaxSettings::default()
+        ..Settings::default()
     };
     let (image, _) = cpu::render(tables, &frame, &settings).unwrap();
     let (mut checked, mut worst) = (0, 0f64);
@@ -184,9 +184,9 @@ fn the_image_is_continuous_across_the_threshold() {
     let tables = Tables::open(&dir).unwrap();
     let frame = ball(&tables, tmp.path(), 30.0);
     let render_at = |threshold: f64| {
-        let settings = MaxSettings {
+        let settings = Settings {
             threshold,
-            ..MaxSettings::default()
+            ..Settings::default()
         };
         cpu::render(&tables, &frame, &settings).unwrap().0
     };
@@ -225,31 +225,31 @@ fn bad_settings_and_short_tables_are_refused() {
     let frame = ball(&tables, tmp.path(), 30.0);
     for (settings, key) in [
         (
-            MaxSettings {
+            Settings {
                 threshold: 0.0,
-                ..MaxSettings::default()
+                ..Settings::default()
             },
-            "max_threshold = 0",
+            "threshold = 0",
         ),
         (
-            MaxSettings {
+            Settings {
                 threshold: -1.0,
-                ..MaxSettings::default()
+                ..Settings::default()
             },
-            "max_threshold = -1",
+            "threshold = -1",
         ),
         (
-            MaxSettings {
+            Settings {
                 tolerance: 0.0,
-                ..MaxSettings::default()
+                ..Settings::default()
             },
             "diffusion_tolerance = 0",
         ),
         (
-            MaxSettings {
+            Settings {
                 max_iterations: 1,
                 tolerance: 1e-9,
-                ..MaxSettings::default()
+                ..Settings::default()
             },
             "did not converge",
         ),
@@ -263,9 +263,9 @@ fn bad_settings_and_short_tables_are_refused() {
     // optical depth ~30 per ray: beyond a table baked to D = 5.
     let (_tmp5, dir5) = bake(&fields().replace("n_max = 8", "n_max = 8\npoisson_max_depth = 5"));
     let short = Tables::open(&dir5).unwrap();
-    let settings = MaxSettings {
+    let settings = Settings {
         threshold: 100.0,
-        ..MaxSettings::default()
+        ..Settings::default()
     };
     let e = cpu::render(&short, &frame, &settings)
         .unwrap_err()
@@ -296,6 +296,8 @@ fn blocks(tables: &Tables, dir: &Path, both: bool, clear_air: usize) -> Frame {
 width = 24
 height = 12
 grid_resolution = 16
+
+[render.max]
 clear_air_iterations = {clear_air}
 
 [camera]
@@ -336,9 +338,9 @@ fn light_crosses_clear_air_between_parts_and_never_comes_back_to_its_own() {
     let tables = Tables::open(&dir).unwrap();
     let run = |both: bool, clear_air: usize| {
         let frame = blocks(&tables, tmp.path(), both, clear_air);
-        let settings = MaxSettings {
+        let settings = Settings {
             clear_air_iterations: clear_air,
-            ..MaxSettings::default()
+            ..Settings::default()
         };
         cpu::render(&tables, &frame, &settings).unwrap()
     };
@@ -371,7 +373,7 @@ fn the_gpu_gather_equals_the_cpu_reference() {
     let tables = Tables::open(&dir).unwrap();
     let mut frame = ball(&tables, tmp.path(), 30.0);
     frame.ground_albedo = 0.3;
-    let settings = MaxSettings::default();
+    let settings = Settings::default();
     let lighting = cpu::light(&tables, &frame, &settings).unwrap();
     let uploaded =
         runtime::gpu::GpuTables::upload(&gpu, &tables, runtime::gpu::TexelFormat::F32).unwrap();

@@ -10,7 +10,7 @@ use std::path::Path;
 use glam::DVec3;
 use render::geometry::box_span;
 use render::miyazaki::cpu::{asymmetry, cornette_shanks, render};
-use render::miyazaki::{SvsPhase, setup};
+use render::miyazaki::{Miyazaki, SvsPhase, setup};
 use render::{Frame, RenderScene};
 use runtime::{Tables, sample};
 
@@ -71,8 +71,8 @@ fn thin_uniform_box_gives_single_scattering_with_k_multi() {
         (0.02, SvsPhase::CornetteShanks, "cornette_shanks"),
     ] {
         let extra = format!(
-            "[render]\nwidth = 32\nheight = 32\nslices = 256\nlight_resolution = 32\n\
-             svs_a = 1.5\nk_multi = {k_multi}\nsvs_phase = \"{name}\"\n\n\
+            "[render]\nwidth = 32\nheight = 32\n[render.miyazaki]\nslices = 256\n\
+             light_resolution = 32\na = 1.5\nk_multi = {k_multi}\nphase = \"{name}\"\n\n\
              [camera]\nposition_m = [0, 1500, 0]\nlook_at_m = [0, 1500, 5000]\nfov_deg = 20\n\n\
              [sun]\nelevation_deg = 30\nazimuth_deg = 160\n\n[sky]\nenabled = false\n\n\
              [ground]\nalbedo = 0.0"
@@ -84,10 +84,11 @@ fn thin_uniform_box_gives_single_scattering_with_k_multi() {
             [500.0, 2000.0, 5500.0],
             &extra,
         );
-        assert_eq!(scene.svs.phase, phase);
+        let svs = scene.settings::<Miyazaki>().unwrap();
+        assert_eq!(svs.phase, phase);
         let frame = scene.frame(&tables).unwrap();
-        let s = setup(&frame, &scene.svs).unwrap();
-        let image = render(&tables, &frame, &scene.svs).unwrap();
+        let s = setup(&frame, &svs).unwrap();
+        let image = render(&tables, &frame, &svs).unwrap();
         let mut checked = 0;
         for j in 0..frame.height {
             for i in 0..frame.width {
@@ -159,7 +160,8 @@ fn the_ground_under_a_cloud_slab_is_darker_by_its_transmittance() {
     // slab looks down at the ground where both lit and shadowed ground are in view.
     let thickness = 200.0;
     let density = 1.0 / (cloud.sigma_ext_m2[1] * thickness);
-    let extra = "[render]\nwidth = 48\nheight = 36\nslices = 2048\nlight_resolution = 128\n\n\
+    let extra = "[render]\nwidth = 48\nheight = 36\n[render.miyazaki]\nslices = 2048\n\
+                 light_resolution = 128\n\n\
                  [camera]\nposition_m = [0, 500, -2000]\nlook_at_m = [0, 0, 2500]\nfov_deg = 50\n\n\
                  [sun]\nelevation_deg = 60\nazimuth_deg = 0\n\n[sky]\nenabled = false\n\n\
                  [ground]\nalbedo = 0.5";
@@ -171,8 +173,9 @@ fn the_ground_under_a_cloud_slab_is_darker_by_its_transmittance() {
         extra,
     );
     let frame = scene.frame(&tables).unwrap();
-    let s = setup(&frame, &scene.svs).unwrap();
-    let image = render(&tables, &frame, &scene.svs).unwrap();
+    let svs = scene.settings::<Miyazaki>().unwrap();
+    let s = setup(&frame, &svs).unwrap();
+    let image = render(&tables, &frame, &svs).unwrap();
     let l_y = s.to_sun.y;
     let lit = 0.5 / std::f64::consts::PI * l_y;
     let (mut shadowed, mut sunlit, mut worst) = (0, 0, 0.0f64);
@@ -260,8 +263,9 @@ fn single_scattering_in_a_haze_layer_is_exact() {
     let n0 = 1e-4 / (haze.sigma_ext_m2[1] * (-0.5f64).exp());
     let scene = RenderScene::parse(&common::haze_scene(n0), "haze", tmp.path()).unwrap();
     let frame = scene.frame(&tables).unwrap();
-    let s = setup(&frame, &scene.svs).unwrap();
-    let image = render(&tables, &frame, &scene.svs).unwrap();
+    let svs = scene.settings::<Miyazaki>().unwrap();
+    let s = setup(&frame, &svs).unwrap();
+    let image = render(&tables, &frame, &svs).unwrap();
     let mut worst: f64 = 0.0;
     for (p, rgb) in image.rgb.iter().enumerate() {
         let d = pixel_ray(&frame, p % frame.width, p / frame.width);
@@ -309,7 +313,8 @@ fn a_shadow_in_the_haze_removes_its_single_scattering() {
     let (min, max) = ([1100.0, 1000.0, 3000.0], [2000.0, 1400.0, 4000.0]);
     let extra = |_: ()| {
         format!(
-            "[render]\nwidth = 16\nheight = 8\nslices = 512\nlight_resolution = 256\n\n\
+            "[render]\nwidth = 16\nheight = 8\n[render.miyazaki]\nslices = 512\n\
+             light_resolution = 256\n\n\
              [camera]\nposition_m = [0, 300, 0]\nlook_at_m = [0, 300, 1000]\nfov_deg = 4\n\n\
              [sun]\nelevation_deg = 30\nazimuth_deg = 90\n\n[sky]\nenabled = false\n\n\
              [ground]\nalbedo = 0.0\n\n\
@@ -323,8 +328,9 @@ fn a_shadow_in_the_haze_removes_its_single_scattering() {
     for density in [opaque, opaque * 1e-12] {
         let (scene, _) = uniform_box(tmp.path(), density, min, max, &extra(()));
         let frame = scene.frame(&tables).unwrap();
-        images.push(render(&tables, &frame, &scene.svs).unwrap());
-        frames.push((frame, scene.svs));
+        let svs = scene.settings::<Miyazaki>().unwrap();
+        images.push(render(&tables, &frame, &svs).unwrap());
+        frames.push((frame, svs));
     }
     let (frame, svs) = &frames[0];
     let s = setup(frame, svs).unwrap();
@@ -394,12 +400,14 @@ fn gpu_render_matches_the_cpu_reference() {
 [render]
 width = 64
 height = 48
+grid_resolution = 40
+
+[render.miyazaki]
 slices = 64
 light_resolution = 64
-grid_resolution = 40
-svs_a = {a}
+a = {a}
 k_multi = 0.05
-svs_phase = "{phase}"
+phase = "{phase}"
 
 [camera]
 position_m = [0, 300, 0]
@@ -442,9 +450,10 @@ top_m = 2000
         );
         let scene = RenderScene::parse(&text, "test", tmp.path()).unwrap();
         let frame = scene.frame(&tables).unwrap();
-        let reference = render(&tables, &frame, &scene.svs).unwrap();
+        let svs = scene.settings::<Miyazaki>().unwrap();
+        let reference = render(&tables, &frame, &svs).unwrap();
         let (image, t) = renderer
-            .render(&gpu, &tables, &uploaded, &frame, &scene.svs)
+            .render(&gpu, &tables, &uploaded, &frame, &svs)
             .unwrap();
         // f32 against f64 on lavapipe: worst 1e-6·|c| + 1e-7 of the image's scale; the margin
         // is for GPUs whose exp and pow are a few ulp off.
@@ -473,20 +482,29 @@ fn bad_keys_are_refused_naming_the_key_value_and_range() {
     );
     for (keys, needle) in [
         (
-            "[render]\nsvs_a = -1",
-            "svs_a = -1 is outside the allowed range (0, 2]",
+            "[render.miyazaki]\na = -1",
+            "[render.miyazaki] a = -1 is outside the allowed range (0, 2]",
         ),
         (
-            "[render]\nsvs_a = 2.5",
-            "svs_a = 2.5 is outside the allowed range (0, 2]",
+            "[render.miyazaki]\na = 2.5",
+            "[render.miyazaki] a = 2.5 is outside the allowed range (0, 2]",
         ),
         (
-            "[render]\nk_multi = -0.1",
-            "k_multi = -0.1 must be finite and ≥ 0 (1/sr)",
+            "[render.miyazaki]\nk_multi = -0.1",
+            "[render.miyazaki] k_multi = -0.1 must be finite and ≥ 0 (1/sr)",
         ),
         (
-            "[render]\nsvs_phase = \"hg\"",
-            "svs_phase = \"hg\" is not one of \"tables\", \"cornette_shanks\"",
+            "[render.miyazaki]\nphase = \"hg\"",
+            "unknown variant `hg`, expected `tables` or `cornette_shanks`",
+        ),
+        (
+            "[render.miyazaki]\nxi = 0.1",
+            "[render.miyazaki] xi: --model miyazaki has no such setting",
+        ),
+        (
+            "[render]\nsvs_a = 1.5",
+            "[render] svs_a: each model's settings live in its own table: write a = 1.5 under \
+             [render.miyazaki]",
         ),
         (
             "[ground]\nalbedo = 1.5",

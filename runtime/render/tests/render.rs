@@ -8,6 +8,7 @@ use std::path::Path;
 use render::geometry::box_span;
 use render::riley::cpu;
 use render::riley::gpu::Renderer;
+use render::riley::{Riley, Settings, Setup};
 use render::{Frame, LightUpdate, RenderScene};
 use runtime::Tables;
 use runtime::gpu::{GpuTables, TexelFormat};
@@ -23,15 +24,17 @@ fn fields() -> String {
 }
 
 /// A cumulus of cloud beside a shaft of rain, 6 km ahead, with the sun where asked.
-fn two_field_frame(tables: &Tables, elevation: f64, azimuth: f64) -> Frame {
+fn two_field_frame(tables: &Tables, elevation: f64, azimuth: f64) -> (Frame, Settings) {
     let text = format!(
         r#"{}
 [render]
 width = 72
 height = 54
+grid_resolution = 48
+
+[render.riley]
 slices = 64
 light_resolution = 64
-grid_resolution = 48
 xi = 0.01
 
 [camera]
@@ -65,7 +68,10 @@ top_m = 2000
         fields()
     );
     let scene = RenderScene::parse(&text, "test", Path::new(".")).unwrap();
-    scene.frame(tables).unwrap()
+    (
+        scene.frame(tables).unwrap(),
+        scene.settings::<Riley>().unwrap(),
+    )
 }
 
 #[test]
@@ -81,11 +87,14 @@ fn gpu_render_matches_the_cpu_reference_in_both_compositing_orders() {
         (30.0, 10.0, false, LightUpdate::Continuum),
         (30.0, 10.0, false, LightUpdate::Riley2004),
     ] {
-        let mut frame = two_field_frame(&tables, elevation, azimuth);
-        frame.light_update = update;
-        assert_eq!(frame.setup().unwrap().front_to_back, front_to_back);
-        let reference = cpu::render(&tables, &frame).unwrap();
-        let (image, t) = renderer.render(&gpu, &tables, &uploaded, &frame).unwrap();
+        let (frame, mut settings) = two_field_frame(&tables, elevation, azimuth);
+        settings.light_update = update;
+        let setup = Setup::new(&frame, &settings).unwrap();
+        assert_eq!(setup.front_to_back, front_to_back);
+        let reference = cpu::render(&tables, &frame, &settings).unwrap();
+        let (image, t) = renderer
+            .render(&gpu, &tables, &uploaded, &frame, &settings)
+            .unwrap();
         // f32 on the GPU against f64: rounding in ~100 slices of exp/pow, the asin polynomial
         // (1 ulp) and f32 coordinates of metre-scale points (a few 1e-5 of a texel) stay far
         // below 1e-3 of a pixel plus 1e-4 of the image's scale.
@@ -117,6 +126,8 @@ fn thin_uniform_box_gives_single_scattering() {
 [render]
 width = 32
 height = 32
+
+[render.riley]
 slices = 256
 light_resolution = 32
 
@@ -148,8 +159,9 @@ max_m = [500, 2000, 5500]
     );
     let scene = RenderScene::parse(&text, "thin", tmp.path()).unwrap();
     let frame = scene.frame(&tables).unwrap();
-    let setup = frame.setup().unwrap();
-    let image = cpu::render(&tables, &frame).unwrap();
+    let settings = scene.settings::<Riley>().unwrap();
+    let setup = Setup::new(&frame, &settings).unwrap();
+    let image = cpu::render(&tables, &frame, &settings).unwrap();
     let mut checked = 0;
     let mut worst = 0f64;
     for j in 0..frame.height {
@@ -192,7 +204,7 @@ fn side_lit_ball(
     tau: f64,
     slices: usize,
     update: LightUpdate,
-) -> Frame {
+) -> (Frame, Settings) {
     let n = 48;
     let file = dir.join("ball.f32");
     if !file.exists() {
@@ -205,9 +217,11 @@ fn side_lit_ball(
 [render]
 width = 64
 height = 64
+grid_resolution = 48
+
+[render.riley]
 slices = {slices}
 light_resolution = 64
-grid_resolution = 48
 
 [camera]
 position_m = [0, 500, -2500]
@@ -236,12 +250,10 @@ number_density_per_m3 = {density}
         fields(),
         file.display()
     );
-    let mut frame = RenderScene::parse(&text, "test", Path::new("."))
-        .unwrap()
-        .frame(tables)
-        .unwrap();
-    frame.light_update = update;
-    frame
+    let scene = RenderScene::parse(&text, "test", Path::new(".")).unwrap();
+    let mut settings = scene.settings::<Riley>().unwrap();
+    settings.light_update = update;
+    (scene.frame(tables).unwrap(), settings)
 }
 
 #[test]
@@ -249,8 +261,8 @@ fn the_light_buffer_converges_as_slices_are_added() {
     let (tmp, dir) = bake(&fields());
     let tables = Tables::open(&dir).unwrap();
     let total = |tau: f64, slices: usize, update: LightUpdate| -> f64 {
-        let frame = side_lit_ball(&tables, tmp.path(), tau, slices, update);
-        let image = cpu::render(&tables, &frame).unwrap();
+        let (frame, settings) = side_lit_ball(&tables, tmp.path(), tau, slices, update);
+        let image = cpu::render(&tables, &frame, &settings).unwrap();
         image.rgb.iter().map(|p| p[1] as f64).sum()
     };
     for tau in [8.0, 32.0] {

@@ -16,7 +16,7 @@ use grid::ThetaGrid;
 use ndarray::{Array2, Array3};
 use rayon::prelude::*;
 use render::truth::phase::{PhaseSampler, rotate};
-use render::truth::{Rng, Tracer, TruthSettings};
+use render::truth::{Rng, Settings, Tracer, Truth};
 use render::{Atmosphere, Camera, DensityGrid, Frame, MAX_FIELDS, RenderScene, Sun};
 use runtime::{FieldTable, Spectrum, Tables};
 use std::path::Path;
@@ -132,12 +132,8 @@ fn slab_frame(tau: f64) -> Frame {
             beta_sea_level_per_m: [0.0; 3],
             scale_height_m: 8000.0,
         },
-        xi: 0.0,
-        light_update: render::LightUpdate::Continuum,
         width: 1,
         height: 1,
-        slices: 1,
-        light_resolution: 2,
         grid: DensityGrid {
             min_m: DVec3::new(-1e4, 1.0, -1e4),
             max_m: DVec3::new(1e4, 2.0, 1e4),
@@ -146,6 +142,9 @@ fn slab_frame(tau: f64) -> Frame {
         },
         haze: None,
         ground_albedo: 0.0,
+        lights: Vec::new(),
+        media: Vec::new(),
+        occluders: Vec::new(),
     }
 }
 
@@ -262,7 +261,7 @@ fn carried_wavelengths_agree_with_one_wavelength_per_path() {
         scale_height_m: 2.0,
     };
     frame.ground_albedo = 0.5;
-    let mut tracer = Tracer::new(&tables, &frame, &TruthSettings::default()).unwrap();
+    let mut tracer = Tracer::new(&tables, &frame, &Settings::default()).unwrap();
     assert_eq!(tracer.wavelengths_per_path, 4);
     let n = 40_000;
     let mut worst: f64 = 0.0;
@@ -313,7 +312,7 @@ fn exact_single_scattering_from_a_slab() {
     let bins = hg_bins(&grid, 0.85);
     let tables = tables_of(&bins, 0.5, 0.9);
     let frame = slab_frame(0.5);
-    let mut tracer = Tracer::new(&tables, &frame, &TruthSettings::default()).unwrap();
+    let mut tracer = Tracer::new(&tables, &frame, &Settings::default()).unwrap();
     tracer.max_scatterings = 1;
     let sampler = PhaseSampler::new(&grid, &bins, 0.0);
     let beam = -frame.sun.direction();
@@ -359,7 +358,7 @@ fn single_scattering_in_a_haze_layer_is_exact() {
     let n0 = 1e-4 / (haze.sigma_ext_m2[1] * (-0.5f64).exp());
     let scene = RenderScene::parse(&common::haze_scene(n0), "haze", tmp.path()).unwrap();
     let frame = scene.frame(&tables).unwrap();
-    let mut tracer = Tracer::new(&tables, &frame, &scene.truth_settings()).unwrap();
+    let mut tracer = Tracer::new(&tables, &frame, &scene.settings::<Truth>().unwrap()).unwrap();
     tracer.max_scatterings = 1;
     let single = haze.single.as_ref().unwrap();
     let grid = ThetaGrid::new(tables.theta_step_deg).unwrap();
@@ -418,7 +417,7 @@ fn white_furnace_returns_exactly_the_background() {
     frame.sun.irradiance = [0.0; 3];
     frame.atmosphere = Atmosphere::default();
     frame.ground_albedo = 1.0;
-    let mut tracer = Tracer::new(&tables, &frame, &TruthSettings::default()).unwrap();
+    let mut tracer = Tracer::new(&tables, &frame, &Settings::default()).unwrap();
     tracer.set_albedo(1.0);
     tracer.background = [1.0; 3];
     // Plain phase sampling: every path's weight stays exactly 1. (Guided continuations weigh
@@ -669,7 +668,7 @@ fn slabs_agree_with_disort() {
         let bins = if phase == "hg085" { &hg } else { &cloud };
         let tables = tables_of(bins, 0.18, omega);
         let frame = slab_frame(tau);
-        let tracer = Tracer::new(&tables, &frame, &TruthSettings::default()).unwrap();
+        let tracer = Tracer::new(&tables, &frame, &Settings::default()).unwrap();
         let beam = -frame.sun.direction();
         let (got, photons) = fluxes(&tracer, beam, n_flux, seed + index as u64);
         for (i, name) in ["R", "T_diffuse"].into_iter().enumerate() {
@@ -764,9 +763,9 @@ height_m = 300
         e.contains("[0.0, -1.0, 0.0]") && e.contains("occluder"),
         "{e}"
     );
-    let e = parse("[render]\nspp = 0\n").unwrap_err().to_string();
+    let e = parse("[render.truth]\nspp = 0\n").unwrap_err().to_string();
     assert!(e.contains("spp = 0") && e.contains("[1, 1048576]"), "{e}");
-    let e = parse("[render]\nspp = 100000000\n")
+    let e = parse("[render.truth]\nspp = 100000000\n")
         .unwrap_err()
         .to_string();
     assert!(e.contains("spp = 100000000"), "{e}");
@@ -786,7 +785,7 @@ height_m = 300
         .data
         .iter_mut()
         .for_each(|v| *v = [0.0; MAX_FIELDS]);
-    let e = Tracer::new(&tables, &frame, &TruthSettings::default())
+    let e = Tracer::new(&tables, &frame, &Settings::default())
         .unwrap_err()
         .to_string();
     assert!(e.contains("no particles"), "{e}");

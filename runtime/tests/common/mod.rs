@@ -91,6 +91,8 @@ pub fn haze_scene(n0: f64) -> String {
 [render]
 width = 4
 height = 4
+
+[render.miyazaki]
 slices = 64
 light_resolution = 16
 

@@ -10,12 +10,11 @@ use rayon::prelude::*;
 
 use runtime::{Tables, sample};
 
-use super::{BiriSettings, Kernel};
+use super::{Kernel, Settings};
 use crate::camera::pixel_ray;
 use crate::geometry::{ShadowPlane, Sphere, nappe_roots};
-use crate::objects::Light;
-use crate::objects::{OccluderShape, Region};
-use crate::{FrameError, Image};
+use crate::objects::{Light, Medium, Occluder, OccluderShape, Region};
+use crate::{Frame, FrameError, Image};
 
 /// The light's distance h from a ray is taken as at least this (m): Eq. 2's 1/h is singular
 /// for a ray through the light, whose radiance is the light's own.
@@ -59,35 +58,35 @@ pub struct BiriReport {
     pub crossings_per_ray: f64,
 }
 
-/// Renders `scene` (its `[[medium]]`, `[[occluder]]`, `[[light]]`, camera and ground) with
-/// the kernel `scene.biri.kernel`. Fails before any work when a medium's field has no kernel
+/// Renders `frame` (its `[[medium]]`, `[[occluder]]`, `[[light]]`, camera and ground) with
+/// the kernel `settings.kernel`. Fails before any work when a medium's field has no kernel
 /// table in the bake.
 pub fn render(
     tables: &Tables,
-    scene: &crate::RenderScene,
+    frame: &Frame,
+    settings: &Settings,
 ) -> Result<(Image, BiriReport), FrameError> {
-    let settings = &scene.biri;
-    settings.check(&scene.lights).map_err(|e| FrameError(e.0))?;
-    let media = optics(tables, settings)?;
+    super::check_scene(frame)?;
+    let media = optics(tables, &frame.media)?;
     let grid =
         grid::ThetaGrid::new(tables.theta_step_deg).map_err(|e| FrameError(e.to_string()))?;
-    let axes = scene
+    let axes = frame
         .camera
         .axes()
         .ok_or_else(|| FrameError("camera look_at_m equals position_m".into()))?;
-    let tan_half = (0.5 * scene.camera.fov_deg).to_radians().tan();
-    let (w, h) = (scene.width, scene.height);
-    let o = scene.camera.position_m;
+    let tan_half = frame.camera.tan_half_fov();
+    let (w, h) = (frame.width, frame.height);
+    let o = frame.camera.position_m;
     let mut report = BiriReport::default();
 
     let t = Instant::now();
-    let prepared: Vec<Prepared> = scene
+    let prepared: Vec<Prepared> = frame
         .lights
         .iter()
         .map(|l| {
             let mut planes = Vec::new();
             let mut spheres = Vec::new();
-            for oc in &settings.occluders {
+            for oc in &frame.occluders {
                 match &oc.shape {
                     OccluderShape::Mesh(m) => planes.extend(m.silhouette(l.position_m)),
                     OccluderShape::Sphere(s) => spheres.push(*s),
@@ -96,7 +95,7 @@ pub fn render(
             let s = l.position_m;
             Prepared {
                 light: *l,
-                count_at_eye: settings
+                count_at_eye: frame
                     .occluders
                     .iter()
                     .map(|oc| oc.blockers(o, s) as i32)
@@ -113,9 +112,10 @@ pub fn render(
     let ctx = Context {
         tables,
         grid: &grid,
-        settings,
+        kernel: settings.kernel,
+        occluders: &frame.occluders,
         media: &media,
-        ground_albedo: scene.ground_albedo,
+        ground_albedo: frame.ground_albedo,
     };
     // Stage 2: the surface each ray meets, shaded and attenuated.
     let t = Instant::now();
@@ -156,9 +156,8 @@ pub fn render(
     ))
 }
 
-fn optics(tables: &Tables, settings: &BiriSettings) -> Result<Vec<Optics>, FrameError> {
-    settings
-        .media
+fn optics(tables: &Tables, media: &[Medium]) -> Result<Vec<Optics>, FrameError> {
+    media
         .iter()
         .map(|m| {
             let field = crate::objects::field_index(tables, &m.field)?;
@@ -187,7 +186,8 @@ fn optics(tables: &Tables, settings: &BiriSettings) -> Result<Vec<Optics>, Frame
 struct Context<'a> {
     tables: &'a Tables,
     grid: &'a grid::ThetaGrid,
-    settings: &'a BiriSettings,
+    kernel: Kernel,
+    occluders: &'a [Occluder],
     media: &'a [Optics],
     ground_albedo: f64,
 }
@@ -212,10 +212,7 @@ impl Context<'_> {
 
     /// Whether the segment p → q passes no occluder.
     fn visible(&self, p: DVec3, q: DVec3) -> bool {
-        self.settings
-            .occluders
-            .iter()
-            .all(|o| o.blockers(p, q) == 0)
+        self.occluders.iter().all(|o| o.blockers(p, q) == 0)
     }
 
     /// The first surface along o + x d: its distance (∞ for none) and its radiance at the eye
@@ -225,7 +222,7 @@ impl Context<'_> {
         if d.y < 0.0 {
             best = Some((-o.y / d.y, DVec3::Y, self.ground_albedo));
         }
-        for oc in &self.settings.occluders {
+        for oc in self.occluders {
             if let Some((x, n)) = oc.hit(o, d, best.map_or(f64::INFINITY, |b| b.0)) {
                 best = Some((x, n, oc.albedo));
             }
@@ -416,7 +413,7 @@ impl Context<'_> {
             if tau_h > depths {
                 return 0.0; // e^{−β(x + r)} ≤ e^{−τ_h} < e^{−100}
             }
-            let delta = match self.settings.kernel {
+            let delta = match self.kernel {
                 Kernel::Exact => {
                     sample::biri_primitive_difference(field, self.grid, c, tau_h, (th0, th1))
                         .unwrap_or(0.0)

@@ -13,7 +13,7 @@ use runtime::gpu::{Gpu, GpuTables, WGSL};
 
 use crate::gpu::{RenderError, Timings, a4, check_sizes, entry, filled, v4};
 use crate::objects::{OccluderShape, Region};
-use crate::{FrameError, Image};
+use crate::{Frame, FrameError, Image};
 
 /// The model's WGSL (after [`WGSL`]).
 pub const BIRI_WGSL: &str = include_str!("biri.wgsl");
@@ -70,7 +70,7 @@ impl Renderer {
         Self { layout, pipeline }
     }
 
-    /// Renders `scene` (as [`super::cpu::render`]) with `gpu_tables`, `tables` uploaded with
+    /// Renders `frame` (as [`super::cpu::render`]) with `gpu_tables`, `tables` uploaded with
     /// [`runtime::gpu::TexelFormat::F32`] (half floats would round the kernel's Ams_1 bins);
     /// `Timings::upload` includes stage 1.
     pub fn render(
@@ -78,9 +78,10 @@ impl Renderer {
         gpu: &Gpu,
         tables: &Tables,
         gpu_tables: &GpuTables,
-        scene: &crate::RenderScene,
+        frame: &Frame,
+        settings: &super::Settings,
     ) -> Result<(Image, Timings), RenderError> {
-        self.render_stages(gpu, tables, gpu_tables, scene, false)
+        self.render_stages(gpu, tables, gpu_tables, frame, settings, false)
     }
 
     /// [`Renderer::render`], or with `surfaces_only` stage 2 alone (the surfaces, shaded and
@@ -91,19 +92,19 @@ impl Renderer {
         gpu: &Gpu,
         tables: &Tables,
         gpu_tables: &GpuTables,
-        scene: &crate::RenderScene,
+        frame: &Frame,
+        settings: &super::Settings,
         surfaces_only: bool,
     ) -> Result<(Image, Timings), RenderError> {
-        let settings = &scene.biri;
-        settings.check(&scene.lights).map_err(|e| FrameError(e.0))?;
+        super::check_scene(frame)?;
         let start = Instant::now();
         let device = &gpu.device;
-        let o = scene.camera.position_m;
-        let (forward, right, up) = scene
+        let o = frame.camera.position_m;
+        let (forward, right, up) = frame
             .camera
             .axes()
             .ok_or_else(|| FrameError("camera look_at_m equals position_m".into()))?;
-        let spheres: Vec<(&crate::geometry::Sphere, f64)> = settings
+        let spheres: Vec<(&crate::geometry::Sphere, f64)> = frame
             .occluders
             .iter()
             .filter_map(|oc| match &oc.shape {
@@ -122,10 +123,10 @@ impl Renderer {
         // Stage 1: silhouettes and the shadow count at the eye, per light.
         let mut lights: Vec<[f32; 4]> = Vec::new();
         let mut planes: Vec<[f32; 4]> = Vec::new();
-        for l in &scene.lights {
+        for l in &frame.lights {
             let s = l.position_m;
             let first = planes.len() / 3;
-            for oc in &settings.occluders {
+            for oc in &frame.occluders {
                 if let OccluderShape::Mesh(m) = &oc.shape {
                     for p in m.silhouette(s) {
                         planes.push(v4(p.a, p.weight as f64));
@@ -134,7 +135,7 @@ impl Renderer {
                     }
                 }
             }
-            let count: usize = settings.occluders.iter().map(|oc| oc.blockers(o, s)).sum();
+            let count: usize = frame.occluders.iter().map(|oc| oc.blockers(o, s)).sum();
             let blocked = spheres.iter().enumerate().fold(0u32, |b, (i, (sp, _))| {
                 b | (u32::from(sp.blocks(o, s)) << i)
             });
@@ -158,7 +159,7 @@ impl Renderer {
         }
         let mut mesh_rows: Vec<[f32; 4]> = Vec::new();
         let mut tri_rows: Vec<[f32; 4]> = Vec::new();
-        for oc in &settings.occluders {
+        for oc in &frame.occluders {
             if let OccluderShape::Mesh(m) = &oc.shape {
                 let first = tri_rows.len() / 3;
                 for t in &m.triangles {
@@ -176,7 +177,7 @@ impl Renderer {
         let mut fields: Vec<usize> = Vec::new();
         let mut media_rows: Vec<[f32; 4]> = Vec::new();
         let mut depth_max = 0f64;
-        for m in &settings.media {
+        for m in &frame.media {
             let index = crate::objects::field_index(tables, &m.field)?;
             let f = &tables.fields[index];
             let b = f.biri.as_ref().ok_or_else(|| {
@@ -212,18 +213,18 @@ impl Renderer {
                 polynomials.extend(b.polynomial[c].iter().map(|&v| v as f32));
             }
         }
-        let (w, h) = (scene.width, scene.height);
+        let (w, h) = (frame.width, frame.height);
         let u = |v: [u32; 4]| v.map(f32::from_bits);
         let params: Vec<[f32; 4]> = vec![
-            v4(o, (0.5 * scene.camera.fov_deg).to_radians().tan()),
+            v4(o, frame.camera.tan_half_fov()),
             v4(forward, w as f64 / h as f64),
-            v4(right, scene.ground_albedo),
+            v4(right, frame.ground_albedo),
             v4(up, 0.0),
             u([
                 w as u32,
                 h as u32,
-                scene.lights.len() as u32,
-                settings.media.len() as u32,
+                frame.lights.len() as u32,
+                frame.media.len() as u32,
             ]),
             u([
                 spheres.len() as u32,

@@ -31,10 +31,20 @@
 pub mod cpu;
 pub mod gpu;
 
-use crate::objects::{Medium, Occluder, Region};
+use std::time::Instant;
+
+use serde::{Deserialize, Serialize};
+
+use runtime::gpu::{Gpu, GpuTables, TexelFormat};
+
+use crate::gpu::RenderError;
+use crate::model::{Job, Model, Pass, Rendered};
+use crate::objects;
+use crate::{Frame, FrameError};
 
 /// Which form of the kernel's integral Γ uses.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
 pub enum Kernel {
     /// The exact primitive C(τ_h, θ) from the bake's table, interpolated.
     #[default]
@@ -62,95 +72,161 @@ impl Kernel {
     }
 }
 
-/// The `--model biri` part of a scene.
-#[derive(Debug, Clone, PartialEq, Default)]
-pub struct BiriSettings {
-    /// `[render] biri_kernel` / `--biri-kernel`.
+/// The model's settings, `[render.biri]`; its media, occluders and lights are the frame's.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Settings {
+    /// The form of the kernel's integral (`--biri-kernel`).
     pub kernel: Kernel,
-    /// `[[medium]]` tables.
-    pub media: Vec<Medium>,
-    /// `[[occluder]]` tables.
-    pub occluders: Vec<Occluder>,
 }
 
-/// A setting the model cannot use, named with its allowed range.
-#[derive(Debug, thiserror::Error)]
-#[error("{0}")]
-pub struct SettingsError(pub String);
+/// `--model biri`.
+pub struct Biri;
 
-impl BiriSettings {
-    /// The checks made before anything is baked: media that overlap or more than one medium
-    /// with one everywhere, and lights inside an occluder or a medium box's edge cases.
-    pub fn check(&self, lights: &[crate::objects::Light]) -> Result<(), SettingsError> {
-        let bad = |s: String| Err(SettingsError(s));
-        if self.media.is_empty() {
-            return bad(
-                "--model biri needs at least one [[medium]] table (a homogeneous medium: \
-                 field, number_density_per_m3, and min_m/max_m for a box)"
-                    .into(),
-            );
-        }
-        if lights.is_empty() {
-            return bad(
-                "--model biri needs at least one [[light]]: nothing lights the medium".into(),
-            );
-        }
-        let everywhere = self
-            .media
-            .iter()
-            .position(|m| m.region == Region::Everywhere);
-        if let Some(i) = everywhere
-            && self.media.len() > 1
-        {
-            return bad(format!(
-                "[[medium]] {} fills the whole scene, so it cannot share it with {} other \
-                 medium/media (give each a box, min_m and max_m, that do not overlap)",
-                i + 1,
-                self.media.len() - 1
-            ));
-        }
-        for (i, a) in self.media.iter().enumerate() {
-            for (j, b) in self.media.iter().enumerate().skip(i + 1) {
-                if let (
-                    Region::Box {
-                        min_m: a0,
-                        max_m: a1,
-                    },
-                    Region::Box {
-                        min_m: b0,
-                        max_m: b1,
-                    },
-                ) = (a.region, b.region)
-                    && a0.cmplt(b1).all()
-                    && b0.cmplt(a1).all()
-                {
-                    return bad(format!(
-                        "[[medium]] {} and [[medium]] {} overlap: the media of one scene must \
-                         not (each ray's attenuation is one medium's at a time)",
-                        i + 1,
-                        j + 1
-                    ));
-                }
-            }
-        }
-        self.check_lights(lights)
-    }
+impl Model for Biri {
+    const NAME: &'static str = "biri";
+    const ABOUT: &'static str = "Biri, Arquès & Michelin 2006: single scattering of [[light]]s \
+        in homogeneous [[medium]]s in closed form, volumetric shadows of [[occluder]]s from \
+        their silhouette planes";
+    // 32-bit texels: the exact kernel adds Ams_1 bin values to the primitive.
+    const TEXELS: TexelFormat = TexelFormat::F32;
+    const GPU: bool = true;
+    type Settings = Settings;
+    type Renderer = gpu::Renderer;
 
-    /// Refuses a light inside an occluder (for every model that draws occluders).
-    pub fn check_lights(&self, lights: &[crate::objects::Light]) -> Result<(), SettingsError> {
-        for (i, l) in lights.iter().enumerate() {
-            for (k, o) in self.occluders.iter().enumerate() {
-                if o.contains(l.position_m) {
-                    return Err(SettingsError(format!(
-                        "[[light]] {}: position_m = {:?} is inside [[occluder]] {}: its light \
-                         could never leave it",
-                        i + 1,
-                        l.position_m.to_array(),
-                        k + 1
-                    )));
-                }
-            }
-        }
+    fn check(_: &Settings) -> Result<(), FrameError> {
         Ok(())
     }
+
+    fn check_frame(_: &Settings, frame: &Frame) -> Result<(), FrameError> {
+        check_scene(frame)?;
+        let mut view = frame.clone();
+        view.sun.elevation_deg = 90.0; // biri has no sun
+        view.check_view()
+    }
+
+    fn renderer(gpu: &Gpu, tables: &GpuTables) -> Option<gpu::Renderer> {
+        Some(gpu::Renderer::new(gpu, tables))
+    }
+
+    fn render_cpu(s: &Settings, job: &Job) -> Result<Rendered, RenderError> {
+        let start = Instant::now();
+        let (image, report) = cpu::render(job.tables, job.frame, s)?;
+        let all = start.elapsed().as_secs_f64();
+        let share = |s: f64| 100.0 * s / all.max(1e-12);
+        let summary = format!(
+            "analytic single scattering (CPU reference, {} threads, {} kernel): {}×{}, {} \
+             light(s), {} shadow planes, {:.2} crossings per ray and light: {all:.3} s \
+             (silhouettes {:.1} %, surfaces {:.1} %, medium and shadow planes {:.1} %)",
+            rayon::current_num_threads(),
+            s.kernel.name(),
+            image.width,
+            image.height,
+            job.frame.lights.len(),
+            report.shadow_planes,
+            report.crossings_per_ray,
+            share(report.silhouettes_s),
+            share(report.surfaces_s),
+            share(report.medium_s)
+        );
+        let pass = |name, seconds| Pass { name, seconds };
+        Ok(Rendered {
+            summary,
+            image,
+            extra: Vec::new(),
+            figures: vec![
+                ("shadow planes", report.shadow_planes as f64),
+                ("crossings per ray and light", report.crossings_per_ray),
+            ],
+            passes: vec![
+                pass("silhouettes", report.silhouettes_s),
+                pass("surfaces", report.surfaces_s),
+                pass("medium and shadow planes", report.medium_s),
+            ],
+        })
+    }
+
+    fn render_gpu(
+        renderer: &gpu::Renderer,
+        s: &Settings,
+        job: &Job,
+        gpu: &Gpu,
+        tables: &GpuTables,
+    ) -> Result<Rendered, RenderError> {
+        let (image, t) = renderer.render(gpu, job.tables, tables, job.frame, s)?;
+        Ok(Rendered {
+            summary: format!(
+                "analytic single scattering ({}, {} kernel): {}×{}, {} light(s): silhouettes \
+                 and upload {:.1} ms, frame {:.1} ms, readback {:.1} ms",
+                gpu.describe(),
+                s.kernel.name(),
+                image.width,
+                image.height,
+                job.frame.lights.len(),
+                t.upload * 1e3,
+                t.frame * 1e3,
+                t.readback * 1e3
+            ),
+            image,
+            extra: Vec::new(),
+            figures: Vec::new(),
+            passes: t.passes(),
+        })
+    }
+
+    /// Stage 2 alone (the surfaces, shaded and attenuated, no medium): the paper's Table 1
+    /// splits the frame into stages this way.
+    fn bench_parts(
+        renderer: &gpu::Renderer,
+        s: &Settings,
+        job: &Job,
+        gpu: &Gpu,
+        tables: &GpuTables,
+    ) -> Result<Vec<Pass>, RenderError> {
+        let (_, t) = renderer.render_stages(gpu, job.tables, tables, job.frame, s, true)?;
+        Ok(vec![Pass {
+            name: "stage 2 alone",
+            seconds: t.frame,
+        }])
+    }
+}
+
+/// What the model needs of a scene and refuses in it: no density volumes, haze or sunlight (it
+/// draws point and spot lights in homogeneous media), at least one medium and one light, media
+/// that do not overlap, no light inside an occluder.
+pub fn check_scene(frame: &Frame) -> Result<(), FrameError> {
+    let bad = |s: String| Err(FrameError(s));
+    if frame.grid != crate::DensityGrid::empty() {
+        return bad(
+            "the scene has [[volume]] tables; --model biri draws homogeneous [[medium]] tables \
+             only (render volumes with riley, miyazaki, max or truth)"
+                .into(),
+        );
+    }
+    if let Some(h) = &frame.haze {
+        return bad(format!(
+            "the scene has a [haze] layer (field {:?}); --model biri draws homogeneous \
+             [[medium]] tables only",
+            h.name
+        ));
+    }
+    if frame.sun.irradiance.iter().any(|&v| v > 0.0) {
+        return bad(format!(
+            "[sun] irradiance = {:?}: --model biri draws point and spot lights only; set it to \
+             [0, 0, 0] or leave out [sun]",
+            frame.sun.irradiance
+        ));
+    }
+    if frame.media.is_empty() {
+        return bad(
+            "--model biri needs at least one [[medium]] table (a homogeneous medium: field, \
+             number_density_per_m3, and min_m/max_m for a box)"
+                .into(),
+        );
+    }
+    if frame.lights.is_empty() {
+        return bad("--model biri needs at least one [[light]]: nothing lights the medium".into());
+    }
+    objects::check_media(&frame.media)?;
+    objects::check_lights(&frame.lights, &frame.occluders)
 }

@@ -9,7 +9,7 @@ use rayon::prelude::*;
 
 use runtime::{FieldTable, Tables, sample};
 
-use super::MaxSettings;
+use super::Settings;
 use super::diffusion::{self, Problem};
 use crate::geometry::box_span;
 use crate::shading::{check_fields, coefficients, compose};
@@ -376,7 +376,8 @@ impl Lighting {
     pub fn check_frame(&self, frame: &Frame) -> Result<(), FrameError> {
         if frame.grid.dims != self.dims || frame.sun.direction() != self.sun_dir {
             return Err(FrameError(format!(
-                "the max lighting was computed for a {:?} grid and the sun towards {:?}; this                  frame has {:?} and {:?}: light it again",
+                "the max lighting was computed for a {:?} grid and the sun towards {:?}; this \
+                 frame has {:?} and {:?}: light it again",
                 self.dims,
                 self.sun_dir,
                 frame.grid.dims,
@@ -392,7 +393,7 @@ impl Lighting {
 pub fn render(
     tables: &Tables,
     frame: &Frame,
-    settings: &MaxSettings,
+    settings: &Settings,
 ) -> Result<(Image, MaxReport), FrameError> {
     let lighting = light(tables, frame, settings)?;
     gather(tables, frame, settings, &lighting)
@@ -403,7 +404,7 @@ pub fn render(
 pub(crate) fn check(
     tables: &Tables,
     frame: &Frame,
-    settings: &MaxSettings,
+    settings: &Settings,
 ) -> Result<f64, FrameError> {
     frame.check_view()?;
     settings.check()?;
@@ -432,11 +433,7 @@ pub(crate) fn check(
 
 /// Steps 1–4 of the [module docs](super): reduced sun and sky, the diffusion solve and §3's
 /// clear-air propagation.
-pub fn light(
-    tables: &Tables,
-    frame: &Frame,
-    settings: &MaxSettings,
-) -> Result<Lighting, FrameError> {
+pub fn light(tables: &Tables, frame: &Frame, settings: &Settings) -> Result<Lighting, FrameError> {
     check(tables, frame, settings)?;
     let fields: Vec<&FieldTable> = tables.fields.iter().collect();
     let grid = &frame.grid;
@@ -594,7 +591,7 @@ pub(crate) fn voxel_length(grid: &DensityGrid) -> f64 {
 pub fn gather(
     tables: &Tables,
     frame: &Frame,
-    settings: &MaxSettings,
+    settings: &Settings,
     lighting: &Lighting,
 ) -> Result<(Image, MaxReport), FrameError> {
     let depth_max = check(tables, frame, settings)?;
@@ -710,7 +707,7 @@ pub fn gather(
         return Err(FrameError(format!(
             "an edge segment reached optical depth {:.3}, beyond the bake's Poisson table \
              (poisson_max_depth = {depth_max}): bake with a larger [scene] poisson_max_depth or \
-             lower [render] max_threshold",
+             lower [render.max] threshold",
             report.largest_edge_depth
         )));
     }

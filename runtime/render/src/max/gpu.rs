@@ -15,7 +15,7 @@ use std::time::Instant;
 use runtime::Tables;
 use runtime::gpu::{Gpu, GpuTables, read_back};
 
-use super::MaxSettings;
+use super::Settings;
 use super::cpu::{Lighting, check, voxel_length};
 use crate::gpu::{
     COMPOSE_WGSL, RenderError, Timings, bind, build, check_sizes, field_and_sky_rows, filled,
@@ -59,7 +59,7 @@ impl Renderer {
         tables: &Tables,
         gpu_tables: &GpuTables,
         frame: &Frame,
-        settings: &MaxSettings,
+        settings: &Settings,
         lighting: &Lighting,
     ) -> Result<(Image, Timings, f64), RenderError> {
         let depth_max = check(tables, frame, settings)?;
@@ -161,7 +161,7 @@ impl Renderer {
             return Err(FrameError(format!(
                 "an edge segment reached optical depth {largest:.3}, beyond the bake's Poisson \
                  table (poisson_max_depth = {depth_max}): bake with a larger [scene] \
-                 poisson_max_depth or lower [render] max_threshold"
+                 poisson_max_depth or lower [render.max] threshold"
             ))
             .into());
         }

@@ -29,8 +29,8 @@
 //!    [`cpu::MIN_DIFFUSION_VOXEL_DEPTH`] ([`diffusion`]; the thinner fringe a grid's
 //!    interpolation leaves, down to 10⁻¹⁹ of the core, would stall the solver), with
 //!    κ_tr = β_ext (σ_tr/σ_t), the bake's `transport_factor` mixed over the fields by their
-//!    extinction, solved to [`MaxSettings::tolerance`] by multigrid-preconditioned CG.
-//! 4. **Clear-air propagation** (§3, `[render] clear_air_iterations`, default 1 as the
+//!    extinction, solved to [`Settings::tolerance`] by multigrid-preconditioned CG.
+//! 4. **Clear-air propagation** (§3, `[render.max] clear_air_iterations`, default 1 as the
 //!    paper): for each sky direction a second sweep carries the light the clouds send out (α
 //!    times I_0, the skylight and the sun scattered into that direction) across empty voxels
 //!    into other parts of the cloud, where it joins the incident light; then the diffusion is
@@ -48,7 +48,7 @@
 //!      applied to the reduced sun, and to the diffuse light I_0 + S as isotropic incident
 //!      radiance (M integrates to 1); α^i weights order i, which sums to the factor shown;
 //!    - the share is w_edge = clamp(1.5 − τ_v/T, 0, 1), τ_v the voxel's optical depth β_ext h
-//!      (green) and T = [`MaxSettings::threshold`]: all edge below T/2, all dense above 3T/2,
+//!      (green) and T = [`Settings::threshold`]: all edge below T/2, all dense above 3T/2,
 //!      linear between (the paper's "density dependent interpolation of the two").
 //! 6. The pixel is composed with the air, sun disk and ground as the other slicing models
 //!    ([`crate::riley`]); the ground is lit through the volume's T_sun along the sun's ray.
@@ -76,25 +76,141 @@ pub mod cpu;
 pub mod diffusion;
 pub mod gpu;
 
-use crate::FrameError;
+use std::time::Instant;
 
-/// The `max` model's settings (`[render] max_threshold`, `diffusion_tolerance`,
-/// `max_diffusion_iterations`).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct MaxSettings {
+use serde::{Deserialize, Serialize};
+
+use runtime::gpu::{Gpu, GpuTables, TexelFormat};
+
+use crate::gpu::RenderError;
+use crate::model::{Job, Model, Pass, Rendered};
+use crate::{Frame, FrameError};
+
+/// `--model max`.
+pub struct Max;
+
+impl Model for Max {
+    const NAME: &'static str = "max";
+    const ABOUT: &'static str = "Max et al. 2004: a diffusion solve in the dense core, \
+        Poisson-weighted multiple anisotropic scattering from the bake's M(D, θ) at the edges; \
+        the lighting on the CPU (all cores), the final gather on the GPU or --cpu";
+    const TEXELS: TexelFormat = TexelFormat::F32;
+    const GPU: bool = true;
+    type Settings = Settings;
+    type Renderer = gpu::Renderer;
+
+    fn check(s: &Settings) -> Result<(), FrameError> {
+        s.check()
+    }
+
+    fn check_frame(s: &Settings, frame: &Frame) -> Result<(), FrameError> {
+        frame.sunlight_only(Self::NAME, false)?;
+        frame.check_view().and_then(|()| s.check())
+    }
+
+    fn renderer(gpu: &Gpu, tables: &GpuTables) -> Option<gpu::Renderer> {
+        Some(gpu::Renderer::new(gpu, tables))
+    }
+
+    fn render_cpu(s: &Settings, job: &Job) -> Result<Rendered, RenderError> {
+        let lighting = cpu::light(job.tables, job.frame, s)?;
+        let start = Instant::now();
+        let (image, report) = cpu::gather(job.tables, job.frame, s, &lighting)?;
+        let gather = start.elapsed().as_secs_f64();
+        Ok(rendered(image, &report, gather, "CPU", job.frame))
+    }
+
+    fn render_gpu(
+        renderer: &gpu::Renderer,
+        s: &Settings,
+        job: &Job,
+        gpu: &Gpu,
+        tables: &GpuTables,
+    ) -> Result<Rendered, RenderError> {
+        let lighting = cpu::light(job.tables, job.frame, s)?;
+        let (image, t, largest) =
+            renderer.gather(gpu, job.tables, tables, job.frame, s, &lighting)?;
+        let mut report = lighting.report.clone();
+        report.gather_s = t.upload + t.frame + t.readback;
+        report.largest_edge_depth = largest;
+        Ok(rendered(
+            image,
+            &report,
+            report.gather_s,
+            &gpu.describe(),
+            job.frame,
+        ))
+    }
+}
+
+/// The frame with its passes (the lighting's steps, then the gather on `on`) and summary.
+fn rendered(
+    image: crate::Image,
+    report: &cpu::MaxReport,
+    gather_s: f64,
+    on: &str,
+    frame: &Frame,
+) -> Rendered {
+    let summary = format!(
+        "diffusion + Poisson edges (lighting on the CPU, {} threads; gather on {on}): {}×{}, \
+         grid {:?}: reduced sunlight {:.2} s, diffusion {:.2} s ({} unknowns, {} levels, {:?} \
+         CG iterations to residuals {:.1e}/{:.1e}/{:.1e}), clear-air propagation and second \
+         solve {:.2} s (mean light across clear air {:.2e}), final gather {gather_s:.2} s; \
+         largest edge depth {:.2}",
+        rayon::current_num_threads(),
+        image.width,
+        image.height,
+        frame.grid.dims,
+        report.propagation_s,
+        report.diffusion_s,
+        report.unknowns,
+        report.levels,
+        report.iterations,
+        report.residual[0],
+        report.residual[1],
+        report.residual[2],
+        report.clear_air_s,
+        report.clear_air_mean,
+        report.largest_edge_depth
+    );
+    let pass = |name, seconds| Pass { name, seconds };
+    Rendered {
+        summary,
+        image,
+        extra: Vec::new(),
+        figures: vec![
+            ("unknowns", report.unknowns as f64),
+            ("CG iterations", report.iterations[1] as f64),
+            ("largest edge depth", report.largest_edge_depth),
+        ],
+        passes: vec![
+            pass("reduced light", report.propagation_s),
+            pass("diffusion", report.diffusion_s),
+            pass("clear air", report.clear_air_s),
+            pass("gather", gather_s),
+        ],
+    }
+}
+
+/// The model's settings, `[render.max]`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Settings {
     /// T: the voxel optical depth β_ext h (green) at which the dense (diffusion) treatment
     /// takes over from the edge (Poisson) treatment, > 0. Default 1.
     pub threshold: f64,
     /// Relative residual ‖b − A x‖/‖b‖ the diffusion solve must reach, (0, 0.1]. Default 1e-6.
+    #[serde(rename = "diffusion_tolerance")]
     pub tolerance: f64,
     /// Conjugate-gradient iterations allowed, [1, 100000]. Default 500.
+    #[serde(rename = "max_diffusion_iterations")]
     pub max_iterations: usize,
     /// Iterations of §3's clear-air propagation (the clouds' light carried across empty voxels
     /// into other parts, then the diffusion solved again), [0, 4]. Default 1, as the paper.
     pub clear_air_iterations: usize,
 }
 
-impl Default for MaxSettings {
+impl Default for Settings {
     fn default() -> Self {
         Self {
             threshold: 1.0,
@@ -105,32 +221,32 @@ impl Default for MaxSettings {
     }
 }
 
-impl MaxSettings {
+impl Settings {
     /// Checks the settings, naming the key, its value and the allowed range.
     pub fn check(&self) -> Result<(), FrameError> {
         if !(self.threshold.is_finite() && self.threshold > 0.0) {
             return Err(FrameError(format!(
-                "[render] max_threshold = {} is outside the allowed range (0, ∞) (a voxel's \
+                "threshold = {} is outside the allowed range (0, ∞) (a voxel's \
                  optical depth)",
                 self.threshold
             )));
         }
         if !(self.tolerance > 0.0 && self.tolerance <= 0.1) {
             return Err(FrameError(format!(
-                "[render] diffusion_tolerance = {} is outside the allowed range (0, 0.1] \
+                "diffusion_tolerance = {} is outside the allowed range (0, 0.1] \
                  (relative residual)",
                 self.tolerance
             )));
         }
         if !(1..=100_000).contains(&self.max_iterations) {
             return Err(FrameError(format!(
-                "[render] max_diffusion_iterations = {} is outside the allowed range [1, 100000]",
+                "max_diffusion_iterations = {} is outside the allowed range [1, 100000]",
                 self.max_iterations
             )));
         }
         if self.clear_air_iterations > 4 {
             return Err(FrameError(format!(
-                "[render] clear_air_iterations = {} is outside the allowed range [0, 4]",
+                "clear_air_iterations = {} is outside the allowed range [0, 4]",
                 self.clear_air_iterations
             )));
         }

@@ -9,7 +9,7 @@ use rayon::prelude::*;
 use grid::ThetaGrid;
 use runtime::{FieldTable, Tables, sample};
 
-use super::{SvsPhase, SvsSettings, SvsSetup};
+use super::{Settings, SvsPhase, SvsSetup};
 use crate::shading::{bilinear_taps, check_fields, coefficients, over_footprint};
 use crate::sky::rayleigh_phase;
 use crate::{Frame, FrameError, Image, MAX_FIELDS, SUN_DIAMETER_DEG};
@@ -154,15 +154,18 @@ impl Air<'_> {
 
 /// Renders `frame` by shadow-view slicing with the fields of `tables` (field i = grid
 /// channel i).
-pub fn render(tables: &Tables, frame: &Frame, settings: &SvsSettings) -> Result<Image, FrameError> {
+pub fn render(tables: &Tables, frame: &Frame, settings: &Settings) -> Result<Image, FrameError> {
     let s = super::setup(frame, settings)?;
     check_fields(tables, frame)?;
     let fields: Vec<&FieldTable> = tables.fields.iter().collect();
     let (w, h) = (frame.width, frame.height);
-    let res = frame.light_resolution;
+    let res = settings.light_resolution;
     let atm = &frame.atmosphere;
     let l_y = s.to_sun.y;
-    let haze = frame.haze.map(|h| (tables.fields[h.field].clone(), h));
+    let haze = frame
+        .haze
+        .as_ref()
+        .map(|h| (tables.fields[h.field].clone(), h));
     let air = Air {
         atm,
         haze_ext: haze.as_ref().map_or([0.0; 3], |(f, h)| {
@@ -199,7 +202,7 @@ pub fn render(tables: &Tables, frame: &Frame, settings: &SvsSettings) -> Result<
         };
         std::array::from_fn(|c| p[c] * f.sigma_sca_m2[c] * h.number_density_per_m3)
     };
-    let haze_field = frame.haze.map(|h| h.field);
+    let haze_field = frame.haze.as_ref().map(|h| h.field);
     type Texture = ([[f64; 3]; MAX_FIELDS], f64, [f64; 3]);
     let mie: Vec<Texture> = rays
         .par_iter()
@@ -235,7 +238,7 @@ pub fn render(tables: &Tables, frame: &Frame, settings: &SvsSettings) -> Result<
             f64::INFINITY
         }
     };
-    for k in 0..frame.slices {
+    for k in 0..settings.slices {
         let c = s.plane(k);
         // Eq. 10 first (§4.1): the slice's cloud into the shadow surface.
         shadow.par_iter_mut().enumerate().for_each(|(i, texel)| {

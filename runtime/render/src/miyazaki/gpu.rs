@@ -10,7 +10,7 @@ use std::time::Instant;
 use runtime::Tables;
 use runtime::gpu::{Gpu, GpuTables};
 
-use super::{SvsPhase, SvsSettings};
+use super::{Settings, SvsPhase};
 use crate::gpu::{
     Dispatch, RenderError, Timings, a4, bind, build, check_sizes, filled, run_slices,
     slice_uniforms, storage, v4,
@@ -58,13 +58,13 @@ impl Renderer {
         tables: &Tables,
         gpu_tables: &GpuTables,
         frame: &Frame,
-        settings: &SvsSettings,
+        settings: &Settings,
     ) -> Result<(Image, Timings), RenderError> {
         let s = super::setup(frame, settings)?;
         crate::shading::check_fields(tables, frame)?;
         let device = &gpu.device;
         let start = Instant::now();
-        let (w, h, res) = (frame.width, frame.height, frame.light_resolution);
+        let (w, h, res) = (frame.width, frame.height, settings.light_resolution);
         check_sizes(
             device,
             &[
@@ -76,7 +76,7 @@ impl Renderer {
         )?;
         let cos_disk = (SUN_DIAMETER_DEG / 2.0).to_radians().cos();
         let (forward, right, up) = s.axes;
-        let haze = frame.haze.map(|h| (&tables.fields[h.field], h));
+        let haze = frame.haze.as_ref().map(|h| (&tables.fields[h.field], h));
         let mut params: Vec<[f32; 4]> = vec![
             v4(s.eye, if s.back_to_front { 1.0 } else { 0.0 }),
             v4(forward, s.tan_half_fov_y),
@@ -111,7 +111,7 @@ impl Renderer {
             w as u32,
             h as u32,
             res as u32,
-            frame.haze.map_or(0, |h| h.field as u32 + 1),
+            frame.haze.as_ref().map_or(0, |h| h.field as u32 + 1),
         ]));
         for i in 0..MAX_FIELDS {
             params.push(
@@ -177,7 +177,7 @@ impl Renderer {
             false,
         );
         let image = storage(device, "photometeor svs image", 16 * (w * h) as u64, true);
-        let planes: Vec<f64> = (0..frame.slices).map(|k| s.plane(k)).collect();
+        let planes: Vec<f64> = (0..settings.slices).map(|k| s.plane(k)).collect();
         let (slice_buffer, stride) = slice_uniforms(device, &planes);
         let bind_group = bind(
             device,
@@ -198,7 +198,7 @@ impl Renderer {
             gpu_tables,
             &bind_group,
             start,
-            (frame.slices, stride),
+            (settings.slices, stride),
             (
                 Dispatch(&self.clear, (w.max(res), h.max(res))),
                 &[

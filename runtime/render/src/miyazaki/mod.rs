@@ -9,7 +9,7 @@
 //!   Σᵢ ΔI_v(tᵢ) with **Eq. 5** ΔI_v = Δt(p) I_sun (…) g_view(tᵢ) g_sun(sᵢ).
 //! - **Shadow-view slices (§4.2)**: parallel planes whose normal n splits the angle θ between
 //!   the view direction V_e and V′ (the direction towards the sun V_s, or −V_s when
-//!   V_e·V_s < 0) as θ_e : θ_s = 1 : a ([`SvsSettings::a`], the paper's 1.0–2.0): n is the
+//!   V_e·V_s < 0) as θ_e : θ_s = 1 : a ([`Settings::a`], the paper's 1.0–2.0): n is the
 //!   slerp of V_e towards V′ by θ/(1 + a). a = 1 is Riley's half-angle vector; the larger a,
 //!   the closer the slices are to facing the eye and the less the sampling interval
 //!   Δt(p) = Δ/|n·d(p)| differs between pixels. Slices are processed from the sun's side, so
@@ -58,17 +58,102 @@
 pub mod cpu;
 pub mod gpu;
 
-use glam::DVec3;
+use std::time::Instant;
 
+use glam::DVec3;
+use serde::{Deserialize, Serialize};
+
+use runtime::gpu::{Gpu, GpuTables, TexelFormat};
+
+use crate::gpu::RenderError;
+use crate::model::{Job, Model, Pass, Rendered};
+use crate::shading::check_slicing;
 use crate::{Frame, FrameError, basis};
 
-/// The allowed range of [`SvsSettings::a`]: (0, 2]. The paper uses 1.0–2.0; below 1 the slices
+/// `--model miyazaki`.
+pub struct Miyazaki;
+
+impl Model for Miyazaki {
+    const NAME: &'static str = "miyazaki";
+    const ABOUT: &'static str = "Miyazaki, Dobashi & Nishita: shadow-view slices, single \
+        scattering plus a constant k_multi, shadows on the ground and in the air, a [haze] layer";
+    const TEXELS: TexelFormat = TexelFormat::Auto;
+    const GPU: bool = true;
+    type Settings = Settings;
+    type Renderer = gpu::Renderer;
+
+    fn check(s: &Settings) -> Result<(), FrameError> {
+        check(s)
+    }
+
+    fn check_frame(s: &Settings, frame: &Frame) -> Result<(), FrameError> {
+        frame.sunlight_only(Self::NAME, true)?;
+        setup(frame, s).map(|_| ())
+    }
+
+    fn renderer(gpu: &Gpu, tables: &GpuTables) -> Option<gpu::Renderer> {
+        Some(gpu::Renderer::new(gpu, tables))
+    }
+
+    fn render_cpu(s: &Settings, job: &Job) -> Result<Rendered, RenderError> {
+        let start = Instant::now();
+        let image = cpu::render(job.tables, job.frame, s)?;
+        let seconds = start.elapsed().as_secs_f64();
+        Ok(Rendered {
+            summary: format!(
+                "shadow-view slices (CPU reference): {}×{}, {} slices, a = {}, k_multi = {} /sr, \
+                 shadow surface {}²: {seconds:.2} s",
+                image.width, image.height, s.slices, s.a, s.k_multi, s.light_resolution
+            ),
+            image,
+            extra: Vec::new(),
+            figures: Vec::new(),
+            passes: vec![Pass {
+                name: "frame",
+                seconds,
+            }],
+        })
+    }
+
+    fn render_gpu(
+        renderer: &gpu::Renderer,
+        s: &Settings,
+        job: &Job,
+        gpu: &Gpu,
+        tables: &GpuTables,
+    ) -> Result<Rendered, RenderError> {
+        let (image, t) = renderer.render(gpu, job.tables, tables, job.frame, s)?;
+        Ok(Rendered {
+            summary: format!(
+                "shadow-view slices ({}): {}×{}, {} slices, a = {}, k_multi = {} /sr, shadow \
+                 surface {}²: upload {:.1} ms, frame {:.1} ms, readback {:.1} ms",
+                gpu.describe(),
+                image.width,
+                image.height,
+                s.slices,
+                s.a,
+                s.k_multi,
+                s.light_resolution,
+                t.upload * 1e3,
+                t.frame * 1e3,
+                t.readback * 1e3
+            ),
+            image,
+            extra: Vec::new(),
+            figures: Vec::new(),
+            passes: t.passes(),
+        })
+    }
+}
+
+/// The allowed range of [`Settings::a`]: (0, 2]. The paper uses 1.0–2.0; below 1 the slices
 /// turn towards the sun and away from the eye, and at 0 they face the sun, edge-on to an eye
 /// at 90° to it.
 pub const A_RANGE: (f64, f64) = (0.0, 2.0);
 
 /// The phase function of the clouds in Eqs. 1 and 8.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
 pub enum SvsPhase {
     /// Each field's baked Ams_1 (its exact single-scattering phase function), per channel.
     Tables,
@@ -87,10 +172,14 @@ impl SvsPhase {
     }
 }
 
-/// What the model needs besides the frame (scene keys `[render] svs_a`, `k_multi`,
-/// `svs_phase`; the ground albedo is the frame's).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct SvsSettings {
+/// The model's settings, `[render.miyazaki]` (the ground albedo is the frame's).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Settings {
+    /// Number of shadow-view slices through the volumes' box, [1, 4096] (default 256).
+    pub slices: usize,
+    /// Shadow-surface texels per side, [2, 4096] (default 512).
+    pub light_resolution: usize,
     /// θ_e : θ_s = 1 : a, in [`A_RANGE`] (0 excluded).
     pub a: f64,
     /// The constant multiple-scattering term of the clouds (1/sr), ≥ 0.
@@ -99,9 +188,11 @@ pub struct SvsSettings {
     pub phase: SvsPhase,
 }
 
-impl Default for SvsSettings {
+impl Default for Settings {
     fn default() -> Self {
         Self {
+            slices: 256,
+            light_resolution: 512,
             a: 1.5,
             k_multi: 0.0,
             phase: SvsPhase::Tables,
@@ -153,17 +244,18 @@ pub fn slice_normal(ve: DVec3, vs: DVec3, a: f64) -> DVec3 {
 }
 
 /// Checks the settings, naming the key, its value and the range.
-pub fn check(settings: &SvsSettings) -> Result<(), FrameError> {
+pub fn check(settings: &Settings) -> Result<(), FrameError> {
     let bad = |s: String| Err(FrameError(s));
+    check_slicing(settings.slices, settings.light_resolution, "shadow surface")?;
     if !(settings.a.is_finite() && settings.a > A_RANGE.0 && settings.a <= A_RANGE.1) {
         return bad(format!(
-            "[render] svs_a = {} is outside the allowed range ({}, {}] (the paper uses 1.0–2.0)",
+            "a = {} is outside the allowed range ({}, {}] (the paper uses 1.0–2.0)",
             settings.a, A_RANGE.0, A_RANGE.1
         ));
     }
     if !(settings.k_multi.is_finite() && settings.k_multi >= 0.0) {
         return bad(format!(
-            "[render] k_multi = {} must be finite and ≥ 0 (1/sr)",
+            "k_multi = {} must be finite and ≥ 0 (1/sr)",
             settings.k_multi
         ));
     }
@@ -171,23 +263,10 @@ pub fn check(settings: &SvsSettings) -> Result<(), FrameError> {
 }
 
 /// Checks the frame and the settings and derives the geometry.
-pub fn setup(frame: &Frame, settings: &SvsSettings) -> Result<SvsSetup, FrameError> {
+pub fn setup(frame: &Frame, settings: &Settings) -> Result<SvsSetup, FrameError> {
     frame.check_view()?;
     check(settings)?;
     let bad = |s: String| Err(FrameError(s));
-    if !(1..=4096).contains(&frame.slices) {
-        return bad(format!(
-            "slices = {} is outside the allowed range [1, 4096]",
-            frame.slices
-        ));
-    }
-    if !(2..=4096).contains(&frame.light_resolution) {
-        return bad(format!(
-            "light_resolution = {} is outside the allowed range [2, 4096] (the shadow surface's \
-             texels per side)",
-            frame.light_resolution
-        ));
-    }
     if frame.grid.contains(frame.camera.position_m) {
         return bad(format!(
             "the camera at {:?} m is inside the volumes' box {:?}…{:?} m; shadow-view slicing \
@@ -200,15 +279,15 @@ pub fn setup(frame: &Frame, settings: &SvsSettings) -> Result<SvsSetup, FrameErr
     let normal = slice_normal(axes.0, to_sun, settings.a);
     let along = |axis: DVec3| frame.grid.span_along(axis);
     let range = along(normal);
-    let step = (range.1 - range.0) / frame.slices as f64;
+    let step = (range.1 - range.0) / settings.slices as f64;
     let (shadow_u, shadow_w) = basis(to_sun);
     let (u_lo, u_hi) = along(shadow_u);
     let (w_lo, w_hi) = along(shadow_w);
-    let res = frame.light_resolution as f64;
+    let res = settings.light_resolution as f64;
     Ok(SvsSetup {
         eye: frame.camera.position_m,
         axes,
-        tan_half_fov_y: (frame.camera.fov_deg.to_radians() / 2.0).tan(),
+        tan_half_fov_y: frame.camera.tan_half_fov(),
         to_sun,
         normal,
         back_to_front: axes.0.dot(to_sun) >= 0.0,

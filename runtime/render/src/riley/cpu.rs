@@ -8,7 +8,7 @@ use glam::DVec3;
 use runtime::sample;
 use runtime::{FieldTable, Tables};
 
-use super::Setup;
+use super::{Settings, Setup};
 use crate::shading::{bilinear_taps, check_fields, coefficients, compose, over_footprint};
 use crate::{Frame, FrameError, Image, LightUpdate, MAX_FIELDS};
 
@@ -77,12 +77,12 @@ fn cross_slab(
 }
 
 /// Renders `frame` with the fields of `tables` (field i = grid channel i).
-pub fn render(tables: &Tables, frame: &Frame) -> Result<Image, FrameError> {
-    let setup = frame.setup()?;
+pub fn render(tables: &Tables, frame: &Frame, settings: &Settings) -> Result<Image, FrameError> {
+    let setup = Setup::new(frame, settings)?;
     check_fields(tables, frame)?;
     let fields: Vec<&FieldTable> = tables.fields.iter().collect();
     let (w, h) = (frame.width, frame.height);
-    let res = frame.light_resolution;
+    let res = settings.light_resolution;
     let l_y = frame.sun.direction()[1];
     let cos_light = |d: DVec3| -setup.light.dot(d);
     let rays: Vec<DVec3> = (0..w * h).map(|p| setup.ray(p % w, p / w, w, h)).collect();
@@ -101,7 +101,7 @@ pub fn render(tables: &Tables, frame: &Frame) -> Result<Image, FrameError> {
     // Δ_l, the light's path through one slab.
     let light_thickness = setup.slice_step / h_dot_l;
 
-    for k in 0..frame.slices {
+    for k in 0..settings.slices {
         let c = setup.slice_start + k as f64 * setup.slice_step;
         eye.par_iter_mut().zip(&rays).for_each(|(px, &d)| {
             let hd = setup.half.dot(d);
@@ -119,7 +119,7 @@ pub fn render(tables: &Tables, frame: &Frame) -> Result<Image, FrameError> {
                 return;
             }
             let mut lit = bilinear(&light, res, setup.light_coords(p));
-            if frame.light_update == LightUpdate::Continuum {
+            if settings.light_update == LightUpdate::Continuum {
                 // The light at the slab's middle: the buffer holds it at the slab's entry.
                 cross_slab(
                     &mut lit,
@@ -128,7 +128,7 @@ pub fn render(tables: &Tables, frame: &Frame) -> Result<Image, FrameError> {
                     &sca,
                     &rho,
                     light_thickness / 2.0,
-                    frame.light_update,
+                    settings.light_update,
                 );
             }
             let sun = frame.atmosphere.sunlight(p[1], l_y);
@@ -148,7 +148,7 @@ pub fn render(tables: &Tables, frame: &Frame) -> Result<Image, FrameError> {
                 let scattered = lit.intensity[ch]
                     * sun[ch]
                     * frame.sun.irradiance[ch]
-                    * (phase[ch] + frame.xi)
+                    * (phase[ch] + settings.xi)
                     * (sca[ch] / ext[ch])
                     * (1.0 - slab);
                 let (l, tr) = (&mut px.0[ch], &mut px.1[ch]);
@@ -175,7 +175,7 @@ pub fn render(tables: &Tables, frame: &Frame) -> Result<Image, FrameError> {
                 &sca,
                 &rho,
                 thickness,
-                frame.light_update,
+                settings.light_update,
             );
         });
     }

@@ -59,12 +59,13 @@ impl Renderer {
         tables: &Tables,
         gpu_tables: &GpuTables,
         frame: &Frame,
+        settings: &super::Settings,
     ) -> Result<(Image, Timings), RenderError> {
-        let setup = frame.setup()?;
+        let setup = super::Setup::new(frame, settings)?;
         crate::shading::check_fields(tables, frame)?;
         let device = &gpu.device;
         let start = Instant::now();
-        let (w, h, res) = (frame.width, frame.height, frame.light_resolution);
+        let (w, h, res) = (frame.width, frame.height, settings.light_resolution);
         let voxels = frame.grid.data.len();
         check_sizes(
             device,
@@ -81,9 +82,9 @@ impl Renderer {
         params.push(v4(setup.eye, if setup.front_to_back { 1.0 } else { 0.0 }));
         params.push(v4(setup.forward, setup.tan_half_fov_y));
         params.push(v4(setup.right, setup.aspect));
-        params.push(v4(setup.up, frame.xi));
+        params.push(v4(setup.up, settings.xi));
         params.push(v4(setup.light, setup.slice_step));
-        let continuum = match frame.light_update {
+        let continuum = match settings.light_update {
             crate::LightUpdate::Continuum => 1.0,
             crate::LightUpdate::Riley2004 => 0.0,
         };
@@ -128,7 +129,7 @@ impl Renderer {
         );
         let eye_buffer = storage(device, "photometeor eye buffer", 32 * (w * h) as u64, false);
         let image = storage(device, "photometeor image", 16 * (w * h) as u64, true);
-        let planes: Vec<f64> = (0..frame.slices)
+        let planes: Vec<f64> = (0..settings.slices)
             .map(|k| setup.slice_start + k as f64 * setup.slice_step)
             .collect();
         let (slice_buffer, stride) = slice_uniforms(device, &planes);
@@ -150,7 +151,7 @@ impl Renderer {
             gpu_tables,
             &bind_group,
             start,
-            (frame.slices, stride),
+            (settings.slices, stride),
             (
                 Dispatch(&self.clear, (w.max(res), h.max(res))),
                 &[

@@ -40,11 +40,125 @@
 pub mod cpu;
 pub mod gpu;
 
-use glam::DVec3;
+use std::time::Instant;
 
-use crate::{Frame, FrameError};
+use glam::DVec3;
+use serde::{Deserialize, Serialize};
+
+use runtime::gpu::{Gpu, GpuTables, TexelFormat};
+
+use crate::gpu::RenderError;
+use crate::model::{Job, Model, Pass, Rendered};
+use crate::shading::check_slicing;
+use crate::{Frame, FrameError, LightUpdate};
 
 pub use crate::basis;
+
+/// `--model riley`.
+pub struct Riley;
+
+/// The model's settings, `[render.riley]`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Settings {
+    /// Number S of half-angle slices through the grid's box, [1, 4096] (default 256).
+    pub slices: usize,
+    /// Light-buffer texels per side, [2, 4096] (default 512).
+    pub light_resolution: usize,
+    /// Riley's ξ: back-scattered light added to the phase function in the eye pass (1/sr),
+    /// ≥ 0 (default 0).
+    pub xi: f64,
+    /// How the light buffer loses light per slab (default continuum).
+    pub light_update: LightUpdate,
+}
+
+impl Default for Settings {
+    fn default() -> Self {
+        Self {
+            slices: 256,
+            light_resolution: 512,
+            xi: 0.0,
+            light_update: LightUpdate::default(),
+        }
+    }
+}
+
+impl Model for Riley {
+    const NAME: &'static str = "riley";
+    const ABOUT: &'static str = "Riley et al. 2004: half-angle slicing with light and eye \
+        buffers, the multiple-scattering tables Ams_n and F_n for the angular spread of sunlight";
+    const TEXELS: TexelFormat = TexelFormat::Auto;
+    const GPU: bool = true;
+    type Settings = Settings;
+    type Renderer = gpu::Renderer;
+
+    fn check(s: &Settings) -> Result<(), FrameError> {
+        check_slicing(s.slices, s.light_resolution, "light-buffer")?;
+        if !(s.xi.is_finite() && s.xi >= 0.0) {
+            return Err(FrameError(format!(
+                "xi = {} must be finite and ≥ 0 (1/sr)",
+                s.xi
+            )));
+        }
+        Ok(())
+    }
+
+    fn check_frame(s: &Settings, frame: &Frame) -> Result<(), FrameError> {
+        frame.sunlight_only(Self::NAME, false)?;
+        Setup::new(frame, s).map(|_| ())
+    }
+
+    fn renderer(gpu: &Gpu, tables: &GpuTables) -> Option<gpu::Renderer> {
+        Some(gpu::Renderer::new(gpu, tables))
+    }
+
+    fn render_cpu(s: &Settings, job: &Job) -> Result<Rendered, RenderError> {
+        let start = Instant::now();
+        let image = cpu::render(job.tables, job.frame, s)?;
+        let seconds = start.elapsed().as_secs_f64();
+        Ok(Rendered {
+            summary: format!(
+                "CPU reference: {}×{}, {} slices, light buffer {}²: {seconds:.2} s",
+                image.width, image.height, s.slices, s.light_resolution
+            ),
+            image,
+            extra: Vec::new(),
+            figures: Vec::new(),
+            passes: vec![Pass {
+                name: "frame",
+                seconds,
+            }],
+        })
+    }
+
+    fn render_gpu(
+        renderer: &gpu::Renderer,
+        s: &Settings,
+        job: &Job,
+        gpu: &Gpu,
+        tables: &GpuTables,
+    ) -> Result<Rendered, RenderError> {
+        let (image, t) = renderer.render(gpu, job.tables, tables, job.frame, s)?;
+        Ok(Rendered {
+            summary: format!(
+                "{}: {}×{}, {} slices, light buffer {}²: upload {:.1} ms, frame {:.1} ms, \
+                 readback {:.1} ms",
+                gpu.describe(),
+                image.width,
+                image.height,
+                s.slices,
+                s.light_resolution,
+                t.upload * 1e3,
+                t.frame * 1e3,
+                t.readback * 1e3
+            ),
+            image,
+            extra: Vec::new(),
+            figures: Vec::new(),
+            passes: t.passes(),
+        })
+    }
+}
 
 /// The derived geometry both renderers use (module docs).
 #[derive(Debug, Clone, Copy)]
@@ -81,55 +195,42 @@ pub struct Setup {
     pub light_texel: [f64; 2],
 }
 
-impl Frame {
-    /// Checks the parameters and derives the slicing geometry.
-    pub fn setup(&self) -> Result<Setup, FrameError> {
-        self.check_view()?;
-        let bad = |s: String| Err(FrameError(s));
-        if !(1..=4096).contains(&self.slices) {
-            return bad(format!(
-                "slices = {} is outside the allowed range [1, 4096]",
-                self.slices
-            ));
-        }
-        if !(2..=4096).contains(&self.light_resolution) {
-            return bad(format!(
-                "light_resolution = {} is outside the allowed range [2, 4096]",
-                self.light_resolution
-            ));
-        }
-        if self.grid.contains(self.camera.position_m) {
-            return bad(format!(
+impl Setup {
+    /// Checks the frame and the settings and derives the slicing geometry.
+    pub fn new(frame: &Frame, settings: &Settings) -> Result<Self, FrameError> {
+        frame.check_view()?;
+        Riley::check(settings)?;
+        if frame.grid.contains(frame.camera.position_m) {
+            return Err(FrameError(format!(
                 "the camera at {:?} m is inside the volumes' box {:?}…{:?} m; half-angle \
                  slicing needs it outside",
-                self.camera.position_m, self.grid.min_m, self.grid.max_m
-            ));
+                frame.camera.position_m, frame.grid.min_m, frame.grid.max_m
+            )));
         }
-        let (forward, right, up) = self.camera.axes().expect("checked by check_view");
-        let fov = self.camera.fov_deg;
+        let (forward, right, up) = frame.camera.axes().expect("checked by check_view");
 
-        let light = -self.sun.direction();
+        let light = -frame.sun.direction();
         let front_to_back = forward.dot(light) >= 0.0;
         let half = if front_to_back {
             (forward + light).normalize()
         } else {
             (light - forward).normalize()
         };
-        let along = |axis: DVec3| self.grid.span_along(axis);
+        let along = |axis: DVec3| frame.grid.span_along(axis);
         let (h_lo, h_hi) = along(half);
-        let slice_step = (h_hi - h_lo) / self.slices as f64;
+        let slice_step = (h_hi - h_lo) / settings.slices as f64;
         // Light-buffer axes: any orthonormal pair ⟂ l.
         let (light_u, light_w) = basis(light);
         let (u_lo, u_hi) = along(light_u);
         let (w_lo, w_hi) = along(light_w);
-        let res = self.light_resolution as f64;
+        let res = settings.light_resolution as f64;
         Ok(Setup {
-            eye: self.camera.position_m,
+            eye: frame.camera.position_m,
             forward,
             right,
             up,
-            tan_half_fov_y: (fov.to_radians() / 2.0).tan(),
-            aspect: self.width as f64 / self.height as f64,
+            tan_half_fov_y: frame.camera.tan_half_fov(),
+            aspect: frame.width as f64 / frame.height as f64,
             light,
             half,
             front_to_back,
@@ -141,9 +242,7 @@ impl Frame {
             light_texel: [(u_hi - u_lo) / res, (w_hi - w_lo) / res],
         })
     }
-}
 
-impl Setup {
     /// Unit ray direction through the centre of pixel (i, j), row j = 0 at the top.
     pub fn ray(&self, i: usize, j: usize, width: usize, height: usize) -> DVec3 {
         crate::camera::pixel_ray(

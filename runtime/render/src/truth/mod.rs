@@ -91,10 +91,15 @@ use std::time::Instant;
 use glam::DVec3;
 use grid::ThetaGrid;
 use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use runtime::gpu::{Gpu, GpuTables, TexelFormat};
 
 use crate::basis;
 use crate::camera::pixel_ray;
 use crate::geometry::box_span;
+use crate::gpu::RenderError;
+use crate::model::{Job, Model, Pass, Progress, Rendered};
 use crate::objects::Light;
 use crate::{DensityGrid, Frame, FrameError, Image, MAX_FIELDS, SUN_DIAMETER_DEG};
 use phase::{PhaseSampler, rayleigh, rotate, sample_rayleigh};
@@ -110,41 +115,115 @@ pub const GUIDE_SHARE: f64 = 0.1;
 /// Samples per pixel allowed.
 pub const SPP_RANGE: (usize, usize) = (1, 1 << 20);
 
-/// What the path tracer needs besides the frame.
-#[derive(Debug, Clone, PartialEq)]
-pub struct TruthSettings {
+/// The path tracer's settings, `[render.truth]` (its lights, media and occluders are the
+/// frame's).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Settings {
     /// Samples (paths) per pixel, [`SPP_RANGE`].
     pub spp: usize,
-    /// Stop early once the noise (see [`TruthImage::noise`]) is at or below this; 0: never.
-    pub target_noise: f64,
     /// Seed of the random streams.
     pub seed: u64,
-    /// Point and spot lights.
-    pub lights: Vec<Light>,
-    /// Wavelengths each camera path carries, 1…[`MAX_CARRIED`]; 0: the default (all of an
-    /// `rgb3` bake's three, else [`MAX_CARRIED`]). 1 is one wavelength per path.
-    pub wavelengths_per_path: usize,
-    /// Homogeneous media (`[[medium]]`) and Lambertian occluders (`[[occluder]]`).
-    pub media: Vec<crate::objects::Medium>,
-    /// Lambertian occluders (`[[occluder]]`).
-    pub occluders: Vec<crate::objects::Occluder>,
+    /// Stop early once the noise (see [`TruthImage::noise`]) is at or below this, [0, 1); 0:
+    /// run every sample.
+    #[serde(rename = "noise")]
+    pub target_noise: f64,
     /// Scatterings after which a path ends, [1, [`MAX_BOUNCES`]]; 0: [`MAX_BOUNCES`]. 1 is
     /// exact single scattering.
     pub max_scatterings: usize,
+    /// Wavelengths each camera path carries, 1…[`MAX_CARRIED`]; 0: the default (all of an
+    /// `rgb3` bake's three, else [`MAX_CARRIED`]). 1 is one wavelength per path.
+    pub wavelengths_per_path: usize,
 }
 
-impl Default for TruthSettings {
+impl Default for Settings {
     fn default() -> Self {
         Self {
             spp: 256,
-            target_noise: 0.0,
             seed: 1,
-            lights: Vec::new(),
-            wavelengths_per_path: 0,
-            media: Vec::new(),
-            occluders: Vec::new(),
+            target_noise: 0.0,
             max_scatterings: 0,
+            wavelengths_per_path: 0,
         }
+    }
+}
+
+/// `--model truth`.
+pub struct Truth;
+
+impl Model for Truth {
+    const NAME: &'static str = "truth";
+    const ABOUT: &'static str = "an unbiased spectral Monte Carlo path tracer of the same scene \
+        on the CPU (all cores), the reference every fast model is measured against; its EXR adds \
+        stderr.R/G/B, each pixel's standard error";
+    const TEXELS: TexelFormat = TexelFormat::F32;
+    const GPU: bool = false;
+    type Settings = Settings;
+    type Renderer = ();
+
+    fn check(s: &Settings) -> Result<(), FrameError> {
+        check_settings(s)
+    }
+
+    fn check_frame(s: &Settings, frame: &Frame) -> Result<(), FrameError> {
+        check(frame, s)?;
+        crate::objects::check_lights(&frame.lights, &frame.occluders)
+    }
+
+    fn renderer(_: &Gpu, _: &GpuTables) -> Option<()> {
+        None
+    }
+
+    fn render_cpu(s: &Settings, job: &Job) -> Result<Rendered, RenderError> {
+        let truth = render(job.tables, job.frame, s, job.progress)?;
+        let summary = format!(
+            "path-traced truth: {}×{}, {} spp, noise {:.2} % (median relative standard error, \
+             green, volume pixels), {:.1} s, {:.3} M paths/s on {} threads",
+            truth.image.width,
+            truth.image.height,
+            truth.spp,
+            truth.noise * 100.0,
+            truth.seconds,
+            truth.paths_per_second / 1e6,
+            rayon::current_num_threads()
+        );
+        let extra = (0..3)
+            .map(|c| {
+                (
+                    format!("stderr.{}", ["R", "G", "B"][c]),
+                    truth.std_error.iter().map(|e| e[c]).collect(),
+                )
+            })
+            .collect();
+        Ok(Rendered {
+            summary,
+            figures: vec![
+                ("spp", truth.spp as f64),
+                ("noise", truth.noise),
+                ("paths per second", truth.paths_per_second),
+                // The noise falls as 1/√(time): the time this estimator needs for 1 %.
+                (
+                    "seconds to 1 % noise",
+                    truth.seconds * (truth.noise / 0.01).powi(2),
+                ),
+            ],
+            image: truth.image,
+            extra,
+            passes: vec![Pass {
+                name: "trace",
+                seconds: truth.seconds,
+            }],
+        })
+    }
+
+    fn render_gpu(
+        _: &(),
+        s: &Settings,
+        job: &Job,
+        _: &Gpu,
+        _: &GpuTables,
+    ) -> Result<Rendered, RenderError> {
+        Self::render_cpu(s, job)
     }
 }
 
@@ -165,16 +244,6 @@ pub struct TruthImage {
     pub seconds: f64,
     /// Paths traced per second.
     pub paths_per_second: f64,
-}
-
-/// Progress of a progressive render: called after each pass.
-pub trait TruthProgress: Sync {
-    /// `spp` of `total` samples per pixel done, current noise, seconds so far.
-    fn pass(&self, spp: usize, total: usize, noise: f64, seconds: f64);
-}
-
-impl TruthProgress for () {
-    fn pass(&self, _: usize, _: usize, _: f64, _: f64) {}
 }
 
 /// The random stream of one sample (`Rng::stream(seed, pixel, sample)`).
@@ -341,11 +410,7 @@ fn bad<T>(s: String) -> Result<T, FrameError> {
 impl<'a> Tracer<'a> {
     /// Builds the per-wavelength optics of `tables` (which must hold single-scattering tables,
     /// i.e. come from a bake of this version) for the frame's grid, sun and atmosphere.
-    pub fn new(
-        tables: &Tables,
-        frame: &'a Frame,
-        settings: &TruthSettings,
-    ) -> Result<Self, FrameError> {
+    pub fn new(tables: &Tables, frame: &'a Frame, settings: &Settings) -> Result<Self, FrameError> {
         crate::shading::check_fields(tables, frame)?;
         let spectrum = tables.spectrum.as_ref().ok_or_else(|| {
             FrameError(format!(
@@ -365,7 +430,7 @@ impl<'a> Tracer<'a> {
             }
         }
         let max = frame.grid.max_density();
-        let media: Vec<(crate::objects::Region, f64, usize)> = settings
+        let media: Vec<(crate::objects::Region, f64, usize)> = frame
             .media
             .iter()
             .map(|m| {
@@ -438,7 +503,7 @@ impl<'a> Tracer<'a> {
                 .sum::<f64>()
                 + media_max)
                 .max(majorant);
-            let (haze_ext_sl, haze_sca_sl) = frame.haze.map_or((0.0, 0.0), |h| {
+            let (haze_ext_sl, haze_sca_sl) = frame.haze.as_ref().map_or((0.0, 0.0), |h| {
                 let f = &fields[h.field];
                 let ext = h.number_density_per_m3 * f.sigma_ext;
                 (ext, ext * f.albedo)
@@ -475,10 +540,10 @@ impl<'a> Tracer<'a> {
         {
             let p = frame.camera.position_m;
             grow(&mut track, p, p);
-            for l in &settings.lights {
+            for l in &frame.lights {
                 grow(&mut track, l.position_m, l.position_m);
             }
-            for o in &settings.occluders {
+            for o in &frame.occluders {
                 let (a, b) = o.bounds();
                 grow(&mut track, a, b);
             }
@@ -498,7 +563,10 @@ impl<'a> Tracer<'a> {
             grid: &frame.grid,
             n_fields: tables.fields.len(),
             air_on: bands.iter().any(|b| b.beta_air_sl > 0.0),
-            haze: frame.haze.map(|h| (h.field, 1.0 / h.scale_height_m)),
+            haze: frame
+                .haze
+                .as_ref()
+                .map(|h| (h.field, 1.0 / h.scale_height_m)),
             wavelengths_per_path: match settings.wavelengths_per_path {
                 0 => bands.len().min(MAX_CARRIED),
                 n => n,
@@ -512,9 +580,9 @@ impl<'a> Tracer<'a> {
             cos_disk,
             disk_sr: 2.0 * PI * (1.0 - cos_disk),
             ground_albedo: frame.ground_albedo,
-            lights: settings.lights.clone(),
+            lights: frame.lights.clone(),
             media,
-            occluders: settings.occluders.clone(),
+            occluders: frame.occluders.clone(),
             track_min,
             track_max,
             background: [0.0; 3],
@@ -1120,35 +1188,10 @@ impl<'a> Tracer<'a> {
 }
 
 /// Checks what the truth needs of a frame and its settings, naming the value and its range.
-pub fn check(frame: &Frame, settings: &TruthSettings) -> Result<(), FrameError> {
+pub fn check(frame: &Frame, settings: &Settings) -> Result<(), FrameError> {
     frame.check_view()?;
-    if !(SPP_RANGE.0..=SPP_RANGE.1).contains(&settings.spp) {
-        return bad(format!(
-            "spp = {} is outside the allowed range [{}, {}] samples per pixel",
-            settings.spp, SPP_RANGE.0, SPP_RANGE.1
-        ));
-    }
-    if !(settings.target_noise.is_finite() && (0.0..1.0).contains(&settings.target_noise)) {
-        return bad(format!(
-            "target noise = {} is outside the allowed range [0, 1) (relative standard error)",
-            settings.target_noise
-        ));
-    }
-    if settings.wavelengths_per_path > MAX_CARRIED {
-        return bad(format!(
-            "wavelengths per path = {} is outside the allowed range [1, {MAX_CARRIED}] (0: the \
-             default)",
-            settings.wavelengths_per_path
-        ));
-    }
-    if settings.max_scatterings > MAX_BOUNCES {
-        return bad(format!(
-            "max scatterings = {} is outside the allowed range [1, {MAX_BOUNCES}] (0: the \
-             default)",
-            settings.max_scatterings
-        ));
-    }
-    for (i, l) in settings.lights.iter().enumerate() {
+    check_settings(settings)?;
+    for (i, l) in frame.lights.iter().enumerate() {
         if l.position_m.y.is_nan() || l.position_m.y <= 0.0 || !l.position_m.is_finite() {
             return bad(format!(
                 "[[light]] {}: position_m = {:?} is at or below the ground (y = 0), inside an \
@@ -1161,18 +1204,49 @@ pub fn check(frame: &Frame, settings: &TruthSettings) -> Result<(), FrameError> 
     Ok(())
 }
 
+/// The settings alone, each against its allowed range.
+fn check_settings(settings: &Settings) -> Result<(), FrameError> {
+    if !(SPP_RANGE.0..=SPP_RANGE.1).contains(&settings.spp) {
+        return bad(format!(
+            "spp = {} is outside the allowed range [{}, {}] samples per pixel",
+            settings.spp, SPP_RANGE.0, SPP_RANGE.1
+        ));
+    }
+    if !(settings.target_noise.is_finite() && (0.0..1.0).contains(&settings.target_noise)) {
+        return bad(format!(
+            "noise = {} is outside the allowed range [0, 1) (relative standard error)",
+            settings.target_noise
+        ));
+    }
+    if settings.wavelengths_per_path > MAX_CARRIED {
+        return bad(format!(
+            "wavelengths_per_path = {} is outside the allowed range [1, {MAX_CARRIED}] (0: the \
+             default)",
+            settings.wavelengths_per_path
+        ));
+    }
+    if settings.max_scatterings > MAX_BOUNCES {
+        return bad(format!(
+            "max_scatterings = {} is outside the allowed range [1, {MAX_BOUNCES}] (0: the \
+             default)",
+            settings.max_scatterings
+        ));
+    }
+    Ok(())
+}
+
 /// Renders `frame` by path tracing (module docs); `progress` is told after every pass.
 pub fn render(
     tables: &Tables,
     frame: &Frame,
-    settings: &TruthSettings,
-    progress: &dyn TruthProgress,
+    settings: &Settings,
+    progress: &dyn Progress,
 ) -> Result<TruthImage, FrameError> {
     check(frame, settings)?;
     let tracer = Tracer::new(tables, frame, settings)?;
     let (w, h) = (frame.width, frame.height);
     let axes = frame.camera.axes().expect("checked");
-    let tan = (frame.camera.fov_deg.to_radians() / 2.0).tan();
+    let tan = frame.camera.tan_half_fov();
     let rays: Vec<DVec3> = (0..w * h)
         .map(|p| pixel_ray(axes, tan, (p % w, p / w), (w, h)))
         .collect();
@@ -1201,7 +1275,11 @@ pub fn render(
         });
         done += batch;
         noise = noise_of(&acc, done, &transparency);
-        progress.pass(done, settings.spp, noise, start.elapsed().as_secs_f64());
+        progress.update(
+            done as u64,
+            settings.spp as u64,
+            &format!("noise {:.2} %", noise * 100.0),
+        );
         if settings.target_noise > 0.0 && noise <= settings.target_noise {
             break;
         }
