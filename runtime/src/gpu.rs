@@ -36,6 +36,28 @@ use crate::load::Tables;
 /// group 0.
 pub const WGSL: &str = include_str!("tables.wgsl");
 
+crate::uniform! {
+    /// `ams_params` (binding 3): the table's sizes and 1/Δθ.
+    pub struct AmsParams as "AmsParams" {
+        /// K, the angles per row.
+        pub angle_count: u32,
+        /// N_max, the rows per field in `ams_forward_fraction`.
+        pub n_stride: u32,
+        /// Fields in the table.
+        pub field_count: u32,
+        /// Padding.
+        pub pad0: u32,
+        /// 1/Δθ (1/rad).
+        pub inv_step_rad: f32,
+        /// Padding.
+        pub pad1: f32,
+        /// Padding.
+        pub pad2: f32,
+        /// Padding.
+        pub pad3: f32,
+    }
+}
+
 /// Smallest normal and largest finite half-float.
 const F16_MIN_NORMAL: f64 = 6.103_515_625e-5;
 const F16_MAX: f64 = 65504.0;
@@ -262,19 +284,16 @@ impl GpuTables {
         let (model_texture, models) = upload_models(gpu, tables)?;
         let model_depths = storage("photometeor model depths", &models.depths);
         let inv_step = 1.0 / tables.theta_step_deg.to_radians();
-        let params_words: [u32; 8] = [
-            k_len as u32,
-            n_stride as u32,
-            tables.fields.len() as u32,
-            0,
-            (inv_step as f32).to_bits(),
-            0,
-            0,
-            0,
-        ];
+        let params = AmsParams {
+            angle_count: k_len as u32,
+            n_stride: n_stride as u32,
+            field_count: tables.fields.len() as u32,
+            inv_step_rad: inv_step as f32,
+            ..Default::default()
+        };
         let params = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("photometeor table params"),
-            contents: bytemuck::cast_slice(&params_words),
+            contents: bytemuck::bytes_of(&params),
             usage: wgpu::BufferUsages::UNIFORM,
         });
         let layout = Self::bind_group_layout(device);

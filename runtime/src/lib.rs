@@ -16,5 +16,6 @@ pub mod gpu;
 pub mod load;
 pub mod sample;
 pub mod shaders;
+pub mod uniform;
 
 pub use load::{FieldTable, LoadError, Spectrum, Tables};

@@ -1,7 +1,7 @@
 // The pixel around a volume's light, shared by riley's composite and max's gather (included
 // after slicing.wgsl; the including shader's `rp` also has eye (xyz), sun (xyz towards the sun,
 // w = cos of the disk radius), irradiance (rgb; w = the disk's solid angle) and grid_min.w (the
-// ground's albedo)). The CPU reference is runtime::render::riley::cpu::compose.
+// ground's albedo)). The CPU reference is render::shading::compose.
 
 // The distance K along d from the eye to the ground; K < 0 stands for ∞ (the ray leaves the
 // atmosphere without meeting the ground).

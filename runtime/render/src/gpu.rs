@@ -11,7 +11,7 @@ use wgpu::util::DeviceExt;
 use runtime::Tables;
 use runtime::gpu::{Gpu, GpuError, GpuTables, WGSL, read_back};
 
-use crate::{Frame, FrameError, Image, MAX_FIELDS};
+use crate::{Frame, FrameError, Image, MAX_FIELDS, SUN_DIAMETER_DEG};
 
 /// The pieces the slicing renderers' shaders share (grid sampling, camera rays, the sky).
 pub const SLICING_WGSL: &str = include_str!("slicing.wgsl");
@@ -91,38 +91,61 @@ pub(crate) fn v4(v: glam::DVec3, w: f64) -> [f32; 4] {
     [v[0] as f32, v[1] as f32, v[2] as f32, w as f32]
 }
 
-/// The rows riley's and max's params uniforms end with (their WGSL structs' order): each field's
+/// What riley's and max's params uniforms end with (their WGSL structs' order): each field's
 /// σ_ext (m², [`MAX_FIELDS`] rows, zero past the last field), the air's β at sea level and
-/// 1/H, the sun's direction and the cosine of its disk's radius `cos_disk`, its irradiance and
-/// the disk's solid angle.
-pub(crate) fn field_and_sky_rows(
-    tables: &Tables,
-    frame: &Frame,
-    sun_dir: glam::DVec3,
-    cos_disk: f64,
-) -> Vec<[f32; 4]> {
-    let mut rows: Vec<[f32; 4]> = (0..MAX_FIELDS)
-        .map(|i| {
+/// 1/H, the sun's direction and the cosine of its disk's radius, its irradiance and the disk's
+/// solid angle.
+pub(crate) struct FieldsAndSky {
+    pub sigma_ext: [[f32; 4]; MAX_FIELDS],
+    pub sky_beta: [f32; 4],
+    pub sun: [f32; 4],
+    pub irradiance: [f32; 4],
+}
+
+/// [`FieldsAndSky`] of `tables` and `frame`.
+pub(crate) fn fields_and_sky(tables: &Tables, frame: &Frame) -> FieldsAndSky {
+    let cos_disk = (SUN_DIAMETER_DEG / 2.0).to_radians().cos();
+    FieldsAndSky {
+        sigma_ext: std::array::from_fn(|i| {
             tables
                 .fields
                 .get(i)
                 .map_or([0.0; 4], |f| v4(f.sigma_ext_m2.into(), 0.0))
-        })
-        .collect();
-    rows.push(v4(
-        frame.atmosphere.beta_sea_level_per_m.into(),
-        1.0 / frame.atmosphere.scale_height_m,
-    ));
-    rows.push(v4(sun_dir, cos_disk));
-    rows.push(v4(
-        frame.sun.irradiance.into(),
-        std::f64::consts::TAU * (1.0 - cos_disk),
-    ));
-    rows
+        }),
+        sky_beta: v4(
+            frame.atmosphere.beta_sea_level_per_m.into(),
+            1.0 / frame.atmosphere.scale_height_m,
+        ),
+        sun: v4(frame.sun.direction(), cos_disk),
+        irradiance: v4(
+            frame.sun.irradiance.into(),
+            std::f64::consts::TAU * (1.0 - cos_disk),
+        ),
+    }
 }
 
-/// Bind group 1's layout and the compute pipelines `names` of a slicing renderer's shader
-/// `wgsl` (compiled after [`WGSL`] and [`SLICING_WGSL`], `tables`' layout as bind group 0).
+runtime::uniform! {
+    /// The per-slice uniform of the slicing models (`SliceParams` in `render.wgsl` and
+    /// `svs.wgsl`), read at a dynamic offset.
+    pub struct SliceParams as "SliceParams" {
+        /// The slice's plane value (m).
+        pub plane: f32,
+        /// Its index in processing order.
+        pub index: u32,
+        /// Padding.
+        pub pad0: u32,
+        /// Padding.
+        pub pad1: u32,
+    }
+}
+
+/// A slicing model's whole shader: [`WGSL`], [`SLICING_WGSL`], then the model's own `wgsl`.
+pub fn slicing_source(wgsl: &str) -> String {
+    format!("{WGSL}\n{SLICING_WGSL}\n{wgsl}")
+}
+
+/// Bind group 1's layout and the compute pipelines `names` of a shader `source` (a whole
+/// module, [`slicing_source`]; `tables`' layout as bind group 0).
 /// Bind group 1 has `bindings` buffers: 0 the params uniform, 5 the slice uniforms (dynamic
 /// offset), those in `read_only` read-only storage (1, the densities, always among them),
 /// every other one read-write storage.
@@ -130,7 +153,7 @@ pub(crate) fn build(
     gpu: &Gpu,
     tables: &GpuTables,
     label: &str,
-    wgsl: &str,
+    source: String,
     bindings: u32,
     read_only: &[u32],
     names: &[&str],
@@ -156,7 +179,7 @@ pub(crate) fn build(
     });
     let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
         label: Some(label),
-        source: wgpu::ShaderSource::Wgsl(format!("{WGSL}\n{SLICING_WGSL}\n{wgsl}").into()),
+        source: wgpu::ShaderSource::Wgsl(source.into()),
     });
     let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
         label: Some(&format!("{label} pipeline layout")),
@@ -268,9 +291,12 @@ pub(crate) fn slice_uniforms(device: &wgpu::Device, planes: &[f64]) -> (wgpu::Bu
     let stride = device.limits().min_uniform_buffer_offset_alignment.max(16) as usize;
     let mut bytes = vec![0u8; stride * planes.len()];
     for (k, &plane) in planes.iter().enumerate() {
-        let entry = &mut bytes[k * stride..k * stride + 16];
-        entry[..4].copy_from_slice(&(plane as f32).to_le_bytes());
-        entry[4..8].copy_from_slice(&(k as u32).to_le_bytes());
+        let entry = SliceParams {
+            plane: plane as f32,
+            index: k as u32,
+            ..Default::default()
+        };
+        bytes[k * stride..k * stride + 16].copy_from_slice(bytemuck::bytes_of(&entry));
     }
     let buffer = filled(
         device,

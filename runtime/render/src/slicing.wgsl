@@ -1,4 +1,4 @@
-// Pieces both slicing renderers' shaders use (runtime::render::riley and ::miyazaki), included
+// Pieces both slicing renderers' shaders use (render::riley and render::miyazaki), included
 // after tables.wgsl and before either. The including shader declares `rp` with at least:
 // forward (w = tan(fov_y / 2)), right (w = aspect), up, sizes (x = width, y = height),
 // grid_min, grid_max (xyz: the box), grid_dims (xyz voxels, w = field count), sigma_ext
@@ -100,7 +100,7 @@ fn air_transparency(y: f32, p_y: f32, k: f32) -> vec3<f32> {
     return exp(-beta_eye / g * path_factor(p_y, k));
 }
 
-// Sky light from the first K metres of the ray (runtime::render::sky::Atmosphere::inscatter).
+// Sky light from the first K metres of the ray (render::sky::Atmosphere::inscatter).
 fn inscatter(y: f32, p_y: f32, k: f32, cos_sun: f32, l_y: f32) -> vec3<f32> {
     if (k == 0.0) {
         return vec3<f32>(0.0);

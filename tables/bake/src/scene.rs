@@ -111,7 +111,7 @@ struct SceneFile {
     scene: Spanned<Header>,
     #[serde(rename = "field", default)]
     fields: Vec<Spanned<FieldFile>>,
-    // The renderer's tables (`runtime::render::scene`), checked there, not by the bake.
+    // The renderer's tables (`render::scene`), checked there, not by the bake.
     #[serde(default, rename = "render")]
     _render: Option<toml::Value>,
     #[serde(default, rename = "camera")]

@@ -21,6 +21,28 @@ pub const BIRI_WGSL: &str = include_str!("biri.wgsl");
 /// Spheres one GPU frame can hold (their shadow states at the eye are one u32's bits).
 pub const MAX_GPU_SPHERES: usize = 32;
 
+runtime::uniform! {
+    /// `Params` of `biri.wgsl` (its comments say what each component holds).
+    pub struct BiriParams as "Params" {
+        /// Eye (m); w = tan(fov_y / 2).
+        pub eye: [f32; 4],
+        /// View direction; w = aspect.
+        pub forward: [f32; 4],
+        /// Right axis; w = ground albedo.
+        pub right: [f32; 4],
+        /// Up axis.
+        pub up: [f32; 4],
+        /// Width, height, lights, media.
+        pub counts: [u32; 4],
+        /// Spheres, meshes, kernel (0 exact, 1 polynomial).
+        pub counts2: [u32; 4],
+        /// z = 1: surfaces only (stage 2).
+        pub counts3: [u32; 4],
+        /// The kernel table's last depth.
+        pub depth_max: [f32; 4],
+    }
+}
+
 /// The pipeline, built once.
 pub struct Renderer {
     layout: wgpu::BindGroupLayout,
@@ -31,6 +53,11 @@ pub struct Renderer {
 fn with_bits(v: DVec3, bits: u32) -> [f32; 4] {
     let [x, y, z, _] = v4(v, 0.0);
     [x, y, z, f32::from_bits(bits)]
+}
+
+/// The model's whole shader module, as the renderer compiles it.
+pub fn source() -> String {
+    format!("{WGSL}\n{BIRI_WGSL}")
 }
 
 impl Renderer {
@@ -52,7 +79,7 @@ impl Renderer {
         });
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("photometeor biri"),
-            source: wgpu::ShaderSource::Wgsl(format!("{WGSL}\n{BIRI_WGSL}").into()),
+            source: wgpu::ShaderSource::Wgsl(source().into()),
         });
         let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("photometeor biri pipeline layout"),
@@ -214,27 +241,26 @@ impl Renderer {
             }
         }
         let (w, h) = (frame.width, frame.height);
-        let u = |v: [u32; 4]| v.map(f32::from_bits);
-        let params: Vec<[f32; 4]> = vec![
-            v4(o, frame.camera.tan_half_fov()),
-            v4(forward, w as f64 / h as f64),
-            v4(right, frame.ground_albedo),
-            v4(up, 0.0),
-            u([
+        let params = BiriParams {
+            eye: v4(o, frame.camera.tan_half_fov()),
+            forward: v4(forward, w as f64 / h as f64),
+            right: v4(right, frame.ground_albedo),
+            up: v4(up, 0.0),
+            counts: [
                 w as u32,
                 h as u32,
                 frame.lights.len() as u32,
                 frame.media.len() as u32,
-            ]),
-            u([
+            ],
+            counts2: [
                 spheres.len() as u32,
                 mesh_rows.len() as u32 / 2,
                 u32::from(settings.kernel == super::Kernel::Polynomial),
                 0,
-            ]),
-            u([0, 0, u32::from(surfaces_only), 0]),
-            [depth_max as f32, 0.0, 0.0, 0.0],
-        ];
+            ],
+            counts3: [0, 0, u32::from(surfaces_only), 0],
+            depth_max: [depth_max as f32, 0.0, 0.0, 0.0],
+        };
         let image_bytes = 16 * (w * h) as u64;
         check_sizes(
             device,
@@ -255,7 +281,12 @@ impl Renderer {
             )
         };
         let storage = wgpu::BufferUsages::STORAGE;
-        let params = buffer("biri params", &params, wgpu::BufferUsages::UNIFORM);
+        let params = filled(
+            device,
+            "biri params",
+            bytemuck::bytes_of(&params),
+            wgpu::BufferUsages::UNIFORM,
+        );
         let lights = buffer("biri lights", &lights, storage);
         let planes = buffer("biri planes", &planes, storage);
         let spheres = buffer("biri spheres", &sphere_rows, storage);

@@ -1,5 +1,5 @@
 // Max et al. 2004's final gather (§4) on the GPU: one invocation per pixel does what
-// runtime::render::max::cpu::gather does per ray, in f32, from the per-voxel lighting the CPU
+// render::max::cpu::gather does per ray, in f32, from the per-voxel lighting the CPU
 // computed (T_sun, the diffusion solution I_0 and the reduced skylight: steps 1–4 of the
 // module docs), then composes the pixel with the air, the sun disk and the ground. Included
 // after tables.wgsl (bind group 0: Ams_1 by `ams_mix`, the Poisson mixtures by `poisson`),
@@ -173,7 +173,7 @@ fn gather(@builtin(global_invocation_id) id: vec3<u32>) {
     }
     atomicMax(&largest_edge, bitcast<u32>(largest));
 
-    // Composition (riley::cpu::compose), the ground lit through the volume.
+    // Composition (render::shading::compose), the ground lit through the volume.
     var lit = vec3<f32>(1.0);
     let k_end = ground_distance(d);
     if (rp.grid_min.w > 0.0 && k_end > 0.0) {

@@ -18,10 +18,40 @@ use runtime::gpu::{Gpu, GpuTables, read_back};
 use super::Settings;
 use super::cpu::{Lighting, check, voxel_length};
 use crate::gpu::{
-    COMPOSE_WGSL, RenderError, Timings, bind, build, check_sizes, field_and_sky_rows, filled,
-    storage, timed_frame, v4,
+    COMPOSE_WGSL, FieldsAndSky, RenderError, Timings, bind, build, check_sizes, fields_and_sky,
+    filled, slicing_source, storage, timed_frame, v4,
 };
-use crate::{Frame, FrameError, Image, SUN_DIAMETER_DEG};
+use crate::{Frame, FrameError, Image, MAX_FIELDS};
+
+runtime::uniform! {
+    /// `MaxParams` of `gather.wgsl` (its comments say what each w holds).
+    pub struct MaxParams as "MaxParams" {
+        /// Eye (m); w = the march's step (m).
+        pub eye: [f32; 4],
+        /// View direction; w = tan(fov_y / 2).
+        pub forward: [f32; 4],
+        /// Right axis; w = aspect.
+        pub right: [f32; 4],
+        /// Up axis; w = the voxel length (h_x h_y h_z)^{1/3} (m).
+        pub up: [f32; 4],
+        /// Grid box's lower corner; w = ground albedo.
+        pub grid_min: [f32; 4],
+        /// Grid box's upper corner; w = the threshold T.
+        pub grid_max: [f32; 4],
+        /// nx, ny, nz, field count.
+        pub grid_dims: [u32; 4],
+        /// Width, height, 0, 0.
+        pub sizes: [u32; 4],
+        /// Per field, σ_ext per channel (m²).
+        pub sigma_ext: [[f32; 4]; MAX_FIELDS],
+        /// β at sea level per channel (1/m); w = γ (1/m).
+        pub sky_beta: [f32; 4],
+        /// Unit vector towards the sun; w = cos(disk radius).
+        pub sun: [f32; 4],
+        /// Irradiance per channel; w = disk solid angle (sr).
+        pub irradiance: [f32; 4],
+    }
+}
 
 /// The gather's WGSL (after [`runtime::gpu::WGSL`], the slicing renderers' WGSL and [`COMPOSE_WGSL`]).
 pub const GATHER_WGSL: &str = include_str!("gather.wgsl");
@@ -30,6 +60,11 @@ pub const GATHER_WGSL: &str = include_str!("gather.wgsl");
 pub struct Renderer {
     layout: wgpu::BindGroupLayout,
     pipeline: wgpu::ComputePipeline,
+}
+
+/// The model's whole shader module, as the renderer compiles it.
+pub fn source() -> String {
+    slicing_source(&format!("{COMPOSE_WGSL}\n{GATHER_WGSL}"))
 }
 
 impl Renderer {
@@ -41,7 +76,7 @@ impl Renderer {
             gpu,
             tables,
             "photometeor max gather",
-            &format!("{COMPOSE_WGSL}\n{GATHER_WGSL}"),
+            source(),
             5,
             &[1, 2],
             &["gather"],
@@ -84,25 +119,31 @@ impl Renderer {
         let size: [f64; 3] =
             std::array::from_fn(|a| (grid.max_m[a] - grid.min_m[a]) / grid.dims[a] as f64);
         let step = 0.5 * size.iter().copied().fold(f64::INFINITY, f64::min);
-        let sun_dir = frame.sun.direction();
-        let cos_disk = (SUN_DIAMETER_DEG / 2.0).to_radians().cos();
-        let uints = |v: [u32; 4]| v.map(f32::from_bits);
-        let mut params: Vec<[f32; 4]> = vec![
-            v4(frame.camera.position_m, step),
-            v4(forward, (frame.camera.fov_deg.to_radians() / 2.0).tan()),
-            v4(right, w as f64 / h as f64),
-            v4(up, voxel_length(grid)),
-            v4(grid.min_m, frame.ground_albedo),
-            v4(grid.max_m, settings.threshold),
-            uints([
+        let FieldsAndSky {
+            sigma_ext,
+            sky_beta,
+            sun,
+            irradiance,
+        } = fields_and_sky(tables, frame);
+        let params = MaxParams {
+            eye: v4(frame.camera.position_m, step),
+            forward: v4(forward, frame.camera.tan_half_fov()),
+            right: v4(right, w as f64 / h as f64),
+            up: v4(up, voxel_length(grid)),
+            grid_min: v4(grid.min_m, frame.ground_albedo),
+            grid_max: v4(grid.max_m, settings.threshold),
+            grid_dims: [
                 grid.dims[0] as u32,
                 grid.dims[1] as u32,
                 grid.dims[2] as u32,
                 tables.fields.len() as u32,
-            ]),
-            uints([w as u32, h as u32, 0, 0]),
-        ];
-        params.extend(field_and_sky_rows(tables, frame, sun_dir, cos_disk));
+            ],
+            sizes: [w as u32, h as u32, 0, 0],
+            sigma_ext,
+            sky_beta,
+            sun,
+            irradiance,
+        };
         let rgb = |v: &[f64; 3], w: f32| [v[0] as f32, v[1] as f32, v[2] as f32, w];
         let mut rows: Vec<[f32; 4]> = Vec::with_capacity(3 * voxels);
         for i in 0..voxels {
@@ -116,7 +157,7 @@ impl Renderer {
         let params = filled(
             device,
             "photometeor max params",
-            bytemuck::cast_slice(&params),
+            bytemuck::bytes_of(&params),
             wgpu::BufferUsages::UNIFORM,
         );
         let density = filled(

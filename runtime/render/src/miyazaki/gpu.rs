@@ -13,9 +13,53 @@ use runtime::gpu::{Gpu, GpuTables};
 use super::{Settings, SvsPhase};
 use crate::gpu::{
     Dispatch, RenderError, Timings, a4, bind, build, check_sizes, filled, run_slices,
-    slice_uniforms, storage, v4,
+    slice_uniforms, slicing_source, storage, v4,
 };
 use crate::{Frame, Image, MAX_FIELDS, SUN_DIAMETER_DEG};
+
+runtime::uniform! {
+    /// `SvsParams` of `svs.wgsl` (its comments say what each w holds).
+    pub struct SvsParams as "SvsParams" {
+        /// Eye (m); w = 1 back to front, 0 front to back.
+        pub eye: [f32; 4],
+        /// View direction; w = tan(fov_y / 2).
+        pub forward: [f32; 4],
+        /// Right axis; w = aspect.
+        pub right: [f32; 4],
+        /// Up axis; w = k_multi (1/sr).
+        pub up: [f32; 4],
+        /// Unit vector towards the sun; w = slice spacing Δ (m).
+        pub to_sun: [f32; 4],
+        /// The slices' unit normal; w = Δs, the sun's path per slice (m).
+        pub normal: [f32; 4],
+        /// Shadow-surface axis u; w = its origin along u.
+        pub shadow_u: [f32; 4],
+        /// Shadow-surface axis w; w = its origin along w.
+        pub shadow_w: [f32; 4],
+        /// Texel size u, w (m); z = ground albedo; w = 1: Cornette–Shanks.
+        pub shadow_texel: [f32; 4],
+        /// Grid box's lower corner; w = lower plane value of the slices' range.
+        pub grid_min: [f32; 4],
+        /// Grid box's upper corner; w = upper plane value.
+        pub grid_max: [f32; 4],
+        /// nx, ny, nz, field count.
+        pub grid_dims: [u32; 4],
+        /// Width, height, shadow resolution, haze field + 1 (0: none).
+        pub sizes: [u32; 4],
+        /// Per field, σ_ext per channel (m²).
+        pub sigma_ext: [[f32; 4]; MAX_FIELDS],
+        /// Per field, the Cornette–Shanks asymmetry per channel.
+        pub g: [[f32; 4]; MAX_FIELDS],
+        /// Rayleigh β_sl per channel (1/m); w = 1/H.
+        pub sky_beta: [f32; 4],
+        /// Haze N_0 σ_ext per channel (1/m); w = 1/H_haze.
+        pub haze: [f32; 4],
+        /// Haze N_0 σ_sca per channel (1/m); w = cos of the disk radius.
+        pub haze_sca: [f32; 4],
+        /// Irradiance per channel; w = disk solid angle (sr).
+        pub irradiance: [f32; 4],
+    }
+}
 
 /// The model's WGSL (after `runtime::gpu::WGSL` and `crate::gpu::SLICING_WGSL`).
 pub const SVS_WGSL: &str = include_str!("svs.wgsl");
@@ -29,6 +73,11 @@ pub struct Renderer {
     composite: wgpu::ComputePipeline,
 }
 
+/// The model's whole shader module, as the renderer compiles it.
+pub fn source() -> String {
+    slicing_source(SVS_WGSL)
+}
+
 impl Renderer {
     /// Compiles the shaders and builds the pipelines, with `tables`' layout as bind group 0.
     pub fn new(gpu: &Gpu, tables: &GpuTables) -> Self {
@@ -36,7 +85,7 @@ impl Renderer {
             gpu,
             tables,
             "photometeor svs",
-            SVS_WGSL,
+            source(),
             7,
             &[1],
             &["clear", "shadow_slice", "eye_slice", "composite"],
@@ -77,16 +126,20 @@ impl Renderer {
         let cos_disk = (SUN_DIAMETER_DEG / 2.0).to_radians().cos();
         let (forward, right, up) = s.axes;
         let haze = frame.haze.as_ref().map(|h| (&tables.fields[h.field], h));
-        let mut params: Vec<[f32; 4]> = vec![
-            v4(s.eye, if s.back_to_front { 1.0 } else { 0.0 }),
-            v4(forward, s.tan_half_fov_y),
-            v4(right, w as f64 / h as f64),
-            v4(up, settings.k_multi),
-            v4(s.to_sun, s.step),
-            v4(s.normal, s.sun_step),
-            v4(s.shadow_u, s.shadow_origin[0]),
-            v4(s.shadow_w, s.shadow_origin[1]),
-            [
+        let [nx, ny, nz] = frame.grid.dims;
+        let per_field = |f: &dyn Fn(&runtime::FieldTable) -> [f64; 3]| -> [[f32; 4]; MAX_FIELDS] {
+            std::array::from_fn(|i| tables.fields.get(i).map_or([0.0; 4], |t| a4(f(t), 0.0)))
+        };
+        let params = SvsParams {
+            eye: v4(s.eye, if s.back_to_front { 1.0 } else { 0.0 }),
+            forward: v4(forward, s.tan_half_fov_y),
+            right: v4(right, w as f64 / h as f64),
+            up: v4(up, settings.k_multi),
+            to_sun: v4(s.to_sun, s.step),
+            normal: v4(s.normal, s.sun_step),
+            shadow_u: v4(s.shadow_u, s.shadow_origin[0]),
+            shadow_w: v4(s.shadow_w, s.shadow_origin[1]),
+            shadow_texel: [
                 s.shadow_texel[0] as f32,
                 s.shadow_texel[1] as f32,
                 frame.ground_albedo as f32,
@@ -96,60 +149,42 @@ impl Renderer {
                     0.0
                 },
             ],
-            v4(frame.grid.min_m, s.range.0),
-            v4(frame.grid.max_m, s.range.1),
-        ];
-        let [nx, ny, nz] = frame.grid.dims;
-        let uints = |v: [u32; 4]| v.map(f32::from_bits);
-        params.push(uints([
-            nx as u32,
-            ny as u32,
-            nz as u32,
-            tables.fields.len() as u32,
-        ]));
-        params.push(uints([
-            w as u32,
-            h as u32,
-            res as u32,
-            frame.haze.as_ref().map_or(0, |h| h.field as u32 + 1),
-        ]));
-        for i in 0..MAX_FIELDS {
-            params.push(
-                tables
-                    .fields
-                    .get(i)
-                    .map_or([0.0; 4], |f| a4(f.sigma_ext_m2, 0.0)),
-            );
-        }
-        for i in 0..MAX_FIELDS {
-            params.push(tables.fields.get(i).map_or([0.0; 4], |f| {
-                a4(super::cpu::asymmetry(f, tables.theta_step_deg), 0.0)
-            }));
-        }
-        params.push(a4(
-            frame.atmosphere.beta_sea_level_per_m,
-            1.0 / frame.atmosphere.scale_height_m,
-        ));
-        params.push(haze.map_or([0.0; 4], |(f, h)| {
-            a4(
-                f.sigma_ext_m2.map(|e| e * h.number_density_per_m3),
-                1.0 / h.scale_height_m,
-            )
-        }));
-        params.push(a4(
-            haze.map_or([0.0; 3], |(f, h)| {
-                f.sigma_sca_m2.map(|e| e * h.number_density_per_m3)
+            grid_min: v4(frame.grid.min_m, s.range.0),
+            grid_max: v4(frame.grid.max_m, s.range.1),
+            grid_dims: [nx as u32, ny as u32, nz as u32, tables.fields.len() as u32],
+            sizes: [
+                w as u32,
+                h as u32,
+                res as u32,
+                frame.haze.as_ref().map_or(0, |h| h.field as u32 + 1),
+            ],
+            sigma_ext: per_field(&|f| f.sigma_ext_m2),
+            g: per_field(&|f| super::cpu::asymmetry(f, tables.theta_step_deg)),
+            sky_beta: a4(
+                frame.atmosphere.beta_sea_level_per_m,
+                1.0 / frame.atmosphere.scale_height_m,
+            ),
+            haze: haze.map_or([0.0; 4], |(f, h)| {
+                a4(
+                    f.sigma_ext_m2.map(|e| e * h.number_density_per_m3),
+                    1.0 / h.scale_height_m,
+                )
             }),
-            cos_disk,
-        ));
-        params.push(a4(
-            frame.sun.irradiance,
-            std::f64::consts::TAU * (1.0 - cos_disk),
-        ));
+            haze_sca: a4(
+                haze.map_or([0.0; 3], |(f, h)| {
+                    f.sigma_sca_m2.map(|e| e * h.number_density_per_m3)
+                }),
+                cos_disk,
+            ),
+            irradiance: a4(
+                frame.sun.irradiance,
+                std::f64::consts::TAU * (1.0 - cos_disk),
+            ),
+        };
         let params = filled(
             device,
             "photometeor svs params",
-            bytemuck::cast_slice(&params),
+            bytemuck::bytes_of(&params),
             wgpu::BufferUsages::UNIFORM,
         );
         let density = filled(

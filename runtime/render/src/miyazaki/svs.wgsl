@@ -1,8 +1,8 @@
-// Miyazaki, Dobashi & Nishita's shadow-view slices (runtime::render::miyazaki docs): per slice
+// Miyazaki, Dobashi & Nishita's shadow-view slices (render::miyazaki docs): per slice
 // the shadow surface first (Eq. 10), then the screen (Eqs. 8, 9, blended as §4.3), then the
 // composite with the air outside the slices, the ground and the sun disk. Included after
 // tables.wgsl (bind group 0) and slicing.wgsl. The CPU reference is
-// runtime::render::miyazaki::cpu; this follows it step for step.
+// render::miyazaki::cpu; this follows it step for step.
 
 struct SvsParams {
     eye: vec4<f32>,          // xyz; w = 1 back to front, 0 front to back

@@ -11,14 +11,54 @@ use runtime::Tables;
 use runtime::gpu::{Gpu, GpuTables};
 
 use crate::gpu::{
-    COMPOSE_WGSL, Dispatch, RenderError, Timings, bind, build, check_sizes, field_and_sky_rows,
-    filled, run_slices, slice_uniforms, storage, v4,
+    COMPOSE_WGSL, Dispatch, FieldsAndSky, RenderError, Timings, bind, build, check_sizes,
+    fields_and_sky, filled, run_slices, slice_uniforms, slicing_source, storage, v4,
 };
-use crate::{Frame, Image, SUN_DIAMETER_DEG};
+use crate::{Frame, Image, MAX_FIELDS};
 
 /// The renderer's WGSL (after [`runtime::gpu::WGSL`], [`crate::gpu::SLICING_WGSL`] and
 /// [`COMPOSE_WGSL`]).
 pub const RENDER_WGSL: &str = include_str!("render.wgsl");
+
+runtime::uniform! {
+    /// `RenderParams` of `render.wgsl` (its comments say what each w holds).
+    pub struct RenderParams as "RenderParams" {
+        /// Eye (m); w = 1 front to back, 0 back to front.
+        pub eye: [f32; 4],
+        /// View direction; w = tan(fov_y / 2).
+        pub forward: [f32; 4],
+        /// Right axis; w = aspect.
+        pub right: [f32; 4],
+        /// Up axis; w = ξ (1/sr).
+        pub up: [f32; 4],
+        /// The sunlight's direction of travel; w = slice spacing Δ (m).
+        pub light: [f32; 4],
+        /// The half-angle vector; w = 1: continuum light update, 0: Eq. 25 as printed.
+        pub half_vector: [f32; 4],
+        /// Light-buffer axis u; w = its origin along u.
+        pub light_u: [f32; 4],
+        /// Light-buffer axis w; w = its origin along w.
+        pub light_w: [f32; 4],
+        /// Texel size u, w (m); z = the sun's y component.
+        pub light_texel: [f32; 4],
+        /// Grid box's lower corner; w = ground albedo.
+        pub grid_min: [f32; 4],
+        /// Grid box's upper corner.
+        pub grid_max: [f32; 4],
+        /// nx, ny, nz, field count.
+        pub grid_dims: [u32; 4],
+        /// Width, height, light resolution, 0.
+        pub sizes: [u32; 4],
+        /// Per field, σ_ext per channel (m²).
+        pub sigma_ext: [[f32; 4]; MAX_FIELDS],
+        /// β at sea level per channel (1/m); w = γ (1/m).
+        pub sky_beta: [f32; 4],
+        /// Unit vector towards the sun; w = cos(disk radius).
+        pub sun: [f32; 4],
+        /// Irradiance per channel; w = disk solid angle (sr).
+        pub irradiance: [f32; 4],
+    }
+}
 
 /// Pipelines and layouts, built once.
 pub struct Renderer {
@@ -29,6 +69,11 @@ pub struct Renderer {
     composite: wgpu::ComputePipeline,
 }
 
+/// The model's whole shader module, as the renderer compiles it.
+pub fn source() -> String {
+    slicing_source(&format!("{COMPOSE_WGSL}\n{RENDER_WGSL}"))
+}
+
 impl Renderer {
     /// Compiles [`RENDER_WGSL`] after [`runtime::gpu::WGSL`] and builds the pipelines, with `tables`' layout
     /// as bind group 0.
@@ -37,7 +82,7 @@ impl Renderer {
             gpu,
             tables,
             "photometeor render",
-            &format!("{COMPOSE_WGSL}\n{RENDER_WGSL}"),
+            source(),
             6,
             &[1],
             &["clear", "eye_slice", "light_slice", "composite"],
@@ -76,43 +121,45 @@ impl Renderer {
             ],
         )?;
 
-        let mut params: Vec<[f32; 4]> = Vec::new();
-        let sun_dir = frame.sun.direction();
-        let cos_disk = (SUN_DIAMETER_DEG / 2.0).to_radians().cos();
-        params.push(v4(setup.eye, if setup.front_to_back { 1.0 } else { 0.0 }));
-        params.push(v4(setup.forward, setup.tan_half_fov_y));
-        params.push(v4(setup.right, setup.aspect));
-        params.push(v4(setup.up, settings.xi));
-        params.push(v4(setup.light, setup.slice_step));
+        let [nx, ny, nz] = frame.grid.dims;
+        let FieldsAndSky {
+            sigma_ext,
+            sky_beta,
+            sun,
+            irradiance,
+        } = fields_and_sky(tables, frame);
         let continuum = match settings.light_update {
             crate::LightUpdate::Continuum => 1.0,
             crate::LightUpdate::Riley2004 => 0.0,
         };
-        params.push(v4(setup.half, continuum));
-        params.push(v4(setup.light_u, setup.light_origin[0]));
-        params.push(v4(setup.light_w, setup.light_origin[1]));
-        params.push([
-            setup.light_texel[0] as f32,
-            setup.light_texel[1] as f32,
-            sun_dir[1] as f32,
-            0.0,
-        ]);
-        params.push(v4(frame.grid.min_m, frame.ground_albedo));
-        params.push(v4(frame.grid.max_m, 0.0));
-        let [nx, ny, nz] = frame.grid.dims;
-        let uints = |v: [u32; 4]| v.map(f32::from_bits);
-        params.push(uints([
-            nx as u32,
-            ny as u32,
-            nz as u32,
-            tables.fields.len() as u32,
-        ]));
-        params.push(uints([w as u32, h as u32, res as u32, 0]));
-        params.extend(field_and_sky_rows(tables, frame, sun_dir, cos_disk));
+        let params = RenderParams {
+            eye: v4(setup.eye, if setup.front_to_back { 1.0 } else { 0.0 }),
+            forward: v4(setup.forward, setup.tan_half_fov_y),
+            right: v4(setup.right, setup.aspect),
+            up: v4(setup.up, settings.xi),
+            light: v4(setup.light, setup.slice_step),
+            half_vector: v4(setup.half, continuum),
+            light_u: v4(setup.light_u, setup.light_origin[0]),
+            light_w: v4(setup.light_w, setup.light_origin[1]),
+            light_texel: [
+                setup.light_texel[0] as f32,
+                setup.light_texel[1] as f32,
+                frame.sun.direction()[1] as f32,
+                0.0,
+            ],
+            grid_min: v4(frame.grid.min_m, frame.ground_albedo),
+            grid_max: v4(frame.grid.max_m, 0.0),
+            grid_dims: [nx as u32, ny as u32, nz as u32, tables.fields.len() as u32],
+            sizes: [w as u32, h as u32, res as u32, 0],
+            sigma_ext,
+            sky_beta,
+            sun,
+            irradiance,
+        };
         let params = filled(
             device,
             "photometeor render params",
-            bytemuck::cast_slice(&params),
+            bytemuck::bytes_of(&params),
             wgpu::BufferUsages::UNIFORM,
         );
         let density = filled(

@@ -1,7 +1,7 @@
 // photometeor's renderer (runtime::render docs): half-angle slicing with a light buffer and an
 // eye buffer, Riley et al. 2004 Eqs. 6, 21/22, 25, 26 and the analytic sky (Eqs. 11–15).
 // Included after tables.wgsl (bind group 0), slicing.wgsl and compose.wgsl. The CPU reference is
-// runtime::render::riley::cpu.
+// render::riley::cpu.
 
 struct RenderParams {
     eye: vec4<f32>,          // xyz; w = 1 front to back, 0 back to front
@@ -159,7 +159,7 @@ fn light_slice(@builtin(global_invocation_id) id: vec3<u32>) {
     let texel = light_buffer[id.x + res * id.y];
     let f = forward_fraction_mix(rho, texel.w + 1.0 + tau.g);
     let albedo = select(vec3<f32>(0.0), sca / ext, ext > vec3<f32>(0.0));
-    // runtime::render::LightUpdate::keep.
+    // render::LightUpdate::keep.
     var kept: vec3<f32>;
     if (rp.half_vector.w > 0.5) {
         kept = exp(-tau * (1.0 - albedo * f));
