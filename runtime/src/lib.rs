@@ -5,9 +5,11 @@
 //! `ams(field, n, cos θ)` linear in θ and in fractional n, `forward_fraction(field, n)`, and the
 //! spatial mix of several fields (Riley et al. 2004 Eq. 6).
 //!
-//! [`gpu`] uploads the tables with the WGSL module (`tables.wgsl`). The renderers built on this
-//! are `photometeor-render`; the bake that writes the tables is `photometeor-bake`, which an
-//! engine does not link.
+//! [`gpu`] uploads the tables with the WGSL module (`tables.wgsl`); [`shaders`] translates it
+//! to HLSL, GLSL, MSL and SPIR-V; [`export`] writes the tables in other engines' formats
+//! (Bevy, Mitsuba, KTX2, NPY); [`uniform`] mirrors WGSL uniform structs as Pod structs whose
+//! layout is checked against the shader. The renderers built on this are `photometeor-render`;
+//! the bake that writes the tables is `photometeor-bake`, which an engine does not link.
 
 #![warn(missing_docs)]
 

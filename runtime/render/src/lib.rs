@@ -1,27 +1,44 @@
-//! The renderers fed by photometeor's tables, over shared parts: the scene file ([`scene`]),
-//! density volumes ([`volume`]), the analytic sky ([`sky`]), camera and sun ([`camera`]), and
-//! image output ([`image`]).
+//! The renderers fed by photometeor's tables: one module per render model over shared parts.
 //!
-//! Each render model is a module of its own with the same shape — scene keys → frame → CPU
-//! reference → GPU:
+//! # The shape of a model
+//! A model is a folder `src/<model>/` with a unit type implementing [`Model`]
+//! ([`model`]'s docs): its `NAME` (`--model <name>` and the scene table `[render.<name>]`), its
+//! `Settings` (a serde struct read from that table; keys it does not have are refused naming
+//! the model and the key), `check` (its settings' ranges) and `check_frame` (what it needs of a
+//! scene and refuses in it, before anything is baked), its CPU reference (`cpu.rs`) and its GPU
+//! renderer (`gpu.rs` with its WGSL beside it). Adding one is its folder plus one line in the
+//! `models!` list at the end of `model.rs`; the scene parser, `photometeor render`,
+//! `photometeor bench render` and the viewer dispatch through [`ModelSettings`], so nothing
+//! else changes. A model imports the shared modules only, never another model (a test holds
+//! this: `tests/layout.rs`).
+//!
+//! The models:
 //! - [`riley`]: Riley et al. 2004's half-angle slicing with a light buffer and an eye buffer,
-//!   the multiple-scattering tables Ams_n and F_n for the angular spread of sunlight (`--model
-//!   riley`, the default).
-//!
-//! - [`miyazaki`]: Miyazaki, Dobashi & Nishita's shadow-view slices — single scattering with
-//!   a constant k_multi, a shadow surface for the clouds' shadows on the ground and in the air
-//!   (`--model miyazaki`).
-//! - [`max`]: Max, Schussman, Miyazaki, Iwasaki & Nishita 2004 — a diffusion solve in the
-//!   dense core, Poisson-weighted multiple anisotropic scattering from the bake's M(D, θ) at the
-//!   edges (`--model max`, CPU).
-//! - [`truth`]: an unbiased spectral Monte Carlo path tracer of the full radiative transfer on
-//!   the same scene (`--model truth`), the reference every fast model is measured against.
-//!
+//!   the multiple-scattering tables Ams_n and F_n for the angular spread of sunlight (the
+//!   default).
+//! - [`miyazaki`]: Miyazaki, Dobashi & Nishita's shadow-view slices — single scattering with a
+//!   constant k_multi, a shadow surface for the clouds' shadows on the ground and in the air.
+//! - [`max`]: Max, Schussman, Miyazaki, Iwasaki & Nishita 2004 — a diffusion solve in the dense
+//!   core, Poisson-weighted multiple anisotropic scattering from the bake's M(D, θ) at the
+//!   edges (lighting on the CPU, the final gather on the GPU).
 //! - [`biri`]: Biri, Arquès & Michelin 2006 — single scattering of point and spot lights in
 //!   homogeneous media in closed form per ray, volumetric shadows from the occluders'
-//!   silhouette planes (`--model biri`, GPU and CPU reference).
+//!   silhouette planes.
+//! - [`truth`]: an unbiased spectral Monte Carlo path tracer of the full radiative transfer on
+//!   the same scene, the reference every fast model is measured against.
 //!
-//! A new model goes beside them as `src/<model>/`, using the same scene, camera and image.
+//! # The shared parts
+//! - [`scene`]: the scene file's render tables → [`RenderScene`] (shared keys, objects, one
+//!   checked settings table per model) → [`Frame`] (the view, the density grid, the objects)
+//!   for a set of tables.
+//! - [`objects`]: lights, media and their regions, occluders; [`geometry`]: meshes (OBJ),
+//!   spheres, ray tests; [`volume`]: density volumes rasterized into one grid.
+//! - [`camera`], [`sky`] (Riley's analytic sky, Eqs. 9–15), [`shading`] (per-sample
+//!   coefficients, sun-side buffer lookups, the pixel composed around a volume's light),
+//!   [`image`] (EXR and PNG out), [`error_map`] (a frame against the truth).
+//! - [`gpu`]: the plumbing every GPU renderer uses (pipelines, buffers, slice uniforms, a
+//!   timed frame and its readback); each WGSL uniform is mirrored by a Pod struct declared
+//!   with `runtime::uniform!`, whose layout a test checks against the shader's.
 //!
 //! Units: radiance per unit solar irradiance outside the atmosphere (1/sr) per channel; lengths
 //! in metres, y up, sea level at y = 0.
@@ -234,4 +251,16 @@ pub struct Image {
     pub rgb: Vec<[f32; 3]>,
     /// The volume's transparency T_vol (green channel) per pixel, 0…1.
     pub transparency: Vec<f32>,
+}
+
+impl Image {
+    /// An image from (rgb, T_vol) per pixel, row-major.
+    pub fn from_pixels(width: usize, height: usize, pixels: &[([f32; 3], f32)]) -> Self {
+        Self {
+            width,
+            height,
+            rgb: pixels.iter().map(|p| p.0).collect(),
+            transparency: pixels.iter().map(|p| p.1).collect(),
+        }
+    }
 }

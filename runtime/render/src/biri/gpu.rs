@@ -12,6 +12,7 @@ use runtime::Tables;
 use runtime::gpu::{Gpu, GpuTables, WGSL};
 
 use crate::gpu::{RenderError, Timings, a4, check_sizes, entry, filled, v4};
+use crate::geometry::Sphere;
 use crate::objects::{OccluderShape, Region};
 use crate::{Frame, FrameError, Image};
 
@@ -131,7 +132,7 @@ impl Renderer {
             .camera
             .axes()
             .ok_or_else(|| FrameError("camera look_at_m equals position_m".into()))?;
-        let spheres: Vec<(&crate::geometry::Sphere, f64)> = frame
+        let spheres: Vec<(&Sphere, f64)> = frame
             .occluders
             .iter()
             .filter_map(|oc| match &oc.shape {
@@ -147,99 +148,9 @@ impl Renderer {
             ))
             .into());
         }
-        // Stage 1: silhouettes and the shadow count at the eye, per light.
-        let mut lights: Vec<[f32; 4]> = Vec::new();
-        let mut planes: Vec<[f32; 4]> = Vec::new();
-        for l in &frame.lights {
-            let s = l.position_m;
-            let first = planes.len() / 3;
-            for oc in &frame.occluders {
-                if let OccluderShape::Mesh(m) = &oc.shape {
-                    for p in m.silhouette(s) {
-                        planes.push(v4(p.a, p.weight as f64));
-                        planes.push(v4(p.b, 0.0));
-                        planes.push(v4(p.normal, 0.0));
-                    }
-                }
-            }
-            let count: usize = frame.occluders.iter().map(|oc| oc.blockers(o, s)).sum();
-            let blocked = spheres.iter().enumerate().fold(0u32, |b, (i, (sp, _))| {
-                b | (u32::from(sp.blocks(o, s)) << i)
-            });
-            lights.push(v4(s, count as f64));
-            lights.push(a4(l.intensity, if l.spot.is_some() { 1.0 } else { 0.0 }));
-            let (axis, cos) = l
-                .spot
-                .map_or((DVec3::Y, 1.0), |(a, half)| (a, half.to_radians().cos()));
-            lights.push(v4(axis, cos));
-            lights.push([
-                f32::from_bits(first as u32),
-                f32::from_bits((planes.len() / 3 - first) as u32),
-                f32::from_bits(blocked),
-                0.0,
-            ]);
-        }
-        let mut sphere_rows: Vec<[f32; 4]> = Vec::new();
-        for (s, albedo) in &spheres {
-            sphere_rows.push(v4(s.center, s.radius));
-            sphere_rows.push([*albedo as f32, 0.0, 0.0, 0.0]);
-        }
-        let mut mesh_rows: Vec<[f32; 4]> = Vec::new();
-        let mut tri_rows: Vec<[f32; 4]> = Vec::new();
-        for oc in &frame.occluders {
-            if let OccluderShape::Mesh(m) = &oc.shape {
-                let first = tri_rows.len() / 3;
-                for t in &m.triangles {
-                    let [a, b, c] = t.map(|i| m.vertices[i]);
-                    tri_rows.push(v4(a, oc.albedo));
-                    tri_rows.push(v4(b, 0.0));
-                    tri_rows.push(v4(c, 0.0));
-                }
-                mesh_rows.push(with_bits(m.bounds.0, first as u32));
-                mesh_rows.push(with_bits(m.bounds.1, m.triangles.len() as u32));
-            }
-        }
-        // Media, and the quartic's coefficients of their fields (the exact primitive is in
-        // `gpu_tables`).
-        let mut fields: Vec<usize> = Vec::new();
-        let mut media_rows: Vec<[f32; 4]> = Vec::new();
-        let mut depth_max = 0f64;
-        for m in &frame.media {
-            let index = crate::objects::field_index(tables, &m.field)?;
-            let f = &tables.fields[index];
-            let b = f.biri.as_ref().ok_or_else(|| {
-                FrameError(format!(
-                    "field {:?} of the bake in {} has no Biri kernel table ({}.biri.exr): bake \
-                     it again",
-                    f.name,
-                    tables.dir.display(),
-                    f.name
-                ))
-            })?;
-            depth_max = depth_max.max(*b.depths.last().expect("depths"));
-            if !fields.contains(&index) {
-                fields.push(index);
-            }
-            let n = m.number_density_per_m3;
-            let (lo, hi, is_box) = match m.region {
-                Region::Everywhere => (DVec3::ZERO, DVec3::ZERO, 0.0f64),
-                Region::Box { min_m, max_m } => (min_m, max_m, 1.0),
-            };
-            media_rows.push(v4(lo, is_box));
-            media_rows.push(with_bits(hi, index as u32));
-            media_rows.push(a4(f.sigma_ext_m2.map(|s| n * s), 0.0));
-            media_rows.push(a4(f.sigma_sca_m2.map(|s| n * s), 0.0));
-            media_rows.push(a4(m.ambient, 0.0));
-        }
-        // polynomials[f] = where field f's coefficients start; fields without media get none.
-        let mut polynomials = vec![0f32; tables.fields.len()];
-        for &index in &fields {
-            polynomials[index] = polynomials.len() as f32;
-            let b = tables.fields[index].biri.as_ref().expect("checked above");
-            for c in 0..3 {
-                polynomials.extend(b.polynomial[c].iter().map(|&v| v as f32));
-            }
-        }
+        let (lights, planes) = light_rows(frame, &spheres);
+        let (sphere_rows, mesh_rows, tri_rows) = occluder_rows(frame, &spheres);
+        let (media_rows, polynomials, depth_max) = media_rows(tables, frame)?;
         let (w, h) = (frame.width, frame.height);
         let params = BiriParams {
             eye: v4(o, frame.camera.tan_half_fov()),
@@ -270,69 +181,27 @@ impl Renderer {
                 ("triangle bytes", 16 * tri_rows.len() as u64),
             ],
         )?;
-        // wgpu refuses empty storage buffers: pad each with one zero row.
-        let buffer = |label: &str, rows: &[[f32; 4]], usage: wgpu::BufferUsages| {
-            let bytes: &[u8] = bytemuck::cast_slice(rows);
-            filled(
-                device,
-                label,
-                if bytes.is_empty() { &[0; 16] } else { bytes },
-                usage,
-            )
-        };
-        let storage = wgpu::BufferUsages::STORAGE;
         let params = filled(
             device,
             "biri params",
             bytemuck::bytes_of(&params),
             wgpu::BufferUsages::UNIFORM,
         );
-        let lights = buffer("biri lights", &lights, storage);
-        let planes = buffer("biri planes", &planes, storage);
-        let spheres = buffer("biri spheres", &sphere_rows, storage);
-        let meshes = buffer("biri meshes", &mesh_rows, storage);
-        let tris = buffer("biri triangles", &tri_rows, storage);
-        let media = buffer("biri media", &media_rows, storage);
-        let polynomials = filled(
-            device,
-            "biri polynomials",
-            bytemuck::cast_slice(if polynomials.is_empty() {
-                &[0f32]
-            } else {
-                &polynomials[..]
-            }),
-            storage,
-        );
         let image = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("biri image"),
             size: image_bytes,
-            usage: storage | wgpu::BufferUsages::COPY_SRC,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
             mapped_at_creation: false,
         });
-        let all = [
-            &params,
-            &lights,
-            &planes,
-            &spheres,
-            &meshes,
-            &tris,
-            &media,
-            &polynomials,
-            &image,
+        let rows = [
+            ("biri lights", &lights),
+            ("biri planes", &planes),
+            ("biri spheres", &sphere_rows),
+            ("biri meshes", &mesh_rows),
+            ("biri triangles", &tri_rows),
+            ("biri media", &media_rows),
         ];
-        let entries: Vec<wgpu::BindGroupEntry> = all
-            .iter()
-            .enumerate()
-            .map(|(i, b)| wgpu::BindGroupEntry {
-                binding: i as u32,
-                resource: b.as_entire_binding(),
-            })
-            .collect();
-        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("photometeor biri bindings"),
-            layout: &self.layout,
-            entries: &entries,
-        });
+        let bind_group = self.bind(device, &params, &rows, &polynomials, &image);
         Ok(crate::gpu::timed_frame(
             gpu,
             start,
@@ -346,4 +215,162 @@ impl Renderer {
             (w, h),
         )?)
     }
+
+    /// Bind group 1: the params uniform, the row buffers in binding order (wgpu refuses empty
+    /// storage buffers: each empty one gets one zero row), the polynomials and the image.
+    fn bind(
+        &self,
+        device: &wgpu::Device,
+        params: &wgpu::Buffer,
+        rows: &[(&str, &Vec<[f32; 4]>)],
+        polynomials: &[f32],
+        image: &wgpu::Buffer,
+    ) -> wgpu::BindGroup {
+        let storage = wgpu::BufferUsages::STORAGE;
+        let padded = |label: &str, bytes: &[u8]| {
+            filled(
+                device,
+                label,
+                if bytes.is_empty() { &[0; 16] } else { bytes },
+                storage,
+            )
+        };
+        let mut buffers: Vec<wgpu::Buffer> = rows
+            .iter()
+            .map(|(label, r)| padded(label, bytemuck::cast_slice(r.as_slice())))
+            .collect();
+        buffers.push(padded("biri polynomials", bytemuck::cast_slice(polynomials)));
+        let all: Vec<&wgpu::Buffer> = std::iter::once(params)
+            .chain(&buffers)
+            .chain(std::iter::once(image))
+            .collect();
+        let entries: Vec<wgpu::BindGroupEntry> = all
+            .iter()
+            .enumerate()
+            .map(|(i, b)| wgpu::BindGroupEntry {
+                binding: i as u32,
+                resource: b.as_entire_binding(),
+            })
+            .collect();
+        device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("photometeor biri bindings"),
+            layout: &self.layout,
+            entries: &entries,
+        })
+    }
+}
+
+/// Stage 1 per light: its row block (position and the shadow count at the eye; intensity and
+/// whether it is a spot; the spot's axis and cosine; its first silhouette plane, their count
+/// and which spheres block the eye, as bits) and its meshes' silhouette planes (three rows
+/// each: the edge's ends, the plane's normal).
+fn light_rows(frame: &Frame, spheres: &[(&Sphere, f64)]) -> (Vec<[f32; 4]>, Vec<[f32; 4]>) {
+    let o = frame.camera.position_m;
+    let mut lights: Vec<[f32; 4]> = Vec::new();
+    let mut planes: Vec<[f32; 4]> = Vec::new();
+    for l in &frame.lights {
+        let s = l.position_m;
+        let first = planes.len() / 3;
+        for oc in &frame.occluders {
+            if let OccluderShape::Mesh(m) = &oc.shape {
+                for p in m.silhouette(s) {
+                    planes.push(v4(p.a, p.weight as f64));
+                    planes.push(v4(p.b, 0.0));
+                    planes.push(v4(p.normal, 0.0));
+                }
+            }
+        }
+        let count: usize = frame.occluders.iter().map(|oc| oc.blockers(o, s)).sum();
+        let blocked = spheres.iter().enumerate().fold(0u32, |b, (i, (sp, _))| {
+            b | (u32::from(sp.blocks(o, s)) << i)
+        });
+        lights.push(v4(s, count as f64));
+        lights.push(a4(l.intensity, if l.spot.is_some() { 1.0 } else { 0.0 }));
+        let (axis, cos) = l
+            .spot
+            .map_or((DVec3::Y, 1.0), |(a, half)| (a, half.to_radians().cos()));
+        lights.push(v4(axis, cos));
+        lights.push([
+            f32::from_bits(first as u32),
+            f32::from_bits((planes.len() / 3 - first) as u32),
+            f32::from_bits(blocked),
+            0.0,
+        ]);
+    }
+    (lights, planes)
+}
+
+/// The spheres (centre and radius, albedo), the meshes (bounds with their first triangle and
+/// count, as bits) and their triangles (three vertices, the first with the albedo).
+fn occluder_rows(
+    frame: &Frame,
+    spheres: &[(&Sphere, f64)],
+) -> (Vec<[f32; 4]>, Vec<[f32; 4]>, Vec<[f32; 4]>) {
+    let mut sphere_rows: Vec<[f32; 4]> = Vec::new();
+    for (s, albedo) in spheres {
+        sphere_rows.push(v4(s.center, s.radius));
+        sphere_rows.push([*albedo as f32, 0.0, 0.0, 0.0]);
+    }
+    let mut mesh_rows: Vec<[f32; 4]> = Vec::new();
+    let mut tri_rows: Vec<[f32; 4]> = Vec::new();
+    for oc in &frame.occluders {
+        if let OccluderShape::Mesh(m) = &oc.shape {
+            let first = tri_rows.len() / 3;
+            for t in &m.triangles {
+                let [a, b, c] = t.map(|i| m.vertices[i]);
+                tri_rows.push(v4(a, oc.albedo));
+                tri_rows.push(v4(b, 0.0));
+                tri_rows.push(v4(c, 0.0));
+            }
+            mesh_rows.push(with_bits(m.bounds.0, first as u32));
+            mesh_rows.push(with_bits(m.bounds.1, m.triangles.len() as u32));
+        }
+    }
+    (sphere_rows, mesh_rows, tri_rows)
+}
+
+/// The media (box or everywhere, their field as bits, β_ext, β_sca, ambient), the quartic's
+/// coefficients of their fields (`polynomials[f]` = where field f's start; the exact primitive
+/// is in the uploaded tables) and the kernel tables' largest depth.
+fn media_rows(tables: &Tables, frame: &Frame) -> Result<(Vec<[f32; 4]>, Vec<f32>, f64), FrameError> {
+    let mut fields: Vec<usize> = Vec::new();
+    let mut media_rows: Vec<[f32; 4]> = Vec::new();
+    let mut depth_max = 0f64;
+    for m in &frame.media {
+        let index = crate::objects::field_index(tables, &m.field)?;
+        let f = &tables.fields[index];
+        let b = f.biri.as_ref().ok_or_else(|| {
+            FrameError(format!(
+                "field {:?} of the bake in {} has no Biri kernel table ({}.biri.exr): bake it \
+                 again",
+                f.name,
+                tables.dir.display(),
+                f.name
+            ))
+        })?;
+        depth_max = depth_max.max(*b.depths.last().expect("depths"));
+        if !fields.contains(&index) {
+            fields.push(index);
+        }
+        let n = m.number_density_per_m3;
+        let (lo, hi, is_box) = match m.region {
+            Region::Everywhere => (DVec3::ZERO, DVec3::ZERO, 0.0f64),
+            Region::Box { min_m, max_m } => (min_m, max_m, 1.0),
+        };
+        media_rows.push(v4(lo, is_box));
+        media_rows.push(with_bits(hi, index as u32));
+        media_rows.push(a4(f.sigma_ext_m2.map(|s| n * s), 0.0));
+        media_rows.push(a4(f.sigma_sca_m2.map(|s| n * s), 0.0));
+        media_rows.push(a4(m.ambient, 0.0));
+    }
+    // Fields without media get no coefficients.
+    let mut polynomials = vec![0f32; tables.fields.len()];
+    for &index in &fields {
+        polynomials[index] = polynomials.len() as f32;
+        let b = tables.fields[index].biri.as_ref().expect("checked above");
+        for c in 0..3 {
+            polynomials.extend(b.polynomial[c].iter().map(|&v| v as f32));
+        }
+    }
+    Ok((media_rows, polynomials, depth_max))
 }

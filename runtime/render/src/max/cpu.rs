@@ -439,33 +439,13 @@ pub fn light(tables: &Tables, frame: &Frame, settings: &Settings) -> Result<Ligh
     let grid = &frame.grid;
     let h = voxel_size(grid);
     let sun_dir = frame.sun.direction();
-    let light = -sun_dir;
-    let l_y = sun_dir[1];
     let mut report = MaxReport::default();
 
     // 1, 2: reduced sunlight and first-scattered sources.
     let start = Instant::now();
     let v = voxels(&fields, grid);
-    let tau_sun = sun_depths(grid, &v.ext, light);
-    let dims = grid.dims;
-    let centre = |i: usize| {
-        let c = [
-            i % dims[0],
-            (i / dims[0]) % dims[1],
-            i / (dims[0] * dims[1]),
-        ];
-        DVec3::from_array(std::array::from_fn(|a| {
-            grid.min_m[a] + (c[a] as f64 + 0.5) * h[a]
-        }))
-    };
-    // E T_sun S_atm per voxel: the reduced sunlight's irradiance.
-    let reduced: Vec<[f64; 3]> = (0..tau_sun.len())
-        .into_par_iter()
-        .map(|i| {
-            let s_atm = frame.atmosphere.sunlight(centre(i).y, l_y);
-            std::array::from_fn(|c| frame.sun.irradiance[c] * s_atm[c] * (-tau_sun[i][c]).exp())
-        })
-        .collect();
+    let tau_sun = sun_depths(grid, &v.ext, -sun_dir);
+    let reduced = reduced_sun(frame, &tau_sun);
     let mut sky = reduced_sky(frame, &v.ext);
     report.propagation_s = start.elapsed().as_secs_f64();
 
@@ -480,18 +460,93 @@ pub fn light(tables: &Tables, frame: &Frame, settings: &Settings) -> Result<Ligh
         .iter()
         .map(|e| e[1] * h_voxel >= MIN_DIFFUSION_VOXEL_DEPTH)
         .collect();
-    // One solve per channel with the reduced sun and the incident light `sky` (skylight, and
-    // after §3's propagation the clouds' light across clear air).
-    let solve = |sky: &Sky, report: &mut MaxReport| -> Result<Vec<[f64; 3]>, FrameError> {
+    let sources = Sources {
+        v: &v,
+        active: &active,
+        reduced: &reduced,
+        light: -sun_dir,
+        dims: grid.dims,
+        h,
+        settings,
+    };
+    let mut i0 = sources.solve(&sky, &mut report)?;
+    report.diffusion_s = start.elapsed().as_secs_f64();
+
+    // §3: the clouds' own light carried across clear air into other parts, then solved again.
+    let start = Instant::now();
+    for _ in 0..settings.clear_air_iterations {
+        let (across, mean) = sources.across_clear_air(tables, frame, &i0, &sky);
+        for (j, (m, f)) in across.mean.iter().zip(&across.flux).enumerate() {
+            for c in 0..3 {
+                sky.mean[j][c] += m[c];
+                sky.flux[j][c] += f[c];
+            }
+        }
+        report.clear_air_mean = mean;
+        i0 = sources.solve(&sky, &mut report)?;
+    }
+    report.clear_air_s = start.elapsed().as_secs_f64();
+    Ok(Lighting {
+        t_sun: tau_sun.iter().map(|t| t.map(|x| (-x).exp())).collect(),
+        i0,
+        active,
+        sky_mean: sky.mean,
+        dims: grid.dims,
+        sun_dir,
+        report,
+    })
+}
+
+/// E T_sun S_atm per voxel: the reduced sunlight's irradiance, from the sun's optical depth
+/// `tau_sun` to each voxel centre.
+fn reduced_sun(frame: &Frame, tau_sun: &[[f64; 3]]) -> Vec<[f64; 3]> {
+    let grid = &frame.grid;
+    let (h, dims, l_y) = (voxel_size(grid), grid.dims, frame.sun.direction()[1]);
+    let centre = |i: usize| {
+        let c = [
+            i % dims[0],
+            (i / dims[0]) % dims[1],
+            i / (dims[0] * dims[1]),
+        ];
+        DVec3::from_array(std::array::from_fn(|a| {
+            grid.min_m[a] + (c[a] as f64 + 0.5) * h[a]
+        }))
+    };
+    (0..tau_sun.len())
+        .into_par_iter()
+        .map(|i| {
+            let s_atm = frame.atmosphere.sunlight(centre(i).y, l_y);
+            std::array::from_fn(|c| frame.sun.irradiance[c] * s_atm[c] * (-tau_sun[i][c]).exp())
+        })
+        .collect()
+}
+
+/// What the diffusion solves read: the voxels' optics, which take part, the reduced sun.
+struct Sources<'a> {
+    v: &'a Voxels,
+    active: &'a [bool],
+    reduced: &'a [[f64; 3]],
+    /// The sunlight's direction of travel.
+    light: DVec3,
+    dims: [usize; 3],
+    h: [f64; 3],
+    settings: &'a Settings,
+}
+
+impl Sources<'_> {
+    /// Step 3: one solve per channel with the reduced sun and the incident light `sky`
+    /// (skylight, and after §3's propagation the clouds' light across clear air).
+    fn solve(&self, sky: &Sky, report: &mut MaxReport) -> Result<Vec<[f64; 3]>, FrameError> {
+        let v = self.v;
         let mut i0 = vec![[0.0f64; 3]; v.ext.len()];
         for c in 0..3 {
             let problem = Problem {
-                dims,
-                h,
+                dims: self.dims,
+                h: self.h,
                 kappa_tr: v
                     .transport
                     .iter()
-                    .zip(&active)
+                    .zip(self.active)
                     .map(|(t, &on)| if on { t[c] } else { 0.0 })
                     .collect(),
                 kappa_a: v
@@ -501,15 +556,16 @@ pub fn light(tables: &Tables, frame: &Frame, settings: &Settings) -> Result<Ligh
                     .map(|(e, s)| (e[c] - s[c]).max(0.0))
                     .collect(),
                 q0: (0..v.sca.len())
-                    .map(|i| v.sca[i][c] * (reduced[i][c] / (4.0 * PI) + sky.mean[i][c]))
+                    .map(|i| v.sca[i][c] * (self.reduced[i][c] / (4.0 * PI) + sky.mean[i][c]))
                     .collect(),
                 q1: (0..v.sca.len())
                     .map(|i| {
-                        let flux = light * reduced[i][c] / (4.0 * PI) + sky.flux[i][c];
+                        let flux = self.light * self.reduced[i][c] / (4.0 * PI) + sky.flux[i][c];
                         (flux * v.g_sca[i][c]).to_array()
                     })
                     .collect(),
             };
+            let settings = self.settings;
             let s = diffusion::solve(&problem, settings.tolerance, settings.max_iterations)
                 .map_err(|e| FrameError(format!("channel {}: {e}", ["R", "G", "B"][c])))?;
             report.iterations[c] += s.iterations;
@@ -521,13 +577,20 @@ pub fn light(tables: &Tables, frame: &Frame, settings: &Settings) -> Result<Ligh
             }
         }
         Ok(i0)
-    };
-    let mut i0 = solve(&sky, &mut report)?;
-    report.diffusion_s = start.elapsed().as_secs_f64();
+    }
 
-    // §3: the clouds' own light carried across clear air into other parts, then solved again.
-    let start = Instant::now();
-    for _ in 0..settings.clear_air_iterations {
+    /// §3: the light each cloud voxel sends along every sky direction (α (I_0 + S) and the
+    /// reduced sun scattered that way) carried across clear air into other parts, as an
+    /// incident [`Sky`], and its mean radiance (green) over the cloud's voxels.
+    fn across_clear_air(
+        &self,
+        tables: &Tables,
+        frame: &Frame,
+        i0: &[[f64; 3]],
+        sky: &Sky,
+    ) -> (Sky, f64) {
+        let (v, grid) = (self.v, &frame.grid);
+        let fields: Vec<&FieldTable> = tables.fields.iter().collect();
         let full: Vec<bool> = v.ext.iter().map(|e| e[1] > 0.0).collect();
         let mut across = Sky::zero(v.ext.len());
         for s_dir in sky_directions() {
@@ -536,7 +599,7 @@ pub fn light(tables: &Tables, frame: &Frame, settings: &Settings) -> Result<Ligh
             let rho_of = |i: usize| -> [f64; MAX_FIELDS] {
                 std::array::from_fn(|f| f64::from(grid.data[i][f]))
             };
-            let cos = light.dot(-s_dir);
+            let cos = self.light.dot(-s_dir);
             let emission = |i: usize| -> [f64; 3] {
                 let rho = rho_of(i);
                 let p1 = sample::mix(&fields, &rho, tables.theta_step_deg, 1.0, cos);
@@ -546,19 +609,13 @@ pub fn light(tables: &Tables, frame: &Frame, settings: &Settings) -> Result<Ligh
                     } else {
                         0.0
                     };
-                    a * (i0[i][c].max(0.0) + sky.mean[i][c] + p1[c] * reduced[i][c])
+                    a * (i0[i][c].max(0.0) + sky.mean[i][c] + p1[c] * self.reduced[i][c])
                 })
             };
             let l = clear_air_light(grid, &v.ext, &full, emission, -s_dir);
             across.add(s_dir, |j| l[j]);
         }
-        for (j, (m, f)) in across.mean.iter().zip(&across.flux).enumerate() {
-            for c in 0..3 {
-                sky.mean[j][c] += m[c];
-                sky.flux[j][c] += f[c];
-            }
-        }
-        report.clear_air_mean = across
+        let mean = across
             .mean
             .iter()
             .zip(&full)
@@ -566,18 +623,8 @@ pub fn light(tables: &Tables, frame: &Frame, settings: &Settings) -> Result<Ligh
             .map(|(m, _)| m[1])
             .sum::<f64>()
             / full.iter().filter(|f| **f).count().max(1) as f64;
-        i0 = solve(&sky, &mut report)?;
+        (across, mean)
     }
-    report.clear_air_s = start.elapsed().as_secs_f64();
-    Ok(Lighting {
-        t_sun: tau_sun.iter().map(|t| t.map(|x| (-x).exp())).collect(),
-        i0,
-        active,
-        sky_mean: sky.mean,
-        dims,
-        sun_dir,
-        report,
-    })
 }
 
 /// The size of a voxel as one length, (h_x h_y h_z)^{1/3} (m).
@@ -596,110 +643,28 @@ pub fn gather(
 ) -> Result<(Image, MaxReport), FrameError> {
     let depth_max = check(tables, frame, settings)?;
     lighting.check_frame(frame)?;
-    let fields: Vec<&FieldTable> = tables.fields.iter().collect();
     let grid = &frame.grid;
     let h = voxel_size(grid);
-    let h_voxel = voxel_length(grid);
-    let sun_dir = frame.sun.direction();
-    let light = -sun_dir;
-    let l_y = sun_dir[1];
-    let (t_sun, i0, active) = (&lighting.t_sun, &lighting.i0, &lighting.active);
-    let sky_mean = &lighting.sky_mean;
+    let g = Gather {
+        tables,
+        frame,
+        settings,
+        lighting,
+        fields: tables.fields.iter().collect(),
+        h_voxel: voxel_length(grid),
+        step: 0.5 * h.iter().copied().fold(f64::INFINITY, f64::min),
+        sun_dir: frame.sun.direction(),
+    };
     let mut report = lighting.report.clone();
     let start = Instant::now();
-    let (forward, right, up) = frame.camera.axes().expect("checked by check_view");
-    let tan_half = (frame.camera.fov_deg.to_radians() / 2.0).tan();
-    let eye = frame.camera.position_m;
+    let axes = frame.camera.axes().expect("checked by check_view");
+    let tan_half = frame.camera.tan_half_fov();
     let (w, hgt) = (frame.width, frame.height);
-    let step = 0.5 * h.iter().copied().fold(f64::INFINITY, f64::min);
     let gathered: Vec<([f32; 3], f32, f64)> = (0..w * hgt)
         .into_par_iter()
         .map(|px| {
-            let d = crate::camera::pixel_ray(
-                (forward, right, up),
-                tan_half,
-                (px % w, px / w),
-                (w, hgt),
-            );
-            let cos_theta = -light.dot(d);
-            let mut l_vol = [0.0f64; 3];
-            let mut tr = [1.0f64; 3];
-            let mut largest: f64 = 0.0;
-            if let Some((t0, t1)) = box_span(grid.min_m, grid.max_m, eye, d) {
-                let t0 = t0.max(0.0);
-                let n = (((t1 - t0) / step).ceil() as usize).max(1);
-                let dt = (t1 - t0) / n as f64;
-                let mut edge = [0.0f64; 3];
-                for k in 0..n {
-                    let p = eye + (t0 + (k as f64 + 0.5) * dt) * d;
-                    let rho: [f64; MAX_FIELDS] = grid.sample(p);
-                    let (ext, sca) = coefficients(&fields, &rho);
-                    if ext.iter().all(|&e| e <= 0.0) {
-                        continue;
-                    }
-                    let w_edge = settings.edge_share(ext[1] * h_voxel);
-                    let s_atm = frame.atmosphere.sunlight(p.y, l_y);
-                    let ts = trilinear(grid, t_sun, None, p);
-                    let sun: [f64; 3] =
-                        std::array::from_fn(|c| frame.sun.irradiance[c] * s_atm[c] * ts[c]);
-                    // Diffuse light: the diffusion solution and the reduced skylight, isotropic.
-                    let i0_here = trilinear(grid, i0, Some(active), p);
-                    let sky_here = trilinear(grid, sky_mean, None, p);
-                    // (P1's I_0 can dip below zero where the first-scattered light's flux
-                    // term dominates, in optically thin voxels: no radiance is negative.)
-                    let diffuse: [f64; 3] =
-                        std::array::from_fn(|c| i0_here[c].max(0.0) + sky_here[c]);
-                    let p1 = sample::mix(&fields, &rho, tables.theta_step_deg, 1.0, cos_theta);
-                    let before: [f64; 3] = std::array::from_fn(|c| edge[c] * w_edge);
-                    let after: [f64; 3] = std::array::from_fn(|c| before[c] + w_edge * ext[c] * dt);
-                    let (m_before, m_after) = if w_edge > 0.0 {
-                        (
-                            sample::poisson_mix(
-                                &fields,
-                                &rho,
-                                tables.theta_step_deg,
-                                before,
-                                cos_theta,
-                            ),
-                            sample::poisson_mix(
-                                &fields,
-                                &rho,
-                                tables.theta_step_deg,
-                                after,
-                                cos_theta,
-                            ),
-                        )
-                    } else {
-                        ([0.0; 3], [0.0; 3])
-                    };
-                    for c in 0..3 {
-                        if ext[c] <= 0.0 {
-                            continue;
-                        }
-                        let albedo = sca[c] / ext[c];
-                        let dtau = ext[c] * dt;
-                        let slab = (-dtau).exp();
-                        // Dense share: diffusion plus exact single scattering of the sun.
-                        let dense =
-                            (1.0 - w_edge) * (1.0 - slab) * albedo * (diffuse[c] + p1[c] * sun[c]);
-                        // Edge share: the segment's increment, seen from its entry.
-                        let (g0, g1) = (scattered(before[c], albedo), scattered(after[c], albedo));
-                        let edge_light =
-                            (g1 * m_after[c] - g0 * m_before[c]) * sun[c] + (g1 - g0) * diffuse[c];
-                        let entry = tr[c] * before[c].exp();
-                        l_vol[c] += tr[c] * dense + entry * edge_light;
-                        tr[c] *= slab;
-                        edge[c] = after[c];
-                        largest = largest.max(after[c]);
-                    }
-                    if tr.iter().all(|&t| t < 1e-9) {
-                        break;
-                    }
-                }
-            }
-            let ground_lit = |g: DVec3| transmittance_to_sun(&fields, grid, g, sun_dir);
-            let rgb = compose(frame, eye, d, l_vol, tr, ground_lit);
-            (rgb, tr[1] as f32, largest)
+            let d = crate::camera::pixel_ray(axes, tan_half, (px % w, px / w), (w, hgt));
+            g.pixel(d)
         })
         .collect();
     report.largest_edge_depth = gathered.iter().map(|g| g.2).fold(0.0, f64::max);
@@ -712,13 +677,112 @@ pub fn gather(
         )));
     }
     report.gather_s = start.elapsed().as_secs_f64();
-    Ok((
-        Image {
-            width: w,
-            height: hgt,
-            rgb: gathered.iter().map(|g| g.0).collect(),
-            transparency: gathered.iter().map(|g| g.1).collect(),
-        },
-        report,
-    ))
+    let pixels: Vec<([f32; 3], f32)> = gathered.iter().map(|g| (g.0, g.1)).collect();
+    Ok((Image::from_pixels(w, hgt, &pixels), report))
+}
+
+/// What the final gather reads.
+struct Gather<'a> {
+    tables: &'a Tables,
+    frame: &'a Frame,
+    settings: &'a Settings,
+    lighting: &'a Lighting,
+    fields: Vec<&'a FieldTable>,
+    /// The voxel length (h_x h_y h_z)^{1/3} (m).
+    h_voxel: f64,
+    /// The march's step, half the smallest voxel side (m).
+    step: f64,
+    /// Unit vector towards the sun.
+    sun_dir: DVec3,
+}
+
+/// A ray's march so far: the volume's radiance and transparency, the current edge segment's
+/// optical depth, per channel, and the largest edge depth reached.
+struct March {
+    l_vol: [f64; 3],
+    tr: [f64; 3],
+    edge: [f64; 3],
+    largest: f64,
+}
+
+impl Gather<'_> {
+    /// Steps 5–6 for the ray `d` from the eye: the pixel, its T_vol and the largest edge depth.
+    fn pixel(&self, d: DVec3) -> ([f32; 3], f32, f64) {
+        let (frame, grid) = (self.frame, &self.frame.grid);
+        let eye = frame.camera.position_m;
+        let mut m = March {
+            l_vol: [0.0; 3],
+            tr: [1.0; 3],
+            edge: [0.0; 3],
+            largest: 0.0,
+        };
+        if let Some((t0, t1)) = box_span(grid.min_m, grid.max_m, eye, d) {
+            let t0 = t0.max(0.0);
+            let n = (((t1 - t0) / self.step).ceil() as usize).max(1);
+            let dt = (t1 - t0) / n as f64;
+            for k in 0..n {
+                let p = eye + (t0 + (k as f64 + 0.5) * dt) * d;
+                self.step_at(&mut m, p, d, dt);
+                if m.tr.iter().all(|&t| t < 1e-9) {
+                    break;
+                }
+            }
+        }
+        let ground_lit = |g: DVec3| transmittance_to_sun(&self.fields, grid, g, self.sun_dir);
+        let rgb = compose(frame, eye, d, m.l_vol, m.tr, ground_lit);
+        (rgb, m.tr[1] as f32, m.largest)
+    }
+
+    /// One step of length `dt` at `p` along `d`: its share in the dense treatment (diffusion
+    /// plus exact single scattering of the sun) and in the edge treatment (the segment's
+    /// increment, seen from its entry), module docs step 5.
+    fn step_at(&self, m: &mut March, p: DVec3, d: DVec3, dt: f64) {
+        let (frame, grid, lighting) = (self.frame, &self.frame.grid, self.lighting);
+        let theta_step = self.tables.theta_step_deg;
+        let cos_theta = self.sun_dir.dot(d);
+        let rho: [f64; MAX_FIELDS] = grid.sample(p);
+        let (ext, sca) = coefficients(&self.fields, &rho);
+        if ext.iter().all(|&e| e <= 0.0) {
+            return;
+        }
+        let w_edge = self.settings.edge_share(ext[1] * self.h_voxel);
+        let s_atm = frame.atmosphere.sunlight(p.y, self.sun_dir[1]);
+        let ts = trilinear(grid, &lighting.t_sun, None, p);
+        let sun: [f64; 3] = std::array::from_fn(|c| frame.sun.irradiance[c] * s_atm[c] * ts[c]);
+        // Diffuse light: the diffusion solution and the reduced skylight, isotropic.
+        let i0_here = trilinear(grid, &lighting.i0, Some(&lighting.active), p);
+        let sky_here = trilinear(grid, &lighting.sky_mean, None, p);
+        // (P1's I_0 can dip below zero where the first-scattered light's flux term dominates,
+        // in optically thin voxels: no radiance is negative.)
+        let diffuse: [f64; 3] = std::array::from_fn(|c| i0_here[c].max(0.0) + sky_here[c]);
+        let p1 = sample::mix(&self.fields, &rho, theta_step, 1.0, cos_theta);
+        let before: [f64; 3] = std::array::from_fn(|c| m.edge[c] * w_edge);
+        let after: [f64; 3] = std::array::from_fn(|c| before[c] + w_edge * ext[c] * dt);
+        let (m_before, m_after) = if w_edge > 0.0 {
+            (
+                sample::poisson_mix(&self.fields, &rho, theta_step, before, cos_theta),
+                sample::poisson_mix(&self.fields, &rho, theta_step, after, cos_theta),
+            )
+        } else {
+            ([0.0; 3], [0.0; 3])
+        };
+        for c in 0..3 {
+            if ext[c] <= 0.0 {
+                continue;
+            }
+            let albedo = sca[c] / ext[c];
+            let dtau = ext[c] * dt;
+            let slab = (-dtau).exp();
+            // Dense share: diffusion plus exact single scattering of the sun.
+            let dense = (1.0 - w_edge) * (1.0 - slab) * albedo * (diffuse[c] + p1[c] * sun[c]);
+            // Edge share: the segment's increment, seen from its entry.
+            let (g0, g1) = (scattered(before[c], albedo), scattered(after[c], albedo));
+            let edge_light = (g1 * m_after[c] - g0 * m_before[c]) * sun[c] + (g1 - g0) * diffuse[c];
+            let entry = m.tr[c] * before[c].exp();
+            m.l_vol[c] += m.tr[c] * dense + entry * edge_light;
+            m.tr[c] *= slab;
+            m.edge[c] = after[c];
+            m.largest = m.largest.max(after[c]);
+        }
+    }
 }

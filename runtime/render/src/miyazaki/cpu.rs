@@ -152,299 +152,380 @@ impl Air<'_> {
     }
 }
 
+/// The Mie scattering texture (§4.1) of one pixel: per field (P_f(α) + k_multi) σ_sca,f per
+/// channel, the Rayleigh phase, and the haze's N_0 σ_sca P(α); α is constant along the ray.
+type Texture = ([[f64; 3]; MAX_FIELDS], f64, [f64; 3]);
+
+/// A pixel's S (the scattered light), α* (air and cloud transparency) and the cloud's own
+/// transparency, per channel.
+type EyeTexel = ([f64; 3], [f64; 3], [f64; 3]);
+
+/// What every step of a frame reads.
+struct Svs<'a> {
+    tables: &'a Tables,
+    frame: &'a Frame,
+    settings: &'a Settings,
+    s: SvsSetup,
+    fields: Vec<&'a FieldTable>,
+    /// Each field's Cornette–Shanks asymmetry per channel.
+    g: Vec<[f64; 3]>,
+    air: Air<'a>,
+    air_on: bool,
+    /// The haze layer's field and layer, if any, and its asymmetry.
+    haze: Option<(FieldTable, &'a crate::Haze)>,
+    haze_g: Option<[f64; 3]>,
+    /// n·eye: the eye's plane value.
+    n_dot_e: f64,
+}
+
+impl Svs<'_> {
+    fn res(&self) -> usize {
+        self.settings.light_resolution
+    }
+
+    /// Where the ray `d` from the eye meets the ground (∞ if it does not).
+    fn t_ground(&self, d: DVec3) -> f64 {
+        if d.y < 0.0 {
+            (self.s.eye.y / -d.y).max(0.0)
+        } else {
+            f64::INFINITY
+        }
+    }
+
+    /// A field's phase function at cos α: its Ams_1, or Cornette–Shanks with asymmetry `g`.
+    fn phase(&self, f: &FieldTable, g: [f64; 3], cos: f64) -> [f64; 3] {
+        match self.settings.phase {
+            SvsPhase::Tables => sample::ams(f, self.tables.theta_step_deg, 1.0, cos),
+            SvsPhase::CornetteShanks => std::array::from_fn(|c| cornette_shanks(g[c], cos)),
+        }
+    }
+
+    /// The pixel's [`Texture`] for ray `d`: the haze's β_atm is N_0 σ_sca P(α), no k_multi
+    /// (Eq. 1); the haze layer lives in the air, not the grid.
+    fn texture(&self, d: DVec3) -> Texture {
+        let cos = d.dot(self.s.to_sun);
+        let haze_field = self.frame.haze.as_ref().map(|h| h.field);
+        let mut out = [[0.0; 3]; MAX_FIELDS];
+        for (i, f) in self.fields.iter().enumerate() {
+            if Some(i) == haze_field {
+                continue;
+            }
+            let p = self.phase(f, self.g[i], cos);
+            out[i] = std::array::from_fn(|c| (p[c] + self.settings.k_multi) * f.sigma_sca_m2[c]);
+        }
+        let haze_beta = match &self.haze {
+            None => [0.0; 3],
+            Some((f, h)) => {
+                let g = self.haze_g.expect("with the haze");
+                let p = match self.settings.phase {
+                    SvsPhase::Tables => sample::ams(f, self.tables.theta_step_deg, 1.0, cos),
+                    SvsPhase::CornetteShanks => {
+                        std::array::from_fn(|c| cornette_shanks(g[c], cos))
+                    }
+                };
+                std::array::from_fn(|c| p[c] * f.sigma_sca_m2[c] * h.number_density_per_m3)
+            }
+        };
+        (out, rayleigh_phase(cos), haze_beta)
+    }
+
+    /// Eq. 10, first of each slice (§4.1): slice plane `c`'s cloud into shadow texel `i`.
+    fn shadow_slab(&self, texel: &mut [f64; 3], i: usize, c: f64) {
+        let res = self.res();
+        let p = self.s.shadow_point(i % res, i / res, c);
+        let rho = self.frame.grid.sample(p);
+        let (ext, _) = coefficients(&self.fields, &rho);
+        for ch in 0..3 {
+            texel[ch] *= (-ext[ch] * self.s.sun_step).exp();
+        }
+    }
+
+    /// Then the screen: Eqs. 8 and 9 at slice plane `c` along ray `d`, blended as §4.3.
+    fn eye_slab(&self, px: &mut EyeTexel, d: DVec3, tex: &Texture, c: f64, shadow: &[[f64; 3]]) {
+        let (s, air) = (&self.s, &self.air);
+        let (beta, p_air, haze_b) = tex;
+        let nd = s.normal.dot(d);
+        if nd.abs() < 1e-9 {
+            return;
+        }
+        let t = (c - self.n_dot_e) / nd;
+        if t <= 0.0 || t > self.t_ground(d) {
+            return;
+        }
+        let p = s.eye + t * d;
+        let rho = self.frame.grid.sample(p);
+        let (ext, _) = coefficients(&self.fields, &rho);
+        let (rayleigh, n_haze) = if self.air_on {
+            air.at(p.y)
+        } else {
+            ([0.0; 3], 0.0)
+        };
+        let air_ext: [f64; 3] = std::array::from_fn(|ch| rayleigh[ch] + n_haze * air.haze_ext[ch]);
+        if ext.iter().chain(&air_ext).all(|&e| e <= 0.0) {
+            return;
+        }
+        let dt = s.step / nd.abs();
+        let g_cl = shadow_at(shadow, self.res(), s.shadow_coords(p));
+        let g_atm = if self.air_on {
+            air.sunlight(p.y)
+        } else {
+            [1.0; 3]
+        };
+        let (sum, alpha_star, t_cl) = px;
+        for ch in 0..3 {
+            let mut b = rayleigh[ch] * p_air + n_haze * haze_b[ch];
+            for (f, r) in rho.iter().enumerate().take(self.fields.len()) {
+                b += r * beta[f][ch];
+            }
+            // Eq. 8 (× I_sun), Eq. 9.
+            let contribution = self.frame.sun.irradiance[ch] * dt * b * g_atm[ch] * g_cl[ch];
+            let slab = (-(ext[ch] + air_ext[ch]) * dt).exp();
+            if s.back_to_front {
+                sum[ch] = contribution + slab * sum[ch];
+            } else {
+                sum[ch] += alpha_star[ch] * contribution;
+            }
+            alpha_star[ch] *= slab;
+            t_cl[ch] *= (-ext[ch] * dt).exp();
+        }
+    }
+
+    /// In-scattering by the air along ray `d` over [t0, t1], per unit irradiance: Eq. 14 where
+    /// the segment is on the sun's side of the slices, less the final shadow's deficit on the
+    /// far side; with haze, both species by the midpoint rule (module docs of [`super`]).
+    fn air_segment(
+        &self,
+        d: DVec3,
+        tex: &Texture,
+        (t0, t1): (f64, f64),
+        shadow: &[[f64; 3]],
+    ) -> [f64; 3] {
+        if !self.air_on || t1 <= t0 {
+            return [0.0; 3];
+        }
+        let s = &self.s;
+        // The segment lies on one side of the slices: ask at a point well inside it (a point
+        // at its start would sit on the boundary plane in f32).
+        let probe_t = if t1.is_finite() {
+            0.5 * (t0 + t1)
+        } else {
+            t0 + t0.max(1.0)
+        };
+        let sunward = s.sunward_of_slices(s.eye + probe_t * d);
+        // Without haze: Eq. 14 in closed form, less the final shadow's deficit on the far side
+        // (inside the shadow prism). With haze: both species by the midpoint rule along the
+        // whole segment.
+        let mut out = [0.0; 3];
+        let (lo, hi, shadow_only) = if self.air.haze_on() {
+            let cap = if t1.is_finite() {
+                t1
+            } else {
+                t0 + SHADOWED_AIR_MAX_M
+            };
+            (t0, cap, false)
+        } else {
+            let (atm, l_y, cos_sun) = (self.air.atm, self.air.l_y, d.dot(s.to_sun));
+            let a = atm.inscatter(s.eye.y, d.y, t1, l_y, cos_sun);
+            let b = atm.inscatter(s.eye.y, d.y, t0, l_y, cos_sun);
+            out = std::array::from_fn(|c| a[c] - b[c]);
+            if sunward {
+                return out;
+            }
+            let (lo, hi) = prism_span(
+                s,
+                self.res(),
+                s.eye,
+                d,
+                t0,
+                t1.min(t0 + SHADOWED_AIR_MAX_M),
+            );
+            (lo, hi, true)
+        };
+        if hi > lo {
+            self.air_midpoints(d, tex, (lo, hi), shadow_only, sunward, shadow, &mut out);
+        }
+        out
+    }
+
+    /// The midpoint rule of [`Self::air_segment`] over [lo, hi], added to `out`: the shadow
+    /// deficit at 64 midpoints over the prism (`shadow_only`), or the hazy air at midpoints
+    /// 0.02 of an optical depth (or 2 km) apart until the transmittance from the eye is below
+    /// 1e-7.
+    fn air_midpoints(
+        &self,
+        d: DVec3,
+        (_, p_air, haze_b): &Texture,
+        (lo, hi): (f64, f64),
+        shadow_only: bool,
+        sunward: bool,
+        shadow: &[[f64; 3]],
+        out: &mut [f64; 3],
+    ) {
+        let (s, air, res) = (&self.s, &self.air, self.res());
+        let (mut t, uniform) = (lo, (hi - lo) / SHADOWED_AIR_POINTS as f64);
+        let prism = prism_span(s, res, s.eye, d, lo, hi);
+        let prism_step = s.shadow_texel[0]
+            .min(s.shadow_texel[1])
+            .max((prism.1 - prism.0) / 256.0);
+        let mut n = 0;
+        while (shadow_only && n < SHADOWED_AIR_POINTS) || (!shadow_only && t < hi) {
+            let (rayleigh, n_haze) = air.at(s.eye.y + (t + 0.5 * uniform) * d.y);
+            let dt = if shadow_only {
+                // Counted, not accumulated: exactly the 64 midpoints.
+                t = lo + n as f64 * uniform;
+                uniform
+            } else {
+                let ext = (0..3)
+                    .map(|c| rayleigh[c] + n_haze * air.haze_ext[c])
+                    .fold(0.0, f64::max);
+                let mut dt = (HAZY_AIR_STEP_TAU / ext.max(1e-300))
+                    .min(HAZY_AIR_MAX_STEP_M)
+                    .min(hi - t);
+                // Over the shadow's prism the steps resolve its edges: a shadow texel, or
+                // 1/256 of the prism's stretch if that is longer; and a step ends where the
+                // prism begins.
+                if !sunward {
+                    if t < prism.0 {
+                        dt = dt.min(prism.0 - t);
+                    } else if t < prism.1 {
+                        dt = dt.min(prism_step);
+                    }
+                }
+                dt
+            };
+            let tm = t + 0.5 * dt;
+            t += dt;
+            n += 1;
+            let p = s.eye + tm * d;
+            let g_cl = if sunward {
+                [1.0; 3]
+            } else {
+                shadow_at(shadow, res, s.shadow_coords(p))
+            };
+            let sun = air.sunlight(p.y);
+            let tr = air.transparency(s.eye.y, d.y, tm);
+            let (rayleigh, n_haze) = air.at(p.y);
+            for c in 0..3 {
+                let b = rayleigh[c] * p_air + n_haze * haze_b[c];
+                let lit = if shadow_only {
+                    -(1.0 - g_cl[c])
+                } else {
+                    g_cl[c]
+                };
+                out[c] += b * sun[c] * tr[c] * lit * dt;
+            }
+            if !shadow_only && tr.iter().all(|&v| v < 1e-7) {
+                break;
+            }
+        }
+    }
+
+    /// Composite: the air before and after the slices, the ground lit through the final
+    /// shadow surface, or the sun's disk.
+    fn pixel(&self, (sum, _, t_cl): EyeTexel, d: DVec3, tex: &Texture, shadow: &[[f64; 3]]) -> ([f32; 3], f32) {
+        let (s, air) = (&self.s, &self.air);
+        let t_end = self.t_ground(d);
+        // The slices' range along the ray, clipped to [0, t_end].
+        let nd = s.normal.dot(d);
+        let (ta, tb) = if nd.abs() < 1e-12 {
+            let inside = (s.range.0..=s.range.1).contains(&self.n_dot_e);
+            if inside { (0.0, t_end) } else { (0.0, 0.0) }
+        } else {
+            let (x, y) = (
+                (s.range.0 - self.n_dot_e) / nd,
+                (s.range.1 - self.n_dot_e) / nd,
+            );
+            (x.min(y).clamp(0.0, t_end), x.max(y).clamp(0.0, t_end))
+        };
+        let front = self.air_segment(d, tex, (0.0, ta), shadow);
+        let back = self.air_segment(d, tex, (tb, t_end), shadow);
+        let t_front = air.transparency(s.eye.y, d.y, ta);
+        let t_all = air.transparency(s.eye.y, d.y, t_end);
+        let cos_disk = (SUN_DIAMETER_DEG / 2.0).to_radians().cos();
+        let disk_sr = std::f64::consts::TAU * (1.0 - cos_disk);
+        // What lies beyond: the ground, lit through the final shadow surface, or the sun.
+        let end: [f64; 3] = if t_end.is_finite() {
+            let ground = s.eye + t_end * d;
+            let g_cl = shadow_at(shadow, self.res(), s.shadow_coords(ground));
+            let sun_ground = air.sunlight(0.0);
+            std::array::from_fn(|c| {
+                self.frame.ground_albedo / PI * air.l_y * sun_ground[c] * g_cl[c] * t_all[c]
+            })
+        } else if d.dot(s.to_sun) >= cos_disk {
+            std::array::from_fn(|c| t_all[c] / disk_sr)
+        } else {
+            [0.0; 3]
+        };
+        let irradiance = self.frame.sun.irradiance;
+        let rgb = std::array::from_fn(|c| {
+            let i_s = irradiance[c];
+            let v = i_s * front[c] + t_front[c] * sum[c] + t_cl[c] * i_s * (back[c] + end[c]);
+            v as f32
+        });
+        (rgb, t_cl[1] as f32)
+    }
+}
+
 /// Renders `frame` by shadow-view slicing with the fields of `tables` (field i = grid
 /// channel i).
 pub fn render(tables: &Tables, frame: &Frame, settings: &Settings) -> Result<Image, FrameError> {
     let s = super::setup(frame, settings)?;
     check_fields(tables, frame)?;
     let fields: Vec<&FieldTable> = tables.fields.iter().collect();
-    let (w, h) = (frame.width, frame.height);
-    let res = settings.light_resolution;
-    let atm = &frame.atmosphere;
-    let l_y = s.to_sun.y;
     let haze = frame
         .haze
         .as_ref()
         .map(|h| (tables.fields[h.field].clone(), h));
     let air = Air {
-        atm,
+        atm: &frame.atmosphere,
         haze_ext: haze.as_ref().map_or([0.0; 3], |(f, h)| {
             f.sigma_ext_m2.map(|e| e * h.number_density_per_m3)
         }),
         haze_gamma: haze.as_ref().map_or(0.0, |(_, h)| 1.0 / h.scale_height_m),
-        l_y,
+        l_y: s.to_sun.y,
     };
-    let air_on = air.on();
-    let irradiance = frame.sun.irradiance;
+    let svs = Svs {
+        tables,
+        frame,
+        settings,
+        g: fields
+            .iter()
+            .map(|f| asymmetry(f, tables.theta_step_deg))
+            .collect(),
+        fields,
+        air_on: air.on(),
+        air,
+        haze_g: haze
+            .as_ref()
+            .map(|(f, _)| asymmetry(f, tables.theta_step_deg)),
+        haze,
+        n_dot_e: s.normal.dot(s.eye),
+        s,
+    };
+    let (w, h) = (frame.width, frame.height);
+    let res = settings.light_resolution;
     let rays: Vec<DVec3> = (0..w * h)
         .map(|p| crate::camera::pixel_ray(s.axes, s.tan_half_fov_y, (p % w, p / w), (w, h)))
         .collect();
-    let g: Vec<[f64; 3]> = fields
-        .iter()
-        .map(|f| asymmetry(f, tables.theta_step_deg))
-        .collect();
-    // The Mie scattering texture (§4.1): per pixel and field, (P_f(α) + k_multi) σ_sca,f per
-    // channel, and the Rayleigh phase; α is constant along a pixel's ray.
-    // The haze's β_atm: N_0 σ_sca P(α) (its Ams_1 or Cornette–Shanks), no k_multi (Eq. 1).
-    let haze_g = haze
-        .as_ref()
-        .map(|(f, _)| asymmetry(f, tables.theta_step_deg));
-    let haze_beta = |cos: f64| -> [f64; 3] {
-        let Some((f, h)) = &haze else {
-            return [0.0; 3];
-        };
-        let p = match settings.phase {
-            SvsPhase::Tables => sample::ams(f, tables.theta_step_deg, 1.0, cos),
-            SvsPhase::CornetteShanks => {
-                let g = haze_g.expect("with the haze");
-                std::array::from_fn(|c| cornette_shanks(g[c], cos))
-            }
-        };
-        std::array::from_fn(|c| p[c] * f.sigma_sca_m2[c] * h.number_density_per_m3)
-    };
-    let haze_field = frame.haze.as_ref().map(|h| h.field);
-    type Texture = ([[f64; 3]; MAX_FIELDS], f64, [f64; 3]);
-    let mie: Vec<Texture> = rays
-        .par_iter()
-        .map(|&d| {
-            let cos = d.dot(s.to_sun);
-            let mut out = [[0.0; 3]; MAX_FIELDS];
-            for (i, f) in fields.iter().enumerate() {
-                if Some(i) == haze_field {
-                    continue; // the haze layer lives in the air, not the grid
-                }
-                let p = match settings.phase {
-                    SvsPhase::Tables => sample::ams(f, tables.theta_step_deg, 1.0, cos),
-                    SvsPhase::CornetteShanks => {
-                        std::array::from_fn(|c| cornette_shanks(g[i][c], cos))
-                    }
-                };
-                out[i] = std::array::from_fn(|c| (p[c] + settings.k_multi) * f.sigma_sca_m2[c]);
-            }
-            (out, rayleigh_phase(cos), haze_beta(cos))
-        })
-        .collect();
-
-    // The shadow surface g_sun_cl, and per pixel: S, α* (air and cloud), the cloud's own
-    // transparency.
+    let mie: Vec<Texture> = rays.par_iter().map(|&d| svs.texture(d)).collect();
     let mut shadow = vec![[1.0f64; 3]; res * res];
-    let mut eye = vec![([0.0f64; 3], [1.0f64; 3], [1.0f64; 3]); w * h];
-    let n_dot_e = s.normal.dot(s.eye);
-    let y_eye = s.eye.y;
-    let t_ground = |d: DVec3| {
-        if d.y < 0.0 {
-            (y_eye / -d.y).max(0.0)
-        } else {
-            f64::INFINITY
-        }
-    };
+    let mut eye: Vec<EyeTexel> = vec![([0.0; 3], [1.0; 3], [1.0; 3]); w * h];
     for k in 0..settings.slices {
         let c = s.plane(k);
-        // Eq. 10 first (§4.1): the slice's cloud into the shadow surface.
-        shadow.par_iter_mut().enumerate().for_each(|(i, texel)| {
-            let p = s.shadow_point(i % res, i / res, c);
-            let rho = frame.grid.sample(p);
-            let (ext, _) = coefficients(&fields, &rho);
-            for ch in 0..3 {
-                texel[ch] *= (-ext[ch] * s.sun_step).exp();
-            }
-        });
-        // Then the screen: Eqs. 8 and 9, blended as §4.3.
+        shadow
+            .par_iter_mut()
+            .enumerate()
+            .for_each(|(i, texel)| svs.shadow_slab(texel, i, c));
         eye.par_iter_mut()
             .zip(&rays)
             .zip(&mie)
-            .for_each(|((px, &d), (beta, p_air, haze_b))| {
-                let nd = s.normal.dot(d);
-                if nd.abs() < 1e-9 {
-                    return;
-                }
-                let t = (c - n_dot_e) / nd;
-                if t <= 0.0 || t > t_ground(d) {
-                    return;
-                }
-                let p = s.eye + t * d;
-                let rho = frame.grid.sample(p);
-                let (ext, _) = coefficients(&fields, &rho);
-                let (rayleigh, n_haze) = if air_on { air.at(p.y) } else { ([0.0; 3], 0.0) };
-                let air_ext: [f64; 3] =
-                    std::array::from_fn(|ch| rayleigh[ch] + n_haze * air.haze_ext[ch]);
-                if ext.iter().chain(&air_ext).all(|&e| e <= 0.0) {
-                    return;
-                }
-                let dt = s.step / nd.abs();
-                let g_cl = shadow_at(&shadow, res, s.shadow_coords(p));
-                let g_atm = if air_on { air.sunlight(p.y) } else { [1.0; 3] };
-                let (sum, alpha_star, t_cl) = px;
-                for ch in 0..3 {
-                    let mut b = rayleigh[ch] * p_air + n_haze * haze_b[ch];
-                    for (f, r) in rho.iter().enumerate().take(fields.len()) {
-                        b += r * beta[f][ch];
-                    }
-                    // Eq. 8 (× I_sun), Eq. 9.
-                    let contribution = irradiance[ch] * dt * b * g_atm[ch] * g_cl[ch];
-                    let slab = (-(ext[ch] + air_ext[ch]) * dt).exp();
-                    if s.back_to_front {
-                        sum[ch] = contribution + slab * sum[ch];
-                    } else {
-                        sum[ch] += alpha_star[ch] * contribution;
-                    }
-                    alpha_star[ch] *= slab;
-                    t_cl[ch] *= (-ext[ch] * dt).exp();
-                }
-            });
+            .for_each(|((px, &d), tex)| svs.eye_slab(px, d, tex, c, &shadow));
     }
-
-    // Composite: the air before and after the slices, the ground, the sun disk.
-    let cos_disk = (SUN_DIAMETER_DEG / 2.0).to_radians().cos();
-    let disk_sr = std::f64::consts::TAU * (1.0 - cos_disk);
-    let sun_ground = air.sunlight(0.0);
     let pixels: Vec<([f32; 3], f32)> = eye
         .par_iter()
         .zip(&rays)
         .zip(&mie)
-        .map(|((&(sum, _, t_cl), &d), &(_, p_air, haze_b))| {
-            let t_end = t_ground(d);
-            // The slices' range along the ray, clipped to [0, t_end].
-            let nd = s.normal.dot(d);
-            let (ta, tb) = if nd.abs() < 1e-12 {
-                let inside = (s.range.0..=s.range.1).contains(&n_dot_e);
-                if inside { (0.0, t_end) } else { (0.0, 0.0) }
-            } else {
-                let (x, y) = ((s.range.0 - n_dot_e) / nd, (s.range.1 - n_dot_e) / nd);
-                (x.min(y).clamp(0.0, t_end), x.max(y).clamp(0.0, t_end))
-            };
-            let cos_sun = d.dot(s.to_sun);
-            // In-scattering by the air over [t0, t1], per unit irradiance: Eq. 14 where the
-            // segment is on the sun's side of the slices, less the final shadow's deficit on
-            // the far side.
-            let air_segment = |t0: f64, t1: f64| -> [f64; 3] {
-                if !air_on || t1 <= t0 {
-                    return [0.0; 3];
-                }
-                // The segment lies on one side of the slices: ask at a point well inside it (a
-                // point at its start would sit on the boundary plane in f32).
-                let probe_t = if t1.is_finite() {
-                    0.5 * (t0 + t1)
-                } else {
-                    t0 + t0.max(1.0)
-                };
-                let probe = s.eye + probe_t * d;
-                let sunward = s.sunward_of_slices(probe);
-                let haze_on = air.haze_on();
-                // Without haze: Eq. 14 in closed form, less the final shadow's deficit on the
-                // far side (inside the shadow prism). With haze: both species by the midpoint
-                // rule along the whole segment.
-                let mut out = [0.0; 3];
-                let (lo, hi, shadow_only) = if haze_on {
-                    let cap = if t1.is_finite() {
-                        t1
-                    } else {
-                        t0 + SHADOWED_AIR_MAX_M
-                    };
-                    (t0, cap, false)
-                } else {
-                    let a = atm.inscatter(y_eye, d.y, t1, l_y, cos_sun);
-                    let b = atm.inscatter(y_eye, d.y, t0, l_y, cos_sun);
-                    out = std::array::from_fn(|c| a[c] - b[c]);
-                    if sunward {
-                        return out;
-                    }
-                    let (lo, hi) =
-                        prism_span(&s, res, s.eye, d, t0, t1.min(t0 + SHADOWED_AIR_MAX_M));
-                    (lo, hi, true)
-                };
-                if hi <= lo {
-                    return out;
-                }
-                // The shadow deficit: 64 midpoints over the prism. The hazy air: midpoints
-                // 0.02 of an optical depth (or 2 km) apart, until the transmittance from the
-                // eye is below 1e-7.
-                let (mut t, uniform) = (lo, (hi - lo) / SHADOWED_AIR_POINTS as f64);
-                let prism = prism_span(&s, res, s.eye, d, lo, hi);
-                let prism_step = s.shadow_texel[0]
-                    .min(s.shadow_texel[1])
-                    .max((prism.1 - prism.0) / 256.0);
-                let mut n = 0;
-                while (shadow_only && n < SHADOWED_AIR_POINTS) || (!shadow_only && t < hi) {
-                    let (rayleigh, n_haze) = air.at(s.eye.y + (t + 0.5 * uniform) * d.y);
-                    let dt = if shadow_only {
-                        // Counted, not accumulated: exactly the 64 midpoints.
-                        t = lo + n as f64 * uniform;
-                        uniform
-                    } else {
-                        let ext = (0..3)
-                            .map(|c| rayleigh[c] + n_haze * air.haze_ext[c])
-                            .fold(0.0, f64::max);
-                        let mut dt = (HAZY_AIR_STEP_TAU / ext.max(1e-300))
-                            .min(HAZY_AIR_MAX_STEP_M)
-                            .min(hi - t);
-                        // Over the shadow's prism the steps resolve its edges: a shadow texel,
-                        // or 1/256 of the prism's stretch if that is longer; and a step ends
-                        // where the prism begins.
-                        if !sunward {
-                            if t < prism.0 {
-                                dt = dt.min(prism.0 - t);
-                            } else if t < prism.1 {
-                                dt = dt.min(prism_step);
-                            }
-                        }
-                        dt
-                    };
-                    let tm = t + 0.5 * dt;
-                    t += dt;
-                    n += 1;
-                    let p = s.eye + tm * d;
-                    let g_cl = if sunward {
-                        [1.0; 3]
-                    } else {
-                        shadow_at(&shadow, res, s.shadow_coords(p))
-                    };
-                    let sun = air.sunlight(p.y);
-                    let tr = air.transparency(y_eye, d.y, tm);
-                    let (rayleigh, n_haze) = air.at(p.y);
-                    for c in 0..3 {
-                        let b = rayleigh[c] * p_air + n_haze * haze_b[c];
-                        let lit = if shadow_only {
-                            -(1.0 - g_cl[c])
-                        } else {
-                            g_cl[c]
-                        };
-                        out[c] += b * sun[c] * tr[c] * lit * dt;
-                    }
-                    if !shadow_only && tr.iter().all(|&v| v < 1e-7) {
-                        break;
-                    }
-                }
-                out
-            };
-            let front = air_segment(0.0, ta);
-            let back = air_segment(tb, t_end);
-            let t_front = air.transparency(y_eye, d.y, ta);
-            let t_all = air.transparency(y_eye, d.y, t_end);
-            // What lies beyond: the ground, lit through the final shadow surface, or the sun.
-            let end: [f64; 3] = if t_end.is_finite() {
-                let ground = s.eye + t_end * d;
-                let g_cl = shadow_at(&shadow, res, s.shadow_coords(ground));
-                std::array::from_fn(|c| {
-                    frame.ground_albedo / PI * l_y * sun_ground[c] * g_cl[c] * t_all[c]
-                })
-            } else if cos_sun >= cos_disk {
-                std::array::from_fn(|c| t_all[c] / disk_sr)
-            } else {
-                [0.0; 3]
-            };
-            let rgb = std::array::from_fn(|c| {
-                let i_s = irradiance[c];
-                let v = i_s * front[c] + t_front[c] * sum[c] + t_cl[c] * i_s * (back[c] + end[c]);
-                v as f32
-            });
-            (rgb, t_cl[1] as f32)
-        })
+        .map(|((&px, &d), tex)| svs.pixel(px, d, tex, &shadow))
         .collect();
-    Ok(Image {
-        width: w,
-        height: h,
-        rgb: pixels.iter().map(|p| p.0).collect(),
-        transparency: pixels.iter().map(|p| p.1).collect(),
-    })
+    Ok(Image::from_pixels(w, h, &pixels))
 }

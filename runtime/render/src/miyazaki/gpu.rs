@@ -73,6 +73,69 @@ pub struct Renderer {
     composite: wgpu::ComputePipeline,
 }
 
+/// The model's uniform for `frame` with the slicing geometry `s`.
+fn params(tables: &Tables, frame: &Frame, settings: &Settings, s: &super::SvsSetup) -> SvsParams {
+    let (w, h, res) = (frame.width, frame.height, settings.light_resolution);
+    let cos_disk = (SUN_DIAMETER_DEG / 2.0).to_radians().cos();
+    let (forward, right, up) = s.axes;
+    let haze = frame.haze.as_ref().map(|h| (&tables.fields[h.field], h));
+    let [nx, ny, nz] = frame.grid.dims;
+    let per_field = |f: &dyn Fn(&runtime::FieldTable) -> [f64; 3]| -> [[f32; 4]; MAX_FIELDS] {
+        std::array::from_fn(|i| tables.fields.get(i).map_or([0.0; 4], |t| a4(f(t), 0.0)))
+    };
+    SvsParams {
+        eye: v4(s.eye, if s.back_to_front { 1.0 } else { 0.0 }),
+        forward: v4(forward, s.tan_half_fov_y),
+        right: v4(right, w as f64 / h as f64),
+        up: v4(up, settings.k_multi),
+        to_sun: v4(s.to_sun, s.step),
+        normal: v4(s.normal, s.sun_step),
+        shadow_u: v4(s.shadow_u, s.shadow_origin[0]),
+        shadow_w: v4(s.shadow_w, s.shadow_origin[1]),
+        shadow_texel: [
+            s.shadow_texel[0] as f32,
+            s.shadow_texel[1] as f32,
+            frame.ground_albedo as f32,
+            if settings.phase == SvsPhase::CornetteShanks {
+                1.0
+            } else {
+                0.0
+            },
+        ],
+        grid_min: v4(frame.grid.min_m, s.range.0),
+        grid_max: v4(frame.grid.max_m, s.range.1),
+        grid_dims: [nx as u32, ny as u32, nz as u32, tables.fields.len() as u32],
+        sizes: [
+            w as u32,
+            h as u32,
+            res as u32,
+            frame.haze.as_ref().map_or(0, |h| h.field as u32 + 1),
+        ],
+        sigma_ext: per_field(&|f| f.sigma_ext_m2),
+        g: per_field(&|f| super::cpu::asymmetry(f, tables.theta_step_deg)),
+        sky_beta: a4(
+            frame.atmosphere.beta_sea_level_per_m,
+            1.0 / frame.atmosphere.scale_height_m,
+        ),
+        haze: haze.map_or([0.0; 4], |(f, h)| {
+            a4(
+                f.sigma_ext_m2.map(|e| e * h.number_density_per_m3),
+                1.0 / h.scale_height_m,
+            )
+        }),
+        haze_sca: a4(
+            haze.map_or([0.0; 3], |(f, h)| {
+                f.sigma_sca_m2.map(|e| e * h.number_density_per_m3)
+            }),
+            cos_disk,
+        ),
+        irradiance: a4(
+            frame.sun.irradiance,
+            std::f64::consts::TAU * (1.0 - cos_disk),
+        ),
+    }
+}
+
 /// The model's whole shader module, as the renderer compiles it.
 pub fn source() -> String {
     slicing_source(SVS_WGSL)
@@ -123,64 +186,7 @@ impl Renderer {
                 ("shadow surface bytes", 16 * (res * res) as u64),
             ],
         )?;
-        let cos_disk = (SUN_DIAMETER_DEG / 2.0).to_radians().cos();
-        let (forward, right, up) = s.axes;
-        let haze = frame.haze.as_ref().map(|h| (&tables.fields[h.field], h));
-        let [nx, ny, nz] = frame.grid.dims;
-        let per_field = |f: &dyn Fn(&runtime::FieldTable) -> [f64; 3]| -> [[f32; 4]; MAX_FIELDS] {
-            std::array::from_fn(|i| tables.fields.get(i).map_or([0.0; 4], |t| a4(f(t), 0.0)))
-        };
-        let params = SvsParams {
-            eye: v4(s.eye, if s.back_to_front { 1.0 } else { 0.0 }),
-            forward: v4(forward, s.tan_half_fov_y),
-            right: v4(right, w as f64 / h as f64),
-            up: v4(up, settings.k_multi),
-            to_sun: v4(s.to_sun, s.step),
-            normal: v4(s.normal, s.sun_step),
-            shadow_u: v4(s.shadow_u, s.shadow_origin[0]),
-            shadow_w: v4(s.shadow_w, s.shadow_origin[1]),
-            shadow_texel: [
-                s.shadow_texel[0] as f32,
-                s.shadow_texel[1] as f32,
-                frame.ground_albedo as f32,
-                if settings.phase == SvsPhase::CornetteShanks {
-                    1.0
-                } else {
-                    0.0
-                },
-            ],
-            grid_min: v4(frame.grid.min_m, s.range.0),
-            grid_max: v4(frame.grid.max_m, s.range.1),
-            grid_dims: [nx as u32, ny as u32, nz as u32, tables.fields.len() as u32],
-            sizes: [
-                w as u32,
-                h as u32,
-                res as u32,
-                frame.haze.as_ref().map_or(0, |h| h.field as u32 + 1),
-            ],
-            sigma_ext: per_field(&|f| f.sigma_ext_m2),
-            g: per_field(&|f| super::cpu::asymmetry(f, tables.theta_step_deg)),
-            sky_beta: a4(
-                frame.atmosphere.beta_sea_level_per_m,
-                1.0 / frame.atmosphere.scale_height_m,
-            ),
-            haze: haze.map_or([0.0; 4], |(f, h)| {
-                a4(
-                    f.sigma_ext_m2.map(|e| e * h.number_density_per_m3),
-                    1.0 / h.scale_height_m,
-                )
-            }),
-            haze_sca: a4(
-                haze.map_or([0.0; 3], |(f, h)| {
-                    f.sigma_sca_m2.map(|e| e * h.number_density_per_m3)
-                }),
-                cos_disk,
-            ),
-            irradiance: a4(
-                frame.sun.irradiance,
-                std::f64::consts::TAU * (1.0 - cos_disk),
-            ),
-        };
+        let params = params(tables, frame, settings, &s);
         let params = filled(
             device,
             "photometeor svs params",

@@ -76,17 +76,142 @@ fn cross_slab(
     }
 }
 
+/// What every step of a frame reads: the frame, its settings and geometry, the fields.
+struct Slicer<'a> {
+    tables: &'a Tables,
+    frame: &'a Frame,
+    settings: &'a Settings,
+    setup: Setup,
+    fields: Vec<&'a FieldTable>,
+    /// h·eye: the eye's plane value.
+    h_dot_e: f64,
+    /// Δ_l, the light's path through one slab.
+    light_thickness: f64,
+    /// The sun direction's y component.
+    l_y: f64,
+}
+
+/// A pixel's volume radiance L and transparency T per channel, accumulated over the slices.
+type EyeTexel = ([f64; 3], [f64; 3]);
+
+impl Slicer<'_> {
+    /// Step 1 of the module docs (Eq. 26): the slab of slice plane `c` along the pixel's ray
+    /// `d`, lit by the light buffer, added to the pixel's (L, T).
+    fn eye_slab(&self, px: &mut EyeTexel, d: DVec3, c: f64, light: &[Light]) {
+        let (setup, settings) = (&self.setup, self.settings);
+        let hd = setup.half.dot(d);
+        if hd.abs() < 1e-9 {
+            return;
+        }
+        let t = (c - self.h_dot_e) / hd;
+        if t <= 0.0 {
+            return;
+        }
+        let p = setup.eye + t * d;
+        let rho = self.frame.grid.sample(p);
+        let (ext, sca) = coefficients(&self.fields, &rho);
+        if ext.iter().all(|&e| e <= 0.0) {
+            return;
+        }
+        let mut lit = bilinear(light, settings.light_resolution, setup.light_coords(p));
+        if settings.light_update == LightUpdate::Continuum {
+            // The light at the slab's middle: the buffer holds it at the slab's entry.
+            cross_slab(
+                &mut lit,
+                &self.fields,
+                &ext,
+                &sca,
+                &rho,
+                self.light_thickness / 2.0,
+                settings.light_update,
+            );
+        }
+        let sun = self.frame.atmosphere.sunlight(p[1], self.l_y);
+        let phase = sample::mix(
+            &self.fields,
+            &rho,
+            self.tables.theta_step_deg,
+            lit.n + 1.0,
+            -setup.light.dot(d),
+        );
+        let thickness = setup.slice_step / hd.abs();
+        for ch in 0..3 {
+            if ext[ch] <= 0.0 {
+                continue;
+            }
+            let slab = (-ext[ch] * thickness).exp();
+            let scattered = lit.intensity[ch]
+                * sun[ch]
+                * self.frame.sun.irradiance[ch]
+                * (phase[ch] + settings.xi)
+                * (sca[ch] / ext[ch])
+                * (1.0 - slab);
+            let (l, tr) = (&mut px.0[ch], &mut px.1[ch]);
+            if setup.front_to_back {
+                *l += *tr * scattered;
+            } else {
+                *l = scattered + slab * *l;
+            }
+            *tr *= slab;
+        }
+    }
+
+    /// Step 2 (Eqs. 21, 25): light texel `i` carried across slice plane `c`.
+    fn light_slab(&self, texel: &mut Light, i: usize, c: f64) {
+        let res = self.settings.light_resolution;
+        let p = self.setup.light_point(i % res, i / res, c);
+        let rho = self.frame.grid.sample(p);
+        let (ext, sca) = coefficients(&self.fields, &rho);
+        if ext.iter().all(|&e| e <= 0.0) {
+            return;
+        }
+        cross_slab(
+            texel,
+            &self.fields,
+            &ext,
+            &sca,
+            &rho,
+            self.light_thickness,
+            self.settings.light_update,
+        );
+    }
+
+    /// The pixel of ray `d` composed around its volume light: the ground is lit through the
+    /// final light buffer (1 outside its footprint, where no volume is).
+    fn pixel(&self, (l_vol, t_vol): EyeTexel, d: DVec3, light: &[Light]) -> ([f32; 3], f32) {
+        let res = self.settings.light_resolution;
+        let ground_lit = |p: DVec3| {
+            let uv = self.setup.light_coords(p);
+            if over_footprint(res, uv) {
+                bilinear(light, res, uv).intensity
+            } else {
+                [1.0; 3]
+            }
+        };
+        (
+            compose(self.frame, self.setup.eye, d, l_vol, t_vol, ground_lit),
+            t_vol[1] as f32,
+        )
+    }
+}
+
 /// Renders `frame` with the fields of `tables` (field i = grid channel i).
 pub fn render(tables: &Tables, frame: &Frame, settings: &Settings) -> Result<Image, FrameError> {
     let setup = Setup::new(frame, settings)?;
     check_fields(tables, frame)?;
-    let fields: Vec<&FieldTable> = tables.fields.iter().collect();
+    let slicer = Slicer {
+        tables,
+        frame,
+        settings,
+        fields: tables.fields.iter().collect(),
+        h_dot_e: setup.half.dot(setup.eye),
+        light_thickness: setup.slice_step / setup.half.dot(setup.light),
+        l_y: frame.sun.direction()[1],
+        setup,
+    };
     let (w, h) = (frame.width, frame.height);
     let res = settings.light_resolution;
-    let l_y = frame.sun.direction()[1];
-    let cos_light = |d: DVec3| -setup.light.dot(d);
     let rays: Vec<DVec3> = (0..w * h).map(|p| setup.ray(p % w, p / w, w, h)).collect();
-
     let mut light = vec![
         Light {
             intensity: [1.0; 3],
@@ -94,116 +219,21 @@ pub fn render(tables: &Tables, frame: &Frame, settings: &Settings) -> Result<Ima
         };
         res * res
     ];
-    // Per pixel: radiance and transparency of the volume, per channel.
-    let mut eye = vec![([0.0f64; 3], [1.0f64; 3]); w * h];
-    let h_dot_l = setup.half.dot(setup.light);
-    let h_dot_e = setup.half.dot(setup.eye);
-    // Δ_l, the light's path through one slab.
-    let light_thickness = setup.slice_step / h_dot_l;
-
+    let mut eye: Vec<EyeTexel> = vec![([0.0; 3], [1.0; 3]); w * h];
     for k in 0..settings.slices {
         let c = setup.slice_start + k as f64 * setup.slice_step;
-        eye.par_iter_mut().zip(&rays).for_each(|(px, &d)| {
-            let hd = setup.half.dot(d);
-            if hd.abs() < 1e-9 {
-                return;
-            }
-            let t = (c - h_dot_e) / hd;
-            if t <= 0.0 {
-                return;
-            }
-            let p = setup.eye + t * d;
-            let rho = frame.grid.sample(p);
-            let (ext, sca) = coefficients(&fields, &rho);
-            if ext.iter().all(|&e| e <= 0.0) {
-                return;
-            }
-            let mut lit = bilinear(&light, res, setup.light_coords(p));
-            if settings.light_update == LightUpdate::Continuum {
-                // The light at the slab's middle: the buffer holds it at the slab's entry.
-                cross_slab(
-                    &mut lit,
-                    &fields,
-                    &ext,
-                    &sca,
-                    &rho,
-                    light_thickness / 2.0,
-                    settings.light_update,
-                );
-            }
-            let sun = frame.atmosphere.sunlight(p[1], l_y);
-            let phase = sample::mix(
-                &fields,
-                &rho,
-                tables.theta_step_deg,
-                lit.n + 1.0,
-                cos_light(d),
-            );
-            let thickness = setup.slice_step / hd.abs();
-            for ch in 0..3 {
-                if ext[ch] <= 0.0 {
-                    continue;
-                }
-                let slab = (-ext[ch] * thickness).exp();
-                let scattered = lit.intensity[ch]
-                    * sun[ch]
-                    * frame.sun.irradiance[ch]
-                    * (phase[ch] + settings.xi)
-                    * (sca[ch] / ext[ch])
-                    * (1.0 - slab);
-                let (l, tr) = (&mut px.0[ch], &mut px.1[ch]);
-                if setup.front_to_back {
-                    *l += *tr * scattered;
-                } else {
-                    *l = scattered + slab * *l;
-                }
-                *tr *= slab;
-            }
-        });
-        let thickness = light_thickness;
-        light.par_iter_mut().enumerate().for_each(|(i, texel)| {
-            let p = setup.light_point(i % res, i / res, c);
-            let rho = frame.grid.sample(p);
-            let (ext, sca) = coefficients(&fields, &rho);
-            if ext.iter().all(|&e| e <= 0.0) {
-                return;
-            }
-            cross_slab(
-                texel,
-                &fields,
-                &ext,
-                &sca,
-                &rho,
-                thickness,
-                settings.light_update,
-            );
-        });
+        eye.par_iter_mut()
+            .zip(&rays)
+            .for_each(|(px, &d)| slicer.eye_slab(px, d, c, &light));
+        light
+            .par_iter_mut()
+            .enumerate()
+            .for_each(|(i, texel)| slicer.light_slab(texel, i, c));
     }
-
     let pixels: Vec<([f32; 3], f32)> = eye
         .par_iter()
         .zip(&rays)
-        .map(|(&(l_vol, t_vol), &d)| {
-            // The ground is lit through the final light buffer (1 outside its footprint,
-            // where no volume is).
-            let ground_lit = |p: DVec3| {
-                let uv = setup.light_coords(p);
-                if over_footprint(res, uv) {
-                    bilinear(&light, res, uv).intensity
-                } else {
-                    [1.0; 3]
-                }
-            };
-            (
-                compose(frame, setup.eye, d, l_vol, t_vol, ground_lit),
-                t_vol[1] as f32,
-            )
-        })
+        .map(|(&px, &d)| slicer.pixel(px, d, &light))
         .collect();
-    Ok(Image {
-        width: w,
-        height: h,
-        rgb: pixels.iter().map(|p| p.0).collect(),
-        transparency: pixels.iter().map(|p| p.1).collect(),
-    })
+    Ok(Image::from_pixels(w, h, &pixels))
 }

@@ -430,14 +430,7 @@ impl<'a> Tracer<'a> {
             }
         }
         let max = frame.grid.max_density();
-        let media: Vec<(crate::objects::Region, f64, usize)> = frame
-            .media
-            .iter()
-            .map(|m| {
-                let field = crate::objects::field_index(tables, &m.field)?;
-                Ok((m.region, m.number_density_per_m3, field))
-            })
-            .collect::<Result<_, FrameError>>()?;
+        let media = media_of(tables, frame)?;
         if max.iter().all(|&m| m <= 0.0) && media.is_empty() {
             return bad(
                 "the density grid holds no particles (every voxel is 0): nothing scatters, \
@@ -445,116 +438,9 @@ impl<'a> Tracer<'a> {
                     .into(),
             );
         }
-        let weights = &spectrum.weights;
-        let lambdas = &spectrum.wavelengths_nm;
-        // β_sl(λ): log-linear in ln λ through the channels' mean wavelengths.
-        let mean_lambda: [f64; 3] =
-            std::array::from_fn(|c| (0..lambdas.len()).map(|j| weights[c][j] * lambdas[j]).sum());
-        let beta = frame.atmosphere.beta_sea_level_per_m;
-        let mut pts: Vec<(f64, f64)> = (0..3).map(|c| (mean_lambda[c], beta[c])).collect();
-        pts.sort_by(|a, b| a.0.total_cmp(&b.0));
-        let beta_at = |l: f64| -> f64 {
-            if pts.iter().any(|p| p.1 <= 0.0) {
-                // Air off (or a channel without air): the nearest channel's value.
-                return pts
-                    .iter()
-                    .min_by(|a, b| (a.0 - l).abs().total_cmp(&(b.0 - l).abs()))
-                    .map_or(0.0, |p| p.1);
-            }
-            let seg = if l <= pts[1].0 { 0 } else { 1 };
-            let (a, b) = (pts[seg], pts[seg + 1]);
-            if a.0 == b.0 {
-                return a.1;
-            }
-            let t = (l.ln() - a.0.ln()) / (b.0.ln() - a.0.ln());
-            (a.1.ln() + t * (b.1.ln() - a.1.ln())).exp()
-        };
-        let mut bands = Vec::new();
-        let mut band_cdf = Vec::new();
-        let mut majorant: f64 = 0.0;
-        let mut acc = 0.0;
-        for (j, &lambda) in lambdas.iter().enumerate() {
-            let q = (weights[0][j] + weights[1][j] + weights[2][j]) / 3.0;
-            if q <= 0.0 {
-                continue;
-            }
-            let fields: Vec<FieldOptics> = tables
-                .fields
-                .iter()
-                .map(|f| {
-                    let s = f.single.as_ref().expect("checked above");
-                    let bins: Vec<f64> = s.bins.row(j).to_vec();
-                    FieldOptics {
-                        sigma_ext: s.sigma_ext_m2[j],
-                        albedo: s.albedo[j],
-                        phase: PhaseSampler::new(&grid_theta, &bins, s.forward_delta_fraction[j]),
-                    }
-                })
-                .collect();
-            // Media do not overlap each other: the densest one's extinction bounds theirs.
-            let media_max = media
-                .iter()
-                .map(|&(_, n, f)| n * fields[f].sigma_ext)
-                .fold(0.0, f64::max);
-            majorant = (fields
-                .iter()
-                .zip(&max)
-                .map(|(f, m)| f.sigma_ext * m)
-                .sum::<f64>()
-                + media_max)
-                .max(majorant);
-            let (haze_ext_sl, haze_sca_sl) = frame.haze.as_ref().map_or((0.0, 0.0), |h| {
-                let f = &fields[h.field];
-                let ext = h.number_density_per_m3 * f.sigma_ext;
-                (ext, ext * f.albedo)
-            });
-            bands.push(Band {
-                fields,
-                beta_air_sl: beta_at(lambda),
-                haze_ext_sl,
-                haze_sca_sl,
-                to_rgb: std::array::from_fn(|c| weights[c][j] / q),
-            });
-            acc += q;
-            band_cdf.push(acc);
-        }
-        for c in band_cdf.iter_mut() {
-            *c /= acc;
-        }
+        let (bands, band_cdf, majorant) = bands(tables, frame, spectrum, &grid_theta, &media);
         let cos_disk = (SUN_DIAMETER_DEG / 2.0).to_radians().cos();
-        // The tracked box: the grid's, the media boxes', and for a medium everywhere all the
-        // scene's contents (camera, lights, occluders, grid) and 30 of its free paths more.
-        let mut track = (frame.grid.min_m, frame.grid.max_m);
-        let grow = |t: &mut (DVec3, DVec3), a: DVec3, b: DVec3| {
-            t.0 = t.0.min(a);
-            t.1 = t.1.max(b);
-        };
-        for &(region, _, _) in &media {
-            if let crate::objects::Region::Box { min_m, max_m } = region {
-                grow(&mut track, min_m, max_m);
-            }
-        }
-        if let Some(&(_, n, f)) = media
-            .iter()
-            .find(|m| m.0 == crate::objects::Region::Everywhere)
-        {
-            let p = frame.camera.position_m;
-            grow(&mut track, p, p);
-            for l in &frame.lights {
-                grow(&mut track, l.position_m, l.position_m);
-            }
-            for o in &frame.occluders {
-                let (a, b) = o.bounds();
-                grow(&mut track, a, b);
-            }
-            let thinnest = bands
-                .iter()
-                .map(|b| n * b.fields[f].sigma_ext)
-                .fold(f64::INFINITY, f64::min);
-            let margin = DVec3::splat(30.0 / thinnest.max(1e-12));
-            track = (track.0 - margin, track.1 + margin);
-        }
-        let (track_min, track_max) = track;
+        let (track_min, track_max) = tracked_box(frame, &media, &bands);
         let mut sigma_ext_g = [0.0; MAX_FIELDS];
         for (i, f) in tables.fields.iter().enumerate() {
             sigma_ext_g[i] = f.sigma_ext_m2[1];
@@ -1185,6 +1071,153 @@ impl<'a> Tracer<'a> {
         }
         (-tau).exp()
     }
+}
+
+/// Each medium's region, number density and field index in `tables`.
+fn media_of(
+    tables: &Tables,
+    frame: &Frame,
+) -> Result<Vec<(crate::objects::Region, f64, usize)>, FrameError> {
+    frame
+        .media
+        .iter()
+        .map(|m| {
+            let field = crate::objects::field_index(tables, &m.field)?;
+            Ok((m.region, m.number_density_per_m3, field))
+        })
+        .collect()
+}
+
+/// The air's β at sea level at wavelength `l` (nm): log-linear in ln λ through `pts`, the
+/// channels' (mean wavelength, β_sl) sorted by wavelength; with the air off (or a channel
+/// without air) the nearest channel's value.
+fn beta_air_at(pts: &[(f64, f64)], l: f64) -> f64 {
+    if pts.iter().any(|p| p.1 <= 0.0) {
+        return pts
+            .iter()
+            .min_by(|a, b| (a.0 - l).abs().total_cmp(&(b.0 - l).abs()))
+            .map_or(0.0, |p| p.1);
+    }
+    let seg = if l <= pts[1].0 { 0 } else { 1 };
+    let (a, b) = (pts[seg], pts[seg + 1]);
+    if a.0 == b.0 {
+        return a.1;
+    }
+    let t = (l.ln() - a.0.ln()) / (b.0.ln() - a.0.ln());
+    (a.1.ln() + t * (b.1.ln() - a.1.ln())).exp()
+}
+
+/// Every wavelength of the bake with a weight: its [`Band`], the CDF of the hero's sampling
+/// probabilities q_j, and the majorant over all of them (module docs, "Volumes").
+fn bands(
+    tables: &Tables,
+    frame: &Frame,
+    spectrum: &runtime::Spectrum,
+    grid_theta: &ThetaGrid,
+    media: &[(crate::objects::Region, f64, usize)],
+) -> (Vec<Band>, Vec<f64>, f64) {
+    let max = frame.grid.max_density();
+    let weights = &spectrum.weights;
+    let lambdas = &spectrum.wavelengths_nm;
+    // β_sl(λ): log-linear in ln λ through the channels' mean wavelengths.
+    let mean_lambda: [f64; 3] =
+        std::array::from_fn(|c| (0..lambdas.len()).map(|j| weights[c][j] * lambdas[j]).sum());
+    let beta = frame.atmosphere.beta_sea_level_per_m;
+    let mut pts: Vec<(f64, f64)> = (0..3).map(|c| (mean_lambda[c], beta[c])).collect();
+    pts.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let mut bands = Vec::new();
+    let mut band_cdf = Vec::new();
+    let mut majorant: f64 = 0.0;
+    let mut acc = 0.0;
+    for (j, &lambda) in lambdas.iter().enumerate() {
+        let q = (weights[0][j] + weights[1][j] + weights[2][j]) / 3.0;
+        if q <= 0.0 {
+            continue;
+        }
+        let fields: Vec<FieldOptics> = tables
+            .fields
+            .iter()
+            .map(|f| {
+                let s = f.single.as_ref().expect("checked by Tracer::new");
+                let bins: Vec<f64> = s.bins.row(j).to_vec();
+                FieldOptics {
+                    sigma_ext: s.sigma_ext_m2[j],
+                    albedo: s.albedo[j],
+                    phase: PhaseSampler::new(grid_theta, &bins, s.forward_delta_fraction[j]),
+                }
+            })
+            .collect();
+        // Media do not overlap each other: the densest one's extinction bounds theirs.
+        let media_max = media
+            .iter()
+            .map(|&(_, n, f)| n * fields[f].sigma_ext)
+            .fold(0.0, f64::max);
+        majorant = (fields
+            .iter()
+            .zip(&max)
+            .map(|(f, m)| f.sigma_ext * m)
+            .sum::<f64>()
+            + media_max)
+            .max(majorant);
+        let (haze_ext_sl, haze_sca_sl) = frame.haze.as_ref().map_or((0.0, 0.0), |h| {
+            let f = &fields[h.field];
+            let ext = h.number_density_per_m3 * f.sigma_ext;
+            (ext, ext * f.albedo)
+        });
+        bands.push(Band {
+            fields,
+            beta_air_sl: beta_air_at(&pts, lambda),
+            haze_ext_sl,
+            haze_sca_sl,
+            to_rgb: std::array::from_fn(|c| weights[c][j] / q),
+        });
+        acc += q;
+        band_cdf.push(acc);
+    }
+    for c in band_cdf.iter_mut() {
+        *c /= acc;
+    }
+    (bands, band_cdf, majorant)
+}
+
+/// The tracked box: the grid's, the media boxes', and for a medium everywhere all the scene's
+/// contents (camera, lights, occluders, grid) and 30 of its free paths more.
+fn tracked_box(
+    frame: &Frame,
+    media: &[(crate::objects::Region, f64, usize)],
+    bands: &[Band],
+) -> (DVec3, DVec3) {
+    let mut track = (frame.grid.min_m, frame.grid.max_m);
+    let grow = |t: &mut (DVec3, DVec3), a: DVec3, b: DVec3| {
+        t.0 = t.0.min(a);
+        t.1 = t.1.max(b);
+    };
+    for &(region, _, _) in media {
+        if let crate::objects::Region::Box { min_m, max_m } = region {
+            grow(&mut track, min_m, max_m);
+        }
+    }
+    if let Some(&(_, n, f)) = media
+        .iter()
+        .find(|m| m.0 == crate::objects::Region::Everywhere)
+    {
+        let p = frame.camera.position_m;
+        grow(&mut track, p, p);
+        for l in &frame.lights {
+            grow(&mut track, l.position_m, l.position_m);
+        }
+        for o in &frame.occluders {
+            let (a, b) = o.bounds();
+            grow(&mut track, a, b);
+        }
+        let thinnest = bands
+            .iter()
+            .map(|b| n * b.fields[f].sigma_ext)
+            .fold(f64::INFINITY, f64::min);
+        let margin = DVec3::splat(30.0 / thinnest.max(1e-12));
+        track = (track.0 - margin, track.1 + margin);
+    }
+    track
 }
 
 /// Checks what the truth needs of a frame and its settings, naming the value and its range.
