@@ -11,8 +11,8 @@ use glam::DVec3;
 use runtime::Tables;
 use runtime::gpu::{Gpu, GpuTables, WGSL};
 
-use crate::gpu::{RenderError, Timings, a4, check_sizes, entry, filled, v4};
 use crate::geometry::Sphere;
+use crate::gpu::{RenderError, Timings, a4, check_sizes, entry, filled, v4};
 use crate::objects::{OccluderShape, Region};
 use crate::{Frame, FrameError, Image};
 
@@ -239,7 +239,10 @@ impl Renderer {
             .iter()
             .map(|(label, r)| padded(label, bytemuck::cast_slice(r.as_slice())))
             .collect();
-        buffers.push(padded("biri polynomials", bytemuck::cast_slice(polynomials)));
+        buffers.push(padded(
+            "biri polynomials",
+            bytemuck::cast_slice(polynomials),
+        ));
         let all: Vec<&wgpu::Buffer> = std::iter::once(params)
             .chain(&buffers)
             .chain(std::iter::once(image))
@@ -260,11 +263,14 @@ impl Renderer {
     }
 }
 
+/// Rows of vec4<f32>, as the storage buffers hold them.
+type Rows = Vec<[f32; 4]>;
+
 /// Stage 1 per light: its row block (position and the shadow count at the eye; intensity and
 /// whether it is a spot; the spot's axis and cosine; its first silhouette plane, their count
 /// and which spheres block the eye, as bits) and its meshes' silhouette planes (three rows
 /// each: the edge's ends, the plane's normal).
-fn light_rows(frame: &Frame, spheres: &[(&Sphere, f64)]) -> (Vec<[f32; 4]>, Vec<[f32; 4]>) {
+fn light_rows(frame: &Frame, spheres: &[(&Sphere, f64)]) -> (Rows, Rows) {
     let o = frame.camera.position_m;
     let mut lights: Vec<[f32; 4]> = Vec::new();
     let mut planes: Vec<[f32; 4]> = Vec::new();
@@ -302,10 +308,7 @@ fn light_rows(frame: &Frame, spheres: &[(&Sphere, f64)]) -> (Vec<[f32; 4]>, Vec<
 
 /// The spheres (centre and radius, albedo), the meshes (bounds with their first triangle and
 /// count, as bits) and their triangles (three vertices, the first with the albedo).
-fn occluder_rows(
-    frame: &Frame,
-    spheres: &[(&Sphere, f64)],
-) -> (Vec<[f32; 4]>, Vec<[f32; 4]>, Vec<[f32; 4]>) {
+fn occluder_rows(frame: &Frame, spheres: &[(&Sphere, f64)]) -> (Rows, Rows, Rows) {
     let mut sphere_rows: Vec<[f32; 4]> = Vec::new();
     for (s, albedo) in spheres {
         sphere_rows.push(v4(s.center, s.radius));
@@ -332,7 +335,7 @@ fn occluder_rows(
 /// The media (box or everywhere, their field as bits, β_ext, β_sca, ambient), the quartic's
 /// coefficients of their fields (`polynomials[f]` = where field f's start; the exact primitive
 /// is in the uploaded tables) and the kernel tables' largest depth.
-fn media_rows(tables: &Tables, frame: &Frame) -> Result<(Vec<[f32; 4]>, Vec<f32>, f64), FrameError> {
+fn media_rows(tables: &Tables, frame: &Frame) -> Result<(Rows, Vec<f32>, f64), FrameError> {
     let mut fields: Vec<usize> = Vec::new();
     let mut media_rows: Vec<[f32; 4]> = Vec::new();
     let mut depth_max = 0f64;

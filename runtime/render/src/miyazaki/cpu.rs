@@ -219,9 +219,7 @@ impl Svs<'_> {
                 let g = self.haze_g.expect("with the haze");
                 let p = match self.settings.phase {
                     SvsPhase::Tables => sample::ams(f, self.tables.theta_step_deg, 1.0, cos),
-                    SvsPhase::CornetteShanks => {
-                        std::array::from_fn(|c| cornette_shanks(g[c], cos))
-                    }
+                    SvsPhase::CornetteShanks => std::array::from_fn(|c| cornette_shanks(g[c], cos)),
                 };
                 std::array::from_fn(|c| p[c] * f.sigma_sca_m2[c] * h.number_density_per_m3)
             }
@@ -331,14 +329,7 @@ impl Svs<'_> {
             if sunward {
                 return out;
             }
-            let (lo, hi) = prism_span(
-                s,
-                self.res(),
-                s.eye,
-                d,
-                t0,
-                t1.min(t0 + SHADOWED_AIR_MAX_M),
-            );
+            let (lo, hi) = prism_span(s, self.res(), s.eye, d, t0, t1.min(t0 + SHADOWED_AIR_MAX_M));
             (lo, hi, true)
         };
         if hi > lo {
@@ -422,7 +413,13 @@ impl Svs<'_> {
 
     /// Composite: the air before and after the slices, the ground lit through the final
     /// shadow surface, or the sun's disk.
-    fn pixel(&self, (sum, _, t_cl): EyeTexel, d: DVec3, tex: &Texture, shadow: &[[f64; 3]]) -> ([f32; 3], f32) {
+    fn pixel(
+        &self,
+        (sum, _, t_cl): EyeTexel,
+        d: DVec3,
+        tex: &Texture,
+        shadow: &[[f64; 3]],
+    ) -> ([f32; 3], f32) {
         let (s, air) = (&self.s, &self.air);
         let t_end = self.t_ground(d);
         // The slices' range along the ray, clipped to [0, t_end].
