@@ -602,7 +602,15 @@ fn flux_sums(
 
 /// R and T_diffuse with their standard errors: `n0` photons, then more until 3σ of each is
 /// under 0.3 % of its value (so a 0.5 % disagreement stands out at 5σ), at most 64 n0.
-fn fluxes(tracer: &Tracer, beam: DVec3, n0: usize, seed: u64) -> ([(f64, f64); 2], usize) {
+/// R and T_diffuse from `n0` photons, and with `grow` from as many more (up to 64 n0) as bring
+/// 3σ under 0.3 % of each flux.
+fn fluxes(
+    tracer: &Tracer,
+    beam: DVec3,
+    n0: usize,
+    grow: bool,
+    seed: u64,
+) -> ([(f64, f64); 2], usize) {
     let mut sums = [(0.0, 0.0); 2];
     let mut n = 0;
     let mut want = n0;
@@ -621,7 +629,7 @@ fn fluxes(tracer: &Tracer, beam: DVec3, n0: usize, seed: u64) -> ([(f64, f64); 2
             .map(|&(m, se)| (n as f64 * (3.0 * se / (0.003 * m)).powi(2)).ceil() as usize)
             .max()
             .unwrap();
-        want = need.min(64 * n0).max(n);
+        want = if grow { need.min(64 * n0).max(n) } else { n };
     }
     (stats(&sums, n), n)
 }
@@ -637,14 +645,19 @@ fn slabs_agree_with_disort() {
     let grid = ThetaGrid::new(0.18).unwrap();
     let hg = hg_bins(&grid, 0.85);
     let cloud = cloud550_bins();
+    // CI size: a fixed 5·10⁴ photons per slab, every flux held within 4σ and within 0.5 %
+    // where its 3σ resolves that. TRUTH_SLAB_LONG=1: 2·10⁵ photons, then as many as bring 3σ
+    // under 0.3 % of each flux, every flux held to 0.5 % (docs/truth.md).
+    let long = std::env::var("TRUTH_SLAB_LONG").is_ok();
     let n_flux: usize = std::env::var("TRUTH_SLAB_PATHS")
         .ok()
         .and_then(|v| v.parse().ok())
-        .unwrap_or(200_000);
+        .unwrap_or(if long { 200_000 } else { 50_000 });
+    // Camera paths per radiance: 2.5·10⁴ at CI size (σ 4–14 %), 5·10⁴ in the long run.
     let n_radiance: usize = std::env::var("TRUTH_SLAB_RADIANCE_PATHS")
         .ok()
         .and_then(|v| v.parse().ok())
-        .unwrap_or(n_flux / 4);
+        .unwrap_or(if long { n_flux / 4 } else { 25_000 });
     // With enough paths (TRUTH_SLAB_RADIANCE_PATHS, far beyond CI size) the radiances are
     // also held to the 2 % where 3σ resolves it.
     let radiance_2pct = std::env::var("TRUTH_SLAB_RADIANCE_2PCT").is_ok();
@@ -670,7 +683,7 @@ fn slabs_agree_with_disort() {
         let frame = slab_frame(tau);
         let tracer = Tracer::new(&tables, &frame, &Settings::default()).unwrap();
         let beam = -frame.sun.direction();
-        let (got, photons) = fluxes(&tracer, beam, n_flux, seed + index as u64);
+        let (got, photons) = fluxes(&tracer, beam, n_flux, long, seed + index as u64);
         for (i, name) in ["R", "T_diffuse"].into_iter().enumerate() {
             let want = case[name].as_f64().unwrap();
             let (got, se) = got[i];
@@ -685,11 +698,13 @@ fn slabs_agree_with_disort() {
                 start.elapsed().as_secs_f64()
             );
             assert!(z.abs() < 4.0, "{phase} τ {tau} ω {omega} {name}");
-            assert!(
-                rel.abs() < 0.005,
-                "{phase} τ {tau} ω {omega} {name}: {:+.2} %",
-                rel * 100.0
-            );
+            if long || 3.0 * se < 0.005 * want {
+                assert!(
+                    rel.abs() < 0.005,
+                    "{phase} τ {tau} ω {omega} {name}: {:+.2} %",
+                    rel * 100.0
+                );
+            }
         }
         // Radiances by the camera-side estimator the renders use, in directions ≥ 30° from
         // the beam and from the glory (DISORT's own stream-doubling change there ≤ 0.1 %).
