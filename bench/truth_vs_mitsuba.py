@@ -452,6 +452,18 @@ def median_chi_factor(dof):
     return (1 - 2 / (9 * dof)) ** 1.5
 
 
+def portable(value, root, work):
+    """`value` with paths inside the repository made relative to it and the work directory
+    `work` written as $WORK, so the committed JSON names no machine's paths."""
+    if isinstance(value, dict):
+        return {k: portable(v, root, work) for k, v in value.items()}
+    if isinstance(value, list):
+        return [portable(v, root, work) for v in value]
+    if isinstance(value, str):
+        return value.replace(root.rstrip("/") + "/", "").replace(work, "$WORK")
+    return value
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--size", type=int, default=256, help="image side in pixels (default 256)")
@@ -709,7 +721,8 @@ def main():
                         mitsuba_se=mit_se, A=A, mask=mask)
     res["machine"]["loadavg_end"] = os.getloadavg()
     with open(a.json, "w") as fh:
-        json.dump(res, fh, indent=2, default=float)
+        json.dump(portable(res, os.path.dirname(HERE), os.path.dirname(a.binary)), fh, indent=2,
+                  default=float)
 
     # Table.
     print(f"\n{a.size}×{a.size}, mask {int(mask.sum())} px (1 − T_vol > 1 %), peak τ(z) {a.tau}, "

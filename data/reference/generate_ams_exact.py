@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """Exact Ams_n bin averages of a cloud-droplet phase function: the reference for the j >= 2
-terms of photometeor's Ams_n (tables/tests/ams_exact.rs; issue 20).
+terms of photometeor's Ams_n (tables/tests/ams_exact.rs; docs/accuracy.md).
 
     python3 -m pip install miepython==3.3.0 numpy
     python3 data/reference/generate_ams_exact.py     # ~30 min on one core; writes data/reference/ams_exact_cloud.csv
@@ -8,7 +8,7 @@ terms of photometeor's Ams_n (tables/tests/ams_exact.rs; issue 20).
 Nothing here comes from photometeor. The phase function P is a cloud's: water spheres with a
 gamma distribution of radii (r_eff = 10 um, v_eff = 0.1: n(r) ~ r^7 e^{-r/1 um}, the default
 scene's cloud), at 450 nm (the default scene's narrowest diffraction lobe, and the channel with
-the largest bias reported in issue 20), m = 1.3374 (water near 10 C; any m would do: what is
+the largest bias the preset study reported), m = 1.3374 (water near 10 C; any m would do: what is
 tested is the convolution, and both sides use this one P). Its amplitudes come from miepython
 (Bohren & Huffman's series; miepython takes m = n - i k, so the real m is passed as is).
 

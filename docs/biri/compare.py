@@ -39,6 +39,18 @@ def compare(truth, model, png=None):
     return json.loads(run(args + (["--map", png] if png else []))[0].stdout)
 
 
+def portable(value, root, work):
+    """`value` with paths inside the repository made relative to it and the work directory
+    `work` written as $WORK, so the committed JSON names no machine's paths."""
+    if isinstance(value, dict):
+        return {k: portable(v, root, work) for k, v in value.items()}
+    if isinstance(value, list):
+        return [portable(v, root, work) for v in value]
+    if isinstance(value, str):
+        return value.replace(root.rstrip("/") + "/", "").replace(work, "$WORK")
+    return value
+
+
 def main():
     os.makedirs(WORK, exist_ok=True)
     common = ["--width", str(SIZE[0]), "--height", str(SIZE[1]), "--tables", f"{WORK}/tables",
@@ -93,7 +105,7 @@ def main():
           f"{scan[best]['mean_rel_error']*100:.1f} % bias {scan[best]['bias']*100:+.1f} %")
     rows.append({"model": f"biri, exact, best ambient {best}", "truth": "full",
                  "seconds": rows[0]["seconds"], **scan[best]})
-    json.dump({"size": SIZE, "spp": SPP, "truth": truths, "rows": rows, "ambient_scan": scan},
+    json.dump(portable({"size": SIZE, "spp": SPP, "truth": truths, "rows": rows, "ambient_scan": scan}, ROOT, WORK),
               open(f"{OUT}/compare.json", "w"), indent=1)
     md = ["| model | against the truth with | mean rel. error | median | 95th pct | bias | within 3σ | seconds |",
           "|---|---|---|---|---|---|---|---|"]

@@ -66,6 +66,18 @@ def compare(truth, model, png=None):
     return rep
 
 
+def portable(value, root, work):
+    """`value` with paths inside the repository made relative to it and the work directory
+    `work` written as $WORK, so the committed JSON names no machine's paths."""
+    if isinstance(value, dict):
+        return {k: portable(v, root, work) for k, v in value.items()}
+    if isinstance(value, list):
+        return [portable(v, root, work) for v in value]
+    if isinstance(value, str):
+        return value.replace(root.rstrip("/") + "/", "").replace(work, "$WORK")
+    return value
+
+
 def main():
     os.makedirs(WORK, exist_ok=True)
     common = ["--width", str(SIZE[0]), "--height", str(SIZE[1]), "--quality", "draft", "--quiet"]
@@ -158,7 +170,7 @@ def main():
             print(f"{name} riley: mean {rl['mean_rel_error']*100:.1f} % p95 {rl['p95_rel_error']*100:.1f} % "
                   f"bias {rl['bias']*100:+.1f} %; truth {truth_line}", flush=True)
         results.append(row)
-    json.dump({"size": SIZE, "spp": SPP, "k_grid": K_GRID, "results": results},
+    json.dump(portable({"size": SIZE, "spp": SPP, "k_grid": K_GRID, "results": results}, ROOT, WORK),
               open(f"{OUT}/compare.json", "w"), indent=1)
     md = ["| scene | model | k_multi (1/sr) | mean rel. error | median | 95th pct | bias | all lit pixels: mean / p95 / bias | seconds (CPU reference) |",
           "|---|---|---|---|---|---|---|---|---|"]

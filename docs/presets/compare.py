@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""The presets' errors against references whose own noise is measured (issue 20).
+"""The presets' errors against references whose own noise is measured (docs/accuracy.md, "Presets that keep their promise").
 
     python3 docs/presets/compare.py OUT.json MODE=DIR ... 
 

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""A preset's noise from two bakes at different seeds, no reference needed (issue 20).
+"""A preset's noise from two bakes at different seeds, no reference needed (docs/accuracy.md, "Presets that keep their promise").
 
     python3 docs/presets/pairs.py DIR_SEED_A DIR_SEED_B
 

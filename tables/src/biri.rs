@@ -579,7 +579,7 @@ mod tests {
                 worst = worst.max(rel);
             }
             // Measured ≤ 2.6e-4 (HG at τ_h = 2.1): the table's interpolation in θ and τ_h;
-            // the issue asks 1e-3.
+            // the target is 1e-3.
             assert!(worst < 3e-4, "{name}: {worst:e}");
         }
     }

@@ -3,7 +3,8 @@
 //! miepython: the Legendre coefficients of the continuous P by quadrature, so Ams_n = Σ_l
 //! (2l+1)/(4π) χ_l^n P_l exactly, averaged over each bin). The table is given only the bin
 //! averages of P, as a bake is; what it makes of the j ≥ 2 terms — the slope of the
-//! diffraction lobe, the glory, the fogbow — is what this measures (issue 20).
+//! diffraction lobe, the glory, the fogbow — is what this measures (docs/accuracy.md, "Presets
+//! that keep their promise").
 
 use std::path::Path;
 
@@ -65,9 +66,9 @@ fn errors(reconstruction: Reconstruction) -> (f64, f64) {
 }
 
 /// The spline reconstruction (the default) keeps every order within 0.5 % of the exact
-/// convolution beyond 1° (issue 20's target; measured 0.005 %, Ams_2 at 1.44°, so the assertion
+/// convolution beyond 1° (the presets' target; measured 0.005 %, Ams_2 at 1.44°, so the assertion
 /// sits just above that) and every value ≥ 0; the earlier half-bin heat-kernel blur is measured
-/// beside it (what it cost: Ams_2 4.0 % high at 1.80°, the bias issue 20 reported).
+/// beside it (what it cost: Ams_2 4.0 % high at 1.80°, the bias the preset study found).
 #[test]
 fn higher_orders_equal_the_exact_convolution_beyond_one_degree() {
     let (blurred, _) = errors(Reconstruction::HeatKernel { blur_bins: 0.5 });

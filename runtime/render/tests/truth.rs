@@ -659,7 +659,7 @@ fn slabs_agree_with_disort() {
         .and_then(|v| v.parse().ok())
         .unwrap_or(if long { n_flux / 4 } else { 25_000 });
     // With enough paths (TRUTH_SLAB_RADIANCE_PATHS, far beyond CI size) the radiances are
-    // also held to the 2 % where 3σ resolves it.
+    // also held to 2 % where 3σ resolves it.
     let radiance_2pct = std::env::var("TRUTH_SLAB_RADIANCE_2PCT").is_ok();
     let seed: u64 = std::env::var("TRUTH_SLAB_SEED")
         .ok()
