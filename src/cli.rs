@@ -52,9 +52,12 @@ enum Command {
     /// A size distribution of water or ice spheres: σ_ext, albedo, g and the phase function
     /// averaged inside the bins of a uniform θ grid, per wavelength.
     Phase(phase::PhaseArgs),
-    /// Bake a scene's multiple-scattering tables: one EXR per field (rows Ams_1..Ams_N, columns
-    /// θ_k = k·Δθ, channels R, G, B in 1/sr) and manifest.json. Unchanged fields come from the
-    /// cache in DIR/.cache.
+    /// Bake a scene's multiple-scattering tables: per field `<field>.exr` (rows Ams_1..Ams_N,
+    /// columns θ_k = k·Δθ, channels R, G, B in 1/sr) and three side tables the render models
+    /// read (`.single.exr`, single scattering per wavelength for the path tracer; `.poisson.exr`,
+    /// Max et al.'s Poisson mixtures; `.biri.exr`, Biri et al.'s kernel), and manifest.json
+    /// naming every file with its size and CRC-32. Unchanged fields come from the cache in
+    /// DIR/.cache.
     Bake(bake::BakeArgs),
     /// Summarize a bake directory (fields, sizes, F_i, n_iso, g, σ_ext, albedo).
     Inspect(inspect::InspectArgs),

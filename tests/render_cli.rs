@@ -81,6 +81,11 @@ fn rainbow_radius_in_the_render_matches_the_tables_primary_peak_red_outside() {
     }
     assert!(out.status.success(), "render failed:\n{stderr}");
     assert!(cwd.join("rainbow.png").exists());
+    // Its stderr is a pipe, not a terminal: the bake's progress comes as plain lines.
+    assert!(
+        stderr.contains("  rain: baking (") && stderr.contains("  rain: done in "),
+        "no bake progress lines on a non-terminal stderr:\n{stderr}"
+    );
 
     // The table's primary bow: the largest Ams_1 between 130° and 145°, per channel.
     let tables = Tables::open(cwd.join("tables")).unwrap();

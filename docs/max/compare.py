@@ -14,7 +14,7 @@ Run from the repository root after `cargo build --release`:
     python3 docs/max/compare.py           # writes docs/max/compare.json, compare.md, PNGs
 MAX_REUSE_TRUTH=1 reuses the truth renders of an earlier run in MAX_WORK.
 """
-import json, os, struct, subprocess, sys, time
+import json, os, subprocess, sys, time
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 BIN = os.path.join(ROOT, "target", "release", "photometeor")
@@ -31,21 +31,24 @@ def run(args):
     return r
 
 
-def ball_file(path, n=48):
-    if os.path.exists(path):
-        return
-    with open(path, "wb") as f:
-        for z in range(n):
-            for y in range(n):
-                for x in range(n):
-                    c = lambda i: (i + 0.5) / n * 2 - 1
-                    r = (c(x) ** 2 + c(y) ** 2 + c(z) ** 2) ** 0.5
-                    f.write(struct.pack("<f", max(0.0, 1 - r) ** 0.5))
+def soft_ball(head, field, density, azimuth, size, tail=""):
+    """The soft-ball fixture (data/scenes/fixtures/soft_ball.toml) after `head` (the [scene] and
+    [[field]] tables), with its field, density, sun azimuth and image size set and `tail` (more
+    [render.<model>] tables) after it; its grid file named by absolute path."""
+    fixtures = os.path.join(ROOT, "data", "scenes", "fixtures")
+    values = {"field": f'"{field}"', "number_density_per_m3": density, "azimuth_deg": azimuth,
+              "width": size, "height": size,
+              "file": json.dumps(os.path.join(fixtures, "soft_ball_48.f32"))}
+    lines = []
+    for line in open(os.path.join(fixtures, "soft_ball.toml")).read().splitlines():
+        key = line.split("=")[0].strip()
+        lines.append(f"{key} = {values[key]}" if key in values and "=" in line else line)
+    return head + "\n".join(lines) + "\n" + tail
 
 
 def ball_scene(tau, azimuth, sigma_ext_g, threshold=1.0):
     density = tau / (0.666 * 1000 * sigma_ext_g) if sigma_ext_g else 1.0
-    return f"""[scene]
+    head = """[scene]
 name = "max-ball"
 spectral = "rgb3"
 theta_step_deg = 0.18
@@ -55,44 +58,18 @@ quality = "draft"
 [[field]]
 name = "cloud"
 kind = "cloud"
-distribution = {{ kind = "gamma", r_eff_um = 10, v_eff = 0.1 }}
+distribution = { kind = "gamma", r_eff_um = 10, v_eff = 0.1 }
 
-[render]
-width = 64
-height = 64
-grid_resolution = 48
-
+"""
+    tail = f"""
 [render.riley]
 slices = 256
 light_resolution = 64
 
 [render.max]
 threshold = {threshold}
-
-[camera]
-position_m = [0, 500, -2500]
-look_at_m = [0, 500, 500]
-fov_deg = 30
-
-[sun]
-elevation_deg = 20
-azimuth_deg = {azimuth}
-
-[sky]
-enabled = false
-
-[ground]
-albedo = 0.0
-
-[[volume]]
-field = "cloud"
-shape = "grid"
-file = "{WORK}/ball.f32"
-dims = [48, 48, 48]
-min_m = [-500, 0, 0]
-max_m = [500, 1000, 1000]
-number_density_per_m3 = {density}
 """
+    return soft_ball(head, "cloud", density, azimuth, 64, tail)
 
 
 def with_threshold(src, dst, threshold):
@@ -149,7 +126,6 @@ def case(name, scene_path, tables, size_args, pngs):
 
 def main():
     os.makedirs(WORK, exist_ok=True)
-    ball_file(f"{WORK}/ball.f32")
     results = []
     src = os.path.join(ROOT, "data", "scenes", "cumulus_dawn.toml")
     results.append(case("cumulus_dawn", src, f"{WORK}/tables-cumulus_dawn",

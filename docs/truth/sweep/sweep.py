@@ -31,23 +31,25 @@ FIELDS = {
 SIZE = int(os.environ.get("SWEEP_SIZE", "48"))
 
 
-def ball(path, n=48):
-    import struct
-    if os.path.exists(path):
-        return
-    with open(path, "wb") as f:
-        for z in range(n):
-            for y in range(n):
-                for x in range(n):
-                    c = lambda i: (i + 0.5) / n * 2 - 1
-                    r = (c(x) ** 2 + c(y) ** 2 + c(z) ** 2) ** 0.5
-                    f.write(struct.pack("<f", max(0.0, 1 - r) ** 0.5))
+def soft_ball(head, field, density, azimuth, size, tail=""):
+    """The soft-ball fixture (data/scenes/fixtures/soft_ball.toml) after `head` (the [scene] and
+    [[field]] tables), with its field, density, sun azimuth and image size set and `tail` (more
+    [render.<model>] tables) after it; its grid file named by absolute path."""
+    fixtures = os.path.join(ROOT, "data", "scenes", "fixtures")
+    values = {"field": f'"{field}"', "number_density_per_m3": density, "azimuth_deg": azimuth,
+              "width": size, "height": size,
+              "file": json.dumps(os.path.join(fixtures, "soft_ball_48.f32"))}
+    lines = []
+    for line in open(os.path.join(fixtures, "soft_ball.toml")).read().splitlines():
+        key = line.split("=")[0].strip()
+        lines.append(f"{key} = {values[key]}" if key in values and "=" in line else line)
+    return head + "\n".join(lines) + "\n" + tail
 
 
 def scene(field, tau, azimuth, sigma_ext_g, xi):
     # ∫ sqrt(1 - |x|) dx over the diameter = 4/3 of the radius: τ = N σ · 666 m.
     density = tau / (0.666 * 1000 * sigma_ext_g) if sigma_ext_g else 1.0
-    return f"""[scene]
+    head = f"""[scene]
 name = "sweep-{field}"
 spectral = "rgb3"
 theta_step_deg = 0.18
@@ -59,40 +61,14 @@ name = "{field}"
 kind = "{field}"
 {FIELDS[field]}
 
-[render]
-width = {SIZE}
-height = {SIZE}
-grid_resolution = 48
-
+"""
+    tail = f"""
 [render.riley]
 slices = 256
 light_resolution = {SIZE}
 xi = {xi}
-
-[camera]
-position_m = [0, 500, -2500]
-look_at_m = [0, 500, 500]
-fov_deg = 30
-
-[sun]
-elevation_deg = 20
-azimuth_deg = {azimuth}
-
-[sky]
-enabled = false
-
-[ground]
-albedo = 0.0
-
-[[volume]]
-field = "{field}"
-shape = "grid"
-file = "{WORK}/ball.f32"
-dims = [48, 48, 48]
-min_m = [-500, 0, 0]
-max_m = [500, 1000, 1000]
-number_density_per_m3 = {density}
 """
+    return soft_ball(head, field, density, azimuth, SIZE, tail)
 
 
 def best_xi(row):
@@ -131,7 +107,6 @@ def main():
         open(out.replace(".json", ".md"), "w").write(table(data["results"]))
         return
     os.makedirs(WORK, exist_ok=True)
-    ball(f"{WORK}/ball.f32")
     results = []
     for field in FIELDS:
         tables = f"{WORK}/tables-{field}"

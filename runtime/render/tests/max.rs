@@ -64,42 +64,18 @@ max_m = [500, 2000, 5500]
         .unwrap()
 }
 
-/// A soft ball of cloud, 32³ voxels over a 1 km box, `tau` through its centre, side-lit.
-fn ball(tables: &Tables, dir: &Path, tau: f64) -> Frame {
-    let n = 32;
-    common::write_soft_ball(&dir.join("ball.f32"), n);
-    let density = tau / (0.666 * 1000.0 * tables.field("cloud").unwrap().sigma_ext_m2[1]);
-    let text = format!(
-        r#"{}
-[render]
-width = 40
-height = 40
-grid_resolution = 32
-
-[camera]
-position_m = [0, 500, -2500]
-look_at_m = [0, 500, 500]
-fov_deg = 30
-
-[sun]
-elevation_deg = 20
-azimuth_deg = 70
-
-[[volume]]
-field = "cloud"
-shape = "grid"
-file = "ball.f32"
-dims = [{n}, {n}, {n}]
-min_m = [-500, 0, 0]
-max_m = [500, 1000, 1000]
-number_density_per_m3 = {density}
-"#,
-        fields()
-    );
-    RenderScene::parse(&text, "ball", dir)
-        .unwrap()
-        .frame(tables)
-        .unwrap()
+/// The soft-ball fixture of cloud, `tau` through its centre, side-lit (sun 20° up, 70° round),
+/// rasterized to 32³ voxels, 40² pixels, with the sky and a grey ground.
+fn ball(tables: &Tables, tau: f64) -> Frame {
+    let (text, base) = common::soft_ball(&fields());
+    let mut scene = RenderScene::parse(&text, "ball", &base).unwrap();
+    scene.volumes[0].number_density_per_m3 =
+        tau / (0.666 * 1000.0 * tables.field("cloud").unwrap().sigma_ext_m2[1]);
+    (scene.width, scene.height, scene.grid_resolution) = (40, 40, 32);
+    scene.sun.azimuth_deg = 70.0;
+    scene.atmosphere = render::Atmosphere::default();
+    scene.ground_albedo = render::scene::DEFAULT_GROUND_ALBEDO;
+    scene.frame(tables).unwrap()
 }
 
 /// Worst relative difference of a `max` render of the uniform box of optical depth `tau`
@@ -182,7 +158,7 @@ fn a_thin_box_gives_single_scattering_in_both_treatments() {
 fn the_image_is_continuous_across_the_threshold() {
     let (tmp, dir) = bake(&fields());
     let tables = Tables::open(&dir).unwrap();
-    let frame = ball(&tables, tmp.path(), 30.0);
+    let frame = ball(&tables, 30.0);
     let render_at = |threshold: f64| {
         let settings = Settings {
             threshold,
@@ -222,7 +198,7 @@ fn the_image_is_continuous_across_the_threshold() {
 fn bad_settings_and_short_tables_are_refused() {
     let (tmp, dir) = bake(&fields());
     let tables = Tables::open(&dir).unwrap();
-    let frame = ball(&tables, tmp.path(), 30.0);
+    let frame = ball(&tables, 30.0);
     for (settings, key) in [
         (
             Settings {
@@ -371,7 +347,7 @@ fn the_gpu_gather_equals_the_cpu_reference() {
     let Some(gpu) = common::gpu() else { return };
     let (tmp, dir) = bake(&fields());
     let tables = Tables::open(&dir).unwrap();
-    let mut frame = ball(&tables, tmp.path(), 30.0);
+    let mut frame = ball(&tables, 30.0);
     frame.ground_albedo = 0.3;
     let settings = Settings::default();
     let lighting = cpu::light(&tables, &frame, &settings).unwrap();

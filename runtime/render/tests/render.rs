@@ -196,72 +196,47 @@ max_m = [500, 2000, 5500]
     eprintln!("{checked} pixels: worst relative difference from single scattering {worst:.2e}");
 }
 
-/// A soft ball of cloud, 48³ voxels over a 1 km box, of optical depth `tau` through its centre
-/// in green, side-lit by a low sun (Riley's hardest case for the light buffer).
+/// The soft-ball fixture of cloud, of optical depth `tau` through its centre in green,
+/// side-lit by a low sun (5° up: Riley's hardest case for the light buffer), 64² pixels.
 fn side_lit_ball(
     tables: &Tables,
-    dir: &Path,
     tau: f64,
     slices: usize,
     update: LightUpdate,
 ) -> (Frame, Settings) {
-    let n = 48;
-    let file = dir.join("ball.f32");
-    if !file.exists() {
-        common::write_soft_ball(&file, n);
-    }
+    let (text, base) = common::soft_ball(&fields());
+    let mut scene = RenderScene::parse(&text, "ball", &base).unwrap();
     // ∫ sqrt(1 − |x|) over the diameter of the unit box's ball: 2·(2/3) of the box side / 2.
-    let density = tau / (0.666 * 1000.0 * tables.field("cloud").unwrap().sigma_ext_m2[1]);
-    let text = format!(
-        r#"{}
-[render]
-width = 64
-height = 64
-grid_resolution = 48
-
-[render.riley]
-slices = {slices}
-light_resolution = 64
-
-[camera]
-position_m = [0, 500, -2500]
-look_at_m = [0, 500, 500]
-fov_deg = 30
-
-[sun]
-elevation_deg = 5
-azimuth_deg = 90
-
-[sky]
-enabled = false
-
-[ground]
-albedo = 0.0
-
-[[volume]]
-field = "cloud"
-shape = "grid"
-file = "{}"
-dims = [48, 48, 48]
-min_m = [-500, 0, 0]
-max_m = [500, 1000, 1000]
-number_density_per_m3 = {density}
-"#,
-        fields(),
-        file.display()
-    );
-    let scene = RenderScene::parse(&text, "test", Path::new(".")).unwrap();
-    let mut settings = scene.settings::<Riley>().unwrap();
-    settings.light_update = update;
+    scene.volumes[0].number_density_per_m3 =
+        tau / (0.666 * 1000.0 * tables.field("cloud").unwrap().sigma_ext_m2[1]);
+    scene.sun.elevation_deg = 5.0;
+    let settings = Settings {
+        slices,
+        light_resolution: 64,
+        light_update: update,
+        ..Settings::default()
+    };
     (scene.frame(tables).unwrap(), settings)
 }
 
 #[test]
+fn the_soft_ball_fixture_is_its_formula() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (_, base) = common::soft_ball("");
+    common::write_soft_ball(&tmp.path().join("ball.f32"), 48);
+    assert!(
+        std::fs::read(tmp.path().join("ball.f32")).unwrap()
+            == std::fs::read(base.join("soft_ball_48.f32")).unwrap(),
+        "data/scenes/fixtures/soft_ball_48.f32 is not √(1 − r) on 48³ voxels"
+    );
+}
+
+#[test]
 fn the_light_buffer_converges_as_slices_are_added() {
-    let (tmp, dir) = bake(&fields());
+    let (_tmp, dir) = bake(&fields());
     let tables = Tables::open(&dir).unwrap();
     let total = |tau: f64, slices: usize, update: LightUpdate| -> f64 {
-        let (frame, settings) = side_lit_ball(&tables, tmp.path(), tau, slices, update);
+        let (frame, settings) = side_lit_ball(&tables, tau, slices, update);
         let image = cpu::render(&tables, &frame, &settings).unwrap();
         image.rgb.iter().map(|p| p[1] as f64).sum()
     };

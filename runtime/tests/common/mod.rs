@@ -180,6 +180,26 @@ pub fn assert_gpu_matches_cpu(
 /// Writes an n³ little-endian f32 density file of a soft ball, sqrt(1 − r) over the unit
 /// ball of the grid's box (the τ sweep's and the light-buffer tests' ball).
 #[allow(dead_code)]
+/// The soft-ball fixture scene (`data/scenes/fixtures/soft_ball.toml`: its render tables, the
+/// grid file beside it) after `fields` (a scene's [scene] and [[field]] tables), and the folder
+/// its grid file is relative to.
+#[allow(dead_code)]
+pub fn soft_ball(fields: &str) -> (String, std::path::PathBuf) {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../data/scenes/fixtures")
+        .canonicalize()
+        .or_else(|_| {
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("../data/scenes/fixtures")
+                .canonicalize()
+        })
+        .expect("data/scenes/fixtures");
+    let text = std::fs::read_to_string(dir.join("soft_ball.toml")).unwrap();
+    (format!("{fields}\n{text}"), dir)
+}
+
+/// The soft ball's density √(1 − r) on n³ voxels, as `soft_ball_48.f32` holds it for n = 48.
+#[allow(dead_code)]
 pub fn write_soft_ball(path: &std::path::Path, n: usize) {
     let mut bytes = Vec::with_capacity(4 * n * n * n);
     for z in 0..n {

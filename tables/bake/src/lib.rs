@@ -3,8 +3,9 @@
 //! The flow: a TOML [`scene::Scene`] (validated, plain data) and a quality preset make a
 //! [`plan::BakePlan`]; [`bake::run`] computes each field's [`mie::PhaseFunction`] per
 //! wavelength (Mie spheres or the crystal tracer), turns them into Ams_n and F_n per RGB channel
-//! (`photometeor-tables`), and writes one EXR per field and `manifest.json`
-//! (`photometeor-format`). Unchanged fields come from the [`cache`]. [`compare`] measures a bake
+//! (`photometeor-tables`), and writes four EXRs per field (the tables and the side tables the
+//! render models read: single scattering per wavelength, Poisson mixtures, Biri's kernel) and
+//! `manifest.json` (`photometeor-format`). Unchanged fields come from the [`cache`]. [`compare`] measures a bake
 //! against a reference bake, [`validate`] against theory it did not come from.
 //!
 //! This is the only crate that calls the solver. Progress is reported through
