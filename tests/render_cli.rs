@@ -351,7 +351,7 @@ fn miyazaki_keys_out_of_range_are_refused_before_any_bake() {
         ),
         (
             base.replace("scale_height_m = 1500", "scale_height_m = 0"),
-            "[haze] scale_height_m = 0 must be finite and > 0 (m)",
+            "[haze] scale_height_m = 0 is outside the allowed range [1, 1e6] (m)",
         ),
         (
             base.replace("albedo = 0.1", "albedo = 1.2"),
@@ -411,7 +411,7 @@ fn max_keys_out_of_range_are_refused_before_any_bake() {
         ),
         (
             with("diffusion_tolerance = 0.5"),
-            "[render.max] diffusion_tolerance = 0.5 is outside the allowed range (0, 0.1]",
+            "[render.max] diffusion_tolerance = 0.5 is outside the allowed range [1e-12, 0.1]",
         ),
         (
             with("max_diffusion_iterations = 0"),
@@ -536,7 +536,7 @@ fn settings_of_another_model_are_refused_before_any_bake() {
         (
             "miyazaki",
             &["--set", "k_multi=-1"],
-            "[render.miyazaki] k_multi = -1 must be finite and ≥ 0",
+            "[render.miyazaki] k_multi = -1 is outside the allowed range [0, 1e6]",
         ),
     ];
     for (model, extra, named) in cases {

@@ -166,6 +166,14 @@ struct OccluderKeys {
 /// every model.
 pub const DEFAULT_GROUND_ALBEDO: f64 = 0.1;
 
+/// The largest sun irradiance and light intensity per channel a scene may give (the image's
+/// unit): a pixel is an f32, and the sun's disk alone multiplies the irradiance by 1/Ω_disk
+/// ≈ 1.7·10⁴ and a light's intensity is divided by down to 10⁻⁶ m², so 10³⁰ stays finite.
+pub const MAX_SOURCE: f64 = 1e30;
+
+/// The allowed range of a scale height (the sky's and the haze's), metres.
+pub const SCALE_HEIGHT_RANGE_M: (f64, f64) = (1.0, 1e6);
+
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct HazeKeys {
@@ -354,6 +362,35 @@ fn positive(what: &str, v: f64) -> Result<f64, String> {
     }
 }
 
+/// A scale height in [`SCALE_HEIGHT_RANGE_M`].
+fn scale_height(what: &str, h: f64) -> Result<f64, String> {
+    let (lo, hi) = SCALE_HEIGHT_RANGE_M;
+    if h.is_finite() && (lo..=hi).contains(&h) {
+        Ok(h)
+    } else {
+        Err(format!(
+            "{what} = {h} is outside the allowed range [{lo}, {hi:e}] (m)"
+        ))
+    }
+}
+
+/// `[camera]`: finite positions and field of view.
+fn camera_keys(camera: CameraKeys) -> Result<Camera, String> {
+    for (key, v) in [
+        ("position_m", camera.position_m),
+        ("look_at_m", camera.look_at_m),
+    ] {
+        if v.iter().any(|x| !x.is_finite()) {
+            return Err(format!("[camera] {key} = {v:?} must be finite (m)"));
+        }
+    }
+    Ok(Camera {
+        position_m: DVec3::from_array(camera.position_m),
+        look_at_m: DVec3::from_array(camera.look_at_m),
+        fov_deg: camera.fov_deg.unwrap_or(60.0),
+    })
+}
+
 /// `[render]`'s shared keys and the model tables, checked.
 struct RenderChecked {
     width: usize,
@@ -413,15 +450,18 @@ fn render_keys(render: RenderKeys) -> Result<RenderChecked, String> {
 fn sky_keys(sky: SkyKeys) -> Result<Atmosphere, String> {
     let mut atmosphere = Atmosphere::default();
     if let Some(b) = sky.beta_sea_level_per_m {
-        if b.iter().any(|v| !(v.is_finite() && *v >= 0.0)) {
+        if b.iter()
+            .any(|v| !(v.is_finite() && (0.0..=1.0).contains(v)))
+        {
             return Err(format!(
-                "[sky] beta_sea_level_per_m = {b:?} must be ≥ 0 (1/m)"
+                "[sky] beta_sea_level_per_m = {b:?} is outside the allowed range [0, 1] per \
+                 channel (1/m; clear air is ~10⁻⁵)"
             ));
         }
         atmosphere.beta_sea_level_per_m = b;
     }
     if let Some(h) = sky.scale_height_m {
-        atmosphere.scale_height_m = positive("[sky] scale_height_m", h)?;
+        atmosphere.scale_height_m = scale_height("[sky] scale_height_m", h)?;
     }
     if sky.enabled == Some(false) {
         atmosphere.beta_sea_level_per_m = [0.0; 3];
@@ -441,9 +481,25 @@ fn sun_keys(sun: Option<SunKeys>, lamps_only: bool) -> Result<Sun, String> {
         },
         None => return Err("no [sun] table (elevation_deg, azimuth_deg)".into()),
     };
+    for (key, v) in [
+        ("elevation_deg", sun.elevation_deg),
+        ("azimuth_deg", sun.azimuth_deg),
+    ] {
+        if !v.is_finite() {
+            return Err(format!(
+                "[sun] {key} = {v} must be a finite angle (degrees)"
+            ));
+        }
+    }
     let irradiance = sun.irradiance.unwrap_or([1.0; 3]);
-    if irradiance.iter().any(|v| !(v.is_finite() && *v >= 0.0)) {
-        return Err(format!("[sun] irradiance = {irradiance:?} must be ≥ 0"));
+    if irradiance
+        .iter()
+        .any(|v| !(v.is_finite() && (0.0..=MAX_SOURCE).contains(v)))
+    {
+        return Err(format!(
+            "[sun] irradiance = {irradiance:?} is outside the allowed range [0, {MAX_SOURCE:e}] \
+             per channel"
+        ));
     }
     Ok(Sun {
         elevation_deg: sun.elevation_deg,
@@ -459,12 +515,7 @@ fn haze_keys(h: HazeKeys) -> Result<HazeKeysChecked, String> {
             h.number_density_per_m3
         ));
     }
-    if !(h.scale_height_m.is_finite() && h.scale_height_m > 0.0) {
-        return Err(format!(
-            "[haze] scale_height_m = {} must be finite and > 0 (m)",
-            h.scale_height_m
-        ));
-    }
+    scale_height("[haze] scale_height_m", h.scale_height_m)?;
     Ok(HazeKeysChecked {
         field: h.field,
         number_density_per_m3: h.number_density_per_m3,
@@ -497,7 +548,8 @@ impl RenderScene {
         let render = render_keys(file.render.unwrap_or_default()).map_err(err)?;
         let camera = file
             .camera
-            .ok_or_else(|| err("no [camera] table (position_m, look_at_m, fov_deg)".into()))?;
+            .ok_or_else(|| err("no [camera] table (position_m, look_at_m, fov_deg)".into()))
+            .and_then(|c| camera_keys(c).map_err(err))?;
         let sun = sun_keys(file.sun, !file.media.is_empty()).map_err(err)?;
         let atmosphere = sky_keys(file.sky.unwrap_or_default()).map_err(err)?;
         let ground_albedo = file
@@ -524,11 +576,7 @@ impl RenderScene {
             height: render.height,
             grid_resolution: render.grid_resolution,
             exposure: render.exposure,
-            camera: Camera {
-                position_m: DVec3::from_array(camera.position_m),
-                look_at_m: DVec3::from_array(camera.look_at_m),
-                fov_deg: camera.fov_deg.unwrap_or(60.0),
-            },
+            camera,
             sun,
             atmosphere,
             volumes,
@@ -684,8 +732,14 @@ fn light(l: &LightKeys) -> Result<Light, String> {
             l.position_m
         ));
     }
-    if l.intensity.iter().any(|v| !(v.is_finite() && *v >= 0.0)) {
-        return Err(format!("intensity = {:?} must be ≥ 0", l.intensity));
+    if l.intensity
+        .iter()
+        .any(|v| !(v.is_finite() && (0.0..=MAX_SOURCE).contains(v)))
+    {
+        return Err(format!(
+            "intensity = {:?} is outside the allowed range [0, {MAX_SOURCE:e}] per channel",
+            l.intensity
+        ));
     }
     let spot = match (l.spot_direction, l.spot_half_angle_deg) {
         (None, None) => None,

@@ -125,6 +125,11 @@ pub(crate) fn compose(
     })
 }
 
+/// The largest constant a model may add to a phase function (Riley's ξ, Miyazaki's k_multi),
+/// 1/sr: the largest forward bin of any table is ~10⁶/sr, and the useful values measured are
+/// below 1.
+pub const MAX_PHASE_TERM: f64 = 1e6;
+
 /// The slicing models' settings: `slices` in [1, 4096], `light_resolution` (the sun-side
 /// buffer's texels per side, `buffer` names it) in [2, 4096].
 pub fn check_slicing(

@@ -388,7 +388,7 @@ fn bad_scenes_are_refused_naming_the_value_file_and_line() {
             fog.into(),
             "[[light]]\nposition_m = [0, 4, 5]\nintensity = [1, -1, 1]\n".into(),
             "biri",
-            vec!["intensity = [1.0, -1.0, 1.0]", "≥ 0"],
+            vec!["intensity = [1.0, -1.0, 1.0]", "allowed range [0, 1e30]"],
         ),
         (
             fog.into(),

@@ -156,7 +156,7 @@ fn a_thin_box_gives_single_scattering_in_both_treatments() {
 
 #[test]
 fn the_image_is_continuous_across_the_threshold() {
-    let (tmp, dir) = bake(&fields());
+    let (_tmp, dir) = bake(&fields());
     let tables = Tables::open(&dir).unwrap();
     let frame = ball(&tables, 30.0);
     let render_at = |threshold: f64| {
@@ -190,13 +190,13 @@ fn the_image_is_continuous_across_the_threshold() {
     // A change of T by 1e-3 moves no pixel by more than a small multiple of 1e-3 (a jump at a
     // segment's start or end would move some by ~the edge light itself), while a change of T by
     // 2× does move them: the check can fail.
-    assert!(small < 1e-3, "{small:e}"); // measured 5.1e-4
+    assert!(small < 1e-3, "{small:e}"); // measured 6.0e-4 (the soft-ball fixture at 32³)
     assert!(large > 20.0 * small, "{large:e} vs {small:e}");
 }
 
 #[test]
 fn bad_settings_and_short_tables_are_refused() {
-    let (tmp, dir) = bake(&fields());
+    let (_tmp, dir) = bake(&fields());
     let tables = Tables::open(&dir).unwrap();
     let frame = ball(&tables, 30.0);
     for (settings, key) in [
@@ -345,7 +345,7 @@ fn light_crosses_clear_air_between_parts_and_never_comes_back_to_its_own() {
 #[test]
 fn the_gpu_gather_equals_the_cpu_reference() {
     let Some(gpu) = common::gpu() else { return };
-    let (tmp, dir) = bake(&fields());
+    let (_tmp, dir) = bake(&fields());
     let tables = Tables::open(&dir).unwrap();
     let mut frame = ball(&tables, 30.0);
     frame.ground_albedo = 0.3;

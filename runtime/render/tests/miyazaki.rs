@@ -491,7 +491,7 @@ fn bad_keys_are_refused_naming_the_key_value_and_range() {
         ),
         (
             "[render.miyazaki]\nk_multi = -0.1",
-            "[render.miyazaki] k_multi = -0.1 must be finite and ≥ 0 (1/sr)",
+            "[render.miyazaki] k_multi = -0.1 is outside the allowed range [0, 1e6] (1/sr)",
         ),
         (
             "[render.miyazaki]\nphase = \"hg\"",
@@ -512,7 +512,7 @@ fn bad_keys_are_refused_naming_the_key_value_and_range() {
         ),
         (
             "[haze]\nfield = \"cloud\"\nnumber_density_per_m3 = 1e8\nscale_height_m = 0",
-            "[haze] scale_height_m = 0 must be finite and > 0 (m)",
+            "[haze] scale_height_m = 0 is outside the allowed range [1, 1e6] (m)",
         ),
         (
             "[haze]\nfield = \"cloud\"\nnumber_density_per_m3 = -1\nscale_height_m = 1000",

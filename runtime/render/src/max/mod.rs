@@ -231,10 +231,10 @@ impl Settings {
                 self.threshold
             )));
         }
-        if !(self.tolerance > 0.0 && self.tolerance <= 0.1) {
+        if !(self.tolerance >= 1e-12 && self.tolerance <= 0.1) {
             return Err(FrameError(format!(
-                "diffusion_tolerance = {} is outside the allowed range (0, 0.1] \
-                 (relative residual)",
+                "diffusion_tolerance = {} is outside the allowed range [1e-12, 0.1] (relative \
+                 residual; f64 arithmetic cannot reach less)",
                 self.tolerance
             )));
         }

@@ -67,7 +67,7 @@ use runtime::gpu::{Gpu, GpuTables, TexelFormat};
 
 use crate::gpu::RenderError;
 use crate::model::{Job, Model, Pass, Rendered};
-use crate::shading::check_slicing;
+use crate::shading::{MAX_PHASE_TERM, check_slicing};
 use crate::{Frame, FrameError, basis};
 
 /// `--model miyazaki`.
@@ -253,10 +253,10 @@ pub fn check(settings: &Settings) -> Result<(), FrameError> {
             settings.a, A_RANGE.0, A_RANGE.1
         ));
     }
-    if !(settings.k_multi.is_finite() && settings.k_multi >= 0.0) {
+    if !(settings.k_multi.is_finite() && (0.0..=MAX_PHASE_TERM).contains(&settings.k_multi)) {
         return bad(format!(
-            "k_multi = {} must be finite and ≥ 0 (1/sr)",
-            settings.k_multi
+            "k_multi = {} is outside the allowed range [0, {:e}] (1/sr)",
+            settings.k_multi, MAX_PHASE_TERM
         ));
     }
     Ok(())

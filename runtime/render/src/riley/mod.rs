@@ -49,7 +49,7 @@ use runtime::gpu::{Gpu, GpuTables, TexelFormat};
 
 use crate::gpu::RenderError;
 use crate::model::{Job, Model, Pass, Rendered};
-use crate::shading::check_slicing;
+use crate::shading::{MAX_PHASE_TERM, check_slicing};
 use crate::{Frame, FrameError, LightUpdate};
 
 pub use crate::basis;
@@ -94,9 +94,9 @@ impl Model for Riley {
 
     fn check(s: &Settings) -> Result<(), FrameError> {
         check_slicing(s.slices, s.light_resolution, "light-buffer")?;
-        if !(s.xi.is_finite() && s.xi >= 0.0) {
+        if !(s.xi.is_finite() && (0.0..=MAX_PHASE_TERM).contains(&s.xi)) {
             return Err(FrameError(format!(
-                "xi = {} must be finite and ≥ 0 (1/sr)",
+                "xi = {} is outside the allowed range [0, {MAX_PHASE_TERM:e}] (1/sr)",
                 s.xi
             )));
         }

@@ -1117,6 +1117,7 @@ fn bands(
     media: &[(crate::objects::Region, f64, usize)],
 ) -> (Vec<Band>, Vec<f64>, f64) {
     let max = frame.grid.max_density();
+    let overlapping = crate::objects::check_media(&frame.media).is_err();
     let weights = &spectrum.weights;
     let lambdas = &spectrum.wavelengths_nm;
     // β_sl(λ): log-linear in ln λ through the channels' mean wavelengths.
@@ -1147,11 +1148,14 @@ fn bands(
                 }
             })
             .collect();
-        // Media do not overlap each other: the densest one's extinction bounds theirs.
-        let media_max = media
-            .iter()
-            .map(|&(_, n, f)| n * fields[f].sigma_ext)
-            .fold(0.0, f64::max);
+        // Where media overlap their densities add (`Tracer::density`), so the sum of their
+        // extinctions bounds them; where they do not, the densest one's does.
+        let media_ext = media.iter().map(|&(_, n, f)| n * fields[f].sigma_ext);
+        let media_max = if overlapping {
+            media_ext.sum()
+        } else {
+            media_ext.fold(0.0, f64::max)
+        };
         majorant = (fields
             .iter()
             .zip(&max)
