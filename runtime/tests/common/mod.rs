@@ -177,9 +177,6 @@ pub fn assert_gpu_matches_cpu(
     worst
 }
 
-/// Writes an n³ little-endian f32 density file of a soft ball, sqrt(1 − r) over the unit
-/// ball of the grid's box (the τ sweep's and the light-buffer tests' ball).
-#[allow(dead_code)]
 /// The soft-ball fixture scene (`data/scenes/fixtures/soft_ball.toml`: its render tables, the
 /// grid file beside it) after `fields` (a scene's [scene] and [[field]] tables), and the folder
 /// its grid file is relative to.
@@ -198,7 +195,8 @@ pub fn soft_ball(fields: &str) -> (String, std::path::PathBuf) {
     (format!("{fields}\n{text}"), dir)
 }
 
-/// The soft ball's density √(1 − r) on n³ voxels, as `soft_ball_48.f32` holds it for n = 48.
+/// Writes an n³ little-endian f32 density file of a soft ball, √(1 − r) over the unit ball of
+/// the grid's box, as `soft_ball_48.f32` holds it for n = 48.
 #[allow(dead_code)]
 pub fn write_soft_ball(path: &std::path::Path, n: usize) {
     let mut bytes = Vec::with_capacity(4 * n * n * n);
