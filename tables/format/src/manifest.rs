@@ -49,6 +49,7 @@ use serde_json::Value;
 use thiserror::Error;
 
 use crate::atomic::{read_regular_file, write_file_atomically};
+use crate::side::SideTable;
 
 /// The manifest's layout version; [`read_manifest`] rejects any other.
 pub const MANIFEST_SCHEMA_VERSION: u32 = 2;
@@ -459,7 +460,23 @@ pub fn read_manifest(dir: impl AsRef<Path>) -> Result<Manifest, ManifestError> {
             op,
             source,
         })?;
-    let value: Value = serde_json::from_slice(&bytes).map_err(|source| ManifestError::Json {
+    parse_manifest(&bytes, &path)
+}
+
+/// Parses and checks the bytes of a `manifest.json` as [`read_manifest`] does; `path` names it
+/// in errors.
+pub fn parse_manifest(bytes: &[u8], path: &Path) -> Result<Manifest, ManifestError> {
+    let path = path.to_path_buf();
+    if bytes.len() as u64 > MAX_MANIFEST_BYTES {
+        return Err(ManifestError::Invalid {
+            path,
+            what: format!(
+                "{} bytes, more than the {MAX_MANIFEST_BYTES} a manifest may have",
+                bytes.len()
+            ),
+        });
+    }
+    let value: Value = serde_json::from_slice(bytes).map_err(|source| ManifestError::Json {
         path: path.clone(),
         source,
     })?;
@@ -475,7 +492,7 @@ pub fn read_manifest(dir: impl AsRef<Path>) -> Result<Manifest, ManifestError> {
     }
     // Deserialize from the bytes (not the Value) so errors keep their line and column.
     let manifest: Manifest =
-        serde_json::from_slice(&bytes).map_err(|source| ManifestError::Json {
+        serde_json::from_slice(bytes).map_err(|source| ManifestError::Json {
             path: path.clone(),
             source,
         })?;
@@ -566,56 +583,39 @@ impl BakeDir {
     }
 
     /// Reads the single-scattering EXR of `entry` (`crate::single`), if the bake has one, and
-    /// checks it: the contract, then the field name, Δθ, K, and last its size and CRC-32.
+    /// checks it as [`Self::read_side`] does.
     pub fn read_single(
         &self,
         entry: &FieldEntry,
     ) -> Result<Option<crate::SingleScatter>, crate::IoError> {
-        self.read_side_file(
-            &entry.single_scattering,
-            entry,
-            crate::single::decode_single_exr,
-            |t| (t.field.as_str(), t.theta_step_deg, t.bins.ncols()),
-        )
+        self.read_side(entry.single_scattering.as_ref(), entry)
     }
 
     /// Reads the Poisson-mixture EXR of `entry` (`crate::poisson`), if the bake has one, and
-    /// checks it as [`Self::read_single`] does.
+    /// checks it as [`Self::read_side`] does.
     pub fn read_poisson(
         &self,
         entry: &FieldEntry,
     ) -> Result<Option<crate::PoissonTable>, crate::IoError> {
-        self.read_side_file(
-            &entry.poisson,
-            entry,
-            crate::poisson::decode_poisson_exr,
-            |t| (t.field.as_str(), t.theta_step_deg, t.rows.dim().2),
-        )
+        self.read_side(entry.poisson.as_ref(), entry)
     }
 
     /// Reads the point-light kernel EXR of `entry` (`crate::biri`), if the bake has one, and
-    /// checks it as [`Self::read_single`] does.
+    /// checks it as [`Self::read_side`] does.
     pub fn read_biri(
         &self,
         entry: &FieldEntry,
     ) -> Result<Option<crate::BiriTable>, crate::IoError> {
-        self.read_side_file(
-            &entry.biri_kernel,
-            entry,
-            crate::biri::decode_biri_exr,
-            |t| (t.field.as_str(), t.theta_step_deg, t.primitive.dim().2),
-        )
+        self.read_side(entry.biri_kernel.as_ref(), entry)
     }
 
-    /// A further file of `entry` (`file`, if listed): decoded by `decode` (the contract), then
-    /// its field name, Δθ and angle count (`identity`) against the manifest, and last its size
-    /// and CRC-32.
-    fn read_side_file<T>(
+    /// A side table of `entry` (`file`, if listed): read within [`crate::exr::MAX_EXR_BYTES`],
+    /// decoded with every check of its contract ([`crate::side::decode`]), then its field name,
+    /// Δθ and angle count against the manifest, and last its size and CRC-32.
+    pub fn read_side<T: SideTable>(
         &self,
-        file: &Option<FileRef>,
+        file: Option<&FileRef>,
         entry: &FieldEntry,
-        decode: fn(&[u8], &Path) -> Result<T, crate::IoError>,
-        identity: impl Fn(&T) -> (&str, f64, usize),
     ) -> Result<Option<T>, crate::IoError> {
         use crate::{ContractError, IoError};
         let Some(file) = file else {
@@ -623,18 +623,19 @@ impl BakeDir {
         };
         let path = self.dir.join(&file.file);
         let bytes = crate::exr::read_exr_bytes(&path)?;
-        let table = decode(&bytes, &path)?;
+        let table: T = crate::side::decode(&bytes, &path)?;
         let mismatch = |what: String| IoError::Contract {
             path: path.clone(),
             check: ContractError::Manifest(what),
         };
-        let (field, step, angles) = identity(&table);
-        if field != entry.name {
+        if table.field() != entry.name {
             return Err(mismatch(format!(
-                "field attribute {field:?}, but manifest.json lists this file for field {:?}",
+                "field attribute {:?}, but manifest.json lists this file for field {:?}",
+                table.field(),
                 entry.name
             )));
         }
+        let (step, angles) = (table.theta_step_deg(), table.planes()[0].ncols());
         if step != self.manifest.theta_step_deg || angles != self.manifest.angle_count {
             return Err(mismatch(format!(
                 "Δθ = {step}° with {angles} angles, manifest.json says {}° with {}",
