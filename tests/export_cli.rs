@@ -552,3 +552,47 @@ fn hg_lobes_are_fitted_with_what_they_lose() {
     assert!(bow < 0.5, "{bow}");
     assert!(text.contains("best dual HG"), "{text}");
 }
+
+/// What inspect, validate, compare and export print is written for people: no Rust debug
+/// formatting of options or structs (`Some(102)`, "ring at None°").
+#[test]
+fn user_output_has_no_debug_formatting() {
+    let d = bake().to_str().unwrap();
+    let root = workdir("export_words");
+    let mut runs: Vec<Vec<String>> = [
+        vec!["inspect", d],
+        vec!["validate", d],
+        vec!["compare", d, d],
+    ]
+    .into_iter()
+    .map(|a| a.into_iter().map(String::from).collect())
+    .collect();
+    for format in ["bevy", "mitsuba", "npy", "csv", "hg"] {
+        let out = root.join(format);
+        runs.push(
+            [
+                "export",
+                d,
+                "--format",
+                format,
+                "--out",
+                out.to_str().unwrap(),
+            ]
+            .map(String::from)
+            .to_vec(),
+        );
+    }
+    for args in runs {
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        let o = photometeor(&args, Path::new("."));
+        let text = format!(
+            "{}{}",
+            String::from_utf8_lossy(&o.stdout),
+            String::from_utf8_lossy(&o.stderr)
+        );
+        assert!(!text.is_empty(), "{args:?} printed nothing");
+        for debug in ["Some(", "None"] {
+            assert!(!text.contains(debug), "{args:?} prints {debug:?}:\n{text}");
+        }
+    }
+}

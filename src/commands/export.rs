@@ -11,6 +11,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
 use clap::{Args, ValueEnum};
+use format::FieldKind;
 use runtime::export::{
     Cost, Lobes, asymmetry, cost, fit_dual_hg, fit_hg, resample, rms_relative, samples_for,
     strip_forward_peak,
@@ -587,19 +588,19 @@ fn replace_dir(stage: &Path, out: &Path) -> Result<()> {
 
 /// The optical features whose height a lobe should keep, per field kind: name and the θ range
 /// (degrees) where the row's largest value is the feature's peak.
-fn features(kind: &str) -> Vec<(&'static str, f64, f64)> {
+fn features(kind: FieldKind) -> Vec<(&'static str, f64, f64)> {
     let mut v = vec![("forward peak", 0.0, 0.0)];
     match kind {
-        "rain" => v.push(("primary rainbow", 130.0, 145.0)),
-        "cloud" => {
+        FieldKind::Rain => v.push(("primary rainbow", 130.0, 145.0)),
+        FieldKind::Cloud => {
             v.push(("fogbow", 130.0, 145.0));
             v.push(("glory", 175.0, 180.0));
         }
-        "ice" | "snow" => {
+        FieldKind::Ice | FieldKind::Snow => {
             v.push(("22° halo", 21.0, 24.0));
             v.push(("46° halo", 44.5, 47.5));
         }
-        _ => {}
+        FieldKind::Haze => {}
     }
     v
 }
@@ -617,7 +618,7 @@ fn write_lobes(
     let mut text = String::new();
     for fr in fields {
         let f = fr.field;
-        let feats = features(&f.kind);
+        let feats = features(f.kind);
         let mut orders = serde_json::Map::new();
         let mut plot_rows = None;
         for (oi, &order) in a.orders.iter().enumerate() {

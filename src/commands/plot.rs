@@ -149,7 +149,7 @@ fn plot_bake(dir: &Path, reference: Option<&Path>, out: &Path) -> Result<Vec<Pat
             out,
             &format!("{}_phase", f.name),
         )?);
-        let zooms: &[(&str, &str, f64, f64)] = match f.kind.as_str() {
+        let zooms: &[(&str, &str, f64, f64)] = match f.kind.name() {
             "rain" => &[("rainbows", "primary and secondary rainbows", 120.0, 145.0)],
             "cloud" => &[
                 ("corona", "corona", 0.0, 10.0),

@@ -368,6 +368,19 @@ pub enum IoError {
     },
 }
 
+impl IoError {
+    /// The file the error names, if it names one (not for an image refused before writing).
+    pub fn path(&self) -> Option<&Path> {
+        match self {
+            IoError::Io { path, .. }
+            | IoError::Encode { path, .. }
+            | IoError::Unreadable { path, .. }
+            | IoError::Contract { path, .. } => Some(path),
+            IoError::InvalidImage { .. } | IoError::NonFinite { .. } => None,
+        }
+    }
+}
+
 /// A failed check of the EXR contract, see the [module docs](self).
 #[derive(Debug, Clone, PartialEq, Error)]
 pub enum ContractError {

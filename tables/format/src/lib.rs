@@ -22,6 +22,7 @@ pub mod export;
 pub mod exr;
 pub mod manifest;
 pub mod poisson;
+pub mod sections;
 pub mod side;
 pub mod single;
 
@@ -32,8 +33,9 @@ pub use commit::{
 };
 pub use exr::{ContractError, FieldImage, IoError, RGB_CHANNELS, read_field_exr, write_field_exr};
 pub use manifest::{
-    BakeDir, FieldEntry, MANIFEST_FILE, Manifest, ManifestCheck, ManifestError, PerChannel,
-    parse_manifest, read_manifest, write_manifest,
+    BakeDir, FieldEntry, FieldFiles, MANIFEST_FILE, Manifest, ManifestCheck, ManifestError,
+    PerChannel, parse_manifest, read_manifest, write_manifest,
 };
 pub use poisson::{PoissonTable, decode_poisson_exr, poisson_exr_bytes, poisson_file_name};
+pub use sections::{Channels, FieldKind, Material, Microphysics, QualityRecord, SpectralSampling};
 pub use single::{SingleScatter, decode_single_exr, single_exr_bytes, single_file_name};
