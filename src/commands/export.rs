@@ -255,10 +255,10 @@ fn check(a: &ExportArgs, t: &Tables) -> Result<()> {
         ),
         _ => {}
     }
+    // Not a file, not the bake or inside it, not a directory holding it (an earlier export
+    // there is replaced whole).
+    format::check_output_dir(&a.out, &[&a.dir]).context("--out")?;
     if a.out.exists() {
-        if !a.out.is_dir() {
-            bail!("--out {} exists and is not a directory", a.out.display());
-        }
         let earlier = a.out.join("export.json").is_file();
         let empty = std::fs::read_dir(&a.out)?.next().is_none();
         if !earlier && !empty {
@@ -323,7 +323,7 @@ fn write_all(
     stage: &Path,
 ) -> Result<serde_json::Value> {
     let write = |name: &str, bytes: &[u8]| -> Result<()> {
-        std::fs::write(stage.join(name), bytes).with_context(|| format!("writing {name}"))
+        Ok(format::write_output(&stage.join(name), bytes, &[])?)
     };
     let mut report_fields = serde_json::Map::new();
     let mut text = String::new();
@@ -831,7 +831,7 @@ fn write_lobes(
                     },
                 ],
             };
-            save(&plot, stage, &format!("{}.lobes", f.name))?;
+            save(&plot, stage, &format!("{}.lobes", f.name), &[])?;
         }
         report_fields.insert(
             f.name.clone(),
@@ -850,11 +850,11 @@ fn write_lobes(
                  features: the lobes' value at each feature's peak over the table's (kept)",
         "fields": report_fields,
     });
-    std::fs::write(
-        stage.join("export.json"),
-        serde_json::to_string_pretty(&report)?,
-    )
-    .context("writing export.json")?;
+    format::write_output(
+        &stage.join("export.json"),
+        serde_json::to_string_pretty(&report)?.as_bytes(),
+        &[],
+    )?;
     if !a.json {
         print!("{text}");
         println!(

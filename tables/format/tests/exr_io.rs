@@ -722,7 +722,10 @@ fn manifest_schema_and_consistency_are_checked() {
     let cases: [(Edit, &str); 9] = [
         (|f| f.albedo.g = 7.0, "albedo.G = 7"),
         (|f| f.g.r = -5.0, "g.R = -5"),
-        (|f| f.sigma_ext_m2.b = -1e-6, "sigma_ext_m2.B = -1e-6 is outside [1e-30, 1] m²"),
+        (
+            |f| f.sigma_ext_m2.b = -1e-6,
+            "sigma_ext_m2.B = -1e-6 is outside [1e-30, 1] m²",
+        ),
         (|f| f.forward_fraction.r[0] = 1.5, "F_1 = 1.5"),
         (|f| f.forward_fraction.r[2] = 0.95, "F_3 = 0.95 exceeds F_2"),
         (
