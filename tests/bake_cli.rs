@@ -54,7 +54,7 @@ fn no_argument_bake_writes_all_four_fields() {
     for f in &bake.manifest.fields {
         assert!(bake.out.join(&f.file).is_file());
         assert_eq!(f.n_max, 26);
-        assert_eq!(f.quality["preset"], "standard");
+        assert_eq!(f.quality.preset, "standard");
         assert_eq!(f.content_hash.len(), 64);
         for c in f.n_isotropic.as_array() {
             let n: Vec<u32> = ["1e-2", "1e-4", "1e-6"]
@@ -236,18 +236,20 @@ fn inspect_and_compare_read_the_bake() {
         "{text}"
     );
     for f in &default_bake().manifest.fields {
-        let noise = &f.quality["crystal_noise"];
-        if f.kind == "ice" || f.kind == "snow" {
-            for c in ["R", "G", "B"] {
-                let n = noise[c].as_f64().unwrap();
-                assert!(n > 0.0 && n <= 0.009, "{} {c}: noise {n}", f.name);
+        let noise = &f.quality.crystal_noise;
+        if !f.kind.is_drops() {
+            for (c, n) in ["R", "G", "B"]
+                .iter()
+                .zip(noise.as_ref().unwrap().as_array())
+            {
+                assert!(*n > 0.0 && *n <= 0.009, "{} {c}: noise {n}", f.name);
             }
         } else {
-            assert!(noise.is_null(), "{}: {noise}", f.name);
+            assert!(noise.is_none(), "{}: {noise:?}", f.name);
             // Drops: the size sampling's noise, at the standard preset under its 1 %.
-            for c in ["R", "G", "B"] {
-                let n = f.quality["size_noise"][c].as_f64().unwrap();
-                assert!(n > 0.0 && n < 0.01, "{} {c}: size noise {n}", f.name);
+            let size_noise = f.quality.size_noise.as_ref().unwrap();
+            for (c, n) in ["R", "G", "B"].iter().zip(size_noise.as_array()) {
+                assert!(*n > 0.0 && *n < 0.01, "{} {c}: size noise {n}", f.name);
             }
         }
     }

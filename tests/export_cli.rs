@@ -72,6 +72,8 @@ fn bevy_ktx2_reads_back_with_the_ktx2_crate_and_the_reported_cost_is_the_cost() 
         "1,4",
         "--samples",
         "2049",
+        "--forward-peak",
+        "keep",
     ]));
     let t = Tables::open(bake()).unwrap();
     let r = report(&out);
@@ -138,6 +140,8 @@ fn the_default_sample_count_keeps_the_moved_light_under_max_loss_where_the_limit
         "cloud",
         "--max-loss",
         "0.05",
+        "--forward-peak",
+        "keep",
     ]));
     let r = report(&out);
     let n = r["fields"]["cloud"]["samples"].as_u64().unwrap() as usize;
@@ -173,6 +177,8 @@ fn the_default_sample_count_keeps_the_moved_light_under_max_loss_where_the_limit
         "rain",
         "--samples",
         "4097",
+        "--forward-peak",
+        "keep",
     ]));
     assert!(text.contains("above --max-loss"), "{text}");
     let strip = workdir("export_strip").join("m");
@@ -226,6 +232,8 @@ fn numpy_openexr_and_mitsuba_read_the_exports() {
             "1,2",
             "--samples",
             "4097",
+            "--forward-peak",
+            "keep",
         ]));
     }
     let script = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/check_export.py");
@@ -291,7 +299,14 @@ fn bad_arguments_are_refused_naming_the_value_and_nothing_is_written() {
             "--samples applies to bevy and mitsuba",
         ),
         (
-            &["--format", "bevy", "--fields", "rain"],
+            &[
+                "--format",
+                "bevy",
+                "--fields",
+                "rain",
+                "--forward-peak",
+                "keep",
+            ],
             "--max-loss 0.01 cannot be met for field \"rain\" within 8192 values, the bevy limit",
         ),
     ];
@@ -380,6 +395,8 @@ fn the_bevy_texture_sampled_by_its_wgsl_on_a_gpu_matches_the_cpu() {
         "cloud",
         "--samples",
         "8192",
+        "--forward-peak",
+        "keep",
     ]));
     let snippet = fs::read_to_string(out.join("phase_curve.wgsl")).unwrap();
     let bytes = fs::read(out.join("cloud.ams1.ktx2")).unwrap();
@@ -551,4 +568,110 @@ fn hg_lobes_are_fitted_with_what_they_lose() {
         .unwrap();
     assert!(bow < 0.5, "{bow}");
     assert!(text.contains("best dual HG"), "{text}");
+}
+
+/// What inspect, validate, compare and export print is written for people: no Rust debug
+/// formatting of options or structs (`Some(102)`, "ring at None°").
+#[test]
+fn user_output_has_no_debug_formatting() {
+    let d = bake().to_str().unwrap();
+    let root = workdir("export_words");
+    let mut runs: Vec<Vec<String>> = [
+        vec!["inspect", d],
+        vec!["validate", d],
+        vec!["compare", d, d],
+    ]
+    .into_iter()
+    .map(|a| a.into_iter().map(String::from).collect())
+    .collect();
+    for format in ["bevy", "mitsuba", "npy", "csv", "hg"] {
+        let out = root.join(format);
+        runs.push(
+            [
+                "export",
+                d,
+                "--format",
+                format,
+                "--out",
+                out.to_str().unwrap(),
+            ]
+            .map(String::from)
+            .to_vec(),
+        );
+    }
+    for args in runs {
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        let o = photometeor(&args, Path::new("."));
+        let text = format!(
+            "{}{}",
+            String::from_utf8_lossy(&o.stdout),
+            String::from_utf8_lossy(&o.stderr)
+        );
+        assert!(!text.is_empty(), "{args:?} printed nothing");
+        for debug in ["Some(", "None"] {
+            assert!(!text.contains(debug), "{args:?} prints {debug:?}:\n{text}");
+        }
+    }
+}
+
+/// With its defaults, export succeeds for every format, choosing per field the forward-peak
+/// treatment and sample count that meet --max-loss, and says which it chose; a stripped peak's
+/// Mitsuba medium carries the δ-scaled optics.
+#[test]
+fn every_format_succeeds_with_its_defaults_and_reports_its_choice() {
+    let root = workdir("export_defaults");
+    for format in ["bevy", "mitsuba", "npy", "csv", "hg"] {
+        let out = root.join(format);
+        let text = ok(&export(&[
+            "--format",
+            format,
+            "--out",
+            out.to_str().unwrap(),
+        ]));
+        let r = report(&out);
+        assert_eq!(r["forward_peak"], "auto", "{format}");
+        for field in ["cloud", "rain"] {
+            let f = &r["fields"][field];
+            if format == "hg" {
+                continue;
+            }
+            let treatment = f["forward_peak"].as_str().unwrap();
+            let samples = f["samples"].as_u64().unwrap();
+            assert!(
+                text.contains(&format!("forward peak {treatment}"))
+                    || format == "npy"
+                    || format == "csv",
+                "{format}: {text}"
+            );
+            if format == "bevy" || format == "mitsuba" {
+                let moved = ["R", "G", "B"]
+                    .iter()
+                    .map(|c| f["orders"]["1"]["channels"][c]["moved"].as_f64().unwrap())
+                    .fold(0.0, f64::max);
+                // Met, or written with its loss reported.
+                let line = text
+                    .lines()
+                    .find(|l| l.starts_with(field) && l.contains("Ams_1 "))
+                    .unwrap();
+                assert!(
+                    moved <= 0.01 || line.contains("above --max-loss"),
+                    "{format} {field}: {treatment} {samples}: {moved}\n{text}"
+                );
+            } else {
+                assert_eq!(treatment, "keep", "{format} {field}");
+            }
+        }
+    }
+    // The rain's peak cannot be held by a grid in cos θ: it is stripped, and the medium takes
+    // the scaled optics the report gives.
+    let r = report(&root.join("mitsuba"));
+    assert_eq!(r["fields"]["rain"]["forward_peak"], "strip");
+    let g = &r["fields"]["rain"]["orders"]["1"]["channels"]["G"];
+    let xml = fs::read_to_string(root.join("mitsuba/rain.xml")).unwrap();
+    let sigma_t = format!("{:.6e}", g["scaled_sigma_ext_m2"].as_f64().unwrap());
+    let albedo = format!("{:.6}", g["scaled_albedo"].as_f64().unwrap());
+    assert!(
+        xml.contains(&sigma_t) && xml.contains(&albedo),
+        "{sigma_t} {albedo}\n{xml}"
+    );
 }

@@ -401,3 +401,119 @@ fn a_full_disk_leaves_the_previous_bake_as_it_was() {
     assert_eq!(snapshot(&dir), before);
     assert_eq!(consistent(&dir), ["rain"]);
 }
+
+/// Flips bit 27 of the data window's x max in `file` (an EXR of `dir`): a header that declares
+/// 2^27 more columns than the file holds.
+fn flip_data_window_bit(file: &Path) {
+    let mut bytes = fs::read(file).unwrap();
+    let window = b"dataWindow\0box2i\0";
+    let at = bytes
+        .windows(window.len())
+        .position(|w| w == window)
+        .unwrap()
+        + window.len()
+        + 4;
+    bytes[at + 8 + 3] ^= 0x08;
+    fs::write(file, bytes).unwrap();
+}
+
+/// Runs the binary with its address space limited to 1 GiB, as on a machine without the
+/// memory a corrupt header asks for: an allocation sized from the header aborts there.
+fn photometeor_in_1_gib(args: &[&str], cwd: &Path) -> std::process::Output {
+    Command::new("sh")
+        .arg("-c")
+        .arg("ulimit -v 1048576 && exec \"$0\" \"$@\"")
+        .arg(env!("CARGO_BIN_EXE_photometeor"))
+        .args(args)
+        .current_dir(cwd)
+        .output()
+        .unwrap()
+}
+
+#[test]
+fn every_reader_refuses_a_side_table_whose_header_declares_more_than_the_file_holds() {
+    let work = workdir("faults-side-table-header");
+    let dir = work.join("tables");
+    bake_into(&scene("a", &["cloud", "rain"]), &dir).unwrap();
+    let d = dir.to_str().unwrap();
+    for file in ["cloud.single.exr", "rain.poisson.exr", "cloud.biri.exr"] {
+        let path = dir.join(file);
+        let good = fs::read(&path).unwrap();
+        flip_data_window_bit(&path);
+        for args in [
+            &["export", d, "--format", "npy", "--out", "export"][..],
+            &["inspect", d],
+            &["validate", d],
+        ] {
+            let out = photometeor_in_1_gib(args, &work);
+            let stderr = String::from_utf8_lossy(&out.stderr);
+            assert_eq!(out.status.code(), Some(2), "{args:?} on {file}: {stderr}");
+            assert!(
+                stderr.contains(file) && stderr.contains("the header declares a 134218729 × "),
+                "{args:?} on {file}: {stderr}"
+            );
+        }
+        let e = runtime::Tables::open(&dir).unwrap_err().to_string();
+        assert!(e.contains(file), "{e}");
+        fs::write(&path, good).unwrap();
+    }
+    assert!(!work.join("export").exists());
+    assert_eq!(consistent(&dir), ["cloud", "rain"]);
+}
+
+#[test]
+fn impossible_manifest_values_are_refused_by_every_reader() {
+    let work = workdir("faults-manifest-values");
+    let dir = work.join("tables");
+    bake_into(&scene("a", &["cloud", "rain"]), &dir).unwrap();
+    let d = dir.to_str().unwrap();
+    let manifest = fs::read_to_string(dir.join("manifest.json")).unwrap();
+    type Edit = fn(&mut serde_json::Value);
+    let edits: [(Edit, &str); 5] = [
+        (
+            |v| v["fields"][0]["sigma_ext_m2"]["G"] = 1e308.into(),
+            "sigma_ext_m2.G = 1e308 is outside [1e-30, 1] m²",
+        ),
+        (
+            |v| v["fields"][1]["microphysics"]["temperature_c"] = "warm".into(),
+            "temperature_c",
+        ),
+        (
+            |v| v["fields"][1]["microphysics"]["temperature_c"] = 150.0.into(),
+            "microphysics.temperature_c = 150 is outside [-12, 99] °C",
+        ),
+        (
+            |v| {
+                let zeros = serde_json::json!([0.0, 0.0, 0.0, 0.0]);
+                v["fields"][1]["forward_peak_fraction"]["G"] = zeros;
+            },
+            "forward_peak_fraction.G[0] = 0 in manifest.json, but the table's forward peaks give 0.4",
+        ),
+        (
+            |v| v["fields"][0]["kind"] = "hail".into(),
+            "unknown variant `hail`",
+        ),
+    ];
+    for (edit, needle) in edits {
+        let mut v: serde_json::Value = serde_json::from_str(&manifest).unwrap();
+        edit(&mut v);
+        fs::write(
+            dir.join("manifest.json"),
+            serde_json::to_vec_pretty(&v).unwrap(),
+        )
+        .unwrap();
+        for args in [
+            &["inspect", d][..],
+            &["validate", d],
+            &["export", d, "--format", "mitsuba", "--out", "export"],
+        ] {
+            let out = photometeor(args, &work);
+            let stderr = String::from_utf8_lossy(&out.stderr);
+            assert_eq!(out.status.code(), Some(2), "{args:?} accepted {needle}");
+            assert!(stderr.contains(needle), "{args:?}: {stderr}");
+        }
+        assert!(!work.join("export").exists());
+    }
+    fs::write(dir.join("manifest.json"), manifest).unwrap();
+    assert_eq!(consistent(&dir), ["cloud", "rain"]);
+}

@@ -14,7 +14,7 @@
 
 use std::path::{Path, PathBuf};
 
-use format::{BakeDir, BiriTable, FieldImage, PoissonTable, SingleScatter};
+use format::{BakeDir, BiriTable, FieldImage, FieldKind, PoissonTable, SingleScatter};
 use grid::ThetaGrid;
 use ndarray::Axis;
 use thiserror::Error;
@@ -38,8 +38,8 @@ pub struct LoadError {
 pub struct FieldTable {
     /// The field's name in the scene.
     pub name: String,
-    /// cloud | rain | ice | snow
-    pub kind: String,
+    /// What the field is made of.
+    pub kind: FieldKind,
     /// Ams_n (`image.ams[[c, n − 1, k]]`, channel c ∈ {R, G, B}, θ_k = k·Δθ, 1/sr) and F_n
     /// (`image.forward_fraction[[c, n − 1]]`).
     pub image: FieldImage,
@@ -84,7 +84,8 @@ pub struct Tables {
     /// The selected fields.
     pub fields: Vec<FieldTable>,
     /// The bake's wavelengths (nm) and each channel's weights over them (`weights[c][j]`),
-    /// from the manifest's `channels`; `None` when the manifest does not list them.
+    /// from the manifest's `channels` (always present since the manifest's `channels` are
+    /// typed; an `Option` for the renderers that match on it).
     pub spectrum: Option<Spectrum>,
 }
 
@@ -98,44 +99,13 @@ pub struct Spectrum {
 }
 
 impl Spectrum {
-    /// Reads `wavelengths_nm` and `weights.{R,G,B}` of the manifest's `channels`, checking
-    /// their lengths and ranges.
-    pub fn from_channels(channels: &serde_json::Value) -> Result<Option<Self>, String> {
-        let Some(lambdas) = channels.get("wavelengths_nm") else {
-            return Ok(None);
-        };
-        let list = |v: &serde_json::Value, what: &str| -> Result<Vec<f64>, String> {
-            v.as_array()
-                .and_then(|a| {
-                    a.iter()
-                        .map(serde_json::Value::as_f64)
-                        .collect::<Option<Vec<_>>>()
-                })
-                .ok_or_else(|| format!("channels.{what} is not a list of numbers"))
-        };
-        let wavelengths_nm = list(lambdas, "wavelengths_nm")?;
-        let mut weights: [Vec<f64>; 3] = Default::default();
-        for (c, ch) in ["R", "G", "B"].iter().enumerate() {
-            let w = channels
-                .get("weights")
-                .and_then(|w| w.get(ch))
-                .ok_or_else(|| format!("channels.weights.{ch} is missing"))?;
-            weights[c] = list(w, &format!("weights.{ch}"))?;
-            let sum: f64 = weights[c].iter().sum();
-            if weights[c].len() != wavelengths_nm.len()
-                || weights[c].iter().any(|v| !(v.is_finite() && *v >= 0.0))
-                || (sum - 1.0).abs() > 1e-9
-            {
-                return Err(format!(
-                    "channels.weights.{ch} must be {} values ≥ 0 summing to 1",
-                    wavelengths_nm.len()
-                ));
-            }
+    /// The wavelengths and weights of a manifest's `channels` (checked by the manifest's
+    /// reader: one weight ≥ 0 per wavelength, each channel's summing to 1).
+    pub fn from_channels(channels: &format::Channels) -> Self {
+        Self {
+            wavelengths_nm: channels.wavelengths_nm.clone(),
+            weights: channels.weights.as_array().map(Clone::clone),
         }
-        Ok(Some(Self {
-            wavelengths_nm,
-            weights,
-        }))
     }
 }
 
@@ -166,10 +136,7 @@ impl Tables {
                 }
             }
         }
-        let spectrum = Spectrum::from_channels(&manifest.channels).map_err(|check| LoadError {
-            file: manifest_file.clone(),
-            check,
-        })?;
+        let spectrum = Some(Spectrum::from_channels(&manifest.channels));
         let grid = ThetaGrid::new(manifest.theta_step_deg).expect("checked by read_manifest");
         let omega = grid.bin_solid_angles();
         let mut fields = Vec::new();
@@ -182,10 +149,17 @@ impl Tables {
                 file: file.clone(),
                 check,
             };
-            // Contract, manifest cross-checks (name, Δθ, K, N, F_i) and size + CRC-32.
-            let image = bake
-                .read_field(entry)
-                .map_err(|e| fail(strip_path(&e.to_string(), &file)))?;
+            // Every file of the field: the contracts, the manifest cross-checks (name, Δθ, K,
+            // N, F_i, the single table's wavelengths, optics and forward peaks) and each file's
+            // size + CRC-32, an error naming the file that failed.
+            let files = bake.read_field_files(entry).map_err(|e| {
+                let failed = e.path().map_or_else(|| file.clone(), Path::to_path_buf);
+                LoadError {
+                    check: strip_path(&e.to_string(), &failed),
+                    file: failed,
+                }
+            })?;
+            let image = files.image;
             // F_i's range and order are the manifest's checks, and read_field has compared the
             // EXR's F_i with the manifest's bit for bit: only the rows remain to be checked.
             for (c, ch) in ["R", "G", "B"].into_iter().enumerate() {
@@ -208,45 +182,18 @@ impl Tables {
                     }
                 }
             }
-            // A further file's failure, named by the file.
-            let side = |file: String| {
-                let path = dir.join(file);
-                move |e: format::IoError| LoadError {
-                    check: strip_path(&e.to_string(), &path),
-                    file: path.clone(),
-                }
-            };
-            let single = bake
-                .read_single(entry)
-                .map_err(side(format::single_file_name(&entry.name)))?;
-            if let (Some(t), Some(s)) = (&single, &spectrum)
-                && t.wavelengths_nm != s.wavelengths_nm
-            {
-                return Err(fail(format!(
-                    "{}'s wavelengths {:?} differ from manifest.json's {:?}",
-                    format::single_file_name(&entry.name),
-                    t.wavelengths_nm,
-                    s.wavelengths_nm
-                )));
-            }
-            let poisson = bake
-                .read_poisson(entry)
-                .map_err(side(format::poisson_file_name(&entry.name)))?;
-            let biri = bake
-                .read_biri(entry)
-                .map_err(side(format::biri_file_name(&entry.name)))?;
             let ext = entry.sigma_ext_m2.as_array().map(|&v| v);
             let alb = entry.albedo.as_array().map(|&v| v);
             fields.push(FieldTable {
                 name: entry.name.clone(),
-                kind: entry.kind.clone(),
+                kind: entry.kind,
                 image,
                 sigma_sca_m2: [ext[0] * alb[0], ext[1] * alb[1], ext[2] * alb[2]],
                 sigma_ext_m2: ext,
                 albedo: alb,
-                single,
-                poisson,
-                biri,
+                single: files.single,
+                poisson: files.poisson,
+                biri: files.biri,
                 transport_factor: entry
                     .transport_factor
                     .as_ref()

@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 use clap::Args as ClapArgs;
-use render::error_map::{Pixels, compare, read_frame, write_error_map};
+use render::error_map::{Pixels, compare, error_map_rgb8, read_frame};
 
 #[derive(Debug, ClapArgs)]
 pub struct CompareRenderArgs {
@@ -26,6 +26,11 @@ pub struct CompareRenderArgs {
 }
 
 pub fn run(a: CompareRenderArgs) -> Result<()> {
+    // The map never replaces a device, a directory or either frame it compares.
+    let inputs = [a.truth.as_path(), a.model.as_path()];
+    if let Some(path) = &a.map {
+        format::check_output(path, &inputs)?;
+    }
     let truth = read_frame(&a.truth)?;
     let model = read_frame(&a.model)?;
     let pixels = if a.pixels == "all" {
@@ -35,7 +40,9 @@ pub fn run(a: CompareRenderArgs) -> Result<()> {
     };
     let (report, map) = compare(&truth, &model, pixels)?;
     if let Some(path) = &a.map {
-        write_error_map(path, &map, truth.image.width, truth.image.height)?;
+        let (w, h) = (truth.image.width as u32, truth.image.height as u32);
+        let png = crate::commands::plot::png_rgb8(w, h, &error_map_rgb8(&map))?;
+        format::write_output(path, &png, &inputs)?;
     }
     if a.json {
         println!("{}", serde_json::to_string(&report)?);

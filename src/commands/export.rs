@@ -11,6 +11,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
 use clap::{Args, ValueEnum};
+use format::FieldKind;
 use runtime::export::{
     Cost, Lobes, asymmetry, cost, fit_dual_hg, fit_hg, resample, rms_relative, samples_for,
     strip_forward_peak,
@@ -44,6 +45,10 @@ pub enum ExportFormat {
 /// What to do with the forward peak a grid in cos θ cannot hold.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum ForwardPeak {
+    /// Per field, `keep` if some sample count within the format's limit meets --max-loss,
+    /// else `strip` if one does, else whichever loses less at the limit, written with its loss
+    /// reported; the bake's own θ grid (npy, csv, hg) keeps the row.
+    Auto,
     /// Export the row as it is (the peak is spread over the last cell; its cost is reported).
     Keep,
     /// δ-scaling: take the peak's excess f over the next bin out, renormalise, and report the
@@ -79,7 +84,7 @@ pub struct ExportArgs {
     #[arg(long, default_value_t = 0.01)]
     max_loss: f64,
     /// What to do with the forward peak a grid in cos θ cannot hold (bevy, mitsuba).
-    #[arg(long, value_enum, default_value_t = ForwardPeak::Keep)]
+    #[arg(long, value_enum, default_value_t = ForwardPeak::Auto)]
     forward_peak: ForwardPeak,
     /// Print the report as JSON (it is also written to OUT/export.json).
     #[arg(long)]
@@ -89,6 +94,7 @@ pub struct ExportArgs {
 impl ForwardPeak {
     fn name(self) -> &'static str {
         match self {
+            ForwardPeak::Auto => "auto",
             ForwardPeak::Keep => "keep",
             ForwardPeak::Strip => "strip",
         }
@@ -118,15 +124,73 @@ impl ExportFormat {
 
 const CHANNELS: [&str; 3] = ["R", "G", "B"];
 
-/// One field's rows to export: per order, per channel, the row (after --forward-peak) and the
-/// forward peak taken out.
+/// One field's rows to export: the forward-peak treatment chosen for it (keep or strip), and
+/// per order, per channel, the row after it and the forward peak taken out.
 struct FieldRows<'a> {
     field: &'a FieldTable,
+    treatment: ForwardPeak,
     rows: Vec<[Vec<f64>; 3]>,
     stripped: Vec<[f64; 3]>,
 }
 
-fn rows_of<'a>(t: &'a Tables, field: &'a FieldTable, a: &ExportArgs) -> FieldRows<'a> {
+impl FieldRows<'_> {
+    /// Every row, each order's channels in turn.
+    fn all(&self) -> Vec<&[f64]> {
+        self.rows
+            .iter()
+            .flat_map(|r| r.iter().map(|v| v.as_slice()))
+            .collect()
+    }
+
+    /// The sample count on the cos θ grid (--samples, or the smallest that meets --max-loss
+    /// within `max`) and the worst cost there.
+    fn samples(&self, a: &ExportArgs, step: f64, max: usize) -> (usize, Cost) {
+        let all = self.all();
+        match a.samples {
+            Some(n) => (n, worst_cost(&all, step, n)),
+            None => samples_for(&all, step, a.max_loss, max),
+        }
+    }
+}
+
+/// The worst cost over `rows` resampled to `n` values.
+fn worst_cost(rows: &[&[f64]], step: f64, n: usize) -> Cost {
+    rows.iter()
+        .map(|r| cost(r, step, &resample(r, step, n)))
+        .max_by(|x, y| x.moved.total_cmp(&y.moved))
+        .expect("at least one row")
+}
+
+/// `field`'s rows under the forward-peak treatment --forward-peak asks for, or for `auto`
+/// the one that meets --max-loss (see [`ForwardPeak::Auto`]).
+fn choose_rows<'a>(t: &'a Tables, field: &'a FieldTable, a: &ExportArgs) -> FieldRows<'a> {
+    let step = t.theta_step_deg;
+    match (a.forward_peak, a.format.max_samples()) {
+        (ForwardPeak::Auto, None) => rows_of(t, field, a, ForwardPeak::Keep),
+        (ForwardPeak::Auto, Some(max)) => {
+            let keep = rows_of(t, field, a, ForwardPeak::Keep);
+            let (_, kept) = keep.samples(a, step, max);
+            if kept.moved <= a.max_loss {
+                return keep;
+            }
+            let strip = rows_of(t, field, a, ForwardPeak::Strip);
+            let (_, stripped) = strip.samples(a, step, max);
+            if stripped.moved <= a.max_loss || stripped.moved < kept.moved {
+                strip
+            } else {
+                keep
+            }
+        }
+        (treatment, _) => rows_of(t, field, a, treatment),
+    }
+}
+
+fn rows_of<'a>(
+    t: &'a Tables,
+    field: &'a FieldTable,
+    a: &ExportArgs,
+    treatment: ForwardPeak,
+) -> FieldRows<'a> {
     let mut rows = Vec::new();
     let mut stripped = Vec::new();
     for &n in &a.orders {
@@ -136,9 +200,9 @@ fn rows_of<'a>(t: &'a Tables, field: &'a FieldTable, a: &ExportArgs) -> FieldRow
             let row: Vec<f64> = (0..t.angle_count)
                 .map(|k| field.image.ams[[c, n - 1, k]])
                 .collect();
-            (r[c], s[c]) = match a.forward_peak {
-                ForwardPeak::Keep => (row, 0.0),
+            (r[c], s[c]) = match treatment {
                 ForwardPeak::Strip => strip_forward_peak(&row, t.theta_step_deg),
+                ForwardPeak::Keep | ForwardPeak::Auto => (row, 0.0),
             };
         }
         rows.push(r);
@@ -146,6 +210,7 @@ fn rows_of<'a>(t: &'a Tables, field: &'a FieldTable, a: &ExportArgs) -> FieldRow
     }
     FieldRows {
         field,
+        treatment,
         rows,
         stripped,
     }
@@ -190,10 +255,10 @@ fn check(a: &ExportArgs, t: &Tables) -> Result<()> {
         ),
         _ => {}
     }
+    // Not a file, not the bake or inside it, not a directory holding it (an earlier export
+    // there is replaced whole).
+    format::check_output_dir(&a.out, &[&a.dir]).context("--out")?;
     if a.out.exists() {
-        if !a.out.is_dir() {
-            bail!("--out {} exists and is not a directory", a.out.display());
-        }
         let earlier = a.out.join("export.json").is_file();
         let empty = std::fs::read_dir(&a.out)?.next().is_none();
         if !earlier && !empty {
@@ -227,7 +292,7 @@ pub fn run(a: ExportArgs) -> Result<()> {
     let step = t.theta_step_deg;
     let fields: Vec<FieldRows> = selected(&t, &a)
         .into_iter()
-        .map(|f| rows_of(&t, f, &a))
+        .map(|f| choose_rows(&t, f, &a))
         .collect();
     let stage = staging_dir(&a.out)?;
     let result = if a.format == ExportFormat::Hg {
@@ -258,7 +323,7 @@ fn write_all(
     stage: &Path,
 ) -> Result<serde_json::Value> {
     let write = |name: &str, bytes: &[u8]| -> Result<()> {
-        std::fs::write(stage.join(name), bytes).with_context(|| format!("writing {name}"))
+        Ok(format::write_output(&stage.join(name), bytes, &[])?)
     };
     let mut report_fields = serde_json::Map::new();
     let mut text = String::new();
@@ -284,16 +349,13 @@ fn write_all(
         let (n, resampled) = match a.format.max_samples() {
             None => (t.angle_count, None),
             Some(max) => {
-                let all: Vec<&[f64]> = fr
-                    .rows
-                    .iter()
-                    .flat_map(|r| r.iter().map(|v| v.as_slice()))
-                    .collect();
                 let n = match a.samples {
                     Some(s) => s,
                     None => {
-                        let (n, worst) = samples_for(&all, step, a.max_loss, max);
-                        if worst.moved > a.max_loss {
+                        let (n, worst) = fr.samples(a, step, max);
+                        // An explicit treatment that cannot meet the bound is refused; `auto`
+                        // writes the least loss it found and reports it.
+                        if worst.moved > a.max_loss && a.forward_peak != ForwardPeak::Auto {
                             bail!(
                                 "--max-loss {} cannot be met for field {:?} within {max} values, the {} limit: there {:.2} % of the light lands in a wrong θ bin; allow at least --max-loss {:.4}, take the loss with --samples N, or try --forward-peak strip",
                                 a.max_loss,
@@ -399,7 +461,7 @@ fn write_all(
                 } else {
                     e.insert("moved".into(), json!(0.0));
                 }
-                if a.forward_peak == ForwardPeak::Strip {
+                if fr.treatment == ForwardPeak::Strip {
                     let fs = fr.stripped[oi][c];
                     let al = f.albedo[c];
                     e.insert("forward_peak_stripped".into(), json!(fs));
@@ -419,8 +481,9 @@ fn write_all(
                 let peak = r[oi].cost.iter().map(|c| c.peak_kept).fold(1.0, f64::min);
                 let _ = writeln!(
                     text,
-                    "{:<10} Ams_{order:<3} {n:>8} values  moved {:>7.3} %  forward peak kept {:>9.3e}{}",
+                    "{:<10} Ams_{order:<3} {n:>8} values  forward peak {:<5}  moved {:>7.3} %  forward peak kept {:>9.3e}{}",
                     f.name,
+                    fr.treatment.name(),
                     worst * 100.0,
                     peak,
                     if worst > a.max_loss {
@@ -437,8 +500,14 @@ fn write_all(
         }
         match a.format {
             ExportFormat::Mitsuba => {
-                let al = f.albedo;
-                let s = f.sigma_ext_m2;
+                // With the peak stripped the medium takes the δ-scaled optics of the order it
+                // refers to: σ_ext (1 − α f) and α (1 − f)/(1 − α f).
+                let f0 = fr.stripped[0];
+                let al: [f64; 3] = std::array::from_fn(|c| {
+                    f.albedo[c] * (1.0 - f0[c]) / (1.0 - f.albedo[c] * f0[c])
+                });
+                let s: [f64; 3] =
+                    std::array::from_fn(|c| f.sigma_ext_m2[c] * (1.0 - f.albedo[c] * f0[c]));
                 let snippet = format!(
                     "<!-- photometeor {version}: field {name} ({kind}), tabphase per order n and channel.\n     \
                      Mitsuba's tabphase is one scalar table: render one channel at a time, or pick G.\n     \
@@ -495,6 +564,7 @@ fn write_all(
             f.name.clone(),
             json!({
                 "kind": f.kind,
+                "forward_peak": fr.treatment.name(),
                 "samples": n,
                 "sigma_ext_m2": f.sigma_ext_m2,
                 "albedo": f.albedo,
@@ -587,19 +657,19 @@ fn replace_dir(stage: &Path, out: &Path) -> Result<()> {
 
 /// The optical features whose height a lobe should keep, per field kind: name and the θ range
 /// (degrees) where the row's largest value is the feature's peak.
-fn features(kind: &str) -> Vec<(&'static str, f64, f64)> {
+fn features(kind: FieldKind) -> Vec<(&'static str, f64, f64)> {
     let mut v = vec![("forward peak", 0.0, 0.0)];
     match kind {
-        "rain" => v.push(("primary rainbow", 130.0, 145.0)),
-        "cloud" => {
+        FieldKind::Rain => v.push(("primary rainbow", 130.0, 145.0)),
+        FieldKind::Cloud => {
             v.push(("fogbow", 130.0, 145.0));
             v.push(("glory", 175.0, 180.0));
         }
-        "ice" | "snow" => {
+        FieldKind::Ice | FieldKind::Snow => {
             v.push(("22° halo", 21.0, 24.0));
             v.push(("46° halo", 44.5, 47.5));
         }
-        _ => {}
+        FieldKind::Haze => {}
     }
     v
 }
@@ -617,7 +687,7 @@ fn write_lobes(
     let mut text = String::new();
     for fr in fields {
         let f = fr.field;
-        let feats = features(&f.kind);
+        let feats = features(f.kind);
         let mut orders = serde_json::Map::new();
         let mut plot_rows = None;
         for (oi, &order) in a.orders.iter().enumerate() {
@@ -761,7 +831,7 @@ fn write_lobes(
                     },
                 ],
             };
-            save(&plot, stage, &format!("{}.lobes", f.name))?;
+            save(&plot, stage, &format!("{}.lobes", f.name), &[])?;
         }
         report_fields.insert(
             f.name.clone(),
@@ -780,11 +850,11 @@ fn write_lobes(
                  features: the lobes' value at each feature's peak over the table's (kept)",
         "fields": report_fields,
     });
-    std::fs::write(
-        stage.join("export.json"),
-        serde_json::to_string_pretty(&report)?,
-    )
-    .context("writing export.json")?;
+    format::write_output(
+        &stage.join("export.json"),
+        serde_json::to_string_pretty(&report)?.as_bytes(),
+        &[],
+    )?;
     if !a.json {
         print!("{text}");
         println!(

@@ -59,13 +59,20 @@ pub(crate) struct LinePlot {
 
 /// Runs `photometeor plot`.
 pub fn run(a: PlotArgs) -> Result<()> {
+    // What the command reads is never written over: the bakes and the trade-off file.
+    let protected: Vec<&Path> = [&a.dir, &a.reference, &a.tradeoff]
+        .into_iter()
+        .flatten()
+        .map(PathBuf::as_path)
+        .collect();
+    format::check_output_dir(&a.out, &protected)?;
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
     let mut written = Vec::new();
     if let Some(dir) = &a.dir {
-        written.extend(plot_bake(dir, a.reference.as_deref(), &a.out)?);
+        written.extend(plot_bake(dir, a.reference.as_deref(), &a.out, &protected)?);
     }
     if let Some(t) = &a.tradeoff {
-        written.extend(plot_tradeoff(t, &a.out)?);
+        written.extend(plot_tradeoff(t, &a.out, &protected)?);
     }
     if a.dir.is_none() && a.tradeoff.is_none() {
         anyhow::bail!("nothing to plot: give a bake directory, --tradeoff FILE, or both");
@@ -76,7 +83,12 @@ pub fn run(a: PlotArgs) -> Result<()> {
     Ok(())
 }
 
-fn plot_bake(dir: &Path, reference: Option<&Path>, out: &Path) -> Result<Vec<PathBuf>> {
+fn plot_bake(
+    dir: &Path,
+    reference: Option<&Path>,
+    out: &Path,
+    protected: &[&Path],
+) -> Result<Vec<PathBuf>> {
     let bake = BakeDir::open(dir)?;
     let manifest = &bake.manifest;
     let reference = reference.map(BakeDir::open).transpose()?;
@@ -148,8 +160,9 @@ fn plot_bake(dir: &Path, reference: Option<&Path>, out: &Path) -> Result<Vec<Pat
             &phase(0.0, 180.0, "single scattering, per channel"),
             out,
             &format!("{}_phase", f.name),
+            protected,
         )?);
-        let zooms: &[(&str, &str, f64, f64)] = match f.kind.as_str() {
+        let zooms: &[(&str, &str, f64, f64)] = match f.kind.name() {
             "rain" => &[("rainbows", "primary and secondary rainbows", 120.0, 145.0)],
             "cloud" => &[
                 ("corona", "corona", 0.0, 10.0),
@@ -164,6 +177,7 @@ fn plot_bake(dir: &Path, reference: Option<&Path>, out: &Path) -> Result<Vec<Pat
                 &phase(*a, *b, title),
                 out,
                 &format!("{}_zoom_{slug}", f.name),
+                protected,
             )?);
         }
         // The Ams_n family in the G channel.
@@ -194,6 +208,7 @@ fn plot_bake(dir: &Path, reference: Option<&Path>, out: &Path) -> Result<Vec<Pat
             },
             out,
             &format!("{}_ams_family", f.name),
+            protected,
         )?);
         for c in 0..3 {
             forward.push(Series {
@@ -212,7 +227,7 @@ fn plot_bake(dir: &Path, reference: Option<&Path>, out: &Path) -> Result<Vec<Pat
                     .collect(),
             });
         }
-        written.push(colour_strips(&image, step, out, &f.name)?);
+        written.push(colour_strips(&image, step, out, &f.name, protected)?);
     }
     let n_max = manifest.fields.iter().map(|f| f.n_max).max().unwrap_or(1);
     written.extend(save(
@@ -227,6 +242,7 @@ fn plot_bake(dir: &Path, reference: Option<&Path>, out: &Path) -> Result<Vec<Pat
         },
         out,
         "forward_fraction",
+        protected,
     )?);
     Ok(written)
 }
@@ -235,7 +251,13 @@ fn plot_bake(dir: &Path, reference: Option<&Path>, out: &Path) -> Result<Vec<Pat
 /// so the 98th percentile of the largest channel over θ ≥ 30° maps to 1 (the
 /// forward lobe saturates; features at larger angles keep their contrast), tone-mapped by
 /// x/(1 + x)·2 (1 ↦ 1) and encoded with the sRGB transfer function.
-fn colour_strips(image: &FieldImage, step: f64, out: &Path, name: &str) -> Result<PathBuf> {
+fn colour_strips(
+    image: &FieldImage,
+    step: f64,
+    out: &Path,
+    name: &str,
+    protected: &[&Path],
+) -> Result<PathBuf> {
     let k_len = image.angle_count();
     let orders: Vec<usize> = [1, 2, 4, 8]
         .into_iter()
@@ -245,8 +267,10 @@ fn colour_strips(image: &FieldImage, step: f64, out: &Path, name: &str) -> Resul
     let gap = 6u32;
     let path = out.join(format!("{name}_colours.png"));
     let height = orders.len() as u32 * (strip_h + gap);
+    let mut pixels = vec![0u8; 3 * k_len * height as usize];
     {
-        let root = BitMapBackend::new(&path, (k_len as u32, height)).into_drawing_area();
+        let root =
+            BitMapBackend::with_buffer(&mut pixels, (k_len as u32, height)).into_drawing_area();
         root.fill(&WHITE).map_err(|e| anyhow!("{e:?}"))?;
         let k2 = ((30.0 / step).ceil() as usize).min(k_len - 1);
         for (s, &n) in orders.iter().enumerate() {
@@ -278,12 +302,13 @@ fn colour_strips(image: &FieldImage, step: f64, out: &Path, name: &str) -> Resul
             }
         }
         root.present()
-            .map_err(|e| anyhow!("writing {}: {e:?}", path.display()))?;
+            .map_err(|e| anyhow!("drawing {}: {e:?}", path.display()))?;
     }
+    format::write_output(&path, &png_rgb8(k_len as u32, height, &pixels)?, protected)?;
     Ok(path)
 }
 
-fn plot_tradeoff(path: &Path, out: &Path) -> Result<Vec<PathBuf>> {
+fn plot_tradeoff(path: &Path, out: &Path, protected: &[&Path]) -> Result<Vec<PathBuf>> {
     let text =
         std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
     let v: serde_json::Value =
@@ -339,21 +364,50 @@ fn plot_tradeoff(path: &Path, out: &Path) -> Result<Vec<PathBuf>> {
         },
         out,
         "tradeoff_pareto",
+        protected,
     )
 }
 
-/// Writes `plot` as `<name>.png` and `<name>.svg` under `out`.
-pub(crate) fn save(plot: &LinePlot, out: &Path, name: &str) -> Result<Vec<PathBuf>> {
+/// Writes `plot` as `<name>.png` and `<name>.svg` under `out`, each drawn in memory and
+/// written through `format::write_output` (never over the files in `protected`).
+pub(crate) fn save(
+    plot: &LinePlot,
+    out: &Path,
+    name: &str,
+    protected: &[&Path],
+) -> Result<Vec<PathBuf>> {
     let png = out.join(format!("{name}.png"));
     let svg = out.join(format!("{name}.svg"));
+    let (width, height) = (960, 540);
+    let mut rgb = vec![0u8; 3 * width as usize * height as usize];
     draw(
-        BitMapBackend::new(&png, (960, 540)).into_drawing_area(),
+        BitMapBackend::with_buffer(&mut rgb, (width, height)).into_drawing_area(),
         plot,
     )
-    .with_context(|| format!("writing {}", png.display()))?;
-    draw(SVGBackend::new(&svg, (960, 540)).into_drawing_area(), plot)
-        .with_context(|| format!("writing {}", svg.display()))?;
+    .with_context(|| format!("drawing {}", png.display()))?;
+    format::write_output(&png, &png_rgb8(width, height, &rgb)?, protected)?;
+    let mut text = String::new();
+    draw(
+        SVGBackend::with_string(&mut text, (width, height)).into_drawing_area(),
+        plot,
+    )
+    .with_context(|| format!("drawing {}", svg.display()))?;
+    format::write_output(&svg, text.as_bytes(), protected)?;
     Ok(vec![png, svg])
+}
+
+/// 8-bit RGB pixels (rows top to bottom) as the bytes of a PNG.
+pub(crate) fn png_rgb8(width: u32, height: u32, rgb: &[u8]) -> Result<Vec<u8>> {
+    let mut bytes = Vec::new();
+    {
+        let mut encoder = png::Encoder::new(&mut bytes, width, height);
+        encoder.set_color(png::ColorType::Rgb);
+        encoder.set_depth(png::BitDepth::Eight);
+        encoder.set_source_srgb(png::SrgbRenderingIntent::Perceptual);
+        let mut writer = encoder.write_header()?;
+        writer.write_image_data(rgb)?;
+    }
+    Ok(bytes)
 }
 
 fn y_bounds(plot: &LinePlot) -> (f64, f64) {

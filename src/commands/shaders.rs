@@ -14,16 +14,16 @@ pub struct ShadersArgs {
     out: PathBuf,
 }
 
-/// Runs `photometeor shaders`: translates everything first, then writes each file atomically
-/// (a temporary file renamed), so a failure leaves no half-written output.
+/// Runs `photometeor shaders`: translates everything first, then writes each file through
+/// `format::write_output` (a temporary file renamed; never over a device, FIFO or directory),
+/// so a failure leaves no half-written output.
 pub fn run(a: ShadersArgs) -> Result<()> {
+    format::check_output_dir(&a.out, &[])?;
     let outputs = runtime::shaders::translate()?;
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
     for o in &outputs {
         let path = a.out.join(o.name);
-        let tmp = a.out.join(format!(".{}.tmp", o.name));
-        std::fs::write(&tmp, &o.bytes).with_context(|| format!("writing {}", tmp.display()))?;
-        std::fs::rename(&tmp, &path).with_context(|| format!("writing {}", path.display()))?;
+        format::write_output(&path, &o.bytes, &[])?;
         println!("{} ({} bytes)", path.display(), o.bytes.len());
     }
     Ok(())

@@ -33,7 +33,6 @@
 
 use std::sync::OnceLock;
 
-use serde_json::{Value, json};
 use thiserror::Error;
 
 const CMF_CSV: &str = include_str!("../data/color/cie1931_2deg_cmf.csv");
@@ -139,40 +138,6 @@ impl ChannelWeights {
                 max_nm,
             } => spectral_weights(count, min_nm, max_nm),
         }
-    }
-
-    /// The channel definitions written to the manifest.
-    pub fn channel_definitions(&self) -> Value {
-        let per_channel = |v: &[Vec<f64>; 3]| json!({ "R": v[0], "G": v[1], "B": v[2] });
-        let mode = match self.mode {
-            SpectralMode::Rgb3 => json!({ "kind": "rgb3" }),
-            SpectralMode::Spectral {
-                count,
-                min_nm,
-                max_nm,
-            } => json!({
-                "kind": "spectral",
-                "count": count,
-                "min_nm": min_nm,
-                "max_nm": max_nm,
-            }),
-        };
-        json!({
-            "names": ["R", "G", "B"],
-            "space": "linear sRGB / Rec.709 primaries, D65 white (IEC 61966-2-1)",
-            "unit": "1/sr; each channel's row integrates to 1 over the sphere",
-            "mode": mode,
-            "observer": "CIE 1931 2° colour-matching functions",
-            "illuminant": "ASTM G173-03 extraterrestrial solar spectrum",
-            "mixing": "channel phase function = Σ_j w_cj σ_sca,j P_j / Σ_j w_cj σ_sca,j; Ams_n mixed the same way per wavelength",
-            "wavelengths_nm": self.wavelengths_nm,
-            "weights": per_channel(&self.weights),
-            "negative_lobe_fraction": {
-                "R": self.negative_lobe_fraction[0],
-                "G": self.negative_lobe_fraction[1],
-                "B": self.negative_lobe_fraction[2],
-            },
-        })
     }
 }
 

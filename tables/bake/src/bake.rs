@@ -20,7 +20,7 @@ use ndarray::{Array2, Array3, s};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use tables::ams::{AmsMixture, AmsSeries};
-use tables::spectral::ChannelWeights;
+use tables::spectral::{ChannelWeights, SpectralMode};
 
 use crate::cache::{self, Lookup, content_hash};
 use crate::error::BakeError;
@@ -297,7 +297,7 @@ pub fn run(plan: &BakePlan, progress: &dyn Progress) -> Result<BakeReport, BakeE
     report.cleaned = lock.clean_stale()?;
     // The previous bake, and which of its fields this one keeps.
     let previous = format::read_manifest(&plan.out_dir).ok();
-    let channels = weights.channel_definitions();
+    let channels = channel_definitions(&weights);
     let mut kept: Vec<FieldEntry> = Vec::new();
     if !plan.prune
         && let Some(previous) = &previous
@@ -486,7 +486,7 @@ fn field_entry(
         file,
         bytes: bytes.len() as u64,
         crc32: format::crc32_hex(bytes),
-        kind: format!("{:?}", field.kind).to_lowercase(),
+        kind: field.kind,
         n_max: plan.scene.n_max,
         forward_fraction: PerChannel::from_array(forward_fraction),
         forward_peak_fraction: PerChannel::from_array(s.forward_peak_fraction.clone()),
@@ -494,21 +494,38 @@ fn field_entry(
         sigma_ext_m2: PerChannel::from_array(s.sigma_ext_m2),
         albedo: PerChannel::from_array(s.albedo),
         n_isotropic: PerChannel::from_array([n_iso(0), n_iso(1), n_iso(2)]),
-        microphysics: serde_json::to_value(field).unwrap_or_default(),
-        quality: {
-            let mut q = serde_json::json!({ "preset": plan.quality, "knobs": plan.knobs, "legendre_l_max": s.l_max });
-            let rgb = |n: [f64; 3]| serde_json::json!({ "R": n[0], "G": n[1], "B": n[2] });
-            if let Some(c) = &s.crystal_sampling {
-                q["crystal_rays"] = c.rays.into();
-                q["crystal_noise"] = rgb(c.noise);
+        microphysics: format::Microphysics {
+            crystal: field
+                .crystal
+                .map(|c| serde_json::to_value(c).expect("a crystal serializes")),
+            distribution: field
+                .distribution
+                .map(|d| serde_json::to_value(d).expect("a distribution serializes")),
+            kind: field.kind,
+            material: match field.material {
+                mie::refractive::Material::Water => format::Material::Water,
+                mie::refractive::Material::Ice => format::Material::Ice,
+            },
+            name: field.name.clone(),
+            refractive_index: field.refractive_index,
+            temperature_c: field.temperature_c,
+        },
+        quality: format::QualityRecord {
+            crystal_noise: s
+                .crystal_sampling
+                .as_ref()
+                .map(|c| PerChannel::from_array(c.noise)),
+            crystal_rays: s.crystal_sampling.as_ref().map(|c| c.rays),
+            knobs: serde_json::to_value(plan.knobs).expect("the knobs serialize"),
+            legendre_l_max: s.l_max,
+            preset: match plan.quality {
+                Quality::Draft => "draft",
+                Quality::Standard => "standard",
+                Quality::Reference => "reference",
             }
-            if let Some(n) = s.size_noise {
-                q["size_noise"] = rgb(n);
-            }
-            if let Some(n) = s.sizes {
-                q["sizes"] = n.into();
-            }
-            q
+            .into(),
+            size_noise: s.size_noise.map(PerChannel::from_array),
+            sizes: s.sizes,
         },
         content_hash: hash,
         single_scattering: None,
@@ -518,6 +535,34 @@ fn field_entry(
             1.0 - s.albedo[c] * s.g[c]
         }))),
         biri_kernel: None,
+    }
+}
+
+/// The manifest's `channels` of `weights`: the colour space, the observer and illuminant the
+/// weights come from (`tables::spectral`), the wavelengths and each channel's weights.
+pub fn channel_definitions(weights: &ChannelWeights) -> format::Channels {
+    format::Channels {
+        illuminant: "ASTM G173-03 extraterrestrial solar spectrum".into(),
+        mixing: "channel phase function = Σ_j w_cj σ_sca,j P_j / Σ_j w_cj σ_sca,j; Ams_n mixed the same way per wavelength".into(),
+        mode: match weights.mode {
+            SpectralMode::Rgb3 => format::SpectralSampling::Rgb3,
+            SpectralMode::Spectral {
+                count,
+                min_nm,
+                max_nm,
+            } => format::SpectralSampling::Spectral {
+                count,
+                min_nm,
+                max_nm,
+            },
+        },
+        names: ["R", "G", "B"].map(String::from).to_vec(),
+        negative_lobe_fraction: PerChannel::from_array(weights.negative_lobe_fraction),
+        observer: "CIE 1931 2° colour-matching functions".into(),
+        space: "linear sRGB / Rec.709 primaries, D65 white (IEC 61966-2-1)".into(),
+        unit: "1/sr; each channel's row integrates to 1 over the sphere".into(),
+        wavelengths_nm: weights.wavelengths_nm.clone(),
+        weights: PerChannel::from_array(weights.weights.clone()),
     }
 }
 

@@ -186,22 +186,9 @@ struct FieldFile {
     roughness: Option<f64>,
 }
 
-/// What a particle field is made of.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum FieldKind {
-    /// Cloud droplets: spheres, water by default.
-    Cloud,
-    /// Raindrops: spheres, water by default.
-    Rain,
-    /// Ice crystals: hexagonal prisms, columns by default.
-    Ice,
-    /// Snow: rough ice crystals, aggregates by default.
-    Snow,
-    /// Haze: aerosol spheres (lognormal, 0.05–1 µm median radius), water by default or a
-    /// given refractive index; its phase function makes light shafts visible.
-    Haze,
-}
+/// What a particle field is made of: the format's own vocabulary, which manifests and the
+/// runtime share.
+pub use format::FieldKind;
 
 /// Accuracy presets; their node counts are set from the measured speed/accuracy trade.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]

@@ -32,7 +32,7 @@
 
 use std::path::Path;
 
-use format::BakeDir;
+use format::{BakeDir, FieldKind};
 use mie::theory::{minimum_deviation_deg, rainbow_theory, size_parameter};
 use mie::{Material, SizeDistribution};
 use serde::Serialize;
@@ -144,45 +144,38 @@ pub fn validate(dir: &Path) -> Result<Report> {
     let bake = BakeDir::open(dir)?;
     let manifest = &bake.manifest;
     let step = manifest.theta_step_deg;
-    let lambdas: Vec<f64> = serde_json::from_value(manifest.channels["wavelengths_nm"].clone())
-        .map_err(|e| manifest_error(format!("channels.wavelengths_nm: {e}")))?;
-    let spectra: Vec<ChannelBand> = CHANNELS
-        .iter()
-        .map(|c| {
-            let w: Vec<f64> = serde_json::from_value(manifest.channels["weights"][*c].clone())
-                .map_err(|e| manifest_error(format!("channels.weights.{c}: {e}")))?;
-            if w.len() != lambdas.len() {
-                return Err(manifest_error(format!(
-                    "channels.weights.{c} has {} entries for {} wavelengths",
-                    w.len(),
-                    lambdas.len()
-                )));
-            }
+    let lambdas = &manifest.channels.wavelengths_nm;
+    let spectra: Vec<ChannelBand> = manifest
+        .channels
+        .weights
+        .as_array()
+        .into_iter()
+        .map(|w| {
+            // The manifest's checks hold: one weight per wavelength, summing to 1.
             let total: f64 = w.iter().sum();
             let (lambda_nm, weight) = lambdas
                 .iter()
-                .zip(&w)
+                .zip(w)
                 .filter(|(_, w)| **w > 0.0)
                 .map(|(l, w)| (*l, w / total))
                 .unzip();
-            Ok(ChannelBand { lambda_nm, weight })
+            ChannelBand { lambda_nm, weight }
         })
-        .collect::<Result<_>>()?;
+        .collect();
 
     let mut checks = Vec::new();
     for entry in &manifest.fields {
-        let image = bake.read_field(entry)?;
+        // Every file of the field, each checked against its contract, the manifest and the
+        // others: a corrupt side table fails validation too.
+        let image = bake.read_field_files(entry)?.image;
         let ams1: Vec<Vec<f64>> = (0..3).map(|c| image.row(c, 0).to_vec()).collect();
         let rows: Vec<&[f64]> = ams1.iter().map(Vec::as_slice).collect();
         let micro = &entry.microphysics;
-        let material: Material = serde_json::from_value(micro["material"].clone()).unwrap_or(
-            if matches!(entry.kind.as_str(), "ice" | "snow") {
-                Material::Ice
-            } else {
-                Material::Water
-            },
-        );
-        let temperature_c = micro["temperature_c"].as_f64().unwrap_or(10.0);
+        let material = match micro.material {
+            format::Material::Water => Material::Water,
+            format::Material::Ice => Material::Ice,
+        };
+        let temperature_c = micro.temperature_c;
         let n_of = |lambda: f64| -> f64 {
             material
                 .refractive_index(lambda, temperature_c)
@@ -195,16 +188,22 @@ pub fn validate(dir: &Path) -> Result<Report> {
             rows: &rows,
             spectra: &spectra,
         };
-        match entry.kind.as_str() {
-            "cloud" | "rain" => {
+        match entry.kind {
+            FieldKind::Cloud | FieldKind::Rain => {
                 let distribution: SizeDistribution =
-                    serde_json::from_value(micro["distribution"].clone()).map_err(|e| {
-                        manifest_error(format!("field {:?}: distribution: {e}", entry.name))
-                    })?;
+                    serde_json::from_value(micro.distribution.clone().unwrap_or_default())
+                        .map_err(|e| {
+                            manifest_error(format!("field {:?}: distribution: {e}", entry.name))
+                        })?;
                 spheres(&ctx, &n_of, &distribution, &mut checks)?;
             }
-            "ice" => {
-                let roughness = micro["crystal"]["roughness"].as_f64().unwrap_or(0.0);
+            FieldKind::Ice => {
+                let roughness = micro
+                    .crystal
+                    .as_ref()
+                    .and_then(|c| c.get("roughness"))
+                    .and_then(serde_json::Value::as_f64)
+                    .unwrap_or(0.0);
                 if roughness <= 0.2 {
                     halos(&ctx, &n_of, &mut checks);
                 } else {
@@ -215,8 +214,7 @@ pub fn validate(dir: &Path) -> Result<Report> {
                     ));
                 }
             }
-            "snow" | "haze" => featureless(&ctx, &mut checks),
-            other => checks.push(ctx.info("RGB", "kind", format!("unknown kind {other:?}"))),
+            FieldKind::Snow | FieldKind::Haze => featureless(&ctx, &mut checks),
         }
     }
     Ok(Report {
@@ -453,10 +451,17 @@ fn spheres(
                         "first bright ring of the distribution's Fraunhofer pattern ± 10 %".into(),
                     ));
                 }
-                other => checks.push(ctx.info(
+                Some(ring) => checks.push(ctx.info(
                     CHANNELS[c],
                     "first corona ring",
-                    format!("not judged: Fraunhofer ring at {other:?}° (no ring, or within 4 bins of 0°)"),
+                    format!(
+                        "not judged: the Fraunhofer ring at {ring:.3}° lies within 4 bins of 0°"
+                    ),
+                )),
+                None => checks.push(ctx.info(
+                    CHANNELS[c],
+                    "first corona ring",
+                    "not judged: the distribution's Fraunhofer pattern has no ring".into(),
                 )),
             }
         }

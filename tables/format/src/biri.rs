@@ -4,8 +4,8 @@
 //! from the light to the view ray and θ the angle along the ray (`tables::biri`).
 //!
 //! # The contract
-//! - One single-part, flat, single-resolution, scanline EXR; ZIP compression; three 32-bit float
-//!   channels `R`, `G`, `B`, sampling 1×1, `pLinear` = 0.
+//! - The layout every side table shares ([`crate::side`]: one scanline ZIP part, its header, the
+//!   order of reading); here three 32-bit float channels `R`, `G`, `B`.
 //! - Data window (0, 0)–(K − 1, J − 1): column k ↔ θ_k = k·Δθ − 90° (the field's angle grid,
 //!   shifted: θ + 90° is the scattering angle), row j ↔ τ_h,j, ascending from 0. Values: the
 //!   exact primitive C(τ_h, θ_k) = ∫_{−90°}^{θ_k} K dθ' (θ' in radians, p in 1/sr),
@@ -25,14 +25,14 @@
 //!   Lists are encoded as F_i in the field's EXR (`crate::exr`, "Encoding of F_i").
 //! - The manifest entry's `biri_kernel` names this file with its size and CRC-32.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
-use exr::meta::attribute::AttributeValue;
 use grid::ThetaGrid;
-use ndarray::Array3;
+use ndarray::{Array2, Array3, ArrayView2};
 
-use crate::exr::{Checked, ContractError, IoError, encode_layer, f64_list_attribute, utf8_text};
-use crate::poisson::{read_rgb_rows, rgb_channels};
+use crate::exr::IoError;
+use crate::poisson::stack_planes;
+use crate::side::{self, SideTable};
 
 /// Version of this layout in `photometeor/schema`; a reader rejects any other.
 pub const BIRI_SCHEMA_VERSION: i32 = 1;
@@ -44,10 +44,11 @@ pub fn biri_file_name(name: &str) -> String {
 
 /// Names of the header attributes.
 pub mod attr {
-    /// `photometeor/schema` (`int`: [`super::BIRI_SCHEMA_VERSION`]), `/field` (`string`),
-    /// `/theta_step_deg` (`double`: Δθ in degrees) and `/depths` (`string`: the τ_h values),
-    /// named as in the Poisson file.
-    pub use crate::poisson::attr::{DEPTHS, FIELD, SCHEMA, THETA_STEP_DEG};
+    /// `string`: the τ_h values, named as in the Poisson file.
+    pub use crate::poisson::attr::DEPTHS;
+    /// `photometeor/schema` (`int`: [`super::BIRI_SCHEMA_VERSION`]), `/field` (`string`) and
+    /// `/theta_step_deg` (`double`: Δθ in degrees), as in every side table.
+    pub use crate::side::attr::{FIELD, SCHEMA, THETA_STEP_DEG};
     /// `string`: polynomial coefficients per channel.
     pub const POLY: [&str; 3] = [
         "photometeor/poly_R",
@@ -135,57 +136,74 @@ impl BiriTable {
     }
 }
 
+impl SideTable for BiriTable {
+    const WHAT: &'static str = "Biri kernel table";
+    const SCHEMA_VERSION: i32 = BIRI_SCHEMA_VERSION;
+    const CHANNELS: &'static [&'static str] = &["R", "G", "B"];
+    const LISTS: &'static [&'static str] = &[
+        attr::DEPTHS,
+        attr::POLY[0],
+        attr::POLY[1],
+        attr::POLY[2],
+        attr::POLY_ERROR[0],
+        attr::POLY_ERROR[1],
+        attr::POLY_ERROR[2],
+    ];
+
+    fn file_name(field: &str) -> String {
+        biri_file_name(field)
+    }
+
+    fn field(&self) -> &str {
+        &self.field
+    }
+
+    fn theta_step_deg(&self) -> f64 {
+        self.theta_step_deg
+    }
+
+    fn lists(&self) -> Vec<&[f64]> {
+        let mut lists: Vec<&[f64]> = vec![&self.depths];
+        lists.extend(self.polynomial.iter().map(Vec::as_slice));
+        lists.extend(self.polynomial_error.iter().map(Vec::as_slice));
+        lists
+    }
+
+    fn planes(&self) -> Vec<ArrayView2<'_, f64>> {
+        self.primitive.outer_iter().collect()
+    }
+
+    fn from_parts(
+        field: String,
+        theta_step_deg: f64,
+        lists: Vec<Vec<f64>>,
+        planes: Vec<Array2<f64>>,
+    ) -> Self {
+        let [depths, p_r, p_g, p_b, e_r, e_g, e_b] =
+            <[Vec<f64>; 7]>::try_from(lists).expect("one list per name in LISTS");
+        Self {
+            field,
+            theta_step_deg,
+            depths,
+            primitive: stack_planes(&planes),
+            polynomial: [p_r, p_g, p_b],
+            polynomial_error: [e_r, e_g, e_b],
+        }
+    }
+
+    fn check(&self) -> Result<(), String> {
+        BiriTable::check(self)
+    }
+}
+
 /// The bytes of `t`'s EXR (deterministic: the header's attributes sorted by name).
 pub fn biri_exr_bytes(t: &BiriTable) -> Result<Vec<u8>, IoError> {
-    t.check().map_err(|what| IoError::InvalidImage {
-        field: t.field.clone(),
-        what: format!("Biri kernel table: {what}"),
-    })?;
-    let (_, j, k) = t.primitive.dim();
-    let mut attributes = vec![
-        (attr::SCHEMA, AttributeValue::I32(BIRI_SCHEMA_VERSION)),
-        (attr::FIELD, AttributeValue::Text(utf8_text(&t.field))),
-        (attr::THETA_STEP_DEG, AttributeValue::F64(t.theta_step_deg)),
-        (attr::DEPTHS, f64_list_attribute(&t.depths)),
-    ];
-    for c in 0..3 {
-        attributes.push((attr::POLY[c], f64_list_attribute(&t.polynomial[c])));
-        attributes.push((
-            attr::POLY_ERROR[c],
-            f64_list_attribute(&t.polynomial_error[c]),
-        ));
-    }
-    encode_layer((k, j), rgb_channels(&t.primitive), attributes).map_err(|source| IoError::Encode {
-        path: PathBuf::from(biri_file_name(&t.field)),
-        source,
-    })
+    side::encode(t)
 }
 
 /// Decodes and checks the bytes of a kernel EXR; `path` names it in errors.
 pub fn decode_biri_exr(bytes: &[u8], path: &Path) -> Result<BiriTable, IoError> {
-    let file = Checked::read(bytes, path)?;
-    let primitive = read_rgb_rows(&file)?;
-    file.schema(attr::SCHEMA, BIRI_SCHEMA_VERSION)?;
-    let list = |name| file.f64_list(name, "comma-separated decimals");
-    let t = BiriTable {
-        field: file.text(attr::FIELD)?,
-        theta_step_deg: file.double(attr::THETA_STEP_DEG)?,
-        depths: list(attr::DEPTHS)?,
-        primitive,
-        polynomial: [
-            list(attr::POLY[0])?,
-            list(attr::POLY[1])?,
-            list(attr::POLY[2])?,
-        ],
-        polynomial_error: [
-            list(attr::POLY_ERROR[0])?,
-            list(attr::POLY_ERROR[1])?,
-            list(attr::POLY_ERROR[2])?,
-        ],
-    };
-    t.check()
-        .map_err(|why| file.contract(ContractError::Size(why)))?;
-    Ok(t)
+    side::decode(bytes, path)
 }
 
 #[cfg(test)]

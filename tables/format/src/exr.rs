@@ -42,6 +42,17 @@
 //! reference library does (its header is a `std::map`). The records only move within the
 //! header, whose length does not change, so the chunk offset table stays valid.
 //!
+//! # Bounds
+//! Every size an EXR's header declares is checked against the file's own size and a stated
+//! bound before anything is allocated for it ([`check_declared_size`], in every reader of this
+//! crate and in [`decode_channels`]): the compression must be none or ZIP (deflate, whose
+//! expansion is at most [`MAX_DEFLATE_RATIO`]), the samples at most [`decoded_bound`] of the
+//! file's length, and every chunk the data window implies must have room in the file (16 bytes
+//! at least: its offset-table entry, line number and size). The contract's own sizes — K from
+//! Δθ, the rows from N or the header's lists — are then compared with the data window, still
+//! before the pixels are decoded. A flipped bit in a header is refused naming the declared size
+//! and the file's, instead of sizing an allocation.
+//!
 //! # Atomicity
 //! The image is encoded in memory and written by [`crate::write_file_atomically`]: a temporary file
 //! in the destination's directory, fsync, rename over the destination, fsync of the directory.
@@ -66,6 +77,23 @@ use crate::atomic::{read_regular_file, write_file_atomically};
 /// The largest EXR a reader accepts (bytes): 4 channels × 18001 angles × 2000 orders of f32 is
 /// 288 MB uncompressed; anything larger is not a bake.
 pub const MAX_EXR_BYTES: u64 = 512 << 20;
+
+/// The most bytes of samples any EXR read here may declare (2 GiB): a bake's largest table
+/// (4 channels × 18001 angles × 2000 orders of f32) is 288 MB, a render frame of 8192² pixels
+/// with its 7 channels 1.9 GB.
+pub const MAX_DECODED_BYTES: u64 = 2 << 30;
+
+/// Deflate's largest expansion: one compressed byte never stands for more than 1032 bytes
+/// (RFC 1951: a 258-byte match in as little as 2 bits).
+pub const MAX_DEFLATE_RATIO: u64 = 1032;
+
+/// The most bytes of samples an EXR of `file_len` bytes can decode to, as its readers enforce
+/// before allocating (see "Bounds"): [`MAX_DEFLATE_RATIO`] per byte of a ZIP file, at most
+/// [`MAX_DECODED_BYTES`]. The largest single allocation a reader makes is twice this (the
+/// samples as `f64`) or the file itself.
+pub fn decoded_bound(file_len: u64) -> u64 {
+    MAX_DECODED_BYTES.min(MAX_DEFLATE_RATIO.saturating_mul(file_len))
+}
 
 /// Version of the EXR layout written in `photometeor/schema`; a reader rejects any other.
 pub const EXR_SCHEMA_VERSION: i32 = 1;
@@ -338,6 +366,19 @@ pub enum IoError {
         /// The failed check.
         check: ContractError,
     },
+}
+
+impl IoError {
+    /// The file the error names, if it names one (not for an image refused before writing).
+    pub fn path(&self) -> Option<&Path> {
+        match self {
+            IoError::Io { path, .. }
+            | IoError::Encode { path, .. }
+            | IoError::Unreadable { path, .. }
+            | IoError::Contract { path, .. } => Some(path),
+            IoError::InvalidImage { .. } | IoError::NonFinite { .. } => None,
+        }
+    }
 }
 
 /// A failed check of the EXR contract, see the [module docs](self).
@@ -644,7 +685,33 @@ impl<'a> Checked<'a> {
         ) {
             return Err(checked.contract(ContractError::Layout("tiled".into())));
         }
+        check_declared_size(&checked.header, bytes.len() as u64)
+            .map_err(|why| checked.contract(ContractError::Size(why)))?;
         Ok(checked)
+    }
+
+    /// The data window must start at (0, 0) and be `width` × `height`, the contract's sizes:
+    /// checked before any pixel is decoded. `what` says where the sizes come from.
+    pub(crate) fn expect_size(
+        &self,
+        width: usize,
+        height: usize,
+        what: &str,
+    ) -> Result<(), IoError> {
+        let position = self.header.own_attributes.layer_position;
+        if position != Vec2(0, 0) {
+            return Err(self.contract(ContractError::Size(format!(
+                "data window starts at ({}, {}), expected (0, 0)",
+                position.0, position.1
+            ))));
+        }
+        let (w, h) = (self.header.layer_size.0, self.header.layer_size.1);
+        if (w, h) != (width, height) {
+            return Err(self.contract(ContractError::Size(format!(
+                "data window is {w} × {h}, expected {width} × {height} ({what})"
+            ))));
+        }
+        Ok(())
     }
 
     /// The header.
@@ -757,9 +824,56 @@ impl<'a> Checked<'a> {
 /// Named channels of 32-bit float samples, in a file's order.
 pub type Channels = Vec<(String, Vec<f32>)>;
 
+/// Checks the sizes `header` declares against a file of `file_len` bytes (see "Bounds"): the
+/// compression is none or ZIP, the samples fit [`decoded_bound`] of the file, and every chunk
+/// of the data window has room in it. The error names the declared sizes and the file's.
+pub fn check_declared_size(
+    header: &exr::meta::header::Header,
+    file_len: u64,
+) -> Result<(), String> {
+    let (w, h) = (header.layer_size.0 as u64, header.layer_size.1 as u64);
+    let ratio = match header.compression {
+        Compression::Uncompressed => 1,
+        Compression::ZIP1 | Compression::ZIP16 => MAX_DEFLATE_RATIO,
+        other => {
+            return Err(format!(
+                "compression {other}, expected ZIP (or none): the only ones whose expansion is bounded here"
+            ));
+        }
+    };
+    let channels = header.channels.list.len() as u64;
+    let declared = header.channels.bytes_per_pixel as u64 * w * h;
+    let bound = MAX_DECODED_BYTES.min(ratio.saturating_mul(file_len));
+    if declared > bound || channels * 4 * w * h > MAX_DECODED_BYTES {
+        return Err(format!(
+            "the header declares a {w} × {h} data window of {channels} channel(s), {declared} bytes of samples, \
+             but a {file_len}-byte file ({}) decodes to at most {bound} (at most {ratio} bytes per byte, \
+             {MAX_DECODED_BYTES} in all)",
+            header.compression
+        ));
+    }
+    let lines = header.compression.scan_lines_per_block() as u64;
+    let chunks = h.div_ceil(lines);
+    if chunks.saturating_mul(16) > file_len {
+        return Err(format!(
+            "the header declares {h} lines in {chunks} chunks of {lines}, but a {file_len}-byte file \
+             has room for at most {} (16 bytes per chunk at least)",
+            file_len / 16
+        ));
+    }
+    Ok(())
+}
+
 /// Every channel of the first layer of an EXR as 32-bit floats, in the file's order, with the
 /// layer's width and height (any flat EXR: `photometeor render`'s frames as well as tables).
+/// The header's sizes are checked first ([`check_declared_size`]), so no allocation is sized
+/// by a header the file cannot back.
 pub fn decode_channels(bytes: &[u8]) -> Result<(Channels, usize, usize), exr::error::Error> {
+    let meta = MetaData::read_from_buffered(Cursor::new(bytes), true)?;
+    for header in &meta.headers {
+        check_declared_size(header, bytes.len() as u64)
+            .map_err(|why| exr::error::Error::Invalid(why.into()))?;
+    }
     let image = exr::prelude::read()
         .no_deep_data()
         .largest_resolution_level()
@@ -823,8 +937,17 @@ pub fn decode_field_exr(bytes: &[u8], path: &Path) -> Result<FieldImage, IoError
         AttributeValue::I32(v) if *v >= 1 => *v as usize,
         other => return Err(file.bad(attr::N_MAX, format!("{other:?}"), "an int ≥ 1")),
     };
-    let mut forward_fraction = Array2::zeros((3, n));
-    for (c, name) in attr::FORWARD_FRACTION.iter().enumerate() {
+
+    // Size, before anything is allocated by N or the data window.
+    let (width, height) = (header.layer_size.0, header.layer_size.1);
+    if width != grid.len() || height != n {
+        return Err(file.contract(ContractError::Size(format!(
+            "data window is {width} × {height}, expected K × N = {} × {n} (K = 180°/{theta_step_deg}° + 1, N = n_max)",
+            grid.len()
+        ))));
+    }
+    let mut lists = Vec::with_capacity(3);
+    for name in attr::FORWARD_FRACTION {
         let values = file.f64_list(name, "comma-separated finite decimals F_1..F_N")?;
         if values.len() != n {
             return Err(file.bad(
@@ -833,18 +956,13 @@ pub fn decode_field_exr(bytes: &[u8], path: &Path) -> Result<FieldImage, IoError
                 &format!("N = n_max = {n} values"),
             ));
         }
+        lists.push(values);
+    }
+    let mut forward_fraction = Array2::zeros((3, n));
+    for (c, values) in lists.iter().enumerate() {
         forward_fraction
             .row_mut(c)
-            .assign(&ArrayView1::from(&values));
-    }
-
-    // Size.
-    let (width, height) = (header.layer_size.0, header.layer_size.1);
-    if width != grid.len() || height != n {
-        return Err(file.contract(ContractError::Size(format!(
-            "data window is {width} × {height}, expected K × N = {} × {n} (K = 180°/{theta_step_deg}° + 1, N = n_max)",
-            grid.len()
-        ))));
+            .assign(&ArrayView1::from(values));
     }
 
     // Pixels.

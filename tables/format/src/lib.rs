@@ -5,9 +5,11 @@
 //! Ams_1..Ams_N × columns θ_k = k·Δθ, channels R, G, B in 1/sr, F_1..F_N in the header), and
 //! beside it the field's single-scattering optics per wavelength ([`single`]) and its Poisson
 //! mixtures of all scattering orders ([`poisson`]) and Biri et al.'s point-light kernel
-//! ([`biri`]).
-//! Writers go through [`write_file_atomically`]; readers through [`read_regular_file`], so a
-//! FIFO or a device is never read and no file is read past a size bound. Every reader checks
+//! ([`biri`]): three side tables of one layout, written and read by one codec ([`side`]).
+//! Writers go through [`write_file_atomically`] (a command's user-named outputs through
+//! [`write_output`], which refuses devices, FIFOs, directories and the files it reads);
+//! readers through [`read_regular_file`], so a FIFO or a device is never read and no file is
+//! read past a size bound. Every reader checks
 //! what it reads against the contract, naming the file and the failed check.
 //!
 //! This crate depends on neither the solver nor the bake: an engine that loads tables links
@@ -21,7 +23,10 @@ pub mod commit;
 pub mod export;
 pub mod exr;
 pub mod manifest;
+pub mod output;
 pub mod poisson;
+pub mod sections;
+pub mod side;
 pub mod single;
 
 pub use atomic::{read_regular_file, write_file_atomically};
@@ -31,8 +36,10 @@ pub use commit::{
 };
 pub use exr::{ContractError, FieldImage, IoError, RGB_CHANNELS, read_field_exr, write_field_exr};
 pub use manifest::{
-    BakeDir, FieldEntry, MANIFEST_FILE, Manifest, ManifestCheck, ManifestError, PerChannel,
-    read_manifest, write_manifest,
+    BakeDir, FieldEntry, FieldFiles, MANIFEST_FILE, Manifest, ManifestCheck, ManifestError,
+    PerChannel, parse_manifest, read_manifest, write_manifest,
 };
+pub use output::{OutputError, check_output, check_output_dir, write_output};
 pub use poisson::{PoissonTable, decode_poisson_exr, poisson_exr_bytes, poisson_file_name};
+pub use sections::{Channels, FieldKind, Material, Microphysics, QualityRecord, SpectralSampling};
 pub use single::{SingleScatter, decode_single_exr, single_exr_bytes, single_file_name};

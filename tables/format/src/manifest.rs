@@ -49,6 +49,8 @@ use serde_json::Value;
 use thiserror::Error;
 
 use crate::atomic::{read_regular_file, write_file_atomically};
+use crate::sections::{Channels, FieldKind, Microphysics, QualityRecord};
+use crate::side::SideTable;
 
 /// The manifest's layout version; [`read_manifest`] rejects any other.
 pub const MANIFEST_SCHEMA_VERSION: u32 = 2;
@@ -98,9 +100,8 @@ pub struct Manifest {
     pub theta_step_deg: f64,
     /// K = 180°/Δθ + 1, the width of every EXR.
     pub angle_count: usize,
-    /// How R, G and B were formed (spectral mode, wavelengths, weights), as the caller
-    /// defines it.
-    pub channels: Value,
+    /// How R, G and B were formed (spectral mode, wavelengths, weights).
+    pub channels: Channels,
     /// One entry per field, in the scene's order.
     pub fields: Vec<FieldEntry>,
 }
@@ -117,8 +118,8 @@ pub struct FieldEntry {
     /// CRC-32 (IEEE) of the EXR's bytes, 8 lowercase hex digits; readers refuse a file that
     /// does not match (a file of another generation, a corrupted copy).
     pub crc32: String,
-    /// `cloud`, `rain`, `ice` or `snow`.
-    pub kind: String,
+    /// What the field is made of.
+    pub kind: FieldKind,
     /// N, the number of rows Ams_1..Ams_N.
     pub n_max: usize,
     /// F_1..F_N per channel (Riley et al. 2004 Eq. 23).
@@ -136,11 +137,11 @@ pub struct FieldEntry {
     /// max_k |4π Ams_n(θ_k) − 1| < ε, or `null` when no n ≤ N reaches it.
     pub n_isotropic: PerChannel<BTreeMap<String, Option<u32>>>,
     /// Every microphysics input of the field, as the scene gave it.
-    pub microphysics: Value,
+    pub microphysics: Microphysics,
     /// Every quality input (preset and the numbers it set) and the sampling noise of Ams_1 per
     /// channel: for crystal fields the rays traced (`crystal_rays`) and the noise they reached
     /// (`crystal_noise`), for drops the size sampling's (`size_noise`).
-    pub quality: Value,
+    pub quality: QualityRecord,
     /// Hash of every input that affects the field's result, lowercase hex.
     pub content_hash: String,
     /// The field's single-scattering optics per wavelength (`crate::single`), for spectral
@@ -189,6 +190,14 @@ impl From<String> for ManifestCheck {
 /// The largest manifest a reader accepts (bytes); a bake of 1000 fields stays far below.
 pub const MAX_MANIFEST_BYTES: u64 = 64 << 20;
 
+/// The largest N a manifest may list, as a scene allows it.
+pub const MAX_N: usize = 10_000;
+
+/// The extinction cross-sections per particle a manifest may hold (m²): above a nanometre
+/// sphere's (Rayleigh, ~10⁻²⁹ m² at 400 nm) and below a one-metre square (a hailstone of
+/// 10 cm radius has 2πr² ≈ 0.06 m²); anything outside is a corrupt value, not a particle.
+pub const SIGMA_EXT_RANGE_M2: (f64, f64) = (1e-30, 1.0);
+
 /// What went wrong writing or reading a manifest. Every variant names the file.
 #[derive(Debug, Error)]
 pub enum ManifestError {
@@ -202,13 +211,17 @@ pub enum ManifestError {
         /// The underlying error.
         source: io::Error,
     },
-    /// Not valid JSON, or not the manifest's structure (the message has line and column).
-    #[error("{}: {source}", path.display())]
+    /// Not valid JSON, or not the manifest's structure (the message has the key, line and
+    /// column).
+    #[error("{}: {}{error}", path.display(), key.as_ref().map_or(String::new(), |k| format!("{k}: ")))]
     Json {
         /// The file.
         path: PathBuf,
-        /// The underlying error.
-        source: serde_json::Error,
+        /// Where in the manifest the value is (`fields.1.microphysics.temperature_c`), when the
+        /// JSON is valid but a value has the wrong type.
+        key: Option<String>,
+        /// The parser's error, with line and column.
+        error: serde_json::Error,
     },
     /// A schema version this reader does not know.
     #[error("{}: schema {found}, expected {expected}", path.display())]
@@ -242,6 +255,7 @@ impl Manifest {
     }
 
     fn check_inner(&self) -> Result<(), String> {
+        self.channels.check()?;
         if self.schema != MANIFEST_SCHEMA_VERSION {
             return Err(format!(
                 "schema {}, expected {MANIFEST_SCHEMA_VERSION}",
@@ -327,8 +341,32 @@ impl Manifest {
                     f.crc32
                 )));
             }
-            if f.n_max == 0 {
-                return Err(at("n_max = 0, expected ≥ 1".into()));
+            if !(1..=MAX_N).contains(&f.n_max) {
+                return Err(at(format!("n_max = {}, expected 1 to {MAX_N}", f.n_max)));
+            }
+            if f.microphysics.name != f.name || f.microphysics.kind != f.kind {
+                return Err(at(format!(
+                    "microphysics names field {:?} of kind {}, the entry {:?} of kind {}",
+                    f.microphysics.name, f.microphysics.kind, f.name, f.kind
+                )));
+            }
+            f.microphysics.check().map_err(&at)?;
+            f.quality.check().map_err(&at)?;
+            for (key, size) in std::iter::once(("bytes", f.bytes)).chain(
+                [
+                    ("single_scattering.bytes", &f.single_scattering),
+                    ("poisson.bytes", &f.poisson),
+                    ("biri_kernel.bytes", &f.biri_kernel),
+                ]
+                .into_iter()
+                .filter_map(|(k, r)| r.as_ref().map(|r| (k, r.bytes))),
+            ) {
+                if size > crate::exr::MAX_EXR_BYTES {
+                    return Err(at(format!(
+                        "{key} = {size}, more than the {} bytes a bake's EXR may have",
+                        crate::exr::MAX_EXR_BYTES
+                    )));
+                }
             }
             for (key, per) in [
                 ("forward_fraction", &f.forward_fraction),
@@ -369,8 +407,12 @@ impl Manifest {
                 }
             }
             for (c, v) in ["R", "G", "B"].iter().zip(f.sigma_ext_m2.as_array()) {
-                if v.is_nan() || *v <= 0.0 {
-                    return Err(at(format!("sigma_ext_m2.{c} = {v} must be > 0 (m²)")));
+                if !(SIGMA_EXT_RANGE_M2.0..=SIGMA_EXT_RANGE_M2.1).contains(v) {
+                    return Err(at(format!(
+                        "sigma_ext_m2.{c} = {v:e} is outside [{:e}, {}] m², the extinction \
+                         cross-sections one particle can have",
+                        SIGMA_EXT_RANGE_M2.0, SIGMA_EXT_RANGE_M2.1
+                    )));
                 }
             }
             for (c, v) in ["R", "G", "B"].iter().zip(f.forward_fraction.as_array()) {
@@ -391,15 +433,49 @@ impl Manifest {
                     )));
                 }
             }
-            for (c, v) in ["R", "G", "B"]
+            for ((c, v), ff) in ["R", "G", "B"]
                 .iter()
                 .zip(f.forward_peak_fraction.as_array())
+                .zip(f.forward_fraction.as_array())
             {
+                // The exact forward δ is part of the forward hemisphere's energy, and its
+                // share of row n, Σ_j a_j f_j^n, cannot rise with n.
                 if let Some(i) = v.iter().position(|x| !(0.0..=1.0).contains(x)) {
                     return Err(at(format!(
                         "forward_peak_fraction.{c}[{i}] = {} is outside [0, 1]",
                         v[i]
                     )));
+                }
+                if let Some(i) = (0..v.len()).find(|&i| v[i] > ff[i] + 1e-12) {
+                    return Err(at(format!(
+                        "forward_peak_fraction.{c}[{i}] = {} exceeds F_{} = {}: the forward peak is part of the forward fraction",
+                        v[i],
+                        i + 1,
+                        ff[i]
+                    )));
+                }
+                if let Some(i) = (1..v.len()).find(|&i| v[i] > v[i - 1] + 1e-12) {
+                    return Err(at(format!(
+                        "forward_peak_fraction.{c}[{i}] = {} exceeds [{}] = {}: the forward peak's share cannot rise with n",
+                        v[i],
+                        i - 1,
+                        v[i - 1]
+                    )));
+                }
+            }
+            if let Some(t) = &f.transport_factor {
+                for (c, ((t, a), g)) in ["R", "G", "B"].iter().zip(
+                    t.as_array()
+                        .into_iter()
+                        .zip(f.albedo.as_array())
+                        .zip(f.g.as_array()),
+                ) {
+                    if (t - (1.0 - a * g)).abs() > 1e-12 {
+                        return Err(at(format!(
+                            "transport_factor.{c} = {t}, but 1 − α g = {} from the entry's albedo and g",
+                            1.0 - a * g
+                        )));
+                    }
                 }
             }
             for (c, map) in ["R", "G", "B"].iter().zip(f.n_isotropic.as_array()) {
@@ -459,9 +535,26 @@ pub fn read_manifest(dir: impl AsRef<Path>) -> Result<Manifest, ManifestError> {
             op,
             source,
         })?;
-    let value: Value = serde_json::from_slice(&bytes).map_err(|source| ManifestError::Json {
+    parse_manifest(&bytes, &path)
+}
+
+/// Parses and checks the bytes of a `manifest.json` as [`read_manifest`] does; `path` names it
+/// in errors.
+pub fn parse_manifest(bytes: &[u8], path: &Path) -> Result<Manifest, ManifestError> {
+    let path = path.to_path_buf();
+    if bytes.len() as u64 > MAX_MANIFEST_BYTES {
+        return Err(ManifestError::Invalid {
+            path,
+            what: format!(
+                "{} bytes, more than the {MAX_MANIFEST_BYTES} a manifest may have",
+                bytes.len()
+            ),
+        });
+    }
+    let value: Value = serde_json::from_slice(bytes).map_err(|error| ManifestError::Json {
         path: path.clone(),
-        source,
+        key: None,
+        error,
     })?;
     match value.get("schema") {
         Some(Value::Number(n)) if n.as_u64() == Some(u64::from(MANIFEST_SCHEMA_VERSION)) => {}
@@ -475,10 +568,12 @@ pub fn read_manifest(dir: impl AsRef<Path>) -> Result<Manifest, ManifestError> {
     }
     // Deserialize from the bytes (not the Value) so errors keep their line and column.
     let manifest: Manifest =
-        serde_json::from_slice(&bytes).map_err(|source| ManifestError::Json {
-            path: path.clone(),
-            source,
-        })?;
+        serde_path_to_error::deserialize(&mut serde_json::Deserializer::from_slice(bytes))
+            .map_err(|e| ManifestError::Json {
+                path: path.clone(),
+                key: Some(e.path().to_string()),
+                error: e.into_inner(),
+            })?;
     manifest
         .check()
         .map_err(|e| ManifestError::Invalid { path, what: e.what })?;
@@ -565,57 +660,63 @@ impl BakeDir {
         Ok(image)
     }
 
+    /// Reads every file `entry` names — its EXR ([`Self::read_field`]) and its side tables
+    /// ([`Self::read_side`]) — each checked against its contract and the manifest, then against
+    /// each other ([`check_single_against_entry`]): what `inspect`, `validate` and the runtime
+    /// read, so a corrupt side table fails them naming the file.
+    pub fn read_field_files(&self, entry: &FieldEntry) -> Result<FieldFiles, crate::IoError> {
+        let image = self.read_field(entry)?;
+        let single = self.read_single(entry)?;
+        if let (Some(single), Some(file)) = (&single, &entry.single_scattering) {
+            check_single_against_entry(single, entry, &self.manifest.channels).map_err(|what| {
+                crate::IoError::Contract {
+                    path: self.dir.join(&file.file),
+                    check: crate::ContractError::Manifest(what),
+                }
+            })?;
+        }
+        Ok(FieldFiles {
+            image,
+            single,
+            poisson: self.read_poisson(entry)?,
+            biri: self.read_biri(entry)?,
+        })
+    }
+
     /// Reads the single-scattering EXR of `entry` (`crate::single`), if the bake has one, and
-    /// checks it: the contract, then the field name, Δθ, K, and last its size and CRC-32.
+    /// checks it as [`Self::read_side`] does.
     pub fn read_single(
         &self,
         entry: &FieldEntry,
     ) -> Result<Option<crate::SingleScatter>, crate::IoError> {
-        self.read_side_file(
-            &entry.single_scattering,
-            entry,
-            crate::single::decode_single_exr,
-            |t| (t.field.as_str(), t.theta_step_deg, t.bins.ncols()),
-        )
+        self.read_side(entry.single_scattering.as_ref(), entry)
     }
 
     /// Reads the Poisson-mixture EXR of `entry` (`crate::poisson`), if the bake has one, and
-    /// checks it as [`Self::read_single`] does.
+    /// checks it as [`Self::read_side`] does.
     pub fn read_poisson(
         &self,
         entry: &FieldEntry,
     ) -> Result<Option<crate::PoissonTable>, crate::IoError> {
-        self.read_side_file(
-            &entry.poisson,
-            entry,
-            crate::poisson::decode_poisson_exr,
-            |t| (t.field.as_str(), t.theta_step_deg, t.rows.dim().2),
-        )
+        self.read_side(entry.poisson.as_ref(), entry)
     }
 
     /// Reads the point-light kernel EXR of `entry` (`crate::biri`), if the bake has one, and
-    /// checks it as [`Self::read_single`] does.
+    /// checks it as [`Self::read_side`] does.
     pub fn read_biri(
         &self,
         entry: &FieldEntry,
     ) -> Result<Option<crate::BiriTable>, crate::IoError> {
-        self.read_side_file(
-            &entry.biri_kernel,
-            entry,
-            crate::biri::decode_biri_exr,
-            |t| (t.field.as_str(), t.theta_step_deg, t.primitive.dim().2),
-        )
+        self.read_side(entry.biri_kernel.as_ref(), entry)
     }
 
-    /// A further file of `entry` (`file`, if listed): decoded by `decode` (the contract), then
-    /// its field name, Δθ and angle count (`identity`) against the manifest, and last its size
-    /// and CRC-32.
-    fn read_side_file<T>(
+    /// A side table of `entry` (`file`, if listed): read within [`crate::exr::MAX_EXR_BYTES`],
+    /// decoded with every check of its contract ([`crate::side::decode`]), then its field name,
+    /// Δθ and angle count against the manifest, and last its size and CRC-32.
+    pub fn read_side<T: SideTable>(
         &self,
-        file: &Option<FileRef>,
+        file: Option<&FileRef>,
         entry: &FieldEntry,
-        decode: fn(&[u8], &Path) -> Result<T, crate::IoError>,
-        identity: impl Fn(&T) -> (&str, f64, usize),
     ) -> Result<Option<T>, crate::IoError> {
         use crate::{ContractError, IoError};
         let Some(file) = file else {
@@ -623,18 +724,19 @@ impl BakeDir {
         };
         let path = self.dir.join(&file.file);
         let bytes = crate::exr::read_exr_bytes(&path)?;
-        let table = decode(&bytes, &path)?;
+        let table: T = crate::side::decode(&bytes, &path)?;
         let mismatch = |what: String| IoError::Contract {
             path: path.clone(),
             check: ContractError::Manifest(what),
         };
-        let (field, step, angles) = identity(&table);
-        if field != entry.name {
+        if table.field() != entry.name {
             return Err(mismatch(format!(
-                "field attribute {field:?}, but manifest.json lists this file for field {:?}",
+                "field attribute {:?}, but manifest.json lists this file for field {:?}",
+                table.field(),
                 entry.name
             )));
         }
+        let (step, angles) = (table.theta_step_deg(), table.planes()[0].ncols());
         if step != self.manifest.theta_step_deg || angles != self.manifest.angle_count {
             return Err(mismatch(format!(
                 "Δθ = {step}° with {angles} angles, manifest.json says {}° with {}",
@@ -644,6 +746,82 @@ impl BakeDir {
         same_generation(&bytes, file.bytes, &file.crc32).map_err(mismatch)?;
         Ok(Some(table))
     }
+}
+
+/// Every file of one field, read and checked ([`BakeDir::read_field_files`]).
+#[derive(Debug, Clone)]
+pub struct FieldFiles {
+    /// The field's tables (`<name>.exr`).
+    pub image: crate::FieldImage,
+    /// Its single-scattering optics per wavelength, if the bake has them.
+    pub single: Option<crate::SingleScatter>,
+    /// Its Poisson mixtures, if the bake has them.
+    pub poisson: Option<crate::PoissonTable>,
+    /// Its point-light kernel, if the bake has it.
+    pub biri: Option<crate::BiriTable>,
+}
+
+/// A field's single-scattering table against its manifest entry and the bake's channels: the
+/// same wavelengths; per channel c the entry's σ_ext = Σ_j w_cj σ_ext,j and albedo =
+/// Σ_j w_cj σ_sca,j / σ_ext (relative 10⁻¹²); and its forward-peak fractions, the share of
+/// row n held by the exact forward δ, Σ_j a_cj f_j^n with a_cj = w_cj σ_sca,j / Σ_j w_cj
+/// σ_sca,j and f_j each wavelength's energy of bin 0 above bin 1 (the bake's split,
+/// `tables::ams`), within 10⁻⁶ + 10⁻⁵ n of the value (the table's bins are 32-bit floats).
+/// A manifest whose peak fractions are zero where the table holds a peak is refused here.
+pub fn check_single_against_entry(
+    single: &crate::SingleScatter,
+    entry: &FieldEntry,
+    channels: &Channels,
+) -> Result<(), String> {
+    if single.wavelengths_nm != channels.wavelengths_nm {
+        return Err(format!(
+            "wavelengths {:?} nm, manifest.json's channels have {:?}",
+            single.wavelengths_nm, channels.wavelengths_nm
+        ));
+    }
+    let grid = grid::ThetaGrid::new(single.theta_step_deg).map_err(|e| e.to_string())?;
+    let omega = grid.bin_solid_angles();
+    let split: Vec<f64> = single
+        .bins
+        .outer_iter()
+        .map(|bins| {
+            let energy: f64 = bins.iter().zip(&omega).map(|(v, o)| v * o).sum();
+            let (v0, v1) = (bins[0] / energy, bins[1] / energy);
+            if v0 > v1 { (v0 - v1) * omega[0] } else { 0.0 }
+        })
+        .collect();
+    let sca_j: Vec<f64> = (0..single.wavelengths_nm.len())
+        .map(|j| single.sigma_ext_m2[j] * single.albedo[j])
+        .collect();
+    let close = |a: f64, b: f64| (a - b).abs() <= 1e-12 * a.abs().max(b.abs());
+    for (c, ch) in ["R", "G", "B"].iter().enumerate() {
+        let w = channels.weights.as_array()[c];
+        let ext: f64 = w.iter().zip(&single.sigma_ext_m2).map(|(w, s)| w * s).sum();
+        let sca: f64 = w.iter().zip(&sca_j).map(|(w, s)| w * s).sum();
+        let (want_ext, want_albedo) =
+            (entry.sigma_ext_m2.as_array()[c], entry.albedo.as_array()[c]);
+        if !close(ext, *want_ext) || !close(sca / ext, *want_albedo) {
+            return Err(format!(
+                "channel {ch}: the table's wavelengths give σ_ext = {ext:e} m² and albedo {}, \
+                 manifest.json says {want_ext:e} m² and {want_albedo}",
+                sca / ext
+            ));
+        }
+        let peaks = entry.forward_peak_fraction.as_array()[c];
+        for (i, &got) in peaks.iter().enumerate() {
+            let n = i as i32 + 1;
+            let want: f64 = (0..split.len())
+                .map(|j| w[j] * sca_j[j] / sca * split[j].powi(n))
+                .sum();
+            if (got - want).abs() > 1e-6 + 1e-5 * f64::from(n) * want {
+                return Err(format!(
+                    "forward_peak_fraction.{ch}[{i}] = {got} in manifest.json, but the table's \
+                     forward peaks give {want}"
+                ));
+            }
+        }
+    }
+    Ok(())
 }
 
 /// Whether `bytes` are the file the manifest lists with `size` bytes and CRC-32 `crc32`; the

@@ -5,8 +5,8 @@
 //! edges.
 //!
 //! # The contract
-//! - One single-part, flat, single-resolution, scanline EXR; ZIP compression; three 32-bit float
-//!   channels `R`, `G`, `B`, sampling 1×1, `pLinear` = 0.
+//! - The layout every side table shares ([`crate::side`]: one scanline ZIP part, its header, the
+//!   order of reading); here three 32-bit float channels `R`, `G`, `B`.
 //! - Data window (0, 0)–(K − 1, J − 1): column k ↔ θ_k = k·Δθ as in the field's tables (bin
 //!   averages, `grid::ThetaGrid`), row j ↔ optical depth D_j, ascending. Values in 1/sr; every
 //!   row's energy Σ_k M_k Ω_k is 1. D is each channel's own optical depth (β_ext of that
@@ -28,13 +28,13 @@
 //! Between the rows a reader interpolates linearly in ln D; below D_1 the row tends to Ams_1
 //! (M(0) = Ams_1), and a reader must not extrapolate beyond D_J.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
-use exr::meta::attribute::{AttributeValue, Text};
 use grid::ThetaGrid;
-use ndarray::Array3;
+use ndarray::{Array2, Array3, ArrayView2, Axis};
 
-use crate::exr::{Checked, ContractError, IoError, encode_layer, f64_list_attribute, utf8_text};
+use crate::exr::IoError;
+use crate::side::{self, SideTable};
 
 /// Version of this layout in `photometeor/schema`; a reader rejects any other.
 pub const POISSON_SCHEMA_VERSION: i32 = 1;
@@ -46,12 +46,9 @@ pub fn poisson_file_name(name: &str) -> String {
 
 /// Names of the header attributes.
 pub mod attr {
-    /// `int`: [`super::POISSON_SCHEMA_VERSION`].
-    pub const SCHEMA: &str = "photometeor/schema";
-    /// `string`: the field's name.
-    pub const FIELD: &str = "photometeor/field";
-    /// `double`: Δθ in degrees.
-    pub const THETA_STEP_DEG: &str = "photometeor/theta_step_deg";
+    /// `photometeor/schema` (`int`: [`super::POISSON_SCHEMA_VERSION`]), `/field` (`string`) and
+    /// `/theta_step_deg` (`double`: Δθ in degrees), as in every side table.
+    pub use crate::side::attr::{FIELD, SCHEMA, THETA_STEP_DEG};
     /// `string`: the optical depths D_j.
     pub const DEPTHS: &str = "photometeor/depths";
 }
@@ -120,83 +117,66 @@ impl PoissonTable {
     }
 }
 
+impl SideTable for PoissonTable {
+    const WHAT: &'static str = "Poisson table";
+    const SCHEMA_VERSION: i32 = POISSON_SCHEMA_VERSION;
+    const CHANNELS: &'static [&'static str] = &["R", "G", "B"];
+    const LISTS: &'static [&'static str] = &[attr::DEPTHS];
+
+    fn file_name(field: &str) -> String {
+        poisson_file_name(field)
+    }
+
+    fn field(&self) -> &str {
+        &self.field
+    }
+
+    fn theta_step_deg(&self) -> f64 {
+        self.theta_step_deg
+    }
+
+    fn lists(&self) -> Vec<&[f64]> {
+        vec![&self.depths]
+    }
+
+    fn planes(&self) -> Vec<ArrayView2<'_, f64>> {
+        self.rows.outer_iter().collect()
+    }
+
+    fn from_parts(
+        field: String,
+        theta_step_deg: f64,
+        lists: Vec<Vec<f64>>,
+        planes: Vec<Array2<f64>>,
+    ) -> Self {
+        let [depths] = <[Vec<f64>; 1]>::try_from(lists).expect("one list per name in LISTS");
+        Self {
+            field,
+            theta_step_deg,
+            depths,
+            rows: stack_planes(&planes),
+        }
+    }
+
+    fn check(&self) -> Result<(), String> {
+        PoissonTable::check(self)
+    }
+}
+
+/// Planes of one shape as (plane, row, column).
+pub(crate) fn stack_planes(planes: &[Array2<f64>]) -> Array3<f64> {
+    let views: Vec<ArrayView2<f64>> = planes.iter().map(|p| p.view()).collect();
+    ndarray::stack(Axis(0), &views).expect("the planes of one file have one shape")
+}
+
 /// The bytes of `t`'s EXR (deterministic: the header's attributes sorted by name).
 pub fn poisson_exr_bytes(t: &PoissonTable) -> Result<Vec<u8>, IoError> {
-    t.check().map_err(|what| IoError::InvalidImage {
-        field: t.field.clone(),
-        what: format!("Poisson table: {what}"),
-    })?;
-    let (_, j, k) = t.rows.dim();
-    let channels = rgb_channels(&t.rows);
-    let attributes = vec![
-        (attr::SCHEMA, AttributeValue::I32(POISSON_SCHEMA_VERSION)),
-        (attr::FIELD, AttributeValue::Text(utf8_text(&t.field))),
-        (attr::THETA_STEP_DEG, AttributeValue::F64(t.theta_step_deg)),
-        (attr::DEPTHS, f64_list_attribute(&t.depths)),
-    ];
-    encode_layer((k, j), channels, attributes).map_err(|source| IoError::Encode {
-        path: PathBuf::from(poisson_file_name(&t.field)),
-        source,
-    })
+    side::encode(t)
 }
 
 /// Decodes and checks the bytes of a Poisson-mixture EXR; `path` names it in errors.
 pub fn decode_poisson_exr(bytes: &[u8], path: &Path) -> Result<PoissonTable, IoError> {
-    let file = Checked::read(bytes, path)?;
-    let rows = read_rgb_rows(&file)?;
-    file.schema(attr::SCHEMA, POISSON_SCHEMA_VERSION)?;
-    let field = file.text(attr::FIELD)?;
-    let theta_step_deg = file.double(attr::THETA_STEP_DEG)?;
-    let depths = file.f64_list(attr::DEPTHS, "comma-separated decimals")?;
-    let t = PoissonTable {
-        field,
-        theta_step_deg,
-        depths,
-        rows,
-    };
-    t.check()
-        .map_err(|why| file.contract(ContractError::Size(why)))?;
-    Ok(t)
-}
-
-/// The `R`, `G`, `B` channels of `rows` (channel, row, column) as f32, rows top to bottom.
-pub(crate) fn rgb_channels(rows: &Array3<f64>) -> Vec<(Text, Vec<f32>)> {
-    let channel = |c: usize| -> Vec<f32> {
-        rows.index_axis(ndarray::Axis(0), c)
-            .iter()
-            .map(|&v| v as f32)
-            .collect()
-    };
-    vec![
-        (Text::from("R"), channel(0)),
-        (Text::from("G"), channel(1)),
-        (Text::from("B"), channel(2)),
-    ]
-}
-
-/// The `R`, `G`, `B` 32-bit channels of `file` (exactly those) as (channel, row, column).
-pub(crate) fn read_rgb_rows(file: &Checked) -> Result<Array3<f64>, IoError> {
-    let mut names = file.channel_names();
-    names.sort();
-    if names != ["B", "G", "R"] {
-        return Err(file.contract(ContractError::Channels {
-            found: file.channel_names(),
-        }));
-    }
-    file.check_sample_types()?;
-    let (width, height) = (file.header().layer_size.0, file.header().layer_size.1);
-    let channels = file.channels()?;
-    let samples = |name: &str| {
-        &channels
-            .iter()
-            .find(|(n, _)| n == name)
-            .expect("checked above")
-            .1
-    };
-    let planes = [samples("R"), samples("G"), samples("B")];
-    Ok(Array3::from_shape_fn((3, height, width), |(c, j, k)| {
-        f64::from(planes[c][j * width + k])
-    }))
+    side::decode(bytes, path)
 }
 
 #[cfg(test)]

@@ -3,8 +3,8 @@
 //! truth`) samples so that light keeps its wavelength through every scattering.
 //!
 //! # The contract
-//! - One single-part, flat, single-resolution, scanline EXR; ZIP compression; one 32-bit float
-//!   channel `Y`, sampling 1×1, `pLinear` = 0.
+//! - The layout every side table shares ([`crate::side`]: one scanline ZIP part, its header, the
+//!   order of reading); here one 32-bit float channel `Y`.
 //! - Data window (0, 0)–(K − 1, W − 1): column k ↔ θ_k = k·Δθ as in the field's tables (the bin
 //!   average of p over [θ_k − Δθ/2, θ_k + Δθ/2] ∩ [0°, 180°], `grid::ThetaGrid`), row j ↔
 //!   wavelength j, in the order of the manifest's channel weights (ascending for `spectral`;
@@ -32,13 +32,13 @@
 //! The texels are 32-bit floats, so a sampler normalizes each row's CDF itself: its phase
 //! function is the stored one to within f32 rounding (relative 6·10⁻⁸).
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
-use exr::meta::attribute::{AttributeValue, Text};
 use grid::ThetaGrid;
-use ndarray::Array2;
+use ndarray::{Array2, ArrayView2};
 
-use crate::exr::{Checked, ContractError, IoError, encode_layer, f64_list_attribute, utf8_text};
+use crate::exr::IoError;
+use crate::side::{self, SideTable};
 
 /// Version of this layout in `photometeor/schema`; a reader rejects any other.
 pub const SINGLE_SCHEMA_VERSION: i32 = 1;
@@ -50,12 +50,9 @@ pub fn single_file_name(name: &str) -> String {
 
 /// Names of the header attributes.
 pub mod attr {
-    /// `int`: [`super::SINGLE_SCHEMA_VERSION`].
-    pub const SCHEMA: &str = "photometeor/schema";
-    /// `string`: the field's name.
-    pub const FIELD: &str = "photometeor/field";
-    /// `double`: Δθ in degrees.
-    pub const THETA_STEP_DEG: &str = "photometeor/theta_step_deg";
+    /// `photometeor/schema` (`int`: [`super::SINGLE_SCHEMA_VERSION`]), `/field` (`string`) and
+    /// `/theta_step_deg` (`double`: Δθ in degrees), as in every side table.
+    pub use crate::side::attr::{FIELD, SCHEMA, THETA_STEP_DEG};
     /// `string`: the wavelengths (nm).
     pub const WAVELENGTHS_NM: &str = "photometeor/wavelengths_nm";
     /// `string`: σ_ext (m²) per wavelength.
@@ -146,64 +143,75 @@ impl SingleScatter {
     }
 }
 
+impl SideTable for SingleScatter {
+    const WHAT: &'static str = "single-scattering table";
+    const SCHEMA_VERSION: i32 = SINGLE_SCHEMA_VERSION;
+    const CHANNELS: &'static [&'static str] = &["Y"];
+    const LISTS: &'static [&'static str] = &[
+        attr::WAVELENGTHS_NM,
+        attr::SIGMA_EXT_M2,
+        attr::ALBEDO,
+        attr::FORWARD_DELTA,
+    ];
+
+    fn file_name(field: &str) -> String {
+        single_file_name(field)
+    }
+
+    fn field(&self) -> &str {
+        &self.field
+    }
+
+    fn theta_step_deg(&self) -> f64 {
+        self.theta_step_deg
+    }
+
+    fn lists(&self) -> Vec<&[f64]> {
+        vec![
+            &self.wavelengths_nm,
+            &self.sigma_ext_m2,
+            &self.albedo,
+            &self.forward_delta_fraction,
+        ]
+    }
+
+    fn planes(&self) -> Vec<ArrayView2<'_, f64>> {
+        vec![self.bins.view()]
+    }
+
+    fn from_parts(
+        field: String,
+        theta_step_deg: f64,
+        lists: Vec<Vec<f64>>,
+        planes: Vec<Array2<f64>>,
+    ) -> Self {
+        let [wavelengths_nm, sigma_ext_m2, albedo, forward_delta_fraction] =
+            <[Vec<f64>; 4]>::try_from(lists).expect("one list per name in LISTS");
+        let [bins] = <[Array2<f64>; 1]>::try_from(planes).expect("one plane per channel");
+        Self {
+            field,
+            theta_step_deg,
+            wavelengths_nm,
+            bins,
+            forward_delta_fraction,
+            sigma_ext_m2,
+            albedo,
+        }
+    }
+
+    fn check(&self) -> Result<(), String> {
+        SingleScatter::check(self)
+    }
+}
+
 /// The bytes of `s`'s EXR (deterministic: the header's attributes sorted by name).
 pub fn single_exr_bytes(s: &SingleScatter) -> Result<Vec<u8>, IoError> {
-    s.check().map_err(|what| IoError::InvalidImage {
-        field: s.field.clone(),
-        what: format!("single-scattering table: {what}"),
-    })?;
-    let (w, k) = s.bins.dim();
-    let channels = vec![(Text::from("Y"), s.bins.iter().map(|&v| v as f32).collect())];
-    let attributes = vec![
-        (attr::SCHEMA, AttributeValue::I32(SINGLE_SCHEMA_VERSION)),
-        (attr::FIELD, AttributeValue::Text(utf8_text(&s.field))),
-        (attr::THETA_STEP_DEG, AttributeValue::F64(s.theta_step_deg)),
-        (attr::WAVELENGTHS_NM, f64_list_attribute(&s.wavelengths_nm)),
-        (attr::SIGMA_EXT_M2, f64_list_attribute(&s.sigma_ext_m2)),
-        (attr::ALBEDO, f64_list_attribute(&s.albedo)),
-        (
-            attr::FORWARD_DELTA,
-            f64_list_attribute(&s.forward_delta_fraction),
-        ),
-    ];
-    encode_layer((k, w), channels, attributes).map_err(|source| IoError::Encode {
-        path: PathBuf::from(single_file_name(&s.field)),
-        source,
-    })
+    side::encode(s)
 }
 
 /// Decodes and checks the bytes of a single-scattering EXR; `path` names it in errors.
 pub fn decode_single_exr(bytes: &[u8], path: &Path) -> Result<SingleScatter, IoError> {
-    let file = Checked::read(bytes, path)?;
-    let names = file.channel_names();
-    if names != ["Y"] {
-        return Err(file.contract(ContractError::Channels { found: names }));
-    }
-    file.check_sample_types()?;
-    file.schema(attr::SCHEMA, SINGLE_SCHEMA_VERSION)?;
-    let field = file.text(attr::FIELD)?;
-    let theta_step_deg = file.double(attr::THETA_STEP_DEG)?;
-    let list = |name| file.f64_list(name, "comma-separated decimals");
-    let wavelengths_nm = list(attr::WAVELENGTHS_NM)?;
-    let sigma_ext_m2 = list(attr::SIGMA_EXT_M2)?;
-    let albedo = list(attr::ALBEDO)?;
-    let forward_delta_fraction = list(attr::FORWARD_DELTA)?;
-    let (width, height) = (file.header().layer_size.0, file.header().layer_size.1);
-    let channels = file.channels()?;
-    let samples = &channels[0].1;
-    let bins = Array2::from_shape_fn((height, width), |(j, k)| f64::from(samples[j * width + k]));
-    let s = SingleScatter {
-        field,
-        theta_step_deg,
-        wavelengths_nm,
-        bins,
-        forward_delta_fraction,
-        sigma_ext_m2,
-        albedo,
-    };
-    s.check()
-        .map_err(|why| file.contract(ContractError::Size(why)))?;
-    Ok(s)
+    side::decode(bytes, path)
 }
 
 #[cfg(test)]

@@ -20,6 +20,7 @@ use format::exr::{
 use format::manifest::{
     FieldEntry, MANIFEST_FILE, Manifest, ManifestError, PerChannel, read_manifest, write_manifest,
 };
+use format::sections::{Channels, Material, Microphysics, QualityRecord, SpectralSampling};
 use ndarray::{Array2, Axis};
 use serde_json::json;
 
@@ -560,7 +561,7 @@ fn sample_manifest() -> Manifest {
         file: format!("{name}.exr"),
         bytes: 1234,
         crc32: "0123abcd".to_string(),
-        kind: kind.to_string(),
+        kind: kind.into(),
         n_max: 3,
         forward_fraction: PerChannel::from_array([
             vec![0.97, 0.9, 0.8],
@@ -578,8 +579,24 @@ fn sample_manifest() -> Manifest {
             eps(Some(9), Some(18), None),
             eps(Some(10), None, None),
         ]),
-        microphysics: json!({"radius_um": 500.0, "distribution": "marshall-palmer", "z": [1, 2]}),
-        quality: json!({"preset": "draft", "l_max": 4000}),
+        microphysics: Microphysics {
+            crystal: None,
+            distribution: Some(json!({"kind": "marshall-palmer", "rain_rate_mm_h": 5.0})),
+            kind: kind.into(),
+            material: Material::Water,
+            name: name.to_string(),
+            refractive_index: None,
+            temperature_c: 10.0,
+        },
+        quality: QualityRecord {
+            crystal_noise: None,
+            crystal_rays: None,
+            knobs: json!({"sizes": 40}),
+            legendre_l_max: 4000,
+            preset: "draft".into(),
+            size_noise: Some(PerChannel::from_array([0.01, 0.02, 0.03])),
+            sizes: Some(40),
+        },
         content_hash: "0123456789abcdef".to_string(),
         single_scattering: None,
         poisson: None,
@@ -592,7 +609,22 @@ fn sample_manifest() -> Manifest {
         tool_version: "0.1.0".to_string(),
         theta_step_deg: STEP,
         angle_count: K,
-        channels: json!({"mode": "rgb3", "wavelengths_nm": [650, 515, 440]}),
+        channels: Channels {
+            illuminant: "none".into(),
+            mixing: "one wavelength per channel".into(),
+            mode: SpectralSampling::Rgb3,
+            names: ["R", "G", "B"].map(String::from).to_vec(),
+            negative_lobe_fraction: PerChannel::from_array([0.0; 3]),
+            observer: "none".into(),
+            space: "linear sRGB".into(),
+            unit: "1/sr".into(),
+            wavelengths_nm: vec![650.0, 515.0, 440.0],
+            weights: PerChannel::from_array([
+                vec![1.0, 0.0, 0.0],
+                vec![0.0, 1.0, 0.0],
+                vec![0.0, 0.0, 1.0],
+            ]),
+        },
         // Not alphabetical: the scene's order must be kept.
         fields: vec![field("rain", "rain"), field("cloud", "cloud")],
     }
@@ -690,7 +722,10 @@ fn manifest_schema_and_consistency_are_checked() {
     let cases: [(Edit, &str); 9] = [
         (|f| f.albedo.g = 7.0, "albedo.G = 7"),
         (|f| f.g.r = -5.0, "g.R = -5"),
-        (|f| f.sigma_ext_m2.b = -1e-6, "sigma_ext_m2.B = -0.000001"),
+        (
+            |f| f.sigma_ext_m2.b = -1e-6,
+            "sigma_ext_m2.B = -1e-6 is outside [1e-30, 1] m²",
+        ),
         (|f| f.forward_fraction.r[0] = 1.5, "F_1 = 1.5"),
         (|f| f.forward_fraction.r[2] = 0.95, "F_3 = 0.95 exceeds F_2"),
         (
