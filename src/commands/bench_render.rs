@@ -145,6 +145,8 @@ pub fn run(b: RenderBench) -> Result<()> {
         b.tables.clone(),
         Some(&b.quality),
         true,
+        &[],
+        None,
         |_| {},
     )?;
     let all = settings(&b);

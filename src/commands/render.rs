@@ -93,6 +93,11 @@ pub struct RenderArgs {
     /// Render with the CPU reference instead of the GPU (slow; no adapter needed).
     #[arg(long)]
     cpu: bool,
+    /// The most memory the frame may take, GiB; a frame whose estimate exceeds it is refused
+    /// before anything is baked, naming the setting to lower. Default: the memory available
+    /// (/proc/meminfo's MemAvailable).
+    #[arg(long, value_name = "GIB")]
+    max_memory: Option<f64>,
     /// No progress output.
     #[arg(long)]
     quiet: bool,
@@ -190,6 +195,8 @@ pub fn prepare(
     tables_dir: Option<PathBuf>,
     quality: Option<&str>,
     quiet: bool,
+    outputs: &[&std::path::Path],
+    max_memory_gib: Option<f64>,
     adjust: impl FnOnce(&mut RenderScene),
 ) -> Result<Prepared> {
     let (text, origin, base) = match scene_path {
@@ -227,6 +234,10 @@ pub fn prepare(
     render
         .check(&settings)
         .map_err(|e| anyhow!("{origin}: {e}"))?;
+    let limit = memory_limit(max_memory_gib)?;
+    render
+        .check_memory(&settings, limit)
+        .map_err(|e| anyhow!("{origin}: {e}"))?;
     let used = render.fields();
     for name in &used {
         if !scene.fields.iter().any(|f| &f.name == name) {
@@ -246,6 +257,12 @@ pub fn prepare(
         Some(d) => d,
         None => default_tables_dir(&scene.name)?,
     };
+    // The outputs may not replace a device, a directory, the scene or anything of the bake.
+    let protected: Vec<&std::path::Path> =
+        std::iter::once(dir.as_path()).chain(scene_path).collect();
+    for out in outputs {
+        format::check_output(out, &protected)?;
+    }
     let mut plan = BakePlan::for_preset(scene, dir.clone(), quality);
     // A render bakes only what its volumes use and never removes another field's tables.
     plan.prune = false;
@@ -259,8 +276,33 @@ pub fn prepare(
     })
 }
 
+/// The memory a frame may take (bytes): `--max-memory` GiB, else the memory available now
+/// (Linux's MemAvailable), else no bound.
+pub fn memory_limit(max_memory_gib: Option<f64>) -> Result<u64> {
+    if let Some(g) = max_memory_gib {
+        if !(g.is_finite() && g > 0.0) {
+            bail!("--max-memory {g} must be a number of GiB > 0");
+        }
+        return Ok((g * f64::from(1u32 << 30)) as u64);
+    }
+    let available = std::fs::read_to_string("/proc/meminfo").ok().and_then(|m| {
+        m.lines()
+            .find(|l| l.starts_with("MemAvailable:"))
+            .and_then(|l| l.split_whitespace().nth(1))
+            .and_then(|kib| kib.parse::<u64>().ok())
+    });
+    Ok(available.map_or(u64::MAX, |kib| kib * 1024))
+}
+
 /// Runs `photometeor render`.
 pub fn run(a: RenderArgs) -> Result<()> {
+    if let Some(e) = a.exposure
+        && !(e.is_finite() && e > 0.0)
+    {
+        bail!(
+            "--exposure {e} must be finite and > 0 (it multiplies the radiance before 1 − e^(−x))"
+        );
+    }
     let overrides = a.overrides()?;
     let p = prepare(
         &a.model,
@@ -269,6 +311,10 @@ pub fn run(a: RenderArgs) -> Result<()> {
         a.tables.clone(),
         a.quality.as_deref(),
         a.quiet,
+        &std::iter::once(a.out.as_path())
+            .chain(a.png.as_deref())
+            .collect::<Vec<_>>(),
+        a.max_memory,
         |r| {
             r.width = a.width.unwrap_or(r.width);
             r.height = a.height.unwrap_or(r.height);

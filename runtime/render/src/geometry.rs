@@ -22,6 +22,9 @@
 use glam::DVec3;
 use std::path::Path;
 
+/// The largest OBJ file a scene may name (bytes).
+pub const MAX_OBJ_BYTES: u64 = 256 << 20;
+
 /// Rays closer than this to a surface (m) do not hit it again (self-intersection).
 pub const SURFACE_EPSILON_M: f64 = 1e-6;
 
@@ -469,7 +472,12 @@ pub fn ray_triangle(o: DVec3, d: DVec3, a: DVec3, b: DVec3, c: DVec3) -> Option<
 /// triangles; `v`, `v/vt`, `v//vn`, `v/vt/vn` and negative indices); other statements are
 /// ignored. Errors name the file and line.
 pub fn read_obj(path: &Path) -> Result<Mesh, String> {
-    let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    // Only a regular file of at most MAX_OBJ_BYTES: a FIFO or /dev/zero is refused before
+    // anything is read.
+    let bytes = format::read_regular_file(path, MAX_OBJ_BYTES)
+        .map_err(|(op, e)| format!("{}: {op}: {e}", path.display()))?;
+    let text =
+        String::from_utf8(bytes).map_err(|e| format!("{}: not UTF-8 text: {e}", path.display()))?;
     parse_obj(&text, &path.display().to_string())
 }
 

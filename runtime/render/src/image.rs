@@ -23,16 +23,10 @@ pub enum WriteError {
         /// The encoder's error.
         message: String,
     },
-    /// Writing the encoded bytes failed; `path` is left untouched.
-    #[error("{path}: {op}: {source}")]
-    Io {
-        /// The file being written.
-        path: String,
-        /// The step of the atomic write that failed.
-        op: &'static str,
-        /// The I/O error.
-        source: std::io::Error,
-    },
+    /// The target cannot be written (not a regular file, or the write failed); it is left
+    /// untouched.
+    #[error(transparent)]
+    Output(#[from] format::OutputError),
 }
 
 /// The sRGB transfer curve (IEC 61966-2-1) of a linear value in [0, 1].
@@ -45,11 +39,7 @@ pub fn srgb_encode(linear: f64) -> f64 {
 }
 
 fn write_bytes(path: &Path, bytes: &[u8]) -> Result<(), WriteError> {
-    format::write_file_atomically(path, bytes).map_err(|(op, source)| WriteError::Io {
-        path: path.display().to_string(),
-        op,
-        source,
-    })
+    Ok(format::write_output(path, bytes, &[])?)
 }
 
 impl Image {

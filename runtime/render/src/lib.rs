@@ -71,6 +71,22 @@ pub use volume::DensityGrid;
 
 use glam::DVec3;
 
+/// A number as an error message shows it: plain decimals where they are
+/// short (`0.5`, `-1`, `2000`), scientific notation where they are not
+/// (`1e-300`, `1e308`), `NaN` and `inf` as Rust writes them.
+pub(crate) struct Shown(pub f64);
+
+impl std::fmt::Display for Shown {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let x = self.0;
+        if !x.is_finite() || x == 0.0 || (1e-4..1e7).contains(&x.abs()) {
+            write!(f, "{x}")
+        } else {
+            write!(f, "{x:e}")
+        }
+    }
+}
+
 /// Two unit vectors completing the unit vector `d` to an orthonormal basis (d, e1, e2).
 pub fn basis(d: DVec3) -> (DVec3, DVec3) {
     let helper = if d.x.abs() < 0.9 { DVec3::X } else { DVec3::Y };
@@ -138,7 +154,8 @@ impl Frame {
         let fov = self.camera.fov_deg;
         if !(fov > 0.0 && fov < 170.0) {
             return bad(format!(
-                "camera fov_deg = {fov} is outside the allowed range (0, 170) degrees"
+                "camera fov_deg = {} is outside the allowed range (0, 170) degrees",
+                Shown(fov)
             ));
         }
         let e = self.sun.elevation_deg;

@@ -82,6 +82,26 @@ impl Rendered {
     }
 }
 
+/// A part of a frame's memory: what it is, its bytes, and the setting that sets its size.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Need {
+    /// What it holds ("the eye buffer", …).
+    pub what: &'static str,
+    /// Bytes.
+    pub bytes: u64,
+    /// The setting to lower to make it smaller ("[render] width and height", …).
+    pub setting: String,
+}
+
+/// The per-pixel buffers of a frame: `bytes_per_pixel` times the pixels.
+pub fn image_need(what: &'static str, pixels: u64, bytes_per_pixel: u64) -> Need {
+    Need {
+        what,
+        bytes: pixels * bytes_per_pixel,
+        setting: "[render] width and height (--width, --height)".into(),
+    }
+}
+
 /// What a render model provides (module docs).
 pub trait Model {
     /// The `--model` name and the scene table `[render.<NAME>]`.
@@ -102,6 +122,9 @@ pub trait Model {
     /// What the model needs of the frame and refuses in it, before anything is baked: the
     /// frame's grid may be a placeholder over the volumes' bounds without particles.
     fn check_frame(settings: &Self::Settings, frame: &Frame) -> Result<(), FrameError>;
+    /// The memory a frame of `pixels` pixels over a grid of `voxels` voxels takes beyond the
+    /// grid itself, by part (the CPU reference's, which exceeds the GPU renderer's host side).
+    fn memory(settings: &Self::Settings, pixels: u64, voxels: u64) -> Vec<Need>;
     /// The GPU renderer, or `None` when the model runs on the CPU only ([`Model::GPU`]).
     fn renderer(gpu: &Gpu, tables: &GpuTables) -> Option<Self::Renderer>;
     /// The CPU reference.
@@ -249,6 +272,13 @@ macro_rules! models {
                 match value {
                     Ok(toml::Value::Table(t)) => t,
                     _ => toml::Table::new(),
+                }
+            }
+
+            /// The memory a frame of `pixels` pixels over `voxels` voxels takes beyond the grid.
+            pub fn memory(&self, pixels: u64, voxels: u64) -> Vec<Need> {
+                match self {
+                    $(Self::$variant(s) => <$model as Model>::memory(s, pixels, voxels),)*
                 }
             }
 

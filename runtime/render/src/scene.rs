@@ -108,9 +108,9 @@ use serde::Deserialize;
 
 use glam::DVec3;
 
-use crate::model::{MODEL_NAMES, Model, ModelError, ModelSettings, model_keys};
+use crate::model::{MODEL_NAMES, Model, ModelError, ModelSettings, Need, model_keys};
 use crate::objects::{Light, Medium, Occluder};
-use crate::volume::{Shape, Volume, VolumeError, joint_bounds, rasterize};
+use crate::volume::{Shape, Volume, VolumeError, grid_dims, joint_bounds, rasterize};
 use crate::{Atmosphere, Camera, Frame, FrameError, Haze, Sun};
 use runtime::Tables;
 
@@ -369,7 +369,8 @@ fn scale_height(what: &str, h: f64) -> Result<f64, String> {
         Ok(h)
     } else {
         Err(format!(
-            "{what} = {h} is outside the allowed range [{lo}, {hi:e}] (m)"
+            "{what} = {} is outside the allowed range [{lo}, {hi:e}] (m)",
+            crate::Shown(h)
         ))
     }
 }
@@ -558,7 +559,8 @@ impl RenderScene {
             .unwrap_or(DEFAULT_GROUND_ALBEDO);
         if !(0.0..=1.0).contains(&ground_albedo) {
             return Err(err(format!(
-                "[ground] albedo = {ground_albedo} is outside the allowed range [0, 1]"
+                "[ground] albedo = {} is outside the allowed range [0, 1]",
+                crate::Shown(ground_albedo)
             )));
         }
         let haze = file.haze.map(haze_keys).transpose().map_err(err)?;
@@ -614,6 +616,66 @@ impl RenderScene {
         let model = self.model(name, &[]).map_err(|e| FrameError(e.0))?;
         self.check(&model)?;
         Ok(model)
+    }
+
+    /// The memory a frame of `model` takes, by part: the density grid, the grid files the
+    /// scene read, and the model's own buffers ([`crate::model::Model::memory`]).
+    pub fn memory(&self, model: &ModelSettings) -> Vec<Need> {
+        let voxels: u64 = if self.volumes.is_empty() {
+            1
+        } else {
+            grid_dims(&self.volumes, self.grid_resolution)
+                .iter()
+                .map(|&d| d as u64)
+                .product()
+        };
+        let files: u64 = self
+            .volumes
+            .iter()
+            .map(|v| match &v.shape {
+                Shape::Grid { values, .. } => 16 * values.data.len() as u64,
+                _ => 0,
+            })
+            .sum();
+        let mut needs = vec![Need {
+            what: "the density grid",
+            bytes: 16 * voxels,
+            setting: "[render] grid_resolution".into(),
+        }];
+        if files > 0 {
+            needs.push(Need {
+                what: "the grid files",
+                bytes: files,
+                setting: "the [[volume]] grid files' dims".into(),
+            });
+        }
+        needs.extend(model.memory(self.width as u64 * self.height as u64, voxels));
+        needs
+    }
+
+    /// Refuses a frame of `model` whose memory ([`Self::memory`]) exceeds `limit` bytes,
+    /// naming the total, its largest part and the setting that sets that part.
+    pub fn check_memory(&self, model: &ModelSettings, limit: u64) -> Result<(), FrameError> {
+        let needs = self.memory(model);
+        let total: u64 = needs.iter().map(|n| n.bytes).sum();
+        if total <= limit {
+            return Ok(());
+        }
+        let largest = needs
+            .iter()
+            .max_by_key(|n| n.bytes)
+            .expect("the grid is always a part");
+        let gib = |b: u64| b as f64 / f64::from(1u32 << 30);
+        Err(FrameError(format!(
+            "--model {} needs about {:.2} GiB for this frame ({}: {:.2} GiB), more than the {:.2} \
+             GiB allowed (--max-memory, default: the memory available); lower {}",
+            model.name(),
+            gib(total),
+            largest.what,
+            gib(largest.bytes),
+            gib(limit),
+            largest.setting
+        )))
     }
 
     /// Whether model `name` has setting `key`.
@@ -816,7 +878,8 @@ fn occluder(o: &OccluderKeys, base: &Path) -> Result<Occluder, String> {
     let albedo = o.albedo.unwrap_or(0.5);
     if !(0.0..=1.0).contains(&albedo) {
         return Err(format!(
-            "albedo = {albedo} is outside the allowed range [0, 1]"
+            "albedo = {} is outside the allowed range [0, 1]",
+            crate::Shown(albedo)
         ));
     }
     let finite = |v: Option<[f64; 3]>, what: &str| {

@@ -24,6 +24,30 @@ pub struct DensityGrid {
 }
 
 impl DensityGrid {
+    /// The largest ∫ ρ dl of field `f` along a grid line of voxels parallel to an axis
+    /// (particles/m²): with σ_ext, the deepest axis-aligned column's optical depth.
+    pub fn deepest_column(&self, f: usize) -> f64 {
+        let [nx, ny, nz] = self.dims;
+        let h: [f64; 3] =
+            std::array::from_fn(|a| (self.max_m[a] - self.min_m[a]) / self.dims[a] as f64);
+        let at = |x: usize, y: usize, z: usize| f64::from(self.data[x + nx * (y + ny * z)][f]);
+        let mut deepest: f64 = 0.0;
+        for z in 0..nz {
+            for y in 0..ny {
+                deepest = deepest.max((0..nx).map(|x| at(x, y, z)).sum::<f64>() * h[0]);
+            }
+            for x in 0..nx {
+                deepest = deepest.max((0..ny).map(|y| at(x, y, z)).sum::<f64>() * h[1]);
+            }
+        }
+        for y in 0..ny {
+            for x in 0..nx {
+                deepest = deepest.max((0..nz).map(|z| at(x, y, z)).sum::<f64>() * h[2]);
+            }
+        }
+        deepest
+    }
+
     /// A grid of no particles, one voxel of a millimetre at the origin: the grid of a scene
     /// without `[[volume]]` tables (media only).
     pub fn empty() -> Self {
@@ -408,14 +432,25 @@ pub fn read_grid(
     min_m: DVec3,
     max_m: DVec3,
 ) -> Result<DensityGrid, String> {
-    let count = dims.iter().product::<usize>();
     if dims.iter().any(|&d| d == 0 || d > 4096) {
         return Err(format!(
             "grid {}: dims {dims:?} must each lie in [1, 4096]",
             file.display()
         ));
     }
-    let bytes = std::fs::read(file).map_err(|e| format!("grid {}: {e}", file.display()))?;
+    let count = dims.iter().product::<usize>();
+    if count > MAX_GRID_VALUES {
+        return Err(format!(
+            "grid {}: dims {dims:?} hold {count} values, more than the {MAX_GRID_VALUES} a grid \
+             file may hold (a renderer resamples it to [render] grid_resolution voxels along the \
+             longest side anyway)",
+            file.display()
+        ));
+    }
+    // Only a regular file, and no more than the dims need: a FIFO or /dev/zero is refused
+    // before anything is read.
+    let bytes = format::read_regular_file(file, 4 * count as u64)
+        .map_err(|(op, e)| format!("grid {}: {op}: {e}", file.display()))?;
     if bytes.len() != 4 * count {
         return Err(format!(
             "grid {}: {} bytes, but dims {dims:?} need {} (little-endian f32, x fastest)",
@@ -457,6 +492,18 @@ pub fn read_grid(
 #[error("{0}")]
 pub struct VolumeError(pub String);
 
+/// The most values a grid file may hold (2²⁸: a 1 GiB file, 645³ voxels).
+pub const MAX_GRID_VALUES: usize = 1 << 28;
+
+/// Voxels along x, y, z of the grid [`rasterize`] makes of `volumes`: `resolution` along the
+/// joint box's longest side, the others in proportion (at least 2).
+pub fn grid_dims(volumes: &[Volume], resolution: usize) -> [usize; 3] {
+    let (lo, hi) = joint_bounds(volumes);
+    let extent = [hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]];
+    let longest = extent.iter().cloned().fold(0.0, f64::max);
+    extent.map(|e| ((resolution as f64 * e / longest).round() as usize).max(2))
+}
+
 /// The box holding every volume.
 pub fn joint_bounds(volumes: &[Volume]) -> (DVec3, DVec3) {
     let mut lo = [f64::INFINITY; 3];
@@ -483,8 +530,7 @@ pub fn rasterize(
     }
     let (lo, hi) = joint_bounds(volumes);
     let extent = [hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]];
-    let longest = extent.iter().cloned().fold(0.0, f64::max);
-    let dims = extent.map(|e| ((resolution as f64 * e / longest).round() as usize).max(2));
+    let dims = grid_dims(volumes, resolution);
     let densities: Vec<(usize, f64, Density)> = volumes
         .iter()
         .map(|v| {

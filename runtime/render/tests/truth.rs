@@ -96,7 +96,7 @@ fn tables_spectral(
         angle_count: k,
         fields: vec![FieldTable {
             name: "slab".into(),
-            kind: "cloud".into(),
+            kind: format::FieldKind::Cloud,
             image,
             sigma_sca_m2,
             sigma_ext_m2,

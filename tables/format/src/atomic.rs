@@ -87,7 +87,7 @@ pub fn read_regular_file(
             io::Error::new(
                 io::ErrorKind::InvalidData,
                 format!(
-                    "{} bytes, more than the {max_bytes} bytes a bake's file may have",
+                    "{} bytes, more than the {max_bytes} bytes allowed for this file",
                     meta.len()
                 ),
             ),

@@ -83,14 +83,6 @@ impl std::str::FromStr for FieldKind {
     }
 }
 
-impl From<&str> for FieldKind {
-    /// A kind written in code (`"cloud".into()`). Panics on any other name: parse text that
-    /// comes from outside with [`str::parse`], which returns an error instead.
-    fn from(name: &str) -> Self {
-        name.parse().unwrap_or_else(|e| panic!("{e}"))
-    }
-}
-
 /// What the particles are made of (the manifest's `microphysics.material`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]

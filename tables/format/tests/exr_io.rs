@@ -561,7 +561,7 @@ fn sample_manifest() -> Manifest {
         file: format!("{name}.exr"),
         bytes: 1234,
         crc32: "0123abcd".to_string(),
-        kind: kind.into(),
+        kind: kind.parse().expect("a field kind"),
         n_max: 3,
         forward_fraction: PerChannel::from_array([
             vec![0.97, 0.9, 0.8],
@@ -582,7 +582,7 @@ fn sample_manifest() -> Manifest {
         microphysics: Microphysics {
             crystal: None,
             distribution: Some(json!({"kind": "marshall-palmer", "rain_rate_mm_h": 5.0})),
-            kind: kind.into(),
+            kind: kind.parse().expect("a field kind"),
             material: Material::Water,
             name: name.to_string(),
             refractive_index: None,

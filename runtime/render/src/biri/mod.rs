@@ -38,7 +38,7 @@ use serde::{Deserialize, Serialize};
 use runtime::gpu::{Gpu, GpuTables, TexelFormat};
 
 use crate::gpu::RenderError;
-use crate::model::{Job, Model, Pass, Rendered};
+use crate::model::{Job, Model, Need, Pass, Rendered, image_need};
 use crate::objects;
 use crate::{Frame, FrameError};
 
@@ -103,6 +103,12 @@ impl Model for Biri {
         let mut view = frame.clone();
         view.sun.elevation_deg = 90.0; // biri has no sun
         view.check_view()
+    }
+
+    fn memory(_: &Settings, pixels: u64, _voxels: u64) -> Vec<Need> {
+        // Per pixel: the surface hit (32 B), the medium's light and crossings (40), the image:
+        // measured 89 B.
+        vec![image_need("the per-pixel stages and image", pixels, 96)]
     }
 
     fn renderer(gpu: &Gpu, tables: &GpuTables) -> Option<gpu::Renderer> {

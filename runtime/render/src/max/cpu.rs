@@ -434,6 +434,16 @@ pub(crate) fn check(
 /// Steps 1–4 of the [module docs](super): reduced sun and sky, the diffusion solve and §3's
 /// clear-air propagation.
 pub fn light(tables: &Tables, frame: &Frame, settings: &Settings) -> Result<Lighting, FrameError> {
+    light_with(tables, frame, settings, &())
+}
+
+/// [`light`], telling `progress` as each step starts.
+pub fn light_with(
+    tables: &Tables,
+    frame: &Frame,
+    settings: &Settings,
+    progress: &dyn crate::model::Progress,
+) -> Result<Lighting, FrameError> {
     check(tables, frame, settings)?;
     let fields: Vec<&FieldTable> = tables.fields.iter().collect();
     let grid = &frame.grid;
@@ -442,6 +452,8 @@ pub fn light(tables: &Tables, frame: &Frame, settings: &Settings) -> Result<Ligh
     let mut report = MaxReport::default();
 
     // 1, 2: reduced sunlight and first-scattered sources.
+    let steps = 2 + settings.clear_air_iterations as u64;
+    progress.update(0, steps, "reduced sunlight and skylight");
     let start = Instant::now();
     let v = voxels(&fields, grid);
     let tau_sun = sun_depths(grid, &v.ext, -sun_dir);
@@ -450,6 +462,7 @@ pub fn light(tables: &Tables, frame: &Frame, settings: &Settings) -> Result<Ligh
     report.propagation_s = start.elapsed().as_secs_f64();
 
     // 3: diffusion per channel.
+    progress.update(1, steps, "diffusion solve");
     let start = Instant::now();
     let h_voxel = (h[0] * h[1] * h[2]).cbrt();
     // Voxels thinner than MIN_DIFFUSION_VOXEL_DEPTH take no part in the solve: a grid's
@@ -474,7 +487,8 @@ pub fn light(tables: &Tables, frame: &Frame, settings: &Settings) -> Result<Ligh
 
     // §3: the clouds' own light carried across clear air into other parts, then solved again.
     let start = Instant::now();
-    for _ in 0..settings.clear_air_iterations {
+    for k in 0..settings.clear_air_iterations {
+        progress.update(2 + k as u64, steps, "clear-air propagation and solve");
         let (across, mean) = sources.across_clear_air(tables, frame, &i0, &sky);
         for (j, (m, f)) in across.mean.iter().zip(&across.flux).enumerate() {
             for c in 0..3 {
@@ -486,6 +500,7 @@ pub fn light(tables: &Tables, frame: &Frame, settings: &Settings) -> Result<Ligh
         i0 = sources.solve(&sky, &mut report)?;
     }
     report.clear_air_s = start.elapsed().as_secs_f64();
+    progress.update(steps, steps, "lighting done");
     Ok(Lighting {
         t_sun: tau_sun.iter().map(|t| t.map(|x| (-x).exp())).collect(),
         i0,

@@ -66,7 +66,7 @@ use serde::{Deserialize, Serialize};
 use runtime::gpu::{Gpu, GpuTables, TexelFormat};
 
 use crate::gpu::RenderError;
-use crate::model::{Job, Model, Pass, Rendered};
+use crate::model::{Job, Model, Need, Pass, Rendered, image_need};
 use crate::shading::{MAX_PHASE_TERM, check_slicing};
 use crate::{Frame, FrameError, basis};
 
@@ -89,6 +89,20 @@ impl Model for Miyazaki {
     fn check_frame(s: &Settings, frame: &Frame) -> Result<(), FrameError> {
         frame.sunlight_only(Self::NAME, true)?;
         setup(frame, s).map(|_| ())
+    }
+
+    fn memory(s: &Settings, pixels: u64, _voxels: u64) -> Vec<Need> {
+        // Per pixel: its ray (24 B), the scattering texture (128), S, α*, T (72), the composed
+        // pixel and the image (32): measured 259 B; per shadow texel, g_sun per channel (24).
+        let res = s.light_resolution as u64;
+        vec![
+            image_need("the screen buffers and image", pixels, 264),
+            Need {
+                what: "the shadow surface",
+                bytes: res * res * 24,
+                setting: "[render.miyazaki] light_resolution".into(),
+            },
+        ]
     }
 
     fn renderer(gpu: &Gpu, tables: &GpuTables) -> Option<gpu::Renderer> {
@@ -250,13 +264,16 @@ pub fn check(settings: &Settings) -> Result<(), FrameError> {
     if !(settings.a.is_finite() && settings.a > A_RANGE.0 && settings.a <= A_RANGE.1) {
         return bad(format!(
             "a = {} is outside the allowed range ({}, {}] (the paper uses 1.0–2.0)",
-            settings.a, A_RANGE.0, A_RANGE.1
+            crate::Shown(settings.a),
+            A_RANGE.0,
+            A_RANGE.1
         ));
     }
     if !(settings.k_multi.is_finite() && (0.0..=MAX_PHASE_TERM).contains(&settings.k_multi)) {
         return bad(format!(
             "k_multi = {} is outside the allowed range [0, {:e}] (1/sr)",
-            settings.k_multi, MAX_PHASE_TERM
+            crate::Shown(settings.k_multi),
+            MAX_PHASE_TERM
         ));
     }
     Ok(())

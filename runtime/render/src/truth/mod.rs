@@ -99,7 +99,7 @@ use crate::basis;
 use crate::camera::pixel_ray;
 use crate::geometry::box_span;
 use crate::gpu::RenderError;
-use crate::model::{Job, Model, Pass, Progress, Rendered};
+use crate::model::{Job, Model, Need, Pass, Progress, Rendered, image_need};
 use crate::objects::Light;
 use crate::{DensityGrid, Frame, FrameError, Image, MAX_FIELDS, SUN_DIAMETER_DEG};
 use phase::{PhaseSampler, rayleigh, rotate, sample_rayleigh};
@@ -134,6 +134,9 @@ pub struct Settings {
     /// Wavelengths each camera path carries, 1…[`MAX_CARRIED`]; 0: the default (all of an
     /// `rgb3` bake's three, else [`MAX_CARRIED`]). 1 is one wavelength per path.
     pub wavelengths_per_path: usize,
+    /// Stop after the pass that passes this many seconds of tracing, whatever the samples
+    /// taken, [0, 10⁷]; 0: no time bound.
+    pub max_seconds: f64,
 }
 
 impl Default for Settings {
@@ -144,9 +147,15 @@ impl Default for Settings {
             target_noise: 0.0,
             max_scatterings: 0,
             wavelengths_per_path: 0,
+            max_seconds: 0.0,
         }
     }
 }
+
+/// The largest optical depth the tracer takes on along a straight line through the scene's
+/// volumes, media or haze: a conservative path through τ scatters ~τ² times, and beyond this
+/// its paths would meet [`MAX_BOUNCES`] (biased) after hours each.
+pub const MAX_OPTICAL_DEPTH: f64 = 1000.0;
 
 /// `--model truth`.
 pub struct Truth;
@@ -168,6 +177,12 @@ impl Model for Truth {
     fn check_frame(s: &Settings, frame: &Frame) -> Result<(), FrameError> {
         check(frame, s)?;
         crate::objects::check_lights(&frame.lights, &frame.occluders)
+    }
+
+    fn memory(_: &Settings, pixels: u64, _voxels: u64) -> Vec<Need> {
+        // Per pixel: its ray (24 B), Σx and Σx² per channel (48), T_vol (8), the mean and
+        // standard error (24) and the image (16): measured 110 B.
+        vec![image_need("the sums and image", pixels, 120)]
     }
 
     fn renderer(_: &Gpu, _: &GpuTables) -> Option<()> {
@@ -439,6 +454,7 @@ impl<'a> Tracer<'a> {
             );
         }
         let (bands, band_cdf, majorant) = bands(tables, frame, spectrum, &grid_theta, &media);
+        check_optical_depth(tables, frame, &media, &bands)?;
         let cos_disk = (SUN_DIAMETER_DEG / 2.0).to_radians().cos();
         let (track_min, track_max) = tracked_box(frame, &media, &bands);
         let mut sigma_ext_g = [0.0; MAX_FIELDS];
@@ -1073,6 +1089,74 @@ impl<'a> Tracer<'a> {
     }
 }
 
+/// Refuses a scene the tracer cannot finish: any straight line through its densest part
+/// (a grid column along an axis, a medium box's longest side, the haze's vertical column) of
+/// optical depth above [`MAX_OPTICAL_DEPTH`] at some wavelength, naming it.
+fn check_optical_depth(
+    tables: &Tables,
+    frame: &Frame,
+    media: &[(crate::objects::Region, f64, usize)],
+    bands: &[Band],
+) -> Result<(), FrameError> {
+    let worst_sigma = |f: usize| {
+        bands
+            .iter()
+            .map(|b| b.fields[f].sigma_ext)
+            .fold(0.0, f64::max)
+    };
+    let mut worst: (f64, String) = (0.0, String::new());
+    let mut consider = |tau: f64, what: String| {
+        if tau > worst.0 || tau.is_nan() {
+            worst = (tau, what);
+        }
+    };
+    for (f, field) in tables.fields.iter().enumerate() {
+        consider(
+            frame.grid.deepest_column(f) * worst_sigma(f),
+            format!("a column of the [[volume]] grid of field {:?}", field.name),
+        );
+    }
+    for (i, &(region, n, f)) in media.iter().enumerate() {
+        let length = match region {
+            crate::objects::Region::Box { min_m, max_m } => (max_m - min_m).max_element(),
+            // Everywhere: across the scene's contents, the camera and its lights.
+            crate::objects::Region::Everywhere => {
+                let mut lo = frame.camera.position_m;
+                let mut hi = lo;
+                for l in &frame.lights {
+                    lo = lo.min(l.position_m);
+                    hi = hi.max(l.position_m);
+                }
+                for o in &frame.occluders {
+                    let (a, b) = o.bounds();
+                    lo = lo.min(a);
+                    hi = hi.max(b);
+                }
+                (hi - lo).max_element().max(1.0)
+            }
+        };
+        consider(
+            n * worst_sigma(f) * length,
+            format!("[[medium]] {} across its longest side, {length:e} m", i + 1),
+        );
+    }
+    if let Some(h) = &frame.haze {
+        consider(
+            h.number_density_per_m3 * worst_sigma(h.field) * h.scale_height_m,
+            format!("the [haze] layer's vertical column (field {:?})", h.name),
+        );
+    }
+    // NaN (a NaN density or cross-section) is refused too.
+    if worst.0.is_nan() || worst.0 > MAX_OPTICAL_DEPTH {
+        return bad(format!(
+            "{} has optical depth {:.3e}, more than the {MAX_OPTICAL_DEPTH} the path tracer takes \
+             on (a path through it would scatter ~τ² times): lower its number density",
+            worst.1, worst.0
+        ));
+    }
+    Ok(())
+}
+
 /// Each medium's region, number density and field index in `tables`.
 fn media_of(
     tables: &Tables,
@@ -1252,7 +1336,7 @@ fn check_settings(settings: &Settings) -> Result<(), FrameError> {
     if !(settings.target_noise.is_finite() && (0.0..1.0).contains(&settings.target_noise)) {
         return bad(format!(
             "noise = {} is outside the allowed range [0, 1) (relative standard error)",
-            settings.target_noise
+            crate::Shown(settings.target_noise)
         ));
     }
     if settings.wavelengths_per_path > MAX_CARRIED {
@@ -1260,6 +1344,12 @@ fn check_settings(settings: &Settings) -> Result<(), FrameError> {
             "wavelengths_per_path = {} is outside the allowed range [1, {MAX_CARRIED}] (0: the \
              default)",
             settings.wavelengths_per_path
+        ));
+    }
+    if !(settings.max_seconds.is_finite() && (0.0..=1e7).contains(&settings.max_seconds)) {
+        return bad(format!(
+            "max_seconds = {} is outside the allowed range [0, 1e7] (0: no time bound)",
+            crate::Shown(settings.max_seconds)
         ));
     }
     if settings.max_scatterings > MAX_BOUNCES {
@@ -1318,6 +1408,9 @@ pub fn render(
             &format!("noise {:.2} %", noise * 100.0),
         );
         if settings.target_noise > 0.0 && noise <= settings.target_noise {
+            break;
+        }
+        if settings.max_seconds > 0.0 && start.elapsed().as_secs_f64() >= settings.max_seconds {
             break;
         }
     }

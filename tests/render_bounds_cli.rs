@@ -1,0 +1,310 @@
+//! `photometeor render` with inputs that are valid TOML but would abort, hang, run without end,
+//! write over what is not its own or give a wrong image: each refused before anything is baked
+//! or written (exit 2, the value named), or, where only the tables can tell, before any path
+//! is traced.
+
+mod common;
+
+use std::fs;
+use std::os::unix::fs::FileTypeExt;
+use std::path::Path;
+use std::process::Command;
+
+use common::{photometeor, workdir};
+
+/// A small cloud scene for every model but biri: its [scene], [[field]], [render], [camera],
+/// [sun] and one cumulus; `extra` replaces the marker line `#EXTRA` (more tables or keys).
+fn scene(extra: &str) -> String {
+    r#"[scene]
+name = "bounds"
+spectral = "rgb3"
+n_max = 4
+quality = "draft"
+
+[[field]]
+name = "cloud"
+kind = "cloud"
+distribution = { kind = "gamma", r_eff_um = 8, v_eff = 0.1 }
+
+[render]
+width = 8
+height = 6
+grid_resolution = 16
+
+[camera]
+position_m = [0, 500, -3000]
+look_at_m = [0, 500, 0]
+
+[sun]
+elevation_deg = 30
+azimuth_deg = 40
+
+#EXTRA
+
+[[volume]]
+field = "cloud"
+shape = "cumulus"
+number_density_per_m3 = 1e7
+center_m = [0, 500, 0]
+radius_m = 300
+height_m = 300
+"#
+    .replace("#EXTRA", extra)
+}
+
+/// Runs `render scene.toml --tables tables <args>` in `dir` with `text` as the scene: exit 2
+/// naming `needle`, nothing baked (no `tables/`), no image written.
+fn refused_before_the_bake(dir: &Path, text: &str, args: &[&str], needle: &str) {
+    let _ = fs::remove_dir_all(dir.join("tables"));
+    fs::write(dir.join("scene.toml"), text).unwrap();
+    let mut all = vec![
+        "render",
+        "scene.toml",
+        "--tables",
+        "tables",
+        "--out",
+        "out.exr",
+        "--quiet",
+    ];
+    all.extend_from_slice(args);
+    let o = photometeor(&all, dir);
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{args:?}: {e}");
+    assert!(e.contains(needle), "{args:?}: {needle:?} not in {e}");
+    assert!(
+        !dir.join("tables").exists(),
+        "{args:?}: baked before refusing"
+    );
+    assert!(!dir.join("out.exr").exists(), "{args:?}: wrote an image");
+}
+
+#[test]
+fn values_out_of_range_are_refused_before_the_bake_for_every_model() {
+    let dir = workdir("bounds-values");
+    let base = scene("");
+    let cases: &[(String, &[&str], &str)] = &[
+        (
+            base.replace("azimuth_deg = 40", "azimuth_deg = nan"),
+            &["--model", "truth"],
+            "[sun] azimuth_deg = NaN must be a finite angle",
+        ),
+        (
+            base.replace(
+                "position_m = [0, 500, -3000]",
+                "position_m = [0, inf, -3000]",
+            ),
+            &["--cpu"],
+            "[camera] position_m = [0.0, inf, -3000.0] must be finite",
+        ),
+        (
+            base.replace(
+                "azimuth_deg = 40",
+                "azimuth_deg = 40\nirradiance = [1e308, 1, 1]",
+            ),
+            &[],
+            "outside the allowed range [0, 1e30]",
+        ),
+        (
+            scene(
+                "[haze]\nfield = \"cloud\"\nnumber_density_per_m3 = 1e6\nscale_height_m = 1e-300",
+            ),
+            &["--model", "miyazaki"],
+            "[haze] scale_height_m = 1e-300 is outside the allowed range [1, 1e6]",
+        ),
+        (
+            scene("[render.riley]\nxi = 1e308"),
+            &["--cpu"],
+            "[render.riley] xi = 1e308 is outside the allowed range [0, 1e6]",
+        ),
+        (
+            scene("[render.max]\ndiffusion_tolerance = 1e-300"),
+            &["--model", "max"],
+            "diffusion_tolerance = 1e-300 is outside the allowed range [1e-12, 0.1]",
+        ),
+        (
+            base.clone(),
+            &["--model", "truth", "--noise=-1"],
+            "noise = -1",
+        ),
+        (
+            base.clone(),
+            &["--model", "truth", "--max-scatterings", "2000000"],
+            "max_scatterings = 2000000",
+        ),
+        (
+            base.clone(),
+            &["--model", "max", "--slices", "64"],
+            "--slices: --model max has no setting slices",
+        ),
+        (base.clone(), &["--exposure", "nan"], "--exposure NaN"),
+    ];
+    for (text, args, needle) in cases {
+        refused_before_the_bake(&dir, text, args, needle);
+    }
+}
+
+#[test]
+fn a_frame_larger_than_the_memory_allowed_is_refused_naming_the_setting() {
+    let dir = workdir("bounds-memory");
+    // 8192² pixels of riley's buffers (112 B each) are 7 GiB: over a 1 GiB bound.
+    refused_before_the_bake(
+        &dir,
+        &scene(""),
+        &[
+            "--cpu",
+            "--width",
+            "8192",
+            "--height",
+            "8192",
+            "--max-memory",
+            "1",
+        ],
+        "lower [render] width and height",
+    );
+    // max's lighting at grid_resolution 512 (about 500 B a voxel).
+    refused_before_the_bake(
+        &dir,
+        &scene("").replace("grid_resolution = 16", "grid_resolution = 512"),
+        &["--model", "max", "--cpu", "--max-memory", "1"],
+        "lower [render] grid_resolution",
+    );
+    // The default frame fits the same bound.
+    fs::write(dir.join("scene.toml"), scene("")).unwrap();
+    let o = photometeor(
+        &[
+            "render",
+            "scene.toml",
+            "--tables",
+            "tables",
+            "--out",
+            "out.exr",
+            "--quiet",
+            "--cpu",
+            "--max-memory",
+            "1",
+        ],
+        &dir,
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+}
+
+#[test]
+fn scene_files_that_are_not_regular_files_are_refused() {
+    let dir = workdir("bounds-files");
+    let grid = |file: &str| {
+        scene("").replace(
+            "shape = \"cumulus\"",
+            &format!(
+                "shape = \"grid\"\nfile = \"{file}\"\ndims = [4, 4, 4]\nmin_m = [-300, 200, \
+                 -300]\nmax_m = [300, 800, 300]"
+            ),
+        )
+    };
+    let _ = fs::remove_file(dir.join("zero.f32"));
+    std::os::unix::fs::symlink("/dev/zero", dir.join("zero.f32")).unwrap();
+    refused_before_the_bake(&dir, &grid("zero.f32"), &["--cpu"], "not a regular file");
+    let fifo = dir.join("pipe.f32");
+    let _ = fs::remove_file(&fifo);
+    let made = Command::new("mkfifo").arg(&fifo).status().unwrap();
+    assert!(made.success(), "mkfifo");
+    // Read without a bound, a FIFO would block this forever.
+    refused_before_the_bake(&dir, &grid("pipe.f32"), &["--cpu"], "not a regular file");
+    // More values than a grid file may hold, refused before reading.
+    refused_before_the_bake(
+        &dir,
+        &grid("zero.f32").replace("dims = [4, 4, 4]", "dims = [4096, 4096, 64]"),
+        &["--cpu"],
+        "more than the 268435456 a grid file may hold",
+    );
+    let mesh = format!(
+        "{}\n[[medium]]\nfield = \"cloud\"\nnumber_density_per_m3 = 1e6\n\n[[light]]\n\
+         position_m = [0, 500, -500]\nintensity = [1, 1, 1]\n\n[[occluder]]\nshape = \"mesh\"\n\
+         file = \"zero.f32\"\n",
+        scene("")
+    );
+    refused_before_the_bake(&dir, &mesh, &["--model", "truth"], "not a regular file");
+}
+
+#[test]
+fn hopeless_optical_depths_are_refused_before_any_path() {
+    let dir = workdir("bounds-depth");
+    let dense = scene("").replace(
+        "number_density_per_m3 = 1e7",
+        "number_density_per_m3 = 1e25",
+    );
+    fs::write(dir.join("scene.toml"), &dense).unwrap();
+    let o = photometeor(
+        &[
+            "render",
+            "scene.toml",
+            "--model",
+            "truth",
+            "--tables",
+            "tables",
+            "--out",
+            "out.exr",
+            "--quiet",
+        ],
+        &dir,
+    );
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{e}");
+    assert!(
+        e.contains("a column of the [[volume]] grid of field \"cloud\" has optical depth")
+            && e.contains("more than the 1000"),
+        "{e}"
+    );
+    assert!(!dir.join("out.exr").exists());
+}
+
+#[test]
+fn render_outputs_never_replace_a_device_a_directory_or_the_bake() {
+    let dir = workdir("bounds-outputs");
+    fs::write(dir.join("scene.toml"), scene("")).unwrap();
+    let render = |args: &[&str]| {
+        let mut all = vec![
+            "render",
+            "scene.toml",
+            "--cpu",
+            "--tables",
+            "tables",
+            "--quiet",
+        ];
+        all.extend_from_slice(args);
+        photometeor(&all, &dir)
+    };
+    let o = render(&["--out", "out.exr"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let manifest = fs::read(dir.join("tables/manifest.json")).unwrap();
+    for (args, needle) in [
+        (["--out", "tables/manifest.json"], "tables"),
+        (["--out", "tables/cloud.exr"], "tables"),
+        (["--out", "scene.toml"], "scene.toml"),
+        (["--out", "tables"], "a directory"),
+    ] {
+        let o = render(&args);
+        let e = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {e}");
+        assert!(e.contains(needle), "{args:?}: {e}");
+    }
+    assert_eq!(
+        fs::read(dir.join("tables/manifest.json")).unwrap(),
+        manifest
+    );
+    // A character device (as root, made with mknod: the numbers of /dev/null).
+    let dev = dir.join("device");
+    let _ = fs::remove_file(&dev);
+    if Command::new("mknod")
+        .arg(&dev)
+        .args(["c", "1", "3"])
+        .status()
+        .is_ok_and(|s| s.success())
+    {
+        let o = render(&["--out", "out.exr", "--png", "device"]);
+        assert_eq!(o.status.code(), Some(2));
+        assert!(String::from_utf8_lossy(&o.stderr).contains("a character device"));
+        assert!(fs::metadata(&dev).unwrap().file_type().is_char_device());
+    } else {
+        eprintln!("mknod not permitted here: the device case is not run");
+    }
+}
