@@ -204,24 +204,61 @@ pub fn run(plan: &BakePlan, progress: &dyn Progress) -> Result<BakeReport, BakeE
     let start = Instant::now();
     let weights = ChannelWeights::new(&plan.scene.spectral)?;
     let grid = ThetaGrid::new(plan.scene.theta_step_deg)?;
-    let mut report = BakeReport {
-        scene: plan.scene.name.clone(),
-        out_dir: plan.out_dir.clone(),
-        quality: plan.quality,
-        computed: Vec::new(),
-        cached: Vec::new(),
-        rejected_cache: Vec::new(),
-        cleaned: Vec::new(),
-        seconds: 0.0,
-        peak_rss_mib: None,
-    };
+    let mut report = BakeReport::empty(plan);
     // Every check that needs no solver, before any work: the output directory can be written,
     // and every field's refractive index and size parameters are in range at every wavelength.
     preflight(plan, &weights)?;
     // Compute (or read from the cache) every field first; only then touch the tables, so a
     // failing field leaves the previous bake as it was.
-    // Cached fields first, then the others computed side by side (each field's numbers do not
-    // depend on what runs beside it), in scene order.
+    let lookups = look_up_cache(plan, &mut report.rejected_cache);
+    let (computed, encoded) = compute_and_encode(plan, &lookups, &weights, &grid, progress)?;
+    let done = take_results(lookups, computed, &mut report);
+    // Only now is the directory touched, under its lock: a pending commit of an interrupted
+    // bake is finished and dead writers' leftovers removed (format::commit).
+    let lock = BakeLock::acquire(&plan.out_dir)?;
+    report.cleaned = lock.clean_stale()?;
+    // The previous bake, and which of its fields this one keeps.
+    let previous = format::read_manifest(&plan.out_dir).ok();
+    let channels = weights.channel_definitions();
+    let kept = kept_fields(plan, previous.as_ref(), &channels)?;
+    write_cache_records(plan, &done)?;
+    let manifest = publish(plan, &lock, done, encoded, kept, channels, grid.len())?;
+    remove_stale_tables(plan, previous, &manifest);
+    drop(lock);
+    report.seconds = start.elapsed().as_secs_f64();
+    report.peak_rss_mib = peak_rss_mib();
+    Ok(report)
+}
+
+impl BakeReport {
+    /// The report of `plan` before anything is done.
+    fn empty(plan: &BakePlan) -> Self {
+        Self {
+            scene: plan.scene.name.clone(),
+            out_dir: plan.out_dir.clone(),
+            quality: plan.quality,
+            computed: Vec::new(),
+            cached: Vec::new(),
+            rejected_cache: Vec::new(),
+            cleaned: Vec::new(),
+            seconds: 0.0,
+            peak_rss_mib: None,
+        }
+    }
+}
+
+/// A field of the scene, its content hash and cache record, and the bake the record holds if it
+/// could be used.
+struct CacheLookup<'a> {
+    field: &'a Field,
+    hash: String,
+    cache_file: PathBuf,
+    cached: Option<BakedField>,
+}
+
+/// Each field's cache record, in scene order; a record that could not be used is listed in
+/// `rejected` (file and why) and its field computed again.
+fn look_up_cache<'a>(plan: &'a BakePlan, rejected: &mut Vec<String>) -> Vec<CacheLookup<'a>> {
     let mut lookups = Vec::new();
     for field in &plan.scene.fields {
         let hash = content_hash(plan, field);
@@ -230,81 +267,131 @@ pub fn run(plan: &BakePlan, progress: &dyn Progress) -> Result<BakeReport, BakeE
             Lookup::Hit(r) => r.into_field(&field.name, plan.scene.theta_step_deg),
             Lookup::Missing => None,
             Lookup::Rejected(why) => {
-                report
-                    .rejected_cache
-                    .push(format!("{}: {why}", cache_file.display()));
+                rejected.push(format!("{}: {why}", cache_file.display()));
                 None
             }
         };
-        lookups.push((field, hash, cache_file, cached));
+        lookups.push(CacheLookup {
+            field,
+            hash,
+            cache_file,
+            cached,
+        });
     }
-    // Each field's four EXRs are encoded as soon as it is done, beside the fields still
-    // computing (their deflate and Biri's kernel fit had been a serial tail of every bake);
-    // they are written, in scene order, once every field is done.
-    struct Encoded {
-        table: Vec<u8>,
-        single: Vec<u8>,
-        poisson: Vec<u8>,
-        biri: Vec<u8>,
-    }
-    let encode = |result: &BakedField| -> Result<Encoded, BakeError> {
-        Ok(Encoded {
-            table: field_exr_bytes(&result.image)?,
-            single: format::single_exr_bytes(&result.single)?,
-            poisson: format::poisson_exr_bytes(&result.poisson)?,
-            // Biri's point-light kernel from Ams_1 per channel (cheap: not cached).
-            biri: format::biri_exr_bytes(&biri_kernel(&result.image))?,
-        })
-    };
+    lookups
+}
+
+/// A field's four EXRs, encoded.
+struct Encoded {
+    table: Vec<u8>,
+    single: Vec<u8>,
+    poisson: Vec<u8>,
+    biri: Vec<u8>,
+}
+
+/// The EXRs of one field's bake ([`Encoded`]).
+fn encode(result: &BakedField) -> Result<Encoded, BakeError> {
+    Ok(Encoded {
+        table: field_exr_bytes(&result.image)?,
+        single: format::single_exr_bytes(&result.single)?,
+        poisson: format::poisson_exr_bytes(&result.poisson)?,
+        // Biri's point-light kernel from Ams_1 per channel (cheap: not cached).
+        biri: format::biri_exr_bytes(&biri_kernel(&result.image))?,
+    })
+}
+
+/// Computes the fields the cache did not hold and encodes every field's EXRs, in scene order:
+/// the computed bakes (None where cached) and each field's EXRs. The fields run side by side
+/// (each field's numbers do not depend on what runs beside it), and each field's EXRs are
+/// encoded as soon as it is done, beside the fields still computing (their deflate and Biri's
+/// kernel fit had been a serial tail of every bake); they are written, in scene order, once
+/// every field is done.
+fn compute_and_encode(
+    plan: &BakePlan,
+    lookups: &[CacheLookup],
+    weights: &ChannelWeights,
+    grid: &ThetaGrid,
+    progress: &dyn Progress,
+) -> Result<(Vec<Option<BakedField>>, Vec<Encoded>), BakeError> {
     let computed: Vec<Result<(Option<BakedField>, Encoded), BakeError>> = lookups
         .par_iter()
-        .map(|(field, _, _, cached)| {
-            let computed = match cached {
+        .map(|lookup| {
+            let computed = match &lookup.cached {
                 Some(_) => None,
-                None => Some(compute_field(plan, field, &weights, &grid, progress)?),
+                None => Some(compute_field(plan, lookup.field, weights, grid, progress)?),
             };
-            let result = computed.as_ref().or(cached.as_ref());
+            let result = computed.as_ref().or(lookup.cached.as_ref());
             let encoded = encode(result.expect("a field cached or computed"))?;
             Ok((computed, encoded))
         })
         .collect();
     // The first failing field in scene order, whatever finished first.
-    let (computed, encoded): (Vec<Option<BakedField>>, Vec<Encoded>) = computed
+    Ok(computed
         .into_iter()
         .collect::<Result<Vec<_>, _>>()?
         .into_iter()
-        .unzip();
+        .unzip())
+}
+
+/// A field's bake, cached or computed, and where its new cache record goes (computed fields).
+struct Done<'a> {
+    field: &'a Field,
+    hash: String,
+    result: BakedField,
+    new_record: Option<PathBuf>,
+}
+
+/// Each field's bake from the cache or from this run, in scene order, listing each field in
+/// `report` as cached or computed.
+fn take_results<'a>(
+    lookups: Vec<CacheLookup<'a>>,
+    computed: Vec<Option<BakedField>>,
+    report: &mut BakeReport,
+) -> Vec<Done<'a>> {
     let mut done = Vec::new();
-    let mut fresh = Vec::new();
-    for ((field, hash, cache_file, cached), computed) in lookups.into_iter().zip(computed) {
-        let result = match (cached, computed) {
+    for (lookup, computed) in lookups.into_iter().zip(computed) {
+        let CacheLookup {
+            field,
+            hash,
+            cache_file,
+            cached,
+        } = lookup;
+        let (result, new_record) = match (cached, computed) {
             (Some(r), _) => {
                 report.cached.push(field.name.clone());
-                r
+                (r, None)
             }
             (None, Some(r)) => {
                 report.computed.push(field.name.clone());
-                fresh.push((done.len(), cache_file));
-                r
+                (r, Some(cache_file))
             }
             (None, None) => unreachable!("a field neither cached nor computed"),
         };
-        done.push((field, hash, result));
+        done.push(Done {
+            field,
+            hash,
+            result,
+            new_record,
+        });
     }
-    // Only now is the directory touched, under its lock: a pending commit of an interrupted
-    // bake is finished and dead writers' leftovers removed (format::commit).
-    let lock = BakeLock::acquire(&plan.out_dir)?;
-    report.cleaned = lock.clean_stale()?;
-    // The previous bake, and which of its fields this one keeps.
-    let previous = format::read_manifest(&plan.out_dir).ok();
-    let channels = weights.channel_definitions();
+    done
+}
+
+/// The fields of the `previous` bake in the directory that this one keeps: with `plan.prune`
+/// none; else those of other names, if the previous bake is on the same grid and channels (an
+/// error if it is not and has such fields, which this bake would orphan).
+fn kept_fields(
+    plan: &BakePlan,
+    previous: Option<&Manifest>,
+    channels: &serde_json::Value,
+) -> Result<Vec<FieldEntry>, BakeError> {
     let mut kept: Vec<FieldEntry> = Vec::new();
     if !plan.prune
-        && let Some(previous) = &previous
+        && let Some(previous) = previous
     {
         // Keep the other fields of a compatible previous bake (same grid and channels).
         let compatible =
-            previous.theta_step_deg == plan.scene.theta_step_deg && previous.channels == channels;
+            previous.theta_step_deg == plan.scene.theta_step_deg && previous.channels == *channels;
         let ours = |old: &FieldEntry| {
             plan.scene
                 .fields
@@ -322,45 +409,40 @@ pub fn run(plan: &BakePlan, progress: &dyn Progress) -> Result<BakeReport, BakeE
         }
         kept = others.into_iter().cloned().collect();
     }
+    Ok(kept)
+}
+
+/// Writes the cache records of the fields computed in this run.
+fn write_cache_records(plan: &BakePlan, done: &[Done]) -> Result<(), BakeError> {
     let cache_dir = plan.out_dir.join(".cache");
     std::fs::create_dir_all(&cache_dir).map_err(|source| BakeError::Io {
         path: cache_dir.clone(),
         op: "creating",
         source,
     })?;
-    for (i, cache_file) in &fresh {
-        let (_, hash, result) = &done[*i];
-        cache::write(cache_file, hash, &Record::of(result))?;
+    for d in done {
+        if let Some(cache_file) = &d.new_record {
+            cache::write(cache_file, &d.hash, &Record::of(&d.result))?;
+        }
     }
-    // Stage the whole generation, then publish it in one rename (format::commit).
-    let mut stage = Staging::begin(&lock)?;
+    Ok(())
+}
+
+/// Stages the whole generation (every field's EXRs, the `kept` fields' entries and the
+/// manifest), then publishes it in one rename (format::commit); the manifest published.
+fn publish(
+    plan: &BakePlan,
+    lock: &BakeLock,
+    done: Vec<Done>,
+    encoded: Vec<Encoded>,
+    kept: Vec<FieldEntry>,
+    channels: serde_json::Value,
+    angle_count: usize,
+) -> Result<Manifest, BakeError> {
+    let mut stage = Staging::begin(lock)?;
     let mut entries = Vec::new();
-    for ((field, hash, result), bytes) in done.into_iter().zip(encoded) {
-        let file = format!("{}.exr", field.name);
-        stage.write(&file, &bytes.table)?;
-        let single_file = format::single_file_name(&field.name);
-        stage.write(&single_file, &bytes.single)?;
-        let poisson_file = format::poisson_file_name(&field.name);
-        stage.write(&poisson_file, &bytes.poisson)?;
-        let mut entry = field_entry(plan, field, &result, file, hash, &bytes.table);
-        entry.single_scattering = Some(format::manifest::FileRef {
-            file: single_file,
-            bytes: bytes.single.len() as u64,
-            crc32: format::crc32_hex(&bytes.single),
-        });
-        entry.poisson = Some(format::manifest::FileRef {
-            file: poisson_file,
-            bytes: bytes.poisson.len() as u64,
-            crc32: format::crc32_hex(&bytes.poisson),
-        });
-        let biri_file = format::biri_file_name(&field.name);
-        stage.write(&biri_file, &bytes.biri)?;
-        entry.biri_kernel = Some(format::manifest::FileRef {
-            file: biri_file,
-            bytes: bytes.biri.len() as u64,
-            crc32: format::crc32_hex(&bytes.biri),
-        });
-        entries.push(entry);
+    for (d, bytes) in done.into_iter().zip(encoded) {
+        entries.push(stage_field(&mut stage, plan, d, &bytes)?);
     }
     entries.extend(kept);
     let manifest = Manifest {
@@ -368,7 +450,7 @@ pub fn run(plan: &BakePlan, progress: &dyn Progress) -> Result<BakeReport, BakeE
         tool: "photometeor".into(),
         tool_version: env!("CARGO_PKG_VERSION").into(),
         theta_step_deg: plan.scene.theta_step_deg,
-        angle_count: grid.len(),
+        angle_count,
         channels,
         fields: entries,
     };
@@ -377,7 +459,43 @@ pub fn run(plan: &BakePlan, progress: &dyn Progress) -> Result<BakeReport, BakeE
         .map_err(|e| BakeError::Incompatible(format!("the new manifest: {}", e.what)))?;
     stage.write(format::MANIFEST_FILE, &manifest.to_json_bytes())?;
     stage.commit()?;
-    // Tables of fields the scene no longer has would be read as current: remove them.
+    Ok(manifest)
+}
+
+/// Stages one field's four EXRs; its manifest entry.
+fn stage_field(
+    stage: &mut Staging,
+    plan: &BakePlan,
+    d: Done,
+    bytes: &Encoded,
+) -> Result<FieldEntry, BakeError> {
+    let file = format!("{}.exr", d.field.name);
+    stage.write(&file, &bytes.table)?;
+    let single_file = format::single_file_name(&d.field.name);
+    stage.write(&single_file, &bytes.single)?;
+    let poisson_file = format::poisson_file_name(&d.field.name);
+    stage.write(&poisson_file, &bytes.poisson)?;
+    let mut entry = field_entry(plan, d.field, &d.result, file, d.hash, &bytes.table);
+    entry.single_scattering = Some(file_ref(single_file, &bytes.single));
+    entry.poisson = Some(file_ref(poisson_file, &bytes.poisson));
+    let biri_file = format::biri_file_name(&d.field.name);
+    stage.write(&biri_file, &bytes.biri)?;
+    entry.biri_kernel = Some(file_ref(biri_file, &bytes.biri));
+    Ok(entry)
+}
+
+/// The manifest's reference to a file of these bytes.
+fn file_ref(file: String, bytes: &[u8]) -> format::manifest::FileRef {
+    format::manifest::FileRef {
+        file,
+        bytes: bytes.len() as u64,
+        crc32: format::crc32_hex(bytes),
+    }
+}
+
+/// Removes the tables of the `previous` bake's fields that `manifest` no longer has: they would
+/// be read as current.
+fn remove_stale_tables(plan: &BakePlan, previous: Option<Manifest>, manifest: &Manifest) {
     if let Some(previous) = previous {
         for old in previous.fields {
             let stale = !manifest.fields.iter().any(|f| f.file == old.file);
@@ -390,10 +508,6 @@ pub fn run(plan: &BakePlan, progress: &dyn Progress) -> Result<BakeReport, BakeE
             }
         }
     }
-    drop(lock);
-    report.seconds = start.elapsed().as_secs_f64();
-    report.peak_rss_mib = peak_rss_mib();
-    Ok(report)
 }
 
 /// The solver's refusal of `field`'s inputs, with where it happened (`context`).
