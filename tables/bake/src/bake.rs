@@ -876,7 +876,6 @@ pub fn compute_field(
     progress: &dyn Progress,
 ) -> Result<BakedField, BakeError> {
     let start = Instant::now();
-    let knobs = plan.knobs;
     let lambdas = &weights.wavelengths_nm;
     let bar = progress.field(&field.name, lambdas.len() as u64 + 3);
     bar.message(if field.crystal.is_some() {
@@ -884,27 +883,12 @@ pub fn compute_field(
     } else {
         "Mie per wavelength"
     });
-    let Phases {
-        phases: per_wavelength,
-        size_errors,
-        sizes,
-    } = phase_functions(plan, field, weights, *grid, &|| bar.advance())?;
+    let phases = phase_functions(plan, field, weights, *grid, &|| bar.advance())?;
+    let per_wavelength = &phases.phases;
     // Channel c mixes wavelength j with a_cj = w_cj σ_sca,j / Σ_j w_cj σ_sca,j (the scattered
     // light's spectrum); every row is Σ_j a_cj Ams_n[P_j], light keeping its wavelength.
     bar.message("Legendre series per wavelength");
-    // One pass over the degrees per thread, its wavelengths sharing the bin integrals.
-    let per_thread = per_wavelength
-        .len()
-        .div_ceil(rayon::current_num_threads())
-        .max(1);
-    let series: Vec<AmsSeries> = per_wavelength
-        .par_chunks(per_thread)
-        .map(|chunk| {
-            let bins: Vec<&[f64]> = chunk.iter().map(|p| &p.bins[..]).collect();
-            AmsSeries::many(grid, &bins, knobs.reconstruction)
-        })
-        .collect::<Vec<_>>()
-        .concat();
+    let series = legendre_series(per_wavelength, grid, plan.knobs.reconstruction);
     bar.message("RGB and Ams_n");
     let orders: Vec<usize> = (1..=plan.scene.n_max).collect();
     let depths = plan.scene.poisson_depths();
@@ -913,7 +897,7 @@ pub fn compute_field(
         .map(|c| {
             let r = channel_tables(
                 &weights.weights[c],
-                &per_wavelength,
+                per_wavelength,
                 &series,
                 &orders,
                 &depths,
@@ -926,12 +910,67 @@ pub fn compute_field(
             field: field.name.clone(),
             source,
         })?;
-    let n = orders.len();
-    let k = grid.len();
-    let mut ams = Array3::zeros((3, n, k));
-    let mut poisson_rows = Array3::zeros((3, depths.len(), k));
-    let mut forward_fraction = Array2::zeros((3, n));
-    let mut summary = FieldSummary {
+    let mut summary = sampling_summary(field, &phases, weights, *grid);
+    let tables = ChannelArrays::gather(
+        channels,
+        &mut summary,
+        orders.len(),
+        depths.len(),
+        grid.len(),
+    );
+    bar.finish();
+    summary.seconds = start.elapsed().as_secs_f64();
+    let theta_step_deg = plan.scene.theta_step_deg;
+    Ok(BakedField {
+        single: single_scatter(field, theta_step_deg, lambdas, per_wavelength, grid.len()),
+        poisson: PoissonTable {
+            field: field.name.clone(),
+            theta_step_deg,
+            depths,
+            rows: tables.poisson_rows,
+        },
+        image: FieldImage {
+            field: field.name.clone(),
+            theta_step_deg,
+            ams: tables.ams,
+            forward_fraction: tables.forward_fraction,
+            extra_layers: Vec::new(),
+        },
+        summary,
+    })
+}
+
+/// The Legendre series of every wavelength's phase function, one pass over the degrees per
+/// thread, its wavelengths sharing the bin integrals.
+fn legendre_series(
+    per_wavelength: &[PhaseFunction],
+    grid: &ThetaGrid,
+    reconstruction: tables::ams::Reconstruction,
+) -> Vec<AmsSeries> {
+    let per_thread = per_wavelength
+        .len()
+        .div_ceil(rayon::current_num_threads())
+        .max(1);
+    per_wavelength
+        .par_chunks(per_thread)
+        .map(|chunk| {
+            let bins: Vec<&[f64]> = chunk.iter().map(|p| &p.bins[..]).collect();
+            AmsSeries::many(grid, &bins, reconstruction)
+        })
+        .collect::<Vec<_>>()
+        .concat()
+}
+
+/// A field's summary before its channels are filled in: how far its sampling went (the
+/// crystals' rays and noise, the drops' sizes and size noise).
+fn sampling_summary(
+    field: &Field,
+    phases: &Phases,
+    weights: &ChannelWeights,
+    grid: ThetaGrid,
+) -> FieldSummary {
+    let per_wavelength = &phases.phases;
+    FieldSummary {
         forward_peak_fraction: Default::default(),
         g: [0.0; 3],
         sigma_ext_m2: [0.0; 3],
@@ -945,41 +984,81 @@ pub fn compute_field(
                 .filter_map(|p| p.crystal().map(|o| o.trace.rays))
                 .sum(),
             noise: channel_noises(
-                &per_wavelength,
+                per_wavelength,
                 weights,
-                *grid,
+                grid,
                 mie::crystal::noise_skips_pole(crystal.roughness),
             ),
         }),
-        sizes,
+        sizes: phases.sizes,
         size_noise: field.distribution.map(|_| {
-            let errors: Vec<&[f64]> = size_errors.iter().map(|e| &e[..]).collect();
-            mixed_noises(&per_wavelength, &errors, weights, *grid, false)
+            let errors: Vec<&[f64]> = phases.size_errors.iter().map(|e| &e[..]).collect();
+            mixed_noises(per_wavelength, &errors, weights, grid, false)
         }),
-    };
-    for (c, ch) in channels.into_iter().enumerate() {
-        ams.slice_mut(s![c, .., ..]).assign(&ch.rows);
-        poisson_rows.slice_mut(s![c, .., ..]).assign(&ch.poisson);
-        for (r, f) in ch.forward_fraction.iter().enumerate() {
-            forward_fraction[[c, r]] = *f;
-        }
-        summary.forward_peak_fraction[c] = ch.forward_peak_fraction;
-        summary.g[c] = ch.g;
-        summary.sigma_ext_m2[c] = ch.sigma_ext_m2;
-        summary.albedo[c] = ch.albedo;
-        for e in 0..N_ISO_EPSILONS.len() {
-            summary.n_isotropic[e][c] = ch.n_isotropic[e];
-        }
-        summary.l_max = ch.l_max;
     }
-    bar.finish();
-    summary.seconds = start.elapsed().as_secs_f64();
-    let single = SingleScatter {
+}
+
+/// The three channels' tables side by side, as the field's EXRs hold them.
+struct ChannelArrays {
+    /// Ams_n, (channel, row, angle).
+    ams: Array3<f64>,
+    /// The Poisson mixtures, (channel, depth, angle).
+    poisson_rows: Array3<f64>,
+    /// F_n, (channel, row).
+    forward_fraction: Array2<f64>,
+}
+
+impl ChannelArrays {
+    /// Stacks the `channels` (n rows, `depth_count` Poisson depths and `angle_count` angles
+    /// each), and puts their numbers into `summary`.
+    fn gather(
+        channels: Vec<ChannelResult>,
+        summary: &mut FieldSummary,
+        n: usize,
+        depth_count: usize,
+        angle_count: usize,
+    ) -> Self {
+        let k = angle_count;
+        let mut ams = Array3::zeros((3, n, k));
+        let mut poisson_rows = Array3::zeros((3, depth_count, k));
+        let mut forward_fraction = Array2::zeros((3, n));
+        for (c, ch) in channels.into_iter().enumerate() {
+            ams.slice_mut(s![c, .., ..]).assign(&ch.rows);
+            poisson_rows.slice_mut(s![c, .., ..]).assign(&ch.poisson);
+            for (r, f) in ch.forward_fraction.iter().enumerate() {
+                forward_fraction[[c, r]] = *f;
+            }
+            summary.forward_peak_fraction[c] = ch.forward_peak_fraction;
+            summary.g[c] = ch.g;
+            summary.sigma_ext_m2[c] = ch.sigma_ext_m2;
+            summary.albedo[c] = ch.albedo;
+            for e in 0..N_ISO_EPSILONS.len() {
+                summary.n_isotropic[e][c] = ch.n_isotropic[e];
+            }
+            summary.l_max = ch.l_max;
+        }
+        Self {
+            ams,
+            poisson_rows,
+            forward_fraction,
+        }
+    }
+}
+
+/// The single-scattering optics per wavelength, as written to `<name>.single.exr`.
+fn single_scatter(
+    field: &Field,
+    theta_step_deg: f64,
+    lambdas: &[f64],
+    per_wavelength: &[PhaseFunction],
+    angle_count: usize,
+) -> SingleScatter {
+    SingleScatter {
         field: field.name.clone(),
-        theta_step_deg: plan.scene.theta_step_deg,
-        wavelengths_nm: lambdas.clone(),
-        bins: Array2::from_shape_fn((per_wavelength.len(), k), |(j, kk)| {
-            per_wavelength[j].bins[kk]
+        theta_step_deg,
+        wavelengths_nm: lambdas.to_vec(),
+        bins: Array2::from_shape_fn((per_wavelength.len(), angle_count), |(j, k)| {
+            per_wavelength[j].bins[k]
         }),
         forward_delta_fraction: per_wavelength
             .iter()
@@ -987,24 +1066,7 @@ pub fn compute_field(
             .collect(),
         sigma_ext_m2: per_wavelength.iter().map(|p| p.sigma_ext_m2).collect(),
         albedo: per_wavelength.iter().map(|p| p.albedo).collect(),
-    };
-    Ok(BakedField {
-        single,
-        poisson: PoissonTable {
-            field: field.name.clone(),
-            theta_step_deg: plan.scene.theta_step_deg,
-            depths,
-            rows: poisson_rows,
-        },
-        image: FieldImage {
-            field: field.name.clone(),
-            theta_step_deg: plan.scene.theta_step_deg,
-            ams,
-            forward_fraction,
-            extra_layers: Vec::new(),
-        },
-        summary,
-    })
+    }
 }
 
 /// Gauss nodes per bin. A distribution averages the ripple of each size (period ≈ π/x in θ)
