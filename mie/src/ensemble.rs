@@ -22,7 +22,7 @@ use rayon::prelude::*;
 use crate::amplitude::{FoldedAngles, SphereTerms, weighted_intensity, weighted_intensity_halves};
 use crate::distribution::{SizeDistribution, SizeQuadrature};
 use crate::error::MieError;
-use crate::grid::{ThetaGrid, bin_quadrature};
+use crate::grid::{BinQuadrature, ThetaGrid, bin_quadrature};
 use crate::phase::{MieOrigin, Origin, PhaseFunction};
 use crate::refractive::Material;
 use crate::sphere::Sphere;
@@ -261,112 +261,26 @@ pub fn bulk_with_spread(
         .iter()
         .map(|&r| Sphere::new(m, k * r))
         .collect::<Result<_, _>>()?;
-    let x_min = spheres.iter().map(|s| s.x()).fold(f64::INFINITY, f64::min);
-    let x_max = spheres.iter().map(|s| s.x()).fold(0.0, f64::max);
-    let step_rad = grid.step_deg().to_radians();
-    let forward_panels = (step_rad * x_max / std::f64::consts::PI).ceil().max(1.0) as usize;
-    let forward_limit_deg = (60.0 / x_min).to_degrees();
-    let quadrature = bin_quadrature(&grid, nodes_per_panel, |kbin| {
-        let (lo, _) = grid.bin_edges_deg(kbin);
-        if lo < forward_limit_deg || 180.0 - grid.bin_edges_deg(kbin).1 < forward_limit_deg {
-            forward_panels
-        } else {
-            1
-        }
-    });
-    let node_angles = FoldedAngles::new(&quadrature.mu);
-    let point_angles = FoldedAngles::new(point_cosines);
-    // Sizes in fixed chunks, so memory stays bounded (a chunk's coefficients, not all sizes')
-    // and the summation order does not depend on the thread count.
-    let mut sigma_ext = 0.0;
-    let mut sigma_sca = 0.0;
-    let mut g_sca = 0.0;
-    // Per half (even, odd node index): Σ w I at each angular node, and Σ w σ_sca.
-    let mut halves = [
-        vec![0.0; quadrature.mu.len()],
-        vec![0.0; quadrature.mu.len()],
-    ];
-    let mut half_sca = [0.0; 2];
-    let mut point_intensity = vec![0.0; point_cosines.len()];
-    for (chunk, (radii, weights)) in spheres.chunks(SIZE_CHUNK).zip(
-        sizes
-            .radius_um
-            .chunks(SIZE_CHUNK)
-            .zip(sizes.weight.chunks(SIZE_CHUNK)),
-    ) {
-        // Coefficients and efficiencies per size, in parallel; order is preserved.
-        let per_size: Vec<(SphereTerms, f64, f64, f64)> = chunk
-            .par_iter()
-            .zip(radii.par_iter())
-            .map(|(s, &r)| {
-                let c = s.coefficients();
-                let e = c.efficiencies();
-                let area = std::f64::consts::PI * r * r;
-                (SphereTerms::new(&c), e.q_ext * area, e.q_sca * area, e.g)
-            })
-            .collect();
-        for (i, ((_, ext, sca, g), w)) in per_size.iter().zip(weights).enumerate() {
-            sigma_ext += w * ext;
-            sigma_sca += w * sca;
-            g_sca += w * sca * g;
-            half_sca[i % 2] += w * sca;
-        }
-        let terms: Vec<SphereTerms> = per_size.into_iter().map(|(t, ..)| t).collect();
-        if !point_cosines.is_empty() {
-            for (acc, v) in
-                point_intensity
-                    .iter_mut()
-                    .zip(weighted_intensity(&terms, weights, &point_angles))
-            {
-                *acc += v;
-            }
-        }
-        // SIZE_CHUNK is even, so a size's parity within its chunk is its parity overall.
-        for (acc, half) in
-            halves
-                .iter_mut()
-                .zip(weighted_intensity_halves(&terms, weights, &node_angles))
-        {
-            for (a, v) in acc.iter_mut().zip(half) {
-                *a += v;
-            }
-        }
-    }
-    let scale = 1.0 / (2.0 * k * k * sigma_sca);
-    let node_phase: Vec<f64> = halves[0]
+    let quadrature = forward_resolving_quadrature(&spheres, &grid, nodes_per_panel);
+    let sums = SizeSums::over(&spheres, sizes, &quadrature, point_cosines);
+    let scale = 1.0 / (2.0 * k * k * sums.sigma_sca);
+    let node_phase: Vec<f64> = sums.halves[0]
         .iter()
-        .zip(&halves[1])
+        .zip(&sums.halves[1])
         .map(|(a, b)| (a + b) * scale)
         .collect();
     let bins = quadrature.average(&node_phase);
-    // Each half's own phase function (its terms over its σ_sca), then the spread.
-    let half_bins: Vec<Vec<f64>> = (0..2)
-        .map(|h| {
-            if half_sca[h] > 0.0 {
-                let s = 1.0 / (2.0 * k * k * half_sca[h]);
-                quadrature.average(&halves[h].iter().map(|i| i * s).collect::<Vec<_>>())
-            } else {
-                vec![f64::NAN; bins.len()]
-            }
-        })
-        .collect();
-    let alpha = half_sca[0] / sigma_sca;
-    let factor = ((alpha * alpha + (1.0 - alpha) * (1.0 - alpha)) / 2.0).sqrt();
-    let std_error: Vec<f64> = half_bins[0]
-        .iter()
-        .zip(&half_bins[1])
-        .map(|(a, b)| (a - b).abs() * factor)
-        .collect();
-    let points: Vec<f64> = point_intensity.iter().map(|i| i * scale).collect();
+    let std_error = half_spread(&sums, &quadrature, k, bins.len());
+    let points: Vec<f64> = sums.point_intensity.iter().map(|i| i * scale).collect();
     const UM2_TO_M2: f64 = 1e-12;
     let mut phase = PhaseFunction {
         wavelength_nm,
         m_re: m.re,
         m_im: m.im,
-        sigma_ext_m2: sigma_ext * UM2_TO_M2,
-        sigma_sca_m2: sigma_sca * UM2_TO_M2,
-        albedo: sigma_sca / sigma_ext,
-        g: g_sca / sigma_sca,
+        sigma_ext_m2: sums.sigma_ext * UM2_TO_M2,
+        sigma_sca_m2: sums.sigma_sca * UM2_TO_M2,
+        albedo: sums.sigma_sca / sums.sigma_ext,
+        g: sums.g_sca / sums.sigma_sca,
         grid,
         bins,
         forward_delta_fraction: 0.0,
@@ -383,4 +297,137 @@ pub fn bulk_with_spread(
         m.energy_closure = closure;
     }
     Ok((phase, std_error))
+}
+
+/// The Gauss nodes inside the bins for these spheres: bins near the forward and backward
+/// directions (within 60/x_min rad, where single sizes' diffraction rings are still coherent)
+/// cut into panels of width ≤ π/x_max, the others one panel each (module docs).
+fn forward_resolving_quadrature(
+    spheres: &[Sphere],
+    grid: &ThetaGrid,
+    nodes_per_panel: usize,
+) -> BinQuadrature {
+    let x_min = spheres.iter().map(|s| s.x()).fold(f64::INFINITY, f64::min);
+    let x_max = spheres.iter().map(|s| s.x()).fold(0.0, f64::max);
+    let step_rad = grid.step_deg().to_radians();
+    let forward_panels = (step_rad * x_max / std::f64::consts::PI).ceil().max(1.0) as usize;
+    let forward_limit_deg = (60.0 / x_min).to_degrees();
+    bin_quadrature(grid, nodes_per_panel, |kbin| {
+        let (lo, _) = grid.bin_edges_deg(kbin);
+        if lo < forward_limit_deg || 180.0 - grid.bin_edges_deg(kbin).1 < forward_limit_deg {
+            forward_panels
+        } else {
+            1
+        }
+    })
+}
+
+/// The weighted sums over the sizes that [`bulk_with_spread`] needs (cross-sections in µm²).
+struct SizeSums {
+    /// Σ w σ_ext.
+    sigma_ext: f64,
+    /// Σ w σ_sca.
+    sigma_sca: f64,
+    /// Σ w σ_sca g.
+    g_sca: f64,
+    /// Per half (even, odd node index): Σ w I at each angular node.
+    halves: [Vec<f64>; 2],
+    /// Per half: Σ w σ_sca.
+    half_sca: [f64; 2],
+    /// Σ w I at each point angle.
+    point_intensity: Vec<f64>,
+}
+
+impl SizeSums {
+    /// The sums over `spheres` (radii and weights `sizes`) at the quadrature's nodes and the
+    /// point cosines. Sizes go in fixed chunks, so memory stays bounded (a chunk's
+    /// coefficients, not all sizes') and the summation order does not depend on the thread
+    /// count.
+    fn over(
+        spheres: &[Sphere],
+        sizes: &SizeQuadrature,
+        quadrature: &BinQuadrature,
+        point_cosines: &[f64],
+    ) -> Self {
+        let node_angles = FoldedAngles::new(&quadrature.mu);
+        let point_angles = FoldedAngles::new(point_cosines);
+        let mut sums = Self {
+            sigma_ext: 0.0,
+            sigma_sca: 0.0,
+            g_sca: 0.0,
+            halves: [
+                vec![0.0; quadrature.mu.len()],
+                vec![0.0; quadrature.mu.len()],
+            ],
+            half_sca: [0.0; 2],
+            point_intensity: vec![0.0; point_cosines.len()],
+        };
+        for (chunk, (radii, weights)) in spheres.chunks(SIZE_CHUNK).zip(
+            sizes
+                .radius_um
+                .chunks(SIZE_CHUNK)
+                .zip(sizes.weight.chunks(SIZE_CHUNK)),
+        ) {
+            // Coefficients and efficiencies per size, in parallel; order is preserved.
+            let per_size: Vec<(SphereTerms, f64, f64, f64)> = chunk
+                .par_iter()
+                .zip(radii.par_iter())
+                .map(|(s, &r)| {
+                    let c = s.coefficients();
+                    let e = c.efficiencies();
+                    let area = std::f64::consts::PI * r * r;
+                    (SphereTerms::new(&c), e.q_ext * area, e.q_sca * area, e.g)
+                })
+                .collect();
+            for (i, ((_, ext, sca, g), w)) in per_size.iter().zip(weights).enumerate() {
+                sums.sigma_ext += w * ext;
+                sums.sigma_sca += w * sca;
+                sums.g_sca += w * sca * g;
+                sums.half_sca[i % 2] += w * sca;
+            }
+            let terms: Vec<SphereTerms> = per_size.into_iter().map(|(t, ..)| t).collect();
+            if !point_cosines.is_empty() {
+                for (acc, v) in sums.point_intensity.iter_mut().zip(weighted_intensity(
+                    &terms,
+                    weights,
+                    &point_angles,
+                )) {
+                    *acc += v;
+                }
+            }
+            // SIZE_CHUNK is even, so a size's parity within its chunk is its parity overall.
+            for (acc, half) in
+                sums.halves
+                    .iter_mut()
+                    .zip(weighted_intensity_halves(&terms, weights, &node_angles))
+            {
+                for (a, v) in acc.iter_mut().zip(half) {
+                    *a += v;
+                }
+            }
+        }
+        sums
+    }
+}
+
+/// The standard error of each of the `bin_count` bins from the spread of the two halves' own
+/// phase functions (each half's terms over its σ_sca; [`bulk_with_spread`]).
+fn half_spread(sums: &SizeSums, quadrature: &BinQuadrature, k: f64, bin_count: usize) -> Vec<f64> {
+    let half_bins: Vec<Vec<f64>> = (0..2)
+        .map(|h| {
+            if sums.half_sca[h] > 0.0 {
+                let s = 1.0 / (2.0 * k * k * sums.half_sca[h]);
+                quadrature.average(&sums.halves[h].iter().map(|i| i * s).collect::<Vec<_>>())
+            } else {
+                vec![f64::NAN; bin_count]
+            }
+        })
+        .collect();
+    let alpha = sums.half_sca[0] / sums.sigma_sca;
+    let factor = ((alpha * alpha + (1.0 - alpha) * (1.0 - alpha)) / 2.0).sqrt();
+    half_bins[0]
+        .iter()
+        .zip(&half_bins[1])
+        .map(|(a, b)| (a - b).abs() * factor)
+        .collect()
 }

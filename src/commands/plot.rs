@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, anyhow};
 use clap::Args as ClapArgs;
-use format::{BakeDir, FieldImage};
+use format::{BakeDir, FieldEntry, FieldImage};
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
@@ -83,6 +83,8 @@ pub fn run(a: PlotArgs) -> Result<()> {
     Ok(())
 }
 
+/// Every picture of the bake in `dir` (the reference bake overlaid where given), written to
+/// `out` (never over a path in `protected`); their paths.
 fn plot_bake(
     dir: &Path,
     reference: Option<&Path>,
@@ -93,140 +95,38 @@ fn plot_bake(
     let manifest = &bake.manifest;
     let reference = reference.map(BakeDir::open).transpose()?;
     let step = manifest.theta_step_deg;
-    let theta = |k: usize| k as f64 * step;
     let mut written = Vec::new();
     let mut forward = Vec::new();
     for (i, f) in manifest.fields.iter().enumerate() {
         let image = bake.read_field(f).with_context(|| f.file.clone())?;
-        let reference_image =
-            match &reference {
-                Some(r) => {
-                    let entry = r.entry(&f.name).with_context(|| {
-                        format!(
-                            "field {:?} is not in the reference bake {}",
-                            f.name,
-                            r.dir.display()
-                        )
-                    })?;
-                    Some(r.read_field(entry).with_context(|| {
-                        format!("reference {}", r.dir.join(&entry.file).display())
-                    })?)
-                }
-                None => None,
-            };
-        let row_series =
-            |c: usize, r: usize, img: &FieldImage, a: f64, b: f64| -> Vec<(f64, f64)> {
-                img.row(c, r)
-                    .iter()
-                    .enumerate()
-                    .map(|(k, &v)| (theta(k), v))
-                    .filter(|&(t, v)| t >= a && t <= b && v > 0.0)
-                    .collect()
-            };
-        let phase = |a: f64, b: f64, title: &str| {
-            let mut series: Vec<Series> = (0..3)
-                .map(|c| Series {
-                    label: ["R", "G", "B"][c].to_string(),
-                    colour: CHANNEL_COLOURS[c],
-                    width: 2,
-                    points: row_series(c, 0, &image, a, b),
-                })
-                .collect();
-            if let Some(ri) = &reference_image {
-                for c in 0..3 {
-                    series.push(Series {
-                        label: if c == 0 {
-                            "reference bake".into()
-                        } else {
-                            String::new()
-                        },
-                        colour: RGBColor(0, 0, 0),
-                        width: 1,
-                        points: row_series(c, 0, ri, a, b),
-                    });
-                }
-            }
-            LinePlot {
-                title: format!("{} ({}): {title}", f.name, f.kind),
-                x_label: "scattering angle θ (°)".into(),
-                y_label: "Ams₁ = phase function (1/sr)".into(),
-                x_range: (a, b),
-                log_x: false,
-                log_y: true,
-                series,
-            }
+        let reference_image = reference_image(reference.as_ref(), f)?;
+        let curves = FieldCurves {
+            entry: f,
+            image: &image,
+            reference: reference_image.as_ref(),
+            step,
         };
         written.extend(save(
-            &phase(0.0, 180.0, "single scattering, per channel"),
+            &curves.phase(0.0, 180.0, "single scattering, per channel"),
             out,
             &format!("{}_phase", f.name),
             protected,
         )?);
-        let zooms: &[(&str, &str, f64, f64)] = match f.kind.name() {
-            "rain" => &[("rainbows", "primary and secondary rainbows", 120.0, 145.0)],
-            "cloud" => &[
-                ("corona", "corona", 0.0, 10.0),
-                ("glory", "glory", 165.0, 180.0),
-                ("fogbow", "fogbow", 120.0, 160.0),
-            ],
-            "ice" => &[("halos", "22° and 46° halos", 15.0, 50.0)],
-            _ => &[("no_halos", "10–60° (no halos expected)", 10.0, 60.0)],
-        };
-        for (slug, title, a, b) in zooms {
+        for (slug, title, a, b) in zooms(f.kind.name()) {
             written.extend(save(
-                &phase(*a, *b, title),
+                &curves.phase(*a, *b, title),
                 out,
                 &format!("{}_zoom_{slug}", f.name),
                 protected,
             )?);
         }
-        // The Ams_n family in the G channel.
-        let n_max = image.n_max();
-        let mut orders: Vec<usize> = [1, 2, 4, 8, 16]
-            .into_iter()
-            .filter(|&n| n < n_max)
-            .collect();
-        orders.push(n_max);
         written.extend(save(
-            &LinePlot {
-                title: format!("{}: Ams_n, channel G", f.name),
-                x_label: "scattering angle θ (°)".into(),
-                y_label: "Ams_n (1/sr)".into(),
-                x_range: (0.0, 180.0),
-                log_x: false,
-                log_y: true,
-                series: orders
-                    .iter()
-                    .enumerate()
-                    .map(|(j, &n)| Series {
-                        label: format!("n = {n}"),
-                        colour: FAMILY_COLOURS[j % FAMILY_COLOURS.len()],
-                        width: 2,
-                        points: row_series(1, n - 1, &image, 0.0, 180.0),
-                    })
-                    .collect(),
-            },
+            &curves.ams_family(),
             out,
             &format!("{}_ams_family", f.name),
             protected,
         )?);
-        for c in 0..3 {
-            forward.push(Series {
-                label: if c == 1 {
-                    f.name.clone()
-                } else {
-                    String::new()
-                },
-                colour: FAMILY_COLOURS[(i + 1) % FAMILY_COLOURS.len()],
-                width: if c == 1 { 2 } else { 1 },
-                points: image
-                    .forward_fractions(c)
-                    .iter()
-                    .enumerate()
-                    .map(|(n, &v)| ((n + 1) as f64, v))
-                    .collect(),
-            });
-        }
+        forward.extend(forward_series(i, f, &image));
         written.push(colour_strips(&image, step, out, &f.name, protected)?);
     }
     let n_max = manifest.fields.iter().map(|f| f.n_max).max().unwrap_or(1);
@@ -245,6 +145,145 @@ fn plot_bake(
         protected,
     )?);
     Ok(written)
+}
+
+/// The field `f`'s tables in the reference bake, where one is given.
+fn reference_image(reference: Option<&BakeDir>, f: &FieldEntry) -> Result<Option<FieldImage>> {
+    let Some(r) = reference else {
+        return Ok(None);
+    };
+    let entry = r.entry(&f.name).with_context(|| {
+        format!(
+            "field {:?} is not in the reference bake {}",
+            f.name,
+            r.dir.display()
+        )
+    })?;
+    Ok(Some(r.read_field(entry).with_context(|| {
+        format!("reference {}", r.dir.join(&entry.file).display())
+    })?))
+}
+
+/// The angle ranges worth a closer look in a field of this kind: (file slug, title, from, to in
+/// degrees).
+fn zooms(kind: &str) -> &'static [(&'static str, &'static str, f64, f64)] {
+    match kind {
+        "rain" => &[("rainbows", "primary and secondary rainbows", 120.0, 145.0)],
+        "cloud" => &[
+            ("corona", "corona", 0.0, 10.0),
+            ("glory", "glory", 165.0, 180.0),
+            ("fogbow", "fogbow", 120.0, 160.0),
+        ],
+        "ice" => &[("halos", "22° and 46° halos", 15.0, 50.0)],
+        _ => &[("no_halos", "10–60° (no halos expected)", 10.0, 60.0)],
+    }
+}
+
+/// One field's tables, and the reference bake's, as curves against θ.
+struct FieldCurves<'a> {
+    entry: &'a FieldEntry,
+    image: &'a FieldImage,
+    reference: Option<&'a FieldImage>,
+    /// Δθ, degrees.
+    step: f64,
+}
+
+impl FieldCurves<'_> {
+    /// Row `r` of channel `c` of `img` as (θ, value) points in [a, b]° where the value is > 0
+    /// (a log axis shows no zeros).
+    fn row(&self, img: &FieldImage, c: usize, r: usize, a: f64, b: f64) -> Vec<(f64, f64)> {
+        img.row(c, r)
+            .iter()
+            .enumerate()
+            .map(|(k, &v)| (k as f64 * self.step, v))
+            .filter(|&(t, v)| t >= a && t <= b && v > 0.0)
+            .collect()
+    }
+
+    /// Ams_1 per channel over [a, b]°, the reference bake's in black.
+    fn phase(&self, a: f64, b: f64, title: &str) -> LinePlot {
+        let f = self.entry;
+        let mut series: Vec<Series> = (0..3)
+            .map(|c| Series {
+                label: ["R", "G", "B"][c].to_string(),
+                colour: CHANNEL_COLOURS[c],
+                width: 2,
+                points: self.row(self.image, c, 0, a, b),
+            })
+            .collect();
+        if let Some(ri) = self.reference {
+            for c in 0..3 {
+                series.push(Series {
+                    label: if c == 0 {
+                        "reference bake".into()
+                    } else {
+                        String::new()
+                    },
+                    colour: RGBColor(0, 0, 0),
+                    width: 1,
+                    points: self.row(ri, c, 0, a, b),
+                });
+            }
+        }
+        LinePlot {
+            title: format!("{} ({}): {title}", f.name, f.kind),
+            x_label: "scattering angle θ (°)".into(),
+            y_label: "Ams₁ = phase function (1/sr)".into(),
+            x_range: (a, b),
+            log_x: false,
+            log_y: true,
+            series,
+        }
+    }
+
+    /// The Ams_n family in the G channel: n = 1, 2, 4, 8, 16 below N, and N.
+    fn ams_family(&self) -> LinePlot {
+        let n_max = self.image.n_max();
+        let mut orders: Vec<usize> = [1, 2, 4, 8, 16]
+            .into_iter()
+            .filter(|&n| n < n_max)
+            .collect();
+        orders.push(n_max);
+        LinePlot {
+            title: format!("{}: Ams_n, channel G", self.entry.name),
+            x_label: "scattering angle θ (°)".into(),
+            y_label: "Ams_n (1/sr)".into(),
+            x_range: (0.0, 180.0),
+            log_x: false,
+            log_y: true,
+            series: orders
+                .iter()
+                .enumerate()
+                .map(|(j, &n)| Series {
+                    label: format!("n = {n}"),
+                    colour: FAMILY_COLOURS[j % FAMILY_COLOURS.len()],
+                    width: 2,
+                    points: self.row(self.image, 1, n - 1, 0.0, 180.0),
+                })
+                .collect(),
+        }
+    }
+}
+
+/// F_n against n of the `i`-th field, one curve per channel (G thick, named after the field).
+fn forward_series(i: usize, f: &FieldEntry, image: &FieldImage) -> Vec<Series> {
+    (0..3)
+        .map(|c| Series {
+            label: if c == 1 {
+                f.name.clone()
+            } else {
+                String::new()
+            },
+            colour: FAMILY_COLOURS[(i + 1) % FAMILY_COLOURS.len()],
+            width: if c == 1 { 2 } else { 1 },
+            points: image
+                .forward_fractions(c)
+                .iter()
+                .enumerate()
+                .map(|(n, &v)| ((n + 1) as f64, v))
+                .collect(),
+        })
+        .collect()
 }
 
 /// sRGB strips, one per order n ∈ {1, 2, 4, 8}: column k is Ams_n(θ_k) as linear sRGB, exposed

@@ -12,7 +12,7 @@ use std::time::Instant;
 use anyhow::{Context, Result, bail};
 use bake::compare::{ChannelError, compare};
 use bake::scene::SpectralMode as Spectral;
-use bake::validate::validate;
+use bake::validate::{Report as ValidationReport, validate};
 use bake::{BakePlan, FieldKind, Knobs, Quality, Scene, Silent};
 use clap::Args as ClapArgs;
 use serde::Serialize;
@@ -61,30 +61,70 @@ struct Variant {
 pub fn run(a: TradeoffArgs) -> Result<()> {
     let scene = Scene::from_file_or_default(a.scene.as_deref())?;
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
-    let reference = match &a.reference {
+    let reference = reference_bake(&a, &scene)?;
+    let reference_checks = validate(&reference)?;
+    let standard = standard_knobs(&scene);
+    let variants = variants(&scene, standard, a.quick);
+    let mut rows = Vec::new();
+    for (i, v) in variants.iter().enumerate() {
+        eprintln!(
+            "tradeoff: {} = {} on {} ({}/{})",
+            v.knob,
+            v.value,
+            fields_name(v.drops),
+            i + 1,
+            variants.len()
+        );
+        let dir = a.out.join(format!("variant-{i:02}"));
+        rows.push(measure(&scene, v, &dir, &reference, &reference_checks)?);
+    }
+    print_table(&rows);
+    write_json(&a.out, &scene, &reference, standard, &rows)
+}
+
+/// The reference bake: `--reference`, or a bake at reference quality into the working
+/// directory.
+fn reference_bake(a: &TradeoffArgs, scene: &Scene) -> Result<PathBuf> {
+    Ok(match &a.reference {
         Some(r) => r.clone(),
         None => {
             let dir = a.out.join("reference");
             eprintln!("tradeoff: baking the reference ({})", dir.display());
             bake_variant(
-                &scene,
+                scene,
                 &dir,
                 Quality::Reference,
                 Quality::Reference.knobs_for(&scene.spectral),
             )?;
             dir
         }
-    };
-    let reference_checks = validate(&reference)?;
+    })
+}
 
-    let is_drop = |k: FieldKind| matches!(k, FieldKind::Cloud | FieldKind::Rain | FieldKind::Haze);
-    let has = |drops: bool| scene.fields.iter().any(|f| is_drop(f.kind) == drops);
-    // One knob moved at a time from the standard preset's, the drops at its fixed size count
-    // (no size noise target, whose pilot would choose the sizes anew for every variant).
-    let standard = Knobs {
+/// Whether a field of this kind is drops (spheres), not crystals.
+fn is_drop(kind: FieldKind) -> bool {
+    matches!(kind, FieldKind::Cloud | FieldKind::Rain | FieldKind::Haze)
+}
+
+/// "drops" or "crystals".
+fn fields_name(drops: bool) -> &'static str {
+    if drops { "drops" } else { "crystals" }
+}
+
+/// The knobs every variant moves one of: the standard preset's, the drops at its fixed size
+/// count (no size noise target, whose pilot would choose the sizes anew for every variant).
+fn standard_knobs(scene: &Scene) -> Knobs {
+    Knobs {
         size_noise: 0.0,
         ..Quality::Standard.knobs_for(&scene.spectral)
-    };
+    }
+}
+
+/// Every variant, in the order they are baked: the presets, then one knob moved at a time from
+/// `standard`, on the drops and on the crystals (each where the scene has such fields); fewer
+/// values with `quick`.
+fn variants(scene: &Scene, standard: Knobs, quick: bool) -> Vec<Variant> {
+    let has = |drops: bool| scene.fields.iter().any(|f| is_drop(f.kind) == drops);
     let mut variants = Vec::new();
     for drops in [true, false] {
         if !has(drops) {
@@ -100,178 +140,188 @@ pub fn run(a: TradeoffArgs) -> Result<()> {
             });
         }
     }
-    let pick = |full: Vec<f64>, quick: Vec<f64>| if a.quick { quick } else { full };
     if has(true) {
-        for s in pick(vec![32.0, 100.0, 1600.0], vec![100.0]) {
-            variants.push(Variant {
-                knob: "sizes per λ",
-                value: format!("{s}"),
-                drops: true,
-                knobs: Knobs {
-                    sizes: s as usize,
-                    ..standard
-                },
-                wavelengths: None,
-            });
-        }
-        for n in pick(vec![1.0, 4.0], vec![1.0]) {
-            variants.push(Variant {
-                knob: "nodes per angular panel",
-                value: format!("{n}"),
-                drops: true,
-                knobs: Knobs {
-                    nodes_per_panel: n as usize,
-                    ..standard
-                },
-                wavelengths: None,
-            });
-        }
-        for b in pick(vec![0.25, 0.5, 1.0], vec![0.5]) {
-            variants.push(Variant {
-                knob: "j ≥ 2 terms: steps blurred by (bins)",
-                value: format!("{b}"),
-                drops: true,
-                knobs: Knobs {
-                    reconstruction: tables::ams::Reconstruction::HeatKernel { blur_bins: b },
-                    ..standard
-                },
-                wavelengths: None,
-            });
-        }
-        if matches!(scene.spectral, Spectral::Spectral { .. }) {
-            for w in pick(vec![8.0, 16.0], vec![16.0]) {
-                variants.push(Variant {
-                    knob: "wavelengths",
-                    value: format!("{w}"),
-                    drops: true,
-                    knobs: standard,
-                    wavelengths: Some(w as usize),
-                });
-            }
-        }
+        variants.extend(drop_variants(scene, standard, quick));
     }
     if has(false) {
-        for n in pick(vec![0.02, 0.0045], vec![0.02]) {
-            variants.push(Variant {
-                knob: "crystal noise target",
-                value: format!("{n}"),
-                drops: false,
-                knobs: Knobs {
-                    crystal_noise: n,
-                    ..standard
-                },
-                wavelengths: None,
-            });
-        }
-        for r in pick(vec![1.5e5, 6e5, 2.4e6], vec![1.5e5]) {
-            variants.push(Variant {
-                knob: "rays per λ (no noise target)",
-                value: format!("{r:e}"),
-                drops: false,
-                knobs: Knobs {
-                    rays: r as u64,
-                    crystal_noise: 0.0,
-                    ..standard
-                },
-                wavelengths: None,
-            });
-        }
-        // The tracer's variance-reduction levers, each alone (mie::crystal::trace docs).
-        use mie::crystal::Sampling;
-        for (value, sampling, symmetric) in [
-            ("sobol", Sampling::Sobol, false),
-            ("random, fundamental domain", Sampling::Random, true),
-            ("sobol, fundamental domain", Sampling::Sobol, true),
-        ] {
-            if a.quick && value != "sobol, fundamental domain" {
-                continue;
-            }
-            variants.push(Variant {
-                knob: "ray sampling",
-                value: value.to_string(),
-                drops: false,
-                knobs: Knobs {
-                    ray_sampling: sampling,
-                    ray_symmetric: symmetric,
-                    rays: 600_000,
-                    crystal_noise: 0.0,
-                    ..standard
-                },
-                wavelengths: None,
-            });
-        }
-        for k in pick(vec![1.0, 2.0, 8.0], vec![1.0]) {
-            variants.push(Variant {
-                knob: "tilt splits (distorted crystals)",
-                value: format!("{k}"),
-                drops: false,
-                knobs: Knobs {
-                    tilt_splits: k as u32,
-                    rays: 600_000,
-                    crystal_noise: 0.0,
-                    ..standard
-                },
-                wavelengths: None,
-            });
-        }
+        variants.extend(crystal_variants(standard, quick));
     }
+    variants
+}
 
-    let mut rows = Vec::new();
-    for (i, v) in variants.iter().enumerate() {
-        let mut s = scene.clone();
-        s.fields.retain(|f| is_drop(f.kind) == v.drops);
-        if let (Some(w), Spectral::Spectral { min_nm, max_nm, .. }) = (v.wavelengths, s.spectral) {
-            s.spectral = Spectral::Spectral {
-                count: w,
-                min_nm,
-                max_nm,
-            };
-        }
-        let dir = a.out.join(format!("variant-{i:02}"));
-        eprintln!(
-            "tradeoff: {} = {} on {} ({}/{})",
-            v.knob,
-            v.value,
-            if v.drops { "drops" } else { "crystals" },
-            i + 1,
-            variants.len()
-        );
-        let seconds = bake_variant(&s, &dir, Quality::Standard, v.knobs)?;
-        let cmp = compare(&dir, &reference, 1.0)?;
-        let worst = |f: &dyn Fn(&ChannelError) -> f64| cmp.fields.iter().map(f).fold(0.0, f64::max);
-        let checks = validate(&dir)?;
-        let shift = checks
-            .checks
-            .iter()
-            .filter(|c| c.unit == "deg" && c.expected.is_some())
-            .filter_map(|c| {
-                let r = reference_checks
-                    .checks
-                    .iter()
-                    .find(|r| r.field == c.field && r.channel == c.channel && r.name == c.name)?;
-                Some((c.measured? - r.measured?).abs())
-            })
-            .reduce(f64::max);
-        rows.push(Row {
-            knob: v.knob.into(),
-            value: v.value.clone(),
-            fields: if v.drops { "drops" } else { "crystals" },
-            seconds,
-            rms_rel_ams1: worst(&|e| e.rms_rel_ams1),
-            max_rel_ams1: worst(&|e| e.max_rel_ams1),
-            rms_rel_all: worst(&|e| e.rms_rel_all),
-            max_abs_forward_fraction: worst(&|e| e.max_abs_forward_fraction),
-            max_peak_shift_deg: shift,
-        });
+/// The values a knob takes: all of `full`, or `few` with `quick`.
+fn pick(quick: bool, full: Vec<f64>, few: Vec<f64>) -> Vec<f64> {
+    if quick { few } else { full }
+}
+
+/// The drop knobs moved one at a time: sizes, Gauss nodes, the blur of the j ≥ 2 terms and
+/// (spectral scenes) the wavelength count.
+fn drop_variants(scene: &Scene, standard: Knobs, quick: bool) -> Vec<Variant> {
+    let mut variants = Vec::new();
+    let mut push = |knob, value, knobs, wavelengths| {
+        variants.push(Variant {
+            knob,
+            value,
+            drops: true,
+            knobs,
+            wavelengths,
+        })
+    };
+    for s in pick(quick, vec![32.0, 100.0, 1600.0], vec![100.0]) {
+        let knobs = Knobs {
+            sizes: s as usize,
+            ..standard
+        };
+        push("sizes per λ", format!("{s}"), knobs, None);
     }
-    print_table(&rows);
+    for n in pick(quick, vec![1.0, 4.0], vec![1.0]) {
+        let knobs = Knobs {
+            nodes_per_panel: n as usize,
+            ..standard
+        };
+        push("nodes per angular panel", format!("{n}"), knobs, None);
+    }
+    for b in pick(quick, vec![0.25, 0.5, 1.0], vec![0.5]) {
+        let knobs = Knobs {
+            reconstruction: tables::ams::Reconstruction::HeatKernel { blur_bins: b },
+            ..standard
+        };
+        push(
+            "j ≥ 2 terms: steps blurred by (bins)",
+            format!("{b}"),
+            knobs,
+            None,
+        );
+    }
+    if matches!(scene.spectral, Spectral::Spectral { .. }) {
+        for w in pick(quick, vec![8.0, 16.0], vec![16.0]) {
+            push("wavelengths", format!("{w}"), standard, Some(w as usize));
+        }
+    }
+    variants
+}
+
+/// The crystal knobs moved one at a time: the noise target, the rays without one, the tracer's
+/// variance-reduction levers (mie::crystal::trace docs) and the tilt splits.
+fn crystal_variants(standard: Knobs, quick: bool) -> Vec<Variant> {
+    use mie::crystal::Sampling;
+    let mut variants = Vec::new();
+    let mut push = |knob, value, knobs| {
+        variants.push(Variant {
+            knob,
+            value,
+            drops: false,
+            knobs,
+            wavelengths: None,
+        })
+    };
+    for n in pick(quick, vec![0.02, 0.0045], vec![0.02]) {
+        let knobs = Knobs {
+            crystal_noise: n,
+            ..standard
+        };
+        push("crystal noise target", format!("{n}"), knobs);
+    }
+    for r in pick(quick, vec![1.5e5, 6e5, 2.4e6], vec![1.5e5]) {
+        let knobs = Knobs {
+            rays: r as u64,
+            crystal_noise: 0.0,
+            ..standard
+        };
+        push("rays per λ (no noise target)", format!("{r:e}"), knobs);
+    }
+    for (value, sampling, symmetric) in [
+        ("sobol", Sampling::Sobol, false),
+        ("random, fundamental domain", Sampling::Random, true),
+        ("sobol, fundamental domain", Sampling::Sobol, true),
+    ] {
+        if quick && value != "sobol, fundamental domain" {
+            continue;
+        }
+        let knobs = Knobs {
+            ray_sampling: sampling,
+            ray_symmetric: symmetric,
+            rays: 600_000,
+            crystal_noise: 0.0,
+            ..standard
+        };
+        push("ray sampling", value.to_string(), knobs);
+    }
+    for k in pick(quick, vec![1.0, 2.0, 8.0], vec![1.0]) {
+        let knobs = Knobs {
+            tilt_splits: k as u32,
+            rays: 600_000,
+            crystal_noise: 0.0,
+            ..standard
+        };
+        push("tilt splits (distorted crystals)", format!("{k}"), knobs);
+    }
+    variants
+}
+
+/// Bakes variant `v` of `scene` (its drop or its crystal fields) from scratch into `dir`, and
+/// measures it against the reference bake and its validation checks.
+fn measure(
+    scene: &Scene,
+    v: &Variant,
+    dir: &Path,
+    reference: &Path,
+    reference_checks: &ValidationReport,
+) -> Result<Row> {
+    let mut s = scene.clone();
+    s.fields.retain(|f| is_drop(f.kind) == v.drops);
+    if let (Some(w), Spectral::Spectral { min_nm, max_nm, .. }) = (v.wavelengths, s.spectral) {
+        s.spectral = Spectral::Spectral {
+            count: w,
+            min_nm,
+            max_nm,
+        };
+    }
+    let seconds = bake_variant(&s, dir, Quality::Standard, v.knobs)?;
+    let cmp = compare(dir, reference, 1.0)?;
+    let worst = |f: &dyn Fn(&ChannelError) -> f64| cmp.fields.iter().map(f).fold(0.0, f64::max);
+    let checks = validate(dir)?;
+    let shift = checks
+        .checks
+        .iter()
+        .filter(|c| c.unit == "deg" && c.expected.is_some())
+        .filter_map(|c| {
+            let r = reference_checks
+                .checks
+                .iter()
+                .find(|r| r.field == c.field && r.channel == c.channel && r.name == c.name)?;
+            Some((c.measured? - r.measured?).abs())
+        })
+        .reduce(f64::max);
+    Ok(Row {
+        knob: v.knob.into(),
+        value: v.value.clone(),
+        fields: fields_name(v.drops),
+        seconds,
+        rms_rel_ams1: worst(&|e| e.rms_rel_ams1),
+        max_rel_ams1: worst(&|e| e.max_rel_ams1),
+        rms_rel_all: worst(&|e| e.rms_rel_all),
+        max_abs_forward_fraction: worst(&|e| e.max_abs_forward_fraction),
+        max_peak_shift_deg: shift,
+    })
+}
+
+/// Writes the rows with the scene, the reference and the standard knobs to
+/// `out/tradeoff.json`.
+fn write_json(
+    out: &Path,
+    scene: &Scene,
+    reference: &Path,
+    standard: Knobs,
+    rows: &[Row],
+) -> Result<()> {
     let json = serde_json::json!({
         "scene": scene.name,
         "reference": reference.display().to_string(),
         "standard_knobs": standard,
         "rows": rows,
     });
-    let path = a.out.join("tradeoff.json");
+    let path = out.join("tradeoff.json");
     std::fs::write(&path, serde_json::to_string_pretty(&json)?)
         .with_context(|| format!("writing {}", path.display()))?;
     eprintln!(

@@ -204,24 +204,61 @@ pub fn run(plan: &BakePlan, progress: &dyn Progress) -> Result<BakeReport, BakeE
     let start = Instant::now();
     let weights = ChannelWeights::new(&plan.scene.spectral)?;
     let grid = ThetaGrid::new(plan.scene.theta_step_deg)?;
-    let mut report = BakeReport {
-        scene: plan.scene.name.clone(),
-        out_dir: plan.out_dir.clone(),
-        quality: plan.quality,
-        computed: Vec::new(),
-        cached: Vec::new(),
-        rejected_cache: Vec::new(),
-        cleaned: Vec::new(),
-        seconds: 0.0,
-        peak_rss_mib: None,
-    };
+    let mut report = BakeReport::empty(plan);
     // Every check that needs no solver, before any work: the output directory can be written,
     // and every field's refractive index and size parameters are in range at every wavelength.
     preflight(plan, &weights)?;
     // Compute (or read from the cache) every field first; only then touch the tables, so a
     // failing field leaves the previous bake as it was.
-    // Cached fields first, then the others computed side by side (each field's numbers do not
-    // depend on what runs beside it), in scene order.
+    let lookups = look_up_cache(plan, &mut report.rejected_cache);
+    let (computed, encoded) = compute_and_encode(plan, &lookups, &weights, &grid, progress)?;
+    let done = take_results(lookups, computed, &mut report);
+    // Only now is the directory touched, under its lock: a pending commit of an interrupted
+    // bake is finished and dead writers' leftovers removed (format::commit).
+    let lock = BakeLock::acquire(&plan.out_dir)?;
+    report.cleaned = lock.clean_stale()?;
+    // The previous bake, and which of its fields this one keeps.
+    let previous = format::read_manifest(&plan.out_dir).ok();
+    let channels = channel_definitions(&weights);
+    let kept = kept_fields(plan, previous.as_ref(), &channels)?;
+    write_cache_records(plan, &done)?;
+    let manifest = publish(plan, &lock, done, encoded, kept, channels, grid.len())?;
+    remove_stale_tables(plan, previous, &manifest);
+    drop(lock);
+    report.seconds = start.elapsed().as_secs_f64();
+    report.peak_rss_mib = peak_rss_mib();
+    Ok(report)
+}
+
+impl BakeReport {
+    /// The report of `plan` before anything is done.
+    fn empty(plan: &BakePlan) -> Self {
+        Self {
+            scene: plan.scene.name.clone(),
+            out_dir: plan.out_dir.clone(),
+            quality: plan.quality,
+            computed: Vec::new(),
+            cached: Vec::new(),
+            rejected_cache: Vec::new(),
+            cleaned: Vec::new(),
+            seconds: 0.0,
+            peak_rss_mib: None,
+        }
+    }
+}
+
+/// A field of the scene, its content hash and cache record, and the bake the record holds if it
+/// could be used.
+struct CacheLookup<'a> {
+    field: &'a Field,
+    hash: String,
+    cache_file: PathBuf,
+    cached: Option<BakedField>,
+}
+
+/// Each field's cache record, in scene order; a record that could not be used is listed in
+/// `rejected` (file and why) and its field computed again.
+fn look_up_cache<'a>(plan: &'a BakePlan, rejected: &mut Vec<String>) -> Vec<CacheLookup<'a>> {
     let mut lookups = Vec::new();
     for field in &plan.scene.fields {
         let hash = content_hash(plan, field);
@@ -230,81 +267,131 @@ pub fn run(plan: &BakePlan, progress: &dyn Progress) -> Result<BakeReport, BakeE
             Lookup::Hit(r) => r.into_field(&field.name, plan.scene.theta_step_deg),
             Lookup::Missing => None,
             Lookup::Rejected(why) => {
-                report
-                    .rejected_cache
-                    .push(format!("{}: {why}", cache_file.display()));
+                rejected.push(format!("{}: {why}", cache_file.display()));
                 None
             }
         };
-        lookups.push((field, hash, cache_file, cached));
+        lookups.push(CacheLookup {
+            field,
+            hash,
+            cache_file,
+            cached,
+        });
     }
-    // Each field's four EXRs are encoded as soon as it is done, beside the fields still
-    // computing (their deflate and Biri's kernel fit had been a serial tail of every bake);
-    // they are written, in scene order, once every field is done.
-    struct Encoded {
-        table: Vec<u8>,
-        single: Vec<u8>,
-        poisson: Vec<u8>,
-        biri: Vec<u8>,
-    }
-    let encode = |result: &BakedField| -> Result<Encoded, BakeError> {
-        Ok(Encoded {
-            table: field_exr_bytes(&result.image)?,
-            single: format::single_exr_bytes(&result.single)?,
-            poisson: format::poisson_exr_bytes(&result.poisson)?,
-            // Biri's point-light kernel from Ams_1 per channel (cheap: not cached).
-            biri: format::biri_exr_bytes(&biri_kernel(&result.image))?,
-        })
-    };
+    lookups
+}
+
+/// A field's four EXRs, encoded.
+struct Encoded {
+    table: Vec<u8>,
+    single: Vec<u8>,
+    poisson: Vec<u8>,
+    biri: Vec<u8>,
+}
+
+/// The EXRs of one field's bake ([`Encoded`]).
+fn encode(result: &BakedField) -> Result<Encoded, BakeError> {
+    Ok(Encoded {
+        table: field_exr_bytes(&result.image)?,
+        single: format::single_exr_bytes(&result.single)?,
+        poisson: format::poisson_exr_bytes(&result.poisson)?,
+        // Biri's point-light kernel from Ams_1 per channel (cheap: not cached).
+        biri: format::biri_exr_bytes(&biri_kernel(&result.image))?,
+    })
+}
+
+/// Computes the fields the cache did not hold and encodes every field's EXRs, in scene order:
+/// the computed bakes (None where cached) and each field's EXRs. The fields run side by side
+/// (each field's numbers do not depend on what runs beside it), and each field's EXRs are
+/// encoded as soon as it is done, beside the fields still computing (their deflate and Biri's
+/// kernel fit had been a serial tail of every bake); they are written, in scene order, once
+/// every field is done.
+fn compute_and_encode(
+    plan: &BakePlan,
+    lookups: &[CacheLookup],
+    weights: &ChannelWeights,
+    grid: &ThetaGrid,
+    progress: &dyn Progress,
+) -> Result<(Vec<Option<BakedField>>, Vec<Encoded>), BakeError> {
     let computed: Vec<Result<(Option<BakedField>, Encoded), BakeError>> = lookups
         .par_iter()
-        .map(|(field, _, _, cached)| {
-            let computed = match cached {
+        .map(|lookup| {
+            let computed = match &lookup.cached {
                 Some(_) => None,
-                None => Some(compute_field(plan, field, &weights, &grid, progress)?),
+                None => Some(compute_field(plan, lookup.field, weights, grid, progress)?),
             };
-            let result = computed.as_ref().or(cached.as_ref());
+            let result = computed.as_ref().or(lookup.cached.as_ref());
             let encoded = encode(result.expect("a field cached or computed"))?;
             Ok((computed, encoded))
         })
         .collect();
     // The first failing field in scene order, whatever finished first.
-    let (computed, encoded): (Vec<Option<BakedField>>, Vec<Encoded>) = computed
+    Ok(computed
         .into_iter()
         .collect::<Result<Vec<_>, _>>()?
         .into_iter()
-        .unzip();
+        .unzip())
+}
+
+/// A field's bake, cached or computed, and where its new cache record goes (computed fields).
+struct Done<'a> {
+    field: &'a Field,
+    hash: String,
+    result: BakedField,
+    new_record: Option<PathBuf>,
+}
+
+/// Each field's bake from the cache or from this run, in scene order, listing each field in
+/// `report` as cached or computed.
+fn take_results<'a>(
+    lookups: Vec<CacheLookup<'a>>,
+    computed: Vec<Option<BakedField>>,
+    report: &mut BakeReport,
+) -> Vec<Done<'a>> {
     let mut done = Vec::new();
-    let mut fresh = Vec::new();
-    for ((field, hash, cache_file, cached), computed) in lookups.into_iter().zip(computed) {
-        let result = match (cached, computed) {
+    for (lookup, computed) in lookups.into_iter().zip(computed) {
+        let CacheLookup {
+            field,
+            hash,
+            cache_file,
+            cached,
+        } = lookup;
+        let (result, new_record) = match (cached, computed) {
             (Some(r), _) => {
                 report.cached.push(field.name.clone());
-                r
+                (r, None)
             }
             (None, Some(r)) => {
                 report.computed.push(field.name.clone());
-                fresh.push((done.len(), cache_file));
-                r
+                (r, Some(cache_file))
             }
             (None, None) => unreachable!("a field neither cached nor computed"),
         };
-        done.push((field, hash, result));
+        done.push(Done {
+            field,
+            hash,
+            result,
+            new_record,
+        });
     }
-    // Only now is the directory touched, under its lock: a pending commit of an interrupted
-    // bake is finished and dead writers' leftovers removed (format::commit).
-    let lock = BakeLock::acquire(&plan.out_dir)?;
-    report.cleaned = lock.clean_stale()?;
-    // The previous bake, and which of its fields this one keeps.
-    let previous = format::read_manifest(&plan.out_dir).ok();
-    let channels = channel_definitions(&weights);
+    done
+}
+
+/// The fields of the `previous` bake in the directory that this one keeps: with `plan.prune`
+/// none; else those of other names, if the previous bake is on the same grid and channels (an
+/// error if it is not and has such fields, which this bake would orphan).
+fn kept_fields(
+    plan: &BakePlan,
+    previous: Option<&Manifest>,
+    channels: &format::Channels,
+) -> Result<Vec<FieldEntry>, BakeError> {
     let mut kept: Vec<FieldEntry> = Vec::new();
     if !plan.prune
-        && let Some(previous) = &previous
+        && let Some(previous) = previous
     {
         // Keep the other fields of a compatible previous bake (same grid and channels).
         let compatible =
-            previous.theta_step_deg == plan.scene.theta_step_deg && previous.channels == channels;
+            previous.theta_step_deg == plan.scene.theta_step_deg && previous.channels == *channels;
         let ours = |old: &FieldEntry| {
             plan.scene
                 .fields
@@ -322,45 +409,40 @@ pub fn run(plan: &BakePlan, progress: &dyn Progress) -> Result<BakeReport, BakeE
         }
         kept = others.into_iter().cloned().collect();
     }
+    Ok(kept)
+}
+
+/// Writes the cache records of the fields computed in this run.
+fn write_cache_records(plan: &BakePlan, done: &[Done]) -> Result<(), BakeError> {
     let cache_dir = plan.out_dir.join(".cache");
     std::fs::create_dir_all(&cache_dir).map_err(|source| BakeError::Io {
         path: cache_dir.clone(),
         op: "creating",
         source,
     })?;
-    for (i, cache_file) in &fresh {
-        let (_, hash, result) = &done[*i];
-        cache::write(cache_file, hash, &Record::of(result))?;
+    for d in done {
+        if let Some(cache_file) = &d.new_record {
+            cache::write(cache_file, &d.hash, &Record::of(&d.result))?;
+        }
     }
-    // Stage the whole generation, then publish it in one rename (format::commit).
-    let mut stage = Staging::begin(&lock)?;
+    Ok(())
+}
+
+/// Stages the whole generation (every field's EXRs, the `kept` fields' entries and the
+/// manifest), then publishes it in one rename (format::commit); the manifest published.
+fn publish(
+    plan: &BakePlan,
+    lock: &BakeLock,
+    done: Vec<Done>,
+    encoded: Vec<Encoded>,
+    kept: Vec<FieldEntry>,
+    channels: format::Channels,
+    angle_count: usize,
+) -> Result<Manifest, BakeError> {
+    let mut stage = Staging::begin(lock)?;
     let mut entries = Vec::new();
-    for ((field, hash, result), bytes) in done.into_iter().zip(encoded) {
-        let file = format!("{}.exr", field.name);
-        stage.write(&file, &bytes.table)?;
-        let single_file = format::single_file_name(&field.name);
-        stage.write(&single_file, &bytes.single)?;
-        let poisson_file = format::poisson_file_name(&field.name);
-        stage.write(&poisson_file, &bytes.poisson)?;
-        let mut entry = field_entry(plan, field, &result, file, hash, &bytes.table);
-        entry.single_scattering = Some(format::manifest::FileRef {
-            file: single_file,
-            bytes: bytes.single.len() as u64,
-            crc32: format::crc32_hex(&bytes.single),
-        });
-        entry.poisson = Some(format::manifest::FileRef {
-            file: poisson_file,
-            bytes: bytes.poisson.len() as u64,
-            crc32: format::crc32_hex(&bytes.poisson),
-        });
-        let biri_file = format::biri_file_name(&field.name);
-        stage.write(&biri_file, &bytes.biri)?;
-        entry.biri_kernel = Some(format::manifest::FileRef {
-            file: biri_file,
-            bytes: bytes.biri.len() as u64,
-            crc32: format::crc32_hex(&bytes.biri),
-        });
-        entries.push(entry);
+    for (d, bytes) in done.into_iter().zip(encoded) {
+        entries.push(stage_field(&mut stage, plan, d, &bytes)?);
     }
     entries.extend(kept);
     let manifest = Manifest {
@@ -368,7 +450,7 @@ pub fn run(plan: &BakePlan, progress: &dyn Progress) -> Result<BakeReport, BakeE
         tool: "photometeor".into(),
         tool_version: env!("CARGO_PKG_VERSION").into(),
         theta_step_deg: plan.scene.theta_step_deg,
-        angle_count: grid.len(),
+        angle_count,
         channels,
         fields: entries,
     };
@@ -377,7 +459,43 @@ pub fn run(plan: &BakePlan, progress: &dyn Progress) -> Result<BakeReport, BakeE
         .map_err(|e| BakeError::Incompatible(format!("the new manifest: {}", e.what)))?;
     stage.write(format::MANIFEST_FILE, &manifest.to_json_bytes())?;
     stage.commit()?;
-    // Tables of fields the scene no longer has would be read as current: remove them.
+    Ok(manifest)
+}
+
+/// Stages one field's four EXRs; its manifest entry.
+fn stage_field(
+    stage: &mut Staging,
+    plan: &BakePlan,
+    d: Done,
+    bytes: &Encoded,
+) -> Result<FieldEntry, BakeError> {
+    let file = format!("{}.exr", d.field.name);
+    stage.write(&file, &bytes.table)?;
+    let single_file = format::single_file_name(&d.field.name);
+    stage.write(&single_file, &bytes.single)?;
+    let poisson_file = format::poisson_file_name(&d.field.name);
+    stage.write(&poisson_file, &bytes.poisson)?;
+    let mut entry = field_entry(plan, d.field, &d.result, file, d.hash, &bytes.table);
+    entry.single_scattering = Some(file_ref(single_file, &bytes.single));
+    entry.poisson = Some(file_ref(poisson_file, &bytes.poisson));
+    let biri_file = format::biri_file_name(&d.field.name);
+    stage.write(&biri_file, &bytes.biri)?;
+    entry.biri_kernel = Some(file_ref(biri_file, &bytes.biri));
+    Ok(entry)
+}
+
+/// The manifest's reference to a file of these bytes.
+fn file_ref(file: String, bytes: &[u8]) -> format::manifest::FileRef {
+    format::manifest::FileRef {
+        file,
+        bytes: bytes.len() as u64,
+        crc32: format::crc32_hex(bytes),
+    }
+}
+
+/// Removes the tables of the `previous` bake's fields that `manifest` no longer has: they would
+/// be read as current.
+fn remove_stale_tables(plan: &BakePlan, previous: Option<Manifest>, manifest: &Manifest) {
     if let Some(previous) = previous {
         for old in previous.fields {
             let stale = !manifest.fields.iter().any(|f| f.file == old.file);
@@ -390,10 +508,6 @@ pub fn run(plan: &BakePlan, progress: &dyn Progress) -> Result<BakeReport, BakeE
             }
         }
     }
-    drop(lock);
-    report.seconds = start.elapsed().as_secs_f64();
-    report.peak_rss_mib = peak_rss_mib();
-    Ok(report)
 }
 
 /// The solver's refusal of `field`'s inputs, with where it happened (`context`).
@@ -807,7 +921,6 @@ pub fn compute_field(
     progress: &dyn Progress,
 ) -> Result<BakedField, BakeError> {
     let start = Instant::now();
-    let knobs = plan.knobs;
     let lambdas = &weights.wavelengths_nm;
     let bar = progress.field(&field.name, lambdas.len() as u64 + 3);
     bar.message(if field.crystal.is_some() {
@@ -815,27 +928,12 @@ pub fn compute_field(
     } else {
         "Mie per wavelength"
     });
-    let Phases {
-        phases: per_wavelength,
-        size_errors,
-        sizes,
-    } = phase_functions(plan, field, weights, *grid, &|| bar.advance())?;
+    let phases = phase_functions(plan, field, weights, *grid, &|| bar.advance())?;
+    let per_wavelength = &phases.phases;
     // Channel c mixes wavelength j with a_cj = w_cj σ_sca,j / Σ_j w_cj σ_sca,j (the scattered
     // light's spectrum); every row is Σ_j a_cj Ams_n[P_j], light keeping its wavelength.
     bar.message("Legendre series per wavelength");
-    // One pass over the degrees per thread, its wavelengths sharing the bin integrals.
-    let per_thread = per_wavelength
-        .len()
-        .div_ceil(rayon::current_num_threads())
-        .max(1);
-    let series: Vec<AmsSeries> = per_wavelength
-        .par_chunks(per_thread)
-        .map(|chunk| {
-            let bins: Vec<&[f64]> = chunk.iter().map(|p| &p.bins[..]).collect();
-            AmsSeries::many(grid, &bins, knobs.reconstruction)
-        })
-        .collect::<Vec<_>>()
-        .concat();
+    let series = legendre_series(per_wavelength, grid, plan.knobs.reconstruction);
     bar.message("RGB and Ams_n");
     let orders: Vec<usize> = (1..=plan.scene.n_max).collect();
     let depths = plan.scene.poisson_depths();
@@ -844,7 +942,7 @@ pub fn compute_field(
         .map(|c| {
             let r = channel_tables(
                 &weights.weights[c],
-                &per_wavelength,
+                per_wavelength,
                 &series,
                 &orders,
                 &depths,
@@ -857,12 +955,67 @@ pub fn compute_field(
             field: field.name.clone(),
             source,
         })?;
-    let n = orders.len();
-    let k = grid.len();
-    let mut ams = Array3::zeros((3, n, k));
-    let mut poisson_rows = Array3::zeros((3, depths.len(), k));
-    let mut forward_fraction = Array2::zeros((3, n));
-    let mut summary = FieldSummary {
+    let mut summary = sampling_summary(field, &phases, weights, *grid);
+    let tables = ChannelArrays::gather(
+        channels,
+        &mut summary,
+        orders.len(),
+        depths.len(),
+        grid.len(),
+    );
+    bar.finish();
+    summary.seconds = start.elapsed().as_secs_f64();
+    let theta_step_deg = plan.scene.theta_step_deg;
+    Ok(BakedField {
+        single: single_scatter(field, theta_step_deg, lambdas, per_wavelength, grid.len()),
+        poisson: PoissonTable {
+            field: field.name.clone(),
+            theta_step_deg,
+            depths,
+            rows: tables.poisson_rows,
+        },
+        image: FieldImage {
+            field: field.name.clone(),
+            theta_step_deg,
+            ams: tables.ams,
+            forward_fraction: tables.forward_fraction,
+            extra_layers: Vec::new(),
+        },
+        summary,
+    })
+}
+
+/// The Legendre series of every wavelength's phase function, one pass over the degrees per
+/// thread, its wavelengths sharing the bin integrals.
+fn legendre_series(
+    per_wavelength: &[PhaseFunction],
+    grid: &ThetaGrid,
+    reconstruction: tables::ams::Reconstruction,
+) -> Vec<AmsSeries> {
+    let per_thread = per_wavelength
+        .len()
+        .div_ceil(rayon::current_num_threads())
+        .max(1);
+    per_wavelength
+        .par_chunks(per_thread)
+        .map(|chunk| {
+            let bins: Vec<&[f64]> = chunk.iter().map(|p| &p.bins[..]).collect();
+            AmsSeries::many(grid, &bins, reconstruction)
+        })
+        .collect::<Vec<_>>()
+        .concat()
+}
+
+/// A field's summary before its channels are filled in: how far its sampling went (the
+/// crystals' rays and noise, the drops' sizes and size noise).
+fn sampling_summary(
+    field: &Field,
+    phases: &Phases,
+    weights: &ChannelWeights,
+    grid: ThetaGrid,
+) -> FieldSummary {
+    let per_wavelength = &phases.phases;
+    FieldSummary {
         forward_peak_fraction: Default::default(),
         g: [0.0; 3],
         sigma_ext_m2: [0.0; 3],
@@ -876,41 +1029,81 @@ pub fn compute_field(
                 .filter_map(|p| p.crystal().map(|o| o.trace.rays))
                 .sum(),
             noise: channel_noises(
-                &per_wavelength,
+                per_wavelength,
                 weights,
-                *grid,
+                grid,
                 mie::crystal::noise_skips_pole(crystal.roughness),
             ),
         }),
-        sizes,
+        sizes: phases.sizes,
         size_noise: field.distribution.map(|_| {
-            let errors: Vec<&[f64]> = size_errors.iter().map(|e| &e[..]).collect();
-            mixed_noises(&per_wavelength, &errors, weights, *grid, false)
+            let errors: Vec<&[f64]> = phases.size_errors.iter().map(|e| &e[..]).collect();
+            mixed_noises(per_wavelength, &errors, weights, grid, false)
         }),
-    };
-    for (c, ch) in channels.into_iter().enumerate() {
-        ams.slice_mut(s![c, .., ..]).assign(&ch.rows);
-        poisson_rows.slice_mut(s![c, .., ..]).assign(&ch.poisson);
-        for (r, f) in ch.forward_fraction.iter().enumerate() {
-            forward_fraction[[c, r]] = *f;
-        }
-        summary.forward_peak_fraction[c] = ch.forward_peak_fraction;
-        summary.g[c] = ch.g;
-        summary.sigma_ext_m2[c] = ch.sigma_ext_m2;
-        summary.albedo[c] = ch.albedo;
-        for e in 0..N_ISO_EPSILONS.len() {
-            summary.n_isotropic[e][c] = ch.n_isotropic[e];
-        }
-        summary.l_max = ch.l_max;
     }
-    bar.finish();
-    summary.seconds = start.elapsed().as_secs_f64();
-    let single = SingleScatter {
+}
+
+/// The three channels' tables side by side, as the field's EXRs hold them.
+struct ChannelArrays {
+    /// Ams_n, (channel, row, angle).
+    ams: Array3<f64>,
+    /// The Poisson mixtures, (channel, depth, angle).
+    poisson_rows: Array3<f64>,
+    /// F_n, (channel, row).
+    forward_fraction: Array2<f64>,
+}
+
+impl ChannelArrays {
+    /// Stacks the `channels` (n rows, `depth_count` Poisson depths and `angle_count` angles
+    /// each), and puts their numbers into `summary`.
+    fn gather(
+        channels: Vec<ChannelResult>,
+        summary: &mut FieldSummary,
+        n: usize,
+        depth_count: usize,
+        angle_count: usize,
+    ) -> Self {
+        let k = angle_count;
+        let mut ams = Array3::zeros((3, n, k));
+        let mut poisson_rows = Array3::zeros((3, depth_count, k));
+        let mut forward_fraction = Array2::zeros((3, n));
+        for (c, ch) in channels.into_iter().enumerate() {
+            ams.slice_mut(s![c, .., ..]).assign(&ch.rows);
+            poisson_rows.slice_mut(s![c, .., ..]).assign(&ch.poisson);
+            for (r, f) in ch.forward_fraction.iter().enumerate() {
+                forward_fraction[[c, r]] = *f;
+            }
+            summary.forward_peak_fraction[c] = ch.forward_peak_fraction;
+            summary.g[c] = ch.g;
+            summary.sigma_ext_m2[c] = ch.sigma_ext_m2;
+            summary.albedo[c] = ch.albedo;
+            for e in 0..N_ISO_EPSILONS.len() {
+                summary.n_isotropic[e][c] = ch.n_isotropic[e];
+            }
+            summary.l_max = ch.l_max;
+        }
+        Self {
+            ams,
+            poisson_rows,
+            forward_fraction,
+        }
+    }
+}
+
+/// The single-scattering optics per wavelength, as written to `<name>.single.exr`.
+fn single_scatter(
+    field: &Field,
+    theta_step_deg: f64,
+    lambdas: &[f64],
+    per_wavelength: &[PhaseFunction],
+    angle_count: usize,
+) -> SingleScatter {
+    SingleScatter {
         field: field.name.clone(),
-        theta_step_deg: plan.scene.theta_step_deg,
-        wavelengths_nm: lambdas.clone(),
-        bins: Array2::from_shape_fn((per_wavelength.len(), k), |(j, kk)| {
-            per_wavelength[j].bins[kk]
+        theta_step_deg,
+        wavelengths_nm: lambdas.to_vec(),
+        bins: Array2::from_shape_fn((per_wavelength.len(), angle_count), |(j, k)| {
+            per_wavelength[j].bins[k]
         }),
         forward_delta_fraction: per_wavelength
             .iter()
@@ -918,24 +1111,7 @@ pub fn compute_field(
             .collect(),
         sigma_ext_m2: per_wavelength.iter().map(|p| p.sigma_ext_m2).collect(),
         albedo: per_wavelength.iter().map(|p| p.albedo).collect(),
-    };
-    Ok(BakedField {
-        single,
-        poisson: PoissonTable {
-            field: field.name.clone(),
-            theta_step_deg: plan.scene.theta_step_deg,
-            depths,
-            rows: poisson_rows,
-        },
-        image: FieldImage {
-            field: field.name.clone(),
-            theta_step_deg: plan.scene.theta_step_deg,
-            ams,
-            forward_fraction,
-            extra_layers: Vec::new(),
-        },
-        summary,
-    })
+    }
 }
 
 /// Gauss nodes per bin. A distribution averages the ripple of each size (period ≈ π/x in θ)
