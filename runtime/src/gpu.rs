@@ -30,7 +30,7 @@ use std::time::Instant;
 use thiserror::Error;
 use wgpu::util::DeviceExt;
 
-use crate::load::Tables;
+use crate::load::{FieldTable, Tables};
 
 /// The sampling functions; a shader includes this text and binds [`GpuTables::bind_group`] as
 /// group 0.
@@ -177,101 +177,11 @@ impl GpuTables {
     pub fn upload(gpu: &Gpu, tables: &Tables, format: TexelFormat) -> Result<Self, GpuError> {
         let start = Instant::now();
         let device = &gpu.device;
-        let limits = device.limits();
-        let k_len = tables.angle_count;
         let n_stride = tables.fields.iter().map(|f| f.n_max()).max().unwrap_or(1);
-        let layers = tables.fields.len().max(1);
-        for (what, value, limit) in [
-            ("angle count K", k_len, limits.max_texture_dimension_2d),
-            ("orders N", n_stride, limits.max_texture_dimension_2d),
-            ("fields", layers, limits.max_texture_array_layers),
-        ] {
-            if value as u64 > limit as u64 {
-                return Err(GpuError::Limit {
-                    what,
-                    value: value as u64,
-                    limit: limit as u64,
-                });
-            }
-        }
+        check_table_limits(&device.limits(), tables, n_stride)?;
         let half = format == TexelFormat::Auto && fits_half(tables);
-        let texel_format = if half {
-            wgpu::TextureFormat::Rgba16Float
-        } else {
-            wgpu::TextureFormat::Rgba32Float
-        };
-        let texture = device.create_texture(&wgpu::TextureDescriptor {
-            label: Some("photometeor Ams_n table array"),
-            size: wgpu::Extent3d {
-                width: k_len as u32,
-                height: n_stride as u32,
-                depth_or_array_layers: layers as u32,
-            },
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D2,
-            format: texel_format,
-            usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
-            view_formats: &[],
-        });
-        let texel_bytes = if half { 8 } else { 16 };
-        for (i, f) in tables.fields.iter().enumerate() {
-            let mut bytes = Vec::with_capacity(k_len * n_stride * texel_bytes);
-            for r in 0..n_stride {
-                let row = r.min(f.n_max() - 1);
-                for k in 0..k_len {
-                    let ams = &f.image.ams;
-                    let texel = [ams[[0, row, k]], ams[[1, row, k]], ams[[2, row, k]], 0.0];
-                    for v in texel {
-                        if half {
-                            bytes.extend_from_slice(&half::f16::from_f64(v).to_le_bytes());
-                        } else {
-                            bytes.extend_from_slice(&(v as f32).to_le_bytes());
-                        }
-                    }
-                }
-            }
-            gpu.queue.write_texture(
-                wgpu::TexelCopyTextureInfo {
-                    texture: &texture,
-                    mip_level: 0,
-                    origin: wgpu::Origin3d {
-                        x: 0,
-                        y: 0,
-                        z: i as u32,
-                    },
-                    aspect: wgpu::TextureAspect::All,
-                },
-                &bytes,
-                wgpu::TexelCopyBufferLayout {
-                    offset: 0,
-                    bytes_per_row: Some((k_len * texel_bytes) as u32),
-                    rows_per_image: Some(n_stride as u32),
-                },
-                wgpu::Extent3d {
-                    width: k_len as u32,
-                    height: n_stride as u32,
-                    depth_or_array_layers: 1,
-                },
-            );
-        }
-        let mut ff = Vec::with_capacity(layers * n_stride * 4);
-        let mut info = Vec::with_capacity(layers * 4);
-        for f in &tables.fields {
-            for n in 0..n_stride {
-                let r = n.min(f.n_max() - 1);
-                for c in 0..3 {
-                    ff.push(f.image.forward_fraction[[c, r]] as f32);
-                }
-                ff.push(0.0);
-            }
-            info.push(f.n_max() as f32);
-            info.extend(f.sigma_sca_m2.iter().map(|&s| s as f32));
-        }
-        if tables.fields.is_empty() {
-            ff.extend([0.0f32; 4]);
-            info.extend([1.0f32, 0.0, 0.0, 0.0]);
-        }
+        let texture = upload_ams(gpu, tables, n_stride, half);
+        let (ff, info) = forward_fraction_and_info(tables, n_stride);
         let storage = |label: &str, data: &[f32]| {
             device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
                 label: Some(label),
@@ -283,66 +193,27 @@ impl GpuTables {
         let field_info = storage("photometeor field info", &info);
         let (model_texture, models) = upload_models(gpu, tables)?;
         let model_depths = storage("photometeor model depths", &models.depths);
-        let inv_step = 1.0 / tables.theta_step_deg.to_radians();
-        let params = AmsParams {
-            angle_count: k_len as u32,
-            n_stride: n_stride as u32,
-            field_count: tables.fields.len() as u32,
-            inv_step_rad: inv_step as f32,
-            ..Default::default()
-        };
-        let params = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("photometeor table params"),
-            contents: bytemuck::bytes_of(&params),
-            usage: wgpu::BufferUsages::UNIFORM,
-        });
+        let params = params_buffer(device, tables, n_stride);
         let layout = Self::bind_group_layout(device);
-        let array_view = |texture: &wgpu::Texture, label| {
-            texture.create_view(&wgpu::TextureViewDescriptor {
-                label: Some(label),
-                dimension: Some(wgpu::TextureViewDimension::D2Array),
-                ..Default::default()
-            })
-        };
-        let view = array_view(&texture, "photometeor Ams_n table view");
-        let model_view = array_view(&model_texture, "photometeor model table view");
-        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("photometeor tables"),
-            layout: &layout,
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: wgpu::BindingResource::TextureView(&view),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: forward_fraction.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: field_info.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 3,
-                    resource: params.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 4,
-                    resource: wgpu::BindingResource::TextureView(&model_view),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 5,
-                    resource: model_depths.as_entire_binding(),
-                },
-            ],
-        });
+        let bind_group = bind_tables(
+            device,
+            &layout,
+            TableResources {
+                texture: &texture,
+                forward_fraction: &forward_fraction,
+                field_info: &field_info,
+                params: &params,
+                model_texture: &model_texture,
+                model_depths: &model_depths,
+            },
+        );
         gpu.queue.submit([]);
         device
             .poll(wgpu::PollType::wait_indefinitely())
             .map_err(|e| GpuError::Device(e.to_string()))?;
         Ok(Self {
             texture,
-            format: texel_format,
+            format: ams_texel_format(half),
             forward_fraction,
             field_info,
             params,
@@ -399,6 +270,211 @@ impl GpuTables {
             ],
         })
     }
+}
+
+/// Fails when the Ams texture (K × `n_stride` texels, a layer per field) exceeds a device limit.
+fn check_table_limits(
+    limits: &wgpu::Limits,
+    tables: &Tables,
+    n_stride: usize,
+) -> Result<(), GpuError> {
+    let layers = tables.fields.len().max(1);
+    for (what, value, limit) in [
+        (
+            "angle count K",
+            tables.angle_count,
+            limits.max_texture_dimension_2d,
+        ),
+        ("orders N", n_stride, limits.max_texture_dimension_2d),
+        ("fields", layers, limits.max_texture_array_layers),
+    ] {
+        if value as u64 > limit as u64 {
+            return Err(GpuError::Limit {
+                what,
+                value: value as u64,
+                limit: limit as u64,
+            });
+        }
+    }
+    Ok(())
+}
+
+/// The Ams texture's format: `Rgba16Float` with `half`, else `Rgba32Float`.
+fn ams_texel_format(half: bool) -> wgpu::TextureFormat {
+    if half {
+        wgpu::TextureFormat::Rgba16Float
+    } else {
+        wgpu::TextureFormat::Rgba32Float
+    }
+}
+
+/// The Ams_n texture array (binding 0), filled layer by layer from [`ams_layer_bytes`].
+fn upload_ams(gpu: &Gpu, tables: &Tables, n_stride: usize, half: bool) -> wgpu::Texture {
+    let k_len = tables.angle_count;
+    let layers = tables.fields.len().max(1);
+    let texture = gpu.device.create_texture(&wgpu::TextureDescriptor {
+        label: Some("photometeor Ams_n table array"),
+        size: wgpu::Extent3d {
+            width: k_len as u32,
+            height: n_stride as u32,
+            depth_or_array_layers: layers as u32,
+        },
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format: ams_texel_format(half),
+        usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+        view_formats: &[],
+    });
+    let texel_bytes = if half { 8 } else { 16 };
+    for (i, f) in tables.fields.iter().enumerate() {
+        let bytes = ams_layer_bytes(f, k_len, n_stride, half);
+        gpu.queue.write_texture(
+            wgpu::TexelCopyTextureInfo {
+                texture: &texture,
+                mip_level: 0,
+                origin: wgpu::Origin3d {
+                    x: 0,
+                    y: 0,
+                    z: i as u32,
+                },
+                aspect: wgpu::TextureAspect::All,
+            },
+            &bytes,
+            wgpu::TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: Some((k_len * texel_bytes) as u32),
+                rows_per_image: Some(n_stride as u32),
+            },
+            wgpu::Extent3d {
+                width: k_len as u32,
+                height: n_stride as u32,
+                depth_or_array_layers: 1,
+            },
+        );
+    }
+    texture
+}
+
+/// One field's layer of the Ams texture: texel (k, r) = Ams_{r+1}(θ_k) RGB, A = 0, as half or
+/// 32-bit floats; rows past the field's N repeat its last row (module docs).
+fn ams_layer_bytes(f: &FieldTable, k_len: usize, n_stride: usize, half: bool) -> Vec<u8> {
+    let texel_bytes = if half { 8 } else { 16 };
+    let mut bytes = Vec::with_capacity(k_len * n_stride * texel_bytes);
+    for r in 0..n_stride {
+        let row = r.min(f.n_max() - 1);
+        for k in 0..k_len {
+            let ams = &f.image.ams;
+            let texel = [ams[[0, row, k]], ams[[1, row, k]], ams[[2, row, k]], 0.0];
+            for v in texel {
+                if half {
+                    bytes.extend_from_slice(&half::f16::from_f64(v).to_le_bytes());
+                } else {
+                    bytes.extend_from_slice(&(v as f32).to_le_bytes());
+                }
+            }
+        }
+    }
+    bytes
+}
+
+/// The contents of bindings 1 and 2 (module docs): F_n per field, `n_stride` rows each (a
+/// field with fewer orders repeats its last), and (N, σ_sca R, G, B) per field; one row of
+/// each for no fields.
+fn forward_fraction_and_info(tables: &Tables, n_stride: usize) -> (Vec<f32>, Vec<f32>) {
+    let layers = tables.fields.len().max(1);
+    let mut ff = Vec::with_capacity(layers * n_stride * 4);
+    let mut info = Vec::with_capacity(layers * 4);
+    for f in &tables.fields {
+        for n in 0..n_stride {
+            let r = n.min(f.n_max() - 1);
+            for c in 0..3 {
+                ff.push(f.image.forward_fraction[[c, r]] as f32);
+            }
+            ff.push(0.0);
+        }
+        info.push(f.n_max() as f32);
+        info.extend(f.sigma_sca_m2.iter().map(|&s| s as f32));
+    }
+    if tables.fields.is_empty() {
+        ff.extend([0.0f32; 4]);
+        info.extend([1.0f32, 0.0, 0.0, 0.0]);
+    }
+    (ff, info)
+}
+
+/// The `ams_params` uniform (binding 3).
+fn params_buffer(device: &wgpu::Device, tables: &Tables, n_stride: usize) -> wgpu::Buffer {
+    let inv_step = 1.0 / tables.theta_step_deg.to_radians();
+    let params = AmsParams {
+        angle_count: tables.angle_count as u32,
+        n_stride: n_stride as u32,
+        field_count: tables.fields.len() as u32,
+        inv_step_rad: inv_step as f32,
+        ..Default::default()
+    };
+    device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some("photometeor table params"),
+        contents: bytemuck::bytes_of(&params),
+        usage: wgpu::BufferUsages::UNIFORM,
+    })
+}
+
+/// The resources bind group 0 binds, in binding order.
+struct TableResources<'a> {
+    texture: &'a wgpu::Texture,
+    forward_fraction: &'a wgpu::Buffer,
+    field_info: &'a wgpu::Buffer,
+    params: &'a wgpu::Buffer,
+    model_texture: &'a wgpu::Texture,
+    model_depths: &'a wgpu::Buffer,
+}
+
+/// Bind group 0 (module docs) over `r`, the textures viewed as 2-D arrays.
+fn bind_tables(
+    device: &wgpu::Device,
+    layout: &wgpu::BindGroupLayout,
+    r: TableResources,
+) -> wgpu::BindGroup {
+    let array_view = |texture: &wgpu::Texture, label| {
+        texture.create_view(&wgpu::TextureViewDescriptor {
+            label: Some(label),
+            dimension: Some(wgpu::TextureViewDimension::D2Array),
+            ..Default::default()
+        })
+    };
+    let view = array_view(r.texture, "photometeor Ams_n table view");
+    let model_view = array_view(r.model_texture, "photometeor model table view");
+    device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some("photometeor tables"),
+        layout,
+        entries: &[
+            wgpu::BindGroupEntry {
+                binding: 0,
+                resource: wgpu::BindingResource::TextureView(&view),
+            },
+            wgpu::BindGroupEntry {
+                binding: 1,
+                resource: r.forward_fraction.as_entire_binding(),
+            },
+            wgpu::BindGroupEntry {
+                binding: 2,
+                resource: r.field_info.as_entire_binding(),
+            },
+            wgpu::BindGroupEntry {
+                binding: 3,
+                resource: r.params.as_entire_binding(),
+            },
+            wgpu::BindGroupEntry {
+                binding: 4,
+                resource: wgpu::BindingResource::TextureView(&model_view),
+            },
+            wgpu::BindGroupEntry {
+                binding: 5,
+                resource: r.model_depths.as_entire_binding(),
+            },
+        ],
+    })
 }
 
 /// The contents of bindings 4 and 5 (module docs), as plain arrays.
