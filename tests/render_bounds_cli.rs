@@ -308,3 +308,51 @@ fn render_outputs_never_replace_a_device_a_directory_or_the_bake() {
         eprintln!("mknod not permitted here: the device case is not run");
     }
 }
+
+#[test]
+fn a_render_that_finds_its_tables_being_baked_waits_and_uses_them() {
+    let dir = workdir("bounds-lock");
+    fs::write(dir.join("scene.toml"), scene("")).unwrap();
+    let render = || {
+        Command::new(env!("CARGO_BIN_EXE_photometeor"))
+            .args([
+                "render",
+                "scene.toml",
+                "--tables",
+                "tables",
+                "--out",
+                "out.exr",
+                "--cpu",
+            ])
+            .current_dir(&dir)
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap()
+    };
+    // A first render bakes the tables; then this process holds the bake's lock as a bake in
+    // progress would.
+    assert!(render().wait().unwrap().success());
+    let manifest = fs::read(dir.join("tables/manifest.json")).unwrap();
+    let exr = fs::read(dir.join("tables/cloud.exr")).unwrap();
+    let lock = format::BakeLock::acquire(&dir.join("tables")).unwrap();
+    let child = render();
+    std::thread::sleep(std::time::Duration::from_secs(2));
+    let mut child = child;
+    assert!(
+        child.try_wait().unwrap().is_none(),
+        "the render did not wait for the bake's lock"
+    );
+    drop(lock);
+    let out = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    let pid = std::process::id().to_string();
+    assert!(
+        stderr.contains(&format!("waiting for process {pid}, which is baking")),
+        "{stderr}"
+    );
+    // It used the tables it waited for: the bake is as it was.
+    assert_eq!(fs::read(dir.join("tables/manifest.json")).unwrap(), manifest);
+    assert_eq!(fs::read(dir.join("tables/cloud.exr")).unwrap(), exr);
+    assert!(dir.join("out.exr").is_file());
+}

@@ -266,7 +266,7 @@ pub fn prepare(
     let mut plan = BakePlan::for_preset(scene, dir.clone(), quality);
     // A render bakes only what its volumes use and never removes another field's tables.
     plan.prune = false;
-    bake::run(&plan, &Bars::new(quiet))?;
+    bake_waiting(&plan, quiet)?;
     let names: Vec<&str> = used.iter().map(String::as_str).collect();
     let tables = Tables::open_fields(&dir, Some(&names))?;
     Ok(Prepared {
@@ -274,6 +274,27 @@ pub fn prepare(
         model: settings,
         tables,
     })
+}
+
+/// Bakes `plan`; where another process is baking the same directory (a second render of the
+/// scene), waits for it, saying so, and then takes what it wrote from the cache.
+fn bake_waiting(plan: &BakePlan, quiet: bool) -> Result<()> {
+    loop {
+        format::BakeLock::wait_until_free(&plan.out_dir, |holder| {
+            if !quiet {
+                eprintln!(
+                    "waiting for process {holder}, which is baking {}; its tables will be used",
+                    plan.out_dir.display()
+                );
+            }
+        })?;
+        // The lock can be taken again between the wait and the bake's own lock (a third
+        // process); wait again then.
+        match bake::run(plan, &Bars::new(quiet)) {
+            Err(bake::BakeError::Commit(format::CommitError::Locked { .. })) => continue,
+            r => return r.map(|_| ()).map_err(Into::into),
+        }
+    }
 }
 
 /// The memory a frame may take (bytes): `--max-memory` GiB, else the memory available now

@@ -139,6 +139,31 @@ impl BakeLock {
         })
     }
 
+    /// Waits while another process holds `dir`'s lock, calling `waiting` once with its PID (or
+    /// "unknown") before the wait; returns at once when nobody holds it or `dir` has no lock
+    /// file. Takes nothing: a writer still calls [`BakeLock::acquire`] after, and may find the
+    /// lock taken again by a third process.
+    pub fn wait_until_free(dir: &Path, waiting: impl FnOnce(&str)) -> Result<(), CommitError> {
+        let path = dir.join(LOCK_FILE);
+        let mut file = match OpenOptions::new().read(true).write(true).open(&path) {
+            Ok(f) => f,
+            Err(e) if e.kind() == io::ErrorKind::NotFound => return Ok(()),
+            Err(e) => return Err(io_error(&path, "opening the lock file")(e)),
+        };
+        match file.try_lock() {
+            Ok(()) => return Ok(()),
+            Err(fs::TryLockError::WouldBlock) => {}
+            Err(fs::TryLockError::Error(e)) => return Err(io_error(&path, "locking")(e)),
+        }
+        let mut holder = String::new();
+        let _ = file.read_to_string(&mut holder);
+        let holder = holder.trim();
+        waiting(if holder.is_empty() { "unknown" } else { holder });
+        // Blocks until the holder's lock goes (its bake ends or it dies); dropping the file
+        // releases ours.
+        file.lock().map_err(io_error(&path, "waiting for the lock"))
+    }
+
     /// The locked directory.
     pub fn dir(&self) -> &Path {
         &self.dir
