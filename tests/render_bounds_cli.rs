@@ -250,7 +250,7 @@ fn hopeless_optical_depths_are_refused_before_any_path() {
     let e = String::from_utf8_lossy(&o.stderr);
     assert_eq!(o.status.code(), Some(2), "{e}");
     assert!(
-        e.contains("a column of the [[volume]] grid of field \"cloud\" has optical depth")
+        e.contains("a point of the [[volume]] grid of field \"cloud\" has optical depth")
             && e.contains("more than the 1000"),
         "{e}"
     );
@@ -352,7 +352,10 @@ fn a_render_that_finds_its_tables_being_baked_waits_and_uses_them() {
         "{stderr}"
     );
     // It used the tables it waited for: the bake is as it was.
-    assert_eq!(fs::read(dir.join("tables/manifest.json")).unwrap(), manifest);
+    assert_eq!(
+        fs::read(dir.join("tables/manifest.json")).unwrap(),
+        manifest
+    );
     assert_eq!(fs::read(dir.join("tables/cloud.exr")).unwrap(), exr);
     assert!(dir.join("out.exr").is_file());
 }

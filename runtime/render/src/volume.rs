@@ -24,25 +24,38 @@ pub struct DensityGrid {
 }
 
 impl DensityGrid {
-    /// The largest ∫ ρ dl of field `f` along a grid line of voxels parallel to an axis
-    /// (particles/m²): with σ_ext, the deepest axis-aligned column's optical depth.
-    pub fn deepest_column(&self, f: usize) -> f64 {
+    /// How deep inside field `f` a point of the grid can lie (particles/m²; with σ_ext, an
+    /// optical depth): at each voxel with particles, the least ∫ ρ dl over the three
+    /// axis-parallel grid lines through it (a path escapes along the thinnest), the largest
+    /// over the voxels. A thin wide layer is as thin as its thickness.
+    pub fn deepest_point(&self, f: usize) -> f64 {
         let [nx, ny, nz] = self.dims;
         let h: [f64; 3] =
             std::array::from_fn(|a| (self.max_m[a] - self.min_m[a]) / self.dims[a] as f64);
         let at = |x: usize, y: usize, z: usize| f64::from(self.data[x + nx * (y + ny * z)][f]);
+        // The column sums along x (per y, z), y (per x, z) and z (per x, y).
+        let mut along = [vec![0.0; ny * nz], vec![0.0; nx * nz], vec![0.0; nx * ny]];
+        for z in 0..nz {
+            for y in 0..ny {
+                for x in 0..nx {
+                    let rho = at(x, y, z);
+                    along[0][y + ny * z] += rho * h[0];
+                    along[1][x + nx * z] += rho * h[1];
+                    along[2][x + nx * y] += rho * h[2];
+                }
+            }
+        }
         let mut deepest: f64 = 0.0;
         for z in 0..nz {
             for y in 0..ny {
-                deepest = deepest.max((0..nx).map(|x| at(x, y, z)).sum::<f64>() * h[0]);
-            }
-            for x in 0..nx {
-                deepest = deepest.max((0..ny).map(|y| at(x, y, z)).sum::<f64>() * h[1]);
-            }
-        }
-        for y in 0..ny {
-            for x in 0..nx {
-                deepest = deepest.max((0..nz).map(|z| at(x, y, z)).sum::<f64>() * h[2]);
+                for x in 0..nx {
+                    if at(x, y, z) > 0.0 {
+                        let least = along[0][y + ny * z]
+                            .min(along[1][x + nx * z])
+                            .min(along[2][x + nx * y]);
+                        deepest = deepest.max(least);
+                    }
+                }
             }
         }
         deepest

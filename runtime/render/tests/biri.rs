@@ -450,6 +450,67 @@ fn bad_scenes_are_refused_naming_the_value_file_and_line() {
         "biri",
     );
     assert!(e.contains("bad.obj:4:") && e.contains("\"x\""), "{e}");
+    // A light inside a closed OBJ mesh is refused like one inside a box or a sphere, by every
+    // model that draws occluders; one in the hole of the torus is not inside it.
+    std::fs::write(
+        dir.join("cube.obj"),
+        "v -1 3 4\nv 1 3 4\nv 1 5 4\nv -1 5 4\nv -1 3 6\nv 1 3 6\nv 1 5 6\nv -1 5 6\n\
+         f 1 3 2\nf 1 4 3\nf 5 6 7\nf 5 7 8\nf 1 2 6\nf 1 6 5\nf 4 7 3\nf 4 8 7\n\
+         f 1 5 8\nf 1 8 4\nf 2 3 7\nf 2 7 6\n",
+    )
+    .unwrap();
+    std::fs::copy(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data/scenes/beams/torus.obj"),
+        dir.join("torus.obj"),
+    )
+    .unwrap();
+    for model in ["biri", "truth"] {
+        let e = refused(
+            dir,
+            fog,
+            &format!("{lamp}[[occluder]]\nshape = \"mesh\"\nfile = \"cube.obj\"\n"),
+            model,
+        );
+        assert!(
+            e.contains("[[light]] 1") && e.contains("inside [[occluder]] 1"),
+            "{e}"
+        );
+    }
+    let torus = |offset: &str| {
+        let text = format!(
+            "{}\n[camera]\nposition_m = [0, 1.7, -6]\nlook_at_m = [0, 2, 0]\n{fog}\n{lamp}\
+             [[occluder]]\nshape = \"mesh\"\nfile = \"torus.obj\"\noffset_m = {offset}\n",
+            fields()
+        );
+        let s = RenderScene::parse(&text, "t.toml", dir).map_err(|e| e.to_string())?;
+        s.check_for("biri").map(|_| ()).map_err(|e| e.to_string())
+    };
+    let (lo, hi) = torus_bounds(&dir.join("torus.obj"));
+    let centre = (lo + hi) / 2.0;
+    // The lamp at (0, 4, 5): the torus centred on it (the lamp in its hole) is accepted, the
+    // torus moved so that the lamp is in its tube is refused.
+    let at = |p: DVec3| format!("[{}, {}, {}]", p.x, p.y, p.z);
+    let lamp_at = DVec3::new(0.0, 4.0, 5.0);
+    torus(&at(lamp_at - centre)).unwrap();
+    let tube = DVec3::new((hi.x - lo.x) * 0.375, 0.0, 0.0);
+    let e = torus(&at(lamp_at - centre - tube)).unwrap_err();
+    assert!(e.contains("inside [[occluder]] 1"), "{e}");
+}
+
+/// The bounds of the vertices of an OBJ file.
+fn torus_bounds(path: &Path) -> (DVec3, DVec3) {
+    let text = std::fs::read_to_string(path).unwrap();
+    let mut lo = DVec3::splat(f64::INFINITY);
+    let mut hi = -lo;
+    for l in text.lines().filter(|l| l.starts_with("v ")) {
+        let v: Vec<f64> = l[2..]
+            .split_whitespace()
+            .map(|x| x.parse().unwrap())
+            .collect();
+        lo = lo.min(DVec3::new(v[0], v[1], v[2]));
+        hi = hi.max(DVec3::new(v[0], v[1], v[2]));
+    }
+    (lo, hi)
 }
 
 /// The path tracer restricted to single scattering (one scattering or surface event per

@@ -15,6 +15,7 @@ use glam::DVec3;
 use grid::ThetaGrid;
 use ndarray::{Array2, Array3};
 use rayon::prelude::*;
+use render::objects::{Medium, Region};
 use render::truth::phase::{PhaseSampler, rotate};
 use render::truth::{Rng, Settings, Tracer, Truth};
 use render::{Atmosphere, Camera, DensityGrid, Frame, MAX_FIELDS, RenderScene, Sun};
@@ -394,6 +395,81 @@ fn single_scattering_in_a_haze_layer_is_exact() {
         eprintln!("channel {c}: {got:.6} ± {se:.1e} vs {want:.6} ({z:+.2}σ)");
         assert!(z.abs() < 4.0, "channel {c}: {got} ± {se} vs {want}");
     }
+}
+
+#[test]
+fn overlapping_media_add_their_densities() {
+    // Two boxes of half the slab's density over the same 1 m slab scatter once exactly as the
+    // slab does (the single-scattering formula of `exact_single_scattering_from_a_slab`);
+    // the tracer's majorant must cover their sum, else delta tracking weighs paths wrongly.
+    let grid = ThetaGrid::new(0.5).unwrap();
+    let bins = hg_bins(&grid, 0.85);
+    let tables = tables_of(&bins, 0.5, 0.9);
+    let tau: f64 = 0.5;
+    let mut frame = slab_frame(tau);
+    frame
+        .grid
+        .data
+        .iter_mut()
+        .for_each(|v| *v = [0.0; MAX_FIELDS]);
+    let half = Medium {
+        field: "slab".into(),
+        // σ_ext is 1 m² per particle and the slab 1 m thick: τ/2 each.
+        number_density_per_m3: tau / 2.0,
+        region: Region::Box {
+            min_m: frame.grid.min_m,
+            max_m: frame.grid.max_m,
+        },
+        ambient: [0.0; 3],
+    };
+    frame.media = vec![half.clone(), half.clone()];
+    let mut tracer = Tracer::new(&tables, &frame, &Settings::default()).unwrap();
+    tracer.max_scatterings = 1;
+    let sampler = PhaseSampler::new(&grid, &bins, 0.0);
+    let beam = -frame.sun.direction();
+    let mu0: f64 = 0.5;
+    for &(mu, phi, up) in &[(1.0, 0.0, true), (0.3, 180.0, true), (0.8, 90.0, false)] {
+        let w = outgoing(mu, phi, up);
+        let p = sampler.eval(beam, w);
+        let want = if up {
+            0.9 * p * mu0 / (mu0 + mu) * (1.0 - (-tau * (1.0 / mu0 + 1.0 / mu)).exp())
+        } else {
+            0.9 * p * mu0 / (mu0 - mu) * ((-tau / mu0).exp() - (-tau / mu).exp())
+        };
+        let (got, se) = radiance_rgb(&tracer, w, 100_000, 12)[1];
+        let z = (got - want) / se;
+        eprintln!("two media, μ {mu} φ {phi} up {up}: {got:.6} ± {se:.1e} vs {want:.6} ({z:+.2}σ)");
+        assert!(z.abs() < 4.0, "μ {mu} φ {phi}: {got} ± {se} vs {want}");
+    }
+    // A thin medium filling the scene beside a dense box (the case that gave negative
+    // radiance while the majorant was the densest medium's alone): every path's radiance is
+    // finite and ≥ 0, and the slab is as bright as the box and the thin medium together make it.
+    frame.media = vec![
+        Medium {
+            number_density_per_m3: 4.0 * tau,
+            ..half.clone()
+        },
+        Medium {
+            // Thin, but not so thin that the tracked region (30 mean free paths around the
+            // scene) makes every path long.
+            number_density_per_m3: 0.05,
+            region: Region::Everywhere,
+            ..half
+        },
+    ];
+    let tracer = Tracer::new(&tables, &frame, &Settings::default()).unwrap();
+    let w = outgoing(0.5, 0.0, true);
+    let origin = DVec3::new(0.0, 2.0 + 1e-9, 0.0);
+    let mut worst = f64::INFINITY;
+    for i in 0..5_000u64 {
+        let mut rng = Rng::stream(13, 0, i);
+        for l in tracer.radiance(origin, -w, &mut rng) {
+            assert!(l.is_finite(), "path {i}: {l}");
+            worst = worst.min(l);
+        }
+    }
+    eprintln!("smallest radiance of a path: {worst:e}");
+    assert!(worst >= 0.0, "a path carried radiance {worst}");
 }
 
 #[test]

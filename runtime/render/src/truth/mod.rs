@@ -1089,9 +1089,11 @@ impl<'a> Tracer<'a> {
     }
 }
 
-/// Refuses a scene the tracer cannot finish: any straight line through its densest part
-/// (a grid column along an axis, a medium box's longest side, the haze's vertical column) of
-/// optical depth above [`MAX_OPTICAL_DEPTH`] at some wavelength, naming it.
+/// Refuses a scene the tracer cannot finish, naming the part: one where a point lies deeper
+/// than [`MAX_OPTICAL_DEPTH`] at some wavelength, measured as the least optical depth of the
+/// axis lines through it (a grid's voxel: its three grid lines; a medium's box: its shortest
+/// side; the haze: its vertical column). A path from there scatters ~τ² times to escape; a thin
+/// wide layer is as thin as its thickness.
 fn check_optical_depth(
     tables: &Tables,
     frame: &Frame,
@@ -1112,13 +1114,13 @@ fn check_optical_depth(
     };
     for (f, field) in tables.fields.iter().enumerate() {
         consider(
-            frame.grid.deepest_column(f) * worst_sigma(f),
-            format!("a column of the [[volume]] grid of field {:?}", field.name),
+            frame.grid.deepest_point(f) * worst_sigma(f),
+            format!("a point of the [[volume]] grid of field {:?}", field.name),
         );
     }
     for (i, &(region, n, f)) in media.iter().enumerate() {
         let length = match region {
-            crate::objects::Region::Box { min_m, max_m } => (max_m - min_m).max_element(),
+            crate::objects::Region::Box { min_m, max_m } => (max_m - min_m).min_element(),
             // Everywhere: across the scene's contents, the camera and its lights.
             crate::objects::Region::Everywhere => {
                 let mut lo = frame.camera.position_m;
@@ -1137,7 +1139,10 @@ fn check_optical_depth(
         };
         consider(
             n * worst_sigma(f) * length,
-            format!("[[medium]] {} across its longest side, {length:e} m", i + 1),
+            format!(
+                "[[medium]] {} across its shortest side, {length:e} m",
+                i + 1
+            ),
         );
     }
     if let Some(h) = &frame.haze {
