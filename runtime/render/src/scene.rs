@@ -573,6 +573,16 @@ impl RenderScene {
         let media = each(&file.media, "medium", medium).map_err(err)?;
         let occluders = each(&file.occluders, "occluder", |o| occluder(o, base)).map_err(err)?;
         let volumes = each(&file.volumes, "volume", |v| volume(v, base)).map_err(err)?;
+        if !volumes.is_empty() {
+            let (lo, hi) = joint_bounds(&volumes);
+            if !(hi - lo).is_finite() {
+                return Err(err(format!(
+                    "the [[volume]]s span {:?} to {:?} m: their box must have a finite size",
+                    lo.to_array(),
+                    hi.to_array()
+                )));
+            }
+        }
         Ok(Self {
             width: render.width,
             height: render.height,

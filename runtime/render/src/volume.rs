@@ -514,7 +514,9 @@ pub fn grid_dims(volumes: &[Volume], resolution: usize) -> [usize; 3] {
     let (lo, hi) = joint_bounds(volumes);
     let extent = [hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]];
     let longest = extent.iter().cloned().fold(0.0, f64::max);
-    extent.map(|e| ((resolution as f64 * e / longest).round() as usize).max(2))
+    // The ratio first: resolution × e alone can overflow to ∞ for a huge box.
+    extent
+        .map(|e| ((resolution as f64 * (e / longest)).round() as usize).clamp(2, resolution.max(2)))
 }
 
 /// The box holding every volume.

@@ -1,0 +1,386 @@
+//! Property tests of the scene parsers — the render scene (`RenderScene::parse`, then each
+//! model's `check_for` and `memory`) and the bake scene (`bake::Scene::parse`) — on mutated
+//! copies of every example scene in `data/scenes/` and the soft-ball fixture: a value set to an
+//! extreme, a wrong type or a path of a device, a line removed, duplicated or swapped with
+//! another, bytes flipped, the text truncated. Each case must end in `Ok` or an error naming
+//! what is wrong — no panic, no abort — and no single allocation may exceed the stated bound:
+//! 64 bytes per byte of scene text plus 4 per byte of the largest file beside it (a grid file is
+//! read as f32 and kept as f64 values) plus 1 MiB.
+//!
+//! CI runs `PHOTOMETEOR_FUZZ_CASES` cases per parser (default 256, about a second); the long
+//! run and its result are in docs/accuracy.md ("Scenes under mutation"). Failing cases proptest
+//! finds are kept in `tests/data/scene-fuzz-regressions.txt` and replayed first.
+
+// The allocation counter is a global allocator, which is unsafe to implement.
+#![allow(unsafe_code)]
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::{Cell, RefCell};
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use proptest::prelude::*;
+use proptest::test_runner::{Config, FileFailurePersistence, TestRunner};
+use render::RenderScene;
+use render::model::MODEL_NAMES;
+
+/// Records the largest single allocation made on a thread while it is armed.
+struct Counting;
+
+thread_local! {
+    static ARMED: Cell<bool> = const { Cell::new(false) };
+    static LARGEST: Cell<usize> = const { Cell::new(0) };
+}
+
+fn note(size: usize) {
+    let _ = ARMED.try_with(|armed| {
+        if armed.get() {
+            LARGEST.with(|l| l.set(l.get().max(size)));
+        }
+    });
+}
+
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        note(layout.size());
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
+        note(layout.size());
+        unsafe { System.alloc_zeroed(layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        note(new_size);
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        unsafe { System.dealloc(ptr, layout) }
+    }
+}
+
+#[global_allocator]
+static ALLOCATOR: Counting = Counting;
+
+/// Runs `f` and returns the largest single allocation it made on this thread.
+fn largest_allocation(f: impl FnOnce()) -> usize {
+    LARGEST.with(|l| l.set(0));
+    ARMED.with(|a| a.set(true));
+    f();
+    ARMED.with(|a| a.set(false));
+    LARGEST.with(Cell::get)
+}
+
+/// Cases per parser: `PHOTOMETEOR_FUZZ_CASES`, default 256.
+fn cases() -> u32 {
+    std::env::var("PHOTOMETEOR_FUZZ_CASES")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(256)
+}
+
+fn runner() -> TestRunner {
+    TestRunner::new(Config {
+        cases: cases(),
+        failure_persistence: Some(Box::new(FileFailurePersistence::Direct(
+            "tests/data/scene-fuzz-regressions.txt",
+        ))),
+        ..Config::default()
+    })
+}
+
+/// An example scene: its text and the directory its files are named from.
+struct Seed {
+    name: String,
+    text: String,
+    base: PathBuf,
+    /// The largest file in `base` and its subdirectories one deep (bytes).
+    largest_file: u64,
+}
+
+fn seeds() -> Vec<Seed> {
+    let scenes = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data/scenes");
+    let mut paths: Vec<PathBuf> = std::fs::read_dir(&scenes)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "toml"))
+        .collect();
+    paths.push(scenes.join("fixtures/soft_ball.toml"));
+    paths.sort();
+    paths
+        .into_iter()
+        .map(|p| {
+            let base = p.parent().unwrap().to_path_buf();
+            Seed {
+                name: p.file_name().unwrap().to_string_lossy().into_owned(),
+                text: std::fs::read_to_string(&p).unwrap(),
+                largest_file: largest_file(&base),
+                base,
+            }
+        })
+        .collect()
+}
+
+fn largest_file(dir: &Path) -> u64 {
+    let mut largest = 0;
+    for e in std::fs::read_dir(dir).unwrap() {
+        let p = e.unwrap().path();
+        if p.is_dir() {
+            for e in std::fs::read_dir(&p).unwrap() {
+                largest = largest.max(e.unwrap().metadata().unwrap().len());
+            }
+        } else {
+            largest = largest.max(p.metadata().unwrap().len());
+        }
+    }
+    largest
+}
+
+/// Values a mutation puts in place of a key's value: extremes, non-finite numbers, wrong types,
+/// huge counts and paths of devices and of nothing.
+const VALUES: &[&str] = &[
+    "1e308",
+    "-1e308",
+    "-1",
+    "0",
+    "0.5",
+    "nan",
+    "inf",
+    "-inf",
+    "5e-324",
+    "1e-300",
+    "2147483647",
+    "9223372036854775807",
+    "-9223372036854775808",
+    "100000000",
+    "8192",
+    "512",
+    "\"x\"",
+    "\"\"",
+    "\"/dev/zero\"",
+    "\"/dev/null\"",
+    "\"/\"",
+    "\"../../../../../../etc/passwd\"",
+    "true",
+    "[]",
+    "{}",
+    "[1e308, 1e308, 1e308]",
+    "[nan, 0, 0]",
+    "[0, 0, 0]",
+    "[-1, -1, -1]",
+    "[1, 2]",
+    "[100000, 100000, 100000]",
+    "[\"a\", 1, 2]",
+];
+
+/// One change to a scene's text.
+#[derive(Debug, Clone)]
+enum Mutation {
+    /// The value of the i-th `key = value` line (modulo their count) replaced.
+    Value(usize, &'static str),
+    /// A line removed.
+    Remove(usize),
+    /// A line written twice.
+    Duplicate(usize),
+    /// Two lines' values swapped.
+    Swap(usize, usize),
+    /// One byte's bits flipped by a mask.
+    Flip(usize, u8),
+    /// The text cut at a byte.
+    Truncate(usize),
+}
+
+fn mutation() -> impl Strategy<Value = Mutation> {
+    prop_oneof![
+        4 => (any::<usize>(), prop::sample::select(VALUES)).prop_map(|(i, v)| Mutation::Value(i, v)),
+        1 => any::<usize>().prop_map(Mutation::Remove),
+        1 => any::<usize>().prop_map(Mutation::Duplicate),
+        1 => (any::<usize>(), any::<usize>()).prop_map(|(a, b)| Mutation::Swap(a, b)),
+        1 => (any::<usize>(), 1u8..).prop_map(|(i, m)| Mutation::Flip(i, m)),
+        1 => any::<usize>().prop_map(Mutation::Truncate),
+    ]
+}
+
+/// `text` with `m` applied.
+fn apply(text: &str, m: &Mutation) -> String {
+    let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
+    let assignments: Vec<usize> = (0..lines.len())
+        .filter(|&i| {
+            let l = lines[i].trim_start();
+            !l.starts_with('#') && l.contains(" = ")
+        })
+        .collect();
+    let value_of = |l: &str| l.split_once(" = ").map(|(_, v)| v.to_string());
+    match *m {
+        Mutation::Value(i, v) if !assignments.is_empty() => {
+            let at = assignments[i % assignments.len()];
+            let key = lines[at].split_once(" = ").unwrap().0.to_string();
+            lines[at] = format!("{key} = {v}");
+        }
+        Mutation::Remove(i) if !lines.is_empty() => {
+            lines.remove(i % lines.len());
+        }
+        Mutation::Duplicate(i) if !lines.is_empty() => {
+            let at = i % lines.len();
+            lines.insert(at, lines[at].clone());
+        }
+        Mutation::Swap(a, b) if !assignments.is_empty() => {
+            let (a, b) = (
+                assignments[a % assignments.len()],
+                assignments[b % assignments.len()],
+            );
+            let (va, vb) = (value_of(&lines[a]).unwrap(), value_of(&lines[b]).unwrap());
+            let key = |l: &str| l.split_once(" = ").unwrap().0.to_string();
+            lines[a] = format!("{} = {vb}", key(&lines[a]));
+            lines[b] = format!("{} = {va}", key(&lines[b]));
+        }
+        Mutation::Flip(i, mask) if !text.is_empty() => {
+            let mut bytes = text.as_bytes().to_vec();
+            let at = i % bytes.len();
+            bytes[at] ^= mask;
+            return String::from_utf8_lossy(&bytes).into_owned();
+        }
+        Mutation::Truncate(i) if !text.is_empty() => {
+            let bytes = text.as_bytes();
+            return String::from_utf8_lossy(&bytes[..i % bytes.len()]).into_owned();
+        }
+        _ => {}
+    }
+    lines.join("\n") + "\n"
+}
+
+/// What the mutated scenes did, for the long run's record.
+#[derive(Default)]
+struct Tally {
+    cases: u64,
+    parsed: u64,
+    accepted_by_a_model: u64,
+    largest_allocation: usize,
+    slowest: Duration,
+}
+
+impl Tally {
+    fn print(&self, what: &str) {
+        let accepted = if what.starts_with("render") {
+            format!(
+                ", {} accepted by at least one model",
+                self.accepted_by_a_model
+            )
+        } else {
+            String::new()
+        };
+        eprintln!(
+            "{what}: {} cases, {} parsed{accepted}, largest allocation {} B, slowest case \
+             {:.3} s",
+            self.cases,
+            self.parsed,
+            self.largest_allocation,
+            self.slowest.as_secs_f64()
+        );
+    }
+}
+
+/// The render scene parser and every model's checks and memory estimate on one mutated scene;
+/// whether it parsed and whether any model accepted it.
+fn render_case(text: &str, seed: &Seed) -> (bool, bool) {
+    let Ok(scene) = RenderScene::parse(text, &seed.name, &seed.base) else {
+        return (false, false);
+    };
+    let mut accepted = false;
+    for &model in MODEL_NAMES {
+        if let Ok(settings) = scene.check_for(model) {
+            accepted = true;
+            let bytes: u64 = scene.memory(&settings).iter().map(|n| n.bytes).sum();
+            assert!(bytes > 0, "{model}: a frame estimated at 0 bytes");
+            let _ = scene.check_memory(&settings, 1 << 30);
+        }
+    }
+    (true, accepted)
+}
+
+#[test]
+fn the_render_scene_parser_survives_mutated_scenes() {
+    let seeds = seeds();
+    let tally = RefCell::new(Tally::default());
+    runner()
+        .run(
+            &(0..seeds.len(), prop::collection::vec(mutation(), 1..4)),
+            |(s, mutations)| {
+                let seed = &seeds[s];
+                let text = mutations
+                    .iter()
+                    .fold(seed.text.clone(), |t, m| apply(&t, m));
+                let bound = 64 * text.len() + 4 * seed.largest_file as usize + (1 << 20);
+                let start = Instant::now();
+                let mut outcome = (false, false);
+                let largest = largest_allocation(|| outcome = render_case(&text, seed));
+                let mut tally = tally.borrow_mut();
+                tally.cases += 1;
+                tally.parsed += u64::from(outcome.0);
+                tally.accepted_by_a_model += u64::from(outcome.1);
+                tally.largest_allocation = tally.largest_allocation.max(largest);
+                tally.slowest = tally.slowest.max(start.elapsed());
+                prop_assert!(
+                    largest <= bound,
+                    "{}: an allocation of {largest} B, over the bound {bound} B",
+                    seed.name
+                );
+                Ok(())
+            },
+        )
+        .unwrap();
+    let tally = tally.into_inner();
+    tally.print("render scenes");
+    // The mutations are not all fatal: some scenes still parse and render.
+    if tally.cases >= 256 {
+        assert!(tally.accepted_by_a_model > 0);
+    }
+}
+
+#[test]
+fn the_bake_scene_parser_survives_mutated_scenes() {
+    let seeds = seeds();
+    let tally = RefCell::new(Tally::default());
+    runner()
+        .run(
+            &(0..seeds.len(), prop::collection::vec(mutation(), 1..4)),
+            |(s, mutations)| {
+                let seed = &seeds[s];
+                let text = mutations
+                    .iter()
+                    .fold(seed.text.clone(), |t, m| apply(&t, m));
+                let bound = 64 * text.len() + (1 << 20);
+                let start = Instant::now();
+                let mut parsed = false;
+                let largest = largest_allocation(|| {
+                    if let Ok(scene) = bake::Scene::parse(&text, &seed.name) {
+                        parsed = true;
+                        // A plan of every preset: knobs for the scene's spectral mode.
+                        for q in [
+                            bake::Quality::Draft,
+                            bake::Quality::Standard,
+                            bake::Quality::Reference,
+                        ] {
+                            let _ = bake::BakePlan::for_preset(scene.clone(), "t".into(), q);
+                        }
+                    }
+                });
+                let mut tally = tally.borrow_mut();
+                tally.cases += 1;
+                tally.parsed += u64::from(parsed);
+                tally.largest_allocation = tally.largest_allocation.max(largest);
+                tally.slowest = tally.slowest.max(start.elapsed());
+                prop_assert!(
+                    largest <= bound,
+                    "{}: an allocation of {largest} B, over the bound {bound} B",
+                    seed.name
+                );
+                Ok(())
+            },
+        )
+        .unwrap();
+    let tally = tally.into_inner();
+    tally.print("bake scenes");
+    if tally.cases >= 256 {
+        assert!(tally.parsed > 0);
+    }
+}
