@@ -359,3 +359,37 @@ fn a_render_that_finds_its_tables_being_baked_waits_and_uses_them() {
     assert_eq!(fs::read(dir.join("tables/cloud.exr")).unwrap(), exr);
     assert!(dir.join("out.exr").is_file());
 }
+
+#[test]
+fn the_truth_stops_at_its_time_bound() {
+    let dir = workdir("bounds-seconds");
+    fs::write(dir.join("scene.toml"), scene("")).unwrap();
+    // 10⁶ samples per pixel would take minutes; one second of tracing takes what it can.
+    let o = photometeor(
+        &[
+            "render",
+            "scene.toml",
+            "--tables",
+            "tables",
+            "--out",
+            "out.exr",
+            "--model",
+            "truth",
+            "--spp",
+            "1000000",
+            "--set",
+            "max_seconds=1",
+        ],
+        &dir,
+    );
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{e}");
+    let spp: usize = e
+        .split(" spp,")
+        .next()
+        .and_then(|s| s.rsplit(' ').next())
+        .and_then(|s| s.parse().ok())
+        .unwrap_or_else(|| panic!("no spp in {e}"));
+    assert!((1..1_000_000).contains(&spp), "{spp} spp: {e}");
+    assert!(dir.join("out.exr").is_file());
+}
