@@ -3,15 +3,6 @@
 // w = cos of the disk radius), irradiance (rgb; w = the disk's solid angle) and grid_min.w (the
 // ground's albedo)). The CPU reference is render::shading::compose.
 
-// The distance K along d from the eye to the ground; K < 0 stands for ∞ (the ray leaves the
-// atmosphere without meeting the ground).
-fn ground_distance(d: vec3<f32>) -> f32 {
-    if (d.y < 0.0) {
-        return select(0.0, rp.eye.y / -d.y, rp.eye.y > 0.0);
-    }
-    return -1.0;
-}
-
 // The air in front of and behind the volume (Eqs. 11–15), the sun disk and the Lambertian
 // ground, lit by `lit` (the sunlight the volume leaves at the ground point), around the volume's
 // radiance `l_vol` and transparency `t_vol` along d.

@@ -551,29 +551,12 @@ pub fn parse_obj(text: &str, origin: &str) -> Result<Mesh, String> {
     Ok(Mesh::new(vertices, triangles))
 }
 
-/// Distances along the ray where it enters and leaves the box, if it does (t ≥ 0).
+/// Distances along the ray where it enters and leaves the box, if it does (t ≥ 0): the part of
+/// [`ray_box`]'s line ahead of the origin.
 pub fn box_span(grid_min: DVec3, grid_max: DVec3, origin: DVec3, d: DVec3) -> Option<(f64, f64)> {
-    let (mut t0, mut t1) = (0.0f64, f64::INFINITY);
-    for a in 0..3 {
-        let inv = 1.0 / d[a];
-        let (mut lo, mut hi) = (
-            (grid_min[a] - origin[a]) * inv,
-            (grid_max[a] - origin[a]) * inv,
-        );
-        if lo > hi {
-            std::mem::swap(&mut lo, &mut hi);
-        }
-        if lo.is_nan() || hi.is_nan() {
-            // d[a] = 0 on the box's plane: inside that slab or not.
-            if origin[a] < grid_min[a] || origin[a] > grid_max[a] {
-                return None;
-            }
-            continue;
-        }
-        t0 = t0.max(lo);
-        t1 = t1.min(hi);
-    }
-    (t0 < t1).then_some((t0, t1))
+    let (a, b) = ray_box(origin, d, grid_min, grid_max)?;
+    let a = a.max(0.0);
+    (a < b).then_some((a, b))
 }
 
 #[cfg(test)]

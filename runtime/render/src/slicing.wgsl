@@ -1,7 +1,7 @@
-// Pieces both slicing renderers' shaders use (render::riley and render::miyazaki), included
-// after tables.wgsl and before either. The including shader declares `rp` with at least:
+// Pieces the slicing renderers' shaders use (render::riley, render::miyazaki and render::max's
+// gather), included after tables.wgsl and before each. The including shader declares `rp` with at least:
 // forward (w = tan(fov_y / 2)), right (w = aspect), up, sizes (x = width, y = height),
-// grid_min, grid_max (xyz: the box), grid_dims (xyz voxels, w = field count), sigma_ext
+// eye (xyz), grid_min, grid_max (xyz: the box), grid_dims (xyz voxels, w = field count), sigma_ext
 // (array<vec4<f32>, 4>, m² per channel per field) and sky_beta (rgb = β_sl, w = γ), and the
 // density buffer `density` (array<vec4<f32>>, one channel per field).
 
@@ -55,6 +55,15 @@ fn extinction(rho: vec4<f32>) -> vec3<f32> {
         e = e + rho[i] * rp.sigma_ext[i].rgb;
     }
     return e;
+}
+
+// The distance K along d from the eye to the ground; K < 0 stands for ∞ (the ray leaves the
+// atmosphere without meeting the ground); 0 from an eye at or below the ground.
+fn ground_distance(d: vec3<f32>) -> f32 {
+    if (d.y < 0.0) {
+        return select(0.0, rp.eye.y / -d.y, rp.eye.y > 0.0);
+    }
+    return -1.0;
 }
 
 fn pixel_ray(i: u32, j: u32) -> vec3<f32> {

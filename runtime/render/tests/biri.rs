@@ -154,7 +154,7 @@ fn worst_error(
 ) -> f64 {
     let (image, _) = biri_cpu(tables, scene, kernel);
     let axes = scene.camera.axes().unwrap();
-    let tan_half = (0.5 * scene.camera.fov_deg).to_radians().tan();
+    let tan_half = scene.camera.tan_half_fov();
     let o = scene.camera.position_m;
     let mut want = Vec::new();
     for p in 0..SIZE.0 * SIZE.1 {
@@ -329,7 +329,7 @@ fn the_ground_is_lambertian_and_attenuated_both_ways() {
     let (grey, _) = biri_cpu(&tables, &s, Kernel::Exact);
     let beta = tables.field("fog").unwrap().sigma_ext_m2.map(|x| 3e8 * x);
     let axes = s.camera.axes().unwrap();
-    let tan_half = (0.5 * s.camera.fov_deg).to_radians().tan();
+    let tan_half = s.camera.tan_half_fov();
     let (o, l) = (s.camera.position_m, s.lights[0]);
     let mut worst = 0.0f64;
     let mut ground_pixels = 0;

@@ -85,7 +85,7 @@ fn thin_box_error(tables: &Tables, dir: &Path, tau: f64, threshold: f64) -> (f64
     let frame = uniform_box(tables, dir, tau, false);
     let eye = frame.camera.position_m;
     let (forward, right, up) = frame.camera.axes().unwrap();
-    let tan_half = (frame.camera.fov_deg.to_radians() / 2.0).tan();
+    let tan_half = frame.camera.tan_half_fov();
     let light = -frame.sun.direction();
     let settings = Settings {
         threshold,

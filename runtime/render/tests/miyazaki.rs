@@ -52,7 +52,7 @@ max_m = {max:?}
 
 fn pixel_ray(frame: &Frame, i: usize, j: usize) -> DVec3 {
     let axes = frame.camera.axes().unwrap();
-    let tan = (frame.camera.fov_deg.to_radians() / 2.0).tan();
+    let tan = frame.camera.tan_half_fov();
     render::camera::pixel_ray(axes, tan, (i, j), (frame.width, frame.height))
 }
 

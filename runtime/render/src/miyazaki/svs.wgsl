@@ -118,14 +118,6 @@ fn shadow_at(p: vec3<f32>) -> vec3<f32> {
     return mix(mix(l00, l10, s), mix(l01, l11, s), t);
 }
 
-fn ground_distance(d: vec3<f32>) -> f32 {
-    // < 0: none (the ray leaves upwards).
-    if (d.y < 0.0) {
-        return max(rp.eye.y / -d.y, 0.0);
-    }
-    return -1.0;
-}
-
 fn sunward_of_slices(p: vec3<f32>) -> bool {
     let c = dot(rp.normal.xyz, p);
     if (dot(rp.normal.xyz, rp.to_sun.xyz) > 0.0) {
