@@ -315,6 +315,7 @@ pub fn run(a: ExportArgs) -> Result<()> {
     }
 }
 
+/// `--format bevy | mitsuba | npy | csv`: every selected field's tables and the report.
 fn write_all(
     a: &ExportArgs,
     t: &Tables,
@@ -322,15 +323,13 @@ fn write_all(
     fields: &[FieldRows],
     stage: &Path,
 ) -> Result<serde_json::Value> {
-    let write = |name: &str, bytes: &[u8]| -> Result<()> {
-        Ok(format::write_output(&stage.join(name), bytes, &[])?)
-    };
     let mut report_fields = serde_json::Map::new();
     let mut text = String::new();
     let version = env!("CARGO_PKG_VERSION");
     let writer = format!("photometeor {version}");
     if a.format == ExportFormat::Bevy {
-        write(
+        write_file(
+            stage,
             "phase_curve.wgsl",
             runtime::export::PHASE_CURVE_WGSL.as_bytes(),
         )?;
@@ -338,7 +337,8 @@ fn write_all(
     if a.format == ExportFormat::Npy {
         let k = t.angle_count;
         let theta: Vec<f64> = (0..k).map(|i| i as f64 * step).collect();
-        write(
+        write_file(
+            stage,
             "theta_deg.npy",
             &format::export::npy_f64_bytes(&[k], &theta),
         )?;
@@ -346,220 +346,26 @@ fn write_all(
     let mut mitsuba_json = serde_json::Map::new();
     for fr in fields {
         let f = fr.field;
-        let (n, resampled) = match a.format.max_samples() {
-            None => (t.angle_count, None),
-            Some(max) => {
-                let n = match a.samples {
-                    Some(s) => s,
-                    None => {
-                        let (n, worst) = fr.samples(a, step, max);
-                        // An explicit treatment that cannot meet the bound is refused; `auto`
-                        // writes the least loss it found and reports it.
-                        if worst.moved > a.max_loss && a.forward_peak != ForwardPeak::Auto {
-                            bail!(
-                                "--max-loss {} cannot be met for field {:?} within {max} values, the {} limit: there {:.2} % of the light lands in a wrong θ bin; allow at least --max-loss {:.4}, take the loss with --samples N, or try --forward-peak strip",
-                                a.max_loss,
-                                f.name,
-                                a.format.name(),
-                                worst.moved * 100.0,
-                                (worst.moved * 1e4).ceil() / 1e4
-                            );
-                        }
-                        n
-                    }
-                };
-                let tables: Vec<Resampled> = fr
-                    .rows
-                    .iter()
-                    .map(|r| {
-                        let values = std::array::from_fn(|c| resample(&r[c], step, n));
-                        let cost = std::array::from_fn(|c| cost(&r[c], step, &values[c]));
-                        Resampled { values, cost }
-                    })
-                    .collect();
-                (n, Some(tables))
-            }
+        let (n, resampled) = field_tables(a, t, step, fr)?;
+        let ex = FieldExport {
+            a,
+            stage,
+            fr,
+            n,
+            resampled,
         };
+        let mut parts = FieldParts::default();
         let mut orders_report = serde_json::Map::new();
-        let mut xml = String::new();
-        let mut mj = serde_json::Map::new();
-        let mut npy_data = Vec::new();
         for (oi, &order) in a.orders.iter().enumerate() {
-            let base = format!("{}.ams{order}", f.name);
-            let mut files = Vec::new();
-            match a.format {
-                ExportFormat::Bevy => {
-                    let r = &resampled.as_ref().unwrap()[oi];
-                    let texels: Vec<[f32; 4]> = (0..n)
-                        .map(|i| {
-                            [
-                                r.values[0][i] as f32,
-                                r.values[1][i] as f32,
-                                r.values[2][i] as f32,
-                                1.0,
-                            ]
-                        })
-                        .collect();
-                    let n_text = order.to_string();
-                    let meta = [
-                        ("photometeor/field", f.name.as_str()),
-                        ("photometeor/order", n_text.as_str()),
-                        (
-                            "photometeor/layout",
-                            "column i: cos θ = -1 + 2i/(width-1), θ = 180° first; RGB 1/sr, A = 1",
-                        ),
-                    ];
-                    write(
-                        &format!("{base}.ktx2"),
-                        &format::export::ktx2_rgba32f_bytes(&texels, &writer, &meta),
-                    )?;
-                    write(
-                        &format!("{base}.exr"),
-                        &format::export::curve_exr_bytes(&base, &texels, &meta)?,
-                    )?;
-                    files.push(format!("{base}.ktx2"));
-                    files.push(format!("{base}.exr"));
-                }
-                ExportFormat::Mitsuba => {
-                    let r = &resampled.as_ref().unwrap()[oi];
-                    let mut per = serde_json::Map::new();
-                    for (c, ch) in CHANNELS.iter().enumerate() {
-                        let values: Vec<String> = r.values[c]
-                            .iter()
-                            .map(|&v| format!("{}", v as f32))
-                            .collect();
-                        let _ = writeln!(
-                            xml,
-                            "    <phase type=\"tabphase\" id=\"{}_ams{order}_{ch}\">\n        \
-                             <string name=\"values\" value=\"{}\"/>\n    </phase>",
-                            f.name,
-                            values.join(", ")
-                        );
-                        let f32s: Vec<f32> = r.values[c].iter().map(|&v| v as f32).collect();
-                        per.insert(ch.to_string(), json!(f32s));
-                    }
-                    mj.insert(order.to_string(), serde_json::Value::Object(per));
-                    files.push(format!("{}.xml", f.name));
-                }
-                ExportFormat::Npy => {
-                    for c in 0..3 {
-                        npy_data.extend_from_slice(&fr.rows[oi][c]);
-                    }
-                    files.push(format!("{}.ams.npy", f.name));
-                }
-                ExportFormat::Csv => files.push(format!("{}.csv", f.name)),
-                ExportFormat::Hg => unreachable!("--format hg is written by write_lobes"),
-            }
-            let mut channels = serde_json::Map::new();
-            for (c, ch) in CHANNELS.iter().enumerate() {
-                let mut e = serde_json::Map::new();
-                if let Some(r) = &resampled {
-                    let k = &r[oi].cost[c];
-                    e.insert("moved".into(), json!(k.moved));
-                    e.insert("peak_kept".into(), json!(k.peak_kept));
-                    e.insert("energy_change".into(), json!(k.energy_change));
-                } else {
-                    e.insert("moved".into(), json!(0.0));
-                }
-                if fr.treatment == ForwardPeak::Strip {
-                    let fs = fr.stripped[oi][c];
-                    let al = f.albedo[c];
-                    e.insert("forward_peak_stripped".into(), json!(fs));
-                    e.insert(
-                        "scaled_sigma_ext_m2".into(),
-                        json!(f.sigma_ext_m2[c] * (1.0 - al * fs)),
-                    );
-                    e.insert(
-                        "scaled_albedo".into(),
-                        json!(al * (1.0 - fs) / (1.0 - al * fs)),
-                    );
-                }
-                channels.insert(ch.to_string(), serde_json::Value::Object(e));
-            }
-            if let Some(r) = &resampled {
-                let worst = r[oi].cost.iter().map(|c| c.moved).fold(0.0, f64::max);
-                let peak = r[oi].cost.iter().map(|c| c.peak_kept).fold(1.0, f64::min);
-                let _ = writeln!(
-                    text,
-                    "{:<10} Ams_{order:<3} {n:>8} values  forward peak {:<5}  moved {:>7.3} %  forward peak kept {:>9.3e}{}",
-                    f.name,
-                    fr.treatment.name(),
-                    worst * 100.0,
-                    peak,
-                    if worst > a.max_loss {
-                        format!("  (above --max-loss {} %)", a.max_loss * 100.0)
-                    } else {
-                        String::new()
-                    }
-                );
-            }
+            let files = ex.write_order(oi, order, &writer, &mut parts)?;
+            let channels = ex.channel_report(oi);
+            ex.summary_line(oi, order, &mut text);
             orders_report.insert(
                 order.to_string(),
                 json!({ "files": files, "channels": channels }),
             );
         }
-        match a.format {
-            ExportFormat::Mitsuba => {
-                // With the peak stripped the medium takes the δ-scaled optics of the order it
-                // refers to: σ_ext (1 − α f) and α (1 − f)/(1 − α f).
-                let f0 = fr.stripped[0];
-                let al: [f64; 3] = std::array::from_fn(|c| {
-                    f.albedo[c] * (1.0 - f0[c]) / (1.0 - f.albedo[c] * f0[c])
-                });
-                let s: [f64; 3] =
-                    std::array::from_fn(|c| f.sigma_ext_m2[c] * (1.0 - f.albedo[c] * f0[c]));
-                let snippet = format!(
-                    "<!-- photometeor {version}: field {name} ({kind}), tabphase per order n and channel.\n     \
-                     Mitsuba's tabphase is one scalar table: render one channel at a time, or pick G.\n     \
-                     values: linear in cos θ from -1 (θ = 180°) to 1 (θ = 0°); Mitsuba normalises them,\n     \
-                     and they already integrate to 1. sigma_t below is for one particle per m³:\n     \
-                     set 'scale' to the number density (1/m³). -->\n\
-                     <scene version=\"3.0.0\">\n{xml}    <medium type=\"homogeneous\" id=\"{name}_medium\">\n        \
-                     <rgb name=\"albedo\" value=\"{:.6}, {:.6}, {:.6}\"/>\n        \
-                     <rgb name=\"sigma_t\" value=\"{:.6e}, {:.6e}, {:.6e}\"/>\n        \
-                     <float name=\"scale\" value=\"1\"/>\n        \
-                     <ref id=\"{name}_ams{first}_G\"/>\n    </medium>\n</scene>\n",
-                    al[0],
-                    al[1],
-                    al[2],
-                    s[0],
-                    s[1],
-                    s[2],
-                    name = f.name,
-                    kind = f.kind,
-                    first = a.orders[0],
-                );
-                write(&format!("{}.xml", f.name), snippet.as_bytes())?;
-                mitsuba_json.insert(f.name.clone(), serde_json::Value::Object(mj));
-            }
-            ExportFormat::Npy => {
-                let k = t.angle_count;
-                write(
-                    &format!("{}.ams.npy", f.name),
-                    &format::export::npy_f64_bytes(&[a.orders.len(), 3, k], &npy_data),
-                )?;
-            }
-            ExportFormat::Csv => {
-                let mut csv = String::from("theta_deg");
-                for &o in &a.orders {
-                    for ch in CHANNELS {
-                        let _ = write!(csv, ",ams{o}_{ch}");
-                    }
-                }
-                csv.push('\n');
-                for k in 0..t.angle_count {
-                    let _ = write!(csv, "{}", k as f64 * step);
-                    for r in &fr.rows {
-                        for row in r {
-                            let _ = write!(csv, ",{:e}", row[k]);
-                        }
-                    }
-                    csv.push('\n');
-                }
-                write(&format!("{}.csv", f.name), csv.as_bytes())?;
-            }
-            ExportFormat::Bevy | ExportFormat::Hg => {}
-        }
+        ex.write_field(t, step, version, parts, &mut mitsuba_json)?;
         report_fields.insert(
             f.name.clone(),
             json!({
@@ -573,7 +379,8 @@ fn write_all(
         );
     }
     if a.format == ExportFormat::Mitsuba {
-        write(
+        write_file(
+            stage,
             "mitsuba.json",
             serde_json::to_string(&json!({
                 "layout": "values linear in cos θ from -1 (θ = 180°) to 1 (θ = 0°), 1/sr",
@@ -582,31 +389,9 @@ fn write_all(
             .as_bytes(),
         )?;
     }
-    let grid = match a.format.max_samples() {
-        Some(_) => json!({
-            "kind": "cos_theta",
-            "layout": "value i at cos θ = -1 + 2i/(n-1): θ = 180° first, θ = 0° last; read back \
-                       linear in cos θ between values",
-        }),
-        None => json!({
-            "kind": "theta_bins",
-            "theta_step_deg": step,
-            "layout": "column k: the average over θ ∈ [kΔθ − Δθ/2, kΔθ + Δθ/2] ∩ [0°, 180°] in solid angle",
-        }),
-    };
-    let report = json!({
-        "tool": "photometeor",
-        "tool_version": version,
-        "source": a.dir.display().to_string(),
-        "format": a.format.name(),
-        "grid": grid,
-        "max_loss": a.max_loss,
-        "forward_peak": a.forward_peak.name(),
-        "cost": "moved: the share of the scattered light the resampled table puts in a wrong θ bin of the \
-                 bake (½ Σ Ω_k |p̂_k − p_k|); peak_kept: its value at θ = 0 over the bake's bin 0",
-        "fields": report_fields,
-    });
-    write(
+    let report = export_report(a, step, version, report_fields);
+    write_file(
+        stage,
         "export.json",
         serde_json::to_string_pretty(&report)?.as_bytes(),
     )?;
@@ -623,6 +408,345 @@ fn write_all(
         println!("wrote {} (report: export.json)", a.out.display());
     }
     Ok(report)
+}
+
+/// Writes `bytes` to the file `name` in the staging directory.
+fn write_file(stage: &Path, name: &str, bytes: &[u8]) -> Result<()> {
+    Ok(format::write_output(&stage.join(name), bytes, &[])?)
+}
+
+/// A field's values per table (the bake's K angles, or the sample count on the cos θ grid) and
+/// on the cos θ grid each order's resampled tables with their cost. Refuses a count chosen
+/// for --max-loss that misses it under an explicit --forward-peak.
+fn field_tables(
+    a: &ExportArgs,
+    t: &Tables,
+    step: f64,
+    fr: &FieldRows,
+) -> Result<(usize, Option<Vec<Resampled>>)> {
+    let f = fr.field;
+    Ok(match a.format.max_samples() {
+        None => (t.angle_count, None),
+        Some(max) => {
+            let n = match a.samples {
+                Some(s) => s,
+                None => {
+                    let (n, worst) = fr.samples(a, step, max);
+                    // An explicit treatment that cannot meet the bound is refused; `auto`
+                    // writes the least loss it found and reports it.
+                    if worst.moved > a.max_loss && a.forward_peak != ForwardPeak::Auto {
+                        bail!(
+                            "--max-loss {} cannot be met for field {:?} within {max} values, the {} limit: there {:.2} % of the light lands in a wrong θ bin; allow at least --max-loss {:.4}, take the loss with --samples N, or try --forward-peak strip",
+                            a.max_loss,
+                            f.name,
+                            a.format.name(),
+                            worst.moved * 100.0,
+                            (worst.moved * 1e4).ceil() / 1e4
+                        );
+                    }
+                    n
+                }
+            };
+            let tables: Vec<Resampled> = fr
+                .rows
+                .iter()
+                .map(|r| {
+                    let values = std::array::from_fn(|c| resample(&r[c], step, n));
+                    let cost = std::array::from_fn(|c| cost(&r[c], step, &values[c]));
+                    Resampled { values, cost }
+                })
+                .collect();
+            (n, Some(tables))
+        }
+    })
+}
+
+/// One field's export under way: the arguments, the staging directory, its rows, the values
+/// per table and (on the cos θ grid) the resampled tables, one per order.
+struct FieldExport<'a> {
+    a: &'a ExportArgs,
+    stage: &'a Path,
+    fr: &'a FieldRows<'a>,
+    n: usize,
+    resampled: Option<Vec<Resampled>>,
+}
+
+/// What a field's orders add to files written once per field: Mitsuba's `tabphase` XML and
+/// its JSON values, and the NumPy array's values (orders × R, G, B × θ bins, 1/sr).
+#[derive(Default)]
+struct FieldParts {
+    xml: String,
+    mitsuba: serde_json::Map<String, serde_json::Value>,
+    npy: Vec<f64>,
+}
+
+impl FieldExport<'_> {
+    /// Writes order `order`'s own files (bevy) or adds it to `parts`; returns the names of the
+    /// files that hold it.
+    fn write_order(
+        &self,
+        oi: usize,
+        order: usize,
+        writer: &str,
+        parts: &mut FieldParts,
+    ) -> Result<Vec<String>> {
+        let f = self.fr.field;
+        let mut files = Vec::new();
+        match self.a.format {
+            ExportFormat::Bevy => files.extend(self.write_bevy(oi, order, writer)?),
+            ExportFormat::Mitsuba => {
+                let r = &self.resampled.as_ref().unwrap()[oi];
+                let mut per = serde_json::Map::new();
+                for (c, ch) in CHANNELS.iter().enumerate() {
+                    let values: Vec<String> = r.values[c]
+                        .iter()
+                        .map(|&v| format!("{}", v as f32))
+                        .collect();
+                    let _ = writeln!(
+                        parts.xml,
+                        "    <phase type=\"tabphase\" id=\"{}_ams{order}_{ch}\">\n        \
+                         <string name=\"values\" value=\"{}\"/>\n    </phase>",
+                        f.name,
+                        values.join(", ")
+                    );
+                    let f32s: Vec<f32> = r.values[c].iter().map(|&v| v as f32).collect();
+                    per.insert(ch.to_string(), json!(f32s));
+                }
+                parts
+                    .mitsuba
+                    .insert(order.to_string(), serde_json::Value::Object(per));
+                files.push(format!("{}.xml", f.name));
+            }
+            ExportFormat::Npy => {
+                for c in 0..3 {
+                    parts.npy.extend_from_slice(&self.fr.rows[oi][c]);
+                }
+                files.push(format!("{}.ams.npy", f.name));
+            }
+            ExportFormat::Csv => files.push(format!("{}.csv", f.name)),
+            ExportFormat::Hg => unreachable!("--format hg is written by write_lobes"),
+        }
+        Ok(files)
+    }
+
+    /// Writes order `order`'s Bevy texture as `<field>.ams<n>.ktx2` and `.exr` (N × 1
+    /// Rgba32Float, RGB in 1/sr, A = 1); returns their names.
+    fn write_bevy(&self, oi: usize, order: usize, writer: &str) -> Result<[String; 2]> {
+        let f = self.fr.field;
+        let base = format!("{}.ams{order}", f.name);
+        let r = &self.resampled.as_ref().unwrap()[oi];
+        let texels: Vec<[f32; 4]> = (0..self.n)
+            .map(|i| {
+                [
+                    r.values[0][i] as f32,
+                    r.values[1][i] as f32,
+                    r.values[2][i] as f32,
+                    1.0,
+                ]
+            })
+            .collect();
+        let n_text = order.to_string();
+        let meta = [
+            ("photometeor/field", f.name.as_str()),
+            ("photometeor/order", n_text.as_str()),
+            (
+                "photometeor/layout",
+                "column i: cos θ = -1 + 2i/(width-1), θ = 180° first; RGB 1/sr, A = 1",
+            ),
+        ];
+        write_file(
+            self.stage,
+            &format!("{base}.ktx2"),
+            &format::export::ktx2_rgba32f_bytes(&texels, writer, &meta),
+        )?;
+        write_file(
+            self.stage,
+            &format!("{base}.exr"),
+            &format::export::curve_exr_bytes(&base, &texels, &meta)?,
+        )?;
+        Ok([format!("{base}.ktx2"), format!("{base}.exr")])
+    }
+
+    /// The report of order `oi` per channel: the resampling's cost, and with the peak
+    /// stripped its fraction f and the medium's δ-scaled σ_ext (m²) and albedo.
+    fn channel_report(&self, oi: usize) -> serde_json::Map<String, serde_json::Value> {
+        let (fr, f) = (self.fr, self.fr.field);
+        let mut channels = serde_json::Map::new();
+        for (c, ch) in CHANNELS.iter().enumerate() {
+            let mut e = serde_json::Map::new();
+            if let Some(r) = &self.resampled {
+                let k = &r[oi].cost[c];
+                e.insert("moved".into(), json!(k.moved));
+                e.insert("peak_kept".into(), json!(k.peak_kept));
+                e.insert("energy_change".into(), json!(k.energy_change));
+            } else {
+                e.insert("moved".into(), json!(0.0));
+            }
+            if fr.treatment == ForwardPeak::Strip {
+                let fs = fr.stripped[oi][c];
+                let al = f.albedo[c];
+                e.insert("forward_peak_stripped".into(), json!(fs));
+                e.insert(
+                    "scaled_sigma_ext_m2".into(),
+                    json!(f.sigma_ext_m2[c] * (1.0 - al * fs)),
+                );
+                e.insert(
+                    "scaled_albedo".into(),
+                    json!(al * (1.0 - fs) / (1.0 - al * fs)),
+                );
+            }
+            channels.insert(ch.to_string(), serde_json::Value::Object(e));
+        }
+        channels
+    }
+
+    /// On the cos θ grid, appends order `order`'s line to `text`: values, treatment, the
+    /// worst light moved (%) and the least forward peak kept over the channels.
+    fn summary_line(&self, oi: usize, order: usize, text: &mut String) {
+        let Some(r) = &self.resampled else {
+            return;
+        };
+        let a = self.a;
+        let worst = r[oi].cost.iter().map(|c| c.moved).fold(0.0, f64::max);
+        let peak = r[oi].cost.iter().map(|c| c.peak_kept).fold(1.0, f64::min);
+        let _ = writeln!(
+            text,
+            "{:<10} Ams_{order:<3} {n:>8} values  forward peak {:<5}  moved {:>7.3} %  forward peak kept {:>9.3e}{}",
+            self.fr.field.name,
+            self.fr.treatment.name(),
+            worst * 100.0,
+            peak,
+            if worst > a.max_loss {
+                format!("  (above --max-loss {} %)", a.max_loss * 100.0)
+            } else {
+                String::new()
+            },
+            n = self.n,
+        );
+    }
+
+    /// Writes the field's files that hold all its orders (mitsuba's XML, npy's array, the
+    /// CSV) and adds its values to `mitsuba.json`.
+    fn write_field(
+        &self,
+        t: &Tables,
+        step: f64,
+        version: &str,
+        parts: FieldParts,
+        mitsuba_json: &mut serde_json::Map<String, serde_json::Value>,
+    ) -> Result<()> {
+        let f = self.fr.field;
+        match self.a.format {
+            ExportFormat::Mitsuba => {
+                let scene = self.mitsuba_scene(version, &parts.xml);
+                write_file(self.stage, &format!("{}.xml", f.name), scene.as_bytes())?;
+                mitsuba_json.insert(f.name.clone(), serde_json::Value::Object(parts.mitsuba));
+            }
+            ExportFormat::Npy => {
+                let k = t.angle_count;
+                write_file(
+                    self.stage,
+                    &format!("{}.ams.npy", f.name),
+                    &format::export::npy_f64_bytes(&[self.a.orders.len(), 3, k], &parts.npy),
+                )?;
+            }
+            ExportFormat::Csv => {
+                let csv = self.csv(t, step);
+                write_file(self.stage, &format!("{}.csv", f.name), csv.as_bytes())?;
+            }
+            ExportFormat::Bevy | ExportFormat::Hg => {}
+        }
+        Ok(())
+    }
+
+    /// The field's Mitsuba 3 scene: its `tabphase`s (`xml`) and a homogeneous medium with the
+    /// albedo and σ_t (m², per particle) of the first order, δ-scaled when the peak is stripped.
+    fn mitsuba_scene(&self, version: &str, xml: &str) -> String {
+        let (f, a) = (self.fr.field, self.a);
+        // With the peak stripped the medium takes the δ-scaled optics of the order it
+        // refers to: σ_ext (1 − α f) and α (1 − f)/(1 − α f).
+        let f0 = self.fr.stripped[0];
+        let al: [f64; 3] =
+            std::array::from_fn(|c| f.albedo[c] * (1.0 - f0[c]) / (1.0 - f.albedo[c] * f0[c]));
+        let s: [f64; 3] = std::array::from_fn(|c| f.sigma_ext_m2[c] * (1.0 - f.albedo[c] * f0[c]));
+        format!(
+            "<!-- photometeor {version}: field {name} ({kind}), tabphase per order n and channel.\n     \
+             Mitsuba's tabphase is one scalar table: render one channel at a time, or pick G.\n     \
+             values: linear in cos θ from -1 (θ = 180°) to 1 (θ = 0°); Mitsuba normalises them,\n     \
+             and they already integrate to 1. sigma_t below is for one particle per m³:\n     \
+             set 'scale' to the number density (1/m³). -->\n\
+             <scene version=\"3.0.0\">\n{xml}    <medium type=\"homogeneous\" id=\"{name}_medium\">\n        \
+             <rgb name=\"albedo\" value=\"{:.6}, {:.6}, {:.6}\"/>\n        \
+             <rgb name=\"sigma_t\" value=\"{:.6e}, {:.6e}, {:.6e}\"/>\n        \
+             <float name=\"scale\" value=\"1\"/>\n        \
+             <ref id=\"{name}_ams{first}_G\"/>\n    </medium>\n</scene>\n",
+            al[0],
+            al[1],
+            al[2],
+            s[0],
+            s[1],
+            s[2],
+            name = f.name,
+            kind = f.kind,
+            first = a.orders[0],
+        )
+    }
+
+    /// The field's CSV: θ in degrees, then Ams_n (1/sr) per order and channel, one row per
+    /// bin of the bake's grid.
+    fn csv(&self, t: &Tables, step: f64) -> String {
+        let mut csv = String::from("theta_deg");
+        for &o in &self.a.orders {
+            for ch in CHANNELS {
+                let _ = write!(csv, ",ams{o}_{ch}");
+            }
+        }
+        csv.push('\n');
+        for k in 0..t.angle_count {
+            let _ = write!(csv, "{}", k as f64 * step);
+            for r in &self.fr.rows {
+                for row in r {
+                    let _ = write!(csv, ",{:e}", row[k]);
+                }
+            }
+            csv.push('\n');
+        }
+        csv
+    }
+}
+
+/// `export.json` of a bevy, mitsuba, npy or csv export: the grid the tables use, the
+/// arguments, what the costs mean, and the per-field reports.
+fn export_report(
+    a: &ExportArgs,
+    step: f64,
+    version: &str,
+    report_fields: serde_json::Map<String, serde_json::Value>,
+) -> serde_json::Value {
+    let grid = match a.format.max_samples() {
+        Some(_) => json!({
+            "kind": "cos_theta",
+            "layout": "value i at cos θ = -1 + 2i/(n-1): θ = 180° first, θ = 0° last; read back \
+                       linear in cos θ between values",
+        }),
+        None => json!({
+            "kind": "theta_bins",
+            "theta_step_deg": step,
+            "layout": "column k: the average over θ ∈ [kΔθ − Δθ/2, kΔθ + Δθ/2] ∩ [0°, 180°] in solid angle",
+        }),
+    };
+    json!({
+        "tool": "photometeor",
+        "tool_version": version,
+        "source": a.dir.display().to_string(),
+        "format": a.format.name(),
+        "grid": grid,
+        "max_loss": a.max_loss,
+        "forward_peak": a.forward_peak.name(),
+        "cost": "moved: the share of the scattered light the resampled table puts in a wrong θ bin of the \
+                 bake (½ Σ Ω_k |p̂_k − p_k|); peak_kept: its value at θ = 0 over the bake's bin 0",
+        "fields": report_fields,
+    })
 }
 
 /// A fresh staging directory beside `out`.
@@ -694,78 +818,19 @@ fn write_lobes(
             let mut channels = serde_json::Map::new();
             for (c, ch) in CHANNELS.iter().enumerate() {
                 let row = &fr.rows[oi][c];
-                let describe = |l: &Lobes| {
-                    let bins = l.bins(step, k_len);
-                    let kept: serde_json::Map<String, serde_json::Value> = feats
-                        .iter()
-                        .map(|&(name, from, to)| {
-                            let ks = (from / step).round() as usize..=((to / step).round() as usize).min(k_len - 1);
-                            let k = ks.max_by(|&x, &y| row[x].total_cmp(&row[y])).unwrap();
-                            (name.to_string(), json!({"theta_deg": k as f64 * step, "table": row[k], "lobes": bins[k], "kept": bins[k] / row[k]}))
-                        })
-                        .collect();
-                    let rms = rms_relative(row, &bins, step, 1.0);
-                    (
-                        bins,
-                        json!({"g1": l.g1, "g2": l.g2, "w": l.w, "moved": l.moved, "rms_relative_from_1deg": rms, "features": kept}),
-                        rms,
-                    )
-                };
-                let (single, dual) = (fit_hg(row, step), fit_dual_hg(row, step));
-                // HG at the table's own g: what an engine's `anisotropy` usually gets.
-                let g = asymmetry(row, step);
-                let moment = Lobes {
-                    g1: g,
-                    g2: 0.0,
-                    w: 1.0,
-                    moved: runtime::export::moved(
-                        row,
-                        &runtime::export::hg_bins(g, step, k_len),
-                        step,
-                    ),
-                };
-                let (moment_bins, moment_json, moment_rms) = describe(&moment);
-                let (single_bins, single_json, single_rms) = describe(&single);
-                let (dual_bins, dual_json, dual_rms) = describe(&dual);
+                let fit = ChannelLobes::fit(row, step, k_len, &feats);
                 if c == 1 {
-                    let kept = |j: &serde_json::Value| {
-                        feats
-                            .iter()
-                            .map(|(name, _, _)| {
-                                format!(
-                                    "{name} {:.1} %",
-                                    100.0 * j["features"][*name]["kept"].as_f64().unwrap()
-                                )
-                            })
-                            .collect::<Vec<_>>()
-                            .join(", ")
-                    };
-                    let _ = writeln!(
-                        text,
-                        "{:<10} Ams_{order:<3} G  g = {:.4}\n    HG at that g: moves {:.1} %, rms {:.0} %; kept: {}\n    best HG g = {:.4}: moves {:.1} %, rms {:.0} %; kept: {}\n    best dual HG {:.4}/{:.4}, w = {:.3}: moves {:.1} %, rms {:.0} %; kept: {}",
-                        f.name,
-                        g,
-                        moment.moved * 100.0,
-                        moment_rms * 100.0,
-                        kept(&moment_json),
-                        single.g1,
-                        single.moved * 100.0,
-                        single_rms * 100.0,
-                        kept(&single_json),
-                        dual.g1,
-                        dual.g2,
-                        dual.w,
-                        dual.moved * 100.0,
-                        dual_rms * 100.0,
-                        kept(&dual_json),
-                    );
-                    if oi == 0 {
-                        plot_rows = Some((
-                            row.clone(),
-                            [moment_bins, single_bins, dual_bins],
-                            [moment, single, dual],
-                        ));
-                    }
+                    fit.summary(&mut text, &f.name, order, &feats);
+                }
+                let ChannelLobes {
+                    g,
+                    lobes,
+                    bins,
+                    json: [moment_json, single_json, dual_json],
+                    ..
+                } = fit;
+                if c == 1 && oi == 0 {
+                    plot_rows = Some((row.clone(), bins, lobes));
                 }
                 channels.insert(
                     ch.to_string(),
@@ -774,64 +839,8 @@ fn write_lobes(
             }
             orders.insert(order.to_string(), json!({ "channels": channels }));
         }
-        if let Some((row, [moment, single, dual], [m, s, d])) = plot_rows {
-            use crate::commands::plot::{CHANNEL_COLOURS, LinePlot, Series, save};
-            let pts = |v: &[f64]| -> Vec<(f64, f64)> {
-                v.iter()
-                    .enumerate()
-                    .map(|(k, &p)| (k as f64 * step, p))
-                    .filter(|&(th, p)| th > 0.0 && p > 0.0)
-                    .collect()
-            };
-            let order = a.orders[0];
-            let plot = LinePlot {
-                title: format!(
-                    "{} ({}): Ams_{order} (G) against Henyey–Greenstein lobes",
-                    f.name, f.kind
-                ),
-                x_label: "scattering angle θ (°)".into(),
-                y_label: "phase function (1/sr)".into(),
-                x_range: (0.0, 180.0),
-                log_x: false,
-                log_y: true,
-                series: vec![
-                    Series {
-                        label: format!("Ams_{order}, photometeor"),
-                        colour: CHANNEL_COLOURS[1],
-                        width: 2,
-                        points: pts(&row),
-                    },
-                    Series {
-                        label: format!(
-                            "HG at the table's g = {:.3}: {:.1} % moved",
-                            m.g1,
-                            m.moved * 100.0
-                        ),
-                        colour: plotters::style::RGBColor(148, 103, 189),
-                        width: 1,
-                        points: pts(&moment),
-                    },
-                    Series {
-                        label: format!("best HG g = {:.3}: {:.1} % moved", s.g1, s.moved * 100.0),
-                        colour: plotters::style::RGBColor(0, 0, 0),
-                        width: 1,
-                        points: pts(&single),
-                    },
-                    Series {
-                        label: format!(
-                            "best dual HG {:.3}/{:.3}, w {:.2}: {:.1} % moved",
-                            d.g1,
-                            d.g2,
-                            d.w,
-                            d.moved * 100.0
-                        ),
-                        colour: plotters::style::RGBColor(255, 127, 14),
-                        width: 1,
-                        points: pts(&dual),
-                    },
-                ],
-            };
-            save(&plot, stage, &format!("{}.lobes", f.name), &[])?;
+        if let Some((row, bins, lobes)) = plot_rows {
+            plot_lobes(a, step, stage, f, &row, bins, lobes)?;
         }
         report_fields.insert(
             f.name.clone(),
@@ -863,4 +872,180 @@ fn write_lobes(
         );
     }
     Ok(report)
+}
+
+/// One channel's row against three lobes, in this order: HG at the row's own g, the best-fit
+/// HG and the best-fit dual HG; per lobe its bin averages (1/sr), its report and its rms
+/// relative error for θ ≥ 1°.
+struct ChannelLobes {
+    g: f64,
+    lobes: [Lobes; 3],
+    bins: [Vec<f64>; 3],
+    json: [serde_json::Value; 3],
+    rms: [f64; 3],
+}
+
+impl ChannelLobes {
+    /// Fits the lobes to `row` (K bins of `step` degrees) and measures what each keeps of
+    /// `feats`.
+    fn fit(row: &[f64], step: f64, k_len: usize, feats: &[(&'static str, f64, f64)]) -> Self {
+        let (single, dual) = (fit_hg(row, step), fit_dual_hg(row, step));
+        // HG at the table's own g: what an engine's `anisotropy` usually gets.
+        let g = asymmetry(row, step);
+        let moment = Lobes {
+            g1: g,
+            g2: 0.0,
+            w: 1.0,
+            moved: runtime::export::moved(row, &runtime::export::hg_bins(g, step, k_len), step),
+        };
+        let (moment_bins, moment_json, moment_rms) =
+            describe_lobes(row, &moment, step, k_len, feats);
+        let (single_bins, single_json, single_rms) =
+            describe_lobes(row, &single, step, k_len, feats);
+        let (dual_bins, dual_json, dual_rms) = describe_lobes(row, &dual, step, k_len, feats);
+        ChannelLobes {
+            g,
+            lobes: [moment, single, dual],
+            bins: [moment_bins, single_bins, dual_bins],
+            json: [moment_json, single_json, dual_json],
+            rms: [moment_rms, single_rms, dual_rms],
+        }
+    }
+
+    /// Appends the text report's lines for this channel (order `order` of `field`): g, and
+    /// per lobe the light moved and rms error (%) and the height kept of each feature.
+    fn summary(&self, text: &mut String, field: &str, order: usize, feats: &[(&str, f64, f64)]) {
+        let kept = |j: &serde_json::Value| {
+            feats
+                .iter()
+                .map(|(name, _, _)| {
+                    format!(
+                        "{name} {:.1} %",
+                        100.0 * j["features"][*name]["kept"].as_f64().unwrap()
+                    )
+                })
+                .collect::<Vec<_>>()
+                .join(", ")
+        };
+        let [moment, single, dual] = &self.lobes;
+        let [moment_json, single_json, dual_json] = &self.json;
+        let [moment_rms, single_rms, dual_rms] = self.rms;
+        let _ = writeln!(
+            text,
+            "{:<10} Ams_{order:<3} G  g = {:.4}\n    HG at that g: moves {:.1} %, rms {:.0} %; kept: {}\n    best HG g = {:.4}: moves {:.1} %, rms {:.0} %; kept: {}\n    best dual HG {:.4}/{:.4}, w = {:.3}: moves {:.1} %, rms {:.0} %; kept: {}",
+            field,
+            self.g,
+            moment.moved * 100.0,
+            moment_rms * 100.0,
+            kept(moment_json),
+            single.g1,
+            single.moved * 100.0,
+            single_rms * 100.0,
+            kept(single_json),
+            dual.g1,
+            dual.g2,
+            dual.w,
+            dual.moved * 100.0,
+            dual_rms * 100.0,
+            kept(dual_json),
+        );
+    }
+}
+
+/// Lobes `l` against `row`: their bin averages (1/sr), their report (parameters, light
+/// moved, rms relative error for θ ≥ 1°, and per feature of `feats` the table's and the
+/// lobes' value at the feature's peak, θ in degrees) and that rms error.
+fn describe_lobes(
+    row: &[f64],
+    l: &Lobes,
+    step: f64,
+    k_len: usize,
+    feats: &[(&'static str, f64, f64)],
+) -> (Vec<f64>, serde_json::Value, f64) {
+    let bins = l.bins(step, k_len);
+    let kept: serde_json::Map<String, serde_json::Value> = feats
+        .iter()
+        .map(|&(name, from, to)| {
+            let ks = (from / step).round() as usize..=((to / step).round() as usize).min(k_len - 1);
+            let k = ks.max_by(|&x, &y| row[x].total_cmp(&row[y])).unwrap();
+            (name.to_string(), json!({"theta_deg": k as f64 * step, "table": row[k], "lobes": bins[k], "kept": bins[k] / row[k]}))
+        })
+        .collect();
+    let rms = rms_relative(row, &bins, step, 1.0);
+    (
+        bins,
+        json!({"g1": l.g1, "g2": l.g2, "w": l.w, "moved": l.moved, "rms_relative_from_1deg": rms, "features": kept}),
+        rms,
+    )
+}
+
+/// Draws `<field>.lobes.png` and `.svg`: the first order's G row against the three lobes'
+/// bin averages (1/sr, log scale) over θ in degrees.
+fn plot_lobes(
+    a: &ExportArgs,
+    step: f64,
+    stage: &Path,
+    f: &FieldTable,
+    row: &[f64],
+    [moment, single, dual]: [Vec<f64>; 3],
+    [m, s, d]: [Lobes; 3],
+) -> Result<()> {
+    use crate::commands::plot::{CHANNEL_COLOURS, LinePlot, Series, save};
+    let pts = |v: &[f64]| -> Vec<(f64, f64)> {
+        v.iter()
+            .enumerate()
+            .map(|(k, &p)| (k as f64 * step, p))
+            .filter(|&(th, p)| th > 0.0 && p > 0.0)
+            .collect()
+    };
+    let order = a.orders[0];
+    let plot = LinePlot {
+        title: format!(
+            "{} ({}): Ams_{order} (G) against Henyey–Greenstein lobes",
+            f.name, f.kind
+        ),
+        x_label: "scattering angle θ (°)".into(),
+        y_label: "phase function (1/sr)".into(),
+        x_range: (0.0, 180.0),
+        log_x: false,
+        log_y: true,
+        series: vec![
+            Series {
+                label: format!("Ams_{order}, photometeor"),
+                colour: CHANNEL_COLOURS[1],
+                width: 2,
+                points: pts(row),
+            },
+            Series {
+                label: format!(
+                    "HG at the table's g = {:.3}: {:.1} % moved",
+                    m.g1,
+                    m.moved * 100.0
+                ),
+                colour: plotters::style::RGBColor(148, 103, 189),
+                width: 1,
+                points: pts(&moment),
+            },
+            Series {
+                label: format!("best HG g = {:.3}: {:.1} % moved", s.g1, s.moved * 100.0),
+                colour: plotters::style::RGBColor(0, 0, 0),
+                width: 1,
+                points: pts(&single),
+            },
+            Series {
+                label: format!(
+                    "best dual HG {:.3}/{:.3}, w {:.2}: {:.1} % moved",
+                    d.g1,
+                    d.g2,
+                    d.w,
+                    d.moved * 100.0
+                ),
+                colour: plotters::style::RGBColor(255, 127, 14),
+                width: 1,
+                points: pts(&dual),
+            },
+        ],
+    };
+    save(&plot, stage, &format!("{}.lobes", f.name), &[])?;
+    Ok(())
 }

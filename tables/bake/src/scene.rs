@@ -340,301 +340,29 @@ impl Scene {
             line: e.span().map(|s| line_of(text, s.start)).unwrap_or(0),
             message: e.message().to_string(),
         })?;
-        let header_span = file.scene.span();
+        let keys = Keys {
+            text,
+            origin,
+            span: file.scene.span(),
+        };
         let header = file.scene.into_inner();
-        let at = |key: &str| At {
-            origin: origin.to_string(),
-            line: key_line(text, header_span.clone(), key),
-        };
-
-        if header.name.is_empty()
-            || header.name.chars().count() > 200
-            || header.name.chars().any(char::is_control)
-        {
-            fail!(
-                at("name"),
-                "scene name {:?} must have 1 to 200 characters and no control characters",
-                header.name
-            );
-        }
-        let theta_step_deg = header.theta_step_deg.unwrap_or(0.18);
-        if grid::ThetaGrid::new(theta_step_deg).is_err() {
-            fail!(
-                at("theta_step_deg"),
-                "theta_step_deg = {theta_step_deg} must divide 180° and lie in [0.01, 30]"
-            );
-        }
-        let n_max = match (header.n_max, header.max_optical_depth) {
-            (Some(_), Some(_)) => fail!(
-                at("max_optical_depth"),
-                "give n_max or max_optical_depth, not both"
-            ),
-            (Some(n), None) => {
-                if !(1..=10_000).contains(&n) {
-                    fail!(
-                        at("n_max"),
-                        "n_max = {n} is outside the allowed range [1, 10000]"
-                    );
-                }
-                n
-            }
-            (None, Some(tau)) => {
-                if !(tau.is_finite() && tau > 0.0 && tau <= 5000.0) {
-                    fail!(
-                        at("max_optical_depth"),
-                        "max_optical_depth = {tau} is outside the allowed range (0, 5000]"
-                    );
-                }
-                (tau + 4.0 * tau.sqrt() + 4.0).ceil() as usize
-            }
-            (None, None) => 26,
-        };
-        let poisson_max_depth = header.poisson_max_depth.unwrap_or(30.0);
-        if !(poisson_max_depth.is_finite()
-            && poisson_max_depth > POISSON_MIN_DEPTH
-            && poisson_max_depth <= 1000.0)
-        {
-            fail!(
-                at("poisson_max_depth"),
-                "poisson_max_depth = {poisson_max_depth} is outside the allowed range \
-                 ({POISSON_MIN_DEPTH}, 1000] (optical depth)"
-            );
-        }
-        let spectral = match header.spectral.as_deref().unwrap_or("spectral") {
-            "rgb3" => SpectralMode::Rgb3,
-            "spectral" => {
-                let count = header.wavelengths.unwrap_or(31);
-                let (min_nm, max_nm) = (
-                    header.wavelength_min_nm.unwrap_or(400.0),
-                    header.wavelength_max_nm.unwrap_or(700.0),
-                );
-                if !(3..=1000).contains(&count) {
-                    fail!(
-                        at("wavelengths"),
-                        "wavelengths = {count} is outside the allowed range [3, 1000]"
-                    );
-                }
-                if !(min_nm >= 360.0 && max_nm <= 830.0 && min_nm < max_nm) {
-                    fail!(
-                        at("wavelength_min_nm"),
-                        "wavelength range [{min_nm}, {max_nm}] nm must lie within the CIE table [360, 830] nm"
-                    );
-                }
-                SpectralMode::Spectral {
-                    count,
-                    min_nm,
-                    max_nm,
-                }
-            }
-            other => fail!(
-                at("spectral"),
-                "spectral = {other:?} is not one of \"spectral\", \"rgb3\""
-            ),
-        };
-        // The tables hold N × K values per channel and wavelength mixture; bound their size
-        // (and so the bake's memory and time) before anything is computed.
-        let angles = (180.0 / theta_step_deg).round() as usize + 1;
-        if n_max * angles > MAX_TEXELS_PER_CHANNEL {
-            let key = if header.max_optical_depth.is_some() {
-                "max_optical_depth"
-            } else {
-                "n_max"
-            };
-            fail!(
-                at(key),
-                "n_max = {n_max} orders × {angles} angles (theta_step_deg = {theta_step_deg}) = {} texels per channel exceeds the allowed {MAX_TEXELS_PER_CHANNEL} (≈ {:.0} MB of tables in memory); lower n_max or raise theta_step_deg",
-                n_max * angles,
-                (n_max * angles * 3 * 8 * 4) as f64 / 1e6
-            );
-        }
-        let quality = match header.quality.as_deref() {
-            None => Quality::Standard,
-            Some(q) => Quality::parse(q).ok_or_else(|| {
-                at("quality").error(format!(
-                    "quality = {q:?} is not one of draft, standard, reference"
-                ))
-            })?,
-        };
+        header.check_name(&keys)?;
+        let theta_step_deg = header.theta_step_deg(&keys)?;
+        let n_max = header.n_max(&keys)?;
+        let poisson_max_depth = header.poisson_max_depth(&keys)?;
+        let spectral = header.spectral(&keys)?;
+        header.check_table_size(&keys, n_max, theta_step_deg)?;
+        let quality = header.quality(&keys)?;
 
         let mut fields: Vec<Field> = Vec::new();
         for spanned in file.fields {
-            let span = spanned.span();
-            let f = spanned.into_inner();
-            let at = |key: &str| At {
-                origin: origin.to_string(),
-                line: key_line(text, span.clone(), key),
+            let keys = Keys {
+                text,
+                origin,
+                span: spanned.span(),
             };
-            if f.name.is_empty()
-                || f.name.len() > 200
-                || !f
-                    .name
-                    .chars()
-                    .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
-            {
-                fail!(
-                    at("name"),
-                    "field name {:?} must be 1 to 200 ASCII letters, digits, '_' or '-' (it names the EXR file)",
-                    f.name
-                );
-            }
-            if fields.iter().any(|g| g.name == f.name) {
-                fail!(at("name"), "field name {:?} is used twice", f.name);
-            }
-            let material = f.material.unwrap_or(match f.kind {
-                FieldKind::Cloud | FieldKind::Rain | FieldKind::Haze => Material::Water,
-                FieldKind::Ice | FieldKind::Snow => Material::Ice,
-            });
-            // Liquid drops at 10 °C, ice (crystals or frozen drops) at −20 °C unless given.
-            let temperature_c = f.temperature_c.unwrap_or(match material {
-                Material::Water => 10.0,
-                Material::Ice => -20.0,
-            });
-            if material == Material::Ice
-                && !(temperature_c.is_finite() && (-100.0..=0.0).contains(&temperature_c))
-            {
-                fail!(
-                    at("temperature_c"),
-                    "temperature_c = {temperature_c} is outside the allowed range [-100, 0] °C for ice"
-                );
-            }
-            if material == Material::Water && matches!(f.kind, FieldKind::Ice | FieldKind::Snow) {
-                fail!(
-                    at("material"),
-                    "field {:?} ({:?}): crystals are ice; material = \"water\" is only for cloud and rain",
-                    f.name,
-                    f.kind
-                );
-            }
-            if let Some([n, kappa]) = f.refractive_index {
-                if matches!(f.kind, FieldKind::Ice | FieldKind::Snow) {
-                    fail!(
-                        at("refractive_index"),
-                        "field {:?} ({:?}): crystals are ice; refractive_index is for spheres \
-                         (cloud, rain, haze)",
-                        f.name,
-                        f.kind
-                    );
-                }
-                if !(n.is_finite() && n > 1.0 && n <= 3.0) {
-                    fail!(
-                        at("refractive_index"),
-                        "refractive_index = [{n}, {kappa}]: n = {n} is outside the allowed range \
-                         (1, 3]"
-                    );
-                }
-                if !(kappa.is_finite() && (0.0..=10.0).contains(&kappa)) {
-                    fail!(
-                        at("refractive_index"),
-                        "refractive_index = [{n}, {kappa}]: κ = {kappa} is outside the allowed \
-                         range [0, 10]"
-                    );
-                }
-            }
-            let distribution = match (f.kind, f.distribution) {
-                (FieldKind::Haze, None) => Some(SizeDistribution::Lognormal {
-                    median_radius_um: 0.1,
-                    sigma_g: 2.0,
-                }),
-                (FieldKind::Haze, Some(d)) => {
-                    let SizeDistribution::Lognormal {
-                        median_radius_um, ..
-                    } = d
-                    else {
-                        fail!(
-                            at("distribution"),
-                            "field {:?} (haze): distribution must be lognormal (kind = \
-                             \"lognormal\", median_radius_um, sigma_g)",
-                            f.name
-                        );
-                    };
-                    if !(0.05..=1.0).contains(&median_radius_um) {
-                        fail!(
-                            at("distribution"),
-                            "field {:?} (haze): median_radius_um = {median_radius_um} is outside \
-                             the allowed range [0.05, 1] µm of aerosols (cloud droplets are kind \
-                             = \"cloud\")",
-                            f.name
-                        );
-                    }
-                    Some(d)
-                }
-                (_, d) => d,
-            };
-            let (distribution, crystal) = match f.kind {
-                FieldKind::Cloud | FieldKind::Rain | FieldKind::Haze => {
-                    let d = distribution.ok_or_else(|| {
-                        at("kind").error(format!(
-                            "field {:?} ({:?}) needs a distribution",
-                            f.name, f.kind
-                        ))
-                    })?;
-                    let d = d.validated().map_err(|e| {
-                        at("distribution").error(format!("field {:?}: distribution: {e}", f.name))
-                    })?;
-                    if material == Material::Water
-                        && mie::refractive::water_density_kg_m3(temperature_c).is_err()
-                    {
-                        fail!(
-                            at("temperature_c"),
-                            "temperature_c = {temperature_c} is outside the allowed range [-12, 99] °C for liquid water"
-                        );
-                    }
-                    (Some(d), None)
-                }
-                FieldKind::Ice | FieldKind::Snow => {
-                    if distribution.is_some() {
-                        fail!(
-                            at("distribution"),
-                            "field {:?} ({:?}): crystals take habit, aspect_ratio, max_dimension_um, dimension_sigma_g and roughness, not a sphere distribution",
-                            f.name,
-                            f.kind
-                        );
-                    }
-                    let snow = f.kind == FieldKind::Snow;
-                    let habit =
-                        f.habit
-                            .as_deref()
-                            .unwrap_or(if snow { "aggregate" } else { "column" });
-                    let default_ar = match habit {
-                        "plate" => 0.2,
-                        "column" => 2.0,
-                        "aggregate" => 1.0,
-                        other => fail!(
-                            at("habit"),
-                            "habit = {other:?} is not one of \"plate\", \"column\", \"aggregate\""
-                        ),
-                    };
-                    let crystal = mie::crystal::CrystalField {
-                        aspect_ratio: f.aspect_ratio.unwrap_or(default_ar),
-                        max_dimension_um: f.max_dimension_um.unwrap_or(if snow {
-                            2000.0
-                        } else {
-                            100.0
-                        }),
-                        sigma_g: f.dimension_sigma_g.unwrap_or(1.5),
-                        roughness: f.roughness.unwrap_or(if snow { 0.7 } else { 0.0 }),
-                    };
-                    let crystal = crystal.validated().map_err(|e| {
-                        let key = match e.to_string() {
-                            t if t.starts_with("aspect") => "aspect_ratio",
-                            t if t.starts_with("maximum") => "max_dimension_um",
-                            t if t.starts_with("σ_g") => "dimension_sigma_g",
-                            _ => "roughness",
-                        };
-                        at(key).error(format!("field {:?}: {key}: {e}", f.name))
-                    })?;
-                    (None, Some(crystal))
-                }
-            };
-            fields.push(Field {
-                name: f.name,
-                kind: f.kind,
-                temperature_c,
-                material,
-                refractive_index: f.refractive_index,
-                distribution,
-                crystal,
-            });
+            let field = spanned.into_inner().validated(&keys, &fields)?;
+            fields.push(field);
         }
         if fields.is_empty() {
             return Err(SceneError::Scene {
@@ -650,6 +378,402 @@ impl Scene {
             poisson_max_depth,
             quality,
             fields,
+        })
+    }
+}
+
+/// One TOML table of a scene text: finds the file and line of its keys for errors.
+struct Keys<'a> {
+    text: &'a str,
+    origin: &'a str,
+    span: std::ops::Range<usize>,
+}
+
+impl Keys<'_> {
+    /// Where `key =` sits in this table (or the table's first line when it is absent).
+    fn at(&self, key: &str) -> At {
+        At {
+            origin: self.origin.to_string(),
+            line: key_line(self.text, self.span.clone(), key),
+        }
+    }
+}
+
+/// The `[scene]` table's keys, each checked in turn (in this order, so the first bad key of a
+/// scene is the one reported).
+impl Header {
+    /// Refuses an empty, over-long (> 200 characters) or control-character scene name.
+    fn check_name(&self, keys: &Keys) -> Result<(), SceneError> {
+        if self.name.is_empty()
+            || self.name.chars().count() > 200
+            || self.name.chars().any(char::is_control)
+        {
+            fail!(
+                keys.at("name"),
+                "scene name {:?} must have 1 to 200 characters and no control characters",
+                self.name
+            );
+        }
+        Ok(())
+    }
+
+    /// Δθ in degrees (default 0.18): must divide 180 and lie in [0.01, 30].
+    fn theta_step_deg(&self, keys: &Keys) -> Result<f64, SceneError> {
+        let theta_step_deg = self.theta_step_deg.unwrap_or(0.18);
+        if grid::ThetaGrid::new(theta_step_deg).is_err() {
+            fail!(
+                keys.at("theta_step_deg"),
+                "theta_step_deg = {theta_step_deg} must divide 180° and lie in [0.01, 30]"
+            );
+        }
+        Ok(theta_step_deg)
+    }
+
+    /// N from `n_max` ([1, 10000]) or from `max_optical_depth` τ ((0, 5000]) as
+    /// ⌈τ + 4√τ + 4⌉, never both; default 26.
+    fn n_max(&self, keys: &Keys) -> Result<usize, SceneError> {
+        Ok(match (self.n_max, self.max_optical_depth) {
+            (Some(_), Some(_)) => fail!(
+                keys.at("max_optical_depth"),
+                "give n_max or max_optical_depth, not both"
+            ),
+            (Some(n), None) => {
+                if !(1..=10_000).contains(&n) {
+                    fail!(
+                        keys.at("n_max"),
+                        "n_max = {n} is outside the allowed range [1, 10000]"
+                    );
+                }
+                n
+            }
+            (None, Some(tau)) => {
+                if !(tau.is_finite() && tau > 0.0 && tau <= 5000.0) {
+                    fail!(
+                        keys.at("max_optical_depth"),
+                        "max_optical_depth = {tau} is outside the allowed range (0, 5000]"
+                    );
+                }
+                (tau + 4.0 * tau.sqrt() + 4.0).ceil() as usize
+            }
+            (None, None) => 26,
+        })
+    }
+
+    /// Largest optical depth of the Poisson mixtures (default 30), in
+    /// ([`POISSON_MIN_DEPTH`], 1000].
+    fn poisson_max_depth(&self, keys: &Keys) -> Result<f64, SceneError> {
+        let poisson_max_depth = self.poisson_max_depth.unwrap_or(30.0);
+        if !(poisson_max_depth.is_finite()
+            && poisson_max_depth > POISSON_MIN_DEPTH
+            && poisson_max_depth <= 1000.0)
+        {
+            fail!(
+                keys.at("poisson_max_depth"),
+                "poisson_max_depth = {poisson_max_depth} is outside the allowed range \
+                 ({POISSON_MIN_DEPTH}, 1000] (optical depth)"
+            );
+        }
+        Ok(poisson_max_depth)
+    }
+
+    /// `rgb3`, or `spectral` (default) with [3, 1000] wavelengths over a range in nm within
+    /// [360, 830] (default [400, 700]).
+    fn spectral(&self, keys: &Keys) -> Result<SpectralMode, SceneError> {
+        Ok(match self.spectral.as_deref().unwrap_or("spectral") {
+            "rgb3" => SpectralMode::Rgb3,
+            "spectral" => {
+                let count = self.wavelengths.unwrap_or(31);
+                let (min_nm, max_nm) = (
+                    self.wavelength_min_nm.unwrap_or(400.0),
+                    self.wavelength_max_nm.unwrap_or(700.0),
+                );
+                if !(3..=1000).contains(&count) {
+                    fail!(
+                        keys.at("wavelengths"),
+                        "wavelengths = {count} is outside the allowed range [3, 1000]"
+                    );
+                }
+                if !(min_nm >= 360.0 && max_nm <= 830.0 && min_nm < max_nm) {
+                    fail!(
+                        keys.at("wavelength_min_nm"),
+                        "wavelength range [{min_nm}, {max_nm}] nm must lie within the CIE table [360, 830] nm"
+                    );
+                }
+                SpectralMode::Spectral {
+                    count,
+                    min_nm,
+                    max_nm,
+                }
+            }
+            other => fail!(
+                keys.at("spectral"),
+                "spectral = {other:?} is not one of \"spectral\", \"rgb3\""
+            ),
+        })
+    }
+
+    /// Refuses tables over [`MAX_TEXELS_PER_CHANNEL`] values (N orders × K angles) per
+    /// channel.
+    fn check_table_size(
+        &self,
+        keys: &Keys,
+        n_max: usize,
+        theta_step_deg: f64,
+    ) -> Result<(), SceneError> {
+        // The tables hold N × K values per channel and wavelength mixture; bound their size
+        // (and so the bake's memory and time) before anything is computed.
+        let angles = (180.0 / theta_step_deg).round() as usize + 1;
+        if n_max * angles > MAX_TEXELS_PER_CHANNEL {
+            let key = if self.max_optical_depth.is_some() {
+                "max_optical_depth"
+            } else {
+                "n_max"
+            };
+            fail!(
+                keys.at(key),
+                "n_max = {n_max} orders × {angles} angles (theta_step_deg = {theta_step_deg}) = {} texels per channel exceeds the allowed {MAX_TEXELS_PER_CHANNEL} (≈ {:.0} MB of tables in memory); lower n_max or raise theta_step_deg",
+                n_max * angles,
+                (n_max * angles * 3 * 8 * 4) as f64 / 1e6
+            );
+        }
+        Ok(())
+    }
+
+    /// The accuracy preset (default standard).
+    fn quality(&self, keys: &Keys) -> Result<Quality, SceneError> {
+        Ok(match self.quality.as_deref() {
+            None => Quality::Standard,
+            Some(q) => Quality::parse(q).ok_or_else(|| {
+                keys.at("quality").error(format!(
+                    "quality = {q:?} is not one of draft, standard, reference"
+                ))
+            })?,
+        })
+    }
+}
+
+/// A `[[field]]` table's keys, each checked in turn (in this order, so the first bad key of a
+/// field is the one reported).
+impl FieldFile {
+    /// The validated field; `earlier` are the scene's fields before it (names must differ).
+    fn validated(self, keys: &Keys, earlier: &[Field]) -> Result<Field, SceneError> {
+        self.check_name(keys, earlier)?;
+        let (material, temperature_c) = self.material_and_temperature(keys)?;
+        self.check_refractive_index(keys)?;
+        let distribution = self.haze_distribution(keys)?;
+        let (distribution, crystal) = match self.kind {
+            FieldKind::Cloud | FieldKind::Rain | FieldKind::Haze => {
+                let d = self.sphere_distribution(keys, distribution, material, temperature_c)?;
+                (Some(d), None)
+            }
+            FieldKind::Ice | FieldKind::Snow => (None, Some(self.crystal(keys, distribution)?)),
+        };
+        Ok(Field {
+            name: self.name,
+            kind: self.kind,
+            temperature_c,
+            material,
+            refractive_index: self.refractive_index,
+            distribution,
+            crystal,
+        })
+    }
+
+    /// Refuses a name that is not 1 to 200 ASCII letters, digits, '_' or '-', or that an
+    /// earlier field has.
+    fn check_name(&self, keys: &Keys, earlier: &[Field]) -> Result<(), SceneError> {
+        if self.name.is_empty()
+            || self.name.len() > 200
+            || !self
+                .name
+                .chars()
+                .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
+        {
+            fail!(
+                keys.at("name"),
+                "field name {:?} must be 1 to 200 ASCII letters, digits, '_' or '-' (it names the EXR file)",
+                self.name
+            );
+        }
+        if earlier.iter().any(|g| g.name == self.name) {
+            fail!(keys.at("name"), "field name {:?} is used twice", self.name);
+        }
+        Ok(())
+    }
+
+    /// The material (default water for spheres, ice for crystals) and its temperature in °C
+    /// (default 10 for water, −20 for ice; ice in [−100, 0]); crystals must be ice.
+    fn material_and_temperature(&self, keys: &Keys) -> Result<(Material, f64), SceneError> {
+        let material = self.material.unwrap_or(match self.kind {
+            FieldKind::Cloud | FieldKind::Rain | FieldKind::Haze => Material::Water,
+            FieldKind::Ice | FieldKind::Snow => Material::Ice,
+        });
+        // Liquid drops at 10 °C, ice (crystals or frozen drops) at −20 °C unless given.
+        let temperature_c = self.temperature_c.unwrap_or(match material {
+            Material::Water => 10.0,
+            Material::Ice => -20.0,
+        });
+        if material == Material::Ice
+            && !(temperature_c.is_finite() && (-100.0..=0.0).contains(&temperature_c))
+        {
+            fail!(
+                keys.at("temperature_c"),
+                "temperature_c = {temperature_c} is outside the allowed range [-100, 0] °C for ice"
+            );
+        }
+        if material == Material::Water && matches!(self.kind, FieldKind::Ice | FieldKind::Snow) {
+            fail!(
+                keys.at("material"),
+                "field {:?} ({:?}): crystals are ice; material = \"water\" is only for cloud and rain",
+                self.name,
+                self.kind
+            );
+        }
+        Ok((material, temperature_c))
+    }
+
+    /// A given refractive index [n, κ] is for spheres only, with n in (1, 3] and κ in [0, 10].
+    fn check_refractive_index(&self, keys: &Keys) -> Result<(), SceneError> {
+        if let Some([n, kappa]) = self.refractive_index {
+            if matches!(self.kind, FieldKind::Ice | FieldKind::Snow) {
+                fail!(
+                    keys.at("refractive_index"),
+                    "field {:?} ({:?}): crystals are ice; refractive_index is for spheres \
+                     (cloud, rain, haze)",
+                    self.name,
+                    self.kind
+                );
+            }
+            if !(n.is_finite() && n > 1.0 && n <= 3.0) {
+                fail!(
+                    keys.at("refractive_index"),
+                    "refractive_index = [{n}, {kappa}]: n = {n} is outside the allowed range \
+                     (1, 3]"
+                );
+            }
+            if !(kappa.is_finite() && (0.0..=10.0).contains(&kappa)) {
+                fail!(
+                    keys.at("refractive_index"),
+                    "refractive_index = [{n}, {kappa}]: κ = {kappa} is outside the allowed \
+                     range [0, 10]"
+                );
+            }
+        }
+        Ok(())
+    }
+
+    /// The size distribution as given; for haze the default (lognormal, median 0.1 µm,
+    /// σ_g 2) or a given lognormal with its median radius in [0.05, 1] µm.
+    fn haze_distribution(&self, keys: &Keys) -> Result<Option<SizeDistribution>, SceneError> {
+        Ok(match (self.kind, self.distribution) {
+            (FieldKind::Haze, None) => Some(SizeDistribution::Lognormal {
+                median_radius_um: 0.1,
+                sigma_g: 2.0,
+            }),
+            (FieldKind::Haze, Some(d)) => {
+                let SizeDistribution::Lognormal {
+                    median_radius_um, ..
+                } = d
+                else {
+                    fail!(
+                        keys.at("distribution"),
+                        "field {:?} (haze): distribution must be lognormal (kind = \
+                         \"lognormal\", median_radius_um, sigma_g)",
+                        self.name
+                    );
+                };
+                if !(0.05..=1.0).contains(&median_radius_um) {
+                    fail!(
+                        keys.at("distribution"),
+                        "field {:?} (haze): median_radius_um = {median_radius_um} is outside \
+                         the allowed range [0.05, 1] µm of aerosols (cloud droplets are kind \
+                         = \"cloud\")",
+                        self.name
+                    );
+                }
+                Some(d)
+            }
+            (_, d) => d,
+        })
+    }
+
+    /// A sphere field's validated size distribution (required); liquid water must lie in
+    /// [−12, 99] °C, where its density is known.
+    fn sphere_distribution(
+        &self,
+        keys: &Keys,
+        distribution: Option<SizeDistribution>,
+        material: Material,
+        temperature_c: f64,
+    ) -> Result<SizeDistribution, SceneError> {
+        let d = distribution.ok_or_else(|| {
+            keys.at("kind").error(format!(
+                "field {:?} ({:?}) needs a distribution",
+                self.name, self.kind
+            ))
+        })?;
+        let d = d.validated().map_err(|e| {
+            keys.at("distribution")
+                .error(format!("field {:?}: distribution: {e}", self.name))
+        })?;
+        if material == Material::Water
+            && mie::refractive::water_density_kg_m3(temperature_c).is_err()
+        {
+            fail!(
+                keys.at("temperature_c"),
+                "temperature_c = {temperature_c} is outside the allowed range [-12, 99] °C for liquid water"
+            );
+        }
+        Ok(d)
+    }
+
+    /// A crystal field's validated population: habit (default column for ice, aggregate for
+    /// snow), aspect ratio, median maximum dimension in µm, its σ_g and roughness; no sphere
+    /// distribution.
+    fn crystal(
+        &self,
+        keys: &Keys,
+        distribution: Option<SizeDistribution>,
+    ) -> Result<mie::crystal::CrystalField, SceneError> {
+        if distribution.is_some() {
+            fail!(
+                keys.at("distribution"),
+                "field {:?} ({:?}): crystals take habit, aspect_ratio, max_dimension_um, dimension_sigma_g and roughness, not a sphere distribution",
+                self.name,
+                self.kind
+            );
+        }
+        let snow = self.kind == FieldKind::Snow;
+        let habit = self
+            .habit
+            .as_deref()
+            .unwrap_or(if snow { "aggregate" } else { "column" });
+        let default_ar = match habit {
+            "plate" => 0.2,
+            "column" => 2.0,
+            "aggregate" => 1.0,
+            other => fail!(
+                keys.at("habit"),
+                "habit = {other:?} is not one of \"plate\", \"column\", \"aggregate\""
+            ),
+        };
+        let crystal = mie::crystal::CrystalField {
+            aspect_ratio: self.aspect_ratio.unwrap_or(default_ar),
+            max_dimension_um: self
+                .max_dimension_um
+                .unwrap_or(if snow { 2000.0 } else { 100.0 }),
+            sigma_g: self.dimension_sigma_g.unwrap_or(1.5),
+            roughness: self.roughness.unwrap_or(if snow { 0.7 } else { 0.0 }),
+        };
+        crystal.validated().map_err(|e| {
+            let key = match e.to_string() {
+                t if t.starts_with("aspect") => "aspect_ratio",
+                t if t.starts_with("maximum") => "max_dimension_um",
+                t if t.starts_with("σ_g") => "dimension_sigma_g",
+                _ => "roughness",
+            };
+            keys.at(key)
+                .error(format!("field {:?}: {key}: {e}", self.name))
         })
     }
 }

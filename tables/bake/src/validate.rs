@@ -302,6 +302,8 @@ fn refine(row: &[f64], k: usize) -> f64 {
     k as f64 + off
 }
 
+/// A sphere field's checks: the rainbows when every wavelength's x_eff reaches
+/// [`RAY_OPTICS_MIN_X`], else the glory and the first corona ring per channel.
 fn spheres(
     ctx: &FieldContext,
     n_of: &dyn Fn(f64) -> f64,
@@ -318,99 +320,7 @@ fn spheres(
         .map(|&l| x_of(l))
         .fold(f64::INFINITY, f64::min);
     if x_min >= RAY_OPTICS_MIN_X {
-        let mut primary = [f64::NAN; 3];
-        let mut secondary = [f64::NAN; 3];
-        for c in 0..3 {
-            let s = &ctx.spectra[c];
-            let (e1, t1) = s.expect(|l| {
-                let (t, sh) = rainbow_theory(n_of(l), 1, x_of(l));
-                t + sh
-            });
-            let (e2, t2) = s.expect(|l| {
-                let (t, sh) = rainbow_theory(n_of(l), 2, x_of(l));
-                t - sh
-            });
-            let m1 = ctx.peak(c, e1 - 4.0, e1 + 4.0);
-            let note = format!("Descartes + Airy shift, r_eff = {r_eff:.1} µm");
-            checks.push(ctx.judged(
-                c,
-                "primary rainbow",
-                m1,
-                e1,
-                t1 + RAINBOW_MARGIN_DEG,
-                "deg",
-                note.clone(),
-            ));
-            // Below n ≈ 1.32 (ice spheres) the two bows overlap: no separate secondary and no
-            // dark band to judge.
-            primary[c] = m1.unwrap_or(f64::NAN);
-            if e2 + 3.0 + t1 + t2 > e1 {
-                checks.push(ctx.info(
-                    CHANNELS[c],
-                    "secondary rainbow",
-                    format!("expected at {e2:.2}°, too close to the primary ({e1:.2}°): bows overlap, not judged"),
-                ));
-                continue;
-            }
-            let m2 = ctx.peak(c, e2 - 4.0, e2 + 4.0);
-            checks.push(ctx.judged(
-                c,
-                "secondary rainbow",
-                m2,
-                e2,
-                t2 + RAINBOW_MARGIN_DEG,
-                "deg",
-                note,
-            ));
-            if let (Some(p1), Some(p2)) = (m1, m2) {
-                secondary[c] = p2;
-                // Alexander's dark band: darker than the sky inside the primary and outside the
-                // secondary (in scattering angle: above p1, below p2).
-                let band = ctx.mean(c, p2 + 1.5, p1 - 1.5);
-                let inside = ctx.mean(c, p1 + 1.0, p1 + 6.0);
-                let outside = ctx.mean(c, p2 - 6.0, p2 - 1.0);
-                let contrast = inside.min(outside) / band;
-                checks.push(Check {
-                    status: if contrast > 1.0 {
-                        Status::Pass
-                    } else {
-                        Status::Fail
-                    },
-                    ..ctx.judged(
-                        c,
-                        "Alexander's dark band contrast",
-                        Some(contrast),
-                        1.0,
-                        f64::INFINITY,
-                        "ratio",
-                        "min(mean 1–6° inside the primary, mean 1–6° outside the secondary) / mean of the band; must exceed 1".into(),
-                    )
-                });
-                checks.push(Check {
-                    measured: Some(supernumeraries(ctx, c, p1) as f64),
-                    status: Status::Info,
-                    ..ctx.info(
-                        CHANNELS[c],
-                        "supernumerary maxima",
-                        "local maxima 0.5–6° inside the primary, ≥ 1 % above the minimum before them".into(),
-                    )
-                });
-            }
-        }
-        checks.push(order_check(
-            ctx,
-            "primary rainbow colour order (red outside: θ_R < θ_B)",
-            primary[0] < primary[2],
-            primary[2] - primary[0],
-        ));
-        if secondary.iter().all(|s| s.is_finite()) {
-            checks.push(order_check(
-                ctx,
-                "secondary rainbow colour order (red inside: θ_R > θ_B)",
-                secondary[0] > secondary[2],
-                secondary[0] - secondary[2],
-            ));
-        }
+        rainbows(ctx, n_of, r_eff, checks);
     } else {
         checks.push(ctx.info(
             "RGB",
@@ -418,55 +328,191 @@ fn spheres(
             format!("x_eff = {x_min:.0} < {RAY_OPTICS_MIN_X}: a fogbow, not judged"),
         ));
         for c in 0..3 {
-            // Glory: the back-scatter peak over the minimum between 170° and 178°.
-            let glory = ctx.mean(c, 179.5, 180.0) / min_in(ctx, c, 170.0, 178.0);
-            checks.push(Check {
-                status: if glory > 1.5 {
-                    Status::Pass
-                } else {
-                    Status::Fail
-                },
-                ..ctx.judged(
-                    c,
-                    "glory enhancement",
-                    Some(glory),
-                    1.5,
-                    f64::INFINITY,
-                    "ratio",
-                    "mean over 179.5–180° / minimum over 170–178°; must exceed 1.5".into(),
-                )
-            });
-            let s = &ctx.spectra[c];
-            match corona_ring_deg(&q, s) {
-                Some(expected) if expected > 4.0 * ctx.step => {
-                    let tol = (0.1 * expected).max(1.5 * ctx.step);
-                    let measured = ctx.peak(c, 0.7 * expected, 1.3 * expected);
-                    checks.push(ctx.judged(
-                        c,
-                        "first corona ring",
-                        measured,
-                        expected,
-                        tol,
-                        "deg",
-                        "first bright ring of the distribution's Fraunhofer pattern ± 10 %".into(),
-                    ));
-                }
-                Some(ring) => checks.push(ctx.info(
-                    CHANNELS[c],
-                    "first corona ring",
-                    format!(
-                        "not judged: the Fraunhofer ring at {ring:.3}° lies within 4 bins of 0°"
-                    ),
-                )),
-                None => checks.push(ctx.info(
-                    CHANNELS[c],
-                    "first corona ring",
-                    "not judged: the distribution's Fraunhofer pattern has no ring".into(),
-                )),
-            }
+            glory(ctx, c, checks);
+            corona(ctx, c, &q, checks);
         }
     }
     Ok(())
+}
+
+/// Each channel's bows (see [`rainbow_channel`]), then the colour order of the primary (red
+/// outside) and, where every channel has one, of the secondary (red inside).
+fn rainbows(ctx: &FieldContext, n_of: &dyn Fn(f64) -> f64, r_eff: f64, checks: &mut Vec<Check>) {
+    let mut primary = [f64::NAN; 3];
+    let mut secondary = [f64::NAN; 3];
+    for c in 0..3 {
+        (primary[c], secondary[c]) = rainbow_channel(ctx, c, n_of, r_eff, checks);
+    }
+    checks.push(order_check(
+        ctx,
+        "primary rainbow colour order (red outside: θ_R < θ_B)",
+        primary[0] < primary[2],
+        primary[2] - primary[0],
+    ));
+    if secondary.iter().all(|s| s.is_finite()) {
+        checks.push(order_check(
+            ctx,
+            "secondary rainbow colour order (red inside: θ_R > θ_B)",
+            secondary[0] > secondary[2],
+            secondary[0] - secondary[2],
+        ));
+    }
+}
+
+/// Channel `c`'s primary and secondary rainbow maxima judged against Descartes + the Airy
+/// shift (r_eff in µm), and where both are found the dark band between them and the
+/// supernumeraries; returns the measured primary and secondary angles in degrees (NaN where
+/// not found, or for the secondary where it is not judged).
+fn rainbow_channel(
+    ctx: &FieldContext,
+    c: usize,
+    n_of: &dyn Fn(f64) -> f64,
+    r_eff: f64,
+    checks: &mut Vec<Check>,
+) -> (f64, f64) {
+    let x_of = |lambda: f64| size_parameter(r_eff, lambda);
+    let s = &ctx.spectra[c];
+    let (e1, t1) = s.expect(|l| {
+        let (t, sh) = rainbow_theory(n_of(l), 1, x_of(l));
+        t + sh
+    });
+    let (e2, t2) = s.expect(|l| {
+        let (t, sh) = rainbow_theory(n_of(l), 2, x_of(l));
+        t - sh
+    });
+    let m1 = ctx.peak(c, e1 - 4.0, e1 + 4.0);
+    let note = format!("Descartes + Airy shift, r_eff = {r_eff:.1} µm");
+    checks.push(ctx.judged(
+        c,
+        "primary rainbow",
+        m1,
+        e1,
+        t1 + RAINBOW_MARGIN_DEG,
+        "deg",
+        note.clone(),
+    ));
+    // Below n ≈ 1.32 (ice spheres) the two bows overlap: no separate secondary and no
+    // dark band to judge.
+    let primary = m1.unwrap_or(f64::NAN);
+    if e2 + 3.0 + t1 + t2 > e1 {
+        checks.push(ctx.info(
+            CHANNELS[c],
+            "secondary rainbow",
+            format!("expected at {e2:.2}°, too close to the primary ({e1:.2}°): bows overlap, not judged"),
+        ));
+        return (primary, f64::NAN);
+    }
+    let m2 = ctx.peak(c, e2 - 4.0, e2 + 4.0);
+    checks.push(ctx.judged(
+        c,
+        "secondary rainbow",
+        m2,
+        e2,
+        t2 + RAINBOW_MARGIN_DEG,
+        "deg",
+        note,
+    ));
+    let (Some(p1), Some(p2)) = (m1, m2) else {
+        return (primary, f64::NAN);
+    };
+    dark_band(ctx, c, p1, p2, checks);
+    (primary, p2)
+}
+
+/// Alexander's dark band between the primary at `p1` and the secondary at `p2` (degrees),
+/// judged by its contrast, and the supernumerary maxima inside the primary, counted.
+fn dark_band(ctx: &FieldContext, c: usize, p1: f64, p2: f64, checks: &mut Vec<Check>) {
+    // Alexander's dark band: darker than the sky inside the primary and outside the
+    // secondary (in scattering angle: above p1, below p2).
+    let band = ctx.mean(c, p2 + 1.5, p1 - 1.5);
+    let inside = ctx.mean(c, p1 + 1.0, p1 + 6.0);
+    let outside = ctx.mean(c, p2 - 6.0, p2 - 1.0);
+    let contrast = inside.min(outside) / band;
+    checks.push(Check {
+        status: if contrast > 1.0 {
+            Status::Pass
+        } else {
+            Status::Fail
+        },
+        ..ctx.judged(
+            c,
+            "Alexander's dark band contrast",
+            Some(contrast),
+            1.0,
+            f64::INFINITY,
+            "ratio",
+            "min(mean 1–6° inside the primary, mean 1–6° outside the secondary) / mean of the band; must exceed 1".into(),
+        )
+    });
+    checks.push(Check {
+        measured: Some(supernumeraries(ctx, c, p1) as f64),
+        status: Status::Info,
+        ..ctx.info(
+            CHANNELS[c],
+            "supernumerary maxima",
+            "local maxima 0.5–6° inside the primary, ≥ 1 % above the minimum before them".into(),
+        )
+    });
+}
+
+/// Channel `c`'s glory: the back-scatter peak (mean over 179.5–180°) over the minimum between
+/// 170° and 178° must exceed 1.5.
+fn glory(ctx: &FieldContext, c: usize, checks: &mut Vec<Check>) {
+    // Glory: the back-scatter peak over the minimum between 170° and 178°.
+    let glory = ctx.mean(c, 179.5, 180.0) / min_in(ctx, c, 170.0, 178.0);
+    checks.push(Check {
+        status: if glory > 1.5 {
+            Status::Pass
+        } else {
+            Status::Fail
+        },
+        ..ctx.judged(
+            c,
+            "glory enhancement",
+            Some(glory),
+            1.5,
+            f64::INFINITY,
+            "ratio",
+            "mean over 179.5–180° / minimum over 170–178°; must exceed 1.5".into(),
+        )
+    });
+}
+
+/// Channel `c`'s first corona ring against the size distribution's Fraunhofer pattern
+/// (± 10 %, degrees); reported, not judged, when the ring lies within 4 bins of 0° or there
+/// is none.
+fn corona(
+    ctx: &FieldContext,
+    c: usize,
+    q: &mie::distribution::SizeQuadrature,
+    checks: &mut Vec<Check>,
+) {
+    let s = &ctx.spectra[c];
+    match corona_ring_deg(q, s) {
+        Some(expected) if expected > 4.0 * ctx.step => {
+            let tol = (0.1 * expected).max(1.5 * ctx.step);
+            let measured = ctx.peak(c, 0.7 * expected, 1.3 * expected);
+            checks.push(ctx.judged(
+                c,
+                "first corona ring",
+                measured,
+                expected,
+                tol,
+                "deg",
+                "first bright ring of the distribution's Fraunhofer pattern ± 10 %".into(),
+            ));
+        }
+        Some(ring) => checks.push(ctx.info(
+            CHANNELS[c],
+            "first corona ring",
+            format!("not judged: the Fraunhofer ring at {ring:.3}° lies within 4 bins of 0°"),
+        )),
+        None => checks.push(ctx.info(
+            CHANNELS[c],
+            "first corona ring",
+            "not judged: the distribution's Fraunhofer pattern has no ring".into(),
+        )),
+    }
 }
 
 fn min_in(ctx: &FieldContext, c: usize, a: f64, b: f64) -> f64 {

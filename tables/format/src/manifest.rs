@@ -254,6 +254,7 @@ impl Manifest {
         self.check_inner().map_err(ManifestCheck::from)
     }
 
+    /// [`Manifest::check`]'s checks: the manifest's own keys, then each field in turn.
     fn check_inner(&self) -> Result<(), String> {
         self.channels.check()?;
         if self.schema != MANIFEST_SCHEMA_VERSION {
@@ -272,233 +273,7 @@ impl Manifest {
             ));
         }
         for (i, f) in self.fields.iter().enumerate() {
-            let at = |what: String| format!("field {:?}: {what}", f.name);
-            if f.name.is_empty() {
-                return Err(format!("field {i}: empty name"));
-            }
-            if self.fields[..i].iter().any(|o| o.name == f.name) {
-                return Err(at("name given twice".into()));
-            }
-            let plain = Path::new(&f.name)
-                .file_name()
-                .is_some_and(|n| n == f.name.as_str());
-            if !plain || f.name.starts_with('.') || f.name.len() > 200 {
-                return Err(at(format!(
-                    "name {:?} must be a plain file name stem (no path, no leading '.', at most 200 bytes)",
-                    f.name
-                )));
-            }
-            if f.file != format!("{}.exr", f.name) {
-                return Err(at(format!(
-                    "file {:?} is not the bake's own name for this field, expected \"{}.exr\"",
-                    f.file, f.name
-                )));
-            }
-            for (key, file, own) in [
-                (
-                    "single_scattering",
-                    &f.single_scattering,
-                    crate::single::single_file_name(&f.name),
-                ),
-                (
-                    "poisson",
-                    &f.poisson,
-                    crate::poisson::poisson_file_name(&f.name),
-                ),
-                (
-                    "biri_kernel",
-                    &f.biri_kernel,
-                    crate::biri::biri_file_name(&f.name),
-                ),
-            ] {
-                if let Some(file) = file
-                    && file.file != own
-                {
-                    return Err(at(format!(
-                        "{key} file {:?} is not the bake's own name, expected {own:?}",
-                        file.file
-                    )));
-                }
-            }
-            if let Some(t) = &f.transport_factor
-                && let Some((c, v)) = ["R", "G", "B"]
-                    .iter()
-                    .zip(t.as_array())
-                    .find(|(_, v)| !(v.is_finite() && (0.0..=2.0).contains(*v)))
-            {
-                return Err(at(format!(
-                    "transport_factor.{c} = {v}, expected 1 − α g in [0, 2]"
-                )));
-            }
-            if f.crc32.len() != 8
-                || !f
-                    .crc32
-                    .bytes()
-                    .all(|b| b.is_ascii_hexdigit() && !b.is_ascii_uppercase())
-            {
-                return Err(at(format!(
-                    "crc32 {:?} is not 8 lowercase hex digits",
-                    f.crc32
-                )));
-            }
-            if !(1..=MAX_N).contains(&f.n_max) {
-                return Err(at(format!("n_max = {}, expected 1 to {MAX_N}", f.n_max)));
-            }
-            if f.microphysics.name != f.name || f.microphysics.kind != f.kind {
-                return Err(at(format!(
-                    "microphysics names field {:?} of kind {}, the entry {:?} of kind {}",
-                    f.microphysics.name, f.microphysics.kind, f.name, f.kind
-                )));
-            }
-            f.microphysics.check().map_err(&at)?;
-            f.quality.check().map_err(&at)?;
-            for (key, size) in std::iter::once(("bytes", f.bytes)).chain(
-                [
-                    ("single_scattering.bytes", &f.single_scattering),
-                    ("poisson.bytes", &f.poisson),
-                    ("biri_kernel.bytes", &f.biri_kernel),
-                ]
-                .into_iter()
-                .filter_map(|(k, r)| r.as_ref().map(|r| (k, r.bytes))),
-            ) {
-                if size > crate::exr::MAX_EXR_BYTES {
-                    return Err(at(format!(
-                        "{key} = {size}, more than the {} bytes a bake's EXR may have",
-                        crate::exr::MAX_EXR_BYTES
-                    )));
-                }
-            }
-            for (key, per) in [
-                ("forward_fraction", &f.forward_fraction),
-                ("forward_peak_fraction", &f.forward_peak_fraction),
-            ] {
-                for (c, v) in ["R", "G", "B"].iter().zip(per.as_array()) {
-                    if v.len() != f.n_max {
-                        return Err(at(format!(
-                            "{key}.{c} has {} values, expected n_max = {}",
-                            v.len(),
-                            f.n_max
-                        )));
-                    }
-                    if let Some(j) = v.iter().position(|x| !x.is_finite()) {
-                        return Err(at(format!("{key}.{c}[{j}] = {} is not finite", v[j])));
-                    }
-                }
-            }
-            for (key, per) in [
-                ("g", &f.g),
-                ("sigma_ext_m2", &f.sigma_ext_m2),
-                ("albedo", &f.albedo),
-            ] {
-                for (c, v) in ["R", "G", "B"].iter().zip(per.as_array()) {
-                    if !v.is_finite() {
-                        return Err(at(format!("{key}.{c} = {v} is not finite")));
-                    }
-                }
-            }
-            for (c, v) in ["R", "G", "B"].iter().zip(f.albedo.as_array()) {
-                if !(0.0..=1.0).contains(v) {
-                    return Err(at(format!("albedo.{c} = {v} is outside [0, 1]")));
-                }
-            }
-            for (c, v) in ["R", "G", "B"].iter().zip(f.g.as_array()) {
-                if !(-1.0..=1.0).contains(v) {
-                    return Err(at(format!("g.{c} = {v} is outside [-1, 1]")));
-                }
-            }
-            for (c, v) in ["R", "G", "B"].iter().zip(f.sigma_ext_m2.as_array()) {
-                if !(SIGMA_EXT_RANGE_M2.0..=SIGMA_EXT_RANGE_M2.1).contains(v) {
-                    return Err(at(format!(
-                        "sigma_ext_m2.{c} = {v:e} is outside [{:e}, {}] m², the extinction \
-                         cross-sections one particle can have",
-                        SIGMA_EXT_RANGE_M2.0, SIGMA_EXT_RANGE_M2.1
-                    )));
-                }
-            }
-            for (c, v) in ["R", "G", "B"].iter().zip(f.forward_fraction.as_array()) {
-                if let Some(i) = v.iter().position(|x| !(0.5 - 1e-9..=1.0).contains(x)) {
-                    return Err(at(format!(
-                        "forward_fraction.{c}: F_{} = {} is outside [0.5, 1]",
-                        i + 1,
-                        v[i]
-                    )));
-                }
-                if let Some(i) = (1..v.len()).find(|&i| v[i] > v[i - 1] + 1e-12) {
-                    return Err(at(format!(
-                        "forward_fraction.{c}: F_{} = {} exceeds F_{} = {}: forward fractions cannot rise with n",
-                        i + 1,
-                        v[i],
-                        i,
-                        v[i - 1]
-                    )));
-                }
-            }
-            for ((c, v), ff) in ["R", "G", "B"]
-                .iter()
-                .zip(f.forward_peak_fraction.as_array())
-                .zip(f.forward_fraction.as_array())
-            {
-                // The exact forward δ is part of the forward hemisphere's energy, and its
-                // share of row n, Σ_j a_j f_j^n, cannot rise with n.
-                if let Some(i) = v.iter().position(|x| !(0.0..=1.0).contains(x)) {
-                    return Err(at(format!(
-                        "forward_peak_fraction.{c}[{i}] = {} is outside [0, 1]",
-                        v[i]
-                    )));
-                }
-                if let Some(i) = (0..v.len()).find(|&i| v[i] > ff[i] + 1e-12) {
-                    return Err(at(format!(
-                        "forward_peak_fraction.{c}[{i}] = {} exceeds F_{} = {}: the forward peak is part of the forward fraction",
-                        v[i],
-                        i + 1,
-                        ff[i]
-                    )));
-                }
-                if let Some(i) = (1..v.len()).find(|&i| v[i] > v[i - 1] + 1e-12) {
-                    return Err(at(format!(
-                        "forward_peak_fraction.{c}[{i}] = {} exceeds [{}] = {}: the forward peak's share cannot rise with n",
-                        v[i],
-                        i - 1,
-                        v[i - 1]
-                    )));
-                }
-            }
-            if let Some(t) = &f.transport_factor {
-                for (c, ((t, a), g)) in ["R", "G", "B"].iter().zip(
-                    t.as_array()
-                        .into_iter()
-                        .zip(f.albedo.as_array())
-                        .zip(f.g.as_array()),
-                ) {
-                    if (t - (1.0 - a * g)).abs() > 1e-12 {
-                        return Err(at(format!(
-                            "transport_factor.{c} = {t}, but 1 − α g = {} from the entry's albedo and g",
-                            1.0 - a * g
-                        )));
-                    }
-                }
-            }
-            for (c, map) in ["R", "G", "B"].iter().zip(f.n_isotropic.as_array()) {
-                if let Some(k) = map
-                    .keys()
-                    .find(|k| !N_ISOTROPIC_EPSILONS.contains(&k.as_str()))
-                {
-                    return Err(at(format!(
-                        "n_isotropic.{c} has key {k:?}, expected one of {N_ISOTROPIC_EPSILONS:?}"
-                    )));
-                }
-            }
-            let hex = |s: &str| {
-                !s.is_empty()
-                    && s.bytes()
-                        .all(|b| b.is_ascii_digit() || (b'a'..=b'f').contains(&b))
-            };
-            if !hex(&f.content_hash) {
-                return Err(at(format!(
-                    "content_hash {:?} is not lowercase hex",
-                    f.content_hash
-                )));
-            }
+            f.check(i, &self.fields[..i])?;
         }
         Ok(())
     }
@@ -508,6 +283,281 @@ impl Manifest {
         let mut bytes = serde_json::to_vec_pretty(self).expect("a manifest always serializes");
         bytes.push(b'\n');
         bytes
+    }
+}
+
+/// The consistency checks of one entry, in the order [`Manifest::check`] makes them; each
+/// error names the field.
+impl FieldEntry {
+    /// Every check of the entry at index `i`; `earlier` are the entries before it.
+    fn check(&self, i: usize, earlier: &[FieldEntry]) -> Result<(), String> {
+        self.check_names(i, earlier)?;
+        self.check_record()?;
+        self.check_channel_values()?;
+        self.check_forward_fractions()?;
+        self.check_derived()
+    }
+
+    /// `what`, prefixed with the field's name.
+    fn at(&self, what: String) -> String {
+        format!("field {:?}: {what}", self.name)
+    }
+
+    /// A non-empty name no earlier entry has, a plain file-name stem (≤ 200 bytes), and the
+    /// bake's own names for the EXR and the side tables.
+    fn check_names(&self, i: usize, earlier: &[FieldEntry]) -> Result<(), String> {
+        if self.name.is_empty() {
+            return Err(format!("field {i}: empty name"));
+        }
+        if earlier.iter().any(|o| o.name == self.name) {
+            return Err(self.at("name given twice".into()));
+        }
+        let plain = Path::new(&self.name)
+            .file_name()
+            .is_some_and(|n| n == self.name.as_str());
+        if !plain || self.name.starts_with('.') || self.name.len() > 200 {
+            return Err(self.at(format!(
+                "name {:?} must be a plain file name stem (no path, no leading '.', at most 200 bytes)",
+                self.name
+            )));
+        }
+        if self.file != format!("{}.exr", self.name) {
+            return Err(self.at(format!(
+                "file {:?} is not the bake's own name for this field, expected \"{}.exr\"",
+                self.file, self.name
+            )));
+        }
+        for (key, file, own) in [
+            (
+                "single_scattering",
+                &self.single_scattering,
+                crate::single::single_file_name(&self.name),
+            ),
+            (
+                "poisson",
+                &self.poisson,
+                crate::poisson::poisson_file_name(&self.name),
+            ),
+            (
+                "biri_kernel",
+                &self.biri_kernel,
+                crate::biri::biri_file_name(&self.name),
+            ),
+        ] {
+            if let Some(file) = file
+                && file.file != own
+            {
+                return Err(self.at(format!(
+                    "{key} file {:?} is not the bake's own name, expected {own:?}",
+                    file.file
+                )));
+            }
+        }
+        Ok(())
+    }
+
+    /// The transport factor in [0, 2], an 8-digit lowercase CRC-32, N in [1, [`MAX_N`]], the
+    /// microphysics and quality records (of this field), and file sizes within an EXR's limit
+    /// (bytes).
+    fn check_record(&self) -> Result<(), String> {
+        if let Some(t) = &self.transport_factor
+            && let Some((c, v)) = ["R", "G", "B"]
+                .iter()
+                .zip(t.as_array())
+                .find(|(_, v)| !(v.is_finite() && (0.0..=2.0).contains(*v)))
+        {
+            return Err(self.at(format!(
+                "transport_factor.{c} = {v}, expected 1 − α g in [0, 2]"
+            )));
+        }
+        if self.crc32.len() != 8
+            || !self
+                .crc32
+                .bytes()
+                .all(|b| b.is_ascii_hexdigit() && !b.is_ascii_uppercase())
+        {
+            return Err(self.at(format!(
+                "crc32 {:?} is not 8 lowercase hex digits",
+                self.crc32
+            )));
+        }
+        if !(1..=MAX_N).contains(&self.n_max) {
+            return Err(self.at(format!("n_max = {}, expected 1 to {MAX_N}", self.n_max)));
+        }
+        if self.microphysics.name != self.name || self.microphysics.kind != self.kind {
+            return Err(self.at(format!(
+                "microphysics names field {:?} of kind {}, the entry {:?} of kind {}",
+                self.microphysics.name, self.microphysics.kind, self.name, self.kind
+            )));
+        }
+        self.microphysics.check().map_err(|e| self.at(e))?;
+        self.quality.check().map_err(|e| self.at(e))?;
+        for (key, size) in std::iter::once(("bytes", self.bytes)).chain(
+            [
+                ("single_scattering.bytes", &self.single_scattering),
+                ("poisson.bytes", &self.poisson),
+                ("biri_kernel.bytes", &self.biri_kernel),
+            ]
+            .into_iter()
+            .filter_map(|(k, r)| r.as_ref().map(|r| (k, r.bytes))),
+        ) {
+            if size > crate::exr::MAX_EXR_BYTES {
+                return Err(self.at(format!(
+                    "{key} = {size}, more than the {} bytes a bake's EXR may have",
+                    crate::exr::MAX_EXR_BYTES
+                )));
+            }
+        }
+        Ok(())
+    }
+
+    /// N finite values per channel for F_i and the peak fractions; finite g, σ_ext and
+    /// albedo; albedo in [0, 1], g in [−1, 1], σ_ext in [`SIGMA_EXT_RANGE_M2`] (m²).
+    fn check_channel_values(&self) -> Result<(), String> {
+        for (key, per) in [
+            ("forward_fraction", &self.forward_fraction),
+            ("forward_peak_fraction", &self.forward_peak_fraction),
+        ] {
+            for (c, v) in ["R", "G", "B"].iter().zip(per.as_array()) {
+                if v.len() != self.n_max {
+                    return Err(self.at(format!(
+                        "{key}.{c} has {} values, expected n_max = {}",
+                        v.len(),
+                        self.n_max
+                    )));
+                }
+                if let Some(j) = v.iter().position(|x| !x.is_finite()) {
+                    return Err(self.at(format!("{key}.{c}[{j}] = {} is not finite", v[j])));
+                }
+            }
+        }
+        for (key, per) in [
+            ("g", &self.g),
+            ("sigma_ext_m2", &self.sigma_ext_m2),
+            ("albedo", &self.albedo),
+        ] {
+            for (c, v) in ["R", "G", "B"].iter().zip(per.as_array()) {
+                if !v.is_finite() {
+                    return Err(self.at(format!("{key}.{c} = {v} is not finite")));
+                }
+            }
+        }
+        for (c, v) in ["R", "G", "B"].iter().zip(self.albedo.as_array()) {
+            if !(0.0..=1.0).contains(v) {
+                return Err(self.at(format!("albedo.{c} = {v} is outside [0, 1]")));
+            }
+        }
+        for (c, v) in ["R", "G", "B"].iter().zip(self.g.as_array()) {
+            if !(-1.0..=1.0).contains(v) {
+                return Err(self.at(format!("g.{c} = {v} is outside [-1, 1]")));
+            }
+        }
+        for (c, v) in ["R", "G", "B"].iter().zip(self.sigma_ext_m2.as_array()) {
+            if !(SIGMA_EXT_RANGE_M2.0..=SIGMA_EXT_RANGE_M2.1).contains(v) {
+                return Err(self.at(format!(
+                    "sigma_ext_m2.{c} = {v:e} is outside [{:e}, {}] m², the extinction \
+                     cross-sections one particle can have",
+                    SIGMA_EXT_RANGE_M2.0, SIGMA_EXT_RANGE_M2.1
+                )));
+            }
+        }
+        Ok(())
+    }
+
+    /// F_i in [0.5, 1] and not rising with n; the forward peak's fraction in [0, 1], within
+    /// F_i and not rising with n.
+    fn check_forward_fractions(&self) -> Result<(), String> {
+        for (c, v) in ["R", "G", "B"].iter().zip(self.forward_fraction.as_array()) {
+            if let Some(i) = v.iter().position(|x| !(0.5 - 1e-9..=1.0).contains(x)) {
+                return Err(self.at(format!(
+                    "forward_fraction.{c}: F_{} = {} is outside [0.5, 1]",
+                    i + 1,
+                    v[i]
+                )));
+            }
+            if let Some(i) = (1..v.len()).find(|&i| v[i] > v[i - 1] + 1e-12) {
+                return Err(self.at(format!(
+                    "forward_fraction.{c}: F_{} = {} exceeds F_{} = {}: forward fractions cannot rise with n",
+                    i + 1,
+                    v[i],
+                    i,
+                    v[i - 1]
+                )));
+            }
+        }
+        for ((c, v), ff) in ["R", "G", "B"]
+            .iter()
+            .zip(self.forward_peak_fraction.as_array())
+            .zip(self.forward_fraction.as_array())
+        {
+            // The exact forward δ is part of the forward hemisphere's energy, and its
+            // share of row n, Σ_j a_j f_j^n, cannot rise with n.
+            if let Some(i) = v.iter().position(|x| !(0.0..=1.0).contains(x)) {
+                return Err(self.at(format!(
+                    "forward_peak_fraction.{c}[{i}] = {} is outside [0, 1]",
+                    v[i]
+                )));
+            }
+            if let Some(i) = (0..v.len()).find(|&i| v[i] > ff[i] + 1e-12) {
+                return Err(self.at(format!(
+                    "forward_peak_fraction.{c}[{i}] = {} exceeds F_{} = {}: the forward peak is part of the forward fraction",
+                    v[i],
+                    i + 1,
+                    ff[i]
+                )));
+            }
+            if let Some(i) = (1..v.len()).find(|&i| v[i] > v[i - 1] + 1e-12) {
+                return Err(self.at(format!(
+                    "forward_peak_fraction.{c}[{i}] = {} exceeds [{}] = {}: the forward peak's share cannot rise with n",
+                    v[i],
+                    i - 1,
+                    v[i - 1]
+                )));
+            }
+        }
+        Ok(())
+    }
+
+    /// The transport factor equal to 1 − α g from the entry's own albedo and g, known
+    /// n_isotropic ε keys, and a lowercase hex content hash.
+    fn check_derived(&self) -> Result<(), String> {
+        if let Some(t) = &self.transport_factor {
+            for (c, ((t, a), g)) in ["R", "G", "B"].iter().zip(
+                t.as_array()
+                    .into_iter()
+                    .zip(self.albedo.as_array())
+                    .zip(self.g.as_array()),
+            ) {
+                if (t - (1.0 - a * g)).abs() > 1e-12 {
+                    return Err(self.at(format!(
+                        "transport_factor.{c} = {t}, but 1 − α g = {} from the entry's albedo and g",
+                        1.0 - a * g
+                    )));
+                }
+            }
+        }
+        for (c, map) in ["R", "G", "B"].iter().zip(self.n_isotropic.as_array()) {
+            if let Some(k) = map
+                .keys()
+                .find(|k| !N_ISOTROPIC_EPSILONS.contains(&k.as_str()))
+            {
+                return Err(self.at(format!(
+                    "n_isotropic.{c} has key {k:?}, expected one of {N_ISOTROPIC_EPSILONS:?}"
+                )));
+            }
+        }
+        let hex = |s: &str| {
+            !s.is_empty()
+                && s.bytes()
+                    .all(|b| b.is_ascii_digit() || (b'a'..=b'f').contains(&b))
+        };
+        if !hex(&self.content_hash) {
+            return Err(self.at(format!(
+                "content_hash {:?} is not lowercase hex",
+                self.content_hash
+            )));
+        }
+        Ok(())
     }
 }
 
