@@ -297,7 +297,7 @@ fn lattice(seed: u64, x: i64, y: i64, z: i64) -> f64 {
         h = (h ^ v as u64).wrapping_mul(0x100_0000_01B3);
         h ^= h >> 29;
     }
-    Rng(h).uniform()
+    Rng::new(h).uniform()
 }
 
 /// Value noise with smooth interpolation, in [0, 1].
@@ -337,7 +337,7 @@ impl Density {
                 height_m: h,
             } => {
                 // A central tower and seeded side turrets, all inside the bounds.
-                let mut rng = Rng(v.seed);
+                let mut rng = Rng::new(v.seed);
                 let base = c[1] - h / 2.0;
                 let mut blobs = vec![(
                     DVec3::new(c[0], base + 0.45 * h, c[2]),
