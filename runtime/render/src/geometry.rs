@@ -481,7 +481,13 @@ pub fn read_obj(path: &Path) -> Result<Mesh, String> {
     parse_obj(&text, &path.display().to_string())
 }
 
-/// [`read_obj`] of the text of a file named `origin`.
+/// [`read_obj`] of the text of a file named `origin`: `v` and `f` lines (polygons fanned into
+/// triangles, negative indices relative); other lines ignored.
+///
+/// Written here rather than with `tobj` because an occluder needs only positions and faces,
+/// and a refusal must name the file and line of a bad value or index — `tobj`'s errors
+/// (`LoadError::FaceParseError`, `PositionParseError`, …) carry neither, and it accepts an
+/// out-of-range face index until the mesh is used.
 pub fn parse_obj(text: &str, origin: &str) -> Result<Mesh, String> {
     let mut vertices = Vec::new();
     let mut faces: Vec<(usize, Vec<i64>)> = Vec::new();

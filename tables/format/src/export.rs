@@ -142,28 +142,14 @@ pub fn curve_exr_bytes(
     })
 }
 
-/// A NumPy `.npy` (format 1.0) of little-endian f64 in C order with this shape.
+/// A NumPy `.npy` of little-endian f64 in C order with this shape (written by `ndarray-npy`).
 pub fn npy_f64_bytes(shape: &[usize], data: &[f64]) -> Vec<u8> {
-    assert_eq!(shape.iter().product::<usize>(), data.len(), "npy shape");
-    let dims: Vec<String> = shape.iter().map(|d| d.to_string()).collect();
-    let shape_text = if dims.len() == 1 {
-        format!("({},)", dims[0])
-    } else {
-        format!("({})", dims.join(", "))
-    };
-    let mut header = format!("{{'descr': '<f8', 'fortran_order': False, 'shape': {shape_text}, }}");
-    // Magic (6) + version (2) + length (2) + header + '\n' is a multiple of 64.
-    while !(10 + header.len() + 1).is_multiple_of(64) {
-        header.push(' ');
-    }
-    header.push('\n');
-    let mut out = Vec::with_capacity(10 + header.len() + 8 * data.len());
-    out.extend_from_slice(b"\x93NUMPY\x01\x00");
-    out.extend_from_slice(&(header.len() as u16).to_le_bytes());
-    out.extend_from_slice(header.as_bytes());
-    for v in data {
-        out.extend_from_slice(&v.to_le_bytes());
-    }
+    use ndarray_npy::WriteNpyExt;
+    let array = ndarray::ArrayViewD::from_shape(ndarray::IxDyn(shape), data).expect("npy shape");
+    let mut out = Vec::with_capacity(128 + 8 * data.len());
+    array
+        .write_npy(&mut out)
+        .expect("writing to memory cannot fail");
     out
 }
 
