@@ -485,9 +485,9 @@ pub fn read_obj(path: &Path) -> Result<Mesh, String> {
 /// triangles, negative indices relative); other lines ignored.
 ///
 /// Written here rather than with `tobj` because an occluder needs only positions and faces,
-/// and a refusal must name the file and line of a bad value or index — `tobj`'s errors
-/// (`LoadError::FaceParseError`, `PositionParseError`, …) carry neither, and it accepts an
-/// out-of-range face index until the mesh is used.
+/// and a refusal must name the file, line and value of a bad number or index — `tobj`'s
+/// `LoadError` is a fieldless enum (`PositionParseError`, `FaceVertexOutOfBounds`, …) that
+/// carries none of them.
 pub fn parse_obj(text: &str, origin: &str) -> Result<Mesh, String> {
     let mut vertices = Vec::new();
     let mut faces: Vec<(usize, Vec<i64>)> = Vec::new();
