@@ -97,10 +97,16 @@ pub struct Gpu {
 }
 
 impl Gpu {
-    /// The first adapter of any enabled backend (WGPU_BACKEND, WGPU_ADAPTER_NAME respected).
+    /// The first adapter of the primary backends (Vulkan, Metal, DX12), or of those
+    /// WGPU_BACKEND names (e.g. `gl`); WGPU_ADAPTER_NAME respected. OpenGL is left out unless
+    /// asked for: probing it without a display prints Mesa's "XDG_RUNTIME_DIR is invalid"
+    /// on every run, and Vulkan (lavapipe on a machine without a GPU) serves everywhere else.
     pub fn new() -> Result<Self, GpuError> {
-        let instance =
-            wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+        let mut descriptor = wgpu::InstanceDescriptor::new_without_display_handle_from_env();
+        if std::env::var_os("WGPU_BACKEND").is_none() {
+            descriptor.backends = wgpu::Backends::PRIMARY;
+        }
+        let instance = wgpu::Instance::new(descriptor);
         let adapter = pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
             power_preference: wgpu::PowerPreference::HighPerformance,
             ..Default::default()
