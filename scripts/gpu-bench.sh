@@ -1,0 +1,58 @@
+#!/usr/bin/env bash
+# Every render model's frame time on this machine's GPU adapter, in one step, as JSON.
+#
+#   scripts/gpu-bench.sh [OUT]      # OUT: a directory (default: $OUT if set, else bench/gpu)
+#   QUICK=1 scripts/gpu-bench.sh    # small sizes: checks the script on a software adapter
+#
+# Builds the release binary, bakes each scene's tables (draft preset: frame time does not depend
+# on it), then runs `photometeor bench render` per scene with the models that scene takes,
+# interleaved in one run so their ratios are fair: riley, miyazaki and max on the clouds
+# (image sizes, slice counts and grid resolutions varied one at a time), miyazaki on the shafts,
+# biri on the lamp beams, and the path-traced truth (CPU; its paths/s) on the dense cumulus.
+# Writes OUT/<scene>.json, OUT/machine.txt (adapter, CPU, date) and prints a summary. Sized to
+# finish in under 8 minutes on a GPU machine of 16 cores; on 2 cores with lavapipe use QUICK=1.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+OUT=${1:-${OUT:-bench/gpu}}
+mkdir -p "$OUT"
+start=$(date +%s)
+
+cargo build --release --quiet
+BIN=target/release/photometeor
+
+if [ "${QUICK:-0}" = 1 ]; then
+    SIZE=64 SIZES=32,64 SLICES=32,64 GRIDS=32,64 REPEAT=1 SPP=4
+else
+    SIZE=512 SIZES=256,512,1024 SLICES=64,128,256,512 GRIDS=64,128,256 REPEAT=3 SPP=64
+fi
+
+{
+    echo "date: $(date -u +%Y-%m-%dT%H:%M:%SZ)"
+    echo "commit: $(git rev-parse --short HEAD 2>/dev/null || echo unknown)"
+    echo "cpu: $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2- | sed 's/^ *//') ($(nproc) threads)"
+    command -v nvidia-smi > /dev/null && nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv,noheader
+    echo "quick: ${QUICK:-0}"
+} > "$OUT/machine.txt"
+
+# bench SCENE MODELS [extra options…]: one interleaved run, JSON to OUT/<name>.json.
+bench() {
+    local scene=$1 models=$2 name
+    shift 2
+    name=$(basename "$scene" .toml)
+    echo "== $name: $models" >&2
+    "$BIN" bench render "$scene" --model "$models" --size "$SIZE" --repeat "$REPEAT" --json "$@" \
+        > "$OUT/$name.json"
+}
+
+bench data/scenes/dense_cumulus.toml riley,miyazaki,max \
+    --sizes "$SIZES" --slice-counts "$SLICES" --grids "$GRIDS"
+bench data/scenes/cumulus_dawn.toml riley,miyazaki,max
+bench data/scenes/rainbow.toml riley,miyazaki,max --sizes "$SIZES"
+bench data/scenes/shafts.toml miyazaki --sizes "$SIZES"
+bench data/scenes/beams.toml biri --sizes "$SIZES"
+# The truth has no GPU renderer yet: its CPU paths/s on this machine's cores.
+"$BIN" bench render data/scenes/dense_cumulus.toml --model truth --size "$SIZE" --spp "$SPP" \
+    --repeat 1 --json > "$OUT/dense_cumulus-truth.json"
+
+echo "gpu-bench: $(($(date +%s) - start)) s; JSON in $OUT" >&2
+cat "$OUT/machine.txt" >&2
