@@ -106,6 +106,107 @@ impl SizeQuadrature {
     }
 }
 
+/// A size distribution given as options, the way `photometeor phase` and the Python package's
+/// `phase` take it: exactly one of the groups lognormal_median_um with sigma_g, r_eff_um with
+/// v_eff (a gamma, or a lognormal with `lognormal`), or marshall_palmer_mm_h.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct DistributionOptions {
+    /// Lognormal median radius r_g (µm), with `sigma_g`.
+    pub lognormal_median_um: Option<f64>,
+    /// Lognormal geometric standard deviation σ_g, in (1, 5].
+    pub sigma_g: Option<f64>,
+    /// Effective radius r_eff (µm), with `v_eff`.
+    pub r_eff_um: Option<f64>,
+    /// Effective variance v_eff.
+    pub v_eff: Option<f64>,
+    /// With `r_eff_um`: a lognormal of that r_eff and v_eff instead of a gamma.
+    pub lognormal: bool,
+    /// Marshall–Palmer rain of this rate (mm/h).
+    pub marshall_palmer_mm_h: Option<f64>,
+}
+
+impl DistributionOptions {
+    /// The validated distribution the options choose. `name` writes an option's name as the
+    /// caller's user types it (`r_eff_um` → `--r-eff-um` on the command line); `other` is
+    /// another way to give a distribution the caller has (its text, and whether it was
+    /// used), which counts as a group of its own: with it used, `Ok(None)`.
+    pub fn choose(
+        &self,
+        name: impl Fn(&str) -> String,
+        other: Option<(&str, bool)>,
+    ) -> Result<Option<SizeDistribution>, MieError> {
+        let bad = |s: String| Err(MieError::Options(s));
+        let groups = [
+            self.lognormal_median_um.is_some(),
+            self.r_eff_um.is_some(),
+            self.marshall_palmer_mm_h.is_some(),
+            other.is_some_and(|(_, used)| used),
+        ];
+        if groups.iter().filter(|&&g| g).count() != 1 {
+            let other = other.map_or(String::new(), |(text, _)| format!("{text}, "));
+            return bad(format!(
+                "choose exactly one size distribution: {other}{} with {}, {} with {}, or {}",
+                name("lognormal_median_um"),
+                name("sigma_g"),
+                name("r_eff_um"),
+                name("v_eff"),
+                name("marshall_palmer_mm_h")
+            ));
+        }
+        for (given, owner, what) in [
+            (
+                self.sigma_g.is_some(),
+                self.lognormal_median_um.is_some(),
+                "sigma_g",
+            ),
+            (self.v_eff.is_some(), self.r_eff_um.is_some(), "v_eff"),
+            (self.lognormal, self.r_eff_um.is_some(), "lognormal"),
+        ] {
+            if given && !owner {
+                let owner = if what == "sigma_g" {
+                    "lognormal_median_um"
+                } else {
+                    "r_eff_um"
+                };
+                return bad(format!("{} belongs to {}", name(what), name(owner)));
+            }
+        }
+        if groups[3] {
+            return Ok(None);
+        }
+        let d = if let Some(median) = self.lognormal_median_um {
+            let Some(sigma_g) = self.sigma_g else {
+                return bad(format!(
+                    "{} needs {}, in (1, 5]",
+                    name("lognormal_median_um"),
+                    name("sigma_g")
+                ));
+            };
+            SizeDistribution::Lognormal {
+                median_radius_um: median,
+                sigma_g,
+            }
+        } else if let Some(r_eff) = self.r_eff_um {
+            let Some(v_eff) = self.v_eff else {
+                return bad(format!("{} needs {}", name("r_eff_um"), name("v_eff")));
+            };
+            if self.lognormal {
+                SizeDistribution::lognormal_from_effective(r_eff, v_eff)?
+            } else {
+                SizeDistribution::Gamma {
+                    r_eff_um: r_eff,
+                    v_eff,
+                }
+            }
+        } else {
+            SizeDistribution::MarshallPalmer {
+                rain_rate_mm_h: self.marshall_palmer_mm_h.unwrap_or_default(),
+            }
+        };
+        d.validated().map(Some)
+    }
+}
+
 impl SizeDistribution {
     /// Lognormal from effective radius and variance: ln²σ_g = ln(1 + v_eff), r_g = r_eff e^{−2.5 ln²σ_g}.
     pub fn lognormal_from_effective(r_eff_um: f64, v_eff: f64) -> Result<Self, MieError> {
@@ -395,6 +496,57 @@ fn positive(name: &'static str, value: f64) -> Result<f64, MieError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn options_choose_exactly_one_distribution_naming_the_options_as_typed() {
+        let flag = |n: &str| format!("--{}", n.replace('_', "-"));
+        let err = |o: DistributionOptions| o.choose(flag, None).unwrap_err().to_string();
+        let none = DistributionOptions::default();
+        assert!(err(none).starts_with("choose exactly one size distribution: --lognormal"));
+        let both = DistributionOptions {
+            r_eff_um: Some(10.0),
+            v_eff: Some(0.1),
+            marshall_palmer_mm_h: Some(5.0),
+            ..none
+        };
+        assert!(err(both).contains("--r-eff-um with --v-eff"));
+        let orphan = DistributionOptions {
+            sigma_g: Some(1.4),
+            marshall_palmer_mm_h: Some(5.0),
+            ..none
+        };
+        assert_eq!(err(orphan), "--sigma-g belongs to --lognormal-median-um");
+        let missing = DistributionOptions {
+            r_eff_um: Some(10.0),
+            ..none
+        };
+        assert_eq!(err(missing), "--r-eff-um needs --v-eff");
+        let gamma = DistributionOptions {
+            r_eff_um: Some(10.0),
+            v_eff: Some(0.1),
+            ..none
+        };
+        assert_eq!(
+            gamma.choose(flag, None).unwrap(),
+            Some(SizeDistribution::Gamma {
+                r_eff_um: 10.0,
+                v_eff: 0.1
+            })
+        );
+        // Another group the caller has (Python's mapping) counts as one and is left to it.
+        assert_eq!(
+            none.choose(str::to_string, Some(("mapping", true))),
+            Ok(None)
+        );
+        let e = gamma
+            .choose(str::to_string, Some(("mapping", true)))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.starts_with("choose exactly one size distribution: mapping, "),
+            "{e}"
+        );
+    }
 
     /// Nodes by cross-section keep the truncated distribution's mean area per drop exactly at
     /// any shift; its number (Σ w) and mean volume they estimate within O(1/N) (a lattice

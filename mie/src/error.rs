@@ -15,6 +15,10 @@ pub enum MieError {
         /// The allowed range, as text.
         range: &'static str,
     },
+    /// Options that do not choose exactly one size distribution (see
+    /// [`crate::distribution::DistributionOptions`]).
+    #[error("{0}")]
+    Options(String),
     /// The absorbing part of the refractive index was negative.
     #[error(
         "imaginary refractive index κ = {0} is negative; photometeor uses m = n + iκ with κ ≥ 0 (absorbing)"

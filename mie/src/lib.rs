@@ -32,7 +32,7 @@ pub mod sphere;
 pub mod theory;
 
 pub use amplitude::{FoldedAngles, SphereTerms, amplitudes, exact_cosine_deg};
-pub use distribution::{SizeDistribution, SizeQuadrature};
+pub use distribution::{DistributionOptions, SizeDistribution, SizeQuadrature};
 pub use ensemble::{BulkRequest, NodeCounts, bulk_phase};
 pub use error::MieError;
 pub use grid::{GridError, ThetaGrid};

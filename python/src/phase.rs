@@ -24,8 +24,8 @@ const ADAPTIVE_MAX_SIZES: usize = 1 << 14;
 /// above 10¹⁰ a call runs for hours.
 const RAYS_RANGE: (u64, u64) = (1_000, 10_000_000_000);
 
-/// The size distribution from the mutually exclusive keyword groups (the CLI's
-/// `distribution_from`), or from a scene-style mapping `{"kind": …, …}`.
+/// The size distribution from the mutually exclusive keyword groups
+/// ([`mie::DistributionOptions`], as the CLI), or from a scene-style mapping `{"kind": …, …}`.
 #[allow(clippy::too_many_arguments)]
 fn distribution_from(
     distribution: Option<&Bound<'_, PyMapping>>,
@@ -36,67 +36,31 @@ fn distribution_from(
     lognormal: bool,
     marshall_palmer_mm_h: Option<f64>,
 ) -> PyResult<SizeDistribution> {
-    let chosen = [
-        distribution.is_some(),
-        lognormal_median_um.is_some(),
-        r_eff_um.is_some(),
-        marshall_palmer_mm_h.is_some(),
-    ]
-    .iter()
-    .filter(|&&c| c)
-    .count();
-    if chosen != 1 {
-        return Err(PyValueError::new_err(
-            "choose exactly one size distribution: distribution={\"kind\": …}, \
-             lognormal_median_um with sigma_g, r_eff_um with v_eff, or marshall_palmer_mm_h",
-        ));
-    }
-    if sigma_g.is_some() && lognormal_median_um.is_none() {
-        return Err(PyValueError::new_err(
-            "sigma_g belongs to lognormal_median_um (a lognormal by median radius)",
-        ));
-    }
-    if v_eff.is_some() && r_eff_um.is_none() {
-        return Err(PyValueError::new_err(
-            "v_eff belongs to r_eff_um (a distribution by effective radius)",
-        ));
-    }
-    if lognormal && r_eff_um.is_none() {
-        return Err(PyValueError::new_err(
-            "lognormal=True applies to r_eff_um with v_eff",
-        ));
-    }
-    let d = if let Some(mapping) = distribution {
-        // The scene's inline table, e.g. {"kind": "gamma", "r_eff_um": 10, "v_eff": 0.1}.
-        let json: String = mapping
-            .py()
-            .import("json")?
-            .call_method1("dumps", (mapping.as_any(),))?
-            .extract()?;
-        serde_json::from_str::<SizeDistribution>(&json)
-            .map_err(|e| PyValueError::new_err(format!("distribution {json}: {e}")))?
-    } else if let Some(median) = lognormal_median_um {
-        SizeDistribution::Lognormal {
-            median_radius_um: median,
-            sigma_g: sigma_g.ok_or_else(|| {
-                PyValueError::new_err("lognormal_median_um needs sigma_g, in (1, 5]")
-            })?,
-        }
-    } else if let Some(r_eff) = r_eff_um {
-        let v_eff = v_eff.ok_or_else(|| PyValueError::new_err("r_eff_um needs v_eff"))?;
-        if lognormal {
-            SizeDistribution::lognormal_from_effective(r_eff, v_eff).map_err(|e| to_py(&e))?
-        } else {
-            SizeDistribution::Gamma {
-                r_eff_um: r_eff,
-                v_eff,
-            }
-        }
-    } else {
-        SizeDistribution::MarshallPalmer {
-            rain_rate_mm_h: marshall_palmer_mm_h.unwrap_or_default(),
-        }
+    let options = mie::DistributionOptions {
+        lognormal_median_um,
+        sigma_g,
+        r_eff_um,
+        v_eff,
+        lognormal,
+        marshall_palmer_mm_h,
     };
+    let other = Some(("distribution={\"kind\": …}", distribution.is_some()));
+    if let Some(d) = options
+        .choose(str::to_string, other)
+        .map_err(|e| to_py(&e))?
+    {
+        return Ok(d);
+    }
+    // The other group: the scene's inline table, e.g. {"kind": "gamma", "r_eff_um": 10,
+    // "v_eff": 0.1}.
+    let mapping = distribution.expect("the only group left");
+    let json: String = mapping
+        .py()
+        .import("json")?
+        .call_method1("dumps", (mapping.as_any(),))?
+        .extract()?;
+    let d = serde_json::from_str::<SizeDistribution>(&json)
+        .map_err(|e| PyValueError::new_err(format!("distribution {json}: {e}")))?;
     d.validated().map_err(|e| to_py(&e))
 }
 

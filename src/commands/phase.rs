@@ -1,7 +1,7 @@
 //! `photometeor phase`: a size distribution's σ_ext, albedo, g and bin-averaged phase
 //! function per wavelength.
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Result, bail};
 use clap::Args as ClapArgs;
 use mie::{BulkRequest, NodeCounts, SizeDistribution, ThetaGrid, bulk_phase};
 use serde_json::json;
@@ -64,41 +64,16 @@ pub struct PhaseArgs {
 
 /// Chooses the size distribution from the mutually exclusive flag groups.
 fn distribution_from(a: &PhaseArgs) -> Result<SizeDistribution> {
-    let chosen = [
-        a.lognormal_median_um.is_some(),
-        a.r_eff_um.is_some(),
-        a.marshall_palmer_mm_h.is_some(),
-    ]
-    .iter()
-    .filter(|&&c| c)
-    .count();
-    if chosen != 1 {
-        bail!(
-            "choose exactly one size distribution: --lognormal-median-um with --sigma-g, \
-             --r-eff-um with --v-eff, or --marshall-palmer-mm-h"
-        );
-    }
-    let d = if let Some(median) = a.lognormal_median_um {
-        SizeDistribution::Lognormal {
-            median_radius_um: median,
-            sigma_g: a.sigma_g.context("--lognormal-median-um needs --sigma-g")?,
-        }
-    } else if let Some(r_eff) = a.r_eff_um {
-        let v_eff = a.v_eff.context("--r-eff-um needs --v-eff")?;
-        if a.lognormal {
-            SizeDistribution::lognormal_from_effective(r_eff, v_eff)?
-        } else {
-            SizeDistribution::Gamma {
-                r_eff_um: r_eff,
-                v_eff,
-            }
-        }
-    } else {
-        SizeDistribution::MarshallPalmer {
-            rain_rate_mm_h: a.marshall_palmer_mm_h.unwrap_or_default(),
-        }
+    let options = mie::DistributionOptions {
+        lognormal_median_um: a.lognormal_median_um,
+        sigma_g: a.sigma_g,
+        r_eff_um: a.r_eff_um,
+        v_eff: a.v_eff,
+        lognormal: a.lognormal,
+        marshall_palmer_mm_h: a.marshall_palmer_mm_h,
     };
-    Ok(d.validated()?)
+    let flag = |name: &str| format!("--{}", name.replace('_', "-"));
+    Ok(options.choose(flag, None)?.expect("no other group"))
 }
 
 /// Largest --sizes: 25× the reference preset's 4096, far past where one doubling still changes

@@ -8,7 +8,7 @@
 //! scene and refuses in it, before anything is baked), its CPU reference (`cpu.rs`) and its GPU
 //! renderer (`gpu.rs` with its WGSL beside it). Adding one is its folder plus one line in the
 //! `models!` list at the end of `model.rs`; the scene parser, `photometeor render`,
-//! `photometeor bench render` and the viewer dispatch through [`ModelSettings`], so nothing
+//! `photometeor bench render` dispatch through [`ModelSettings`], so nothing
 //! else changes. A model imports the shared modules only, never another model (a test holds
 //! this: `tests/layout.rs`).
 //!
