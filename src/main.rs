@@ -15,8 +15,17 @@ fn main() -> ExitCode {
     match args.run() {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            // One line: the chain of causes, outermost first.
-            eprintln!("error: {e:#}");
+            // One line: the chain of causes, outermost first; a cause whose text an outer
+            // message already carries (an error that prints its source) is not repeated.
+            let mut line = e.to_string();
+            for cause in e.chain().skip(1) {
+                let text = cause.to_string();
+                if !line.contains(&text) {
+                    line.push_str(": ");
+                    line.push_str(&text);
+                }
+            }
+            eprintln!("error: {line}");
             ExitCode::from(2)
         }
     }
