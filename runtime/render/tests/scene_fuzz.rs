@@ -11,11 +11,7 @@
 //! run and its result are in docs/accuracy.md ("Scenes under mutation"). Failing cases proptest
 //! finds are kept in `tests/data/scene-fuzz-regressions.txt` and replayed first.
 
-// The allocation counter is a global allocator, which is unsafe to implement.
-#![allow(unsafe_code)]
-
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::cell::{Cell, RefCell};
+use std::cell::RefCell;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
@@ -24,51 +20,9 @@ use proptest::test_runner::{Config, FileFailurePersistence, TestRunner};
 use render::RenderScene;
 use render::model::MODEL_NAMES;
 
-/// Records the largest single allocation made on a thread while it is armed.
-struct Counting;
-
-thread_local! {
-    static ARMED: Cell<bool> = const { Cell::new(false) };
-    static LARGEST: Cell<usize> = const { Cell::new(0) };
-}
-
-fn note(size: usize) {
-    let _ = ARMED.try_with(|armed| {
-        if armed.get() {
-            LARGEST.with(|l| l.set(l.get().max(size)));
-        }
-    });
-}
-
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        note(layout.size());
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
-        note(layout.size());
-        unsafe { System.alloc_zeroed(layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        note(new_size);
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        unsafe { System.dealloc(ptr, layout) }
-    }
-}
-
-#[global_allocator]
-static ALLOCATOR: Counting = Counting;
-
-/// Runs `f` and returns the largest single allocation it made on this thread.
-fn largest_allocation(f: impl FnOnce()) -> usize {
-    LARGEST.with(|l| l.set(0));
-    ARMED.with(|a| a.set(true));
-    f();
-    ARMED.with(|a| a.set(false));
-    LARGEST.with(Cell::get)
-}
+#[path = "../../../tests/common/counting_alloc.rs"]
+mod counting_alloc;
+use counting_alloc::largest_allocation;
 
 /// Cases per parser: `PHOTOMETEOR_FUZZ_CASES`, default 256.
 fn cases() -> u32 {
@@ -297,8 +251,13 @@ fn render_case(text: &str, seed: &Seed) -> (bool, bool) {
     (true, accepted)
 }
 
-#[test]
-fn the_render_scene_parser_survives_mutated_scenes() {
+/// Runs `case` on mutated copies of every seed scene (the text, the seed; it returns whether
+/// the scene parsed and whether a model accepted it), each within `bound(text length, seed)`
+/// bytes per allocation; the tally of the run.
+fn fuzz(
+    case: impl Fn(&str, &Seed) -> (bool, bool),
+    bound: impl Fn(usize, &Seed) -> usize,
+) -> Tally {
     let seeds = seeds();
     let tally = RefCell::new(Tally::default());
     runner()
@@ -309,10 +268,10 @@ fn the_render_scene_parser_survives_mutated_scenes() {
                 let text = mutations
                     .iter()
                     .fold(seed.text.clone(), |t, m| apply(&t, m));
-                let bound = 64 * text.len() + 4 * seed.largest_file as usize + (1 << 20);
+                let bound = bound(text.len(), seed);
                 let start = Instant::now();
                 let mut outcome = (false, false);
-                let largest = largest_allocation(|| outcome = render_case(&text, seed));
+                let largest = largest_allocation(|| outcome = case(&text, seed));
                 let mut tally = tally.borrow_mut();
                 tally.cases += 1;
                 tally.parsed += u64::from(outcome.0);
@@ -328,7 +287,14 @@ fn the_render_scene_parser_survives_mutated_scenes() {
             },
         )
         .unwrap();
-    let tally = tally.into_inner();
+    tally.into_inner()
+}
+
+#[test]
+fn the_render_scene_parser_survives_mutated_scenes() {
+    let tally = fuzz(render_case, |len, seed| {
+        64 * len + 4 * seed.largest_file as usize + (1 << 20)
+    });
     tally.print("render scenes");
     // The mutations are not all fatal: some scenes still parse and render.
     if tally.cases >= 256 {
@@ -338,47 +304,21 @@ fn the_render_scene_parser_survives_mutated_scenes() {
 
 #[test]
 fn the_bake_scene_parser_survives_mutated_scenes() {
-    let seeds = seeds();
-    let tally = RefCell::new(Tally::default());
-    runner()
-        .run(
-            &(0..seeds.len(), prop::collection::vec(mutation(), 1..4)),
-            |(s, mutations)| {
-                let seed = &seeds[s];
-                let text = mutations
-                    .iter()
-                    .fold(seed.text.clone(), |t, m| apply(&t, m));
-                let bound = 64 * text.len() + (1 << 20);
-                let start = Instant::now();
-                let mut parsed = false;
-                let largest = largest_allocation(|| {
-                    if let Ok(scene) = bake::Scene::parse(&text, &seed.name) {
-                        parsed = true;
-                        // A plan of every preset: knobs for the scene's spectral mode.
-                        for q in [
-                            bake::Quality::Draft,
-                            bake::Quality::Standard,
-                            bake::Quality::Reference,
-                        ] {
-                            let _ = bake::BakePlan::for_preset(scene.clone(), "t".into(), q);
-                        }
-                    }
-                });
-                let mut tally = tally.borrow_mut();
-                tally.cases += 1;
-                tally.parsed += u64::from(parsed);
-                tally.largest_allocation = tally.largest_allocation.max(largest);
-                tally.slowest = tally.slowest.max(start.elapsed());
-                prop_assert!(
-                    largest <= bound,
-                    "{}: an allocation of {largest} B, over the bound {bound} B",
-                    seed.name
-                );
-                Ok(())
-            },
-        )
-        .unwrap();
-    let tally = tally.into_inner();
+    let case = |text: &str, seed: &Seed| {
+        let Ok(scene) = bake::Scene::parse(text, &seed.name) else {
+            return (false, false);
+        };
+        // A plan of every preset: knobs for the scene's spectral mode.
+        for q in [
+            bake::Quality::Draft,
+            bake::Quality::Standard,
+            bake::Quality::Reference,
+        ] {
+            let _ = bake::BakePlan::for_preset(scene.clone(), "t".into(), q);
+        }
+        (true, false)
+    };
+    let tally = fuzz(case, |len, _| 64 * len + (1 << 20));
     tally.print("bake scenes");
     if tally.cases >= 256 {
         assert!(tally.parsed > 0);
