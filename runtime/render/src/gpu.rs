@@ -43,6 +43,16 @@ pub struct Timings {
 }
 
 impl Timings {
+    /// "upload U ms, frame F ms, readback R ms", for a summary line.
+    pub fn describe(&self) -> String {
+        format!(
+            "upload {:.1} ms, frame {:.1} ms, readback {:.1} ms",
+            self.upload * 1e3,
+            self.frame * 1e3,
+            self.readback * 1e3
+        )
+    }
+
     /// The three as named passes.
     pub fn passes(&self) -> Vec<crate::model::Pass> {
         use crate::model::Pass;

@@ -73,6 +73,30 @@ pub struct Rendered {
 }
 
 impl Rendered {
+    /// A frame without further channels or figures: `image`, its `passes` and the line
+    /// `summary`.
+    pub fn plain(image: Image, passes: Vec<Pass>, summary: String) -> Self {
+        Self {
+            image,
+            extra: Vec::new(),
+            passes,
+            figures: Vec::new(),
+            summary,
+        }
+    }
+
+    /// A CPU frame of one pass, "frame", that took `seconds`.
+    pub fn cpu_frame(image: Image, seconds: f64, summary: String) -> Self {
+        Self::plain(
+            image,
+            vec![Pass {
+                name: "frame",
+                seconds,
+            }],
+            summary,
+        )
+    }
+
     /// The wall time of pass `name`, if the model reported it.
     pub fn seconds(&self, name: &str) -> Option<f64> {
         self.passes

@@ -160,24 +160,17 @@ impl Model for Biri {
         tables: &GpuTables,
     ) -> Result<Rendered, RenderError> {
         let (image, t) = renderer.render(gpu, job.tables, tables, job.frame, s)?;
-        Ok(Rendered {
-            summary: format!(
-                "analytic single scattering ({}, {} kernel): {}×{}, {} light(s): silhouettes \
-                 and upload {:.1} ms, frame {:.1} ms, readback {:.1} ms",
-                gpu.describe(),
-                s.kernel.name(),
-                image.width,
-                image.height,
-                job.frame.lights.len(),
-                t.upload * 1e3,
-                t.frame * 1e3,
-                t.readback * 1e3
-            ),
-            image,
-            extra: Vec::new(),
-            figures: Vec::new(),
-            passes: t.passes(),
-        })
+        // Biri's upload includes the silhouettes, computed on the CPU.
+        let summary = format!(
+            "analytic single scattering ({}, {} kernel): {}×{}, {} light(s): silhouettes and {}",
+            gpu.describe(),
+            s.kernel.name(),
+            image.width,
+            image.height,
+            job.frame.lights.len(),
+            t.describe()
+        );
+        Ok(Rendered::plain(image, t.passes(), summary))
     }
 
     /// Stage 2 alone (the surfaces, shaded and attenuated, no medium): the paper's Table 1

@@ -66,7 +66,7 @@ use serde::{Deserialize, Serialize};
 use runtime::gpu::{Gpu, GpuTables, TexelFormat};
 
 use crate::gpu::RenderError;
-use crate::model::{Job, Model, Need, Pass, Rendered, image_need};
+use crate::model::{Job, Model, Need, Rendered, image_need};
 use crate::shading::{MAX_PHASE_TERM, check_slicing};
 use crate::{Frame, FrameError, basis};
 
@@ -113,20 +113,12 @@ impl Model for Miyazaki {
         let start = Instant::now();
         let image = cpu::render(job.tables, job.frame, s)?;
         let seconds = start.elapsed().as_secs_f64();
-        Ok(Rendered {
-            summary: format!(
-                "shadow-view slices (CPU reference): {}×{}, {} slices, a = {}, k_multi = {} /sr, \
-                 shadow surface {}²: {seconds:.2} s",
-                image.width, image.height, s.slices, s.a, s.k_multi, s.light_resolution
-            ),
-            image,
-            extra: Vec::new(),
-            figures: Vec::new(),
-            passes: vec![Pass {
-                name: "frame",
-                seconds,
-            }],
-        })
+        let summary = format!(
+            "shadow-view slices (CPU reference): {}×{}, {} slices, a = {}, k_multi = {} /sr, \
+             shadow surface {}²: {seconds:.2} s",
+            image.width, image.height, s.slices, s.a, s.k_multi, s.light_resolution
+        );
+        Ok(Rendered::cpu_frame(image, seconds, summary))
     }
 
     fn render_gpu(
@@ -137,26 +129,19 @@ impl Model for Miyazaki {
         tables: &GpuTables,
     ) -> Result<Rendered, RenderError> {
         let (image, t) = renderer.render(gpu, job.tables, tables, job.frame, s)?;
-        Ok(Rendered {
-            summary: format!(
-                "shadow-view slices ({}): {}×{}, {} slices, a = {}, k_multi = {} /sr, shadow \
-                 surface {}²: upload {:.1} ms, frame {:.1} ms, readback {:.1} ms",
-                gpu.describe(),
-                image.width,
-                image.height,
-                s.slices,
-                s.a,
-                s.k_multi,
-                s.light_resolution,
-                t.upload * 1e3,
-                t.frame * 1e3,
-                t.readback * 1e3
-            ),
-            image,
-            extra: Vec::new(),
-            figures: Vec::new(),
-            passes: t.passes(),
-        })
+        let summary = format!(
+            "shadow-view slices ({}): {}×{}, {} slices, a = {}, k_multi = {} /sr, shadow surface \
+             {}²: {}",
+            gpu.describe(),
+            image.width,
+            image.height,
+            s.slices,
+            s.a,
+            s.k_multi,
+            s.light_resolution,
+            t.describe()
+        );
+        Ok(Rendered::plain(image, t.passes(), summary))
     }
 }
 
