@@ -26,6 +26,8 @@ import numpy as np
 import OpenEXR
 
 HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, os.path.join(os.path.dirname(HERE), "scripts"))
+import repo  # noqa: E402
 CASE = os.path.join(HERE, "cumulus")
 OUT = os.path.join(CASE, "out")  # + /<size>
 TABLES = os.path.join(CASE, "tables")
@@ -452,18 +454,6 @@ def median_chi_factor(dof):
     return (1 - 2 / (9 * dof)) ** 1.5
 
 
-def portable(value, root, work):
-    """`value` with paths inside the repository made relative to it and the work directory
-    `work` written as $WORK, so the committed JSON names no machine's paths."""
-    if isinstance(value, dict):
-        return {k: portable(v, root, work) for k, v in value.items()}
-    if isinstance(value, list):
-        return [portable(v, root, work) for v in value]
-    if isinstance(value, str):
-        return value.replace(root.rstrip("/") + "/", "").replace(work, "$WORK")
-    return value
-
-
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--size", type=int, default=256, help="image side in pixels (default 256)")
@@ -721,7 +711,7 @@ def main():
                         mitsuba_se=mit_se, A=A, mask=mask)
     res["machine"]["loadavg_end"] = os.getloadavg()
     with open(a.json, "w") as fh:
-        json.dump(portable(res, os.path.dirname(HERE), os.path.dirname(a.binary)), fh, indent=2,
+        json.dump(repo.portable(res, os.path.dirname(HERE), os.path.dirname(a.binary)), fh, indent=2,
                   default=float)
 
     # Table.

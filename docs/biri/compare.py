@@ -18,6 +18,8 @@ relative error against the full truth is found on a grid (scaling the scene's ow
 import json, os, subprocess, sys, time
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+sys.path.insert(0, os.path.join(ROOT, "scripts"))
+import repo  # noqa: E402
 BIN = os.environ.get("PHOTOMETEOR_BIN", os.path.join(ROOT, "target", "release", "photometeor"))
 WORK = os.environ.get("BIRI_WORK", "/tmp/photometeor-biri")
 SCENE = os.path.join(ROOT, "data", "scenes", "beams.toml")
@@ -37,18 +39,6 @@ def run(args):
 def compare(truth, model, png=None):
     args = ["compare-render", truth, model, "--json", "--pixels", "all"]
     return json.loads(run(args + (["--map", png] if png else []))[0].stdout)
-
-
-def portable(value, root, work):
-    """`value` with paths inside the repository made relative to it and the work directory
-    `work` written as $WORK, so the committed JSON names no machine's paths."""
-    if isinstance(value, dict):
-        return {k: portable(v, root, work) for k, v in value.items()}
-    if isinstance(value, list):
-        return [portable(v, root, work) for v in value]
-    if isinstance(value, str):
-        return value.replace(root.rstrip("/") + "/", "").replace(work, "$WORK")
-    return value
 
 
 def main():
@@ -105,7 +95,7 @@ def main():
           f"{scan[best]['mean_rel_error']*100:.1f} % bias {scan[best]['bias']*100:+.1f} %")
     rows.append({"model": f"biri, exact, best ambient {best}", "truth": "full",
                  "seconds": rows[0]["seconds"], **scan[best]})
-    json.dump(portable({"size": SIZE, "spp": SPP, "truth": truths, "rows": rows, "ambient_scan": scan}, ROOT, WORK),
+    json.dump(repo.portable({"size": SIZE, "spp": SPP, "truth": truths, "rows": rows, "ambient_scan": scan}, ROOT, WORK),
               open(f"{OUT}/compare.json", "w"), indent=1)
     md = ["| model | against the truth with | mean rel. error | median | 95th pct | bias | within 3σ | seconds |",
           "|---|---|---|---|---|---|---|---|"]

@@ -17,6 +17,8 @@ MAX_REUSE_TRUTH=1 reuses the truth renders of an earlier run in MAX_WORK.
 import json, os, subprocess, sys, time
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+sys.path.insert(0, os.path.join(ROOT, "scripts"))
+import repo  # noqa: E402
 BIN = os.path.join(ROOT, "target", "release", "photometeor")
 WORK = os.environ.get("MAX_WORK", "/tmp/photometeor-max")
 OUT = os.path.dirname(os.path.abspath(__file__))
@@ -29,21 +31,6 @@ def run(args):
     if r.returncode != 0:
         sys.exit(f"{' '.join(args)}: {r.stderr}")
     return r
-
-
-def soft_ball(head, field, density, azimuth, size, tail=""):
-    """The soft-ball fixture (data/scenes/fixtures/soft_ball.toml) after `head` (the [scene] and
-    [[field]] tables), with its field, density, sun azimuth and image size set and `tail` (more
-    [render.<model>] tables) after it; its grid file named by absolute path."""
-    fixtures = os.path.join(ROOT, "data", "scenes", "fixtures")
-    values = {"field": f'"{field}"', "number_density_per_m3": density, "azimuth_deg": azimuth,
-              "width": size, "height": size,
-              "file": json.dumps(os.path.join(fixtures, "soft_ball_48.f32"))}
-    lines = []
-    for line in open(os.path.join(fixtures, "soft_ball.toml")).read().splitlines():
-        key = line.split("=")[0].strip()
-        lines.append(f"{key} = {values[key]}" if key in values and "=" in line else line)
-    return head + "\n".join(lines) + "\n" + tail
 
 
 def ball_scene(tau, azimuth, sigma_ext_g, threshold=1.0):
@@ -69,7 +56,7 @@ light_resolution = 64
 [render.max]
 threshold = {threshold}
 """
-    return soft_ball(head, "cloud", density, azimuth, 64, tail)
+    return repo.soft_ball(head, "cloud", density, azimuth, 64, tail)
 
 
 def with_threshold(src, dst, threshold):

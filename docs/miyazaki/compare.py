@@ -16,6 +16,8 @@ MIYAZAKI_REUSE_TRUTH=1 reuses a truth render of an earlier run in MIYAZAKI_WORK.
 import json, math, os, subprocess, sys, time
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+sys.path.insert(0, os.path.join(ROOT, "scripts"))
+import repo  # noqa: E402
 BIN = os.path.join(ROOT, "target", "release", "photometeor")
 WORK = os.environ.get("MIYAZAKI_WORK", "/tmp/photometeor-miyazaki")
 SCENES = ["cumulus_dawn", "shafts"]
@@ -64,18 +66,6 @@ def compare(truth, model, png=None):
     rep["all_pixels"] = json.loads(run(["compare-render", truth, model, "--json",
                                         "--pixels", "all"]).stdout)
     return rep
-
-
-def portable(value, root, work):
-    """`value` with paths inside the repository made relative to it and the work directory
-    `work` written as $WORK, so the committed JSON names no machine's paths."""
-    if isinstance(value, dict):
-        return {k: portable(v, root, work) for k, v in value.items()}
-    if isinstance(value, list):
-        return [portable(v, root, work) for v in value]
-    if isinstance(value, str):
-        return value.replace(root.rstrip("/") + "/", "").replace(work, "$WORK")
-    return value
 
 
 def main():
@@ -170,7 +160,7 @@ def main():
             print(f"{name} riley: mean {rl['mean_rel_error']*100:.1f} % p95 {rl['p95_rel_error']*100:.1f} % "
                   f"bias {rl['bias']*100:+.1f} %; truth {truth_line}", flush=True)
         results.append(row)
-    json.dump(portable({"size": SIZE, "spp": SPP, "k_grid": K_GRID, "results": results}, ROOT, WORK),
+    json.dump(repo.portable({"size": SIZE, "spp": SPP, "k_grid": K_GRID, "results": results}, ROOT, WORK),
               open(f"{OUT}/compare.json", "w"), indent=1)
     md = ["| scene | model | k_multi (1/sr) | mean rel. error | median | 95th pct | bias | all lit pixels: mean / p95 / bias | seconds (CPU reference) |",
           "|---|---|---|---|---|---|---|---|---|"]

@@ -1,13 +1,16 @@
-//! A global allocator that records the largest single allocation a thread makes while armed:
-//! the property tests of the readers and scene parsers bound every allocation with it. Include
-//! it with `#[path = "…/tests/common/counting_alloc.rs"] mod counting_alloc;` (it declares the
-//! test binary's global allocator).
+//! What the property tests of the readers and the scene parsers share: a global allocator that
+//! records the largest single allocation a thread makes while armed (they bound every
+//! allocation with it), and their proptest runner (`PHOTOMETEOR_FUZZ_CASES` cases, failures kept
+//! in a file and replayed first). Include it with `#[path = "…/tests/common/fuzz.rs"] mod fuzz;`
+//! (it declares the test binary's global allocator).
 
 // Implementing GlobalAlloc is unsafe.
 #![allow(unsafe_code)]
 
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
+
+use proptest::test_runner::{Config, FileFailurePersistence, TestRunner};
 
 /// Records the largest single allocation made on a thread while it is armed.
 struct Counting;
@@ -53,4 +56,22 @@ pub fn largest_allocation(f: impl FnOnce()) -> usize {
     f();
     ARMED.with(|a| a.set(false));
     LARGEST.with(Cell::get)
+}
+
+/// Cases per property: `PHOTOMETEOR_FUZZ_CASES`, default 256.
+pub fn cases() -> u32 {
+    std::env::var("PHOTOMETEOR_FUZZ_CASES")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(256)
+}
+
+/// A runner of [`cases`] cases whose failures are kept in `regressions` (relative to the
+/// crate) and replayed first.
+pub fn runner(regressions: &'static str) -> TestRunner {
+    TestRunner::new(Config {
+        cases: cases(),
+        failure_persistence: Some(Box::new(FileFailurePersistence::Direct(regressions))),
+        ..Config::default()
+    })
 }

@@ -16,6 +16,8 @@ Needs nothing beyond the photometeor binary (OpenEXR is not needed: compare-rend
 import json, os, subprocess, sys, time
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
+sys.path.insert(0, os.path.join(ROOT, "scripts"))
+import repo  # noqa: E402
 BIN = os.path.join(ROOT, "target", "release", "photometeor")
 WORK = os.environ.get("SWEEP_WORK", "/tmp/photometeor-sweep")
 TAUS = [0.1, 0.5, 2, 8, 32, 50]
@@ -29,21 +31,6 @@ FIELDS = {
     "rain": 'distribution = { kind = "lognormal", median_radius_um = 500, sigma_g = 1.4 }',
 }
 SIZE = int(os.environ.get("SWEEP_SIZE", "48"))
-
-
-def soft_ball(head, field, density, azimuth, size, tail=""):
-    """The soft-ball fixture (data/scenes/fixtures/soft_ball.toml) after `head` (the [scene] and
-    [[field]] tables), with its field, density, sun azimuth and image size set and `tail` (more
-    [render.<model>] tables) after it; its grid file named by absolute path."""
-    fixtures = os.path.join(ROOT, "data", "scenes", "fixtures")
-    values = {"field": f'"{field}"', "number_density_per_m3": density, "azimuth_deg": azimuth,
-              "width": size, "height": size,
-              "file": json.dumps(os.path.join(fixtures, "soft_ball_48.f32"))}
-    lines = []
-    for line in open(os.path.join(fixtures, "soft_ball.toml")).read().splitlines():
-        key = line.split("=")[0].strip()
-        lines.append(f"{key} = {values[key]}" if key in values and "=" in line else line)
-    return head + "\n".join(lines) + "\n" + tail
 
 
 def scene(field, tau, azimuth, sigma_ext_g, xi):
@@ -68,7 +55,7 @@ slices = 256
 light_resolution = {SIZE}
 xi = {xi}
 """
-    return soft_ball(head, field, density, azimuth, SIZE, tail)
+    return repo.soft_ball(head, field, density, azimuth, SIZE, tail)
 
 
 def best_xi(row):

@@ -16,30 +16,16 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use proptest::prelude::*;
-use proptest::test_runner::{Config, FileFailurePersistence, TestRunner};
+use proptest::test_runner::TestRunner;
 use render::RenderScene;
 use render::model::MODEL_NAMES;
 
-#[path = "../../../tests/common/counting_alloc.rs"]
-mod counting_alloc;
-use counting_alloc::largest_allocation;
-
-/// Cases per parser: `PHOTOMETEOR_FUZZ_CASES`, default 256.
-fn cases() -> u32 {
-    std::env::var("PHOTOMETEOR_FUZZ_CASES")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(256)
-}
+#[path = "../../../tests/common/fuzz.rs"]
+mod fuzz;
+use fuzz::largest_allocation;
 
 fn runner() -> TestRunner {
-    TestRunner::new(Config {
-        cases: cases(),
-        failure_persistence: Some(Box::new(FileFailurePersistence::Direct(
-            "tests/data/scene-fuzz-regressions.txt",
-        ))),
-        ..Config::default()
-    })
+    fuzz::runner("tests/data/scene-fuzz-regressions.txt")
 }
 
 /// An example scene: its text and the directory its files are named from.

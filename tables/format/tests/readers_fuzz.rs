@@ -17,11 +17,11 @@ use std::path::{Path, PathBuf};
 use format::exr::{decode_field_exr, decoded_bound};
 use format::{decode_biri_exr, decode_poisson_exr, decode_single_exr, parse_manifest};
 use proptest::prelude::*;
-use proptest::test_runner::{Config, FileFailurePersistence, TestRunner};
+use proptest::test_runner::TestRunner;
 
-#[path = "../../../tests/common/counting_alloc.rs"]
-mod counting_alloc;
-use counting_alloc::largest_allocation;
+#[path = "../../../tests/common/fuzz.rs"]
+mod fuzz;
+use fuzz::largest_allocation;
 
 /// Slack for fixed-size buffers of the readers (the exr crate reads its offset table in steps
 /// of 65535 entries, 512 KiB).
@@ -45,22 +45,8 @@ fn seed(name: &str) -> Vec<u8> {
     std::fs::read(seed_dir().join(name)).unwrap()
 }
 
-/// Cases per reader: `PHOTOMETEOR_FUZZ_CASES`, default 256.
-fn cases() -> u32 {
-    std::env::var("PHOTOMETEOR_FUZZ_CASES")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(256)
-}
-
 fn runner() -> TestRunner {
-    TestRunner::new(Config {
-        cases: cases(),
-        failure_persistence: Some(Box::new(FileFailurePersistence::Direct(
-            "tests/data/fuzz-regressions.txt",
-        ))),
-        ..Config::default()
-    })
+    fuzz::runner("tests/data/fuzz-regressions.txt")
 }
 
 // ---- EXR mutations ----
@@ -252,7 +238,7 @@ fn fuzz_exr(name: &str, read: fn(&[u8], &Path) -> bool) {
         .unwrap();
     eprintln!(
         "{name}: {} cases ({} still read), largest allocation {} bytes (its bound {})",
-        cases(),
+        fuzz::cases(),
         read_ok.get(),
         worst.get().0,
         worst.get().1
@@ -398,7 +384,7 @@ fn manifest_reader_survives_mutations() {
         .unwrap();
     eprintln!(
         "manifest.json: {} cases ({} still read), largest allocation {} bytes (its bound {})",
-        cases(),
+        fuzz::cases(),
         read_ok.get(),
         worst.get().0,
         worst.get().1
