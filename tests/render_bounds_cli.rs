@@ -8,7 +8,7 @@ mod common;
 use std::fs;
 use std::os::unix::fs::FileTypeExt;
 use std::path::Path;
-use std::process::Command;
+use std::process::{Command, Output};
 
 use common::{photometeor, workdir};
 
@@ -52,11 +52,8 @@ height_m = 300
     .replace("#EXTRA", extra)
 }
 
-/// Runs `render scene.toml --tables tables <args>` in `dir` with `text` as the scene: exit 2
-/// naming `needle`, nothing baked (no `tables/`), no image written.
-fn refused_before_the_bake(dir: &Path, text: &str, args: &[&str], needle: &str) {
-    let _ = fs::remove_dir_all(dir.join("tables"));
-    fs::write(dir.join("scene.toml"), text).unwrap();
+/// `render scene.toml --tables tables --out out.exr <args>` in `dir`.
+fn render(dir: &Path, args: &[&str]) -> Output {
     let mut all = vec![
         "render",
         "scene.toml",
@@ -64,10 +61,17 @@ fn refused_before_the_bake(dir: &Path, text: &str, args: &[&str], needle: &str) 
         "tables",
         "--out",
         "out.exr",
-        "--quiet",
     ];
     all.extend_from_slice(args);
-    let o = photometeor(&all, dir);
+    photometeor(&all, dir)
+}
+
+/// Runs `render scene.toml --tables tables <args>` in `dir` with `text` as the scene: exit 2
+/// naming `needle`, nothing baked (no `tables/`), no image written.
+fn refused_before_the_bake(dir: &Path, text: &str, args: &[&str], needle: &str) {
+    let _ = fs::remove_dir_all(dir.join("tables"));
+    fs::write(dir.join("scene.toml"), text).unwrap();
+    let o = render(dir, &[&["--quiet"], args].concat());
     let e = String::from_utf8_lossy(&o.stderr);
     assert_eq!(o.status.code(), Some(2), "{args:?}: {e}");
     assert!(e.contains(needle), "{args:?}: {needle:?} not in {e}");
@@ -170,21 +174,7 @@ fn a_frame_larger_than_the_memory_allowed_is_refused_naming_the_setting() {
     );
     // The default frame fits the same bound.
     fs::write(dir.join("scene.toml"), scene("")).unwrap();
-    let o = photometeor(
-        &[
-            "render",
-            "scene.toml",
-            "--tables",
-            "tables",
-            "--out",
-            "out.exr",
-            "--quiet",
-            "--cpu",
-            "--max-memory",
-            "1",
-        ],
-        &dir,
-    );
+    let o = render(&dir, &["--quiet", "--cpu", "--max-memory", "1"]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
 }
 
@@ -233,20 +223,7 @@ fn hopeless_optical_depths_are_refused_before_any_path() {
         "number_density_per_m3 = 1e25",
     );
     fs::write(dir.join("scene.toml"), &dense).unwrap();
-    let o = photometeor(
-        &[
-            "render",
-            "scene.toml",
-            "--model",
-            "truth",
-            "--tables",
-            "tables",
-            "--out",
-            "out.exr",
-            "--quiet",
-        ],
-        &dir,
-    );
+    let o = render(&dir, &["--model", "truth", "--quiet"]);
     let e = String::from_utf8_lossy(&o.stderr);
     assert_eq!(o.status.code(), Some(2), "{e}");
     assert!(
@@ -365,14 +342,9 @@ fn the_truth_stops_at_its_time_bound() {
     let dir = workdir("bounds-seconds");
     fs::write(dir.join("scene.toml"), scene("")).unwrap();
     // 10⁶ samples per pixel would take minutes; one second of tracing takes what it can.
-    let o = photometeor(
+    let o = render(
+        &dir,
         &[
-            "render",
-            "scene.toml",
-            "--tables",
-            "tables",
-            "--out",
-            "out.exr",
             "--model",
             "truth",
             "--spp",
@@ -380,7 +352,6 @@ fn the_truth_stops_at_its_time_bound() {
             "--set",
             "max_seconds=1",
         ],
-        &dir,
     );
     let e = String::from_utf8_lossy(&o.stderr);
     assert!(o.status.success(), "{e}");
