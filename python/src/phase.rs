@@ -26,24 +26,10 @@ const RAYS_RANGE: (u64, u64) = (1_000, 10_000_000_000);
 
 /// The size distribution from the mutually exclusive keyword groups
 /// ([`mie::DistributionOptions`], as the CLI), or from a scene-style mapping `{"kind": …, …}`.
-#[allow(clippy::too_many_arguments)]
 fn distribution_from(
     distribution: Option<&Bound<'_, PyMapping>>,
-    lognormal_median_um: Option<f64>,
-    sigma_g: Option<f64>,
-    r_eff_um: Option<f64>,
-    v_eff: Option<f64>,
-    lognormal: bool,
-    marshall_palmer_mm_h: Option<f64>,
+    options: mie::DistributionOptions,
 ) -> PyResult<SizeDistribution> {
-    let options = mie::DistributionOptions {
-        lognormal_median_um,
-        sigma_g,
-        r_eff_um,
-        v_eff,
-        lognormal,
-        marshall_palmer_mm_h,
-    };
     let other = Some(("distribution={\"kind\": …}", distribution.is_some()));
     if let Some(d) = options
         .choose(str::to_string, other)
@@ -246,12 +232,14 @@ pub fn phase<'py>(
     let wavelengths_nm = wavelengths(wavelengths_nm)?;
     let distribution = distribution_from(
         distribution,
-        lognormal_median_um,
-        sigma_g,
-        r_eff_um,
-        v_eff,
-        lognormal,
-        marshall_palmer_mm_h,
+        mie::DistributionOptions {
+            lognormal_median_um,
+            sigma_g,
+            r_eff_um,
+            v_eff,
+            lognormal,
+            marshall_palmer_mm_h,
+        },
     )?;
     let nodes = node_counts(sizes, nodes_per_panel, tolerance)?;
     let (point_angles_deg, point_cosines) = match angles_deg {

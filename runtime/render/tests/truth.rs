@@ -149,6 +149,17 @@ fn slab_frame(tau: f64) -> Frame {
     }
 }
 
+/// Singly scattered radiance per unit F0 leaving a slab of optical depth `tau` lit at cosine
+/// `mu0`, at cosine `mu` reflected (`up`) or transmitted, where ω p(Θ) is `omega_p` (1/sr):
+/// ω p μ0/(μ0 + μ)(1 − e^{−τ(1/μ0 + 1/μ)}) up, ω p μ0/(μ0 − μ)(e^{−τ/μ0} − e^{−τ/μ}) down.
+fn single_scatter_slab(omega_p: f64, mu0: f64, mu: f64, tau: f64, up: bool) -> f64 {
+    if up {
+        omega_p * mu0 / (mu0 + mu) * (1.0 - (-tau * (1.0 / mu0 + 1.0 / mu)).exp())
+    } else {
+        omega_p * mu0 / (mu0 - mu) * ((-tau / mu0).exp() - (-tau / mu).exp())
+    }
+}
+
 /// The outgoing direction at cosine μ to the normal (`up`: reflected, else transmitted) and
 /// azimuth φ (0: the horizontal direction the beam travels, −z).
 fn outgoing(mu: f64, phi_deg: f64, up: bool) -> DVec3 {
@@ -330,11 +341,7 @@ fn exact_single_scattering_from_a_slab() {
     ] {
         let w = outgoing(mu, phi, up);
         let p = sampler.eval(beam, w);
-        let want = if up {
-            0.9 * p * mu0 / (mu0 + mu) * (1.0 - (-tau * (1.0 / mu0 + 1.0 / mu)).exp())
-        } else {
-            0.9 * p * mu0 / (mu0 - mu) * ((-tau / mu0).exp() - (-tau / mu).exp())
-        };
+        let want = single_scatter_slab(0.9 * p, mu0, mu, tau, up);
         let (got, se) = radiance(&tracer, w, 200_000, 11);
         let z = (got - want) / se;
         worst = worst.max(z.abs());
@@ -400,7 +407,7 @@ fn single_scattering_in_a_haze_layer_is_exact() {
 #[test]
 fn overlapping_media_add_their_densities() {
     // Two boxes of half the slab's density over the same 1 m slab scatter once exactly as the
-    // slab does (the single-scattering formula of `exact_single_scattering_from_a_slab`);
+    // slab does (`single_scatter_slab`);
     // the tracer's majorant must cover their sum, else delta tracking weighs paths wrongly.
     let grid = ThetaGrid::new(0.5).unwrap();
     let bins = hg_bins(&grid, 0.85);
@@ -431,11 +438,7 @@ fn overlapping_media_add_their_densities() {
     for &(mu, phi, up) in &[(1.0, 0.0, true), (0.3, 180.0, true), (0.8, 90.0, false)] {
         let w = outgoing(mu, phi, up);
         let p = sampler.eval(beam, w);
-        let want = if up {
-            0.9 * p * mu0 / (mu0 + mu) * (1.0 - (-tau * (1.0 / mu0 + 1.0 / mu)).exp())
-        } else {
-            0.9 * p * mu0 / (mu0 - mu) * ((-tau / mu0).exp() - (-tau / mu).exp())
-        };
+        let want = single_scatter_slab(0.9 * p, mu0, mu, tau, up);
         let (got, se) = radiance_rgb(&tracer, w, 100_000, 12)[1];
         let z = (got - want) / se;
         eprintln!("two media, μ {mu} φ {phi} up {up}: {got:.6} ± {se:.1e} vs {want:.6} ({z:+.2}σ)");
