@@ -16,6 +16,8 @@ use bake::{BakePlan, Scene, Silent};
 use format::{BakeDir, BakeLock, Staging};
 
 mod common;
+#[path = "common/tmpfs.rs"]
+mod tmpfs;
 
 use common::{photometeor, workdir};
 
@@ -364,31 +366,9 @@ fn a_full_disk_leaves_the_previous_bake_as_it_was() {
     fs::create_dir_all(&dir).unwrap();
     // A 4 MiB tmpfs: room for a one-field bake of 4 orders (2.4 MB with its Poisson and Biri
     // tables and cache record), not for two fields of 60 (8.3 MB).
-    let mounted = Command::new("mount")
-        .args(["-t", "tmpfs", "-o", "size=4m", "tmpfs"])
-        .arg(&dir)
-        .output();
-    match mounted {
-        Ok(out) if out.status.success() => {}
-        Ok(out) => {
-            eprintln!(
-                "skipped: cannot mount a tmpfs here ({})",
-                String::from_utf8_lossy(&out.stderr).trim()
-            );
-            return;
-        }
-        Err(e) => {
-            eprintln!("skipped: cannot run mount ({e})");
-            return;
-        }
-    }
-    struct Unmount(PathBuf);
-    impl Drop for Unmount {
-        fn drop(&mut self) {
-            let _ = Command::new("umount").arg(&self.0).status();
-        }
-    }
-    let _unmount = Unmount(dir.clone());
+    let Some(_unmount) = tmpfs::mount_tmpfs(&dir, "4m") else {
+        return;
+    };
     bake_into(&scene("a", &["rain"]), &dir).unwrap();
     let before = snapshot(&dir);
     let big = scene("b", &["cloud", "rain"]).replace("n_max = 4", "n_max = 60");

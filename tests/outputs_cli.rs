@@ -4,6 +4,8 @@
 //! behind. Each refusal exits 2 naming the path, with the target as it was.
 
 mod common;
+#[path = "common/tmpfs.rs"]
+mod tmpfs;
 
 use std::fs;
 use std::os::unix::fs::FileTypeExt;
@@ -164,24 +166,9 @@ fn a_full_disk_is_an_error_that_leaves_nothing_behind() {
     let dir = root.join("small");
     fs::create_dir_all(&dir).unwrap();
     // A 16 KiB tmpfs: too small for the translated shaders (≈ 100 KB).
-    match Command::new("mount")
-        .args(["-t", "tmpfs", "-o", "size=16k", "tmpfs"])
-        .arg(&dir)
-        .output()
-    {
-        Ok(o) if o.status.success() => {}
-        other => {
-            eprintln!("skipped: cannot mount a tmpfs here ({other:?})");
-            return;
-        }
-    }
-    struct Unmount(PathBuf);
-    impl Drop for Unmount {
-        fn drop(&mut self) {
-            let _ = Command::new("umount").arg(&self.0).status();
-        }
-    }
-    let _unmount = Unmount(dir.clone());
+    let Some(_unmount) = tmpfs::mount_tmpfs(&dir, "16k") else {
+        return;
+    };
     refused(
         &root,
         &["shaders", "--out", "small"],
