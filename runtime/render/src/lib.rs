@@ -36,6 +36,9 @@
 //! - [`camera`], [`sky`] (Riley's analytic sky, Eqs. 9–15), [`shading`] (per-sample
 //!   coefficients, sun-side buffer lookups, the pixel composed around a volume's light),
 //!   [`image`] (EXR and PNG out), [`error_map`] (a frame against the truth).
+//! - [`lattice`] (light on the voxel grid: optics, upwind sweeps, reduced sun and sky) and
+//!   [`diffusion`] (the multigrid-preconditioned diffusion solve), for the models that light
+//!   a grid once per sun and gather per view.
 //! - [`gpu`]: the plumbing every GPU renderer uses (pipelines, buffers, slice uniforms, a
 //!   timed frame and its readback); each WGSL uniform is mirrored by a Pod struct declared
 //!   with `runtime::uniform!`, whose layout a test checks against the shader's.
@@ -47,10 +50,12 @@
 
 pub mod biri;
 pub mod camera;
+pub mod diffusion;
 pub mod error_map;
 pub mod geometry;
 pub mod gpu;
 pub mod image;
+pub mod lattice;
 pub mod max;
 pub mod miyazaki;
 pub mod model;

@@ -16,11 +16,12 @@ use runtime::Tables;
 use runtime::gpu::{Gpu, GpuTables, read_back};
 
 use super::Settings;
-use super::cpu::{Lighting, check, voxel_length};
+use super::cpu::{Lighting, check};
 use crate::gpu::{
     COMPOSE_WGSL, FieldsAndSky, RenderError, Timings, bind, build, check_sizes, fields_and_sky,
     filled, slicing_source, storage, timed_frame, v4,
 };
+use crate::lattice::voxel_length;
 use crate::{Frame, FrameError, Image, MAX_FIELDS};
 
 runtime::uniform! {

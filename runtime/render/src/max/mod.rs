@@ -22,11 +22,11 @@
 //!    Q_1 = g β_sca E T_sun l/(4π), with E the sun's irradiance and l its direction of travel
 //!    (a collimated sun is one direction bin of the paper's 96), plus the skylight: the sky
 //!    model's radiance (Eqs. 11–15, seen from the box's mid-height) from
-//!    [`cpu::SKY_DIRECTIONS`] equal-solid-angle directions (the paper's 96 cube bins), each
+//!    [`crate::lattice::SKY_DIRECTIONS`] equal-solid-angle directions (the paper's 96 cube bins), each
 //!    reduced through the grid by its own sweep, adds β_sca S and g β_sca F_sky, S its mean
 //!    over the sphere and F_sky its flux over 4π.
 //! 3. **Diffusion** (Eqs. 4, 7) per channel on the voxels of optical depth β_ext h ≥
-//!    [`cpu::MIN_DIFFUSION_VOXEL_DEPTH`] ([`diffusion`]; the thinner fringe a grid's
+//!    [`crate::lattice::MIN_DIFFUSION_VOXEL_DEPTH`] ([`crate::diffusion`]; the thinner fringe a grid's
 //!    interpolation leaves, down to 10⁻¹⁹ of the core, would stall the solver), with
 //!    κ_tr = β_ext (σ_tr/σ_t), the bake's `transport_factor` mixed over the fields by their
 //!    extinction, solved to [`Settings::tolerance`] by multigrid-preconditioned CG.
@@ -73,7 +73,6 @@
 //! Units: radiance per unit solar irradiance outside the atmosphere (1/sr) per channel.
 
 pub mod cpu;
-pub mod diffusion;
 pub mod gpu;
 
 use std::time::Instant;

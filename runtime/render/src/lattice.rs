@@ -1,0 +1,307 @@
+//! Light on the voxel grid, shared by the models that light a grid once per sun and gather
+//! per view (`max`, `coupled`): the voxels' optics, upwind sweeps along a direction of travel,
+//! the reduced sunlight and skylight at voxel centres, and trilinear lookups of the results.
+
+use std::f64::consts::PI;
+
+use glam::DVec3;
+use rayon::prelude::*;
+
+use runtime::FieldTable;
+
+use crate::geometry::box_span;
+use crate::shading::coefficients;
+use crate::{DensityGrid, Frame};
+
+/// Voxels of smaller optical depth β_ext h (green) are left out of the diffusion solve.
+pub const MIN_DIFFUSION_VOXEL_DEPTH: f64 = 1e-4;
+
+/// Per-voxel optics of the grid, per channel.
+pub struct Voxels {
+    /// β_ext (1/m).
+    pub ext: Vec<[f64; 3]>,
+    /// β_sca (1/m).
+    pub sca: Vec<[f64; 3]>,
+    /// κ_tr = Σ_f β_ext,f (σ_tr/σ_t)_f.
+    pub transport: Vec<[f64; 3]>,
+    /// Σ_f β_sca,f g_f: the forward part of the first-scattered source.
+    pub g_sca: Vec<[f64; 3]>,
+}
+
+/// The optics of every voxel of `grid` with `fields` (field i = grid channel i).
+pub fn voxels(fields: &[&FieldTable], grid: &DensityGrid) -> Voxels {
+    let n = grid.data.len();
+    let mut v = Voxels {
+        ext: vec![[0.0; 3]; n],
+        sca: vec![[0.0; 3]; n],
+        transport: vec![[0.0; 3]; n],
+        g_sca: vec![[0.0; 3]; n],
+    };
+    for (i, rho) in grid.data.iter().enumerate() {
+        for (f, field) in fields.iter().enumerate() {
+            let r = f64::from(rho[f]);
+            if r <= 0.0 {
+                continue;
+            }
+            let tf = field.transport_factor.expect("checked by render");
+            for c in 0..3 {
+                let ext = r * field.sigma_ext_m2[c];
+                let sca = r * field.sigma_sca_m2[c];
+                let g = if field.albedo[c] > 0.0 {
+                    (1.0 - tf[c]) / field.albedo[c]
+                } else {
+                    0.0
+                };
+                v.ext[i][c] += ext;
+                v.sca[i][c] += sca;
+                v.transport[i][c] += ext * tf[c];
+                v.g_sca[i][c] += sca * g;
+            }
+        }
+    }
+    v
+}
+
+/// Voxel sizes per axis (m).
+pub fn voxel_size(grid: &DensityGrid) -> [f64; 3] {
+    std::array::from_fn(|a| (grid.max_m[a] - grid.min_m[a]) / grid.dims[a] as f64)
+}
+
+/// A state of N numbers per voxel centre, computed layer by layer along the direction of
+/// travel `l` (an upwind sweep): each voxel's state is `update(i, back, ds)` from the state
+/// `back` at the point one layer back along −l (bilinear in that layer; `None` beyond the box,
+/// where the light comes from clear air), `ds` the path length between the two.
+pub fn sweep<const N: usize>(
+    grid: &DensityGrid,
+    l: DVec3,
+    update: impl Fn(usize, Option<[f64; N]>, f64) -> [f64; N] + Sync,
+) -> Vec<[f64; N]> {
+    let dims = grid.dims;
+    let h = voxel_size(grid);
+    let a = (0..3)
+        .max_by(|&i, &j| l[i].abs().total_cmp(&l[j].abs()))
+        .expect("three axes");
+    let (b, c) = ((a + 1) % 3, (a + 2) % 3);
+    let stride = [1, dims[0], dims[0] * dims[1]];
+    let ds = h[a] / l[a].abs();
+    // The point one layer back, in voxel units along b and c.
+    let (shift_b, shift_c) = (-ds * l[b] / h[b], -ds * l[c] / h[c]);
+    let mut state = vec![[0.0f64; N]; grid.data.len()];
+    let layers: Vec<usize> = if l[a] > 0.0 {
+        (0..dims[a]).collect()
+    } else {
+        (0..dims[a]).rev().collect()
+    };
+    for (step, &k) in layers.iter().enumerate() {
+        let prev = (step > 0).then(|| layers[step - 1]);
+        let (nb, nc) = (dims[b] as f64, dims[c] as f64);
+        let back_of = |layer: usize, u: f64, v: f64| -> Option<[f64; N]> {
+            if u < -0.5 || v < -0.5 || u > nb - 0.5 || v > nc - 0.5 {
+                return None;
+            }
+            let (u, v) = (u.clamp(0.0, nb - 1.0), v.clamp(0.0, nc - 1.0));
+            let (u0, v0) = (u.floor() as usize, v.floor() as usize);
+            let (u1, v1) = ((u0 + 1).min(dims[b] - 1), (v0 + 1).min(dims[c] - 1));
+            let (s, t) = (u - u0 as f64, v - v0 as f64);
+            let at =
+                |ub: usize, vc: usize| &state[layer * stride[a] + ub * stride[b] + vc * stride[c]];
+            let (p00, p10, p01, p11) = (at(u0, v0), at(u1, v0), at(u0, v1), at(u1, v1));
+            Some(std::array::from_fn(|n| {
+                (1.0 - s) * (1.0 - t) * p00[n]
+                    + s * (1.0 - t) * p10[n]
+                    + (1.0 - s) * t * p01[n]
+                    + s * t * p11[n]
+            }))
+        };
+        let layer: Vec<(usize, [f64; N])> = (0..dims[b] * dims[c])
+            .into_par_iter()
+            .map(|m| {
+                let (ub, vc) = (m % dims[b], m / dims[b]);
+                let i = k * stride[a] + ub * stride[b] + vc * stride[c];
+                let back = prev.and_then(|p| back_of(p, ub as f64 + shift_b, vc as f64 + shift_c));
+                (i, update(i, back, ds))
+            })
+            .collect();
+        for (i, v) in layer {
+            state[i] = v;
+        }
+    }
+    state
+}
+
+/// Optical depth towards the light at every voxel centre, per channel:
+/// the depth one layer back plus the trapezoid of β_ext over the step (from the box's face, or
+/// clear air, half a voxel back for the first).
+pub fn sun_depths(grid: &DensityGrid, ext: &[[f64; 3]], l: DVec3) -> Vec<[f64; 3]> {
+    // State: τ per channel, then β_ext per channel (for the trapezoid).
+    let state = sweep::<6>(grid, l, |i, back, ds| {
+        let here = ext[i];
+        std::array::from_fn(|n| match (n, back) {
+            (0..=2, Some(b)) => b[n] + 0.5 * ds * (here[n] + b[n + 3]),
+            (0..=2, None) => 0.5 * ds * here[n],
+            _ => here[n - 3],
+        })
+    });
+    state.iter().map(|s| [s[0], s[1], s[2]]).collect()
+}
+
+/// Trilinear interpolation of per-voxel `values` at `p` (voxel centres; clamped at the box's
+/// edge voxels), over the voxels `active` says (all if `None`), renormalized over them; zero
+/// outside the box or where no active voxel contributes.
+pub fn trilinear(
+    grid: &DensityGrid,
+    values: &[[f64; 3]],
+    active: Option<&[bool]>,
+    p: DVec3,
+) -> [f64; 3] {
+    let Some(taps) = grid.taps(p) else {
+        return [0.0; 3];
+    };
+    let mut out = [0.0; 3];
+    let mut total = 0.0;
+    for (i, w) in taps.into_iter().flatten() {
+        if active.is_some_and(|m| !m[i]) {
+            continue;
+        }
+        total += w;
+        for c in 0..3 {
+            out[c] += w * values[i][c];
+        }
+    }
+    if active.is_some() && total > 0.0 {
+        out.iter_mut().for_each(|v| *v /= total);
+    }
+    out
+}
+
+/// The fraction of the sunlight the volume leaves at `p` along the sun direction `sun`, by a
+/// ray march of half-voxel steps (for points outside the box: the ground).
+pub fn transmittance_to_sun(
+    fields: &[&FieldTable],
+    grid: &DensityGrid,
+    p: DVec3,
+    sun: DVec3,
+) -> [f64; 3] {
+    let Some((t0, t1)) = box_span(grid.min_m, grid.max_m, p, sun) else {
+        return [1.0; 3];
+    };
+    let step = 0.5
+        * voxel_size(grid)
+            .iter()
+            .copied()
+            .fold(f64::INFINITY, f64::min);
+    let n = (((t1 - t0) / step).ceil() as usize).max(1);
+    let dt = (t1 - t0) / n as f64;
+    let mut tau = [0.0; 3];
+    for i in 0..n {
+        let rho = grid.sample(p + (t0 + (i as f64 + 0.5) * dt) * sun);
+        let (ext, _) = coefficients(fields, &rho);
+        for c in 0..3 {
+            tau[c] += ext[c] * dt;
+        }
+    }
+    tau.map(|t| (-t).exp())
+}
+
+/// Directions of the skylight: a Fibonacci set of equal solid angles 4π/[`SKY_DIRECTIONS`].
+pub const SKY_DIRECTIONS: usize = 32;
+
+/// The reduced skylight per voxel and channel: its mean radiance over
+/// the sphere (1/4π)∫ L_sky T dω and its flux over 4π, (1/4π)∫ L_sky T ω dω (ω the direction
+/// of travel).
+pub struct Sky {
+    /// (1/4π)∫ L_sky T dω per voxel and channel.
+    pub mean: Vec<[f64; 3]>,
+    /// (1/4π)∫ L_sky T ω dω per voxel and channel (ω the direction of travel).
+    pub flux: Vec<[DVec3; 3]>,
+}
+
+/// The [`SKY_DIRECTIONS`] directions (towards the sky, y up), a Fibonacci set.
+pub fn sky_directions() -> Vec<DVec3> {
+    let golden = PI * (3.0 - 5f64.sqrt());
+    (0..SKY_DIRECTIONS)
+        .map(|i| {
+            let z = 1.0 - (2.0 * i as f64 + 1.0) / SKY_DIRECTIONS as f64;
+            let r = (1.0 - z * z).sqrt();
+            let phi = golden * i as f64;
+            DVec3::new(r * phi.cos(), z, r * phi.sin())
+        })
+        .collect()
+}
+
+impl Sky {
+    /// No skylight at `n` voxels.
+    pub fn zero(n: usize) -> Self {
+        Self {
+            mean: vec![[0.0; 3]; n],
+            flux: vec![[DVec3::ZERO; 3]; n],
+        }
+    }
+
+    /// Adds `radiance` per voxel arriving from direction `s` (travelling along −s) over the
+    /// solid angle 4π/[`SKY_DIRECTIONS`].
+    pub fn add(&mut self, s: DVec3, radiance: impl Fn(usize) -> [f64; 3]) {
+        let omega = 4.0 * PI / SKY_DIRECTIONS as f64;
+        for j in 0..self.mean.len() {
+            let r = radiance(j);
+            for c in 0..3 {
+                let w = r[c] * omega / (4.0 * PI);
+                self.mean[j][c] += w;
+                self.flux[j][c] -= w * s;
+            }
+        }
+    }
+}
+
+/// The reduced skylight per voxel: the sky model's radiance from [`SKY_DIRECTIONS`] directions,
+/// each attenuated through the grid by its own sweep.
+pub fn reduced_sky(frame: &Frame, ext: &[[f64; 3]]) -> Sky {
+    let mut sky = Sky::zero(ext.len());
+    let grid = &frame.grid;
+    let sun = frame.sun.direction();
+    // The sky's radiance as seen from the middle of the box (Eqs. 11–15).
+    let y = 0.5 * (grid.min_m.y + grid.max_m.y);
+    for s in sky_directions() {
+        let k_end = if s.y < 0.0 { y / -s.y } else { f64::INFINITY };
+        let l = frame.atmosphere.inscatter(y, s.y, k_end, sun.y, s.dot(sun));
+        let radiance: [f64; 3] = std::array::from_fn(|c| frame.sun.irradiance[c] * l[c]);
+        if radiance.iter().all(|&v| v <= 0.0) {
+            continue;
+        }
+        let tau = sun_depths(grid, ext, -s);
+        sky.add(s, |j| {
+            std::array::from_fn(|c| radiance[c] * (-tau[j][c]).exp())
+        });
+    }
+    sky
+}
+
+/// E T_sun S_atm per voxel: the reduced sunlight's irradiance, from the sun's optical depth
+/// `tau_sun` to each voxel centre.
+pub fn reduced_sun(frame: &Frame, tau_sun: &[[f64; 3]]) -> Vec<[f64; 3]> {
+    let grid = &frame.grid;
+    let (h, dims, l_y) = (voxel_size(grid), grid.dims, frame.sun.direction()[1]);
+    let centre = |i: usize| {
+        let c = [
+            i % dims[0],
+            (i / dims[0]) % dims[1],
+            i / (dims[0] * dims[1]),
+        ];
+        DVec3::from_array(std::array::from_fn(|a| {
+            grid.min_m[a] + (c[a] as f64 + 0.5) * h[a]
+        }))
+    };
+    (0..tau_sun.len())
+        .into_par_iter()
+        .map(|i| {
+            let s_atm = frame.atmosphere.sunlight(centre(i).y, l_y);
+            std::array::from_fn(|c| frame.sun.irradiance[c] * s_atm[c] * (-tau_sun[i][c]).exp())
+        })
+        .collect()
+}
+
+/// The size of a voxel as one length, (h_x h_y h_z)^{1/3} (m).
+pub fn voxel_length(grid: &DensityGrid) -> f64 {
+    let h = voxel_size(grid);
+    (h[0] * h[1] * h[2]).cbrt()
+}
