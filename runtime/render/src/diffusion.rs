@@ -256,6 +256,55 @@ fn assemble(p: &Problem) -> (Stencil, Vec<f64>) {
     )
 }
 
+/// The diffuse flux J (over 4π, per channel's problem) at every voxel of `p` from its
+/// solution `i0`: along each axis the mean of the fluxes through the voxel's two faces, each as
+/// the discretization has it (module docs: D_f (I_i − I_j)/h_a + (Q_1/κ_tr)_f between two
+/// voxels, Marshak's I_i D/(2D + h/2) + (Q_1·n/κ_tr) h/(4D + h) out of a face to an empty
+/// voxel). So the flux out of a voxel's faces is what its balance says, and the P1 radiance
+/// I_0 + 3 J·ω follows the solve. Zero at empty voxels.
+pub fn flux(p: &Problem, i0: &[f64]) -> Vec<[f64; 3]> {
+    use rayon::prelude::*;
+    let [nx, ny, _] = p.dims;
+    let stride = [1, nx, nx * ny];
+    (0..i0.len())
+        .into_par_iter()
+        .map(|i| {
+            let k = p.kappa_tr[i];
+            if k <= 0.0 {
+                return [0.0; 3];
+            }
+            let c = [i % nx, (i / nx) % ny, i / (nx * ny)];
+            let d_i = 1.0 / (3.0 * k);
+            std::array::from_fn(|a| {
+                let ha = p.h[a];
+                let mut along = 0.0;
+                for (side, sign) in [(0usize, -1.0f64), (1, 1.0)] {
+                    let neighbour = if side == 1 {
+                        (c[a] + 1 < p.dims[a]).then(|| i + stride[a])
+                    } else {
+                        (c[a] > 0).then(|| i - stride[a])
+                    }
+                    .filter(|&j| p.kappa_tr[j] > 0.0);
+                    // The flux out of this face (along its outward normal, sign · e_a).
+                    let out = match neighbour {
+                        Some(j) => {
+                            let d_f = 1.0 / (1.5 * (k + p.kappa_tr[j]));
+                            let qn = 0.5 * (p.q1[i][a] / k + p.q1[j][a] / p.kappa_tr[j]);
+                            d_f * (i0[i] - i0[j]) / ha + sign * qn
+                        }
+                        None => {
+                            i0[i] * d_i / (2.0 * d_i + 0.5 * ha)
+                                + sign * p.q1[i][a] / k * ha / (4.0 * d_i + ha)
+                        }
+                    };
+                    along += 0.5 * sign * out;
+                }
+                along
+            })
+        })
+        .collect()
+}
+
 /// The multigrid hierarchy: level 0 is the fine operator.
 struct Hierarchy {
     levels: Vec<Stencil>,

@@ -69,12 +69,18 @@ pub fn voxel_size(grid: &DensityGrid) -> [f64; 3] {
 
 /// A state of N numbers per voxel centre, computed layer by layer along the direction of
 /// travel `l` (an upwind sweep): each voxel's state is `update(i, back, ds)` from the state
-/// `back` at the point one layer back along −l (bilinear in that layer; `None` beyond the box,
-/// where the light comes from clear air), `ds` the path length between the two.
+/// `back` at the point one layer back along −l, `ds` the path length between the two. `back`
+/// is bilinear in that layer between its voxel centres; between the outermost centres and the
+/// box's faces it blends linearly to `outside` at the face (the light arriving from clear
+/// air), and beyond the faces it is `outside`. So light enters through every face the sun
+/// sees, also where the sun is so low that the point one layer back stays within half a voxel
+/// of the face it crossed (before, that point took the edge voxels' state, and a slab lit at
+/// a grazing angle was lit only through its side).
 pub fn sweep<const N: usize>(
     grid: &DensityGrid,
     l: DVec3,
-    update: impl Fn(usize, Option<[f64; N]>, f64) -> [f64; N] + Sync,
+    outside: [f64; N],
+    update: impl Fn(usize, [f64; N], f64) -> [f64; N] + Sync,
 ) -> Vec<[f64; N]> {
     let dims = grid.dims;
     let h = voxel_size(grid);
@@ -92,12 +98,16 @@ pub fn sweep<const N: usize>(
     } else {
         (0..dims[a]).rev().collect()
     };
+    // The share of `outside` at coordinate u of an axis of n centres (0 between the centres,
+    // rising linearly to 1 at the faces half a voxel beyond them).
+    let face_share = |u: f64, n: f64| ((-u).max(u - (n - 1.0)) / 0.5).clamp(0.0, 1.0);
     for (step, &k) in layers.iter().enumerate() {
         let prev = (step > 0).then(|| layers[step - 1]);
         let (nb, nc) = (dims[b] as f64, dims[c] as f64);
-        let back_of = |layer: usize, u: f64, v: f64| -> Option<[f64; N]> {
-            if u < -0.5 || v < -0.5 || u > nb - 0.5 || v > nc - 0.5 {
-                return None;
+        let back_of = |layer: usize, u: f64, v: f64| -> [f64; N] {
+            let kept = (1.0 - face_share(u, nb)) * (1.0 - face_share(v, nc));
+            if kept <= 0.0 {
+                return outside;
             }
             let (u, v) = (u.clamp(0.0, nb - 1.0), v.clamp(0.0, nc - 1.0));
             let (u0, v0) = (u.floor() as usize, v.floor() as usize);
@@ -106,19 +116,22 @@ pub fn sweep<const N: usize>(
             let at =
                 |ub: usize, vc: usize| &state[layer * stride[a] + ub * stride[b] + vc * stride[c]];
             let (p00, p10, p01, p11) = (at(u0, v0), at(u1, v0), at(u0, v1), at(u1, v1));
-            Some(std::array::from_fn(|n| {
-                (1.0 - s) * (1.0 - t) * p00[n]
+            std::array::from_fn(|n| {
+                let inside = (1.0 - s) * (1.0 - t) * p00[n]
                     + s * (1.0 - t) * p10[n]
                     + (1.0 - s) * t * p01[n]
-                    + s * t * p11[n]
-            }))
+                    + s * t * p11[n];
+                kept * inside + (1.0 - kept) * outside[n]
+            })
         };
         let layer: Vec<(usize, [f64; N])> = (0..dims[b] * dims[c])
             .into_par_iter()
             .map(|m| {
                 let (ub, vc) = (m % dims[b], m / dims[b]);
                 let i = k * stride[a] + ub * stride[b] + vc * stride[c];
-                let back = prev.and_then(|p| back_of(p, ub as f64 + shift_b, vc as f64 + shift_c));
+                let back = prev.map_or(outside, |p| {
+                    back_of(p, ub as f64 + shift_b, vc as f64 + shift_c)
+                });
                 (i, update(i, back, ds))
             })
             .collect();
@@ -133,12 +146,11 @@ pub fn sweep<const N: usize>(
 /// the depth one layer back plus the trapezoid of β_ext over the step (from the box's face, or
 /// clear air, half a voxel back for the first).
 pub fn sun_depths(grid: &DensityGrid, ext: &[[f64; 3]], l: DVec3) -> Vec<[f64; 3]> {
-    // State: τ per channel, then β_ext per channel (for the trapezoid).
-    let state = sweep::<6>(grid, l, |i, back, ds| {
+    // State: τ per channel, then β_ext per channel (for the trapezoid); clear air outside.
+    let state = sweep::<6>(grid, l, [0.0; 6], |i, back, ds| {
         let here = ext[i];
-        std::array::from_fn(|n| match (n, back) {
-            (0..=2, Some(b)) => b[n] + 0.5 * ds * (here[n] + b[n + 3]),
-            (0..=2, None) => 0.5 * ds * here[n],
+        std::array::from_fn(|n| match n {
+            0..=2 => back[n] + 0.5 * ds * (here[n] + back[n + 3]),
             _ => here[n - 3],
         })
     });
@@ -148,23 +160,23 @@ pub fn sun_depths(grid: &DensityGrid, ext: &[[f64; 3]], l: DVec3) -> Vec<[f64; 3
 /// Trilinear interpolation of per-voxel `values` at `p` (voxel centres; clamped at the box's
 /// edge voxels), over the voxels `active` says (all if `None`), renormalized over them; zero
 /// outside the box or where no active voxel contributes.
-pub fn trilinear(
+pub fn trilinear<const N: usize>(
     grid: &DensityGrid,
-    values: &[[f64; 3]],
+    values: &[[f64; N]],
     active: Option<&[bool]>,
     p: DVec3,
-) -> [f64; 3] {
+) -> [f64; N] {
     let Some(taps) = grid.taps(p) else {
-        return [0.0; 3];
+        return [0.0; N];
     };
-    let mut out = [0.0; 3];
+    let mut out = [0.0; N];
     let mut total = 0.0;
     for (i, w) in taps.into_iter().flatten() {
         if active.is_some_and(|m| !m[i]) {
             continue;
         }
         total += w;
-        for c in 0..3 {
+        for c in 0..N {
             out[c] += w * values[i][c];
         }
     }

@@ -21,6 +21,8 @@
 //! - [`max`]: Max, Schussman, Miyazaki, Iwasaki & Nishita 2004 — a diffusion solve in the dense
 //!   core, Poisson-weighted multiple anisotropic scattering from the bake's M(D, θ) at the
 //!   edges (lighting on the CPU, the final gather on the GPU).
+//! - [`coupled`]: Riley's light buffer for the forward low orders and the light it drops
+//!   carried by a δ-scaled diffusion solve, gathered with its P1 flux.
 //! - [`biri`]: Biri, Arquès & Michelin 2006 — single scattering of point and spot lights in
 //!   homogeneous media in closed form per ray, volumetric shadows from the occluders'
 //!   silhouette planes.
@@ -50,6 +52,7 @@
 
 pub mod biri;
 pub mod camera;
+pub mod coupled;
 pub mod diffusion;
 pub mod error_map;
 pub mod geometry;

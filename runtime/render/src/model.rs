@@ -377,6 +377,7 @@ models! {
     Riley => crate::riley::Riley,
     Miyazaki => crate::miyazaki::Miyazaki,
     Max => crate::max::Max,
+    Coupled => crate::coupled::Coupled,
     Biri => crate::biri::Biri,
     Truth => crate::truth::Truth,
 }

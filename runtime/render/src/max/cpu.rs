@@ -65,8 +65,7 @@ fn clear_air_light(
     l: DVec3,
 ) -> Vec<[f64; 3]> {
     // State: A (0..3), P (3..6), E (6..9), the clear-air length so far (9).
-    let state = sweep::<10>(grid, l, |i, back, ds| {
-        let b = back.unwrap_or([0.0; 10]);
+    let state = sweep::<10>(grid, l, [0.0; 10], |i, b, ds| {
         let mut out = [0.0; 10];
         if full[i] {
             let crossed = b[9] >= MIN_CLEAR_AIR_STEPS * ds;

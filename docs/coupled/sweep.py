@@ -1,0 +1,153 @@
+#!/usr/bin/env python3
+"""The fast models against the path-traced truth over the optical-depth sweep of docs/truth/sweep
+(the soft ball of cloud or rain, tau 0.1 ... 64 through its centre, the sun 20 degrees up at four
+azimuths), plus held-out clouds the sweep does not contain (other density profiles, sun
+elevations, droplet sizes), for --model coupled (both sources), riley and max.
+
+Each truth image is rendered once (--noise 0.03, at most 8192 spp) and cached under $SWEEP_WORK
+by its scene text, so re-running after a model change renders only the models. compare-render
+gives each frame's median and 95th-percentile per-pixel error and its bias against the truth.
+
+Run from the repository root after `cargo build --release`:
+    python3 docs/coupled/sweep.py                 # all cases -> docs/coupled/sweep.json, .md
+    python3 docs/coupled/sweep.py --only cloud:8  # a subset (field:tau), printed, not written
+    python3 docs/coupled/sweep.py --table-only    # the table again from sweep.json
+"""
+import hashlib, json, os, subprocess, sys, time
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+sys.path.insert(0, os.path.join(ROOT, "scripts"))
+import repo  # noqa: E402
+BIN = os.environ.get("PHOTOMETEOR", os.path.join(ROOT, "target", "release", "photometeor"))
+WORK = os.environ.get("SWEEP_WORK", "/tmp/photometeor-coupled")
+HERE = os.path.dirname(os.path.abspath(__file__))
+TAUS = [0.1, 0.5, 2, 8, 32, 64]
+AZIMUTHS = {"forward (20°)": 0, "48°": 45, "side (90°)": 90, "back (160°)": 180}
+FIELDS = {
+    "cloud": 'distribution = { kind = "gamma", r_eff_um = 10, v_eff = 0.1 }',
+    "rain": 'distribution = { kind = "lognormal", median_radius_um = 500, sigma_g = 1.4 }',
+    # Held out: a smaller droplet size the sweep does not contain.
+    "cloud5": 'distribution = { kind = "gamma", r_eff_um = 5, v_eff = 0.1 }',
+}
+MODELS = {
+    "coupled": "[render.coupled]\n",
+    "coupled-first-scatter": '[render.coupled]\nsource = "first-scatter"\n',
+    "coupled-hemisphere": '[render.coupled]\nsplit = "hemisphere"\n',
+    "coupled-isotropic": '[render.coupled]\nemergent = "isotropic"\n',
+    "riley": "[render.riley]\nslices = 256\nlight_resolution = 48\n",
+    "max": "[render.max]\n",
+}
+SIZE = 48
+# Held-out cases (not tuned on): field, tau, azimuth, sun elevation, grid file profile.
+HELD_OUT = [("cloud5", 16, 30, 40), ("cloud", 24, 120, 60), ("cloud", 12, 200, 10),
+            ("rain", 20, 60, 35)]
+
+
+def scene(field, density, azimuth, elevation=20):
+    kind = "cloud" if field.startswith("cloud") else "rain"
+    head = f"""[scene]
+name = "coupled-sweep-{field}"
+spectral = "rgb3"
+theta_step_deg = 0.18
+n_max = 96
+quality = "draft"
+
+[[field]]
+name = "{field}"
+kind = "{kind}"
+{FIELDS[field]}
+
+"""
+    text = repo.soft_ball(head, field, density, azimuth, SIZE)
+    return text.replace("elevation_deg = 20", f"elevation_deg = {elevation}")
+
+
+def run(args):
+    r = subprocess.run([BIN] + args, capture_output=True, text=True)
+    if r.returncode != 0:
+        sys.exit(f"{' '.join(args)}: {r.stderr}")
+    return r
+
+
+def sigma_of(field):
+    tables = f"{WORK}/tables-{field}"
+    path = f"{WORK}/{field}-probe.toml"
+    open(path, "w").write(scene(field, 1e8, 0))
+    if not os.path.exists(f"{tables}/manifest.json"):
+        run(["render", path, "--cpu", "--out", f"{WORK}/probe.exr", "--tables", tables, "--quiet"])
+    return tables, json.load(open(f"{tables}/manifest.json"))["fields"][0]["sigma_ext_m2"]["G"]
+
+
+def case(field, tau, az, elevation, models):
+    tables, sigma = sigma_of(field)
+    text = scene(field, tau / (0.666 * 1000 * sigma), az, elevation)
+    key = hashlib.sha256(text.encode()).hexdigest()[:16]
+    truth = f"{WORK}/truth-{key}.exr"
+    row = {"field": field, "tau": tau, "azimuth_deg": az, "elevation_deg": elevation}
+    if not os.path.exists(truth):
+        path = f"{WORK}/truth-{key}.toml"
+        open(path, "w").write(text)
+        t0 = time.time()
+        r = run(["render", path, "--model", "truth", "--spp", "8192", "--noise", "0.03",
+                 "--out", truth + ".part.exr", "--tables", tables])
+        os.rename(truth + ".part.exr", truth)
+        open(truth + ".txt", "w").write(f"{r.stderr.strip().splitlines()[-1]} [{time.time() - t0:.1f} s]")
+    row["truth"] = open(truth + ".txt").read()
+    for name in models:
+        path = f"{WORK}/{name}.toml"
+        open(path, "w").write(text + MODELS[name])
+        out = f"{WORK}/{name}-{key}.exr"
+        model = name.split("-")[0]
+        t0 = time.time()
+        run(["render", path, "--cpu", "--model", model, "--out", out, "--tables", tables, "--quiet"])
+        seconds = time.time() - t0
+        rep = json.loads(run(["compare-render", truth, out, "--json"]).stdout)
+        rep["seconds"] = round(seconds, 2)
+        row[name] = rep
+        print(f"{field:6s} τ {tau:5} az {az:3} el {elevation:2} {name:22s} median "
+              f"{rep['median_rel_error']*100:6.1f} % p95 {rep['p95_rel_error']*100:6.1f} % bias "
+              f"{rep['bias']*100:+6.1f} % [{seconds:.1f} s]", flush=True)
+    return row
+
+
+def table(rows, models):
+    head = "| field | τ | sun (azimuth, elevation) | " + " | ".join(
+        f"{m}: median / bias" for m in models) + " | truth noise |"
+    md = [head, "|" + "---|" * (4 + len(models))]
+    for r in rows:
+        cells = []
+        for m in models:
+            rep = r.get(m)
+            cells.append("—" if rep is None else
+                         f"{rep['median_rel_error']*100:.1f} % / {rep['bias']*100:+.1f} %")
+        noise = next((r[m]["truth_noise"] for m in models if m in r), 0)
+        md.append(f"| {r['field']} | {r['tau']} | {r['azimuth_deg']}°, {r['elevation_deg']}° | "
+                  + " | ".join(cells) + f" | {noise*100:.1f} % |")
+    return "\n".join(md) + "\n"
+
+
+def main():
+    out = os.path.join(HERE, "sweep.json")
+    models = list(MODELS)
+    if "--models" in sys.argv:
+        models = sys.argv[sys.argv.index("--models") + 1].split(",")
+    if "--table-only" in sys.argv:
+        data = json.load(open(out))
+        open(out.replace(".json", ".md"), "w").write(table(data["results"], data["models"]))
+        return
+    os.makedirs(WORK, exist_ok=True)
+    cases = [(f, t, az, 20) for f in ("cloud", "rain") for t in TAUS for az in AZIMUTHS.values()]
+    cases += HELD_OUT
+    only = None
+    if "--only" in sys.argv:
+        only = [tuple(s.split(":")) for s in sys.argv[sys.argv.index("--only") + 1].split(",")]
+        cases = [c for c in cases if (c[0], str(c[1])) in only]
+    rows = [case(*c, models) for c in cases]
+    if only is None:
+        data = {"taus": TAUS, "size": SIZE, "models": models, "results": rows}
+        json.dump(repo.portable(data, ROOT, WORK), open(out, "w"), indent=1)
+        open(out.replace(".json", ".md"), "w").write(table(rows, models))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,553 @@
+//! The `coupled` model on the CPU (rayon): the buffer sweep, the diffusion solve and the
+//! gather as the [module docs](super) describe them.
+
+use std::f64::consts::PI;
+use std::time::Instant;
+
+use glam::DVec3;
+use rayon::prelude::*;
+
+use runtime::{FieldTable, Tables, sample};
+
+use super::{Emergent, Settings, Source, Split};
+use crate::diffusion::{self, Problem};
+use crate::geometry::box_span;
+use crate::lattice::{
+    MIN_DIFFUSION_VOXEL_DEPTH, Voxels, reduced_sky, reduced_sun, sweep, transmittance_to_sun,
+    trilinear, voxel_size, voxels,
+};
+use crate::shading::{check_fields, coefficients, compose};
+use crate::{Frame, FrameError, Image, MAX_FIELDS};
+
+/// What the lighting of a `coupled` frame spent and found.
+#[derive(Debug, Clone, Default, serde::Serialize)]
+pub struct CoupledReport {
+    /// Seconds for the buffer sweep, the sources and the reduced skylight (steps 1, 2).
+    pub buffer_s: f64,
+    /// Seconds for the three diffusion solves and the flux (step 3).
+    pub diffusion_s: f64,
+    /// Conjugate-gradient iterations per channel.
+    pub iterations: [usize; 3],
+    /// Relative residual reached per channel.
+    pub residual: [f64; 3],
+    /// Unknowns of the diffusion system.
+    pub unknowns: usize,
+    /// Multigrid levels.
+    pub levels: usize,
+    /// Where the sunlight went, per channel, as fractions of what entered the box: kept in
+    /// the buffer to its exit, absorbed from it, and handed to the diffusion as its source.
+    pub budget: Budget,
+}
+
+/// The sunlight's budget over the box, per channel: the power entering the box from the sun
+/// (per unit irradiance: the box's cross-section towards the sun, m², times S_atm) and, as
+/// fractions of it, where the buffer put it and what the diffusion did with its source.
+#[derive(Debug, Clone, Default, serde::Serialize)]
+pub struct Budget {
+    /// Power entering through the faces the sun sees.
+    pub incident: [f64; 3],
+    /// The buffer's light leaving through the other faces (read at the voxel centres next to
+    /// them, so exact for a sun along a grid axis, within half a voxel's loss otherwise).
+    pub buffer_out: [f64; 3],
+    /// Absorbed from the buffer.
+    pub buffer_absorbed: [f64; 3],
+    /// Scattered out of the buffer into the diffusion (its sunlit source).
+    pub dropped: [f64; 3],
+    /// The diffusion's whole source (the dropped sunlight and the skylight), 4π∫Q_0 dV.
+    pub diffusion_source: [f64; 3],
+    /// Out of the diffusion through its boundary faces, 4π∮J·n dA.
+    pub diffusion_out: [f64; 3],
+    /// Absorbed in the diffusion, 4π∫κ_a I_0 dV.
+    pub diffusion_absorbed: [f64; 3],
+}
+
+/// Everything of a frame that depends on the sun, the sky, the grid and the tables but not on
+/// the camera (steps 1–3 of the [module docs](super)); [`gather`] renders a view from it.
+#[derive(Debug, Clone)]
+pub struct Lighting {
+    /// The buffer per voxel: I per channel and n.
+    pub buffer: Vec<[f64; 4]>,
+    /// I_0 per voxel and channel.
+    pub i0: Vec<[f64; 3]>,
+    /// I_1 = 3J per voxel (x, y, z per channel): the P1 radiance's first moment, so the
+    /// diffusion's radiance towards ω is I_0 + I_1·ω.
+    pub p1: Vec<[f64; 9]>,
+    /// Whether a voxel took part in the solve.
+    pub active: Vec<bool>,
+    /// Each field's asymmetry parameter g per channel.
+    pub g: Vec<[f64; 3]>,
+    /// Each field's forward peak f per channel (the δ-split's unscattered share).
+    pub peak: Vec<[f64; 3]>,
+    /// The reduced skylight's mean radiance per voxel and channel.
+    pub sky_mean: Vec<[f64; 3]>,
+    /// The grid's dimensions this lighting was computed for.
+    pub dims: [usize; 3],
+    /// Unit vector towards the sun it was computed for.
+    pub sun_dir: DVec3,
+    /// Times, iterations, residuals and the energy budget.
+    pub report: CoupledReport,
+}
+
+/// Checks what a `coupled` frame needs of `tables` and `frame`.
+pub(crate) fn check(tables: &Tables, frame: &Frame, settings: &Settings) -> Result<(), FrameError> {
+    frame.check_view()?;
+    settings.check()?;
+    check_fields(tables, frame)?;
+    if frame.haze.is_some() {
+        return Err(FrameError(
+            "--model coupled does not model the [haze] layer; use --model miyazaki or truth".into(),
+        ));
+    }
+    if let Some(f) = tables.fields.iter().find(|f| f.transport_factor.is_none()) {
+        return Err(FrameError(format!(
+            "field {:?}'s bake has no transport factor (written before it existed): bake it \
+             again",
+            f.name
+        )));
+    }
+    Ok(())
+}
+
+/// Steps 1–3 of the [module docs](super).
+pub fn light(tables: &Tables, frame: &Frame, settings: &Settings) -> Result<Lighting, FrameError> {
+    light_with(tables, frame, settings, &())
+}
+
+/// The buffer's state per voxel: I (0..3), n (3), β_ext (4..7) and β_sca (7..10) for the next
+/// step's trapezoid, the dropped (scattered out of the beam) loss per unit length (10..13) and
+/// its forward part α(g − f)/(1 − αf) per unit length (13..16), and the whole loss per unit
+/// length (16..19), all per unit irradiance.
+const STATE: usize = 19;
+
+/// Step 1 and the loss of step 2: the buffer swept along `l`, the direction of travel.
+fn buffer_sweep(
+    fields: &[&FieldTable],
+    frame: &Frame,
+    v: &Voxels,
+    l: DVec3,
+    settings: &Settings,
+    peaks: &[[f64; 3]],
+) -> Vec<[f64; STATE]> {
+    let grid = &frame.grid;
+    // Outside the box: the sunlight unscattered (I = 1, n = 0) in clear air.
+    let mut outside = [0.0; STATE];
+    outside[..3].copy_from_slice(&[1.0; 3]);
+    sweep::<STATE>(grid, l, outside, |i, b, ds| {
+        let (ext_h, sca_h) = (v.ext[i], v.sca[i]);
+        let rho: [f64; MAX_FIELDS] = std::array::from_fn(|f| f64::from(grid.data[i][f]));
+        // From the point one layer back (trapezoid; clear air beyond the box's faces).
+        let (start, n0, path) = ([b[0], b[1], b[2]], b[3], ds);
+        let ext: [f64; 3] = std::array::from_fn(|c| 0.5 * (b[4 + c] + ext_h[c]));
+        let sca: [f64; 3] = std::array::from_fn(|c| 0.5 * (b[7 + c] + sca_h[c]));
+        let tau: [f64; 3] = ext.map(|e| e * path);
+        let g: [f64; 3] = std::array::from_fn(|c| {
+            if sca_h[c] > 0.0 {
+                v.g_sca[i][c] / sca_h[c]
+            } else {
+                0.0
+            }
+        });
+        let peak = mixed(fields, &rho, |f| peaks[f]);
+        let f = match (settings.source, settings.split) {
+            (Source::FirstScatter, _) => [0.0; 3],
+            (Source::Buffer, Split::Hemisphere) => {
+                sample::forward_fraction_mix(fields, &rho, n0 + 1.0 + tau[1])
+            }
+            (Source::Buffer, Split::DeltaEddington) => peak,
+        };
+        let mut out = [0.0; STATE];
+        out[3] = n0;
+        if ext[1] > 0.0 {
+            // The scatterings the beam kept (Riley's n counts them all in the hemisphere split).
+            // Riley's n counts the scatterings the beam kept (the hemisphere split); in the
+            // δ-split the beam is unscattered (n stays 0, Ams_1 in the gather).
+            if settings.split == Split::Hemisphere {
+                out[3] += sca[1] / ext[1] * tau[1];
+            }
+        }
+        for c in 0..3 {
+            let albedo = if ext[c] > 0.0 { sca[c] / ext[c] } else { 0.0 };
+            let lost = 1.0 - albedo * f[c];
+            let kept = start[c] * (-tau[c] * lost).exp();
+            out[c] = kept;
+            out[4 + c] = ext_h[c];
+            out[7 + c] = sca_h[c];
+            if lost > 1e-12 && ds > 0.0 {
+                let loss = (start[c] - kept) / ds;
+                out[10 + c] = loss * albedo * (1.0 - f[c]) / lost;
+                out[13 + c] = loss * albedo * (g[c] - f[c]) / lost;
+                out[16 + c] = loss;
+            }
+        }
+        out
+    })
+}
+
+/// [`light`], telling `progress` as each step starts.
+pub fn light_with(
+    tables: &Tables,
+    frame: &Frame,
+    settings: &Settings,
+    progress: &dyn crate::model::Progress,
+) -> Result<Lighting, FrameError> {
+    check(tables, frame, settings)?;
+    let fields: Vec<&FieldTable> = tables.fields.iter().collect();
+    let grid = &frame.grid;
+    let h = voxel_size(grid);
+    let sun_dir = frame.sun.direction();
+    let l = -sun_dir;
+    let mut report = CoupledReport::default();
+
+    progress.update(0, 2, "light buffer and skylight");
+    let start = Instant::now();
+    let v = voxels(&fields, grid);
+    let peak = peaks(&fields);
+    let state = buffer_sweep(&fields, frame, &v, l, settings, &peak);
+    // E S_atm per voxel: the sun's irradiance at each voxel's height, before the volume.
+    let sunlight = reduced_sun(frame, &vec![[0.0; 3]; v.ext.len()]);
+    let sky = reduced_sky(frame, &v.ext);
+    report.buffer_s = start.elapsed().as_secs_f64();
+
+    progress.update(1, 2, "diffusion solve");
+    let start = Instant::now();
+    let h_voxel = (h[0] * h[1] * h[2]).cbrt();
+    let active: Vec<bool> = v
+        .ext
+        .iter()
+        .map(|e| e[1] * h_voxel >= MIN_DIFFUSION_VOXEL_DEPTH)
+        .collect();
+    let n = v.ext.len();
+    let mut i0 = vec![[0.0f64; 3]; n];
+    let mut p1 = vec![[0.0f64; 9]; n];
+    for c in 0..3 {
+        let problem = Problem {
+            dims: grid.dims,
+            h,
+            kappa_tr: (0..n)
+                .map(|i| if active[i] { v.transport[i][c] } else { 0.0 })
+                .collect(),
+            kappa_a: (0..n)
+                .map(|i| (v.ext[i][c] - v.sca[i][c]).max(0.0))
+                .collect(),
+            q0: (0..n)
+                .map(|i| {
+                    sunlight[i][c] * state[i][10 + c] / (4.0 * PI) + v.sca[i][c] * sky.mean[i][c]
+                })
+                .collect(),
+            q1: (0..n)
+                .map(|i| {
+                    let sun = l * (sunlight[i][c] * state[i][13 + c] / (4.0 * PI));
+                    (sun + sky.flux[i][c] * v.g_sca[i][c]).to_array()
+                })
+                .collect(),
+        };
+        let s = diffusion::solve(
+            &problem,
+            settings.diffusion_tolerance,
+            settings.max_diffusion_iterations,
+        )
+        .map_err(|e| FrameError(format!("channel {}: {e}", ["R", "G", "B"][c])))?;
+        report.iterations[c] = s.iterations;
+        report.residual[c] = s.residual;
+        report.unknowns = s.unknowns;
+        report.levels = s.levels;
+        let flux = diffusion::flux(&problem, &s.i0);
+        for i in 0..n {
+            i0[i][c] = s.i0[i];
+            for a in 0..3 {
+                p1[i][3 * c + a] = 3.0 * flux[i][a];
+            }
+        }
+        let buffer = BufferLight {
+            state: &state,
+            sunlight: &sunlight,
+        };
+        report.budget.add(c, (&problem, &s.i0), &buffer, l);
+    }
+    report.diffusion_s = start.elapsed().as_secs_f64();
+    progress.update(2, 2, "lighting done");
+    Ok(Lighting {
+        buffer: state.iter().map(|s| [s[0], s[1], s[2], s[3]]).collect(),
+        i0,
+        p1,
+        active,
+        g: asymmetries(&fields),
+        peak,
+        sky_mean: sky.mean,
+        dims: grid.dims,
+        sun_dir,
+        report,
+    })
+}
+
+impl Budget {
+    /// Channel `c`'s budget from its problem and solution, the buffer's `state` and the
+    /// `sunlight` E S_atm per voxel (voxel sizes `h`, light travelling along `l`).
+    fn add(&mut self, c: usize, (p, i0): (&Problem, &[f64]), light: &BufferLight, l: DVec3) {
+        let (h, dims) = (p.h, p.dims);
+        let volume = h[0] * h[1] * h[2];
+        let [nx, ny, _] = dims;
+        let (mut incident, mut out, mut dropped, mut lost) = (0.0, 0.0, 0.0, 0.0);
+        let (mut source, mut leak, mut absorbed) = (0.0, 0.0, 0.0);
+        for i in 0..i0.len() {
+            let cc = [i % nx, (i / nx) % ny, i / (nx * ny)];
+            let (e, s) = (light.sunlight[i][c], &light.state[i]);
+            dropped += e * s[10 + c] * volume;
+            lost += e * s[16 + c] * volume;
+            source += 4.0 * PI * p.q0[i] * volume;
+            let d = (p.kappa_tr[i] > 0.0).then(|| 1.0 / (3.0 * p.kappa_tr[i]));
+            if d.is_some() {
+                absorbed += 4.0 * PI * p.kappa_a[i] * i0[i] * volume;
+            }
+            for (a, ha) in h.iter().enumerate() {
+                let area = volume / ha;
+                for sign in [-1.0f64, 1.0] {
+                    let on_face = if sign > 0.0 {
+                        cc[a] + 1 == dims[a]
+                    } else {
+                        cc[a] == 0
+                    };
+                    let stride = [1, nx, nx * ny][a];
+                    let neighbour = if on_face {
+                        None
+                    } else if sign > 0.0 {
+                        Some(i + stride)
+                    } else {
+                        Some(i - stride)
+                    };
+                    if on_face {
+                        // The buffer through the box's faces.
+                        let cos = sign * l[a];
+                        if cos < 0.0 {
+                            incident += e * -cos * area;
+                        } else {
+                            out += e * s[c] * cos * area;
+                        }
+                    }
+                    if let Some(d) = d
+                        && neighbour.is_none_or(|j| p.kappa_tr[j] <= 0.0)
+                    {
+                        // The diffusion's boundary face: Marshak's flux, as the solve has it.
+                        let face = i0[i] * d / (2.0 * d + 0.5 * ha)
+                            + sign * p.q1[i][a] / p.kappa_tr[i] * ha / (4.0 * d + ha);
+                        leak += 4.0 * PI * face * area;
+                    }
+                }
+            }
+        }
+        let share = |x: f64| x / incident.max(f64::MIN_POSITIVE);
+        self.incident[c] = incident;
+        self.buffer_out[c] = share(out);
+        self.dropped[c] = share(dropped);
+        self.buffer_absorbed[c] = share(lost - dropped);
+        self.diffusion_source[c] = share(source);
+        self.diffusion_out[c] = share(leak);
+        self.diffusion_absorbed[c] = share(absorbed);
+    }
+}
+
+/// The buffer's state and the sunlight E S_atm per voxel, which [`Budget::add`] reads.
+struct BufferLight<'a> {
+    state: &'a [[f64; STATE]],
+    sunlight: &'a [[f64; 3]],
+}
+
+/// Step 4 of the [module docs](super): the gather along every pixel's ray and the
+/// composition, from `lighting` ([`light`] of a frame with the same grid and sun).
+pub fn gather(
+    tables: &Tables,
+    frame: &Frame,
+    settings: &Settings,
+    lighting: &Lighting,
+) -> Result<Image, FrameError> {
+    check(tables, frame, settings)?;
+    if frame.grid.dims != lighting.dims || frame.sun.direction() != lighting.sun_dir {
+        return Err(FrameError(format!(
+            "the coupled lighting was computed for a {:?} grid and the sun towards {:?}; this \
+             frame has {:?} and {:?}: light it again",
+            lighting.dims,
+            lighting.sun_dir,
+            frame.grid.dims,
+            frame.sun.direction()
+        )));
+    }
+    let fields: Vec<&FieldTable> = tables.fields.iter().collect();
+    let grid = &frame.grid;
+    let step = 0.5
+        * voxel_size(grid)
+            .iter()
+            .copied()
+            .fold(f64::INFINITY, f64::min);
+    let axes = frame.camera.axes().expect("checked by check_view");
+    let tan_half = frame.camera.tan_half_fov();
+    let (w, hgt) = (frame.width, frame.height);
+    let eye = frame.camera.position_m;
+    let sun_dir = frame.sun.direction();
+    let pixels: Vec<([f32; 3], f32)> = (0..w * hgt)
+        .into_par_iter()
+        .map(|px| {
+            let d = crate::camera::pixel_ray(axes, tan_half, (px % w, px / w), (w, hgt));
+            let (mut l_vol, mut tr, mut seen) = ([0.0f64; 3], [1.0f64; 3], [1.0f64; 3]);
+            if let Some((t0, t1)) = box_span(grid.min_m, grid.max_m, eye, d) {
+                let t0 = t0.max(0.0);
+                let n = (((t1 - t0) / step).ceil() as usize).max(1);
+                let dt = (t1 - t0) / n as f64;
+                for k in 0..n {
+                    let p = eye + (t0 + (k as f64 + 0.5) * dt) * d;
+                    let light = in_scattered(tables, &fields, frame, lighting, settings, p, d);
+                    let Some(step) = light else { continue };
+                    for c in 0..3 {
+                        // The light is seen through the δ-scaled extinction β_ext(1 − αf)
+                        // (what the forward peak scatters still travels towards the eye); the
+                        // background through the true one.
+                        let scaled = step.ext[c] * step.kept[c] * dt;
+                        let true_slab = (-step.ext[c] * dt).exp();
+                        if scaled > 0.0 {
+                            let slab = (-scaled).exp();
+                            l_vol[c] += seen[c] * (1.0 - slab) * step.light[c] / step.kept[c];
+                            seen[c] *= slab;
+                        }
+                        tr[c] *= true_slab;
+                    }
+                    if seen.iter().all(|&t| t < 1e-9) {
+                        break;
+                    }
+                }
+            }
+            let ground_lit = |g: DVec3| transmittance_to_sun(&fields, grid, g, sun_dir);
+            (compose(frame, eye, d, l_vol, tr, ground_lit), tr[1] as f32)
+        })
+        .collect();
+    Ok(Image::from_pixels(w, hgt, &pixels))
+}
+
+/// What one point of a pixel's ray sends towards the eye.
+struct Step {
+    /// β_ext (1/m).
+    ext: [f64; 3],
+    /// 1 − αf: the share of the extinction that is not the forward peak f.
+    kept: [f64; 3],
+    /// The light a unit of (true) optical depth sends towards the eye: α times the buffer's
+    /// light scattered by the phase function, the diffusion's P1 radiance scattered by the
+    /// phase function less its forward peak, and the skylight's mean likewise.
+    light: [f64; 3],
+}
+
+/// At `p` on the ray `d` from the eye, the [`Step`] (module docs step 4); `None` where nothing
+/// scatters.
+fn in_scattered(
+    tables: &Tables,
+    fields: &[&FieldTable],
+    frame: &Frame,
+    lighting: &Lighting,
+    settings: &Settings,
+    p: DVec3,
+    d: DVec3,
+) -> Option<Step> {
+    let grid = &frame.grid;
+    let rho: [f64; MAX_FIELDS] = grid.sample(p);
+    let (ext, sca) = coefficients(fields, &rho);
+    if ext.iter().all(|&e| e <= 0.0) {
+        return None;
+    }
+    let sun_dir = lighting.sun_dir;
+    let p1_on = settings.emergent == Emergent::P1;
+    let buffer = trilinear(grid, &lighting.buffer, None, p);
+    let s_atm = frame.atmosphere.sunlight(p.y, sun_dir.y);
+    let phase = sample::mix(
+        fields,
+        &rho,
+        tables.theta_step_deg,
+        buffer[3] + 1.0,
+        sun_dir.dot(d),
+    );
+    let g = mixed(fields, &rho, |f| lighting.g[f]);
+    let peak = if delta_scaled(settings) {
+        mixed(fields, &rho, |f| lighting.peak[f])
+    } else {
+        [0.0; 3]
+    };
+    let i0 = trilinear(grid, &lighting.i0, Some(&lighting.active), p);
+    let i1 = trilinear(grid, &lighting.p1, Some(&lighting.active), p);
+    let sky = trilinear(grid, &lighting.sky_mean, None, p);
+    let toward_eye = -d;
+    let mut step = Step {
+        ext,
+        kept: [1.0; 3],
+        light: [0.0; 3],
+    };
+    for c in 0..3 {
+        if ext[c] <= 0.0 {
+            continue;
+        }
+        let albedo = sca[c] / ext[c];
+        let f = peak[c];
+        step.kept[c] = 1.0 - albedo * f;
+        let sun = frame.sun.irradiance[c] * s_atm[c] * buffer[c];
+        // The P1 radiance I_0 + I_1·ω is nowhere negative when |I_1| ≤ I_0; the closure's
+        // Q_1/κ_tr term alone is O(1) where the medium is thin (I_0 is O(τ) there), which would
+        // make the diffusion's light first order in τ and the thin limit not single scattering.
+        let mut i1 = DVec3::new(i1[3 * c], i1[3 * c + 1], i1[3 * c + 2]);
+        let limit = i0[c].max(0.0);
+        if i1.length() > limit {
+            i1 *= limit / i1.length();
+        }
+        let along = if p1_on {
+            (g[c] - f) * i1.dot(toward_eye)
+        } else {
+            0.0
+        };
+        let diffuse = ((1.0 - f) * i0[c] + along).max(0.0);
+        step.light[c] = albedo * (phase[c] * sun + diffuse + (1.0 - f) * sky[c]);
+    }
+    Some(step)
+}
+
+/// Whether the gather treats a forward peak as unscattered (the δ-Eddington split).
+fn delta_scaled(settings: &Settings) -> bool {
+    (settings.source, settings.split) == (Source::Buffer, Split::DeltaEddington)
+}
+
+/// A per-field quantity `value(f)` of the mixture at densities `rho`, per channel, weighted by
+/// scattering as the phase functions are ([`sample::mix`]).
+fn mixed(fields: &[&FieldTable], rho: &[f64], value: impl Fn(usize) -> [f64; 3]) -> [f64; 3] {
+    let (mut num, mut den) = ([0.0; 3], [0.0; 3]);
+    for (f, (field, &r)) in fields.iter().zip(rho).enumerate() {
+        if r <= 0.0 {
+            continue;
+        }
+        let v = value(f);
+        for c in 0..3 {
+            let w = r * field.sigma_sca_m2[c];
+            num[c] += w * v[c];
+            den[c] += w;
+        }
+    }
+    std::array::from_fn(|c| if den[c] > 0.0 { num[c] / den[c] } else { 0.0 })
+}
+
+/// Each field's asymmetry parameter g per channel, from its transport factor 1 − αg.
+fn asymmetries(fields: &[&FieldTable]) -> Vec<[f64; 3]> {
+    fields
+        .iter()
+        .map(|field| {
+            let tf = field.transport_factor.expect("checked by check");
+            std::array::from_fn(|c| {
+                if field.albedo[c] > 0.0 {
+                    (1.0 - tf[c]) / field.albedo[c]
+                } else {
+                    0.0
+                }
+            })
+        })
+        .collect()
+}
+
+/// Each field's forward peak f = g² per channel, the share of its scattering the δ-Eddington
+/// split treats as unscattered (Joseph, Wiscombe & Weinman 1976).
+fn peaks(fields: &[&FieldTable]) -> Vec<[f64; 3]> {
+    asymmetries(fields)
+        .into_iter()
+        .map(|g| g.map(|g| g * g))
+        .collect()
+}

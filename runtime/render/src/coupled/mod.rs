@@ -1,0 +1,257 @@
+//! `--model coupled`: the sunlight's forward peak kept in a beam, the rest of what the beam
+//! loses carried by a δ-scaled diffusion solve, both gathered along the eye's rays — the light
+//! Riley's buffer drops, no longer lost.
+//!
+//! # Why
+//! Riley et al. 2004 §4.3 keep in the light buffer only the forward-scattered share αF of what
+//! a slab removes (the continuum update, [`crate::LightUpdate`]); the rest of the scattered
+//! light is gone, which is why `riley` is −17 … −88 % dark at optical depths 8–64
+//! (`docs/truth/sweep`). Max et al. 2004 have that light in a diffusion solve but feed it the
+//! first-scattered sunlight with its forward peak spread by g alone and show it isotropic.
+//!
+//! # The model, per sun ([`cpu::light`]) and per view ([`cpu::gather`])
+//! The phase function is split as δ-Eddington does (Joseph, Wiscombe & Weinman 1976):
+//! p = f δ(forward) + (1 − f) p′, f = g² per field and channel (g from the bake's transport
+//! factor 1 − αg), p′ of asymmetry g′ = (g − f)/(1 − f). The transfer equation with p is the
+//! one with p′ in a medium of extinction β_ext(1 − αf) and albedo α(1 − f)/(1 − αf).
+//! 1. **The beam** at every voxel centre, by an upwind sweep along the light's direction of
+//!    travel l ([`crate::lattice::sweep`]): intensity I per channel (the fraction of the
+//!    sunlight), each step of optical depth τ (trapezoid of β_ext) keeping e^{−τ(1 − αf)}.
+//!    This is Riley's continuum update (Eqs. 21–22) with the forward share f in place of F_n,
+//!    on the grid instead of half-angle slices, so the lighting does not depend on the view.
+//! 2. **Its loss as sources**: per unit volume the beam loses E ΔI/Δs (E the sun's irradiance
+//!    times S_atm, Riley Eq. 12); of that loss β_ext(1 − αf) the share α(1 − f)/(1 − αf) is
+//!    scattered (the rest absorbed) — the light Riley's buffer drops. It is the first-scattered
+//!    source of the δ-scaled medium: Q_0 = (that)/4π and Q_1 = g′ Q_0 l. The skylight adds
+//!    β_sca S and g β_sca F_sky as in `max` ([`crate::lattice::reduced_sky`]).
+//! 3. **Diffusion** ([`crate::diffusion`], Max Eqs. 4, 7; Marshak's boundary) per channel with
+//!    κ_tr = β_ext(1 − αg), which is also the δ-scaled medium's σ′_t(1 − α′g′): the scaling
+//!    changes the sources, not the operator. Then the flux J = Q_1/κ_tr − D∇I_0 per voxel
+//!    ([`crate::diffusion::flux`]) and the P1 radiance I_0 + I_1·ω, I_1 = 3J.
+//! 4. **The gather** along each pixel's ray in half-voxel steps, front to back, through the
+//!    δ-scaled extinction β_ext(1 − αf) (what the forward peak scatters still travels towards
+//!    the eye); per unit of true optical depth a point sends towards the eye ω
+//!    α [p(θ) I E + (1 − f) I_0 + (g − f) I_1·ω + (1 − f) S]: the beam scattered by the exact
+//!    phase function (Ams_1), the P1 radiance scattered by p′ (its first moment g′), the
+//!    skylight's mean S likewise. The beam term is Nakajima & Tanaka's (1988) TMS correction:
+//!    the single scattering of the δ-scaled beam with the untruncated phase function, so
+//!    glories, fogbows and rainbows keep their exact shape; the thin limit is exact single
+//!    scattering (f cancels to first order in τ). The sun disk, the ground and the sky behind
+//!    are seen through the true extinction.
+//!
+//! `[render.coupled]` keeps the candidates the design was chosen from, each measured against
+//! the truth in `docs/coupled/`:
+//! - `split = "hemisphere"`: f = F_{n+1}, the tables' forward-hemisphere fraction, Riley's n
+//!   counted and Ams_{n+1} in the gather, the true extinction in the gather (Riley's buffer
+//!   exactly, with its dropped back-scattered light diffused);
+//! - `source = "first-scatter"`: f = 0, Max's first-scattered sources (no δ-scaling);
+//! - `emergent = "isotropic"`: the diffusion's light without its I_1 term, as Max.
+//!
+//! Units: radiance per unit solar irradiance outside the atmosphere (1/sr) per channel.
+
+pub mod cpu;
+
+use std::time::Instant;
+
+use serde::{Deserialize, Serialize};
+
+use runtime::gpu::{Gpu, GpuTables, TexelFormat};
+
+use crate::gpu::RenderError;
+use crate::model::{Job, Model, Need, Pass, Rendered, image_need};
+use crate::{Frame, FrameError};
+
+/// `--model coupled`.
+pub struct Coupled;
+
+/// Bytes the lighting takes per voxel at its peak beyond the grid (optics 96, buffer 32,
+/// sources and the solve's problem 80, the solver's vectors and hierarchy ≈ 120, the result
+/// and its flux 96, the skylight 96).
+pub const MEMORY_PER_VOXEL: u64 = 520;
+
+/// What feeds the diffusion solve (module docs).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum Source {
+    /// The light the forward buffer drops, α(1 − F) of each slab's extinction (δ-scaled).
+    #[default]
+    Buffer,
+    /// The first-scattered reduced sunlight (F = 0), as Max et al.
+    FirstScatter,
+}
+
+/// Which share of each slab's scattering the buffer keeps in the beam (module docs).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum Split {
+    /// f = g², the δ-Eddington truncation (Joseph, Wiscombe & Weinman 1976): the forward
+    /// peak the diffusion cannot carry stays in the beam; the rest, with asymmetry
+    /// g/(1 + g), is the diffusion's source; the gather sees through β_ext(1 − αf).
+    #[default]
+    DeltaEddington,
+    /// f = F_{n+1}, the tables' forward-hemisphere fraction (Riley's continuum update): all
+    /// light scattered forward stays in the beam, only back-scattered light is dropped; the
+    /// gather sees through β_ext.
+    Hemisphere,
+}
+
+/// How the diffusion's light is scattered towards the eye (module docs).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum Emergent {
+    /// I_0 + g I_1·ω, the P1 radiance through the phase function's first moment.
+    #[default]
+    P1,
+    /// I_0 alone, as Max et al.
+    Isotropic,
+}
+
+/// The model's settings, `[render.coupled]`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Settings {
+    /// What feeds the diffusion (default "buffer").
+    pub source: Source,
+    /// The share the buffer keeps (default "delta-eddington").
+    pub split: Split,
+    /// The diffusion's light towards the eye (default "p1").
+    pub emergent: Emergent,
+    /// Relative residual ‖b − A x‖/‖b‖ the diffusion solve must reach, [1e-12, 0.1].
+    /// Default 1e-6.
+    pub diffusion_tolerance: f64,
+    /// Conjugate-gradient iterations allowed, [1, 100000]. Default 500.
+    pub max_diffusion_iterations: usize,
+}
+
+impl Default for Settings {
+    fn default() -> Self {
+        Self {
+            source: Source::Buffer,
+            split: Split::DeltaEddington,
+            emergent: Emergent::P1,
+            diffusion_tolerance: 1e-6,
+            max_diffusion_iterations: 500,
+        }
+    }
+}
+
+impl Settings {
+    /// Checks the settings, naming the key, its value and the allowed range.
+    pub fn check(&self) -> Result<(), FrameError> {
+        if !(self.diffusion_tolerance >= 1e-12 && self.diffusion_tolerance <= 0.1) {
+            return Err(FrameError(format!(
+                "diffusion_tolerance = {} is outside the allowed range [1e-12, 0.1] (relative \
+                 residual; f64 arithmetic cannot reach less)",
+                crate::Shown(self.diffusion_tolerance)
+            )));
+        }
+        if !(1..=100_000).contains(&self.max_diffusion_iterations) {
+            return Err(FrameError(format!(
+                "max_diffusion_iterations = {} is outside the allowed range [1, 100000]",
+                self.max_diffusion_iterations
+            )));
+        }
+        Ok(())
+    }
+}
+
+impl Model for Coupled {
+    const NAME: &'static str = "coupled";
+    const ABOUT: &'static str = "the sunlight's forward peak kept in a beam (δ-Eddington), \
+        the light it loses carried by a δ-scaled diffusion solve, both gathered with the exact \
+        phase function and the diffusion's P1 flux; lighting per sun, the gather per view";
+    const TEXELS: TexelFormat = TexelFormat::F32;
+    const GPU: bool = false;
+    type Settings = Settings;
+    type Renderer = ();
+
+    fn check(s: &Settings) -> Result<(), FrameError> {
+        s.check()
+    }
+
+    fn check_frame(s: &Settings, frame: &Frame) -> Result<(), FrameError> {
+        frame.sunlight_only(Self::NAME, false)?;
+        frame.check_view().and_then(|()| s.check())
+    }
+
+    fn memory(_: &Settings, pixels: u64, voxels: u64) -> Vec<Need> {
+        vec![
+            Need {
+                what: "the lighting (optics, buffer, sky, diffusion solve and flux)",
+                bytes: voxels * MEMORY_PER_VOXEL,
+                setting: "[render] grid_resolution".into(),
+            },
+            image_need("the gathered image", pixels, 48),
+        ]
+    }
+
+    fn renderer(_: &Gpu, _: &GpuTables) -> Option<()> {
+        None
+    }
+
+    fn render_cpu(s: &Settings, job: &Job) -> Result<Rendered, RenderError> {
+        let lighting = cpu::light_with(job.tables, job.frame, s, job.progress)?;
+        let start = Instant::now();
+        let image = cpu::gather(job.tables, job.frame, s, &lighting)?;
+        let gather = start.elapsed().as_secs_f64();
+        Ok(rendered(image, &lighting.report, gather, job.frame))
+    }
+
+    fn render_gpu(
+        _: &(),
+        s: &Settings,
+        job: &Job,
+        _: &Gpu,
+        _: &GpuTables,
+    ) -> Result<Rendered, RenderError> {
+        Self::render_cpu(s, job)
+    }
+}
+
+/// The frame with its passes (the lighting's steps, then the gather) and summary.
+fn rendered(
+    image: crate::Image,
+    report: &cpu::CoupledReport,
+    gather_s: f64,
+    frame: &Frame,
+) -> Rendered {
+    let summary = format!(
+        "beam + δ-scaled diffusion (CPU, {} threads): {}×{}, grid {:?}: buffer \
+         {:.2} s, diffusion {:.2} s ({} unknowns, {} levels, {:?} CG iterations to residuals \
+         {:.1e}/{:.1e}/{:.1e}), gather {gather_s:.2} s; of the sunlight entering (green): \
+         {:.1} % leaves in the buffer, {:.1} % is absorbed from it, {:.1} % feeds the \
+         diffusion, which sends {:.1} % out and absorbs {:.1} %",
+        rayon::current_num_threads(),
+        image.width,
+        image.height,
+        frame.grid.dims,
+        report.buffer_s,
+        report.diffusion_s,
+        report.unknowns,
+        report.levels,
+        report.iterations,
+        report.residual[0],
+        report.residual[1],
+        report.residual[2],
+        100.0 * report.budget.buffer_out[1],
+        100.0 * report.budget.buffer_absorbed[1],
+        100.0 * report.budget.dropped[1],
+        100.0 * report.budget.diffusion_out[1],
+        100.0 * report.budget.diffusion_absorbed[1],
+    );
+    let pass = |name, seconds| Pass { name, seconds };
+    Rendered {
+        summary,
+        image,
+        extra: Vec::new(),
+        figures: vec![
+            ("unknowns", report.unknowns as f64),
+            ("CG iterations", report.iterations[1] as f64),
+        ],
+        passes: vec![
+            pass("buffer", report.buffer_s),
+            pass("diffusion", report.diffusion_s),
+            pass("gather", gather_s),
+        ],
+    }
+}
