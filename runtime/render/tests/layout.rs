@@ -18,6 +18,7 @@ fn every_uniform_mirrors_its_wgsl_struct() {
     check::<render::miyazaki::gpu::SvsParams>(&render::miyazaki::gpu::source());
     check::<render::gpu::SliceParams>(&render::miyazaki::gpu::source());
     check::<render::max::gpu::MaxParams>(&render::max::gpu::source());
+    check::<render::coupled::gpu::CoupledParams>(&render::coupled::gpu::source());
     check::<render::biri::gpu::BiriParams>(&render::biri::gpu::source());
 }
 

@@ -88,6 +88,23 @@ pub struct Lighting {
     pub report: CoupledReport,
 }
 
+impl Lighting {
+    /// Checks that `frame` has the grid and sun this lighting was computed for.
+    pub fn check_frame(&self, frame: &Frame) -> Result<(), FrameError> {
+        if frame.grid.dims != self.dims || frame.sun.direction() != self.sun_dir {
+            return Err(FrameError(format!(
+                "the coupled lighting was computed for a {:?} grid and the sun towards {:?}; \
+                 this frame has {:?} and {:?}: light it again",
+                self.dims,
+                self.sun_dir,
+                frame.grid.dims,
+                frame.sun.direction()
+            )));
+        }
+        Ok(())
+    }
+}
+
 /// Checks what a `coupled` frame needs of `tables` and `frame`.
 pub(crate) fn check(tables: &Tables, frame: &Frame, settings: &Settings) -> Result<(), FrameError> {
     frame.check_view()?;
@@ -361,16 +378,7 @@ pub fn gather(
     lighting: &Lighting,
 ) -> Result<Image, FrameError> {
     check(tables, frame, settings)?;
-    if frame.grid.dims != lighting.dims || frame.sun.direction() != lighting.sun_dir {
-        return Err(FrameError(format!(
-            "the coupled lighting was computed for a {:?} grid and the sun towards {:?}; this \
-             frame has {:?} and {:?}: light it again",
-            lighting.dims,
-            lighting.sun_dir,
-            frame.grid.dims,
-            frame.sun.direction()
-        )));
-    }
+    lighting.check_frame(frame)?;
     let fields: Vec<&FieldTable> = tables.fields.iter().collect();
     let grid = &frame.grid;
     let step = 0.5
@@ -504,7 +512,7 @@ fn in_scattered(
 }
 
 /// Whether the gather treats a forward peak as unscattered (the δ-Eddington split).
-fn delta_scaled(settings: &Settings) -> bool {
+pub(crate) fn delta_scaled(settings: &Settings) -> bool {
     (settings.source, settings.split) == (Source::Buffer, Split::DeltaEddington)
 }
 

@@ -50,6 +50,7 @@
 //! Units: radiance per unit solar irradiance outside the atmosphere (1/sr) per channel.
 
 pub mod cpu;
+pub mod gpu;
 
 use std::time::Instant;
 
@@ -161,9 +162,9 @@ impl Model for Coupled {
         the light it loses carried by a δ-scaled diffusion solve, both gathered with the exact \
         phase function and the diffusion's P1 flux; lighting per sun, the gather per view";
     const TEXELS: TexelFormat = TexelFormat::F32;
-    const GPU: bool = false;
+    const GPU: bool = true;
     type Settings = Settings;
-    type Renderer = ();
+    type Renderer = gpu::Renderer;
 
     fn check(s: &Settings) -> Result<(), FrameError> {
         s.check()
@@ -185,8 +186,8 @@ impl Model for Coupled {
         ]
     }
 
-    fn renderer(_: &Gpu, _: &GpuTables) -> Option<()> {
-        None
+    fn renderer(gpu: &Gpu, tables: &GpuTables) -> Option<gpu::Renderer> {
+        Some(gpu::Renderer::new(gpu, tables))
     }
 
     fn render_cpu(s: &Settings, job: &Job) -> Result<Rendered, RenderError> {
@@ -194,17 +195,26 @@ impl Model for Coupled {
         let start = Instant::now();
         let image = cpu::gather(job.tables, job.frame, s, &lighting)?;
         let gather = start.elapsed().as_secs_f64();
-        Ok(rendered(image, &lighting.report, gather, job.frame))
+        Ok(rendered(image, &lighting.report, gather, "CPU", job.frame))
     }
 
     fn render_gpu(
-        _: &(),
+        renderer: &gpu::Renderer,
         s: &Settings,
         job: &Job,
-        _: &Gpu,
-        _: &GpuTables,
+        gpu: &Gpu,
+        tables: &GpuTables,
     ) -> Result<Rendered, RenderError> {
-        Self::render_cpu(s, job)
+        let lighting = cpu::light_with(job.tables, job.frame, s, job.progress)?;
+        let (image, t) = renderer.gather(gpu, job.tables, tables, job.frame, s, &lighting)?;
+        let gather = t.upload + t.frame + t.readback;
+        Ok(rendered(
+            image,
+            &lighting.report,
+            gather,
+            &gpu.describe(),
+            job.frame,
+        ))
     }
 }
 
@@ -213,11 +223,12 @@ fn rendered(
     image: crate::Image,
     report: &cpu::CoupledReport,
     gather_s: f64,
+    on: &str,
     frame: &Frame,
 ) -> Rendered {
     let summary = format!(
-        "beam + δ-scaled diffusion (CPU, {} threads): {}×{}, grid {:?}: buffer \
-         {:.2} s, diffusion {:.2} s ({} unknowns, {} levels, {:?} CG iterations to residuals \
+        "beam + δ-scaled diffusion (lighting on the CPU, {} threads; gather on {on}): {}×{}, \
+         grid {:?}: beam {:.2} s, diffusion {:.2} s ({} unknowns, {} levels, {:?} CG iterations to residuals \
          {:.1e}/{:.1e}/{:.1e}), gather {gather_s:.2} s; of the sunlight entering (green): \
          {:.1} % leaves in the buffer, {:.1} % is absorbed from it, {:.1} % feeds the \
          diffusion, which sends {:.1} % out and absorbs {:.1} %",

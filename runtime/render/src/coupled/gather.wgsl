@@ -1,0 +1,184 @@
+// The coupled model's gather (step 4 of render::coupled's docs) on the GPU: one invocation per
+// pixel does what render::coupled::cpu::gather does per ray, in f32, from the per-voxel
+// lighting the CPU computed (the beam, the diffusion's I_0 and I_1, the reduced skylight),
+// then composes the pixel with the air, the sun disk and the ground. Included after
+// tables.wgsl (bind group 0: Ams_n by `ams_mix`), slicing.wgsl (grid sampling, camera rays,
+// the sky) and compose.wgsl.
+
+struct CoupledParams {
+    eye: vec4<f32>,          // xyz; w = the march's step (m)
+    forward: vec4<f32>,      // xyz; w = tan(fov_y / 2)
+    right: vec4<f32>,        // xyz; w = aspect
+    up: vec4<f32>,           // xyz; w = 1 for the δ-split (f = g², δ-scaled gather), else 0
+    grid_min: vec4<f32>,     // xyz; w = ground albedo
+    grid_max: vec4<f32>,     // xyz; w = 1 for the P1 radiance, 0 for I_0 alone
+    grid_dims: vec4<u32>,    // nx, ny, nz, field count
+    sizes: vec4<u32>,        // width, height, 0, 0
+    sigma_ext: array<vec4<f32>, 4>,  // per field, m² per channel
+    asymmetry: array<vec4<f32>, 4>,  // per field, g per channel
+    peak: array<vec4<f32>, 4>,       // per field, the forward peak f per channel
+    sky_beta: vec4<f32>,     // β at sea level per channel (1/m); w = γ (1/m)
+    sun: vec4<f32>,          // unit vector towards the sun; w = cos(disk radius)
+    irradiance: vec4<f32>,   // per channel; w = disk solid angle (sr)
+}
+
+@group(1) @binding(0) var<uniform> rp: CoupledParams;
+@group(1) @binding(1) var<storage, read> density: array<vec4<f32>>;
+// Per voxel five rows: (beam I rgb, n), (I_0 rgb, 1 if in the diffusion solve),
+// (I_1 of R xyz, sky R), (I_1 of G xyz, sky G), (I_1 of B xyz, sky B).
+@group(1) @binding(2) var<storage, read> lighting: array<vec4<f32>>;
+@group(1) @binding(3) var<storage, read_write> image: array<vec4<f32>>;  // rgb, T_vol (green)
+
+// Row `row` of the lighting trilinear at p (voxel centres, clamped to the edge voxels, as
+// DensityGrid::taps), over the voxels in the solve only when `masked` (renormalized over them);
+// zero outside the box or where no such voxel contributes.
+fn lit(p: vec3<f32>, row: u32, masked: bool) -> vec4<f32> {
+    if (!inside_box(p)) {
+        return vec4<f32>(0.0);
+    }
+    let tap = taps(p);
+    var sum = vec4<f32>(0.0);
+    var total = 0.0;
+    for (var corner = 0u; corner < 8u; corner = corner + 1u) {
+        let d = vec3<u32>(corner & 1u, (corner >> 1u) & 1u, (corner >> 2u) & 1u);
+        let w3 = select(1.0 - tap.t, tap.t, d == vec3<u32>(1u));
+        let w = w3.x * w3.y * w3.z;
+        if (w == 0.0) {
+            continue;
+        }
+        let at = tap.lo + d * tap.s;
+        let i = at.x + rp.grid_dims.x * (at.y + rp.grid_dims.y * at.z);
+        if (masked && lighting[5u * i + 1u].w == 0.0) {
+            continue;
+        }
+        total = total + w;
+        sum = sum + w * lighting[5u * i + row];
+    }
+    if (masked) {
+        return select(vec4<f32>(0.0), sum / total, total > 0.0);
+    }
+    return sum;
+}
+
+// A per-field quantity of the mixture, weighted by ρ σ_sca (render::coupled::cpu::mixed).
+fn mixed_g(rho: vec4<f32>) -> vec3<f32> {
+    var num = vec3<f32>(0.0);
+    var den = vec3<f32>(0.0);
+    for (var i = 0u; i < min(rp.grid_dims.w, 4u); i = i + 1u) {
+        if (rho[i] > 0.0) {
+            let w = rho[i] * ams_field_info[i].yzw;
+            num = num + w * rp.asymmetry[i].rgb;
+            den = den + w;
+        }
+    }
+    return select(vec3<f32>(0.0), num / den, den > vec3<f32>(0.0));
+}
+
+fn mixed_peak(rho: vec4<f32>) -> vec3<f32> {
+    var num = vec3<f32>(0.0);
+    var den = vec3<f32>(0.0);
+    for (var i = 0u; i < min(rp.grid_dims.w, 4u); i = i + 1u) {
+        if (rho[i] > 0.0) {
+            let w = rho[i] * ams_field_info[i].yzw;
+            num = num + w * rp.peak[i].rgb;
+            den = den + w;
+        }
+    }
+    return select(vec3<f32>(0.0), num / den, den > vec3<f32>(0.0));
+}
+
+fn scattering_of(rho: vec4<f32>) -> vec3<f32> {
+    var s = vec3<f32>(0.0);
+    for (var i = 0u; i < rp.grid_dims.w; i = i + 1u) {
+        s = s + rho[i] * ams_field_info[i].yzw;
+    }
+    return s;
+}
+
+// The sunlight the volume leaves at p (outside the box: the ground) along the sun, by a march
+// of half-voxel steps.
+fn transmittance_to_sun(p: vec3<f32>) -> vec3<f32> {
+    let span = box_span(p, rp.sun.xyz);
+    if (span.y < 0.0) {
+        return vec3<f32>(1.0);
+    }
+    let n = max(u32(ceil((span.y - span.x) / rp.eye.w)), 1u);
+    let dt = (span.y - span.x) / f32(n);
+    var tau = vec3<f32>(0.0);
+    for (var k = 0u; k < n; k = k + 1u) {
+        tau = tau + extinction(densities(p + (span.x + (f32(k) + 0.5) * dt) * rp.sun.xyz)) * dt;
+    }
+    return exp(-tau);
+}
+
+@compute @workgroup_size(8, 8)
+fn gather(@builtin(global_invocation_id) id: vec3<u32>) {
+    if (id.x >= rp.sizes.x || id.y >= rp.sizes.y) {
+        return;
+    }
+    let d = pixel_ray(id.x, id.y);
+    let eye = rp.eye.xyz;
+    let cos_theta = dot(rp.sun.xyz, d);
+    let toward_eye = -d;
+    var l_vol = vec3<f32>(0.0);
+    var tr = vec3<f32>(1.0);
+    var seen = vec3<f32>(1.0);
+    let span = box_span(eye, d);
+    if (span.y >= 0.0) {
+        let n = max(u32(ceil((span.y - span.x) / rp.eye.w)), 1u);
+        let dt = (span.y - span.x) / f32(n);
+        for (var k = 0u; k < n; k = k + 1u) {
+            let p = eye + (span.x + (f32(k) + 0.5) * dt) * d;
+            let rho = densities(p);
+            let ext = extinction(rho);
+            if (all(ext <= vec3<f32>(0.0))) {
+                continue;
+            }
+            let sca = scattering_of(rho);
+            let beam = lit(p, 0u, false);
+            let i0 = lit(p, 1u, true).rgb;
+            let i1 = array<vec4<f32>, 3>(lit(p, 2u, true), lit(p, 3u, true), lit(p, 4u, true));
+            let sky = vec3<f32>(lit(p, 2u, false).w, lit(p, 3u, false).w, lit(p, 4u, false).w);
+            let sun = rp.irradiance.rgb * sunlight(p.y, rp.sun.y) * beam.rgb;
+            let phase = ams_mix(rho, beam.w + 1.0, cos_theta);
+            let g = mixed_g(rho);
+            let f = select(vec3<f32>(0.0), mixed_peak(rho), rp.up.w > 0.5);
+            for (var c = 0u; c < 3u; c = c + 1u) {
+                if (ext[c] <= 0.0) {
+                    continue;
+                }
+                let albedo = sca[c] / ext[c];
+                // The P1 radiance, |I_1| ≤ I_0 so that it is nowhere negative.
+                var flux = i1[c].xyz;
+                let limit = max(i0[c], 0.0);
+                let len = length(flux);
+                if (len > limit) {
+                    flux = flux * (limit / len);
+                }
+                let along = select(0.0, (g[c] - f[c]) * dot(flux, toward_eye), rp.grid_max.w > 0.5);
+                let diffuse = max((1.0 - f[c]) * i0[c] + along, 0.0);
+                let light = albedo * (phase[c] * sun[c] + diffuse + (1.0 - f[c]) * sky[c]);
+                let kept = 1.0 - albedo * f[c];
+                let scaled = ext[c] * kept * dt;
+                if (scaled > 0.0) {
+                    let slab = exp(-scaled);
+                    l_vol[c] = l_vol[c] + seen[c] * (1.0 - slab) * light / kept;
+                    seen[c] = seen[c] * slab;
+                }
+                tr[c] = tr[c] * exp(-ext[c] * dt);
+            }
+            if (all(seen < vec3<f32>(1e-9))) {
+                break;
+            }
+        }
+    }
+
+    // Composition (render::shading::compose), the ground lit through the volume.
+    var ground = vec3<f32>(1.0);
+    let k_end = ground_distance(d);
+    if (rp.grid_min.w > 0.0 && k_end > 0.0) {
+        ground = transmittance_to_sun(eye + k_end * d);
+    }
+    let v = compose(d, l_vol, tr, ground);
+    image[id.x + rp.sizes.x * id.y] = vec4<f32>(v, tr.g);
+}

@@ -1,0 +1,217 @@
+//! The `coupled` model's gather on wgpu (`gather.wgsl`): one compute invocation per pixel
+//! marches the ray through the grid as [`super::cpu::gather`] does, in f32, reading the
+//! per-voxel [`Lighting`] the CPU computed (the beam, the diffusion's I_0 and I_1, the reduced
+//! skylight). That lighting depends on the sun, the sky and the cloud, not on the camera: a
+//! camera that moves needs only this gather again (`photometeor bench render --model coupled`
+//! times both).
+//!
+//! Bind group 0: the tables ([`GpuTables`]: `ams_mix`). Bind group 1: the params uniform, the
+//! densities, the lighting (five rows per voxel), the image (rgb, T_vol).
+
+use std::time::Instant;
+
+use runtime::Tables;
+use runtime::gpu::{Gpu, GpuTables};
+
+use super::Settings;
+use super::cpu::{Lighting, check, delta_scaled};
+use crate::gpu::{
+    COMPOSE_WGSL, FieldsAndSky, RenderError, Timings, bind, build, check_sizes, fields_and_sky,
+    filled, slicing_source, storage, timed_frame, v4,
+};
+use crate::{Frame, FrameError, Image, MAX_FIELDS};
+
+runtime::uniform! {
+    /// `CoupledParams` of `gather.wgsl` (its comments say what each w holds).
+    pub struct CoupledParams as "CoupledParams" {
+        /// Eye (m); w = the march's step (m).
+        pub eye: [f32; 4],
+        /// View direction; w = tan(fov_y / 2).
+        pub forward: [f32; 4],
+        /// Right axis; w = aspect.
+        pub right: [f32; 4],
+        /// Up axis; w = 1 for the δ-split, else 0.
+        pub up: [f32; 4],
+        /// Grid box's lower corner; w = ground albedo.
+        pub grid_min: [f32; 4],
+        /// Grid box's upper corner; w = 1 for the P1 radiance, 0 for I_0 alone.
+        pub grid_max: [f32; 4],
+        /// nx, ny, nz, field count.
+        pub grid_dims: [u32; 4],
+        /// Width, height, 0, 0.
+        pub sizes: [u32; 4],
+        /// Per field, σ_ext per channel (m²).
+        pub sigma_ext: [[f32; 4]; MAX_FIELDS],
+        /// Per field, g per channel.
+        pub asymmetry: [[f32; 4]; MAX_FIELDS],
+        /// Per field, the forward peak f per channel.
+        pub peak: [[f32; 4]; MAX_FIELDS],
+        /// β at sea level per channel (1/m); w = γ (1/m).
+        pub sky_beta: [f32; 4],
+        /// Unit vector towards the sun; w = cos(disk radius).
+        pub sun: [f32; 4],
+        /// Irradiance per channel; w = disk solid angle (sr).
+        pub irradiance: [f32; 4],
+    }
+}
+
+/// The gather's WGSL (after [`runtime::gpu::WGSL`], the slicing renderers' WGSL and
+/// [`COMPOSE_WGSL`]).
+pub const GATHER_WGSL: &str = include_str!("gather.wgsl");
+
+/// The model's whole shader module, as the renderer compiles it.
+pub fn source() -> String {
+    slicing_source(&format!("{COMPOSE_WGSL}\n{GATHER_WGSL}"))
+}
+
+/// The gather's pipeline, built once.
+pub struct Renderer {
+    layout: wgpu::BindGroupLayout,
+    pipeline: wgpu::ComputePipeline,
+}
+
+/// Per field, a per-channel quantity as the uniform's rows (zero past the fields).
+fn per_field(values: &[[f64; 3]]) -> [[f32; 4]; MAX_FIELDS] {
+    std::array::from_fn(|f| {
+        values
+            .get(f)
+            .map_or([0.0; 4], |v| [v[0] as f32, v[1] as f32, v[2] as f32, 0.0])
+    })
+}
+
+impl Renderer {
+    /// Compiles `gather.wgsl` after the tables' and the slicing renderers' WGSL, `tables`'
+    /// layout as bind group 0.
+    pub fn new(gpu: &Gpu, tables: &GpuTables) -> Self {
+        // Bindings: params, densities and lighting (read-only), image.
+        let (layout, pipelines) = build(
+            gpu,
+            tables,
+            "photometeor coupled gather",
+            source(),
+            4,
+            &[1, 2],
+            &["gather"],
+        );
+        let [pipeline] = <[_; 1]>::try_from(pipelines).expect("one pipeline");
+        Self { layout, pipeline }
+    }
+
+    /// Step 4 of the model for `frame` from `lighting` ([`super::cpu::light`] of a frame with
+    /// the same grid and sun), as [`super::cpu::gather`].
+    pub fn gather(
+        &self,
+        gpu: &Gpu,
+        tables: &Tables,
+        gpu_tables: &GpuTables,
+        frame: &Frame,
+        settings: &Settings,
+        lighting: &Lighting,
+    ) -> Result<(Image, Timings), RenderError> {
+        check(tables, frame, settings)?;
+        lighting.check_frame(frame)?;
+        let device = &gpu.device;
+        let start = Instant::now();
+        let (w, h) = (frame.width, frame.height);
+        let grid = &frame.grid;
+        let voxels = grid.data.len();
+        check_sizes(
+            device,
+            &[
+                ("density grid bytes", 16 * voxels as u64),
+                ("lighting bytes", 80 * voxels as u64),
+                ("image bytes", 16 * (w * h) as u64),
+            ],
+        )?;
+        let (forward, right, up) = frame
+            .camera
+            .axes()
+            .ok_or_else(|| FrameError("camera look_at_m equals position_m".into()))?;
+        let size: [f64; 3] =
+            std::array::from_fn(|a| (grid.max_m[a] - grid.min_m[a]) / grid.dims[a] as f64);
+        let step = 0.5 * size.iter().copied().fold(f64::INFINITY, f64::min);
+        let FieldsAndSky {
+            sigma_ext,
+            sky_beta,
+            sun,
+            irradiance,
+        } = fields_and_sky(tables, frame);
+        let flag = |on: bool| f64::from(u8::from(on));
+        let params = CoupledParams {
+            eye: v4(frame.camera.position_m, step),
+            forward: v4(forward, frame.camera.tan_half_fov()),
+            right: v4(right, w as f64 / h as f64),
+            up: v4(up, flag(delta_scaled(settings))),
+            grid_min: v4(grid.min_m, frame.ground_albedo),
+            grid_max: v4(grid.max_m, flag(settings.emergent == super::Emergent::P1)),
+            grid_dims: [
+                grid.dims[0] as u32,
+                grid.dims[1] as u32,
+                grid.dims[2] as u32,
+                tables.fields.len() as u32,
+            ],
+            sizes: [w as u32, h as u32, 0, 0],
+            sigma_ext,
+            asymmetry: per_field(&lighting.g),
+            peak: per_field(&lighting.peak),
+            sky_beta,
+            sun,
+            irradiance,
+        };
+        let mut rows: Vec<[f32; 4]> = Vec::with_capacity(5 * voxels);
+        for i in 0..voxels {
+            let b = lighting.buffer[i];
+            rows.push(b.map(|v| v as f32));
+            let i0 = lighting.i0[i];
+            let active = f64::from(u8::from(lighting.active[i]));
+            rows.push([i0[0], i0[1], i0[2], active].map(|v| v as f32));
+            for c in 0..3 {
+                let i1 = &lighting.p1[i][3 * c..3 * c + 3];
+                rows.push([i1[0], i1[1], i1[2], lighting.sky_mean[i][c]].map(|v| v as f32));
+            }
+        }
+        let params = filled(
+            device,
+            "photometeor coupled params",
+            bytemuck::bytes_of(&params),
+            wgpu::BufferUsages::UNIFORM,
+        );
+        let density = filled(
+            device,
+            "photometeor coupled densities",
+            bytemuck::cast_slice(&grid.data),
+            wgpu::BufferUsages::STORAGE,
+        );
+        let lighting_buffer = filled(
+            device,
+            "photometeor coupled lighting",
+            bytemuck::cast_slice(&rows),
+            wgpu::BufferUsages::STORAGE,
+        );
+        let image = storage(
+            device,
+            "photometeor coupled image",
+            16 * (w * h) as u64,
+            true,
+        );
+        let bind_group = bind(
+            device,
+            &self.layout,
+            "photometeor coupled gather bindings",
+            &[&params, &density, &lighting_buffer, &image],
+        );
+        timed_frame(
+            gpu,
+            start,
+            |pass| {
+                pass.set_pipeline(&self.pipeline);
+                pass.set_bind_group(0, &gpu_tables.bind_group, &[]);
+                pass.set_bind_group(1, &bind_group, &[]);
+                pass.dispatch_workgroups(w.div_ceil(8) as u32, h.div_ceil(8) as u32, 1);
+            },
+            &image,
+            (w, h),
+        )
+        .map_err(Into::into)
+    }
+}

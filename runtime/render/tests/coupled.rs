@@ -1,0 +1,377 @@
+//! The `coupled` model: its budget balances (a white furnace: every bit of sunlight that enters
+//! leaves or is absorbed), its thin limit is single scattering, its GPU gather is its CPU
+//! reference in f32, a dense ball agrees with a stored truth image within the measured error,
+//! and bad settings and a solve that does not converge are refused.
+
+use std::path::Path;
+
+use render::coupled::{Emergent, Settings, Split, cpu};
+use render::geometry::box_span;
+use render::{Frame, RenderScene};
+use runtime::Tables;
+use runtime::sample;
+
+#[path = "../../tests/common/mod.rs"]
+mod common;
+
+use common::bake;
+
+fn fields() -> String {
+    common::scene("coupled", 8, common::CLOUD)
+}
+
+/// A uniform 4³ box of cloud, 1 km wide, 5 km ahead, of optical depth `tau` across (green),
+/// the sun at `elevation` degrees.
+fn uniform_box(tables: &Tables, dir: &Path, tau: f64, elevation: f64) -> Frame {
+    let cloud = tables.field("cloud").unwrap();
+    let density = tau / 1000.0 / cloud.sigma_ext_m2[1];
+    let ones: Vec<u8> = (0..64).flat_map(|_| 1f32.to_le_bytes()).collect();
+    std::fs::write(dir.join("ones.f32"), ones).unwrap();
+    let text = format!(
+        r#"{}
+[render]
+width = 32
+height = 32
+grid_resolution = 32
+
+[camera]
+position_m = [0, 1500, 0]
+look_at_m = [0, 1500, 5000]
+fov_deg = 20
+
+[sun]
+elevation_deg = {elevation}
+azimuth_deg = 160
+
+[sky]
+enabled = false
+
+[ground]
+albedo = 0.0
+
+[[volume]]
+field = "cloud"
+shape = "grid"
+number_density_per_m3 = {density}
+file = "ones.f32"
+dims = [4, 4, 4]
+min_m = [-500, 1000, 4500]
+max_m = [500, 2000, 5500]
+"#,
+        fields()
+    );
+    RenderScene::parse(&text, "box", dir)
+        .unwrap()
+        .frame(tables)
+        .unwrap()
+}
+
+/// The soft-ball fixture of cloud, `tau` through its centre, the sun 20° up at `azimuth`,
+/// 32³ voxels, 24² pixels, no sky, a black ground (the sweep's case, smaller).
+fn ball(tables: &Tables, tau: f64, azimuth: f64) -> Frame {
+    let (text, base) = common::soft_ball(&fields());
+    let mut scene = RenderScene::parse(&text, "ball", &base).unwrap();
+    scene.volumes[0].number_density_per_m3 =
+        tau / (0.666 * 1000.0 * tables.field("cloud").unwrap().sigma_ext_m2[1]);
+    (scene.width, scene.height, scene.grid_resolution) = (24, 24, 32);
+    scene.sun.azimuth_deg = azimuth;
+    scene.frame(tables).unwrap()
+}
+
+/// With the sun straight down on a uniform box of cloud (albedo 1 − 10⁻⁶ … 1), the sunlight
+/// that enters leaves in the beam, is absorbed from it, or feeds the diffusion (exactly: the
+/// sweep's steps telescope), and the diffusion sends out or absorbs all of its source (to the
+/// solver's tolerance): reflected + transmitted + absorbed = incident.
+#[test]
+fn the_budget_balances_in_a_white_furnace() {
+    let (tmp, dir) = bake(&fields());
+    let tables = Tables::open(&dir).unwrap();
+    for tau in [2.0, 16.0] {
+        let frame = uniform_box(&tables, tmp.path(), tau, 90.0);
+        let settings = Settings {
+            diffusion_tolerance: 1e-9,
+            max_diffusion_iterations: 2000,
+            ..Settings::default()
+        };
+        let lighting = cpu::light(&tables, &frame, &settings).unwrap();
+        let b = &lighting.report.budget;
+        for c in 0..3 {
+            let beam = b.buffer_out[c] + b.buffer_absorbed[c] + b.dropped[c];
+            let diffusion = b.diffusion_out[c] + b.diffusion_absorbed[c];
+            let total = b.buffer_out[c] + b.buffer_absorbed[c] + diffusion;
+            eprintln!(
+                "τ {tau} channel {c}: beam out {:.4}, absorbed {:.2e}, dropped {:.4}; diffusion \
+                 source {:.4}, out {:.4}, absorbed {:.2e}; out + absorbed − incident {:.2e}",
+                b.buffer_out[c],
+                b.buffer_absorbed[c],
+                b.dropped[c],
+                b.diffusion_source[c],
+                b.diffusion_out[c],
+                b.diffusion_absorbed[c],
+                total - 1.0
+            );
+            assert!(b.dropped[c] > 0.1, "τ {tau}: little light dropped");
+            // The beam's partition is exact up to rounding (measured ≤ 3e-16).
+            assert!(
+                (beam - 1.0).abs() < 1e-12,
+                "τ {tau} channel {c}: beam {beam}"
+            );
+            // The sky is off: the diffusion's source is the dropped sunlight.
+            assert!((b.diffusion_source[c] - b.dropped[c]).abs() < 1e-12);
+            // The solve's balance at a relative residual of 1e-9 (measured ≤ 2e-9).
+            assert!(
+                (diffusion - b.diffusion_source[c]).abs() < 1e-7 * b.diffusion_source[c],
+                "τ {tau} channel {c}: the diffusion sends out and absorbs {diffusion}, its \
+                 source is {}",
+                b.diffusion_source[c]
+            );
+        }
+    }
+}
+
+/// Worst relative difference of a `coupled` render of the uniform box of optical depth `tau`
+/// from single scattering, over the pixels whose chord is ≥ 500 m.
+fn thin_box_error(tables: &Tables, dir: &Path, tau: f64, settings: &Settings) -> (f64, usize) {
+    let cloud = tables.field("cloud").unwrap();
+    let frame = uniform_box(tables, dir, tau, 30.0);
+    let eye = frame.camera.position_m;
+    let (forward, right, up) = frame.camera.axes().unwrap();
+    let tan_half = frame.camera.tan_half_fov();
+    let light = -frame.sun.direction();
+    let lighting = cpu::light(tables, &frame, settings).unwrap();
+    let image = cpu::gather(tables, &frame, settings, &lighting).unwrap();
+    let (mut checked, mut worst) = (0, 0f64);
+    for j in 0..frame.height {
+        for i in 0..frame.width {
+            let d = render::camera::pixel_ray(
+                (forward, right, up),
+                tan_half,
+                (i, j),
+                (frame.width, frame.height),
+            );
+            let Some((t0, t1)) = box_span(frame.grid.min_m, frame.grid.max_m, eye, d) else {
+                continue;
+            };
+            let chord = t1 - t0;
+            if chord < 500.0 {
+                continue;
+            }
+            let p1 = sample::ams(cloud, tables.theta_step_deg, 1.0, -light.dot(d));
+            for c in 0..3 {
+                let steps = 2000;
+                let tau = (0..steps)
+                    .map(|s| {
+                        let t = t0 + (s as f64 + 0.5) / steps as f64 * chord;
+                        frame.grid.sample(eye + t * d)[0]
+                    })
+                    .sum::<f64>()
+                    * cloud.sigma_ext_m2[c]
+                    * chord
+                    / steps as f64;
+                let want = p1[c] * cloud.albedo[c] * (1.0 - (-tau).exp());
+                let got = f64::from(image.rgb[i + frame.width * j][c]);
+                worst = worst.max(((got - want) / want).abs());
+            }
+            checked += 1;
+        }
+    }
+    (worst, checked)
+}
+
+/// As the box thins, the image tends to single scattering of the sun with the exact phase
+/// function, every candidate: the beam's δ-scaling and the diffusion's light are O(τ), so the
+/// difference falls a hundredfold from τ = 10⁻³ to 10⁻⁵.
+#[test]
+fn a_thin_box_gives_single_scattering() {
+    let (tmp, dir) = bake(&fields());
+    let tables = Tables::open(&dir).unwrap();
+    let candidates = [
+        ("δ-Eddington, P1", Settings::default()),
+        (
+            "hemisphere",
+            Settings {
+                split: Split::Hemisphere,
+                ..Settings::default()
+            },
+        ),
+        (
+            "isotropic",
+            Settings {
+                emergent: Emergent::Isotropic,
+                ..Settings::default()
+            },
+        ),
+    ];
+    for (what, settings) in candidates {
+        let (e3, checked) = thin_box_error(&tables, tmp.path(), 1e-3, &settings);
+        let (e5, _) = thin_box_error(&tables, tmp.path(), 1e-5, &settings);
+        eprintln!(
+            "{what}: {checked} pixels, worst relative difference from single scattering \
+             {e3:.2e} at τ = 1e-3, {e5:.2e} at τ = 1e-5"
+        );
+        assert!(checked > 200, "only {checked} pixels crossed the box");
+        // Measured 3.5e-6 (δ-Eddington, isotropic) and 5.1e-6 (hemisphere).
+        assert!(e5 < 6e-6, "{what}: {e5:e}");
+        assert!(e3 > 50.0 * e5, "{what}: {e3:e} vs {e5:e}");
+    }
+}
+
+/// The gather on the GPU (`coupled::gpu`, f32, lavapipe in CI) equals the CPU reference's from
+/// the same lighting: a τ 30 soft ball side-lit over a lit ground with the sky on, for the
+/// default and the hemisphere split (Riley's n and Ams_{n+1}), from two cameras.
+#[test]
+fn the_gpu_gather_equals_the_cpu_reference() {
+    let Some(gpu) = common::gpu() else { return };
+    let (_tmp, dir) = bake(&fields());
+    let tables = Tables::open(&dir).unwrap();
+    let mut frame = ball(&tables, 30.0, 70.0);
+    frame.ground_albedo = 0.3;
+    frame.atmosphere = render::Atmosphere::default();
+    let uploaded =
+        runtime::gpu::GpuTables::upload(&gpu, &tables, runtime::gpu::TexelFormat::F32).unwrap();
+    let renderer = render::coupled::gpu::Renderer::new(&gpu, &uploaded);
+    let hemisphere = Settings {
+        split: Split::Hemisphere,
+        ..Settings::default()
+    };
+    for settings in [Settings::default(), hemisphere] {
+        let lighting = cpu::light(&tables, &frame, &settings).unwrap();
+        for camera in [[0.0, 500.0, -2500.0], [-1800.0, 300.0, -1500.0]] {
+            frame.camera.position_m = glam::DVec3::from_array(camera);
+            let cpu_image = cpu::gather(&tables, &frame, &settings, &lighting).unwrap();
+            let (gpu_image, t) = renderer
+                .gather(&gpu, &tables, &uploaded, &frame, &settings, &lighting)
+                .unwrap();
+            let worst = common::assert_gpu_matches_cpu(
+                (&gpu_image.rgb, &gpu_image.transparency),
+                (&cpu_image.rgb, &cpu_image.transparency),
+                // Measured on lavapipe: within 0.57 × (10⁻⁵ |CPU| + 10⁻⁶ of the 99th
+                // percentile), T within the max gather's 6·10⁻⁶ (f32 against f64).
+                (1.2e-5, 1.2e-6, 6e-6),
+                "coupled gather",
+            );
+            eprintln!(
+                "{:?} camera {camera:?}: worst |GPU − CPU| {worst:.2} of the tolerance; gather \
+                 {:.1} ms on the GPU",
+                settings.split,
+                1e3 * t.frame
+            );
+        }
+    }
+}
+
+/// The stored truth of the dense case: the soft ball at τ 32, the sun 48° from the view.
+const DENSE_TRUTH: &str = "tests/data/coupled_dense_truth.exr";
+
+/// The dense case: 24² pixels, the model's CPU reference.
+fn dense(tables: &Tables) -> Frame {
+    ball(tables, 32.0, 45.0)
+}
+
+/// Writes the stored truth of [`dense`] (run once; `cargo test -p photometeor-render --test
+/// coupled -- --ignored store_the_dense_truth`): the path tracer to 1 % noise, 65 536 spp at
+/// most, with the same draft bake the tests make.
+#[test]
+#[ignore]
+fn store_the_dense_truth() {
+    let (_tmp, dir) = bake(&fields());
+    let tables = Tables::open(&dir).unwrap();
+    let frame = dense(&tables);
+    let settings = render::truth::Settings {
+        spp: 65_536,
+        target_noise: 0.01,
+        ..render::truth::Settings::default()
+    };
+    let truth = render::truth::render(&tables, &frame, &settings, &()).unwrap();
+    eprintln!(
+        "truth: {} spp, noise {:.2} %, {:.0} s",
+        truth.spp,
+        truth.noise * 100.0,
+        truth.seconds
+    );
+    let extra = (0..3)
+        .map(|c| {
+            (
+                format!("stderr.{}", ["R", "G", "B"][c]),
+                truth.std_error.iter().map(|e| e[c]).collect(),
+            )
+        })
+        .collect();
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join(DENSE_TRUTH);
+    truth.image.write_exr_with(&path, extra).unwrap();
+}
+
+/// A dense ball (τ 32) against its stored truth: the bias and the median per-pixel error
+/// within what was measured when the model was chosen (docs/coupled).
+#[test]
+fn a_dense_ball_agrees_with_its_stored_truth() {
+    let (_tmp, dir) = bake(&fields());
+    let tables = Tables::open(&dir).unwrap();
+    let frame = dense(&tables);
+    let settings = Settings::default();
+    let lighting = cpu::light(&tables, &frame, &settings).unwrap();
+    let image = cpu::gather(&tables, &frame, &settings, &lighting).unwrap();
+    let truth =
+        render::error_map::read_frame(&Path::new(env!("CARGO_MANIFEST_DIR")).join(DENSE_TRUTH))
+            .unwrap();
+    let model = render::error_map::Frame {
+        image,
+        std_error: None,
+    };
+    let (report, _) =
+        render::error_map::compare(&truth, &model, render::error_map::Pixels::Volume).unwrap();
+    eprintln!(
+        "dense ball against its stored truth: bias {:+.1} %, median {:.1} %, p95 {:.1} %, \
+         truth noise {:.1} %",
+        100.0 * report.bias,
+        100.0 * report.median_rel_error,
+        100.0 * report.p95_rel_error,
+        100.0 * report.truth_noise
+    );
+    assert!(report.pixels > 200);
+    assert!(report.bias.abs() < DENSE_BIAS, "bias {}", report.bias);
+    assert!(report.median_rel_error < DENSE_MEDIAN);
+}
+
+/// The dense case's |bias| and median error are below these, just above the measured −13.1 %
+/// and 11.6 % (the model is deterministic and the truth stored, so they do not scatter; a
+/// change to the model that moves them must say so here).
+const DENSE_BIAS: f64 = 0.14;
+/// See [`DENSE_BIAS`].
+const DENSE_MEDIAN: f64 = 0.125;
+
+/// Settings out of range and a solve that cannot converge within its cap are refused, naming
+/// the key, the value and the range (or the residual and the cap), before any image.
+#[test]
+fn bad_settings_and_a_solve_over_its_cap_are_refused() {
+    let (_tmp, dir) = bake(&fields());
+    let tables = Tables::open(&dir).unwrap();
+    let frame = ball(&tables, 30.0, 45.0);
+    for (settings, want) in [
+        (
+            Settings {
+                diffusion_tolerance: 0.5,
+                ..Settings::default()
+            },
+            "diffusion_tolerance = 0.5 is outside the allowed range [1e-12, 0.1]",
+        ),
+        (
+            Settings {
+                max_diffusion_iterations: 0,
+                ..Settings::default()
+            },
+            "max_diffusion_iterations = 0 is outside the allowed range [1, 100000]",
+        ),
+        (
+            Settings {
+                max_diffusion_iterations: 1,
+                diffusion_tolerance: 1e-12,
+                ..Settings::default()
+            },
+            "did not converge",
+        ),
+    ] {
+        let e = cpu::light(&tables, &frame, &settings).unwrap_err().0;
+        assert!(e.contains(want), "{e}");
+    }
+}
