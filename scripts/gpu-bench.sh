@@ -6,11 +6,11 @@
 #
 # Builds the release binary, bakes each scene's tables (draft preset: frame time does not depend
 # on it), then runs `photometeor bench render` per scene with the models that scene takes,
-# interleaved in one run so their ratios are fair: riley, miyazaki and max on the clouds
+# interleaved in one run so their ratios are fair: riley, miyazaki, max and coupled on the clouds
 # (image sizes, slice counts and grid resolutions varied one at a time), miyazaki on the shafts,
 # biri on the lamp beams, and the path-traced truth (CPU; its paths/s) on the dense cumulus.
 # Writes OUT/<scene>.json, OUT/machine.txt (adapter, CPU, date) and prints a summary. Sized to
-# finish in under 8 minutes on a GPU machine of 16 cores (max's lighting runs on the CPU); on 2
+# finish in under 8 minutes on a GPU machine of 16 cores (max's and coupled's lighting run on the CPU); on 2
 # cores with lavapipe use QUICK=1 (measured: 263 s).
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -51,10 +51,10 @@ bench() {
         > "$OUT/$name.json"
 }
 
-bench data/scenes/dense_cumulus.toml riley,miyazaki,max \
+bench data/scenes/dense_cumulus.toml riley,miyazaki,max,coupled \
     --sizes "$SIZES" --slice-counts "$SLICES" --grids "$GRIDS"
-bench data/scenes/cumulus_dawn.toml riley,miyazaki,max
-bench data/scenes/rainbow.toml riley,miyazaki,max --sizes "$SIZES"
+bench data/scenes/cumulus_dawn.toml riley,miyazaki,max,coupled
+bench data/scenes/rainbow.toml riley,miyazaki,max,coupled --sizes "$SIZES"
 bench data/scenes/shafts.toml miyazaki --sizes "$SIZES"
 bench data/scenes/beams.toml biri --sizes "$SIZES"
 # The truth has no GPU renderer yet: its CPU paths/s on this machine's cores.

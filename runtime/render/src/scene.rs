@@ -26,6 +26,13 @@
 //! max_diffusion_iterations = 500   # CG iteration cap, [1, 100000]
 //! clear_air_iterations = 1  # §3's propagation across clear air, [0, 4]
 //!
+//! [render.coupled]
+//! source = "buffer"         # "buffer" (the beam's loss) or "first-scatter" (f = 0, as max)
+//! split = "delta-eddington" # f = g², or "hemisphere" (Riley's F_n, forward hemisphere)
+//! emergent = "p1"           # the diffusion's light with its flux, or "isotropic"
+//! diffusion_tolerance = 1e-6       # relative residual of the solve, [1e-12, 0.1]
+//! max_diffusion_iterations = 500   # CG iteration cap, [1, 100000]
+//!
 //! [render.biri]
 //! kernel = "exact"          # "exact" (the kernel's primitive) or "polynomial" (Eq. 2)
 //!

@@ -198,7 +198,7 @@ pub fn check_scene(frame: &Frame) -> Result<(), FrameError> {
     if frame.grid != crate::DensityGrid::empty() {
         return bad(
             "the scene has [[volume]] tables; --model biri draws homogeneous [[medium]] tables \
-             only (render volumes with riley, miyazaki, max or truth)"
+             only (render volumes with riley, miyazaki, max, coupled or truth)"
                 .into(),
         );
     }
