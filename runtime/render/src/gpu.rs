@@ -20,6 +20,54 @@ pub const SLICING_WGSL: &str = include_str!("slicing.wgsl");
 /// renderer's composite and `max`'s gather (after [`SLICING_WGSL`]).
 pub const COMPOSE_WGSL: &str = include_str!("compose.wgsl");
 
+/// The grid gathers' shared WGSL (`max`, `coupled`): scattering of a mixture, the march to the
+/// sun.
+pub const MARCH_WGSL: &str = include_str!("march.wgsl");
+
+/// A grid gather's view of `frame`: the camera's axes and the march's step, half the smallest
+/// voxel side (m).
+pub(crate) struct GatherView {
+    /// The camera's forward, right and up axes.
+    pub axes: (glam::DVec3, glam::DVec3, glam::DVec3),
+    /// The march's step (m).
+    pub step: f64,
+}
+
+/// Checks that the densities, `lighting_bytes` per voxel of lighting and the image fit
+/// `device`'s limits, and returns the gather's view of `frame`.
+pub(crate) fn gather_view(
+    device: &wgpu::Device,
+    frame: &Frame,
+    lighting_bytes: u64,
+) -> Result<GatherView, RenderError> {
+    let grid = &frame.grid;
+    let voxels = grid.data.len() as u64;
+    check_sizes(
+        device,
+        &[
+            ("density grid bytes", 16 * voxels),
+            ("lighting bytes", lighting_bytes * voxels),
+            ("image bytes", 16 * (frame.width * frame.height) as u64),
+        ],
+    )?;
+    let axes = frame
+        .camera
+        .axes()
+        .ok_or_else(|| FrameError("camera look_at_m equals position_m".into()))?;
+    let size: [f64; 3] =
+        std::array::from_fn(|a| (grid.max_m[a] - grid.min_m[a]) / grid.dims[a] as f64);
+    Ok(GatherView {
+        axes,
+        step: 0.5 * size.iter().copied().fold(f64::INFINITY, f64::min),
+    })
+}
+
+/// A grid gather's whole shader module: the tables', the slicing renderers', [`COMPOSE_WGSL`],
+/// [`MARCH_WGSL`], then `gather`.
+pub fn gather_source(gather: &str) -> String {
+    slicing_source(&format!("{COMPOSE_WGSL}\n{MARCH_WGSL}\n{gather}"))
+}
+
 /// Why a GPU render failed.
 #[derive(Debug, thiserror::Error)]
 pub enum RenderError {

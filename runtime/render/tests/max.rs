@@ -4,14 +4,14 @@
 
 use std::path::Path;
 
-use render::geometry::box_span;
 use render::max::{Settings, cpu};
 use render::{Frame, RenderScene};
 use runtime::Tables;
-use runtime::sample;
 
 #[path = "../../tests/common/mod.rs"]
 mod common;
+#[path = "support/uniform_box.rs"]
+mod support;
 
 use common::bake;
 
@@ -19,49 +19,8 @@ fn fields() -> String {
     common::scene("max", 8, common::CLOUD)
 }
 
-/// A uniform 4³ box of cloud, 1 km wide, 5 km ahead, of optical depth `tau` across (green).
 fn uniform_box(tables: &Tables, dir: &Path, tau: f64, sky: bool) -> Frame {
-    let cloud = tables.field("cloud").unwrap();
-    let density = tau / 1000.0 / cloud.sigma_ext_m2[1];
-    let ones: Vec<u8> = (0..64).flat_map(|_| 1f32.to_le_bytes()).collect();
-    std::fs::write(dir.join("ones.f32"), ones).unwrap();
-    let text = format!(
-        r#"{}
-[render]
-width = 32
-height = 32
-grid_resolution = 32
-
-[camera]
-position_m = [0, 1500, 0]
-look_at_m = [0, 1500, 5000]
-fov_deg = 20
-
-[sun]
-elevation_deg = 30
-azimuth_deg = 160
-
-[sky]
-enabled = {sky}
-
-[ground]
-albedo = 0.0
-
-[[volume]]
-field = "cloud"
-shape = "grid"
-number_density_per_m3 = {density}
-file = "ones.f32"
-dims = [4, 4, 4]
-min_m = [-500, 1000, 4500]
-max_m = [500, 2000, 5500]
-"#,
-        fields()
-    );
-    RenderScene::parse(&text, "box", dir)
-        .unwrap()
-        .frame(tables)
-        .unwrap()
+    support::uniform_box(tables, dir, &fields(), tau, sky, 30.0)
 }
 
 /// The soft-ball fixture of cloud, `tau` through its centre, side-lit (sun 20° up, 70° round),
@@ -81,54 +40,13 @@ fn ball(tables: &Tables, tau: f64) -> Frame {
 /// Worst relative difference of a `max` render of the uniform box of optical depth `tau`
 /// from single scattering, over the pixels whose chord is ≥ 500 m, at threshold T.
 fn thin_box_error(tables: &Tables, dir: &Path, tau: f64, threshold: f64) -> (f64, usize) {
-    let cloud = tables.field("cloud").unwrap();
     let frame = uniform_box(tables, dir, tau, false);
-    let eye = frame.camera.position_m;
-    let (forward, right, up) = frame.camera.axes().unwrap();
-    let tan_half = frame.camera.tan_half_fov();
-    let light = -frame.sun.direction();
     let settings = Settings {
         threshold,
         ..Settings::default()
     };
     let (image, _) = cpu::render(tables, &frame, &settings).unwrap();
-    let (mut checked, mut worst) = (0, 0f64);
-    for j in 0..frame.height {
-        for i in 0..frame.width {
-            let d = render::camera::pixel_ray(
-                (forward, right, up),
-                tan_half,
-                (i, j),
-                (frame.width, frame.height),
-            );
-            let Some((t0, t1)) = box_span(frame.grid.min_m, frame.grid.max_m, eye, d) else {
-                continue;
-            };
-            let chord = t1 - t0;
-            if chord < 500.0 {
-                continue;
-            }
-            let p1 = sample::ams(cloud, tables.theta_step_deg, 1.0, -light.dot(d));
-            for c in 0..3 {
-                // The rasterized grid's optical depth along the chord, by fine quadrature.
-                let steps = 2000;
-                let tau = (0..steps)
-                    .map(|s| {
-                        let t = t0 + (s as f64 + 0.5) / steps as f64 * chord;
-                        frame.grid.sample(eye + t * d)[0]
-                    })
-                    .sum::<f64>()
-                    * cloud.sigma_ext_m2[c]
-                    * chord
-                    / steps as f64;
-                let want = p1[c] * cloud.albedo[c] * (1.0 - (-tau).exp());
-                let got = f64::from(image.rgb[i + frame.width * j][c]);
-                worst = worst.max(((got - want) / want).abs());
-            }
-            checked += 1;
-        }
-    }
-    (worst, checked)
+    support::single_scatter_error(tables, &frame, &image)
 }
 
 #[test]

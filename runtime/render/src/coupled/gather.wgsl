@@ -3,7 +3,7 @@
 // lighting the CPU computed (the beam, the diffusion's I_0 and I_1, the reduced skylight),
 // then composes the pixel with the air, the sun disk and the ground. Included after
 // tables.wgsl (bind group 0: Ams_n by `ams_mix`), slicing.wgsl (grid sampling, camera rays,
-// the sky) and compose.wgsl.
+// the sky), compose.wgsl and march.wgsl.
 
 struct CoupledParams {
     eye: vec4<f32>,          // xyz; w = the march's step (m)
@@ -85,30 +85,6 @@ fn mixed_peak(rho: vec4<f32>) -> vec3<f32> {
         }
     }
     return select(vec3<f32>(0.0), num / den, den > vec3<f32>(0.0));
-}
-
-fn scattering_of(rho: vec4<f32>) -> vec3<f32> {
-    var s = vec3<f32>(0.0);
-    for (var i = 0u; i < rp.grid_dims.w; i = i + 1u) {
-        s = s + rho[i] * ams_field_info[i].yzw;
-    }
-    return s;
-}
-
-// The sunlight the volume leaves at p (outside the box: the ground) along the sun, by a march
-// of half-voxel steps.
-fn transmittance_to_sun(p: vec3<f32>) -> vec3<f32> {
-    let span = box_span(p, rp.sun.xyz);
-    if (span.y < 0.0) {
-        return vec3<f32>(1.0);
-    }
-    let n = max(u32(ceil((span.y - span.x) / rp.eye.w)), 1u);
-    let dt = (span.y - span.x) / f32(n);
-    var tau = vec3<f32>(0.0);
-    for (var k = 0u; k < n; k = k + 1u) {
-        tau = tau + extinction(densities(p + (span.x + (f32(k) + 0.5) * dt) * rp.sun.xyz)) * dt;
-    }
-    return exp(-tau);
 }
 
 @compute @workgroup_size(8, 8)

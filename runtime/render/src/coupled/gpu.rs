@@ -16,10 +16,10 @@ use runtime::gpu::{Gpu, GpuTables};
 use super::Settings;
 use super::cpu::{Lighting, check, delta_scaled};
 use crate::gpu::{
-    COMPOSE_WGSL, FieldsAndSky, RenderError, Timings, bind, build, check_sizes, fields_and_sky,
-    filled, slicing_source, storage, timed_frame, v4,
+    FieldsAndSky, GatherView, RenderError, Timings, bind, build, fields_and_sky, filled,
+    gather_source, gather_view, storage, timed_frame, v4,
 };
-use crate::{Frame, FrameError, Image, MAX_FIELDS};
+use crate::{Frame, Image, MAX_FIELDS};
 
 runtime::uniform! {
     /// `CoupledParams` of `gather.wgsl` (its comments say what each w holds).
@@ -55,13 +55,12 @@ runtime::uniform! {
     }
 }
 
-/// The gather's WGSL (after [`runtime::gpu::WGSL`], the slicing renderers' WGSL and
-/// [`COMPOSE_WGSL`]).
+/// The gather's WGSL ([`crate::gpu::gather_source`] puts the shared parts before it).
 pub const GATHER_WGSL: &str = include_str!("gather.wgsl");
 
 /// The model's whole shader module, as the renderer compiles it.
 pub fn source() -> String {
-    slicing_source(&format!("{COMPOSE_WGSL}\n{GATHER_WGSL}"))
+    gather_source(GATHER_WGSL)
 }
 
 /// The gather's pipeline, built once.
@@ -115,21 +114,10 @@ impl Renderer {
         let (w, h) = (frame.width, frame.height);
         let grid = &frame.grid;
         let voxels = grid.data.len();
-        check_sizes(
-            device,
-            &[
-                ("density grid bytes", 16 * voxels as u64),
-                ("lighting bytes", 80 * voxels as u64),
-                ("image bytes", 16 * (w * h) as u64),
-            ],
-        )?;
-        let (forward, right, up) = frame
-            .camera
-            .axes()
-            .ok_or_else(|| FrameError("camera look_at_m equals position_m".into()))?;
-        let size: [f64; 3] =
-            std::array::from_fn(|a| (grid.max_m[a] - grid.min_m[a]) / grid.dims[a] as f64);
-        let step = 0.5 * size.iter().copied().fold(f64::INFINITY, f64::min);
+        let GatherView {
+            axes: (forward, right, up),
+            step,
+        } = gather_view(device, frame, 80)?;
         let FieldsAndSky {
             sigma_ext,
             sky_beta,

@@ -3,7 +3,7 @@
 // computed (T_sun, the diffusion solution I_0 and the reduced skylight: steps 1–4 of the
 // module docs), then composes the pixel with the air, the sun disk and the ground. Included
 // after tables.wgsl (bind group 0: Ams_1 by `ams_mix`, the Poisson mixtures by `poisson`),
-// slicing.wgsl (grid sampling, camera rays, the sky) and riley's compose.wgsl.
+// slicing.wgsl (grid sampling, camera rays, the sky), riley's compose.wgsl and march.wgsl.
 
 struct MaxParams {
     eye: vec4<f32>,          // xyz; w = the march's step (m)
@@ -60,14 +60,6 @@ fn lit(p: vec3<f32>, row: u32, masked: bool) -> vec3<f32> {
     return sum;
 }
 
-fn scattering_of(rho: vec4<f32>) -> vec3<f32> {
-    var s = vec3<f32>(0.0);
-    for (var i = 0u; i < rp.grid_dims.w; i = i + 1u) {
-        s = s + rho[i] * ams_field_info[i].yzw;
-    }
-    return s;
-}
-
 // M(D, θ) of the mixture, weighted by ρ σ_sca like Eq. 6 (runtime::sample::poisson_mix).
 fn poisson_mix(rho: vec4<f32>, depth: vec3<f32>, cos_theta: f32) -> vec3<f32> {
     var num = vec3<f32>(0.0);
@@ -93,22 +85,6 @@ fn scattered(d: f32, albedo: f32) -> f32 {
 // The share of a voxel of optical depth τ the edge treatment takes (MaxSettings::edge_share).
 fn edge_share(tau_voxel: f32) -> f32 {
     return clamp(1.5 - tau_voxel / rp.grid_max.w, 0.0, 1.0);
-}
-
-// The sunlight the volume leaves at p (outside the box: the ground) along the sun, by a march
-// of half-voxel steps.
-fn transmittance_to_sun(p: vec3<f32>) -> vec3<f32> {
-    let span = box_span(p, rp.sun.xyz);
-    if (span.y < 0.0) {
-        return vec3<f32>(1.0);
-    }
-    let n = max(u32(ceil((span.y - span.x) / rp.eye.w)), 1u);
-    let dt = (span.y - span.x) / f32(n);
-    var tau = vec3<f32>(0.0);
-    for (var k = 0u; k < n; k = k + 1u) {
-        tau = tau + extinction(densities(p + (span.x + (f32(k) + 0.5) * dt) * rp.sun.xyz)) * dt;
-    }
-    return exp(-tau);
 }
 
 @compute @workgroup_size(8, 8)

@@ -1,0 +1,109 @@
+//! The uniform box of cloud the grid models' tests light (`max.rs`, `coupled.rs`), and how far
+//! a render of it is from single scattering.
+
+use std::path::Path;
+
+use render::geometry::box_span;
+use render::{Frame, Image, RenderScene};
+use runtime::Tables;
+use runtime::sample;
+
+/// A uniform 4³ box of the field "cloud" of `fields`' scene, 1 km wide, 5 km ahead, of optical
+/// depth `tau` across (green), the sun at `elevation` degrees, 32² pixels, 32³ voxels.
+pub fn uniform_box(
+    tables: &Tables,
+    dir: &Path,
+    fields: &str,
+    tau: f64,
+    sky: bool,
+    elevation: f64,
+) -> Frame {
+    let cloud = tables.field("cloud").unwrap();
+    let density = tau / 1000.0 / cloud.sigma_ext_m2[1];
+    let ones: Vec<u8> = (0..64).flat_map(|_| 1f32.to_le_bytes()).collect();
+    std::fs::write(dir.join("ones.f32"), ones).unwrap();
+    let text = format!(
+        r#"{fields}
+[render]
+width = 32
+height = 32
+grid_resolution = 32
+
+[camera]
+position_m = [0, 1500, 0]
+look_at_m = [0, 1500, 5000]
+fov_deg = 20
+
+[sun]
+elevation_deg = {elevation}
+azimuth_deg = 160
+
+[sky]
+enabled = {sky}
+
+[ground]
+albedo = 0.0
+
+[[volume]]
+field = "cloud"
+shape = "grid"
+number_density_per_m3 = {density}
+file = "ones.f32"
+dims = [4, 4, 4]
+min_m = [-500, 1000, 4500]
+max_m = [500, 2000, 5500]
+"#
+    );
+    RenderScene::parse(&text, "box", dir)
+        .unwrap()
+        .frame(tables)
+        .unwrap()
+}
+
+/// Worst relative difference of `image` (a render of `frame`, a [`uniform_box`]) from single
+/// scattering of the sun with the exact phase function, over the pixels whose chord is
+/// ≥ 500 m, and how many pixels that is.
+pub fn single_scatter_error(tables: &Tables, frame: &Frame, image: &Image) -> (f64, usize) {
+    let cloud = tables.field("cloud").unwrap();
+    let eye = frame.camera.position_m;
+    let (forward, right, up) = frame.camera.axes().unwrap();
+    let tan_half = frame.camera.tan_half_fov();
+    let light = -frame.sun.direction();
+    let (mut checked, mut worst) = (0, 0f64);
+    for j in 0..frame.height {
+        for i in 0..frame.width {
+            let d = render::camera::pixel_ray(
+                (forward, right, up),
+                tan_half,
+                (i, j),
+                (frame.width, frame.height),
+            );
+            let Some((t0, t1)) = box_span(frame.grid.min_m, frame.grid.max_m, eye, d) else {
+                continue;
+            };
+            let chord = t1 - t0;
+            if chord < 500.0 {
+                continue;
+            }
+            let p1 = sample::ams(cloud, tables.theta_step_deg, 1.0, -light.dot(d));
+            for c in 0..3 {
+                // The rasterized grid's optical depth along the chord, by fine quadrature.
+                let steps = 2000;
+                let tau = (0..steps)
+                    .map(|s| {
+                        let t = t0 + (s as f64 + 0.5) / steps as f64 * chord;
+                        frame.grid.sample(eye + t * d)[0]
+                    })
+                    .sum::<f64>()
+                    * cloud.sigma_ext_m2[c]
+                    * chord
+                    / steps as f64;
+                let want = p1[c] * cloud.albedo[c] * (1.0 - (-tau).exp());
+                let got = f64::from(image.rgb[i + frame.width * j][c]);
+                worst = worst.max(((got - want) / want).abs());
+            }
+            checked += 1;
+        }
+    }
+    (worst, checked)
+}
