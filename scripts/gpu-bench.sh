@@ -11,7 +11,7 @@
 # biri on the lamp beams, and the path-traced truth (CPU; its paths/s) on the dense cumulus.
 # Writes OUT/<scene>.json, OUT/machine.txt (adapter, CPU, date) and prints a summary. Sized to
 # finish in under 8 minutes on a GPU machine of 16 cores (max's and coupled's lighting run on the CPU); on 2
-# cores with lavapipe use QUICK=1 (measured: 263 s).
+# cores with lavapipe use QUICK=1 (measured: 332 s with coupled added).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 OUT=${1:-${OUT:-bench/gpu}}
