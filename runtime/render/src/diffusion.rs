@@ -256,6 +256,24 @@ fn assemble(p: &Problem) -> (Stencil, Vec<f64>) {
     )
 }
 
+/// Checks a model's solver settings `[render.<model>] diffusion_tolerance` and
+/// `max_diffusion_iterations`, naming the key, its value and the allowed range.
+pub fn check_settings(tolerance: f64, max_iterations: usize) -> Result<(), crate::FrameError> {
+    if !(tolerance >= 1e-12 && tolerance <= 0.1) {
+        return Err(crate::FrameError(format!(
+            "diffusion_tolerance = {} is outside the allowed range [1e-12, 0.1] (relative \
+             residual; f64 arithmetic cannot reach less)",
+            crate::Shown(tolerance)
+        )));
+    }
+    if !(1..=100_000).contains(&max_iterations) {
+        return Err(crate::FrameError(format!(
+            "max_diffusion_iterations = {max_iterations} is outside the allowed range [1, 100000]"
+        )));
+    }
+    Ok(())
+}
+
 /// The diffuse flux J (over 4π, per channel's problem) at every voxel of `p` from its
 /// solution `i0`: along each axis the mean of the fluxes through the voxel's two faces, each as
 /// the discretization has it (module docs: D_f (I_i − I_j)/h_a + (Q_1/κ_tr)_f between two
@@ -264,45 +282,85 @@ fn assemble(p: &Problem) -> (Stencil, Vec<f64>) {
 /// I_0 + 3 J·ω follows the solve. Zero at empty voxels.
 pub fn flux(p: &Problem, i0: &[f64]) -> Vec<[f64; 3]> {
     use rayon::prelude::*;
-    let [nx, ny, _] = p.dims;
-    let stride = [1, nx, nx * ny];
     (0..i0.len())
         .into_par_iter()
         .map(|i| {
-            let k = p.kappa_tr[i];
-            if k <= 0.0 {
+            if p.kappa_tr[i] <= 0.0 {
                 return [0.0; 3];
             }
-            let c = [i % nx, (i / nx) % ny, i / (nx * ny)];
-            let d_i = 1.0 / (3.0 * k);
             std::array::from_fn(|a| {
-                let ha = p.h[a];
-                let mut along = 0.0;
-                for (side, sign) in [(0usize, -1.0f64), (1, 1.0)] {
-                    let neighbour = if side == 1 {
-                        (c[a] + 1 < p.dims[a]).then(|| i + stride[a])
-                    } else {
-                        (c[a] > 0).then(|| i - stride[a])
-                    }
-                    .filter(|&j| p.kappa_tr[j] > 0.0);
-                    // The flux out of this face (along its outward normal, sign · e_a).
-                    let out = match neighbour {
-                        Some(j) => {
-                            let d_f = 1.0 / (1.5 * (k + p.kappa_tr[j]));
-                            let qn = 0.5 * (p.q1[i][a] / k + p.q1[j][a] / p.kappa_tr[j]);
-                            d_f * (i0[i] - i0[j]) / ha + sign * qn
-                        }
-                        None => {
-                            i0[i] * d_i / (2.0 * d_i + 0.5 * ha)
-                                + sign * p.q1[i][a] / k * ha / (4.0 * d_i + ha)
-                        }
-                    };
-                    along += 0.5 * sign * out;
-                }
-                along
+                -0.5 * face_out(p, i0, i, a, -1.0) + 0.5 * face_out(p, i0, i, a, 1.0)
             })
         })
         .collect()
+}
+
+/// The flux out of voxel `i`'s face on side `sign` (±1) of axis `a`, along that face's outward
+/// normal, as the discretization has it (module docs), and whether that face borders an empty
+/// voxel or the box (the boundary).
+fn face(p: &Problem, i0: &[f64], i: usize, a: usize, sign: f64) -> (f64, bool) {
+    let [nx, ny, _] = p.dims;
+    let c = [i % nx, (i / nx) % ny, i / (nx * ny)];
+    let stride = [1, nx, nx * ny][a];
+    let k = p.kappa_tr[i];
+    let ha = p.h[a];
+    let neighbour = if sign > 0.0 {
+        (c[a] + 1 < p.dims[a]).then(|| i + stride)
+    } else {
+        (c[a] > 0).then(|| i - stride)
+    }
+    .filter(|&j| p.kappa_tr[j] > 0.0);
+    match neighbour {
+        Some(j) => {
+            let d_f = 1.0 / (1.5 * (k + p.kappa_tr[j]));
+            let qn = 0.5 * (p.q1[i][a] / k + p.q1[j][a] / p.kappa_tr[j]);
+            (d_f * (i0[i] - i0[j]) / ha + sign * qn, false)
+        }
+        None => {
+            let d_i = 1.0 / (3.0 * k);
+            let out = i0[i] * d_i / (2.0 * d_i + 0.5 * ha)
+                + sign * p.q1[i][a] / k * ha / (4.0 * d_i + ha);
+            (out, true)
+        }
+    }
+}
+
+/// [`face`]'s flux alone.
+fn face_out(p: &Problem, i0: &[f64], i: usize, a: usize, sign: f64) -> f64 {
+    face(p, i0, i, a, sign).0
+}
+
+/// The balance of a solution `i0` of `p` over its voxels: ∫Q_0 dV, the flux out through the
+/// boundary faces ∮J·n dA, and ∫κ_a I_0 dV (per 4π; equal sources and sinks at convergence).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Balance {
+    /// ∫Q_0 dV.
+    pub source: f64,
+    /// ∮J·n dA over the faces to empty voxels and the box.
+    pub out: f64,
+    /// ∫κ_a I_0 dV.
+    pub absorbed: f64,
+}
+
+/// [`Balance`] of `i0`, a solution of `p`.
+pub fn balance(p: &Problem, i0: &[f64]) -> Balance {
+    let volume = p.h[0] * p.h[1] * p.h[2];
+    let mut b = Balance::default();
+    for i in 0..i0.len() {
+        b.source += p.q0[i] * volume;
+        if p.kappa_tr[i] <= 0.0 {
+            continue;
+        }
+        b.absorbed += p.kappa_a[i] * i0[i] * volume;
+        for a in 0..3 {
+            for sign in [-1.0, 1.0] {
+                if let (out, true) = face(p, i0, i, a, sign) {
+                    b.out += out * volume / p.h[a];
+                }
+            }
+        }
+    }
+    b
 }
 
 /// The multigrid hierarchy: level 0 is the fine operator.

@@ -28,6 +28,19 @@ pub struct Voxels {
     pub g_sca: Vec<[f64; 3]>,
 }
 
+/// A field's asymmetry parameter g per channel, from its transport factor 1 − αg (0 where it
+/// does not scatter).
+pub fn asymmetry(field: &FieldTable) -> [f64; 3] {
+    let tf = field.transport_factor.expect("checked by render");
+    std::array::from_fn(|c| {
+        if field.albedo[c] > 0.0 {
+            (1.0 - tf[c]) / field.albedo[c]
+        } else {
+            0.0
+        }
+    })
+}
+
 /// The optics of every voxel of `grid` with `fields` (field i = grid channel i).
 pub fn voxels(fields: &[&FieldTable], grid: &DensityGrid) -> Voxels {
     let n = grid.data.len();
@@ -37,6 +50,7 @@ pub fn voxels(fields: &[&FieldTable], grid: &DensityGrid) -> Voxels {
         transport: vec![[0.0; 3]; n],
         g_sca: vec![[0.0; 3]; n],
     };
+    let g: Vec<[f64; 3]> = fields.iter().map(|f| asymmetry(f)).collect();
     for (i, rho) in grid.data.iter().enumerate() {
         for (f, field) in fields.iter().enumerate() {
             let r = f64::from(rho[f]);
@@ -47,15 +61,10 @@ pub fn voxels(fields: &[&FieldTable], grid: &DensityGrid) -> Voxels {
             for c in 0..3 {
                 let ext = r * field.sigma_ext_m2[c];
                 let sca = r * field.sigma_sca_m2[c];
-                let g = if field.albedo[c] > 0.0 {
-                    (1.0 - tf[c]) / field.albedo[c]
-                } else {
-                    0.0
-                };
                 v.ext[i][c] += ext;
                 v.sca[i][c] += sca;
                 v.transport[i][c] += ext * tf[c];
-                v.g_sca[i][c] += sca * g;
+                v.g_sca[i][c] += sca * g[f][c];
             }
         }
     }

@@ -13,8 +13,8 @@ use super::{Emergent, Settings, Source, Split};
 use crate::diffusion::{self, Problem};
 use crate::geometry::box_span;
 use crate::lattice::{
-    MIN_DIFFUSION_VOXEL_DEPTH, Voxels, reduced_sky, reduced_sun, sweep, transmittance_to_sun,
-    trilinear, voxel_size, voxels,
+    MIN_DIFFUSION_VOXEL_DEPTH, Voxels, asymmetry, reduced_sky, reduced_sun, sweep,
+    transmittance_to_sun, trilinear, voxel_size, voxels,
 };
 use crate::shading::{check_fields, coefficients, compose};
 use crate::{Frame, FrameError, Image, MAX_FIELDS};
@@ -299,67 +299,40 @@ pub fn light_with(
 
 impl Budget {
     /// Channel `c`'s budget from its problem and solution, the buffer's `state` and the
-    /// `sunlight` E S_atm per voxel (voxel sizes `h`, light travelling along `l`).
+    /// `sunlight` E S_atm per voxel (light travelling along `l`).
     fn add(&mut self, c: usize, (p, i0): (&Problem, &[f64]), light: &BufferLight, l: DVec3) {
         let (h, dims) = (p.h, p.dims);
         let volume = h[0] * h[1] * h[2];
         let [nx, ny, _] = dims;
         let (mut incident, mut out, mut dropped, mut lost) = (0.0, 0.0, 0.0, 0.0);
-        let (mut source, mut leak, mut absorbed) = (0.0, 0.0, 0.0);
-        for i in 0..i0.len() {
-            let cc = [i % nx, (i / nx) % ny, i / (nx * ny)];
-            let (e, s) = (light.sunlight[i][c], &light.state[i]);
+        for (i, s) in light.state.iter().enumerate() {
+            let e = light.sunlight[i][c];
             dropped += e * s[10 + c] * volume;
             lost += e * s[16 + c] * volume;
-            source += 4.0 * PI * p.q0[i] * volume;
-            let d = (p.kappa_tr[i] > 0.0).then(|| 1.0 / (3.0 * p.kappa_tr[i]));
-            if d.is_some() {
-                absorbed += 4.0 * PI * p.kappa_a[i] * i0[i] * volume;
-            }
+            // The beam through the box's faces.
+            let cc = [i % nx, (i / nx) % ny, i / (nx * ny)];
             for (a, ha) in h.iter().enumerate() {
-                let area = volume / ha;
-                for sign in [-1.0f64, 1.0] {
-                    let on_face = if sign > 0.0 {
-                        cc[a] + 1 == dims[a]
+                for (sign, on_face) in [(-1.0, cc[a] == 0), (1.0, cc[a] + 1 == dims[a])] {
+                    let cos = sign * l[a];
+                    if !on_face {
+                        continue;
+                    } else if cos < 0.0 {
+                        incident += e * -cos * volume / ha;
                     } else {
-                        cc[a] == 0
-                    };
-                    let stride = [1, nx, nx * ny][a];
-                    let neighbour = if on_face {
-                        None
-                    } else if sign > 0.0 {
-                        Some(i + stride)
-                    } else {
-                        Some(i - stride)
-                    };
-                    if on_face {
-                        // The buffer through the box's faces.
-                        let cos = sign * l[a];
-                        if cos < 0.0 {
-                            incident += e * -cos * area;
-                        } else {
-                            out += e * s[c] * cos * area;
-                        }
-                    }
-                    if let Some(d) = d
-                        && neighbour.is_none_or(|j| p.kappa_tr[j] <= 0.0)
-                    {
-                        // The diffusion's boundary face: Marshak's flux, as the solve has it.
-                        let face = i0[i] * d / (2.0 * d + 0.5 * ha)
-                            + sign * p.q1[i][a] / p.kappa_tr[i] * ha / (4.0 * d + ha);
-                        leak += 4.0 * PI * face * area;
+                        out += e * s[c] * cos * volume / ha;
                     }
                 }
             }
         }
+        let solve = diffusion::balance(p, i0);
         let share = |x: f64| x / incident.max(f64::MIN_POSITIVE);
         self.incident[c] = incident;
         self.buffer_out[c] = share(out);
         self.dropped[c] = share(dropped);
         self.buffer_absorbed[c] = share(lost - dropped);
-        self.diffusion_source[c] = share(source);
-        self.diffusion_out[c] = share(leak);
-        self.diffusion_absorbed[c] = share(absorbed);
+        self.diffusion_source[c] = share(4.0 * PI * solve.source);
+        self.diffusion_out[c] = share(4.0 * PI * solve.out);
+        self.diffusion_absorbed[c] = share(4.0 * PI * solve.absorbed);
     }
 }
 
@@ -534,21 +507,9 @@ fn mixed(fields: &[&FieldTable], rho: &[f64], value: impl Fn(usize) -> [f64; 3])
     std::array::from_fn(|c| if den[c] > 0.0 { num[c] / den[c] } else { 0.0 })
 }
 
-/// Each field's asymmetry parameter g per channel, from its transport factor 1 − αg.
+/// Each field's asymmetry parameter g per channel.
 fn asymmetries(fields: &[&FieldTable]) -> Vec<[f64; 3]> {
-    fields
-        .iter()
-        .map(|field| {
-            let tf = field.transport_factor.expect("checked by check");
-            std::array::from_fn(|c| {
-                if field.albedo[c] > 0.0 {
-                    (1.0 - tf[c]) / field.albedo[c]
-                } else {
-                    0.0
-                }
-            })
-        })
-        .collect()
+    fields.iter().map(|f| asymmetry(f)).collect()
 }
 
 /// Each field's forward peak f = g² per channel, the share of its scattering the δ-Eddington

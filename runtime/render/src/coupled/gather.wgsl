@@ -29,58 +29,20 @@ struct CoupledParams {
 @group(1) @binding(2) var<storage, read> lighting: array<vec4<f32>>;
 @group(1) @binding(3) var<storage, read_write> image: array<vec4<f32>>;  // rgb, T_vol (green)
 
-// Row `row` of the lighting trilinear at p (voxel centres, clamped to the edge voxels, as
-// DensityGrid::taps), over the voxels in the solve only when `masked` (renormalized over them);
-// zero outside the box or where no such voxel contributes.
+// Row `row` of the lighting at p (march.wgsl's `lighting_at`; the solve's mask in row 1's w).
 fn lit(p: vec3<f32>, row: u32, masked: bool) -> vec4<f32> {
-    if (!inside_box(p)) {
-        return vec4<f32>(0.0);
-    }
-    let tap = taps(p);
-    var sum = vec4<f32>(0.0);
-    var total = 0.0;
-    for (var corner = 0u; corner < 8u; corner = corner + 1u) {
-        let d = vec3<u32>(corner & 1u, (corner >> 1u) & 1u, (corner >> 2u) & 1u);
-        let w3 = select(1.0 - tap.t, tap.t, d == vec3<u32>(1u));
-        let w = w3.x * w3.y * w3.z;
-        if (w == 0.0) {
-            continue;
-        }
-        let at = tap.lo + d * tap.s;
-        let i = at.x + rp.grid_dims.x * (at.y + rp.grid_dims.y * at.z);
-        if (masked && lighting[5u * i + 1u].w == 0.0) {
-            continue;
-        }
-        total = total + w;
-        sum = sum + w * lighting[5u * i + row];
-    }
-    if (masked) {
-        return select(vec4<f32>(0.0), sum / total, total > 0.0);
-    }
-    return sum;
+    return lighting_at(p, 5u, row, 1u, masked);
 }
 
-// A per-field quantity of the mixture, weighted by ρ σ_sca (render::coupled::cpu::mixed).
-fn mixed_g(rho: vec4<f32>) -> vec3<f32> {
+// A per-field quantity `values` of the mixture, weighted by ρ σ_sca
+// (render::coupled::cpu::mixed).
+fn mixed(rho: vec4<f32>, values: array<vec4<f32>, 4>) -> vec3<f32> {
     var num = vec3<f32>(0.0);
     var den = vec3<f32>(0.0);
     for (var i = 0u; i < min(rp.grid_dims.w, 4u); i = i + 1u) {
         if (rho[i] > 0.0) {
             let w = rho[i] * ams_field_info[i].yzw;
-            num = num + w * rp.asymmetry[i].rgb;
-            den = den + w;
-        }
-    }
-    return select(vec3<f32>(0.0), num / den, den > vec3<f32>(0.0));
-}
-
-fn mixed_peak(rho: vec4<f32>) -> vec3<f32> {
-    var num = vec3<f32>(0.0);
-    var den = vec3<f32>(0.0);
-    for (var i = 0u; i < min(rp.grid_dims.w, 4u); i = i + 1u) {
-        if (rho[i] > 0.0) {
-            let w = rho[i] * ams_field_info[i].yzw;
-            num = num + w * rp.peak[i].rgb;
+            num = num + w * values[i].rgb;
             den = den + w;
         }
     }
@@ -117,8 +79,8 @@ fn gather(@builtin(global_invocation_id) id: vec3<u32>) {
             let sky = vec3<f32>(lit(p, 2u, false).w, lit(p, 3u, false).w, lit(p, 4u, false).w);
             let sun = rp.irradiance.rgb * sunlight(p.y, rp.sun.y) * beam.rgb;
             let phase = ams_mix(rho, beam.w + 1.0, cos_theta);
-            let g = mixed_g(rho);
-            let f = select(vec3<f32>(0.0), mixed_peak(rho), rp.up.w > 0.5);
+            let g = mixed(rho, rp.asymmetry);
+            let f = select(vec3<f32>(0.0), mixed(rho, rp.peak), rp.up.w > 0.5);
             for (var c = 0u; c < 3u; c = c + 1u) {
                 if (ext[c] <= 0.0) {
                     continue;

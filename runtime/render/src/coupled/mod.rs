@@ -139,20 +139,7 @@ impl Default for Settings {
 impl Settings {
     /// Checks the settings, naming the key, its value and the allowed range.
     pub fn check(&self) -> Result<(), FrameError> {
-        if !(self.diffusion_tolerance >= 1e-12 && self.diffusion_tolerance <= 0.1) {
-            return Err(FrameError(format!(
-                "diffusion_tolerance = {} is outside the allowed range [1e-12, 0.1] (relative \
-                 residual; f64 arithmetic cannot reach less)",
-                crate::Shown(self.diffusion_tolerance)
-            )));
-        }
-        if !(1..=100_000).contains(&self.max_diffusion_iterations) {
-            return Err(FrameError(format!(
-                "max_diffusion_iterations = {} is outside the allowed range [1, 100000]",
-                self.max_diffusion_iterations
-            )));
-        }
-        Ok(())
+        crate::diffusion::check_settings(self.diffusion_tolerance, self.max_diffusion_iterations)
     }
 }
 

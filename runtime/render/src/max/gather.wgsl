@@ -29,35 +29,9 @@ struct MaxParams {
 // order is the u32 order).
 @group(1) @binding(4) var<storage, read_write> largest_edge: atomic<u32>;
 
-// Row `row` of the lighting trilinear at p (voxel centres, clamped to the edge voxels, as
-// DensityGrid::taps), over the voxels in the solve only when `masked` (renormalized over them);
-// zero outside the box or where no such voxel contributes.
+// Row `row` of the lighting at p (march.wgsl's `lighting_at`; the solve's mask in row 0's w).
 fn lit(p: vec3<f32>, row: u32, masked: bool) -> vec3<f32> {
-    if (!inside_box(p)) {
-        return vec3<f32>(0.0);
-    }
-    let tap = taps(p);
-    var sum = vec3<f32>(0.0);
-    var total = 0.0;
-    for (var corner = 0u; corner < 8u; corner = corner + 1u) {
-        let d = vec3<u32>(corner & 1u, (corner >> 1u) & 1u, (corner >> 2u) & 1u);
-        let w3 = select(1.0 - tap.t, tap.t, d == vec3<u32>(1u));
-        let w = w3.x * w3.y * w3.z;
-        if (w == 0.0) {
-            continue;
-        }
-        let at = tap.lo + d * tap.s;
-        let i = at.x + rp.grid_dims.x * (at.y + rp.grid_dims.y * at.z);
-        if (masked && lighting[3u * i].w == 0.0) {
-            continue;
-        }
-        total = total + w;
-        sum = sum + w * lighting[3u * i + row].rgb;
-    }
-    if (masked) {
-        return select(vec3<f32>(0.0), sum / total, total > 0.0);
-    }
-    return sum;
+    return lighting_at(p, 3u, row, 0u, masked).rgb;
 }
 
 // M(D, θ) of the mixture, weighted by ρ σ_sca like Eq. 6 (runtime::sample::poisson_mix).

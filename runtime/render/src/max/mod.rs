@@ -246,19 +246,7 @@ impl Settings {
                 crate::Shown(self.threshold)
             )));
         }
-        if !(self.tolerance >= 1e-12 && self.tolerance <= 0.1) {
-            return Err(FrameError(format!(
-                "diffusion_tolerance = {} is outside the allowed range [1e-12, 0.1] (relative \
-                 residual; f64 arithmetic cannot reach less)",
-                crate::Shown(self.tolerance)
-            )));
-        }
-        if !(1..=100_000).contains(&self.max_iterations) {
-            return Err(FrameError(format!(
-                "max_diffusion_iterations = {} is outside the allowed range [1, 100000]",
-                self.max_iterations
-            )));
-        }
+        crate::diffusion::check_settings(self.tolerance, self.max_iterations)?;
         if self.clear_air_iterations > 4 {
             return Err(FrameError(format!(
                 "clear_air_iterations = {} is outside the allowed range [0, 4]",
