@@ -259,7 +259,7 @@ fn assemble(p: &Problem) -> (Stencil, Vec<f64>) {
 /// Checks a model's solver settings `[render.<model>] diffusion_tolerance` and
 /// `max_diffusion_iterations`, naming the key, its value and the allowed range.
 pub fn check_settings(tolerance: f64, max_iterations: usize) -> Result<(), crate::FrameError> {
-    if !(tolerance >= 1e-12 && tolerance <= 0.1) {
+    if !(1e-12..=0.1).contains(&tolerance) {
         return Err(crate::FrameError(format!(
             "diffusion_tolerance = {} is outside the allowed range [1e-12, 0.1] (relative \
              residual; f64 arithmetic cannot reach less)",
