@@ -41,6 +41,13 @@ impl Args {
             Command::Plot(a) => plot::run(a),
             Command::Shaders(a) => shaders::run(a),
             Command::Export(a) => export::run(a),
+            #[cfg(feature = "view")]
+            Command::View(a) => crate::commands::view::run(a),
+            #[cfg(not(feature = "view"))]
+            Command::View(_) => bail!(
+                "this photometeor was built without the viewer (the `view` feature, which adds \
+                 winit and egui): cargo run --release --features view -- view [SCENE]"
+            ),
         }
     }
 }
@@ -101,6 +108,22 @@ enum Command {
     /// reports the light it moves to a wrong θ bin and the forward peak's height kept, and by
     /// default takes the fewest samples that keep the moved light under --max-loss.
     Export(export::ExportArgs),
+    /// The scene in a window, live (built with `--features view`): move the sun (degrees) and
+    /// the camera, switch models and their settings, change the density and a field's size
+    /// (re-baked in the background), see the frame time, and the error against a truth frame.
+    #[cfg(feature = "view")]
+    View(crate::commands::view::ViewArgs),
+    /// The scene in a window, live: this build has no viewer; build with `--features view`.
+    #[cfg(not(feature = "view"))]
+    View(NoViewer),
+}
+
+/// `view`'s arguments in a build without the viewer: taken and refused with how to build it.
+#[cfg(not(feature = "view"))]
+#[derive(Debug, clap::Args)]
+pub struct NoViewer {
+    #[arg(trailing_var_arg = true, allow_hyphen_values = true, hide = true)]
+    _args: Vec<String>,
 }
 
 /// A particle material on the command line.

@@ -14,3 +14,5 @@ pub mod render;
 pub mod shaders;
 pub mod tradeoff;
 pub mod validate;
+#[cfg(feature = "view")]
+pub mod view;

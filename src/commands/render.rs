@@ -183,6 +183,10 @@ pub struct Prepared {
     pub model: ModelSettings,
     /// The checked tables, field i = grid channel i.
     pub tables: Tables,
+    /// The bake that made them (the scene's fields its volumes use, the directory, the
+    /// preset): what the viewer re-bakes when a field's microphysics changes.
+    #[cfg_attr(not(feature = "view"), allow(dead_code))]
+    pub plan: BakePlan,
 }
 
 /// Reads the scene, checks the model and its settings (`overrides`: flag, key, value) against
@@ -233,7 +237,7 @@ pub fn prepare(
         .map_err(|e| anyhow!("{origin}: {e}"))?;
     render
         .check(&settings)
-        .map_err(|e| anyhow!("{origin}: {e}"))?;
+        .map_err(|e| at_line(&origin, &text, &e.to_string()))?;
     let limit = memory_limit(max_memory_gib)?;
     render
         .check_memory(&settings, limit)
@@ -266,19 +270,32 @@ pub fn prepare(
     let mut plan = BakePlan::for_preset(scene, dir.clone(), quality);
     // A render bakes only what its volumes use and never removes another field's tables.
     plan.prune = false;
-    bake_waiting(&plan, quiet)?;
+    bake_waiting(&plan, &Bars::new(quiet), quiet)?;
     let names: Vec<&str> = used.iter().map(String::as_str).collect();
     let tables = Tables::open_fields(&dir, Some(&names))?;
     Ok(Prepared {
         scene: render,
         model: settings,
         tables,
+        plan,
     })
+}
+
+/// A scene error found after parsing, placed on its key's line where one line sets that key.
+pub fn at_line(origin: &str, text: &str, message: &str) -> anyhow::Error {
+    match render::scene::key_line(text, message) {
+        Some(line) => anyhow!("{origin}: line {line}: {message}"),
+        None => anyhow!("{origin}: {message}"),
+    }
 }
 
 /// Bakes `plan`; where another process is baking the same directory (a second render of the
 /// scene), waits for it, saying so, and then takes what it wrote from the cache.
-fn bake_waiting(plan: &BakePlan, quiet: bool) -> Result<()> {
+pub fn bake_waiting(
+    plan: &BakePlan,
+    progress: &dyn bake::progress::Progress,
+    quiet: bool,
+) -> Result<()> {
     loop {
         format::BakeLock::wait_until_free(&plan.out_dir, |holder| {
             if !quiet {
@@ -290,7 +307,7 @@ fn bake_waiting(plan: &BakePlan, quiet: bool) -> Result<()> {
         })?;
         // The lock can be taken again between the wait and the bake's own lock (a third
         // process); wait again then.
-        match bake::run(plan, &Bars::new(quiet)) {
+        match bake::run(plan, progress) {
             Err(bake::BakeError::Commit(format::CommitError::Locked { .. })) => continue,
             r => return r.map(|_| ()).map_err(Into::into),
         }

@@ -544,15 +544,46 @@ fn each<K, T>(
         .collect()
 }
 
+/// The line of the key a message names ("… elevation_deg = 120 is outside …": the word before
+/// its first " = "), where exactly one line of `text` sets that key; `None` where the key is
+/// set on several lines (the message's table would have to choose) or none. Errors found
+/// after parsing (the frame's checks) are placed with it too.
+pub fn key_line(text: &str, message: &str) -> Option<usize> {
+    let before = &message[..message.find(" = ")?];
+    let key = before.rsplit([' ', '.']).next().filter(|k| !k.is_empty())?;
+    let mut lines = text.lines().enumerate().filter(|(_, l)| {
+        l.trim_start()
+            .strip_prefix(key)
+            .is_some_and(|rest| rest.trim_start().starts_with('='))
+    });
+    let (i, _) = lines.next()?;
+    lines.next().is_none().then_some(i + 1)
+}
+
 impl RenderScene {
     /// Parses the render tables of a scene; `origin` names it in errors, `base` resolves grid
     /// and mesh files. A scene without `[camera]`, `[sun]` or `[[volume]]` cannot be rendered.
     pub fn parse(text: &str, origin: &str, base: &Path) -> Result<Self, SceneError> {
         let err = |message: String| SceneError::Invalid {
             origin: origin.to_string(),
-            message,
+            message: match key_line(text, &message) {
+                Some(line) => format!("line {line}: {message}"),
+                None => message,
+            },
         };
-        let file: File = toml::from_str(text).map_err(|e| err(e.message().to_string()))?;
+        let file: File = toml::from_str(text).map_err(|e| {
+            let message = e.message().to_string();
+            match e.span() {
+                Some(span) => SceneError::Invalid {
+                    origin: origin.to_string(),
+                    message: format!(
+                        "line {}: {message}",
+                        text[..span.start.min(text.len())].matches('\n').count() + 1
+                    ),
+                },
+                None => err(message),
+            }
+        })?;
         let render = render_keys(file.render.unwrap_or_default()).map_err(err)?;
         let camera = file
             .camera
@@ -1023,4 +1054,26 @@ fn volume(v: &VolumeKeys, base: &Path) -> Result<Volume, String> {
         shape,
         seed: v.seed.unwrap_or(1),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::key_line;
+
+    #[test]
+    fn a_range_error_is_placed_on_the_one_line_that_sets_its_key() {
+        let text = "[sun]\nelevation_deg = 120\nazimuth_deg = 0\n[ground]\nalbedo = 2\n";
+        let sun = "sun elevation_deg = 120 is outside the allowed range (0, 90]";
+        assert_eq!(key_line(text, sun), Some(2));
+        assert_eq!(
+            key_line(text, "[ground] albedo = 2 is outside [0, 1]"),
+            Some(5)
+        );
+        // Set on two lines: the message alone cannot say which.
+        let twice = "[a]\nalbedo = 2\n[b]\nalbedo = 3\n";
+        assert_eq!(key_line(twice, "[b] albedo = 3 is outside [0, 1]"), None);
+        // No key named, or a key the text does not set.
+        assert_eq!(key_line(text, "no [camera] table"), None);
+        assert_eq!(key_line(text, "fov_deg = 0 must be in (0, 170)"), None);
+    }
 }

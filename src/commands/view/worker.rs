@@ -1,0 +1,202 @@
+//! The render thread: it owns the device, the tables and each model's prepared renderer, and
+//! renders the newest request it has (module docs of `view`).
+
+use std::collections::HashMap;
+use std::sync::mpsc::{Receiver, Sender, TryRecvError, channel};
+use std::sync::{Arc, OnceLock};
+use std::time::Instant;
+
+use anyhow::{Context, Result};
+use render::camera::{Camera, Sun};
+use render::model::Prepared;
+use render::{Frame, Job, ModelSettings, On, RenderScene, Rendered};
+use runtime::Tables;
+use runtime::gpu::Gpu;
+
+/// One view to render.
+#[derive(Clone)]
+pub struct Request {
+    /// Increases with every request; the window shows the newest result.
+    pub generation: u64,
+    /// The model and its settings.
+    pub model: ModelSettings,
+    /// The camera.
+    pub camera: Camera,
+    /// The sun.
+    pub sun: Sun,
+    /// Factor on every volume's number density.
+    pub density_scale: f64,
+}
+
+/// What the window sends.
+enum Message {
+    /// Render this view (merged with later ones: the newest wins).
+    Render(Box<Request>),
+    /// A new scene (edited file) with its tables, or with the ones in use (`None`).
+    Scene(Box<RenderScene>, Option<Tables>),
+}
+
+/// A finished frame.
+pub struct Shown {
+    /// The request's generation.
+    pub generation: u64,
+    /// The frame, or why it could not be rendered.
+    pub result: Result<Rendered, String>,
+    /// Wall time from the request's start to the image on the host (s).
+    pub seconds: f64,
+}
+
+/// The window's end of the render thread.
+pub struct Worker {
+    to: Sender<Message>,
+    from: Receiver<Shown>,
+    /// Told to repaint when a frame is done.
+    repaint: Arc<OnceLock<eframe::egui::Context>>,
+}
+
+impl Worker {
+    /// Starts the thread with `gpu`, `scene` and its `tables`; fails (before any window opens)
+    /// when the scene's grid cannot be built.
+    pub fn start(gpu: Gpu, scene: RenderScene, tables: Tables) -> Result<Self> {
+        let base = scene.frame(&tables).context("building the density grid")?;
+        let (to, inbox) = channel();
+        let (outbox, from) = channel();
+        let repaint = Arc::new(OnceLock::<eframe::egui::Context>::new());
+        let told = repaint.clone();
+        let mut state = State {
+            gpu,
+            scene,
+            tables,
+            base: Ok(base),
+            scaled: None,
+            prepared: HashMap::new(),
+        };
+        std::thread::Builder::new()
+            .name("render".into())
+            .spawn(move || {
+                while let Some(request) = next_request(&inbox, &mut state) {
+                    let started = Instant::now();
+                    let result = state.render(&request).map_err(|e| format!("{e:#}"));
+                    let shown = Shown {
+                        generation: request.generation,
+                        result,
+                        seconds: started.elapsed().as_secs_f64(),
+                    };
+                    if outbox.send(shown).is_err() {
+                        return;
+                    }
+                    if let Some(ctx) = told.get() {
+                        ctx.request_repaint();
+                    }
+                }
+            })
+            .context("starting the render thread")?;
+        Ok(Self { to, from, repaint })
+    }
+
+    /// The window's context, told to repaint when a frame is done.
+    pub fn set_context(&self, ctx: &eframe::egui::Context) {
+        let _ = self.repaint.set(ctx.clone());
+    }
+
+    /// Asks for a frame.
+    pub fn render(&self, request: Request) {
+        let _ = self.to.send(Message::Render(Box::new(request)));
+    }
+
+    /// Replaces the scene, and the tables when `tables` is given.
+    pub fn set_scene(&self, scene: RenderScene, tables: Option<Tables>) {
+        let _ = self.to.send(Message::Scene(Box::new(scene), tables));
+    }
+
+    /// The frames finished since the last call, oldest first.
+    pub fn finished(&self) -> Vec<Shown> {
+        self.from.try_iter().collect()
+    }
+}
+
+/// Waits for a request, applies every scene change that came with it, and returns the newest
+/// request; `None` when the window has closed.
+fn next_request(inbox: &Receiver<Message>, state: &mut State) -> Option<Request> {
+    let take = |message: Message, state: &mut State, newest: &mut Option<Request>| match message {
+        Message::Render(r) => *newest = Some(*r),
+        Message::Scene(scene, tables) => state.set_scene(*scene, tables),
+    };
+    let mut newest: Option<Request> = None;
+    take(inbox.recv().ok()?, state, &mut newest);
+    loop {
+        match inbox.try_recv() {
+            Ok(message) => take(message, state, &mut newest),
+            Err(TryRecvError::Empty) => match newest.take() {
+                Some(r) => return Some(r),
+                // Only scene changes so far: wait for a view to render with them.
+                None => take(inbox.recv().ok()?, state, &mut newest),
+            },
+            Err(TryRecvError::Disconnected) => return None,
+        }
+    }
+}
+
+/// What the render thread holds.
+struct State {
+    gpu: Gpu,
+    scene: RenderScene,
+    tables: Tables,
+    /// The scene's frame at density scale 1 (the grid built once per scene and tables).
+    base: Result<Frame, String>,
+    /// The frame at another density scale, and that scale.
+    scaled: Option<(f64, Frame)>,
+    /// Each model's renderer and its upload of the tables, made on first use.
+    prepared: HashMap<&'static str, Prepared>,
+}
+
+impl State {
+    fn set_scene(&mut self, scene: RenderScene, tables: Option<Tables>) {
+        if let Some(tables) = tables {
+            self.tables = tables;
+            self.prepared.clear();
+        }
+        self.base = scene
+            .frame(&self.tables)
+            .map_err(|e| format!("building the density grid: {e}"));
+        self.scene = scene;
+        self.scaled = None;
+    }
+
+    fn render(&mut self, r: &Request) -> Result<Rendered> {
+        self.scene.camera = r.camera;
+        self.scene.sun = r.sun;
+        self.scene.check(&r.model)?;
+        let frame = match &mut self.base {
+            Err(e) => anyhow::bail!("{e}"),
+            Ok(base) if r.density_scale == 1.0 => base,
+            Ok(base) => {
+                if self
+                    .scaled
+                    .as_ref()
+                    .is_none_or(|(s, _)| *s != r.density_scale)
+                {
+                    let mut frame = base.clone();
+                    let s = r.density_scale as f32;
+                    frame.grid.data.iter_mut().flatten().for_each(|v| *v *= s);
+                    self.scaled = Some((r.density_scale, frame));
+                }
+                &mut self.scaled.as_mut().expect("set above").1
+            }
+        };
+        frame.camera = r.camera;
+        frame.sun = r.sun;
+        let name = r.model.name();
+        if !self.prepared.contains_key(name) {
+            let prepared = r.model.prepare(&self.gpu, &self.tables)?;
+            self.prepared.insert(name, prepared);
+        }
+        let job = Job {
+            tables: &self.tables,
+            frame,
+            progress: &(),
+        };
+        Ok(r.model
+            .render(&job, On::Gpu(&self.gpu, &self.prepared[name]))?)
+    }
+}

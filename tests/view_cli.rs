@@ -1,0 +1,378 @@
+//! `photometeor view` in a real window under Xvfb (lavapipe's Vulkan surface): a script moves
+//! the sun, switches the model and orbits the camera, and the screenshots are checked; the
+//! still view equals `photometeor render` of the same view; an edit of the watched scene into
+//! an invalid state is reported with its key and line while the last good scene stays; no
+//! display and a bad script are one line and exit 2.
+#![cfg(feature = "view")]
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+mod common;
+
+use common::{photometeor, workdir};
+
+fn gpu_required() -> bool {
+    std::env::var("REQUIRE_GPU").as_deref() == Ok("1")
+}
+
+fn rainbow() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("data/scenes/rainbow.toml")
+}
+
+/// `photometeor view ARGS` under `xvfb-run` in `cwd`, or `None` (skipped) where Xvfb is not
+/// installed and no GPU is required.
+fn view_command(args: &[&str], cwd: &Path) -> Option<Command> {
+    let found = Command::new("xvfb-run")
+        .arg("--help")
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .status()
+        .is_ok();
+    if !found {
+        assert!(
+            !gpu_required(),
+            "REQUIRE_GPU=1 but xvfb-run is missing (Debian: xvfb and xauth; scripts/test \
+             installs them)"
+        );
+        eprintln!("skipped: no xvfb-run");
+        return None;
+    }
+    let mut command = Command::new("xvfb-run");
+    command
+        .args(["-a", "-s", "-screen 0 1024x768x24"])
+        .arg(env!("CARGO_BIN_EXE_photometeor"))
+        .arg("view")
+        .args(args)
+        .current_dir(cwd);
+    Some(command)
+}
+
+/// Whether a failed run only lacked an adapter where none is required (skipped).
+fn skipped_without_adapter(out: &Output) -> bool {
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    if !out.status.success() && stderr.contains("no GPU adapter") && !gpu_required() {
+        eprintln!("skipped, no adapter:\n{stderr}");
+        return true;
+    }
+    false
+}
+
+/// An EXR's R, G, B and A planes.
+fn read_rgba(path: &Path) -> (usize, usize, [Vec<f32>; 4]) {
+    use exr::prelude::*;
+    let image = read()
+        .no_deep_data()
+        .largest_resolution_level()
+        .all_channels()
+        .first_valid_layer()
+        .all_attributes()
+        .from_file(path)
+        .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let size = image.layer_data.size;
+    let plane = |name: &str| -> Vec<f32> {
+        let c = image
+            .layer_data
+            .channel_data
+            .list
+            .iter()
+            .find(|c| c.name.to_string() == name)
+            .unwrap_or_else(|| panic!("channel {name}"));
+        c.sample_data.values_as_f32().collect()
+    };
+    let planes = [plane("R"), plane("G"), plane("B"), plane("A")];
+    (size.0, size.1, planes)
+}
+
+/// An 8-bit RGB PNG: width, height, pixels.
+fn read_png(path: &Path) -> (usize, usize, Vec<[u8; 3]>) {
+    let decoder = png::Decoder::new(std::io::BufReader::new(
+        std::fs::File::open(path).unwrap_or_else(|e| panic!("{}: {e}", path.display())),
+    ));
+    let mut reader = decoder.read_info().unwrap();
+    let mut buf = vec![0; reader.output_buffer_size()];
+    let info = reader.next_frame(&mut buf).unwrap();
+    let channels = info.color_type.samples();
+    let pixels = buf[..info.buffer_size()]
+        .chunks(channels)
+        .map(|p| [p[0], p[1], p[2]])
+        .collect();
+    (info.width as usize, info.height as usize, pixels)
+}
+
+/// The image the window showed: the screenshot cropped to the image's rectangle (its JSON),
+/// one window pixel per image pixel at the zoom.
+fn shown_image(png: &Path) -> (usize, usize, Vec<[u8; 3]>) {
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(png.with_extension("json")).unwrap())
+            .unwrap();
+    let rect: Vec<usize> = json["image_rect_px"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap().round() as usize)
+        .collect();
+    let zoom = json["zoom"].as_u64().unwrap() as usize;
+    let (w, h) = (rect[2] / zoom, rect[3] / zoom);
+    let (ww, _, window) = read_png(png);
+    let pixels = (0..h)
+        .flat_map(|y| (0..w).map(move |x| (x, y)))
+        .map(|(x, y)| window[(rect[1] + y * zoom) * ww + rect[0] + x * zoom])
+        .collect();
+    (w, h, pixels)
+}
+
+/// Standard deviation of the pixels' luminance (0–255).
+fn spread(pixels: &[[u8; 3]]) -> f64 {
+    let y: Vec<f64> = pixels
+        .iter()
+        .map(|p| 0.2126 * p[0] as f64 + 0.7152 * p[1] as f64 + 0.0722 * p[2] as f64)
+        .collect();
+    let mean = y.iter().sum::<f64>() / y.len() as f64;
+    (y.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / y.len() as f64).sqrt()
+}
+
+/// Mean |a − b| / mean |b| of the luminance over the pixels where the volume matters in both
+/// (1 − A > 1 %).
+fn volume_change(a: &[Vec<f32>; 4], b: &[Vec<f32>; 4]) -> f64 {
+    let y = |p: &[Vec<f32>; 4], i: usize| {
+        0.2126 * p[0][i] as f64 + 0.7152 * p[1][i] as f64 + 0.0722 * p[2][i] as f64
+    };
+    let mask: Vec<usize> = (0..a[3].len())
+        .filter(|&i| a[3][i] < 0.99 && b[3][i] < 0.99)
+        .collect();
+    assert!(mask.len() > 100, "the rain covers {} pixels", mask.len());
+    let diff: f64 = mask.iter().map(|&i| (y(a, i) - y(b, i)).abs()).sum();
+    let base: f64 = mask.iter().map(|&i| y(b, i).abs()).sum();
+    diff / base
+}
+
+#[test]
+fn a_scripted_session_moves_the_sun_switches_the_model_orbits_and_its_still_view_equals_render() {
+    let cwd = workdir("view-script");
+    let scene = rainbow();
+    let scene = scene.to_str().unwrap();
+    std::fs::write(
+        cwd.join("script.toml"),
+        "[[step]]\nscreenshot = \"still.png\"\n\n\
+         [[step]]\nsun_elevation_deg = 30\nscreenshot = \"sun.png\"\n\n\
+         [[step]]\nmodel = \"miyazaki\"\nscreenshot = \"model.png\"\n\n\
+         [[step]]\norbit_deg = [25, 5]\nscreenshot = \"orbit.png\"\n",
+    )
+    .unwrap();
+    let size = ["--width", "64", "--height", "48", "--quality", "draft"];
+    let tables = ["--tables", "tables"];
+    let mut args = vec![scene];
+    args.extend(size);
+    args.extend(tables);
+    args.extend(["--script", "script.toml", "--screenshot", "end.png"]);
+    let Some(mut view) = view_command(&args, &cwd) else {
+        return;
+    };
+    let out = view.output().unwrap();
+    if skipped_without_adapter(&out) {
+        return;
+    }
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "view failed:\n{stderr}");
+
+    // Every screenshot shows an image, not a flat colour.
+    let shots = ["still", "sun", "model", "orbit", "end"];
+    for name in shots {
+        let (w, h, pixels) = shown_image(&cwd.join(format!("{name}.png")));
+        assert_eq!((w, h), (64, 48), "{name}");
+        let s = spread(&pixels);
+        assert!(
+            s > 5.0,
+            "{name}.png is nearly uniform: luminance spread {s:.2} of 255"
+        );
+    }
+
+    // The still view is `render`'s frame: the same radiance and, in the window, the same
+    // 8-bit pixels as its PNG.
+    let mut render_args = vec!["render", scene];
+    render_args.extend(size);
+    render_args.extend(tables);
+    render_args.extend(["--out", "render.exr", "--png", "render.png", "--quiet"]);
+    let out = photometeor(&render_args, &cwd);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let (_, _, still) = read_rgba(&cwd.join("still.exr"));
+    let (_, _, rendered) = read_rgba(&cwd.join("render.exr"));
+    let peak = rendered[1].iter().fold(0f32, |m, v| m.max(v.abs()));
+    for c in 0..4 {
+        let worst = (0..still[c].len())
+            .map(|i| (still[c][i] - rendered[c][i]).abs())
+            .fold(0f32, f32::max);
+        assert!(
+            worst <= 1e-6 * peak.max(1.0),
+            "channel {c}: the window's frame differs from render's by {worst:e}"
+        );
+    }
+    let (_, _, shown) = shown_image(&cwd.join("still.png"));
+    let (_, _, png) = read_png(&cwd.join("render.png"));
+    let worst = shown
+        .iter()
+        .zip(&png)
+        .flat_map(|(a, b)| (0..3).map(move |c| (a[c] as i32 - b[c] as i32).abs()))
+        .max()
+        .unwrap();
+    assert!(
+        worst <= 1,
+        "the window's pixels differ from render's PNG by {worst} of 255"
+    );
+
+    // Moving the sun moves the bow: the rain's pixels change.
+    let (_, _, sun) = read_rgba(&cwd.join("sun.exr"));
+    let moved = volume_change(&sun, &still);
+    assert!(
+        moved > 0.05,
+        "the sun moved 18° and the rain changed by {moved:.3}"
+    );
+    // The model switch and the orbit change the image and are recorded.
+    let (_, _, model) = read_rgba(&cwd.join("model.exr"));
+    assert!(volume_change(&model, &sun) > 0.01);
+    let json = |name: &str| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(cwd.join(name)).unwrap()).unwrap()
+    };
+    assert_eq!(json("sun.json")["sun"]["elevation_deg"], 30.0);
+    assert_eq!(json("model.json")["model"], "miyazaki");
+    assert_ne!(
+        json("orbit.json")["camera"]["position_m"],
+        json("model.json")["camera"]["position_m"]
+    );
+    let (_, _, orbit) = shown_image(&cwd.join("orbit.png"));
+    let (_, _, before) = shown_image(&cwd.join("model.png"));
+    assert_ne!(orbit, before, "the orbit did not change the window's image");
+    assert!(json("end.json")["frame_seconds_mean"].as_f64().unwrap() > 0.0);
+}
+
+#[test]
+fn a_scene_edited_into_an_invalid_state_is_reported_with_its_line_and_the_last_good_one_kept() {
+    let cwd = workdir("view-watch");
+    let good = std::fs::read_to_string(rainbow()).unwrap();
+    std::fs::write(cwd.join("scene.toml"), &good).unwrap();
+    std::fs::write(
+        cwd.join("script.toml"),
+        "[[step]]\nscreenshot = \"before.png\"\nwait_s = 4\n\n[[step]]\nscreenshot = \"after.png\"\n",
+    )
+    .unwrap();
+    let args = [
+        "scene.toml",
+        "--width",
+        "48",
+        "--height",
+        "36",
+        "--quality",
+        "draft",
+        "--tables",
+        "tables",
+        "--script",
+        "script.toml",
+        "--screenshot",
+        "end.png",
+    ];
+    let Some(mut view) = view_command(&args, &cwd) else {
+        return;
+    };
+    let mut child = view
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Once the first shot is written, break the scene: the sun below its range.
+    let started = Instant::now();
+    while !cwd.join("before.json").exists() {
+        if let Some(status) = child.try_wait().unwrap() {
+            let out = child.wait_with_output().unwrap();
+            if skipped_without_adapter(&out) {
+                return;
+            }
+            panic!(
+                "view ended ({status}) before its first shot:\n{}",
+                String::from_utf8_lossy(&out.stderr)
+            );
+        }
+        assert!(
+            started.elapsed() < Duration::from_secs(300),
+            "no first shot in 300 s"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let (line, _) = good
+        .lines()
+        .enumerate()
+        .find(|(_, l)| l.trim_start().starts_with("elevation_deg"))
+        .expect("the rainbow scene gives the sun's elevation");
+    let broken: String = good
+        .lines()
+        .enumerate()
+        .map(|(i, l)| if i == line { "elevation_deg = 120" } else { l })
+        .collect::<Vec<_>>()
+        .join("\n");
+    std::fs::write(cwd.join("scene.toml"), broken).unwrap();
+    let out = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "view failed:\n{stderr}");
+    assert!(
+        stderr.contains("elevation_deg") && stderr.contains(&format!("line {}", line + 1)),
+        "the invalid edit is not reported with its key and line:\n{stderr}"
+    );
+    assert!(stderr.contains("keeps the last good scene"), "{stderr}");
+    let (_, _, before) = read_rgba(&cwd.join("before.exr"));
+    let (_, _, after) = read_rgba(&cwd.join("after.exr"));
+    assert_eq!(before, after, "the window did not keep the last good scene");
+}
+
+#[test]
+fn no_display_is_one_line_and_exit_2() {
+    let cwd = workdir("view-no-display");
+    let out = Command::new(env!("CARGO_BIN_EXE_photometeor"))
+        .args([
+            "view",
+            "--quality",
+            "draft",
+            "--tables",
+            "tables",
+            "--width",
+            "8",
+            "--height",
+            "8",
+        ])
+        .env_remove("DISPLAY")
+        .env_remove("WAYLAND_DISPLAY")
+        .current_dir(&cwd)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    let errors: Vec<&str> = stderr.lines().filter(|l| l.starts_with("error:")).collect();
+    assert_eq!(errors.len(), 1, "{stderr}");
+    assert!(errors[0].contains("needs a display"), "{stderr}");
+    // Refused before anything was baked.
+    assert!(!cwd.join("tables").exists(), "{stderr}");
+}
+
+#[test]
+fn a_bad_script_is_refused_with_its_line_before_anything_opens() {
+    let cwd = workdir("view-bad-script");
+    std::fs::write(
+        cwd.join("a.toml"),
+        "[[step]]\nsun_elevation_deg = 30\nsun_elevtion = 4\n",
+    )
+    .unwrap();
+    std::fs::write(cwd.join("b.toml"), "[[step]]\ndolly = -1\n").unwrap();
+    for (file, wanted) in [
+        ("a.toml", "line 3"),
+        ("b.toml", "dolly = -1 is out of range"),
+    ] {
+        let out = photometeor(&["view", "--script", file], &cwd);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{stderr}");
+        assert!(stderr.contains(wanted), "{file}: {stderr}");
+    }
+}
