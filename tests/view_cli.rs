@@ -158,7 +158,8 @@ fn a_scripted_session_moves_the_sun_switches_the_model_orbits_and_its_still_view
         "[[step]]\nscreenshot = \"still.png\"\n\n\
          [[step]]\nsun_elevation_deg = 30\nscreenshot = \"sun.png\"\n\n\
          [[step]]\nmodel = \"miyazaki\"\nscreenshot = \"model.png\"\n\n\
-         [[step]]\norbit_deg = [25, 5]\nscreenshot = \"orbit.png\"\n",
+         [[step]]\norbit_deg = [25, 5]\nscreenshot = \"orbit.png\"\n\n\
+         [[step]]\nfield_size = { rain = 150 }\nscreenshot = \"size.png\"\n",
     )
     .unwrap();
     let size = ["--width", "64", "--height", "48", "--quality", "draft"];
@@ -178,7 +179,7 @@ fn a_scripted_session_moves_the_sun_switches_the_model_orbits_and_its_still_view
     assert!(out.status.success(), "view failed:\n{stderr}");
 
     // Every screenshot shows an image, not a flat colour.
-    let shots = ["still", "sun", "model", "orbit", "end"];
+    let shots = ["still", "sun", "model", "orbit", "size", "end"];
     for name in shots {
         let (w, h, pixels) = shown_image(&cwd.join(format!("{name}.png")));
         assert_eq!((w, h), (64, 48), "{name}");
@@ -245,9 +246,20 @@ fn a_scripted_session_moves_the_sun_switches_the_model_orbits_and_its_still_view
         json("orbit.json")["camera"]["position_m"],
         json("model.json")["camera"]["position_m"]
     );
-    let (_, _, orbit) = shown_image(&cwd.join("orbit.png"));
+    let (_, _, orbited) = shown_image(&cwd.join("orbit.png"));
     let (_, _, before) = shown_image(&cwd.join("model.png"));
-    assert_ne!(orbit, before, "the orbit did not change the window's image");
+    assert_ne!(
+        orbited, before,
+        "the orbit did not change the window's image"
+    );
+    // Smaller drops, re-baked in the background and swapped in: the bows change.
+    let (_, _, orbit) = read_rgba(&cwd.join("orbit.exr"));
+    let (_, _, size) = read_rgba(&cwd.join("size.exr"));
+    let resized = volume_change(&size, &orbit);
+    assert!(
+        resized > 0.01,
+        "the drops shrank 500 → 150 µm and the rain changed by {resized:.4}"
+    );
     assert!(json("end.json")["frame_seconds_mean"].as_f64().unwrap() > 0.0);
 }
 

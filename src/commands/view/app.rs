@@ -371,7 +371,7 @@ impl App {
             return;
         }
         match self.actions.pop_front().expect("not empty") {
-            Action::Apply(step) => self.apply(&step),
+            Action::Apply(step) => self.apply(&step, ctx),
             Action::Repeat => self.dirty = true,
             Action::Shot(path) => {
                 let slot = self.shot.clone();
@@ -400,7 +400,7 @@ impl App {
     }
 
     /// A script step: what it gives changes.
-    fn apply(&mut self, step: &Step) {
+    fn apply(&mut self, step: &Step, ctx: &egui::Context) {
         if let Some(e) = step.sun_elevation_deg {
             self.sun.elevation_deg = e;
         }
@@ -426,6 +426,19 @@ impl App {
         }
         if let Some(e) = step.exposure {
             self.exposure = Some(e);
+        }
+        if let Some(sizes) = &step.field_size {
+            let mut fields = self.plan.scene.fields.clone();
+            for (name, value) in sizes {
+                if let Some(f) = fields.iter_mut().find(|f| &f.name == name)
+                    && let Some((_, size, _)) = watch::knobs(f).into_iter().next()
+                {
+                    *size = *value;
+                }
+            }
+            if let Err(e) = self.bake_fields(fields, ctx) {
+                self.fail(ctx, format!("--script step: field_size: {e:#}"));
+            }
         }
         self.frame_times.clear();
         self.dirty = true;

@@ -80,7 +80,8 @@ pub struct ViewArgs {
     /// `[[step]]` with any of sun_elevation_deg, sun_azimuth_deg (degrees), orbit_deg =
     /// [yaw, pitch] (degrees, about the look-at point), dolly (factor on the distance), model,
     /// set = { key = value }, density_scale, exposure, screenshot = "FILE.png", wait_s (seconds
-    /// the window then waits, still watching the scene file).
+    /// the window then waits, still watching the scene file), field_size = { FIELD = size }
+    /// (the field's size parameter, re-baked before the step's frame).
     #[arg(long, value_name = "TOML")]
     script: Option<PathBuf>,
     /// No progress output on stderr.

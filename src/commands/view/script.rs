@@ -1,6 +1,7 @@
 //! `--script`: camera, sun and model steps run in order, each once the previous one's frame is
 //! shown, for docs and tests that drive the window without a person.
 
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
@@ -27,6 +28,10 @@ pub struct Step {
     pub density_scale: Option<f64>,
     /// The display's exposure, > 0.
     pub exposure: Option<f64>,
+    /// A field's size, by field name: its distribution's size parameter (r_eff_um,
+    /// median_radius_um, rain_rate_mm_h or radius_um) or a crystal's max_dimension_um; the
+    /// field is re-baked before the step's frame.
+    pub field_size: Option<BTreeMap<String, f64>>,
     /// Seconds the window waits, drawing and watching the scene file, before the next step
     /// (after this step's screenshot), (0, 600].
     pub wait_s: Option<f64>,
@@ -101,8 +106,20 @@ impl Step {
         Ok(())
     }
 
-    /// Checks the model and its keys against `scene`'s models, before the window opens.
+    /// Checks the model and its keys against `scene`'s models, and the fields a
+    /// `field_size` names against its fields, before the window opens.
     pub fn check(&self, scene: &RenderScene) -> Result<()> {
+        let fields = scene.fields();
+        for (name, size) in self.field_size.iter().flatten() {
+            if !fields.contains(name) {
+                bail!(
+                    "--script step: field_size names {name:?}; the scene's volumes use {fields:?}"
+                );
+            }
+            if !(size.is_finite() && *size > 0.0) {
+                bail!("--script step: field_size {name} = {size} must be > 0");
+            }
+        }
         if let Some(model) = &self.model
             && !super::MODELS.contains(&model.as_str())
         {

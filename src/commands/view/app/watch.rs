@@ -147,12 +147,8 @@ impl App {
             );
         }
         if commit && fields != self.plan.scene.fields {
-            match fields.iter().try_for_each(check_field) {
-                Ok(()) => {
-                    self.plan.scene.fields = fields;
-                    self.start_bake(ctx);
-                }
-                Err(e) => self.bake_error = Some(format!("{e:#}")),
+            if let Err(e) = self.bake_fields(fields, ctx) {
+                self.bake_error = Some(format!("{e:#}"));
             }
         } else if !commit {
             self.editing = Some(fields);
@@ -160,8 +156,19 @@ impl App {
     }
 }
 
-/// The microphysics of `field` the window edits: (what, value, allowed range).
-fn knobs(field: &mut Field) -> Vec<(&'static str, &mut f64, RangeInclusive<f64>)> {
+impl App {
+    /// Checks `fields` and bakes them in the background, to be swapped in when done.
+    pub(super) fn bake_fields(&mut self, fields: Vec<Field>, ctx: &egui::Context) -> Result<()> {
+        fields.iter().try_for_each(check_field)?;
+        self.plan.scene.fields = fields;
+        self.start_bake(ctx);
+        Ok(())
+    }
+}
+
+/// The microphysics of `field` the window edits: (what, value, allowed range); the first is
+/// its size (a script's `field_size`).
+pub(super) fn knobs(field: &mut Field) -> Vec<(&'static str, &mut f64, RangeInclusive<f64>)> {
     let mut out: Vec<(&'static str, &mut f64, RangeInclusive<f64>)> = Vec::new();
     if let Some(d) = &mut field.distribution {
         out.push(match d {
