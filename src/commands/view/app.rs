@@ -55,7 +55,8 @@ pub fn open(options: Options, scene: RenderScene, plan: BakePlan, worker: Worker
     let native = eframe::NativeOptions {
         viewport: egui::ViewportBuilder::default()
             .with_title("photometeor view")
-            .with_inner_size([w.max(320.0) + PANEL_WIDTH + 24.0, h.max(560.0) + 24.0]),
+            // Room for a small image at twice its size.
+            .with_inner_size([w.max(640.0) + PANEL_WIDTH + 24.0, h.max(560.0) + 24.0]),
         renderer: eframe::Renderer::Wgpu,
         // The screenshot must hold the tone-mapped pixels exactly as `render` writes them.
         dithering: false,
@@ -496,6 +497,7 @@ impl App {
             "exposure": s.exposure,
             "display": format!("{:?}", self.display).to_lowercase(),
             "frames": n,
+            "frame_seconds": self.frame_times.iter().map(|t| t.0).collect::<Vec<_>>(),
             "frame_seconds_mean": mean(|t| t.0),
             "wall_seconds_mean": mean(|t| t.1),
             "passes": s.rendered.passes.iter().map(|p| (p.name, p.seconds)).collect::<Vec<_>>(),
