@@ -182,6 +182,7 @@ pub fn run(b: RenderBench) -> Result<()> {
             tables: &p.tables,
             frame: &frame,
             progress: &(),
+            lighting: None,
         };
         let at: Vec<ModelSettings> = b
             .model

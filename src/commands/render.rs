@@ -372,6 +372,7 @@ pub fn run(a: RenderArgs) -> Result<()> {
         tables: &p.tables,
         frame: &frame,
         progress: &bar,
+        lighting: None,
     };
     let rendered = if a.cpu || !p.model.has_gpu() {
         p.model.render(&job, On::Cpu)?

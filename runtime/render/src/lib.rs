@@ -63,6 +63,7 @@ pub mod max;
 pub mod miyazaki;
 pub mod model;
 pub mod objects;
+pub mod relight;
 pub mod riley;
 pub mod rng;
 pub mod scene;

@@ -45,6 +45,9 @@ pub struct Job<'a> {
     pub frame: &'a Frame,
     /// Told as long work advances.
     pub progress: &'a dyn Progress,
+    /// Where the per-sun lighting of `max` and `coupled` is kept between the frames of a moving
+    /// camera ([`crate::relight`]); `None` lights every frame anew.
+    pub lighting: Option<&'a crate::relight::LightingCache>,
 }
 
 /// One named part of a frame's work and its wall time (s).
@@ -95,6 +98,17 @@ impl Rendered {
             }],
             summary,
         )
+    }
+
+    /// Marks a frame whose per-sun lighting was kept from an earlier frame
+    /// ([`crate::relight`]): its lighting passes took no time, its figure "lighting reused" is 1
+    /// and its summary says so.
+    pub fn reused_lighting(&mut self) {
+        self.figures.push(("lighting reused", 1.0));
+        self.summary = format!(
+            "lighting reused from the previous frame (same sun, grid, sky and settings); {}",
+            self.summary
+        );
     }
 
     /// The wall time of pass `name`, if the model reported it.

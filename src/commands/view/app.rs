@@ -501,6 +501,7 @@ impl App {
             "frame_seconds_mean": mean(|t| t.0),
             "wall_seconds_mean": mean(|t| t.1),
             "passes": s.rendered.passes.iter().map(|p| (p.name, p.seconds)).collect::<Vec<_>>(),
+            "figures": s.rendered.figures,
             "adapter": self.adapter,
             "error_against_truth": s.report,
         });

@@ -9,6 +9,7 @@ use std::time::Instant;
 use anyhow::{Context, Result};
 use render::camera::{Camera, Sun};
 use render::model::Prepared;
+use render::relight::LightingCache;
 use render::{Frame, Job, ModelSettings, On, RenderScene, Rendered};
 use runtime::Tables;
 use runtime::gpu::Gpu;
@@ -70,6 +71,7 @@ impl Worker {
             base: Ok(base),
             scaled: None,
             prepared: HashMap::new(),
+            lighting: LightingCache::new(),
         };
         std::thread::Builder::new()
             .name("render".into())
@@ -148,6 +150,8 @@ struct State {
     scaled: Option<(f64, Frame)>,
     /// Each model's renderer and its upload of the tables, made on first use.
     prepared: HashMap<&'static str, Prepared>,
+    /// max's and coupled's per-sun lighting, kept while only the camera moves.
+    lighting: LightingCache,
 }
 
 impl State {
@@ -155,6 +159,8 @@ impl State {
         if let Some(tables) = tables {
             self.tables = tables;
             self.prepared.clear();
+            // The lighting was computed from the old tables.
+            self.lighting = LightingCache::new();
         }
         self.base = scene
             .frame(&self.tables)
@@ -195,6 +201,7 @@ impl State {
             tables: &self.tables,
             frame,
             progress: &(),
+            lighting: Some(&self.lighting),
         };
         Ok(r.model
             .render(&job, On::Gpu(&self.gpu, &self.prepared[name]))?)

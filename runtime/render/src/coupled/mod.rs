@@ -192,16 +192,20 @@ impl Model for Coupled {
         gpu: &Gpu,
         tables: &GpuTables,
     ) -> Result<Rendered, RenderError> {
-        let lighting = cpu::light_with(job.tables, job.frame, s, job.progress)?;
+        let (lighting, reused) = crate::relight::lit(job.lighting, job.frame, s, || {
+            cpu::light_with(job.tables, job.frame, s, job.progress)
+        })?;
         let (image, t) = renderer.gather(gpu, job.tables, tables, job.frame, s, &lighting)?;
         let gather = t.upload + t.frame + t.readback;
-        Ok(rendered(
-            image,
-            &lighting.report,
-            gather,
-            &gpu.describe(),
-            job.frame,
-        ))
+        let mut report = lighting.report.clone();
+        if reused {
+            (report.buffer_s, report.diffusion_s) = (0.0, 0.0);
+        }
+        let mut out = rendered(image, &report, gather, &gpu.describe(), job.frame);
+        if reused {
+            out.reused_lighting();
+        }
+        Ok(out)
     }
 }
 

@@ -142,19 +142,22 @@ impl Model for Max {
         gpu: &Gpu,
         tables: &GpuTables,
     ) -> Result<Rendered, RenderError> {
-        let lighting = cpu::light_with(job.tables, job.frame, s, job.progress)?;
+        let (lighting, reused) = crate::relight::lit(job.lighting, job.frame, s, || {
+            cpu::light_with(job.tables, job.frame, s, job.progress)
+        })?;
         let (image, t, largest) =
             renderer.gather(gpu, job.tables, tables, job.frame, s, &lighting)?;
         let mut report = lighting.report.clone();
         report.gather_s = t.upload + t.frame + t.readback;
         report.largest_edge_depth = largest;
-        Ok(rendered(
-            image,
-            &report,
-            report.gather_s,
-            &gpu.describe(),
-            job.frame,
-        ))
+        if reused {
+            (report.propagation_s, report.diffusion_s, report.clear_air_s) = (0.0, 0.0, 0.0);
+        }
+        let mut out = rendered(image, &report, report.gather_s, &gpu.describe(), job.frame);
+        if reused {
+            out.reused_lighting();
+        }
+        Ok(out)
     }
 }
 
