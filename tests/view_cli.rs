@@ -10,8 +10,11 @@ use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
 mod common;
+#[path = "common/exr_planes.rs"]
+mod exr_planes;
 
 use common::{photometeor, workdir};
+use exr_planes::read_rgba;
 
 fn gpu_required() -> bool {
     std::env::var("REQUIRE_GPU").as_deref() == Ok("1")
@@ -57,32 +60,6 @@ fn skipped_without_adapter(out: &Output) -> bool {
         return true;
     }
     false
-}
-
-/// An EXR's R, G, B and A planes.
-fn read_rgba(path: &Path) -> (usize, usize, [Vec<f32>; 4]) {
-    use exr::prelude::*;
-    let image = read()
-        .no_deep_data()
-        .largest_resolution_level()
-        .all_channels()
-        .first_valid_layer()
-        .all_attributes()
-        .from_file(path)
-        .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-    let size = image.layer_data.size;
-    let plane = |name: &str| -> Vec<f32> {
-        let c = image
-            .layer_data
-            .channel_data
-            .list
-            .iter()
-            .find(|c| c.name.to_string() == name)
-            .unwrap_or_else(|| panic!("channel {name}"));
-        c.sample_data.values_as_f32().collect()
-    };
-    let planes = [plane("R"), plane("G"), plane("B"), plane("A")];
-    (size.0, size.1, planes)
 }
 
 /// An 8-bit RGB PNG: width, height, pixels.
