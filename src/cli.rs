@@ -7,8 +7,8 @@ use mie::Material;
 use num_complex::Complex64;
 
 use crate::commands::{
-    bake, bench, compare, compare_render, export, inspect, mie as mie_cmd, phase, plot, render,
-    shaders, tradeoff, validate,
+    bake, bench, compare, compare_render, export, inspect, merge, mie as mie_cmd, phase, plot,
+    render, shaders, tradeoff, validate,
 };
 
 /// Phase functions of cloud droplets, raindrops, ice and snow, and the multiple-scattering
@@ -34,6 +34,7 @@ impl Args {
             Command::Render(a) => render::run(a),
             Command::CompareRender(a) => compare_render::run(a),
             Command::Bake(a) => bake::run(a),
+            Command::Merge(a) => merge::run(a),
             Command::Inspect(a) => inspect::run(a),
             Command::Compare(a) => compare::run(a),
             Command::Validate(a) => validate::run(a),
@@ -66,6 +67,11 @@ enum Command {
     /// naming every file with its size and CRC-32. Unchanged fields come from the cache in
     /// DIR/.cache.
     Bake(bake::BakeArgs),
+    /// Merge the shard directories of `bake SCENE --shard K/N --out DIR_K` (K = 1…N) into one
+    /// bake directory: refused, nothing written, unless they are the N shards of one scene and
+    /// one program version with every field once; the bake is byte-identical to one without
+    /// shards.
+    Merge(merge::MergeArgs),
     /// Summarize a bake directory (fields, sizes, F_i, n_iso, g, σ_ext, albedo).
     Inspect(inspect::InspectArgs),
     /// Compare two bakes of the same scene: rms and max relative error of Ams_1 and of all

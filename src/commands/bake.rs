@@ -36,6 +36,12 @@ pub struct BakeArgs {
     /// Mie ripple's of drops).
     #[arg(long, default_value_t = 0)]
     seed: u64,
+    /// Compute shard K of N (1 ≤ K ≤ N ≤ 4096) into --out: a deterministic share of the
+    /// scene's fields, dealt by estimated cost, as records and `shard.json`; `photometeor merge`
+    /// of the N shard directories writes the bake, byte-identical to one without shards. For a
+    /// Slurm array: --shard $((SLURM_ARRAY_TASK_ID + 1))/$SLURM_ARRAY_TASK_COUNT.
+    #[arg(long, value_name = "K/N", value_parser = bake::shard::Shard::parse)]
+    shard: Option<bake::shard::Shard>,
 }
 
 /// Most worker threads a bake starts.
@@ -43,7 +49,18 @@ const MAX_JOBS: usize = 256;
 
 /// Runs `photometeor bake`.
 pub fn run(a: BakeArgs) -> Result<()> {
-    let scene = Scene::from_file_or_default(a.scene.as_deref())?;
+    // The text is kept: a shard records the scene it baked.
+    let (text, origin) = match &a.scene {
+        Some(p) => (
+            std::fs::read_to_string(p).with_context(|| format!("reading scene {}", p.display()))?,
+            p.display().to_string(),
+        ),
+        None => (
+            bake::scene::DEFAULT_SCENE.to_string(),
+            "default scene".into(),
+        ),
+    };
+    let scene = Scene::parse(&text, &origin)?;
     let quality = match a.quality.as_deref() {
         Some(q) => Quality::parse(q).context("quality preset")?,
         None => scene.quality,
@@ -60,6 +77,23 @@ pub fn run(a: BakeArgs) -> Result<()> {
         .num_threads(a.jobs.unwrap_or(0))
         .build()
         .context("building the thread pool")?;
+    if let Some(shard) = a.shard {
+        let record = pool.install(|| bake::shard::run_shard(&plan, &text, shard, &progress))?;
+        if a.json {
+            println!("{}", serde_json::to_string(&record)?);
+        } else if !a.quiet {
+            let names: Vec<&str> = record.fields.iter().map(|f| f.name.as_str()).collect();
+            println!(
+                "shard {}/{} of {} into {} in {:.1} s: fields {names:?}",
+                shard.index,
+                shard.count,
+                plan.scene.name,
+                plan.out_dir.display(),
+                record.seconds
+            );
+        }
+        return Ok(());
+    }
     let report = pool.install(|| bake::run(&plan, &progress))?;
     if a.json {
         println!("{}", serde_json::to_string(&report)?);

@@ -7,6 +7,7 @@ pub mod compare;
 pub mod compare_render;
 pub mod export;
 pub mod inspect;
+pub mod merge;
 pub mod mie;
 pub mod phase;
 pub mod plot;

@@ -428,6 +428,40 @@ fn write_cache_records(plan: &BakePlan, done: &[Done]) -> Result<(), BakeError> 
     Ok(())
 }
 
+/// Computes `field` (unless `plan.out_dir`'s cache holds it) and writes its cache record there,
+/// publishing nothing: a shard's work ([`crate::shard`]). Returns the field's content hash and
+/// whether it was computed.
+pub(crate) fn compute_record(
+    plan: &BakePlan,
+    field: &Field,
+    progress: &dyn Progress,
+) -> Result<(String, bool), BakeError> {
+    let hash = content_hash(plan, field);
+    let cache_file = cache::record_path(&plan.out_dir, &hash);
+    if let Lookup::Hit(_) = cache::read::<Record>(&cache_file, &hash) {
+        return Ok((hash, false));
+    }
+    let weights = ChannelWeights::new(&plan.scene.spectral)?;
+    let grid = ThetaGrid::new(plan.scene.theta_step_deg)?;
+    let result = compute_field(plan, field, &weights, &grid, progress)?;
+    let cache_dir = plan.out_dir.join(".cache");
+    std::fs::create_dir_all(&cache_dir).map_err(|source| BakeError::Io {
+        path: cache_dir.clone(),
+        op: "creating",
+        source,
+    })?;
+    cache::write(&cache_file, &hash, &Record::of(&result))?;
+    Ok((hash, true))
+}
+
+/// Whether `dir`'s cache holds a usable record of `hash`.
+pub(crate) fn has_record(dir: &Path, hash: &str) -> bool {
+    matches!(
+        cache::read::<Record>(&cache::record_path(dir, hash), hash),
+        Lookup::Hit(_)
+    )
+}
+
 /// Stages the whole generation (every field's EXRs, the `kept` fields' entries and the
 /// manifest), then publishes it in one rename (format::commit); the manifest published.
 fn publish(

@@ -56,6 +56,9 @@ pub enum BakeError {
         /// The underlying error.
         source: std::io::Error,
     },
+    /// Shard directories that cannot be merged (one missing, foreign, repeated or damaged).
+    #[error("{0}")]
+    Shards(String),
     /// Two bakes, or a bake and its manifest, do not fit together.
     #[error("{0}")]
     Incompatible(String),

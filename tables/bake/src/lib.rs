@@ -5,7 +5,8 @@
 //! wavelength (Mie spheres or the crystal tracer), turns them into Ams_n and F_n per RGB channel
 //! (`photometeor-tables`), and writes four EXRs per field (the tables and the side tables the
 //! render models read: single scattering per wavelength, Poisson mixtures, Biri's kernel) and
-//! `manifest.json` (`photometeor-format`). Unchanged fields come from the [`cache`]. [`compare`] measures a bake
+//! `manifest.json` (`photometeor-format`). Unchanged fields come from the [`cache`]; [`shard`]
+//! splits a bake over a batch scheduler's tasks and merges them. [`compare`] measures a bake
 //! against a reference bake, [`validate`] against theory it did not come from.
 //!
 //! This is the only crate that calls the solver. Progress is reported through
@@ -20,6 +21,7 @@ pub mod error;
 pub mod plan;
 pub mod progress;
 pub mod scene;
+pub mod shard;
 pub mod validate;
 
 pub use bake::{BakeReport, crystal_stream, run};
