@@ -414,12 +414,7 @@ fn kept_fields(
 
 /// Writes the cache records of the fields computed in this run.
 fn write_cache_records(plan: &BakePlan, done: &[Done]) -> Result<(), BakeError> {
-    let cache_dir = plan.out_dir.join(".cache");
-    std::fs::create_dir_all(&cache_dir).map_err(|source| BakeError::Io {
-        path: cache_dir.clone(),
-        op: "creating",
-        source,
-    })?;
+    create_cache_dir(plan)?;
     for d in done {
         if let Some(cache_file) = &d.new_record {
             cache::write(cache_file, &d.hash, &Record::of(&d.result))?;
@@ -444,14 +439,19 @@ pub(crate) fn compute_record(
     let weights = ChannelWeights::new(&plan.scene.spectral)?;
     let grid = ThetaGrid::new(plan.scene.theta_step_deg)?;
     let result = compute_field(plan, field, &weights, &grid, progress)?;
-    let cache_dir = plan.out_dir.join(".cache");
-    std::fs::create_dir_all(&cache_dir).map_err(|source| BakeError::Io {
-        path: cache_dir.clone(),
-        op: "creating",
-        source,
-    })?;
+    create_cache_dir(plan)?;
     cache::write(&cache_file, &hash, &Record::of(&result))?;
     Ok((hash, true))
+}
+
+/// Creates `plan.out_dir`'s cache directory.
+fn create_cache_dir(plan: &BakePlan) -> Result<(), BakeError> {
+    let cache_dir = plan.out_dir.join(".cache");
+    std::fs::create_dir_all(&cache_dir).map_err(|source| BakeError::Io {
+        path: cache_dir,
+        op: "creating",
+        source,
+    })
 }
 
 /// Whether `dir`'s cache holds a usable record of `hash`.
