@@ -3,15 +3,17 @@
 #
 #   scripts/gpu-bench.sh [OUT]      # OUT: a directory (default: $OUT if set, else bench/gpu)
 #   QUICK=1 scripts/gpu-bench.sh    # small sizes: checks the script on a software adapter
+#   BIN=target/release/photometeor scripts/gpu-bench.sh   # no build: a binary built elsewhere
 #
 # Builds the release binary, bakes each scene's tables (draft preset: frame time does not depend
 # on it), then runs `photometeor bench render` per scene with the models that scene takes,
 # interleaved in one run so their ratios are fair: riley, miyazaki, max and coupled on the clouds
 # (image sizes, slice counts and grid resolutions varied one at a time), miyazaki on the shafts,
 # biri on the lamp beams, and the path-traced truth (CPU; its paths/s) on the dense cumulus.
-# Writes OUT/<scene>.json, OUT/machine.txt (adapter, CPU, date) and prints a summary. Sized to
-# finish in under 8 minutes on a GPU machine of 16 cores (max's and coupled's lighting run on the CPU); on 2
-# cores with lavapipe use QUICK=1 (measured: 332 s with coupled added).
+# Writes OUT/<scene>.json, OUT/machine.txt (adapter, CPU, date) and prints a summary. On an H200
+# machine of 16 threads the parts of this run were timed on 2026-12-04 (docs/rendering.md, "On a
+# real GPU"): max's and coupled's lighting (CPU) are most of it, about 5 minutes in all; on 2
+# cores with lavapipe use QUICK=1.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 OUT=${1:-${OUT:-bench/gpu}}
@@ -24,13 +26,16 @@ if [ -z "${XDG_RUNTIME_DIR:-}" ]; then
     trap 'rm -rf "$XDG_RUNTIME_DIR"' EXIT
 fi
 
-cargo build --release --quiet
-BIN=target/release/photometeor
+# BIN=path uses a binary built elsewhere (a GPU machine without a Rust toolchain).
+if [ -z "${BIN:-}" ]; then
+    cargo build --release --quiet
+    BIN=target/release/photometeor
+fi
 
 if [ "${QUICK:-0}" = 1 ]; then
     SIZE=64 SIZES=32,64 SLICES=32,64 GRIDS=32,64 REPEAT=1 SPP=4
 else
-    SIZE=512 SIZES=256,512,1024 SLICES=64,128,256,512 GRIDS=64,128 REPEAT=2 SPP=64
+    SIZE=512 SIZES=256,512,1024 SLICES=64,128,256,512 GRIDS=64,128 REPEAT=2 SPP=16
 fi
 
 {
@@ -48,13 +53,18 @@ bench() {
     name=$(basename "$scene" .toml)
     echo "== $name: $models" >&2
     "$BIN" bench render "$scene" --model "$models" --size "$SIZE" --repeat "$REPEAT" --json "$@" \
-        > "$OUT/$name.json"
+        > "$OUT/$name${TAG:+-$TAG}.json"
 }
 
-bench data/scenes/dense_cumulus.toml riley,miyazaki,max,coupled \
-    --sizes "$SIZES" --slice-counts "$SLICES" --grids "$GRIDS"
+bench data/scenes/dense_cumulus.toml riley,miyazaki --sizes "$SIZES" --slice-counts "$SLICES" \
+    --grids "$GRIDS"
+# max's and coupled's lighting (CPU, seconds per sun) does not depend on the slice count: timed
+# apart, once per setting, so that it does not take most of the run (measured on an H200
+# machine: 16 s and 8 s per frame at grid 128, which over every slice count and two repeats
+# took 430 s of dense_cumulus alone).
+REPEAT=1 TAG=lighting bench data/scenes/dense_cumulus.toml max,coupled --sizes "$SIZES" --grids "$GRIDS"
 bench data/scenes/cumulus_dawn.toml riley,miyazaki,max,coupled
-bench data/scenes/rainbow.toml riley,miyazaki,max,coupled --sizes "$SIZES"
+REPEAT=1 bench data/scenes/rainbow.toml riley,miyazaki,max,coupled --sizes "$SIZES"
 bench data/scenes/shafts.toml miyazaki --sizes "$SIZES"
 bench data/scenes/beams.toml biri --sizes "$SIZES"
 # The truth has no GPU renderer yet: its CPU paths/s on this machine's cores.
