@@ -83,6 +83,7 @@
 //! One ray through each pixel's centre, as the fast models sample pixels, so images compare
 //! pixel for pixel. The camera may sit inside a volume.
 
+pub mod gpu;
 pub mod phase;
 
 use std::f64::consts::PI;
@@ -163,12 +164,12 @@ pub struct Truth;
 impl Model for Truth {
     const NAME: &'static str = "truth";
     const ABOUT: &'static str = "an unbiased spectral Monte Carlo path tracer of the same scene \
-        on the CPU (all cores), the reference every fast model is measured against; its EXR adds \
-        stderr.R/G/B, each pixel's standard error";
+        on the GPU (the CPU reference, all cores, with --cpu), the reference every fast model is \
+        measured against; its EXR adds stderr.R/G/B, each pixel's standard error";
     const TEXELS: TexelFormat = TexelFormat::F32;
-    const GPU: bool = false;
+    const GPU: bool = true;
     type Settings = Settings;
-    type Renderer = ();
+    type Renderer = gpu::Renderer;
 
     fn check(s: &Settings) -> Result<(), FrameError> {
         check_settings(s)
@@ -185,60 +186,78 @@ impl Model for Truth {
         vec![image_need("the sums and image", pixels, 120)]
     }
 
-    fn renderer(_: &Gpu, _: &GpuTables) -> Option<()> {
-        None
+    fn renderer(gpu: &Gpu, _: &GpuTables) -> Option<gpu::Renderer> {
+        Some(gpu::Renderer::new(gpu))
     }
 
     fn render_cpu(s: &Settings, job: &Job) -> Result<Rendered, RenderError> {
         let truth = render(job.tables, job.frame, s, job.progress)?;
-        let summary = format!(
-            "path-traced truth: {}×{}, {} spp, noise {:.2} % (median relative standard error, \
-             green, volume pixels), {:.1} s, {:.3} M paths/s on {} threads",
-            truth.image.width,
-            truth.image.height,
-            truth.spp,
-            truth.noise * 100.0,
-            truth.seconds,
-            truth.paths_per_second / 1e6,
-            rayon::current_num_threads()
-        );
-        let extra = (0..3)
-            .map(|c| {
-                (
-                    format!("stderr.{}", ["R", "G", "B"][c]),
-                    truth.std_error.iter().map(|e| e[c]).collect(),
-                )
-            })
-            .collect();
-        Ok(Rendered {
-            summary,
-            figures: vec![
-                ("spp", truth.spp as f64),
-                ("noise", truth.noise),
-                ("paths per second", truth.paths_per_second),
-                // The noise falls as 1/√(time): the time this estimator needs for 1 %.
-                (
-                    "seconds to 1 % noise",
-                    truth.seconds * (truth.noise / 0.01).powi(2),
-                ),
-            ],
-            image: truth.image,
-            extra,
-            passes: vec![Pass {
-                name: "trace",
-                seconds: truth.seconds,
-            }],
-        })
+        Ok(rendered(
+            truth,
+            &format!("the CPU, {} threads", rayon::current_num_threads()),
+        ))
     }
 
     fn render_gpu(
-        _: &(),
+        renderer: &gpu::Renderer,
         s: &Settings,
         job: &Job,
-        _: &Gpu,
+        g: &Gpu,
         _: &GpuTables,
     ) -> Result<Rendered, RenderError> {
-        Self::render_cpu(s, job)
+        if let Some(what) = gpu::unsupported(job.frame) {
+            let truth = render(job.tables, job.frame, s, job.progress)?;
+            return Ok(rendered(
+                truth,
+                &format!(
+                    "the CPU ({} threads): the GPU truth does not trace {what} yet",
+                    rayon::current_num_threads()
+                ),
+            ));
+        }
+        let truth = gpu::render(renderer, g, job.tables, job.frame, s, job.progress)?;
+        Ok(rendered(truth, &g.describe()))
+    }
+}
+
+/// A traced frame as the models' [`Rendered`], traced on `on` (for the summary).
+fn rendered(truth: TruthImage, on: &str) -> Rendered {
+    let summary = format!(
+        "path-traced truth: {}×{}, {} spp, noise {:.2} % (median relative standard error, \
+         green, volume pixels), {:.1} s, {:.3} M paths/s on {on}",
+        truth.image.width,
+        truth.image.height,
+        truth.spp,
+        truth.noise * 100.0,
+        truth.seconds,
+        truth.paths_per_second / 1e6,
+    );
+    let extra = (0..3)
+        .map(|c| {
+            (
+                format!("stderr.{}", ["R", "G", "B"][c]),
+                truth.std_error.iter().map(|e| e[c]).collect(),
+            )
+        })
+        .collect();
+    Rendered {
+        summary,
+        figures: vec![
+            ("spp", truth.spp as f64),
+            ("noise", truth.noise),
+            ("paths per second", truth.paths_per_second),
+            // The noise falls as 1/√(time): the time this estimator needs for 1 %.
+            (
+                "seconds to 1 % noise",
+                truth.seconds * (truth.noise / 0.01).powi(2),
+            ),
+        ],
+        image: truth.image,
+        extra,
+        passes: vec![Pass {
+            name: "trace",
+            seconds: truth.seconds,
+        }],
     }
 }
 

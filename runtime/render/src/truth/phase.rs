@@ -85,6 +85,31 @@ impl PhaseSampler {
         self.delta
     }
 
+    /// The number of θ bins.
+    pub fn len(&self) -> usize {
+        self.values.len()
+    }
+
+    /// Whether there are no bins (never, for a table).
+    pub fn is_empty(&self) -> bool {
+        self.values.is_empty()
+    }
+
+    /// The θ step (rad).
+    pub fn step(&self) -> f64 {
+        self.step_rad
+    }
+
+    /// Bin `k`'s 1 − cos θ at its forward edge and its width in cos θ.
+    pub fn bin_mu(&self, k: usize) -> (f64, f64) {
+        (self.one_minus_mu_lo[k], self.mu_width[k])
+    }
+
+    /// The probability p_k Ω_k of drawing bin `k`.
+    pub fn probability(&self, k: usize) -> f64 {
+        self.cdf[k] - if k == 0 { self.delta } else { self.cdf[k - 1] }
+    }
+
     /// A scattering angle: `(1 − cos θ, sin θ)`, or `None` for the forward δ; `u` ∈ [0, 1)².
     pub fn sample(&self, u: f64, v: f64) -> Option<(f64, f64)> {
         if u < self.delta {

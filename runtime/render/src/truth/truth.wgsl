@@ -1,0 +1,737 @@
+// The path-traced truth on the GPU (render::truth::gpu): the estimator of render::truth, written
+// for one invocation per pixel, f32, after slicing.wgsl (grid sampling, camera rays, box span,
+// the air's path factor). Every step names the CPU function it mirrors; the module docs of
+// render::truth give the equations and their sources.
+
+struct Params {
+    forward: vec4<f32>,      // w = tan(fov_y / 2)
+    right: vec4<f32>,        // w = aspect
+    up: vec4<f32>,
+    sizes: vec4<u32>,        // width, height, first sample of this pass, samples in this pass
+    eye: vec4<f32>,
+    grid_min: vec4<f32>,
+    grid_max: vec4<f32>,
+    grid_dims: vec4<u32>,    // w = field count
+    sigma_ext: array<vec4<f32>, 4>, // per field, m² per channel (the transparency uses green)
+    sky_beta: vec4<f32>,     // rgb unused here; w = γ = 1/H of the air
+    sun: vec4<f32>,          // unit direction towards the sun; w = cos of the disk's radius
+    irradiance: vec4<f32>,   // per channel; w = the disk's solid angle (sr)
+    background: vec4<f32>,   // radiance of what paths leave into; w = ground albedo
+    track: vec4<f32>,        // majorant (1/m), guide share ε, the haze's 1/H, T_vol step (m)
+    counts: vec4<u32>,       // bands, wavelengths carried, max scatterings, lights
+    counts2: vec4<u32>,      // θ bins, haze field (0xffffffff: none), air on, blocks
+    seed: vec4<u32>,         // seed's low and high words, splitting on
+    theta: vec4<f32>,        // θ step (rad)
+}
+
+@group(0) @binding(0) var<uniform> rp: Params;
+@group(0) @binding(1) var<storage, read> density: array<vec4<f32>>;
+// Per band BAND_ROWS rows: (β_air,sl, haze N₀σ_ext, haze N₀σ_sca, CDF of q), (w_c/q per channel),
+// then per field (σ_ext, albedo, forward δ, 0).
+@group(0) @binding(2) var<storage, read> bands: array<vec4<f32>>;
+// Per (band, field), PHASE_STRIDE floats: the bins' p_k (1/sr), each bin's CDF within its block
+// (the block's last is 1), each block's CDF over the smooth part (the last is 1).
+@group(0) @binding(3) var<storage, read> phase: array<f32>;
+// Per bin: 1 − cos θ at its forward edge, its width in cos θ.
+@group(0) @binding(4) var<storage, read> bin_mu: array<vec2<f32>>;
+// Per light three rows: position (w: spot 1/0), intensity, spot axis (w: cos of half-angle).
+@group(0) @binding(5) var<storage, read> lights: array<vec4<f32>>;
+// Per pixel two rows: Σ L and Σ L² over this pass's samples (rgb).
+@group(0) @binding(6) var<storage, read_write> sums: array<vec4<f32>>;
+@group(0) @binding(7) var<storage, read_write> transparency_out: array<f32>;
+// The dispatch's sample within the pass (index), at a dynamic offset: one sample per
+// dispatch, so that no invocation runs for long (render::gpu::SliceParams).
+struct SliceParams {
+    plane: f32,
+    index: u32,
+    pad0: u32,
+    pad1: u32,
+}
+@group(0) @binding(8) var<uniform> sp: SliceParams;
+
+const BAND_ROWS: u32 = 6u;
+const BLOCK: u32 = 32u;
+const PI: f32 = 3.14159265358979;
+const INF: f32 = 3.0e38;
+const ROULETTE_WEIGHT: f32 = 1e-3;
+const SPLIT_WEIGHT: f32 = 2.0;
+const MAX_SPLIT: u32 = 16u;
+const STACK: u32 = 64u;
+
+// ---- random numbers: counter-based, two 32-bit keys per (seed, pixel, sample) ----
+
+var<private> key0: u32;
+var<private> key1: u32;
+var<private> counter: u32;
+
+// A 32-bit integer hash (xor-shift-multiply rounds, Wellons' "lowbias32" constants).
+fn hash(v: u32) -> u32 {
+    var x = v;
+    x = x ^ (x >> 16u);
+    x = x * 0x7feb352du;
+    x = x ^ (x >> 15u);
+    x = x * 0x846ca68bu;
+    x = x ^ (x >> 16u);
+    return x;
+}
+
+fn stream(pixel: u32, smp: u32) {
+    let s = hash(hash(rp.seed.x) ^ rp.seed.y);
+    key0 = hash(s ^ hash(pixel + 0x9e3779b9u) ^ hash(smp * 0x85ebca6bu + 1u));
+    key1 = hash(key0 ^ hash(smp + 0x27d4eb2fu) ^ pixel * 0xc2b2ae35u);
+    counter = 0u;
+}
+
+// Uniform in [0, 1), 24 bits.
+fn rand() -> f32 {
+    counter = counter + 1u;
+    let x = hash(hash(counter ^ key0) + key1);
+    return f32(x >> 8u) * (1.0 / 16777216.0);
+}
+
+// Exponential of rate 1.
+fn exp_rand() -> f32 {
+    return -log(1.0 - rand());
+}
+
+// ---- the carried wavelengths (render::truth::Carried) ----
+
+struct Carried {
+    n: u32,
+    band: vec4<u32>,
+    f: vec4<f32>,
+    r: vec4<f32>,
+}
+
+fn mask(c: Carried) -> vec4<f32> {
+    return select(vec4<f32>(0.0), vec4<f32>(1.0), vec4<u32>(0u, 1u, 2u, 3u) < vec4<u32>(c.n));
+}
+
+// W_m = f_m / Σ_k p_k (the balance heuristic).
+fn weights(c: Carried) -> vec4<f32> {
+    let s = dot(c.r, mask(c));
+    if (s <= 0.0) {
+        return vec4<f32>(0.0);
+    }
+    return c.f * mask(c) / s;
+}
+
+fn band_row(b: u32, row: u32) -> vec4<f32> {
+    return bands[b * BAND_ROWS + row];
+}
+
+fn field_optics(b: u32, field: u32) -> vec4<f32> {
+    return bands[b * BAND_ROWS + 2u + field];
+}
+
+// The wavelengths of one path (Tracer::carry): the m-th at u + m/n (mod 1) in the bands' CDF.
+fn carry(n: u32) -> Carried {
+    let u = rand();
+    var c: Carried;
+    c.n = n;
+    c.f = vec4<f32>(1.0);
+    c.r = vec4<f32>(1.0);
+    for (var m = 0u; m < n; m = m + 1u) {
+        var um = u + f32(m) / f32(n);
+        if (um >= 1.0) {
+            um = um - 1.0;
+        }
+        var j = 0u;
+        while (j + 1u < rp.counts.x && band_row(j, 0u).w <= um) {
+            j = j + 1u;
+        }
+        c.band[m] = j;
+    }
+    return c;
+}
+
+// ---- the phase functions (render::truth::phase::PhaseSampler) ----
+
+fn phase_base(b: u32, field: u32) -> u32 {
+    let bins = rp.counts2.x;
+    return (b * 4u + field) * (2u * bins + rp.counts2.w);
+}
+
+fn phase_value(b: u32, field: u32, k: u32) -> f32 {
+    return phase[phase_base(b, field) + k];
+}
+
+// The bin of the angle between unit d and w.
+fn phase_bin(d: vec3<f32>, w: vec3<f32>) -> u32 {
+    let theta = atan2(length(cross(d, w)), dot(d, w));
+    return min(u32(round(theta / rp.theta.x)), rp.counts2.x - 1u);
+}
+
+// A bin of the smooth part drawn by its probability (u picks the block, v the bin in it: each
+// level's CDF is relative, so a bin of probability 10⁻⁸ is drawn as often as it should be in
+// f32), then (1 − cos θ, sin θ) uniform in cos θ inside the bin (w).
+fn phase_sample_smooth(b: u32, field: u32, u: f32, v: f32, w: f32) -> vec2<f32> {
+    let bins = rp.counts2.x;
+    let blocks = rp.counts2.w;
+    let base = phase_base(b, field);
+    var lo = 0u;
+    var hi = blocks - 1u;
+    while (lo < hi) {
+        let mid = (lo + hi) / 2u;
+        if (phase[base + 2u * bins + mid] > u) {
+            hi = mid;
+        } else {
+            lo = mid + 1u;
+        }
+    }
+    var k0 = lo * BLOCK;
+    var k1 = min(k0 + BLOCK, bins) - 1u;
+    while (k0 < k1) {
+        let mid = (k0 + k1) / 2u;
+        if (phase[base + bins + mid] > v) {
+            k1 = mid;
+        } else {
+            k0 = mid + 1u;
+        }
+    }
+    let mu = bin_mu[k0];
+    let omm = clamp(mu.x + w * mu.y, 0.0, 2.0);
+    return vec2<f32>(omm, sqrt(max(omm * (2.0 - omm), 0.0)));
+}
+
+// Rayleigh phase function (1/sr) and the inversion of its CDF (phase::rayleigh,
+// phase::sample_rayleigh).
+fn rayleigh(c: f32) -> f32 {
+    return 3.0 / (16.0 * PI) * (1.0 + c * c);
+}
+
+fn sample_rayleigh(u: f32) -> f32 {
+    let q = 4.0 * u - 2.0;
+    let r = sqrt(q * q + 1.0);
+    let a = q + r;
+    let b = q - r;
+    return clamp(sign(a) * pow(abs(a), 1.0 / 3.0) + sign(b) * pow(abs(b), 1.0 / 3.0), -1.0, 1.0);
+}
+
+fn basis1(d: vec3<f32>) -> vec3<f32> {
+    let helper = select(vec3<f32>(0.0, 1.0, 0.0), vec3<f32>(1.0, 0.0, 0.0), abs(d.x) < 0.9);
+    return normalize(helper - dot(helper, d) * d);
+}
+
+// The direction at angle θ (as 1 − cos θ, sin θ) from d at azimuth 2π u (phase::rotate).
+fn rotate(d: vec3<f32>, omm: f32, s: f32, u: f32) -> vec3<f32> {
+    let e1 = basis1(d);
+    let e2 = cross(d, e1);
+    let phi = 2.0 * PI * u;
+    return normalize((1.0 - omm) * d + s * (cos(phi) * e1 + sin(phi) * e2));
+}
+
+// ---- air and haze: exponential species ----
+
+fn log1p(x: f32) -> f32 {
+    if (abs(x) < 1e-4) {
+        return x * (1.0 - x * (0.5 - x / 3.0));
+    }
+    return log(1.0 + x);
+}
+
+// Distance to the next collision with β(y) = β₀ e^{−γ y} (truth::sample_exponential), or INF.
+fn sample_exponential(beta0: f32, gamma: f32, p: vec3<f32>, d: vec3<f32>) -> f32 {
+    if (beta0 <= 0.0) {
+        return INF;
+    }
+    let target_tau = exp_rand() / (beta0 * exp(-gamma * p.y));
+    let k = gamma * d.y;
+    if (abs(k) < 1e-12) {
+        return target_tau;
+    }
+    let x = target_tau * k;
+    if (x >= 1.0) {
+        return INF;
+    }
+    return -log1p(-x) / k;
+}
+
+// Optical depth per unit β_sl from p along d over s (INF allowed): Tracer::air_path.
+fn exp_path(gamma: f32, p: vec3<f32>, d: vec3<f32>, s: f32) -> f32 {
+    let k = select(s, -1.0, s >= INF);
+    return exp(-gamma * p.y) * path_factor_for(gamma, d.y, k) / gamma;
+}
+
+fn air_path(p: vec3<f32>, d: vec3<f32>, s: f32) -> f32 {
+    if (rp.counts2.z == 0u) {
+        return 0.0;
+    }
+    return exp_path(rp.sky_beta.w, p, d, s);
+}
+
+fn haze_path(p: vec3<f32>, d: vec3<f32>, s: f32) -> f32 {
+    if (rp.counts2.y == 0xffffffffu) {
+        return 0.0;
+    }
+    return exp_path(rp.track.z, p, d, s);
+}
+
+// Tracer::air_ratios.
+fn air_ratios(c: ptr<function, Carried>, p: vec3<f32>, d: vec3<f32>, s: f32, collided: bool) {
+    if ((*c).n == 1u || rp.counts2.z == 0u) {
+        return;
+    }
+    let path = air_path(p, d, s);
+    let b0 = band_row((*c).band[0], 0u).x;
+    for (var m = 1u; m < (*c).n; m = m + 1u) {
+        let bm = band_row((*c).band[m], 0u).x;
+        var k = exp(-(bm - b0) * path);
+        if (collided) {
+            k = k * bm / b0;
+        }
+        (*c).f[m] = (*c).f[m] * k;
+        (*c).r[m] = (*c).r[m] * k;
+    }
+}
+
+// Tracer::haze_ratios.
+fn haze_ratios(c: ptr<function, Carried>, p: vec3<f32>, d: vec3<f32>, s: f32, collided: bool) {
+    if (rp.counts2.y == 0xffffffffu) {
+        return;
+    }
+    let path = haze_path(p, d, s);
+    let b0 = band_row((*c).band[0], 0u).y;
+    for (var m = 0u; m < (*c).n; m = m + 1u) {
+        let row = band_row((*c).band[m], 0u);
+        let k = exp(-(row.y - b0) * path);
+        if (collided) {
+            (*c).f[m] = (*c).f[m] * k * row.z / b0;
+            (*c).r[m] = (*c).r[m] * k * row.y / b0;
+        } else if (m > 0u) {
+            (*c).f[m] = (*c).f[m] * k;
+            (*c).r[m] = (*c).r[m] * k;
+        }
+    }
+}
+
+// ---- the volumes ----
+
+// Extinction at densities rho for each carried wavelength (Tracer::extinctions).
+fn extinctions(c: Carried, rho: vec4<f32>) -> vec4<f32> {
+    var e = vec4<f32>(0.0);
+    for (var m = 0u; m < c.n; m = m + 1u) {
+        for (var f = 0u; f < rp.grid_dims.w; f = f + 1u) {
+            e[m] = e[m] + rho[f] * field_optics(c.band[m], f).x;
+        }
+    }
+    return e;
+}
+
+struct Hit {
+    hit: bool,
+    t: f32,
+    rho: vec4<f32>,
+}
+
+// Delta tracking up to limit, decided by the hero (Tracer::track).
+fn track(c: ptr<function, Carried>, p: vec3<f32>, d: vec3<f32>, limit: f32) -> Hit {
+    var out: Hit;
+    out.hit = false;
+    let span = box_span(p, d);
+    if (span.y < 0.0) {
+        return out;
+    }
+    let end = min(span.y, limit);
+    let mu = rp.track.x;
+    var t = span.x;
+    loop {
+        t = t + exp_rand() / mu;
+        if (t >= end) {
+            return out;
+        }
+        let rho = densities(p + t * d);
+        let e = extinctions(*c, rho);
+        if (rand() * mu < e[0]) {
+            out.hit = true;
+            out.t = t;
+            out.rho = rho;
+            return out;
+        }
+        for (var m = 1u; m < (*c).n; m = m + 1u) {
+            let k = (mu - e[m]) / (mu - e[0]);
+            (*c).f[m] = (*c).f[m] * k;
+            (*c).r[m] = (*c).r[m] * k;
+        }
+    }
+    return out;
+}
+
+// Ratio tracking with Russian roulette below 1/20 (Tracer::volume_transmittance).
+fn volume_transmittance(c: Carried, p: vec3<f32>, d: vec3<f32>, limit: f32) -> vec4<f32> {
+    var tr = vec4<f32>(1.0);
+    let span = box_span(p, d);
+    if (span.y < 0.0) {
+        return tr;
+    }
+    let end = min(span.y, limit);
+    let mu = rp.track.x;
+    var t = span.x;
+    loop {
+        t = t + exp_rand() / mu;
+        if (t >= end) {
+            return tr;
+        }
+        let e = extinctions(c, densities(p + t * d));
+        tr = tr * (1.0 - e / mu);
+        let tm = tr * mask(c);
+        if (max(max(tm.x, tm.y), max(tm.z, tm.w)) < 0.05) {
+            if (rand() < 0.5) {
+                return vec4<f32>(0.0);
+            }
+            tr = tr * 2.0;
+        }
+    }
+    return tr;
+}
+
+// ---- direct light (Tracer::direct) ----
+
+// What a vertex scatters towards `dir` per carried wavelength: kind 0 a volume vertex of
+// `field` (the tabulated phase function), 1 the air, 2 a Lambertian surface of normal n and
+// albedo a.
+struct Vertex {
+    kind: u32,
+    field: u32,
+    d: vec3<f32>,
+    n: vec3<f32>,
+    a: f32,
+}
+
+fn vertex_weight(c: Carried, v: Vertex, dir: vec3<f32>) -> vec4<f32> {
+    if (v.kind == 0u) {
+        let k = phase_bin(v.d, dir);
+        var w = vec4<f32>(0.0);
+        for (var m = 0u; m < c.n; m = m + 1u) {
+            w[m] = phase_value(c.band[m], v.field, k);
+        }
+        return w;
+    }
+    if (v.kind == 1u) {
+        return vec4<f32>(rayleigh(dot(v.d, dir)));
+    }
+    return vec4<f32>(v.a / PI * max(dot(dir, v.n), 0.0));
+}
+
+// One source seen from p along dir over limit: Σ_m coef_m · weight_m · T_m · source.
+fn add_source(c: Carried, v: Vertex, p: vec3<f32>, dir: vec3<f32>, limit: f32, source: vec3<f32>,
+              coef_w: vec4<f32>) -> vec3<f32> {
+    let w = vertex_weight(c, v, dir) * mask(c);
+    if (all(w <= vec4<f32>(0.0))) {
+        return vec3<f32>(0.0);
+    }
+    let tv = volume_transmittance(c, p, dir, limit);
+    let air = air_path(p, dir, limit);
+    let hz = haze_path(p, dir, limit);
+    var sum = vec3<f32>(0.0);
+    for (var m = 0u; m < c.n; m = m + 1u) {
+        let row = band_row(c.band[m], 0u);
+        let t = w[m] * tv[m] * exp(-row.x * air - row.y * hz);
+        sum = sum + coef_w[m] * band_row(c.band[m], 1u).xyz * t * source;
+    }
+    return sum;
+}
+
+fn direct(c: Carried, v: Vertex, p: vec3<f32>, coef_w: vec4<f32>) -> vec3<f32> {
+    var sum = add_source(c, v, p, rp.sun.xyz, INF, rp.irradiance.xyz, coef_w);
+    for (var i = 0u; i < rp.counts.w; i = i + 1u) {
+        let pos = lights[3u * i];
+        let to = pos.xyz - p;
+        let r2 = dot(to, to);
+        if (r2 == 0.0) {
+            continue;
+        }
+        let r = sqrt(r2);
+        let dir = to / r;
+        let axis = lights[3u * i + 2u];
+        if (pos.w > 0.5 && dot(-dir, axis.xyz) < axis.w) {
+            continue;
+        }
+        sum = sum + add_source(c, v, p, dir, r, lights[3u * i + 1u].xyz / r2, coef_w);
+    }
+    return sum;
+}
+
+// ---- free paths (Tracer::next_event) ----
+
+const EV_VOLUME: u32 = 0u;
+const EV_AIR: u32 = 1u;
+const EV_SURFACE: u32 = 2u;
+const EV_ESCAPE: u32 = 3u;
+
+struct Event {
+    kind: u32,
+    field: u32,
+    p: vec3<f32>,
+}
+
+fn next_event(c: ptr<function, Carried>, p0: vec3<f32>, d: vec3<f32>) -> Event {
+    var ev: Event;
+    ev.p = p0;
+    ev.field = 0u;
+    let t_ground = select(INF, max(p0.y / -d.y, 0.0), d.y < 0.0);
+    let hero = band_row((*c).band[0], 0u);
+    let t_air = select(INF, sample_exponential(hero.x, rp.sky_beta.w, p0, d), rp.counts2.z != 0u);
+    let t_haze = select(INF, sample_exponential(hero.y, rp.track.z, p0, d),
+        rp.counts2.y != 0xffffffffu);
+    let hit = track(c, p0, d, min(t_ground, min(t_air, t_haze)));
+    if (hit.hit) {
+        air_ratios(c, p0, d, hit.t, false);
+        haze_ratios(c, p0, d, hit.t, false);
+        ev.p = p0 + hit.t * d;
+        let e = extinctions(*c, hit.rho);
+        let nf = rp.grid_dims.w;
+        var total = vec4<f32>(0.0);
+        for (var m = 0u; m < (*c).n; m = m + 1u) {
+            for (var f = 0u; f < nf; f = f + 1u) {
+                let o = field_optics((*c).band[m], f);
+                total[m] = total[m] + hit.rho[f] * o.x * o.y;
+            }
+        }
+        var field = nf - 1u;
+        if (total[0] > 0.0) {
+            var pick = rand() * total[0];
+            for (var f = 0u; f < nf; f = f + 1u) {
+                let o = field_optics((*c).band[0], f);
+                let s = hit.rho[f] * o.x * o.y;
+                if (pick < s) {
+                    field = f;
+                    break;
+                }
+                pick = pick - s;
+            }
+        } else {
+            field = min(u32(rand() * f32(nf)), nf - 1u);
+        }
+        var p0c = 0.0;
+        for (var m = 0u; m < (*c).n; m = m + 1u) {
+            let o = field_optics((*c).band[m], field);
+            let s = hit.rho[field] * o.x * o.y;
+            let choice = select(1.0 / f32(nf), s / total[m], total[m] > 0.0);
+            if (m == 0u) {
+                p0c = e[0] * choice;
+            }
+            (*c).f[m] = (*c).f[m] * s / p0c;
+            (*c).r[m] = (*c).r[m] * e[m] * choice / p0c;
+        }
+        ev.kind = EV_VOLUME;
+        ev.field = field;
+    } else if (t_haze < min(t_ground, t_air)) {
+        air_ratios(c, p0, d, t_haze, false);
+        haze_ratios(c, p0, d, t_haze, true);
+        ev.p = p0 + t_haze * d;
+        ev.kind = EV_VOLUME;
+        ev.field = rp.counts2.y;
+    } else if (t_air < t_ground) {
+        air_ratios(c, p0, d, t_air, true);
+        haze_ratios(c, p0, d, t_air, false);
+        ev.p = p0 + t_air * d;
+        ev.kind = EV_AIR;
+    } else if (t_ground < INF) {
+        air_ratios(c, p0, d, t_ground, false);
+        haze_ratios(c, p0, d, t_ground, false);
+        ev.p = p0 + t_ground * d;
+        ev.p.y = 0.0;
+        ev.kind = EV_SURFACE;
+    } else {
+        air_ratios(c, p0, d, INF, false);
+        haze_ratios(c, p0, d, INF, false);
+        ev.kind = EV_ESCAPE;
+    }
+    return ev;
+}
+
+// The continuation at a volume vertex (Tracer::continue_volume): with probability ε from the
+// smooth part about the sun, else about d (the δ included), weighted by p/q.
+fn continue_volume(c: ptr<function, Carried>, field: u32, d: vec3<f32>, eps: f32) -> vec3<f32> {
+    let b0 = (*c).band[0];
+    let delta0 = field_optics(b0, field).z;
+    var next: vec3<f32>;
+    if (eps > 0.0 && rand() < eps) {
+        let s = phase_sample_smooth(b0, field, rand(), rand(), rand());
+        next = rotate(rp.sun.xyz, s.x, s.y, rand());
+    } else {
+        let u = rand();
+        if (u < delta0) {
+            // The forward δ: p_m = (1 − ε) f_m, f_m = f_m.
+            for (var m = 0u; m < (*c).n; m = m + 1u) {
+                let ratio = field_optics((*c).band[m], field).z / delta0;
+                (*c).f[m] = (*c).f[m] * ratio / (1.0 - eps);
+                (*c).r[m] = (*c).r[m] * ratio;
+            }
+            return d;
+        }
+        let s = phase_sample_smooth(b0, field, min((u - delta0) / (1.0 - delta0), 0.99999994),
+            rand(), rand());
+        next = rotate(d, s.x, s.y, rand());
+    }
+    if (eps == 0.0 && (*c).n == 1u) {
+        return next;
+    }
+    let kd = phase_bin(d, next);
+    let ks = select(0u, phase_bin(rp.sun.xyz, next), eps > 0.0);
+    var q0 = 0.0;
+    var pm = vec4<f32>(0.0);
+    var qm = vec4<f32>(0.0);
+    for (var m = 0u; m < (*c).n; m = m + 1u) {
+        let b = (*c).band[m];
+        let p = phase_value(b, field, kd);
+        var q = p;
+        if (eps > 0.0) {
+            q = (1.0 - eps) * p + eps * phase_value(b, field, ks) / (1.0 - field_optics(b, field).z);
+        }
+        pm[m] = p;
+        qm[m] = q;
+    }
+    q0 = qm[0];
+    if (q0 <= 0.0) {
+        (*c).f = vec4<f32>(0.0);
+        return next;
+    }
+    (*c).f = (*c).f * pm / q0;
+    (*c).r = (*c).r * qm / q0;
+    return next;
+}
+
+// The weight window (Tracer::weight_window): roulette below ROULETTE_WEIGHT, with `room` > 0
+// a split into k ≤ room + 1 branches above SPLIT_WEIGHT. The branches, 0 when the path ends.
+fn weight_window(c: ptr<function, Carried>, room: u32) -> u32 {
+    let w = weights(*c);
+    let largest = f32((*c).n) * max(max(w.x, w.y), max(w.z, w.w));
+    var kept = largest;
+    if (kept < ROULETTE_WEIGHT) {
+        if (rand() * ROULETTE_WEIGHT >= kept) {
+            return 0u;
+        }
+        kept = ROULETTE_WEIGHT;
+    }
+    var k = 1u;
+    if (rp.seed.z != 0u && kept > SPLIT_WEIGHT) {
+        k = min(min(u32(ceil(kept)), MAX_SPLIT), room + 1u);
+    }
+    if (kept != largest) {
+        (*c).f = (*c).f * (kept / largest);
+    }
+    (*c).f = (*c).f / f32(k);
+    return k;
+}
+
+// ---- a camera path (Tracer::radiance) ----
+
+struct Branch {
+    c: Carried,
+    p: vec3<f32>,
+    d: vec3<f32>,
+    bounce: u32,
+}
+
+fn radiance(origin: vec3<f32>, dir: vec3<f32>) -> vec3<f32> {
+    var stack: array<Branch, STACK>;
+    var top = 1u;
+    stack[0] = Branch(carry(rp.counts.y), origin, dir, 0u);
+    var sum = vec3<f32>(0.0);
+    let max_scatterings = rp.counts.z;
+    while (top > 0u) {
+        top = top - 1u;
+        var c = stack[top].c;
+        var p = stack[top].p;
+        var d = stack[top].d;
+        var bounce = stack[top].bounce;
+        loop {
+            if (bounce >= max_scatterings) {
+                break;
+            }
+            let ev = next_event(&c, p, d);
+            p = ev.p;
+            let w = weights(c);
+            var v: Vertex;
+            v.kind = ev.kind;
+            v.field = ev.field;
+            v.d = d;
+            v.n = vec3<f32>(0.0, 1.0, 0.0);
+            v.a = rp.background.w;
+            if (ev.kind == EV_ESCAPE) {
+                let disk = bounce == 0u && dot(d, rp.sun.xyz) >= rp.sun.w;
+                let l = rp.background.xyz + select(vec3<f32>(0.0), rp.irradiance.xyz / rp.irradiance.w,
+                    disk);
+                for (var m = 0u; m < c.n; m = m + 1u) {
+                    sum = sum + w[m] * band_row(c.band[m], 1u).xyz * l;
+                }
+                break;
+            }
+            if (ev.kind == EV_SURFACE && v.a == 0.0) {
+                break;
+            }
+            sum = sum + direct(c, v, p, w);
+            if (ev.kind == EV_VOLUME) {
+                d = continue_volume(&c, ev.field, d, rp.track.y);
+            } else if (ev.kind == EV_SURFACE) {
+                c.f = c.f * v.a;
+                let r = sqrt(rand());
+                let phi = 2.0 * PI * rand();
+                let e1 = basis1(v.n);
+                let e2 = cross(v.n, e1);
+                d = normalize(r * cos(phi) * e1 + r * sin(phi) * e2 + sqrt(max(1.0 - r * r, 0.0)) * v.n);
+            } else {
+                let mu = sample_rayleigh(rand());
+                d = rotate(d, 1.0 - mu, sqrt(max(1.0 - mu * mu, 0.0)), rand());
+            }
+            bounce = bounce + 1u;
+            if (bounce >= max_scatterings) {
+                break;
+            }
+            let k = weight_window(&c, STACK - 1u - top);
+            if (k == 0u) {
+                break;
+            }
+            for (var i = 1u; i < k; i = i + 1u) {
+                stack[top] = Branch(c, p, d, bounce);
+                top = top + 1u;
+            }
+        }
+    }
+    return sum;
+}
+
+@compute @workgroup_size(8, 8)
+fn trace(@builtin(global_invocation_id) id: vec3<u32>) {
+    if (id.x >= rp.sizes.x || id.y >= rp.sizes.y) {
+        return;
+    }
+    let pixel = id.x + rp.sizes.x * id.y;
+    stream(pixel, rp.sizes.z + sp.index);
+    let l = radiance(rp.eye.xyz, pixel_ray(id.x, id.y));
+    if (sp.index == 0u) {
+        sums[2u * pixel] = vec4<f32>(l, 0.0);
+        sums[2u * pixel + 1u] = vec4<f32>(l * l, 0.0);
+    } else {
+        sums[2u * pixel] = sums[2u * pixel] + vec4<f32>(l, 0.0);
+        sums[2u * pixel + 1u] = sums[2u * pixel + 1u] + vec4<f32>(l * l, 0.0);
+    }
+}
+
+// The volumes' transparency along each pixel's ray by a fine march of green β_ext
+// (Tracer::transparency): quarter-voxel midpoint steps.
+@compute @workgroup_size(8, 8)
+fn transparency(@builtin(global_invocation_id) id: vec3<u32>) {
+    if (id.x >= rp.sizes.x || id.y >= rp.sizes.y) {
+        return;
+    }
+    let pixel = id.x + rp.sizes.x * id.y;
+    let d = pixel_ray(id.x, id.y);
+    let span = box_span(rp.eye.xyz, d);
+    if (span.y < 0.0) {
+        transparency_out[pixel] = 1.0;
+        return;
+    }
+    let steps = u32(clamp(ceil((span.y - span.x) / rp.track.w), 1.0, 65536.0));
+    let dt = (span.y - span.x) / f32(steps);
+    var tau = 0.0;
+    for (var i = 0u; i < steps; i = i + 1u) {
+        let rho = densities(rp.eye.xyz + (span.x + (f32(i) + 0.5) * dt) * d);
+        for (var f = 0u; f < rp.grid_dims.w; f = f + 1u) {
+            tau = tau + rho[f] * rp.sigma_ext[f].g * dt;
+        }
+    }
+    transparency_out[pixel] = exp(-tau);
+}
