@@ -256,13 +256,13 @@ def write_png(path, rgb):
 # ---------------------------------------------------------------------------------------------
 # photometeor.
 TRUTH_LINE = re.compile(
-    r"path-traced truth: (\d+)×(\d+), (\d+) spp, noise ([\d.]+|inf) % .*?, ([\d.]+) s, ([\d.]+) M paths/s on (\d+) threads"
+    r"path-traced truth: (\d+)×(\d+), (\d+) spp, noise ([\d.]+|inf) % .*?, ([\d.]+) s, ([\d.]+) M paths/s on the CPU \((\d+) threads\)"
 )
 
 
 def run_ours(binary, size, spp, seed, out_exr):
     """One `render --model truth` of size × size pixels."""
-    cmd = [binary, "render", SCENE, "--model", "truth", "--spp", str(spp), "--seed", str(seed),
+    cmd = [binary, "render", SCENE, "--model", "truth", "--cpu", "--spp", str(spp), "--seed", str(seed),
            "--width", str(size), "--height", str(size),
            "--tables", TABLES, "--out", out_exr]
     t = time.perf_counter()

@@ -66,7 +66,8 @@ pub struct RenderArgs {
     #[arg(long)]
     noise: Option<f64>,
     /// truth: seed of the random streams; the image is the same for a seed whatever the
-    /// thread count.
+    /// thread count (CPU) or adapter (GPU, up to float rounding); the GPU's and the CPU's
+    /// images of one seed differ sample by sample and agree within their noise.
     #[arg(long)]
     seed: Option<u64>,
     /// truth: wavelengths each path carries, 1–4 (hero-wavelength sampling: the first decides

@@ -17,6 +17,15 @@
 //!   k = ⌈n·W⌉ branches as on the CPU, but at most as many as the stack has room for. Any k ≥ 1
 //!   chosen from the path's past keeps the estimator unbiased (each branch carries 1/k of the
 //!   weight); a full stack only gives up some variance reduction.
+//! - **f32**: the ratios p_m/p_0 of the carried wavelengths are products over every collision;
+//!   after each free path f and p are divided by the mean p (the weights do not change), so that
+//!   they stay inside f32's range in clouds of optical depth 100 (`renormalize` in the shader).
+//! - **Software adapters**: llvmpipe (lavapipe) ends every loop of a shader invocation once
+//!   the invocation has run 65535 loop iterations in all, so a long path (hundreds of
+//!   scatterings in a cloud of optical depth 100) is silently cut short: measured on the soft
+//!   ball at τ = 100, 30 % dark; a probe loop at the end of each invocation detects the cut and
+//!   the pass fails, naming it. `render --model truth` runs the CPU truth on a software adapter
+//!   (faster there too); the tests call this module on lavapipe with scenes inside the limit.
 //! - **Not yet on the GPU**: `[[occluder]]` and `[[medium]]` (the lamp scenes of `--model
 //!   biri`). A frame with them is traced by the CPU truth, and its summary says so.
 
@@ -111,11 +120,11 @@ impl Renderer {
     pub fn new(gpu: &Gpu) -> Self {
         let device = &gpu.device;
         use wgpu::BufferBindingType::{Storage, Uniform};
-        let entries: Vec<_> = (0..9)
+        let entries: Vec<_> = (0..10)
             .map(|b| match b {
                 0 => entry(0, Uniform, false),
                 8 => entry(8, Uniform, true),
-                6 | 7 => entry(b, Storage { read_only: false }, false),
+                6 | 7 | 9 => entry(b, Storage { read_only: false }, false),
                 b => entry(b, Storage { read_only: true }, false),
             })
             .collect();
@@ -382,6 +391,12 @@ pub fn render_with(
     let transparency = storage(device, "truth transparency", 4 * pixels.max(4), true);
     // One uniform per sample of a pass (its index), read at a dynamic offset.
     let (samples, stride) = slice_uniforms(device, &[0.0; MAX_BATCH]);
+    let cut = filled(
+        device,
+        "truth cut paths",
+        &[0; 16],
+        usage | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
+    );
     let buffers = [
         &params_buffer,
         &density,
@@ -392,6 +407,7 @@ pub fn render_with(
         &sums,
         &transparency,
         &samples,
+        &cut,
     ];
     let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
         label: Some("photometeor truth bindings"),
@@ -457,9 +473,20 @@ pub fn render_with(
         params.sizes[3] = batch as u32;
         gpu.queue
             .write_buffer(&params_buffer, 0, bytemuck::bytes_of(&params));
+        gpu.queue.write_buffer(&cut, 0, &[0; 16]);
         let pass_start = Instant::now();
         dispatch(&renderer.trace, batch);
         let rows = read_back(gpu, &sums, 32 * pixels)?;
+        let cut_paths = read_back(gpu, &cut, 16)?[0][0].to_bits();
+        if cut_paths > 0 {
+            return Err(FrameError(format!(
+                "the GPU adapter ({}) cut {cut_paths} paths short: it ends a shader's loops after \
+                 a fixed number of iterations (llvmpipe: 65535), fewer than a path through this \
+                 scene takes; render with --cpu",
+                gpu.describe()
+            ))
+            .into());
+        }
         last = (batch, pass_start.elapsed().as_secs_f64());
         for (p, a) in acc.iter_mut().enumerate() {
             let (s, q) = (rows[2 * p], rows[2 * p + 1]);

@@ -194,7 +194,7 @@ impl Model for Truth {
         let truth = render(job.tables, job.frame, s, job.progress)?;
         Ok(rendered(
             truth,
-            &format!("the CPU, {} threads", rayon::current_num_threads()),
+            &format!("the CPU ({} threads)", rayon::current_num_threads()),
         ))
     }
 
@@ -205,14 +205,23 @@ impl Model for Truth {
         g: &Gpu,
         _: &GpuTables,
     ) -> Result<Rendered, RenderError> {
-        if let Some(what) = gpu::unsupported(job.frame) {
+        let on_cpu = |why: String| -> Result<Rendered, RenderError> {
             let truth = render(job.tables, job.frame, s, job.progress)?;
-            return Ok(rendered(
+            Ok(rendered(
                 truth,
-                &format!(
-                    "the CPU ({} threads): the GPU truth does not trace {what} yet",
-                    rayon::current_num_threads()
-                ),
+                &format!("the CPU ({} threads): {why}", rayon::current_num_threads()),
+            ))
+        };
+        if let Some(what) = gpu::unsupported(job.frame) {
+            return on_cpu(format!("the GPU truth does not trace {what} yet"));
+        }
+        if g.adapter.get_info().device_type == wgpu::DeviceType::Cpu {
+            // A software adapter runs on the same cores, slower than the CPU truth, and
+            // llvmpipe ends a shader's loops after 65535 iterations, which a path through a
+            // dense cloud exceeds (truth::gpu module docs).
+            return on_cpu(format!(
+                "the adapter, {}, is software on the same cores",
+                g.describe()
             ));
         }
         let truth = gpu::render(renderer, g, job.tables, job.frame, s, job.progress)?;

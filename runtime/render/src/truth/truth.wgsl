@@ -48,6 +48,8 @@ struct SliceParams {
     pad1: u32,
 }
 @group(0) @binding(8) var<uniform> sp: SliceParams;
+// Paths of this pass cut short by the adapter (see `trace`).
+@group(0) @binding(9) var<storage, read_write> cut_paths: atomic<u32>;
 
 const BAND_ROWS: u32 = 6u;
 const BLOCK: u32 = 32u;
@@ -56,7 +58,7 @@ const INF: f32 = 3.0e38;
 const ROULETTE_WEIGHT: f32 = 1e-3;
 const SPLIT_WEIGHT: f32 = 2.0;
 const MAX_SPLIT: u32 = 16u;
-const STACK: u32 = 64u;
+const STACK: u32 = 8u;
 
 // ---- random numbers: counter-based, two 32-bit keys per (seed, pixel, sample) ----
 
@@ -114,6 +116,17 @@ fn weights(c: Carried) -> vec4<f32> {
         return vec4<f32>(0.0);
     }
     return c.f * mask(c) / s;
+}
+
+// Divides every f_m and p_m by their mean p: the weights W_m = f_m / Σ_k p_k do not change,
+// but the ratios p_m/p_0, products over thousands of collisions in a dense cloud, stay inside
+// f32's range (e^{±88}; the CPU's f64 has e^{±709}).
+fn renormalize(c: ptr<function, Carried>) {
+    let s = dot((*c).r, mask(*c)) / f32((*c).n);
+    if (s > 0.0 && s < INF) {
+        (*c).f = (*c).f / s;
+        (*c).r = (*c).r / s;
+    }
 }
 
 fn band_row(b: u32, row: u32) -> vec4<f32> {
@@ -642,6 +655,7 @@ fn radiance(origin: vec3<f32>, dir: vec3<f32>) -> vec3<f32> {
                 break;
             }
             let ev = next_event(&c, p, d);
+            renormalize(&c);
             p = ev.p;
             let w = weights(c);
             var v: Vertex;
@@ -701,6 +715,17 @@ fn trace(@builtin(global_invocation_id) id: vec3<u32>) {
     let pixel = id.x + rp.sizes.x * id.y;
     stream(pixel, rp.sizes.z + sp.index);
     let l = radiance(rp.eye.xyz, pixel_ray(id.x, id.y));
+    // A probe loop of two iterations (its bound from the uniform, so that it is not unrolled):
+    // llvmpipe ends every loop of an invocation once the invocation has run 65535 loop
+    // iterations in all, silently cutting a long path short; then this loop runs fewer times,
+    // and the pass reports the cut path.
+    var probe = 0u;
+    for (var i = 0u; i < min(rp.counts2.x, 2u); i = i + 1u) {
+        probe = probe + 1u;
+    }
+    if (probe != min(rp.counts2.x, 2u)) {
+        atomicAdd(&cut_paths, 1u);
+    }
     if (sp.index == 0u) {
         sums[2u * pixel] = vec4<f32>(l, 0.0);
         sums[2u * pixel + 1u] = vec4<f32>(l * l, 0.0);
