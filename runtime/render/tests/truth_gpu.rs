@@ -153,3 +153,38 @@ fn the_gpu_truth_returns_exactly_the_background_in_a_white_furnace() {
     eprintln!("largest |Σ_c L_c − 3| over the pixels: {worst:e}");
     assert!(worst < 1e-4, "{worst}");
 }
+
+/// `data/scenes/rainbow.toml` (rain, a spectral bake, Rayleigh air, the sun 12° up behind the
+/// camera) baked at draft quality with 8 wavelengths, at `width` × `height`.
+fn rainbow(width: usize, height: usize) -> (tempfile::TempDir, Tables, Frame) {
+    let path =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data/scenes/rainbow.toml");
+    let text = std::fs::read_to_string(&path)
+        .unwrap()
+        .replace("wavelengths = 31", "wavelengths = 8")
+        .replace("quality = \"standard\"", "quality = \"draft\"");
+    let (tmp, dir) = common::bake(&text);
+    let tables = Tables::open(&dir).unwrap();
+    let mut scene = RenderScene::parse(&text, "rainbow", path.parent().unwrap()).unwrap();
+    (scene.width, scene.height, scene.grid_resolution) = (width, height, 48);
+    let frame = scene.frame(&tables).unwrap();
+    (tmp, tables, frame)
+}
+
+#[test]
+fn the_gpu_truth_agrees_with_the_cpu_truth_on_the_rainbow() {
+    let Some(g) = common::gpu() else { return };
+    let (_tmp, tables, frame) = rainbow(32, 24);
+    let renderer = gpu::Renderer::new(&g);
+    let s = settings(256, 7);
+    let cpu = render::truth::render(&tables, &frame, &s, &()).unwrap();
+    let gpu_image = gpu::render(&renderer, &g, &tables, &frame, &s, &()).unwrap();
+    let (rms, sum_z, n) = agreement(&gpu_image, &cpu);
+    eprintln!(
+        "rainbow 32×24, 256 spp, 4 of 8 wavelengths per path: z rms {rms:.3} over {n}, image sums \
+         {sum_z:+.2}σ apart; noise GPU {:.3} CPU {:.3}; paths/s GPU {:.0} CPU {:.0}",
+        gpu_image.noise, cpu.noise, gpu_image.paths_per_second, cpu.paths_per_second
+    );
+    assert!((rms - 1.0).abs() < 0.1, "z rms {rms}");
+    assert!(sum_z.abs() < 3.0, "image sums {sum_z}σ apart");
+}
