@@ -9,7 +9,7 @@
 # on it), then runs `photometeor bench render` per scene with the models that scene takes,
 # interleaved in one run so their ratios are fair: riley, miyazaki, max and coupled on the clouds
 # (image sizes, slice counts and grid resolutions varied one at a time), miyazaki on the shafts,
-# biri on the lamp beams, and the path-traced truth (CPU; its paths/s) on the dense cumulus.
+# biri on the lamp beams, and the path-traced truth (GPU and CPU; paths/s) on the dense cumulus.
 # Writes OUT/<scene>.json, OUT/machine.txt (adapter, CPU, date) and prints a summary. On an H200
 # machine of 16 threads the parts of this run were timed on 2026-12-04 (docs/rendering.md, "On a
 # real GPU"): max's and coupled's lighting (CPU) are most of it, about 5 minutes in all; on 2
@@ -67,9 +67,10 @@ bench data/scenes/cumulus_dawn.toml riley,miyazaki,max,coupled
 REPEAT=1 bench data/scenes/rainbow.toml riley,miyazaki,max,coupled --sizes "$SIZES"
 bench data/scenes/shafts.toml miyazaki --sizes "$SIZES"
 bench data/scenes/beams.toml biri --sizes "$SIZES"
-# The truth has no GPU renderer yet: its CPU paths/s on this machine's cores.
+# The truth's paths/s on the GPU beside the CPU truth's on this machine's cores (--cpu); on a
+# software adapter both are the CPU truth (render::truth::gpu docs).
 "$BIN" bench render data/scenes/dense_cumulus.toml --model truth --size "$SIZE" --spp "$SPP" \
-    --repeat 1 --json > "$OUT/dense_cumulus-truth.json"
+    --repeat 1 --cpu --json > "$OUT/dense_cumulus-truth.json"
 
 echo "gpu-bench: $(($(date +%s) - start)) s; JSON in $OUT" >&2
 cat "$OUT/machine.txt" >&2
