@@ -1,8 +1,21 @@
 //! The path-traced truth on wgpu: the estimator of [`super`] (its module docs give the
-//! transport, the equations and their sources) in `truth.wgsl`, one invocation per pixel, in
-//! f32, progressive. Each pass traces a batch of samples per pixel; the host adds the pass's
-//! Σ L and Σ L² into f64 sums, so the mean, the per-pixel standard error and the stopping rules
-//! (`spp`, `noise`, `max_seconds`) are the CPU truth's.
+//! transport, the equations and their sources) in `truth.wgsl`, in f32, progressive. Each pass
+//! takes a batch of samples per pixel; the host adds the pass's Σ L and Σ L² into f64 sums, so
+//! the mean, the per-pixel standard error and the stopping rules (`spp`, `noise`,
+//! `max_seconds`) are the CPU truth's.
+//!
+//! **Resumable paths.** One invocation per pixel of a tile (at most [`TILE_PIXELS`]) follows its
+//! pixel's samples one after the other, but stops between events after about
+//! [`STEPS_PER_DISPATCH`] loop steps and saves its path (the branch, the split branches waiting
+//! on its stack, the random stream's counter, the radiance so far) for the next dispatch; the
+//! host dispatches until no path of the tile is under way. So no dispatch runs for long (a
+//! desktop driver resets a device busy for seconds), and no invocation passes llvmpipe's limit
+//! of 65535 loop iterations, after which lavapipe silently ends every loop of the invocation
+//! (found here: a path traced after 60 000 dummy loop iterations in the same invocation kept
+//! 15 % of its light, after 70 000 none; tracing whole paths in one invocation made the soft
+//! ball at τ = 100 30 % dark). A probe loop at the end of each invocation still detects such a
+//! cut, and the render fails naming it. Where the image is cut between dispatches does not
+//! change it: the same seed gives the same image.
 //!
 //! What differs from the CPU truth, and why it is the same estimator:
 //! - **Random numbers** are counter-based: each (seed, pixel, sample) gets two 32-bit keys
@@ -13,19 +26,14 @@
 //!   block's own CDF, then cos θ uniformly inside it: the same distribution as the CPU's one
 //!   inverse CDF, with each level's CDF relative so that f32 keeps a rare backscatter bin's
 //!   probability (a single f32 CDF over 1001 bins resolves only 6·10⁻⁸ of probability near 1).
-//! - **Splitting** keeps its branches on a stack of [`STACK`] per invocation: a split makes
-//!   k = ⌈n·W⌉ branches as on the CPU, but at most as many as the stack has room for. Any k ≥ 1
+//! - **Splitting** keeps its branches on a stack of [`STACK`] per pixel (in the path state): a
+//!   split makes k = ⌈n·W⌉ branches as on the CPU, but at most as many as the stack has room
+//!   for. Any k ≥ 1
 //!   chosen from the path's past keeps the estimator unbiased (each branch carries 1/k of the
 //!   weight); a full stack only gives up some variance reduction.
 //! - **f32**: the ratios p_m/p_0 of the carried wavelengths are products over every collision;
 //!   after each free path f and p are divided by the mean p (the weights do not change), so that
 //!   they stay inside f32's range in clouds of optical depth 100 (`renormalize` in the shader).
-//! - **Software adapters**: llvmpipe (lavapipe) ends every loop of a shader invocation once
-//!   the invocation has run 65535 loop iterations in all, so a long path (hundreds of
-//!   scatterings in a cloud of optical depth 100) is silently cut short: measured on the soft
-//!   ball at τ = 100, 30 % dark; a probe loop at the end of each invocation detects the cut and
-//!   the pass fails, naming it. `render --model truth` runs the CPU truth on a software adapter
-//!   (faster there too); the tests call this module on lavapipe with scenes inside the limit.
 //! - **Not yet on the GPU**: `[[occluder]]` and `[[medium]]` (the lamp scenes of `--model
 //!   biri`). A frame with them is traced by the CPU truth, and its summary says so.
 
@@ -36,17 +44,15 @@ use runtime::Tables;
 use runtime::gpu::{Gpu, read_back};
 
 use super::{Settings, Tracer, TruthImage, noise_of, std_error};
-use crate::gpu::{
-    RenderError, SLICING_WGSL, a4, check_sizes, entry, filled, slice_uniforms, storage, v4,
-};
+use crate::gpu::{RenderError, SLICING_WGSL, a4, check_sizes, entry, filled, storage, v4};
 use crate::model::Progress;
 use crate::{Frame, FrameError, Image, MAX_FIELDS};
 
 /// The estimator's WGSL (after [`SLICING_WGSL`]).
 pub const TRUTH_WGSL: &str = include_str!("truth.wgsl");
 
-/// Branches one invocation keeps (module docs, "Splitting"); `STACK` in `truth.wgsl`.
-pub const STACK: usize = 64;
+/// Branches one pixel's path keeps waiting (module docs, "Splitting"); `STACK` in `truth.wgsl`.
+pub const STACK: usize = 8;
 
 /// θ bins per block of the two-level phase sampling; `BLOCK` in `truth.wgsl`.
 const BLOCK: usize = 32;
@@ -54,7 +60,22 @@ const BLOCK: usize = 32;
 /// Rows of vec4<f32> per wavelength band; `BAND_ROWS` in `truth.wgsl`.
 const BAND_ROWS: usize = 2 + MAX_FIELDS;
 
-/// Most samples per pixel in one pass (one dispatch each).
+/// Path state rows per tile slot; `F_ROWS` and `U_ROWS` in `truth.wgsl`.
+const F_ROWS: usize = 5 + 4 * STACK;
+const U_ROWS: usize = 3 + 2 * STACK;
+
+/// Pixels whose paths are under way at once (their state: 896 bytes each).
+const TILE_PIXELS: usize = 1 << 16;
+
+/// Loop steps one invocation takes per dispatch before it saves its path for the next: each
+/// free-path or transmittance step counts 1 and each event 64 (`EVENT_STEPS`, its own small
+/// loops), so that an invocation stays well inside llvmpipe's 65535 loop iterations.
+const STEPS_PER_DISPATCH: usize = 8000;
+
+/// Dispatches per submission (the host then reads how many paths are still under way).
+const DISPATCHES_PER_SUBMIT: usize = 8;
+
+/// Most samples per pixel in one pass.
 const MAX_BATCH: usize = 64;
 
 /// A pass that took longer than this (s) is not followed by a larger one (a desktop driver
@@ -103,15 +124,31 @@ runtime::uniform! {
         pub counts2: [u32; 4],
         /// Seed low and high words, splitting on.
         pub seed: [u32; 4],
-        /// θ step (rad).
+        /// θ step (rad); loop steps per dispatch.
         pub theta: [f32; 4],
+        /// The tile's first pixel and its pixel count.
+        pub tile: [u32; 4],
+    }
+}
+
+runtime::uniform! {
+    /// `Step` of `truth.wgsl`: one per dispatch, at a dynamic offset.
+    pub struct StepParams as "Step" {
+        /// 1: the dispatch begins a sample.
+        pub begin: u32,
+        /// 1: it counts the paths still under way after it.
+        pub count: u32,
+        /// Padding.
+        pub pad0: u32,
+        /// Padding.
+        pub pad1: u32,
     }
 }
 
 /// The pipelines, built once.
 pub struct Renderer {
     layout: wgpu::BindGroupLayout,
-    trace: wgpu::ComputePipeline,
+    step: wgpu::ComputePipeline,
     transparency: wgpu::ComputePipeline,
 }
 
@@ -120,11 +157,11 @@ impl Renderer {
     pub fn new(gpu: &Gpu) -> Self {
         let device = &gpu.device;
         use wgpu::BufferBindingType::{Storage, Uniform};
-        let entries: Vec<_> = (0..10)
+        let entries: Vec<_> = (0..12)
             .map(|b| match b {
                 0 => entry(0, Uniform, false),
                 8 => entry(8, Uniform, true),
-                6 | 7 | 9 => entry(b, Storage { read_only: false }, false),
+                6 | 7 | 9 | 10 | 11 => entry(b, Storage { read_only: false }, false),
                 b => entry(b, Storage { read_only: true }, false),
             })
             .collect();
@@ -152,7 +189,7 @@ impl Renderer {
             })
         };
         Self {
-            trace: pipeline("trace"),
+            step: pipeline("step"),
             transparency: pipeline("transparency"),
             layout,
         }
@@ -293,6 +330,10 @@ pub fn render_with(
         &[
             ("density grid bytes", 16 * grid.data.len() as u64),
             ("per-pixel sums bytes", 32 * pixels),
+            (
+                "path state bytes",
+                (16 * F_ROWS * TILE_PIXELS.min(pixels as usize)) as u64,
+            ),
         ],
     )?;
     let o = optics(tracer);
@@ -341,7 +382,13 @@ pub fn render_with(
             o.blocks as u32,
         ],
         seed: [settings.seed as u32, (settings.seed >> 32) as u32, 1, 0],
-        theta: [tracer.bands[0].fields[0].phase.step() as f32, 0.0, 0.0, 0.0],
+        theta: [
+            tracer.bands[0].fields[0].phase.step() as f32,
+            STEPS_PER_DISPATCH as f32,
+            0.0,
+            0.0,
+        ],
+        tile: [0; 4],
     };
     let light_rows: Vec<[f32; 4]> = tracer
         .lights
@@ -389,13 +436,41 @@ pub fn render_with(
     );
     let sums = storage(device, "truth sums", 32 * pixels, true);
     let transparency = storage(device, "truth transparency", 4 * pixels.max(4), true);
-    // One uniform per sample of a pass (its index), read at a dynamic offset.
-    let (samples, stride) = slice_uniforms(device, &[0.0; MAX_BATCH]);
-    let cut = filled(
+    // The four kinds of dispatch (begin or continue, count or not), read at a dynamic offset.
+    let step_stride = device.limits().min_uniform_buffer_offset_alignment.max(16) as usize;
+    let mut step_bytes = vec![0u8; 4 * step_stride];
+    for (i, (begin, count)) in [(1, 0), (0, 0), (0, 1), (1, 1)].into_iter().enumerate() {
+        let u = StepParams {
+            begin,
+            count,
+            ..Default::default()
+        };
+        step_bytes[i * step_stride..][..16].copy_from_slice(bytemuck::bytes_of(&u));
+    }
+    let steps = filled(
         device,
-        "truth cut paths",
+        "truth steps",
+        &step_bytes,
+        wgpu::BufferUsages::UNIFORM,
+    );
+    let counters = filled(
+        device,
+        "truth counters",
         &[0; 16],
         usage | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
+    );
+    let tile = TILE_PIXELS.min(pixels as usize);
+    let state_f = storage(
+        device,
+        "truth path state",
+        (16 * F_ROWS * tile) as u64,
+        false,
+    );
+    let state_u = storage(
+        device,
+        "truth path state (u32)",
+        (16 * U_ROWS * tile) as u64,
+        false,
     );
     let buffers = [
         &params_buffer,
@@ -406,8 +481,10 @@ pub fn render_with(
         &lights,
         &sums,
         &transparency,
-        &samples,
-        &cut,
+        &steps,
+        &counters,
+        &state_f,
+        &state_u,
     ];
     let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
         label: Some("photometeor truth bindings"),
@@ -429,27 +506,50 @@ pub fn render_with(
             })
             .collect::<Vec<_>>(),
     });
-    // `count` dispatches of `pipeline`, the k-th with sample uniform k, in one compute pass
-    // (wgpu orders their storage writes).
-    let dispatch = |pipeline: &wgpu::ComputePipeline, count: usize| {
+    // The transparency pass: one dispatch over the image.
+    let transparency_pass = || {
         let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
-            label: Some("photometeor truth pass"),
+            label: Some("photometeor truth transparency"),
         });
         {
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some("photometeor truth pass"),
+                label: Some("photometeor truth transparency"),
                 timestamp_writes: None,
             });
-            pass.set_pipeline(pipeline);
-            for k in 0..count {
-                pass.set_bind_group(0, &bind_group, &[(k * stride) as u32]);
-                pass.dispatch_workgroups(w.div_ceil(8) as u32, h.div_ceil(8) as u32, 1);
+            pass.set_pipeline(&renderer.transparency);
+            pass.set_bind_group(0, &bind_group, &[0]);
+            pass.dispatch_workgroups(w.div_ceil(8) as u32, h.div_ceil(8) as u32, 1);
+        }
+        gpu.queue.submit([encoder.finish()]);
+    };
+    // DISPATCHES_PER_SUBMIT steps of the paths of a tile of `len` pixels, the first beginning
+    // a sample if `begin`, the last counting the paths still under way.
+    let steps_of = |len: usize, begin: bool| {
+        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+            label: Some("photometeor truth steps"),
+        });
+        {
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("photometeor truth steps"),
+                timestamp_writes: None,
+            });
+            pass.set_pipeline(&renderer.step);
+            for i in 0..DISPATCHES_PER_SUBMIT {
+                let last = i + 1 == DISPATCHES_PER_SUBMIT;
+                let kind = match (begin && i == 0, last) {
+                    (true, false) => 0,
+                    (false, false) => 1,
+                    (false, true) => 2,
+                    (true, true) => 3,
+                };
+                pass.set_bind_group(0, &bind_group, &[(kind * step_stride) as u32]);
+                pass.dispatch_workgroups(len.div_ceil(64) as u32, 1, 1);
             }
         }
         gpu.queue.submit([encoder.finish()]);
     };
 
-    dispatch(&renderer.transparency, 1);
+    transparency_pass();
     let t_vol: Vec<f64> = read_back(gpu, &transparency, 4 * pixels.max(4))?
         .into_iter()
         .flatten()
@@ -469,24 +569,36 @@ pub fn render_with(
         if last.1 > PASS_SECONDS {
             batch = batch.min(last.0.max(1));
         }
-        params.sizes[2] = done as u32;
-        params.sizes[3] = batch as u32;
-        gpu.queue
-            .write_buffer(&params_buffer, 0, bytemuck::bytes_of(&params));
-        gpu.queue.write_buffer(&cut, 0, &[0; 16]);
         let pass_start = Instant::now();
-        dispatch(&renderer.trace, batch);
-        let rows = read_back(gpu, &sums, 32 * pixels)?;
-        let cut_paths = read_back(gpu, &cut, 16)?[0][0].to_bits();
-        if cut_paths > 0 {
-            return Err(FrameError(format!(
-                "the GPU adapter ({}) cut {cut_paths} paths short: it ends a shader's loops after \
-                 a fixed number of iterations (llvmpipe: 65535), fewer than a path through this \
-                 scene takes; render with --cpu",
-                gpu.describe()
-            ))
-            .into());
+        for first in (0..pixels as usize).step_by(TILE_PIXELS) {
+            let len = TILE_PIXELS.min(pixels as usize - first);
+            params.tile = [first as u32, len as u32, 0, 0];
+            params.sizes[2] = done as u32;
+            params.sizes[3] = batch as u32;
+            gpu.queue
+                .write_buffer(&params_buffer, 0, bytemuck::bytes_of(&params));
+            let mut begin = true;
+            loop {
+                gpu.queue.write_buffer(&counters, 4, &[0; 4]);
+                steps_of(len, begin);
+                begin = false;
+                let c = read_back(gpu, &counters, 16)?[0];
+                let cut_paths = c[0].to_bits();
+                if cut_paths > 0 {
+                    return Err(FrameError(format!(
+                        "the GPU adapter ({}) cut {cut_paths} paths short: it ends a shader's \
+                         loops after a fixed number of iterations (llvmpipe: 65535); render \
+                         with --cpu",
+                        gpu.describe()
+                    ))
+                    .into());
+                }
+                if c[1].to_bits() == 0 {
+                    break;
+                }
+            }
         }
+        let rows = read_back(gpu, &sums, 32 * pixels)?;
         last = (batch, pass_start.elapsed().as_secs_f64());
         for (p, a) in acc.iter_mut().enumerate() {
             let (s, q) = (rows[2 * p], rows[2 * p + 1]);
@@ -527,4 +639,23 @@ pub fn render_with(
         seconds,
         paths_per_second: pixels as f64 * n / seconds.max(1e-9),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The sizes the host lays buffers out by are the shader's.
+    #[test]
+    fn the_host_and_the_shader_agree_on_the_layout() {
+        for (name, value) in [("STACK", STACK), ("BLOCK", BLOCK), ("BAND_ROWS", BAND_ROWS)] {
+            let line = format!("const {name}: u32 = {value}u;");
+            assert!(TRUTH_WGSL.contains(&line), "truth.wgsl lacks {line:?}");
+        }
+        for (name, rows) in [("F_ROWS", "5u + 4u * STACK"), ("U_ROWS", "3u + 2u * STACK")] {
+            let line = format!("const {name}: u32 = {rows};");
+            assert!(TRUTH_WGSL.contains(&line), "truth.wgsl lacks {line:?}");
+        }
+        assert_eq!((F_ROWS, U_ROWS), (5 + 4 * STACK, 3 + 2 * STACK));
+    }
 }

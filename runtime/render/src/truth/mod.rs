@@ -216,9 +216,8 @@ impl Model for Truth {
             return on_cpu(format!("the GPU truth does not trace {what} yet"));
         }
         if g.adapter.get_info().device_type == wgpu::DeviceType::Cpu {
-            // A software adapter runs on the same cores, slower than the CPU truth, and
-            // llvmpipe ends a shader's loops after 65535 iterations, which a path through a
-            // dense cloud exceeds (truth::gpu module docs).
+            // A software adapter runs on the same cores as the CPU truth, at half its speed or
+            // less (docs/truth.md, "On the GPU").
             return on_cpu(format!(
                 "the adapter, {}, is software on the same cores",
                 g.describe()

@@ -21,7 +21,8 @@ struct Params {
     counts: vec4<u32>,       // bands, wavelengths carried, max scatterings, lights
     counts2: vec4<u32>,      // θ bins, haze field (0xffffffff: none), air on, blocks
     seed: vec4<u32>,         // seed's low and high words, splitting on
-    theta: vec4<f32>,        // θ step (rad)
+    theta: vec4<f32>,        // θ step (rad); y = loop steps per dispatch (the budget)
+    tile: vec4<u32>,         // the tile's first pixel and its pixel count
 }
 
 @group(0) @binding(0) var<uniform> rp: Params;
@@ -39,17 +40,20 @@ struct Params {
 // Per pixel two rows: Σ L and Σ L² over this pass's samples (rgb).
 @group(0) @binding(6) var<storage, read_write> sums: array<vec4<f32>>;
 @group(0) @binding(7) var<storage, read_write> transparency_out: array<f32>;
-// The dispatch's sample within the pass (index), at a dynamic offset: one sample per
-// dispatch, so that no invocation runs for long (render::gpu::SliceParams).
-struct SliceParams {
-    plane: f32,
-    index: u32,
+// Per dispatch, at a dynamic offset: whether it begins a sample (else it continues the paths
+// under way) and whether it counts the paths still under way after it.
+struct Step {
+    begin: u32,
+    count: u32,
     pad0: u32,
     pad1: u32,
 }
-@group(0) @binding(8) var<uniform> sp: SliceParams;
-// Paths of this pass cut short by the adapter (see `trace`).
-@group(0) @binding(9) var<storage, read_write> cut_paths: atomic<u32>;
+@group(0) @binding(8) var<uniform> stp: Step;
+// Paths cut short by the adapter (see `step`), and paths still under way.
+@group(0) @binding(9) var<storage, read_write> counters: array<atomic<u32>, 2>;
+// Each tile slot's path between dispatches: F_ROWS float rows and U_ROWS u32 rows (`save`).
+@group(0) @binding(10) var<storage, read_write> state_f: array<vec4<f32>>;
+@group(0) @binding(11) var<storage, read_write> state_u: array<vec4<u32>>;
 
 const BAND_ROWS: u32 = 6u;
 const BLOCK: u32 = 32u;
@@ -59,12 +63,17 @@ const ROULETTE_WEIGHT: f32 = 1e-3;
 const SPLIT_WEIGHT: f32 = 2.0;
 const MAX_SPLIT: u32 = 16u;
 const STACK: u32 = 8u;
+const EVENT_STEPS: u32 = 64u;
+const F_ROWS: u32 = 5u + 4u * STACK;
+const U_ROWS: u32 = 3u + 2u * STACK;
 
 // ---- random numbers: counter-based, two 32-bit keys per (seed, pixel, sample) ----
 
 var<private> key0: u32;
 var<private> key1: u32;
 var<private> counter: u32;
+// Loop steps (free-path and transmittance steps, events) taken in this dispatch.
+var<private> work: u32;
 
 // A 32-bit integer hash (xor-shift-multiply rounds, Wellons' "lowbias32" constants).
 fn hash(v: u32) -> u32 {
@@ -320,6 +329,22 @@ fn haze_ratios(c: ptr<function, Carried>, p: vec3<f32>, d: vec3<f32>, s: f32, co
 
 // ---- the volumes ----
 
+// σ_ext of each field (columns) for each carried wavelength (rows; past n the hero's), so that
+// the extinctions at densities ρ are one product, M ρ, without loops: llvmpipe counts every loop
+// iteration of an invocation against its limit (module docs of truth::gpu).
+fn sigma_matrix(c: Carried) -> mat4x4<f32> {
+    let b0 = c.band[0];
+    let b1 = select(b0, c.band[1], c.n > 1u);
+    let b2 = select(b0, c.band[2], c.n > 2u);
+    let b3 = select(b0, c.band[3], c.n > 3u);
+    return mat4x4<f32>(
+        vec4<f32>(field_optics(b0, 0u).x, field_optics(b1, 0u).x, field_optics(b2, 0u).x, field_optics(b3, 0u).x),
+        vec4<f32>(field_optics(b0, 1u).x, field_optics(b1, 1u).x, field_optics(b2, 1u).x, field_optics(b3, 1u).x),
+        vec4<f32>(field_optics(b0, 2u).x, field_optics(b1, 2u).x, field_optics(b2, 2u).x, field_optics(b3, 2u).x),
+        vec4<f32>(field_optics(b0, 3u).x, field_optics(b1, 3u).x, field_optics(b2, 3u).x, field_optics(b3, 3u).x),
+    );
+}
+
 // Extinction at densities rho for each carried wavelength (Tracer::extinctions).
 fn extinctions(c: Carried, rho: vec4<f32>) -> vec4<f32> {
     var e = vec4<f32>(0.0);
@@ -347,25 +372,27 @@ fn track(c: ptr<function, Carried>, p: vec3<f32>, d: vec3<f32>, limit: f32) -> H
     }
     let end = min(span.y, limit);
     let mu = rp.track.x;
+    let sig = sigma_matrix(*c);
     var t = span.x;
     loop {
+        work = work + 1u;
         t = t + exp_rand() / mu;
         if (t >= end) {
             return out;
         }
         let rho = densities(p + t * d);
-        let e = extinctions(*c, rho);
+        let e = sig * rho;
         if (rand() * mu < e[0]) {
             out.hit = true;
             out.t = t;
             out.rho = rho;
             return out;
         }
-        for (var m = 1u; m < (*c).n; m = m + 1u) {
-            let k = (mu - e[m]) / (mu - e[0]);
-            (*c).f[m] = (*c).f[m] * k;
-            (*c).r[m] = (*c).r[m] * k;
-        }
+        // Every other wavelength's density by its share of null collisions over the hero's
+        // (the hero's own factor is 1; past n nothing is read).
+        let k = (mu - e) / (mu - e[0]);
+        (*c).f = (*c).f * k;
+        (*c).r = (*c).r * k;
     }
     return out;
 }
@@ -379,13 +406,15 @@ fn volume_transmittance(c: Carried, p: vec3<f32>, d: vec3<f32>, limit: f32) -> v
     }
     let end = min(span.y, limit);
     let mu = rp.track.x;
+    let sig = sigma_matrix(c);
     var t = span.x;
     loop {
+        work = work + 1u;
         t = t + exp_rand() / mu;
         if (t >= end) {
             return tr;
         }
-        let e = extinctions(c, densities(p + t * d));
+        let e = sig * densities(p + t * d);
         tr = tr * (1.0 - e / mu);
         let tm = tr * mask(c);
         if (max(max(tm.x, tm.y), max(tm.z, tm.w)) < 0.05) {
@@ -629,109 +658,230 @@ fn weight_window(c: ptr<function, Carried>, room: u32) -> u32 {
     return k;
 }
 
-// ---- a camera path (Tracer::radiance) ----
+// ---- a camera path (Tracer::radiance), resumable ----
 
-struct Branch {
+// A path under way: its branch (wavelengths, position, direction, scatterings), the branches
+// split off and waiting (the top `top` entries of its slot's stack), whether it is still under
+// way, and the radiance it has gathered.
+struct Path {
     c: Carried,
     p: vec3<f32>,
     d: vec3<f32>,
     bounce: u32,
+    top: u32,
+    alive: u32,
+    sum: vec3<f32>,
+    // The sample within the pass.
+    k: u32,
 }
 
-fn radiance(origin: vec3<f32>, dir: vec3<f32>) -> vec3<f32> {
-    var stack: array<Branch, STACK>;
-    var top = 1u;
-    stack[0] = Branch(carry(rp.counts.y), origin, dir, 0u);
-    var sum = vec3<f32>(0.0);
+// Sample k of the pass at `pixel`: its random stream and its camera ray.
+fn begin_sample(pixel: u32, k: u32) -> Path {
+    var path: Path;
+    stream(pixel, rp.sizes.z + k);
+    path.c = carry(rp.counts.y);
+    path.p = rp.eye.xyz;
+    path.d = pixel_ray(pixel % rp.sizes.x, pixel / rp.sizes.x);
+    path.bounce = 0u;
+    path.top = 0u;
+    path.alive = 1u;
+    path.sum = vec3<f32>(0.0);
+    path.k = k;
+    return path;
+}
+
+fn push(slot: u32, e: u32, c: Carried, p: vec3<f32>, d: vec3<f32>, bounce: u32) {
+    let f = slot * F_ROWS + 5u + 4u * e;
+    state_f[f] = c.f;
+    state_f[f + 1u] = c.r;
+    state_f[f + 2u] = vec4<f32>(p, 0.0);
+    state_f[f + 3u] = vec4<f32>(d, 0.0);
+    let u = slot * U_ROWS + 3u + 2u * e;
+    state_u[u] = c.band;
+    state_u[u + 1u] = vec4<u32>(c.n, bounce, 0u, 0u);
+}
+
+fn pop(slot: u32, path: ptr<function, Path>) {
+    (*path).top = (*path).top - 1u;
+    let e = (*path).top;
+    let f = slot * F_ROWS + 5u + 4u * e;
+    (*path).c.f = state_f[f];
+    (*path).c.r = state_f[f + 1u];
+    (*path).p = state_f[f + 2u].xyz;
+    (*path).d = state_f[f + 3u].xyz;
+    let u = slot * U_ROWS + 3u + 2u * e;
+    (*path).c.band = state_u[u];
+    (*path).c.n = state_u[u + 1u].x;
+    (*path).bounce = state_u[u + 1u].y;
+}
+
+fn save(slot: u32, path: Path) {
+    let f = slot * F_ROWS;
+    state_f[f] = path.c.f;
+    state_f[f + 1u] = path.c.r;
+    state_f[f + 2u] = vec4<f32>(path.p, 0.0);
+    state_f[f + 3u] = vec4<f32>(path.d, 0.0);
+    state_f[f + 4u] = vec4<f32>(path.sum, 0.0);
+    let u = slot * U_ROWS;
+    state_u[u] = path.c.band;
+    state_u[u + 1u] = vec4<u32>(path.c.n, path.bounce, path.top, path.alive);
+    state_u[u + 2u] = vec4<u32>(key0, key1, counter, path.k);
+}
+
+fn load(slot: u32) -> Path {
+    var path: Path;
+    let f = slot * F_ROWS;
+    path.c.f = state_f[f];
+    path.c.r = state_f[f + 1u];
+    path.p = state_f[f + 2u].xyz;
+    path.d = state_f[f + 3u].xyz;
+    path.sum = state_f[f + 4u].xyz;
+    let u = slot * U_ROWS;
+    path.c.band = state_u[u];
+    let a = state_u[u + 1u];
+    path.c.n = a.x;
+    path.bounce = a.y;
+    path.top = a.z;
+    path.alive = a.w;
+    let k = state_u[u + 2u];
+    key0 = k.x;
+    key1 = k.y;
+    counter = k.z;
+    path.k = k.w;
+    return path;
+}
+
+// One free path of the current branch and what happens at its end (the loop body of
+// Tracer::radiance); true when the branch ends.
+fn event(slot: u32, path: ptr<function, Path>) -> bool {
     let max_scatterings = rp.counts.z;
-    while (top > 0u) {
-        top = top - 1u;
-        var c = stack[top].c;
-        var p = stack[top].p;
-        var d = stack[top].d;
-        var bounce = stack[top].bounce;
-        loop {
-            if (bounce >= max_scatterings) {
-                break;
-            }
-            let ev = next_event(&c, p, d);
-            renormalize(&c);
-            p = ev.p;
-            let w = weights(c);
-            var v: Vertex;
-            v.kind = ev.kind;
-            v.field = ev.field;
-            v.d = d;
-            v.n = vec3<f32>(0.0, 1.0, 0.0);
-            v.a = rp.background.w;
-            if (ev.kind == EV_ESCAPE) {
-                let disk = bounce == 0u && dot(d, rp.sun.xyz) >= rp.sun.w;
-                let l = rp.background.xyz + select(vec3<f32>(0.0), rp.irradiance.xyz / rp.irradiance.w,
-                    disk);
-                for (var m = 0u; m < c.n; m = m + 1u) {
-                    sum = sum + w[m] * band_row(c.band[m], 1u).xyz * l;
-                }
-                break;
-            }
-            if (ev.kind == EV_SURFACE && v.a == 0.0) {
-                break;
-            }
-            sum = sum + direct(c, v, p, w);
-            if (ev.kind == EV_VOLUME) {
-                d = continue_volume(&c, ev.field, d, rp.track.y);
-            } else if (ev.kind == EV_SURFACE) {
-                c.f = c.f * v.a;
-                let r = sqrt(rand());
-                let phi = 2.0 * PI * rand();
-                let e1 = basis1(v.n);
-                let e2 = cross(v.n, e1);
-                d = normalize(r * cos(phi) * e1 + r * sin(phi) * e2 + sqrt(max(1.0 - r * r, 0.0)) * v.n);
-            } else {
-                let mu = sample_rayleigh(rand());
-                d = rotate(d, 1.0 - mu, sqrt(max(1.0 - mu * mu, 0.0)), rand());
-            }
-            bounce = bounce + 1u;
-            if (bounce >= max_scatterings) {
-                break;
-            }
-            let k = weight_window(&c, STACK - 1u - top);
-            if (k == 0u) {
-                break;
-            }
-            for (var i = 1u; i < k; i = i + 1u) {
-                stack[top] = Branch(c, p, d, bounce);
-                top = top + 1u;
-            }
-        }
+    if ((*path).bounce >= max_scatterings) {
+        return true;
     }
-    return sum;
+    var c = (*path).c;
+    let d = (*path).d;
+    let ev = next_event(&c, (*path).p, d);
+    renormalize(&c);
+    let p = ev.p;
+    (*path).p = p;
+    let w = weights(c);
+    var v: Vertex;
+    v.kind = ev.kind;
+    v.field = ev.field;
+    v.d = d;
+    v.n = vec3<f32>(0.0, 1.0, 0.0);
+    v.a = rp.background.w;
+    if (ev.kind == EV_ESCAPE) {
+        let disk = (*path).bounce == 0u && dot(d, rp.sun.xyz) >= rp.sun.w;
+        let l = rp.background.xyz + select(vec3<f32>(0.0), rp.irradiance.xyz / rp.irradiance.w, disk);
+        var add = vec3<f32>(0.0);
+        for (var m = 0u; m < c.n; m = m + 1u) {
+            add = add + w[m] * band_row(c.band[m], 1u).xyz * l;
+        }
+        (*path).sum = (*path).sum + add;
+        return true;
+    }
+    if (ev.kind == EV_SURFACE && v.a == 0.0) {
+        return true;
+    }
+    (*path).sum = (*path).sum + direct(c, v, p, w);
+    var next: vec3<f32>;
+    if (ev.kind == EV_VOLUME) {
+        next = continue_volume(&c, ev.field, d, rp.track.y);
+    } else if (ev.kind == EV_SURFACE) {
+        c.f = c.f * v.a;
+        let r = sqrt(rand());
+        let phi = 2.0 * PI * rand();
+        let e1 = basis1(v.n);
+        let e2 = cross(v.n, e1);
+        next = normalize(r * cos(phi) * e1 + r * sin(phi) * e2 + sqrt(max(1.0 - r * r, 0.0)) * v.n);
+    } else {
+        let mu = sample_rayleigh(rand());
+        next = rotate(d, 1.0 - mu, sqrt(max(1.0 - mu * mu, 0.0)), rand());
+    }
+    (*path).d = next;
+    (*path).bounce = (*path).bounce + 1u;
+    (*path).c = c;
+    if ((*path).bounce >= max_scatterings) {
+        return true;
+    }
+    let k = weight_window(&c, STACK - 1u - (*path).top);
+    (*path).c = c;
+    if (k == 0u) {
+        return true;
+    }
+    for (var i = 1u; i < k; i = i + 1u) {
+        push(slot, (*path).top, c, p, next, (*path).bounce);
+        (*path).top = (*path).top + 1u;
+    }
+    return false;
 }
 
-@compute @workgroup_size(8, 8)
-fn trace(@builtin(global_invocation_id) id: vec3<u32>) {
-    if (id.x >= rp.sizes.x || id.y >= rp.sizes.y) {
+// Advances one pixel's path of the current sample by at most about `rp.theta.y` loop steps:
+// a dispatch stops between events once it has taken that many, and the next one goes on from
+// the saved state. Bounded work per dispatch keeps every invocation inside llvmpipe's loop
+// limit and every dispatch short on a desktop GPU (whose driver resets a device busy for
+// seconds); the path is the same whichever dispatch takes which part of it.
+@compute @workgroup_size(64)
+fn step(@builtin(global_invocation_id) id: vec3<u32>) {
+    if (id.x >= rp.tile.y) {
         return;
     }
-    let pixel = id.x + rp.sizes.x * id.y;
-    stream(pixel, rp.sizes.z + sp.index);
-    let l = radiance(rp.eye.xyz, pixel_ray(id.x, id.y));
+    let slot = id.x;
+    let pixel = rp.tile.x + slot;
+    var path: Path;
+    if (stp.begin == 1u) {
+        path = begin_sample(pixel, 0u);
+    } else {
+        path = load(slot);
+    }
+    if (path.alive == 1u) {
+        work = 0u;
+        let budget = u32(rp.theta.y);
+        loop {
+            if (work >= budget) {
+                break;
+            }
+            // An event's own loops (the carried wavelengths, the fields, the phase CDFs'
+            // binary searches, the lights) count as EVENT_STEPS.
+            work = work + EVENT_STEPS;
+            if (event(slot, &path)) {
+                if (path.top > 0u) {
+                    pop(slot, &path);
+                    continue;
+                }
+                // The sample is done: its radiance into the pass's sums, then the next one.
+                let l = path.sum;
+                if (path.k == 0u) {
+                    sums[2u * pixel] = vec4<f32>(l, 0.0);
+                    sums[2u * pixel + 1u] = vec4<f32>(l * l, 0.0);
+                } else {
+                    sums[2u * pixel] = sums[2u * pixel] + vec4<f32>(l, 0.0);
+                    sums[2u * pixel + 1u] = sums[2u * pixel + 1u] + vec4<f32>(l * l, 0.0);
+                }
+                if (path.k + 1u < rp.sizes.w) {
+                    path = begin_sample(pixel, path.k + 1u);
+                } else {
+                    path.alive = 0u;
+                    break;
+                }
+            }
+        }
+        save(slot, path);
+    }
     // A probe loop of two iterations (its bound from the uniform, so that it is not unrolled):
     // llvmpipe ends every loop of an invocation once the invocation has run 65535 loop
-    // iterations in all, silently cutting a long path short; then this loop runs fewer times,
-    // and the pass reports the cut path.
+    // iterations in all, silently cutting a path short; then this loop runs fewer times, and
+    // the pass reports the cut path.
     var probe = 0u;
     for (var i = 0u; i < min(rp.counts2.x, 2u); i = i + 1u) {
         probe = probe + 1u;
     }
     if (probe != min(rp.counts2.x, 2u)) {
-        atomicAdd(&cut_paths, 1u);
+        atomicAdd(&counters[0], 1u);
     }
-    if (sp.index == 0u) {
-        sums[2u * pixel] = vec4<f32>(l, 0.0);
-        sums[2u * pixel + 1u] = vec4<f32>(l * l, 0.0);
-    } else {
-        sums[2u * pixel] = sums[2u * pixel] + vec4<f32>(l, 0.0);
-        sums[2u * pixel + 1u] = sums[2u * pixel + 1u] + vec4<f32>(l * l, 0.0);
+    if (stp.count == 1u && path.alive == 1u) {
+        atomicAdd(&counters[1], 1u);
     }
 }
 
