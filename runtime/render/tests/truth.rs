@@ -9,164 +9,24 @@
 //! - exact single scattering from a slab, and the thin limit of the full transport;
 //! - plane-parallel slabs against DISORT (data/reference/truth/slab_disort.json).
 
-use std::f64::consts::PI;
-
 use glam::DVec3;
 use grid::ThetaGrid;
-use ndarray::{Array2, Array3};
 use rayon::prelude::*;
 use render::objects::{Medium, Region};
 use render::truth::phase::{PhaseSampler, rotate};
 use render::truth::{Rng, Settings, Tracer, Truth};
-use render::{Atmosphere, Camera, DensityGrid, Frame, MAX_FIELDS, RenderScene, Sun};
-use runtime::{FieldTable, Spectrum, Tables};
+use render::{Atmosphere, DensityGrid, MAX_FIELDS, RenderScene};
+use runtime::{Spectrum, Tables};
 use std::path::Path;
 
 #[path = "../../tests/common/mod.rs"]
 mod common;
+#[path = "support/slabs.rs"]
+mod slabs;
 
-/// Bin averages of Henyey–Greenstein g on `grid` (exact integrals over each bin's μ range).
-fn hg_bins(grid: &ThetaGrid, g: f64) -> Vec<f64> {
-    let widths = grid.bin_mu_widths();
-    let mut mu_hi = 1.0;
-    widths
-        .iter()
-        .map(|&w| {
-            let mu_lo = mu_hi - w;
-            let f = |mu: f64| (1.0 + g * g - 2.0 * g * mu).powf(-0.5);
-            let p = (1.0 - g * g) / (2.0 * g) * (f(mu_hi) - f(mu_lo));
-            mu_hi = mu_lo;
-            p / (2.0 * PI * w)
-        })
-        .collect()
-}
-
-/// Tables of one field with the same single-scattering `bins` at every rgb3 wavelength.
-fn tables_of(bins: &[f64], step: f64, albedo: f64) -> Tables {
-    let rows = vec![bins.to_vec(); 3];
-    let spectrum = Spectrum {
-        wavelengths_nm: vec![650.0, 515.0, 440.0],
-        weights: [
-            vec![1.0, 0.0, 0.0],
-            vec![0.0, 1.0, 0.0],
-            vec![0.0, 0.0, 1.0],
-        ],
-    };
-    tables_spectral(&rows, step, &[0.0; 3], &[1.0; 3], &[albedo; 3], spectrum)
-}
-
-/// Tables of one field with its own single-scattering `bins`, forward δ, σ_ext and albedo at
-/// each wavelength of `spectrum`.
-fn tables_spectral(
-    bins: &[Vec<f64>],
-    step: f64,
-    delta: &[f64],
-    sigma_ext: &[f64],
-    albedo: &[f64],
-    spectrum: Spectrum,
-) -> Tables {
-    let grid = ThetaGrid::new(step).unwrap();
-    let k = grid.len();
-    let iso = 1.0 / (4.0 * PI);
-    let image = format::FieldImage {
-        field: "slab".into(),
-        theta_step_deg: step,
-        ams: Array3::from_elem((3, 1, k), iso),
-        forward_fraction: Array2::from_elem((3, 1), 0.9),
-        extra_layers: Vec::new(),
-    };
-    let n = bins.len();
-    let single = format::SingleScatter {
-        field: "slab".into(),
-        theta_step_deg: step,
-        wavelengths_nm: spectrum.wavelengths_nm.clone(),
-        bins: Array2::from_shape_fn((n, k), |(j, kk)| bins[j][kk]),
-        forward_delta_fraction: delta.to_vec(),
-        sigma_ext_m2: sigma_ext.to_vec(),
-        albedo: albedo.to_vec(),
-    };
-    // The channels' σ as the bake mixes them (Σ_j w_cj σ_j).
-    let mix = |v: &dyn Fn(usize) -> f64| -> [f64; 3] {
-        std::array::from_fn(|c| (0..n).map(|j| spectrum.weights[c][j] * v(j)).sum())
-    };
-    let sigma_ext_m2 = mix(&|j| sigma_ext[j]);
-    let sigma_sca_m2 = mix(&|j| sigma_ext[j] * albedo[j]);
-    Tables {
-        dir: "memory".into(),
-        theta_step_deg: step,
-        angle_count: k,
-        fields: vec![FieldTable {
-            name: "slab".into(),
-            kind: format::FieldKind::Cloud,
-            image,
-            sigma_sca_m2,
-            sigma_ext_m2,
-            albedo: std::array::from_fn(|c| sigma_sca_m2[c] / sigma_ext_m2[c]),
-            single: Some(single),
-            poisson: None,
-            transport_factor: None,
-            biri: None,
-        }],
-        spectrum: Some(spectrum),
-    }
-}
-
-/// A frame whose grid is a slab of optical depth `tau` between y = 1 and 2 m, 20 km wide, with
-/// the sun at elevation 30° (μ0 = 0.5) and azimuth 0 (light travels towards −z), air off.
-fn slab_frame(tau: f64) -> Frame {
-    let mut data = vec![[0f32; MAX_FIELDS]; 8];
-    for v in &mut data {
-        v[0] = tau as f32;
-    }
-    Frame {
-        camera: Camera {
-            position_m: DVec3::new(0.0, 3.0, 0.0),
-            look_at_m: DVec3::new(0.0, 0.0, 0.0),
-            fov_deg: 10.0,
-        },
-        sun: Sun {
-            elevation_deg: 30.0,
-            azimuth_deg: 0.0,
-            irradiance: [1.0; 3],
-        },
-        atmosphere: Atmosphere {
-            beta_sea_level_per_m: [0.0; 3],
-            scale_height_m: 8000.0,
-        },
-        width: 1,
-        height: 1,
-        grid: DensityGrid {
-            min_m: DVec3::new(-1e4, 1.0, -1e4),
-            max_m: DVec3::new(1e4, 2.0, 1e4),
-            dims: [2, 2, 2],
-            data,
-        },
-        haze: None,
-        ground_albedo: 0.0,
-        lights: Vec::new(),
-        media: Vec::new(),
-        occluders: Vec::new(),
-    }
-}
-
-/// Singly scattered radiance per unit F0 leaving a slab of optical depth `tau` lit at cosine
-/// `mu0`, at cosine `mu` reflected (`up`) or transmitted, where ω p(Θ) is `omega_p` (1/sr):
-/// ω p μ0/(μ0 + μ)(1 − e^{−τ(1/μ0 + 1/μ)}) up, ω p μ0/(μ0 − μ)(e^{−τ/μ0} − e^{−τ/μ}) down.
-fn single_scatter_slab(omega_p: f64, mu0: f64, mu: f64, tau: f64, up: bool) -> f64 {
-    if up {
-        omega_p * mu0 / (mu0 + mu) * (1.0 - (-tau * (1.0 / mu0 + 1.0 / mu)).exp())
-    } else {
-        omega_p * mu0 / (mu0 - mu) * ((-tau / mu0).exp() - (-tau / mu).exp())
-    }
-}
-
-/// The outgoing direction at cosine μ to the normal (`up`: reflected, else transmitted) and
-/// azimuth φ (0: the horizontal direction the beam travels, −z).
-fn outgoing(mu: f64, phi_deg: f64, up: bool) -> DVec3 {
-    let s = (1.0 - mu * mu).max(0.0).sqrt();
-    let phi = phi_deg.to_radians();
-    DVec3::new(s * phi.sin(), if up { mu } else { -mu }, -s * phi.cos())
-}
+use slabs::{
+    cloud550_bins, hg_bins, outgoing, single_scatter_slab, slab_frame, tables_of, tables_spectral,
+};
 
 /// Mean and standard error of `n` radiance samples along `-w` seen from just outside the slab.
 fn radiance(tracer: &Tracer, w: DVec3, n: usize, seed: u64) -> (f64, f64) {
@@ -630,22 +490,6 @@ quality = "draft"
         }
     }
     eprintln!("worst deviation {worst:.2}σ");
-}
-
-/// The cloud phase function of data/reference/truth/cloud_550nm_phase.json (0.18° bins).
-fn cloud550_bins() -> Vec<f64> {
-    let text = std::fs::read_to_string(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../../data/reference/truth/cloud_550nm_phase.json"
-    ))
-    .unwrap();
-    let v: serde_json::Value = serde_json::from_str(&text).unwrap();
-    v["bins_per_sr"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|x| x.as_f64().unwrap())
-        .collect()
 }
 
 /// Σw and Σw² of R and T_diffuse (per μ0 F0) from photons `range` entering the slab's top

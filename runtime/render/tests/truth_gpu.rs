@@ -11,6 +11,8 @@ use runtime::Tables;
 
 #[path = "../../tests/common/mod.rs"]
 mod common;
+#[path = "support/slabs.rs"]
+mod slabs;
 
 fn fields() -> String {
     common::scene("truth_gpu", 8, common::CLOUD)
@@ -193,4 +195,128 @@ fn the_gpu_truth_agrees_with_the_cpu_truth_on_the_example_scenes() {
         assert!((rms - 1.0).abs() < 0.1, "{name}: z rms {rms}");
         assert!(sum_z.abs() < 3.0, "{name}: image sums {sum_z}σ apart");
     }
+}
+
+/// Green radiance along −`w` (mean, standard error) seen from just outside the slab of `frame`
+/// (y ∈ [1, 2] m), from `paths` camera paths: a 16 × 16 image whose rays all run along −w
+/// (field of view 10⁻⁴°), averaged.
+fn slab_radiance(
+    renderer: &gpu::Renderer,
+    g: &runtime::gpu::Gpu,
+    tables: &Tables,
+    frame: &Frame,
+    w: DVec3,
+    (paths, max_scatterings): (usize, usize),
+) -> (f64, f64) {
+    let mut frame = frame.clone();
+    frame.camera.position_m = DVec3::new(0.0, if w.y > 0.0 { 2.0 } else { 1.0 }, 0.0);
+    frame.camera.look_at_m = frame.camera.position_m - w;
+    frame.camera.fov_deg = 1e-4;
+    (frame.width, frame.height) = (16, 16);
+    let s = Settings {
+        max_scatterings,
+        ..settings(paths.div_ceil(256), 9)
+    };
+    let image = gpu::render(renderer, g, tables, &frame, &s, &()).unwrap();
+    let n = image.image.rgb.len() as f64;
+    let mean = image.image.rgb.iter().map(|p| p[1] as f64).sum::<f64>() / n;
+    let se = image
+        .std_error
+        .iter()
+        .map(|e| (e[1] as f64).powi(2))
+        .sum::<f64>()
+        .sqrt()
+        / n;
+    (mean, se)
+}
+
+/// The DISORT slabs' radiances (HG 0.85 and the 550 nm cloud; τ 0.5, 4, 16; ω 1, 0.9; μ0 = 0.5)
+/// by the GPU's camera paths, as the CPU truth's test takes them (`truth.rs`,
+/// `slabs_agree_with_disort`): μ = 1 and μ = 0.8 at φ = 90°, 30°–150° from the beam, 2.5·10⁴
+/// paths each, within 4.5σ.
+#[test]
+fn slab_radiances_agree_with_disort_on_the_gpu() {
+    let Some(g) = common::gpu() else { return };
+    let text = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../data/reference/truth/slab_disort.json"
+    ))
+    .unwrap();
+    let reference: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let grid = grid::ThetaGrid::new(0.18).unwrap();
+    let hg = slabs::hg_bins(&grid, 0.85);
+    let cloud = slabs::cloud550_bins();
+    let renderer = gpu::Renderer::new(&g);
+    let mut worst: f64 = 0.0;
+    for case in reference["cases"].as_array().unwrap() {
+        let phase = case["phase"].as_str().unwrap();
+        let tau = case["tau"].as_f64().unwrap();
+        let omega = case["omega"].as_f64().unwrap();
+        let bins = if phase == "hg085" { &hg } else { &cloud };
+        let tables = slabs::tables_of(bins, 0.18, omega);
+        let frame = slabs::slab_frame(tau);
+        for (list, up) in [
+            ("I_up_reflected_top", true),
+            ("I_down_transmitted_bottom", false),
+        ] {
+            for r in case[list].as_array().unwrap() {
+                let (mu, phi) = (r["mu"].as_f64().unwrap(), r["phi_deg"].as_f64().unwrap());
+                let theta = r["scattering_angle_deg"].as_f64().unwrap();
+                if !((mu == 1.0 && phi == 0.0) || (mu == 0.8 && phi == 90.0))
+                    || !(30.0..=150.0).contains(&theta)
+                {
+                    continue;
+                }
+                let want = r["I"].as_f64().unwrap();
+                let w = slabs::outgoing(mu, phi, up);
+                let (got, se) = slab_radiance(&renderer, &g, &tables, &frame, w, (25_000, 0));
+                let z = (got - want) / se;
+                worst = worst.max(z.abs());
+                eprintln!(
+                    "{phase} τ {tau} ω {omega} I({mu}, {phi}°) {}: {got:.5} ± {se:.1e} vs \
+                     DISORT {want:.5} ({:+.2} %, {z:+.2}σ)",
+                    if up { "up" } else { "down" },
+                    (got - want) / want * 100.0
+                );
+                assert!(
+                    z.abs() < 4.5,
+                    "{phase} τ {tau} ω {omega} {list} μ {mu} φ {phi}"
+                );
+            }
+        }
+    }
+    eprintln!("worst {worst:.2}σ");
+}
+
+/// One scattering only, as the CPU truth's `exact_single_scattering_from_a_slab`: the slab of
+/// τ 0.5, HG 0.85 on 0.5° bins, ω 0.9, six directions up and down, 2·10⁵ paths each, against
+/// ω p(Θ) μ0/(μ0 ± μ)(…) in closed form.
+#[test]
+fn exact_single_scattering_from_a_slab_on_the_gpu() {
+    let Some(g) = common::gpu() else { return };
+    let grid = grid::ThetaGrid::new(0.5).unwrap();
+    let bins = slabs::hg_bins(&grid, 0.85);
+    let tables = slabs::tables_of(&bins, 0.5, 0.9);
+    let frame = slabs::slab_frame(0.5);
+    let sampler = render::truth::phase::PhaseSampler::new(&grid, &bins, 0.0);
+    let beam = -frame.sun.direction();
+    let renderer = gpu::Renderer::new(&g);
+    let mut worst: f64 = 0.0;
+    for &(mu, phi, up) in &[
+        (1.0, 0.0, true),
+        (0.5, 0.0, true),
+        (0.3, 180.0, true),
+        (0.8, 90.0, false),
+        (1.0, 0.0, false),
+        (0.3, 180.0, false),
+    ] {
+        let w = slabs::outgoing(mu, phi, up);
+        let want = slabs::single_scatter_slab(0.9 * sampler.eval(beam, w), 0.5, mu, 0.5, up);
+        let (got, se) = slab_radiance(&renderer, &g, &tables, &frame, w, (200_000, 1));
+        let z = (got - want) / se;
+        worst = worst.max(z.abs());
+        eprintln!("μ {mu} φ {phi} up {up}: {got:.6} ± {se:.1e} vs {want:.6} ({z:+.2}σ)");
+        assert!(z.abs() < 4.0, "μ {mu} φ {phi}: {got} ± {se} vs {want}");
+    }
+    eprintln!("worst {worst:.2}σ");
 }
