@@ -122,7 +122,7 @@ runtime::uniform! {
         pub counts: [u32; 4],
         /// θ bins, haze field (u32::MAX: none), air on, blocks.
         pub counts2: [u32; 4],
-        /// Seed low and high words, splitting on.
+        /// Seed low and high words, splitting on, photon mode.
         pub seed: [u32; 4],
         /// θ step (rad); loop steps per dispatch.
         pub theta: [f32; 4],
@@ -315,6 +315,55 @@ pub fn render_with(
     settings: &Settings,
     progress: &dyn Progress,
 ) -> Result<TruthImage, RenderError> {
+    trace(renderer, gpu, tracer, frame, settings, progress, None)
+}
+
+/// Photons walking forward from `origin` along `beam` (as [`Tracer::photon`]: one wavelength,
+/// plain phase sampling, no splitting), `settings.spp` per cell of a 64 × 64 grid of streams:
+/// the mean weight leaving upwards and leaving downwards off the beam's direction (a slab's R
+/// and diffuse T per unit incident flux along the beam), each with its standard error.
+pub fn photon_fluxes(
+    renderer: &Renderer,
+    gpu: &Gpu,
+    tracer: &Tracer,
+    frame: &Frame,
+    (origin, beam): (DVec3, DVec3),
+    settings: &Settings,
+) -> Result<[(f64, f64); 2], RenderError> {
+    let mut frame = frame.clone();
+    (frame.width, frame.height) = (64, 64);
+    let image = trace(
+        renderer,
+        gpu,
+        tracer,
+        &frame,
+        settings,
+        &(),
+        Some((origin, beam)),
+    )?;
+    let n = image.image.rgb.len() as f64;
+    Ok(std::array::from_fn(|c| {
+        let mean = image.image.rgb.iter().map(|p| f64::from(p[c])).sum::<f64>() / n;
+        let var: f64 = image
+            .std_error
+            .iter()
+            .map(|e| f64::from(e[c]).powi(2))
+            .sum();
+        (mean, var.sqrt() / n)
+    }))
+}
+
+/// The passes: camera paths through `frame`'s pixels, or with `photon` = (origin, direction)
+/// photons walking forward, one stream per pixel.
+fn trace(
+    renderer: &Renderer,
+    gpu: &Gpu,
+    tracer: &Tracer,
+    frame: &Frame,
+    settings: &Settings,
+    progress: &dyn Progress,
+    photon: Option<(DVec3, DVec3)>,
+) -> Result<TruthImage, RenderError> {
     if let Some(what) = unsupported(frame) {
         return Err(FrameError(format!(
             "the GPU truth does not trace {what} yet: render with --cpu"
@@ -381,7 +430,12 @@ pub fn render_with(
             u32::from(tracer.air_on),
             o.blocks as u32,
         ],
-        seed: [settings.seed as u32, (settings.seed >> 32) as u32, 1, 0],
+        seed: [
+            settings.seed as u32,
+            (settings.seed >> 32) as u32,
+            1,
+            u32::from(photon.is_some()),
+        ],
         theta: [
             tracer.bands[0].fields[0].phase.step() as f32,
             STEPS_PER_DISPATCH as f32,
@@ -390,6 +444,10 @@ pub fn render_with(
         ],
         tile: [0; 4],
     };
+    if let Some((origin, beam)) = photon {
+        params.eye = v4(origin, 0.0);
+        params.forward = v4(beam, params.forward[3] as f64);
+    }
     let light_rows: Vec<[f32; 4]> = tracer
         .lights
         .iter()

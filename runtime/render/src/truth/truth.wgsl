@@ -20,7 +20,7 @@ struct Params {
     track: vec4<f32>,        // majorant (1/m), guide share ε, the haze's 1/H, T_vol step (m)
     counts: vec4<u32>,       // bands, wavelengths carried, max scatterings, lights
     counts2: vec4<u32>,      // θ bins, haze field (0xffffffff: none), air on, blocks
-    seed: vec4<u32>,         // seed's low and high words, splitting on
+    seed: vec4<u32>,         // seed's low and high words, splitting on, photon mode
     theta: vec4<f32>,        // θ step (rad); y = loop steps per dispatch (the budget)
     tile: vec4<u32>,         // the tile's first pixel and its pixel count
 }
@@ -675,13 +675,19 @@ struct Path {
     k: u32,
 }
 
-// Sample k of the pass at `pixel`: its random stream and its camera ray.
+// Sample k of the pass at `pixel`: its random stream and its camera ray (in photon mode, a
+// photon of one wavelength from the eye along `forward`).
 fn begin_sample(pixel: u32, k: u32) -> Path {
     var path: Path;
     stream(pixel, rp.sizes.z + k);
-    path.c = carry(rp.counts.y);
     path.p = rp.eye.xyz;
-    path.d = pixel_ray(pixel % rp.sizes.x, pixel / rp.sizes.x);
+    if (rp.seed.w == 1u) {
+        path.c = carry(1u);
+        path.d = rp.forward.xyz;
+    } else {
+        path.c = carry(rp.counts.y);
+        path.d = pixel_ray(pixel % rp.sizes.x, pixel / rp.sizes.x);
+    }
     path.bounce = 0u;
     path.top = 0u;
     path.alive = 1u;
@@ -751,9 +757,45 @@ fn load(slot: u32) -> Path {
     return path;
 }
 
+// One free path of a photon walking forward (Tracer::photon: plain phase sampling, no splitting)
+// and what happens at its end; true when it ends, its weight then in `sum`: x if it left
+// upwards, y if downwards off the beam's direction (the slabs' R and diffuse T).
+fn photon_event(path: ptr<function, Path>) -> bool {
+    (*path).sum = vec3<f32>(0.0);
+    if ((*path).bounce >= rp.counts.z) {
+        return true;
+    }
+    var c = (*path).c;
+    let d = (*path).d;
+    let ev = next_event(&c, (*path).p, d);
+    (*path).p = ev.p;
+    if (ev.kind == EV_ESCAPE || ev.kind == EV_SURFACE) {
+        let w = c.f[0];
+        if (d.y > 0.0) {
+            (*path).sum = vec3<f32>(w, 0.0, 0.0);
+        } else if (any(d != rp.forward.xyz)) {
+            (*path).sum = vec3<f32>(0.0, w, 0.0);
+        }
+        return true;
+    }
+    if (ev.kind == EV_VOLUME) {
+        (*path).d = continue_volume(&c, ev.field, d, 0.0);
+    } else {
+        let mu = sample_rayleigh(rand());
+        (*path).d = rotate(d, 1.0 - mu, sqrt(max(1.0 - mu * mu, 0.0)), rand());
+    }
+    (*path).bounce = (*path).bounce + 1u;
+    let k = weight_window(&c, 0u);
+    (*path).c = c;
+    return k == 0u;
+}
+
 // One free path of the current branch and what happens at its end (the loop body of
 // Tracer::radiance); true when the branch ends.
 fn event(slot: u32, path: ptr<function, Path>) -> bool {
+    if (rp.seed.w == 1u) {
+        return photon_event(path);
+    }
     let max_scatterings = rp.counts.z;
     if ((*path).bounce >= max_scatterings) {
         return true;
