@@ -122,7 +122,7 @@ runtime::uniform! {
         pub counts: [u32; 4],
         /// θ bins, haze field (u32::MAX: none), air on, blocks.
         pub counts2: [u32; 4],
-        /// Seed low and high words, splitting on, photon mode.
+        /// Seed low and high words, splitting on.
         pub seed: [u32; 4],
         /// θ step (rad); loop steps per dispatch.
         pub theta: [f32; 4],
@@ -149,6 +149,7 @@ runtime::uniform! {
 pub struct Renderer {
     layout: wgpu::BindGroupLayout,
     step: wgpu::ComputePipeline,
+    photon: wgpu::ComputePipeline,
     transparency: wgpu::ComputePipeline,
 }
 
@@ -178,19 +179,23 @@ impl Renderer {
             bind_group_layouts: &[Some(&layout)],
             immediate_size: 0,
         });
-        let pipeline = |name: &str| {
+        let pipeline = |name: &str, photon: bool| {
             device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
                 label: Some(name),
                 layout: Some(&pipeline_layout),
                 module: &module,
                 entry_point: Some(name),
-                compilation_options: Default::default(),
+                compilation_options: wgpu::PipelineCompilationOptions {
+                    constants: &[("photon_mode", f64::from(u8::from(photon)))],
+                    ..Default::default()
+                },
                 cache: None,
             })
         };
         Self {
-            step: pipeline("step"),
-            transparency: pipeline("transparency"),
+            step: pipeline("step", false),
+            photon: pipeline("step", true),
+            transparency: pipeline("transparency", false),
             layout,
         }
     }
@@ -430,12 +435,7 @@ fn trace(
             u32::from(tracer.air_on),
             o.blocks as u32,
         ],
-        seed: [
-            settings.seed as u32,
-            (settings.seed >> 32) as u32,
-            1,
-            u32::from(photon.is_some()),
-        ],
+        seed: [settings.seed as u32, (settings.seed >> 32) as u32, 1, 0],
         theta: [
             tracer.bands[0].fields[0].phase.step() as f32,
             STEPS_PER_DISPATCH as f32,
@@ -591,7 +591,11 @@ fn trace(
                 label: Some("photometeor truth steps"),
                 timestamp_writes: None,
             });
-            pass.set_pipeline(&renderer.step);
+            pass.set_pipeline(if photon.is_some() {
+                &renderer.photon
+            } else {
+                &renderer.step
+            });
             for i in 0..DISPATCHES_PER_SUBMIT {
                 let last = i + 1 == DISPATCHES_PER_SUBMIT;
                 let kind = match (begin && i == 0, last) {

@@ -20,7 +20,7 @@ struct Params {
     track: vec4<f32>,        // majorant (1/m), guide share ε, the haze's 1/H, T_vol step (m)
     counts: vec4<u32>,       // bands, wavelengths carried, max scatterings, lights
     counts2: vec4<u32>,      // θ bins, haze field (0xffffffff: none), air on, blocks
-    seed: vec4<u32>,         // seed's low and high words, splitting on, photon mode
+    seed: vec4<u32>,         // seed's low and high words, splitting on
     theta: vec4<f32>,        // θ step (rad); y = loop steps per dispatch (the budget)
     tile: vec4<u32>,         // the tile's first pixel and its pixel count
 }
@@ -54,6 +54,11 @@ struct Step {
 // Each tile slot's path between dispatches: F_ROWS float rows and U_ROWS u32 rows (`save`).
 @group(0) @binding(10) var<storage, read_write> state_f: array<vec4<f32>>;
 @group(0) @binding(11) var<storage, read_write> state_u: array<vec4<u32>>;
+
+// The photon pipeline (photons walking forward, `photon_event`) or the camera's: a pipeline
+// constant, so that each pipeline holds only its own code (a run-time flag made lavapipe's
+// camera paths 10× slower).
+override photon_mode: bool = false;
 
 const BAND_ROWS: u32 = 6u;
 const BLOCK: u32 = 32u;
@@ -681,7 +686,7 @@ fn begin_sample(pixel: u32, k: u32) -> Path {
     var path: Path;
     stream(pixel, rp.sizes.z + k);
     path.p = rp.eye.xyz;
-    if (rp.seed.w == 1u) {
+    if (photon_mode) {
         path.c = carry(1u);
         path.d = rp.forward.xyz;
     } else {
@@ -793,7 +798,7 @@ fn photon_event(path: ptr<function, Path>) -> bool {
 // One free path of the current branch and what happens at its end (the loop body of
 // Tracer::radiance); true when the branch ends.
 fn event(slot: u32, path: ptr<function, Path>) -> bool {
-    if (rp.seed.w == 1u) {
+    if (photon_mode) {
         return photon_event(path);
     }
     let max_scatterings = rp.counts.z;
