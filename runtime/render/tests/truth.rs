@@ -24,9 +24,7 @@ mod common;
 #[path = "support/slabs.rs"]
 mod slabs;
 
-use slabs::{
-    cloud550_bins, hg_bins, outgoing, single_scatter_slab, slab_frame, tables_of, tables_spectral,
-};
+use slabs::{hg_bins, outgoing, single_scatter_slab, slab_frame, tables_of, tables_spectral};
 
 /// Mean and standard error of `n` radiance samples along `-w` seen from just outside the slab.
 fn radiance(tracer: &Tracer, w: DVec3, n: usize, seed: u64) -> (f64, f64) {
@@ -559,15 +557,6 @@ fn fluxes(
 
 #[test]
 fn slabs_agree_with_disort() {
-    let text = std::fs::read_to_string(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../../data/reference/truth/slab_disort.json"
-    ))
-    .unwrap();
-    let reference: serde_json::Value = serde_json::from_str(&text).unwrap();
-    let grid = ThetaGrid::new(0.18).unwrap();
-    let hg = hg_bins(&grid, 0.85);
-    let cloud = cloud550_bins();
     // CI size: a fixed 5·10⁴ photons per slab, every flux held within 4σ and within 0.5 %
     // where its 3σ resolves that. TRUTH_SLAB_LONG=1: 2·10⁵ photons, then as many as bring 3σ
     // under 0.3 % of each flux, every flux held to 0.5 % (docs/truth.md).
@@ -594,14 +583,13 @@ fn slabs_agree_with_disort() {
         .and_then(|v| v.parse().ok());
     let (mut worst_flux, mut worst_z, mut worst_rz) = (0.0f64, 0.0f64, 0.0f64);
     let start = std::time::Instant::now();
-    for (index, case) in reference["cases"].as_array().unwrap().iter().enumerate() {
+    for (index, (case, bins)) in slabs::disort_cases().iter().enumerate() {
         let phase = case["phase"].as_str().unwrap();
         let tau = case["tau"].as_f64().unwrap();
         let omega = case["omega"].as_f64().unwrap();
         if only_tau.is_some_and(|t| t != tau) {
             continue;
         }
-        let bins = if phase == "hg085" { &hg } else { &cloud };
         let tables = tables_of(bins, 0.18, omega);
         let frame = slab_frame(tau);
         let tracer = Tracer::new(&tables, &frame, &Settings::default()).unwrap();

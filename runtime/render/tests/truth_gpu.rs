@@ -231,22 +231,12 @@ fn slab_radiance(
 #[test]
 fn slab_radiances_agree_with_disort_on_the_gpu() {
     let Some(g) = common::gpu() else { return };
-    let text = std::fs::read_to_string(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../../data/reference/truth/slab_disort.json"
-    ))
-    .unwrap();
-    let reference: serde_json::Value = serde_json::from_str(&text).unwrap();
-    let grid = grid::ThetaGrid::new(0.18).unwrap();
-    let hg = slabs::hg_bins(&grid, 0.85);
-    let cloud = slabs::cloud550_bins();
     let renderer = gpu::Renderer::new(&g);
     let mut worst: f64 = 0.0;
-    for case in reference["cases"].as_array().unwrap() {
+    for (case, bins) in &slabs::disort_cases() {
         let phase = case["phase"].as_str().unwrap();
         let tau = case["tau"].as_f64().unwrap();
         let omega = case["omega"].as_f64().unwrap();
-        let bins = if phase == "hg085" { &hg } else { &cloud };
         let tables = slabs::tables_of(bins, 0.18, omega);
         let frame = slabs::slab_frame(tau);
         for (list, up) in [
@@ -321,22 +311,12 @@ fn exact_single_scattering_from_a_slab_on_the_gpu() {
 #[test]
 fn slab_fluxes_agree_with_disort_on_the_gpu() {
     let Some(g) = common::gpu() else { return };
-    let text = std::fs::read_to_string(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../../data/reference/truth/slab_disort.json"
-    ))
-    .unwrap();
-    let reference: serde_json::Value = serde_json::from_str(&text).unwrap();
-    let grid = grid::ThetaGrid::new(0.18).unwrap();
-    let hg = slabs::hg_bins(&grid, 0.85);
-    let cloud = slabs::cloud550_bins();
     let renderer = gpu::Renderer::new(&g);
     let (mut worst_rel, mut worst_z): (f64, f64) = (0.0, 0.0);
-    for (index, case) in reference["cases"].as_array().unwrap().iter().enumerate() {
+    for (index, (case, bins)) in slabs::disort_cases().iter().enumerate() {
         let phase = case["phase"].as_str().unwrap();
         let tau = case["tau"].as_f64().unwrap();
         let omega = case["omega"].as_f64().unwrap();
-        let bins = if phase == "hg085" { &hg } else { &cloud };
         let tables = slabs::tables_of(bins, 0.18, omega);
         let frame = slabs::slab_frame(tau);
         let s = settings(13, 5 + index as u64);

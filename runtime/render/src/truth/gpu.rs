@@ -43,10 +43,10 @@ use glam::DVec3;
 use runtime::Tables;
 use runtime::gpu::{Gpu, read_back};
 
-use super::{Settings, Tracer, TruthImage, noise_of, std_error};
+use super::{Passes, Settings, Tracer, TruthImage};
 use crate::gpu::{RenderError, SLICING_WGSL, a4, check_sizes, entry, filled, storage, v4};
 use crate::model::Progress;
-use crate::{Frame, FrameError, Image, MAX_FIELDS};
+use crate::{Frame, FrameError, MAX_FIELDS};
 
 /// The estimator's WGSL (after [`SLICING_WGSL`]).
 pub const TRUTH_WGSL: &str = include_str!("truth.wgsl");
@@ -74,9 +74,6 @@ const STEPS_PER_DISPATCH: usize = 8000;
 
 /// Dispatches per submission (the host then reads how many paths are still under way).
 const DISPATCHES_PER_SUBMIT: usize = 8;
-
-/// Most samples per pixel in one pass.
-const MAX_BATCH: usize = 64;
 
 /// A pass that took longer than this (s) is not followed by a larger one (a desktop driver
 /// may reset a device whose dispatch runs for seconds).
@@ -619,18 +616,11 @@ fn trace(
         .map(f64::from)
         .collect();
 
-    let mut acc = vec![([0.0f64; 3], [0.0f64; 3]); pixels as usize];
-    let start = Instant::now();
-    let mut done = 0usize;
-    let mut noise = f64::INFINITY;
+    let mut passes = Passes::new(settings, t_vol, progress);
     let mut last = (0usize, 0.0f64);
-    while done < settings.spp {
-        // Passes of 1, 1, 2, 4, … samples (at most 64), as the CPU truth's, but none larger
-        // than the last once a pass takes PASS_SECONDS.
-        let mut batch = done.clamp(1, MAX_BATCH).min(settings.spp - done);
-        if last.1 > PASS_SECONDS {
-            batch = batch.min(last.0.max(1));
-        }
+    // As the CPU truth's passes, but none larger than the last once a pass takes PASS_SECONDS.
+    while let Some(batch) = passes.next_batch((last.1 > PASS_SECONDS).then_some(last.0)) {
+        let done = passes.done;
         let pass_start = Instant::now();
         for first in (0..pixels as usize).step_by(TILE_PIXELS) {
             let len = TILE_PIXELS.min(pixels as usize - first);
@@ -662,45 +652,18 @@ fn trace(
         }
         let rows = read_back(gpu, &sums, 32 * pixels)?;
         last = (batch, pass_start.elapsed().as_secs_f64());
-        for (p, a) in acc.iter_mut().enumerate() {
+        for (p, a) in passes.acc.iter_mut().enumerate() {
             let (s, q) = (rows[2 * p], rows[2 * p + 1]);
             for c in 0..3 {
                 a.0[c] += f64::from(s[c]);
                 a.1[c] += f64::from(q[c]);
             }
         }
-        done += batch;
-        noise = noise_of(&acc, done, &t_vol);
-        progress.update(
-            done as u64,
-            settings.spp as u64,
-            &format!("noise {:.2} %", noise * 100.0),
-        );
-        if settings.target_noise > 0.0 && noise <= settings.target_noise {
-            break;
-        }
-        if settings.max_seconds > 0.0 && start.elapsed().as_secs_f64() >= settings.max_seconds {
+        if passes.end_pass(batch) {
             break;
         }
     }
-    let seconds = start.elapsed().as_secs_f64();
-    let n = done as f64;
-    Ok(TruthImage {
-        image: Image {
-            width: w,
-            height: h,
-            rgb: acc.iter().map(|(s, _)| s.map(|v| (v / n) as f32)).collect(),
-            transparency: t_vol.iter().map(|&t| t as f32).collect(),
-        },
-        std_error: acc
-            .iter()
-            .map(|(s, q)| std::array::from_fn(|c| std_error(s[c], q[c], n) as f32))
-            .collect(),
-        spp: done,
-        noise,
-        seconds,
-        paths_per_second: pixels as f64 * n / seconds.max(1e-9),
-    })
+    Ok(passes.image(w, h))
 }
 
 #[cfg(test)]

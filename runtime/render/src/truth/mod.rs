@@ -1414,15 +1414,10 @@ pub fn render(
         .par_iter()
         .map(|&d| tracer.transparency(eye, d))
         .collect();
-    // Per pixel: Σx and Σx² per channel.
-    let mut acc = vec![([0.0f64; 3], [0.0f64; 3]); w * h];
-    let start = Instant::now();
-    let mut done = 0usize;
-    let mut noise = f64::INFINITY;
-    while done < settings.spp {
-        // Passes of 1, 1, 2, 4, … samples (at most 64), so progress and noise come early.
-        let batch = done.clamp(1, 64).min(settings.spp - done);
-        acc.par_iter_mut().enumerate().for_each(|(p, a)| {
+    let mut passes = Passes::new(settings, transparency, progress);
+    while let Some(batch) = passes.next_batch(None) {
+        let done = passes.done;
+        passes.acc.par_iter_mut().enumerate().for_each(|(p, a)| {
             for s in done..done + batch {
                 let mut rng = Rng::stream(settings.seed, p as u64, s as u64);
                 let l = tracer.radiance(eye, rays[p], &mut rng);
@@ -1432,40 +1427,100 @@ pub fn render(
                 }
             }
         });
-        done += batch;
-        noise = noise_of(&acc, done, &transparency);
-        progress.update(
-            done as u64,
-            settings.spp as u64,
-            &format!("noise {:.2} %", noise * 100.0),
-        );
-        if settings.target_noise > 0.0 && noise <= settings.target_noise {
-            break;
-        }
-        if settings.max_seconds > 0.0 && start.elapsed().as_secs_f64() >= settings.max_seconds {
+        if passes.end_pass(batch) {
             break;
         }
     }
-    let seconds = start.elapsed().as_secs_f64();
-    let n = done as f64;
-    let mean: Vec<[f32; 3]> = acc.iter().map(|(s, _)| s.map(|v| (v / n) as f32)).collect();
-    let std_error: Vec<[f32; 3]> = acc
-        .iter()
-        .map(|(s, q)| std::array::from_fn(|c| std_error(s[c], q[c], n) as f32))
-        .collect();
-    Ok(TruthImage {
-        image: Image {
-            width: w,
-            height: h,
-            rgb: mean,
-            transparency: transparency.iter().map(|&t| t as f32).collect(),
-        },
-        std_error,
-        spp: done,
-        noise,
-        seconds,
-        paths_per_second: (w * h * done) as f64 / seconds.max(1e-9),
-    })
+    Ok(passes.image(w, h))
+}
+
+/// The passes of a traced frame, the CPU's or the GPU's: per pixel Σx and Σx² per channel
+/// over the samples taken, the pass sizes (1, 1, 2, 4, … samples, at most 64, so that progress
+/// and noise come early), the progress, and the stopping rules (`spp`, `noise`, `max_seconds`).
+pub(crate) struct Passes<'a> {
+    /// Per pixel: Σx and Σx² per channel.
+    pub acc: Vec<([f64; 3], [f64; 3])>,
+    /// Samples per pixel taken.
+    pub done: usize,
+    noise: f64,
+    start: Instant,
+    settings: &'a Settings,
+    transparency: Vec<f64>,
+    progress: &'a dyn Progress,
+}
+
+impl<'a> Passes<'a> {
+    /// No samples yet, over pixels of volume transparency `transparency`.
+    pub fn new(settings: &'a Settings, transparency: Vec<f64>, progress: &'a dyn Progress) -> Self {
+        Self {
+            acc: vec![([0.0; 3], [0.0; 3]); transparency.len()],
+            done: 0,
+            noise: f64::INFINITY,
+            start: Instant::now(),
+            settings,
+            transparency,
+            progress,
+        }
+    }
+
+    /// The next pass's samples per pixel (at most `cap`, if given), or `None` once all are
+    /// taken.
+    pub fn next_batch(&self, cap: Option<usize>) -> Option<usize> {
+        let left = self
+            .settings
+            .spp
+            .checked_sub(self.done)
+            .filter(|&n| n > 0)?;
+        Some(
+            self.done
+                .clamp(1, 64)
+                .min(left)
+                .min(cap.unwrap_or(usize::MAX))
+                .max(1),
+        )
+    }
+
+    /// A pass of `batch` samples per pixel has been added to `acc`: the noise, the progress,
+    /// and whether a stopping rule ends the frame.
+    pub fn end_pass(&mut self, batch: usize) -> bool {
+        self.done += batch;
+        self.noise = noise_of(&self.acc, self.done, &self.transparency);
+        self.progress.update(
+            self.done as u64,
+            self.settings.spp as u64,
+            &format!("noise {:.2} %", self.noise * 100.0),
+        );
+        (self.settings.target_noise > 0.0 && self.noise <= self.settings.target_noise)
+            || (self.settings.max_seconds > 0.0
+                && self.start.elapsed().as_secs_f64() >= self.settings.max_seconds)
+    }
+
+    /// The frame: each pixel's mean and standard error, and the figures.
+    pub fn image(self, width: usize, height: usize) -> TruthImage {
+        let seconds = self.start.elapsed().as_secs_f64();
+        let n = self.done as f64;
+        TruthImage {
+            image: Image {
+                width,
+                height,
+                rgb: self
+                    .acc
+                    .iter()
+                    .map(|(s, _)| s.map(|v| (v / n) as f32))
+                    .collect(),
+                transparency: self.transparency.iter().map(|&t| t as f32).collect(),
+            },
+            std_error: self
+                .acc
+                .iter()
+                .map(|(s, q)| std::array::from_fn(|c| std_error(s[c], q[c], n) as f32))
+                .collect(),
+            spp: self.done,
+            noise: self.noise,
+            seconds,
+            paths_per_second: (width * height * self.done) as f64 / seconds.max(1e-9),
+        }
+    }
 }
 
 /// Standard error of the mean of n samples with sum `s` and sum of squares `q`.

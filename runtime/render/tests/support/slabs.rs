@@ -170,3 +170,29 @@ pub fn single_scatter_slab(omega_p: f64, mu0: f64, mu: f64, tau: f64, up: bool) 
         omega_p * mu0 / (mu0 - mu) * ((-tau / mu0).exp() - (-tau / mu).exp())
     }
 }
+
+/// The DISORT slabs of `data/reference/truth/slab_disort.json`, each case with the bins of its
+/// phase function (`hg085`: HG g = 0.85; else the 550 nm cloud), on 0.18° bins.
+pub fn disort_cases() -> Vec<(serde_json::Value, Vec<f64>)> {
+    let text = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../data/reference/truth/slab_disort.json"
+    ))
+    .unwrap();
+    let reference: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let hg = hg_bins(&ThetaGrid::new(0.18).unwrap(), 0.85);
+    let cloud = cloud550_bins();
+    reference["cases"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|case| {
+            let bins = if case["phase"] == "hg085" {
+                &hg
+            } else {
+                &cloud
+            };
+            (case.clone(), bins.clone())
+        })
+        .collect()
+}
