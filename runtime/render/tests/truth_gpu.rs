@@ -227,9 +227,15 @@ fn slab_radiance(
 /// The DISORT slabs' radiances (HG 0.85 and the 550 nm cloud; τ 0.5, 4, 16; ω 1, 0.9; μ0 = 0.5)
 /// by the GPU's camera paths, as the CPU truth's test takes them (`truth.rs`,
 /// `slabs_agree_with_disort`): μ = 1 and μ = 0.8 at φ = 90°, 30°–150° from the beam, 2.5·10⁴
-/// paths each, within 4.5σ.
+/// paths each, within 4.5σ. Behind TRUTH_GPU_SLAB_RADIANCES=1 (≈ 15 s of both cores on
+/// lavapipe; CI's time is kept for the fluxes and the scenes): run 2026-12-04, worst 4.06σ
+/// (docs/truth.md).
 #[test]
 fn slab_radiances_agree_with_disort_on_the_gpu() {
+    if std::env::var_os("TRUTH_GPU_SLAB_RADIANCES").is_none() {
+        eprintln!("skipped: set TRUTH_GPU_SLAB_RADIANCES=1 to run");
+        return;
+    }
     let Some(g) = common::gpu() else { return };
     let renderer = gpu::Renderer::new(&g);
     let mut worst: f64 = 0.0;
