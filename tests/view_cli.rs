@@ -15,6 +15,7 @@ mod exr_planes;
 
 use common::{photometeor, workdir};
 use exr_planes::read_rgba;
+use render::error_map::{self, read_frame};
 
 fn gpu_required() -> bool {
     std::env::var("REQUIRE_GPU").as_deref() == Ok("1")
@@ -133,7 +134,8 @@ fn a_scripted_session_moves_the_sun_switches_the_model_orbits_and_its_still_view
     std::fs::write(
         cwd.join("script.toml"),
         "[[step]]\nscreenshot = \"still.png\"\n\n\
-         [[step]]\nsun_elevation_deg = 30\nscreenshot = \"sun.png\"\n\n\
+         [[step]]\ntruth_spp = 16\ndisplay = \"truth\"\nscreenshot = \"truth.png\"\n\n\
+         [[step]]\nsun_elevation_deg = 30\ndisplay = \"model\"\nscreenshot = \"sun.png\"\n\n\
          [[step]]\nmodel = \"miyazaki\"\nscreenshot = \"model.png\"\n\n\
          [[step]]\norbit_deg = [25, 5]\nscreenshot = \"orbit.png\"\n\n\
          [[step]]\nfield_size = { rain = 150 }\nscreenshot = \"size.png\"\n",
@@ -156,7 +158,7 @@ fn a_scripted_session_moves_the_sun_switches_the_model_orbits_and_its_still_view
     assert!(out.status.success(), "view failed:\n{stderr}");
 
     // Every screenshot shows an image, not a flat colour.
-    let shots = ["still", "sun", "model", "orbit", "size", "end"];
+    let shots = ["still", "truth", "sun", "model", "orbit", "size", "end"];
     for name in shots {
         let (w, h, pixels) = shown_image(&cwd.join(format!("{name}.png")));
         assert_eq!((w, h), (64, 48), "{name}");
@@ -204,6 +206,58 @@ fn a_scripted_session_moves_the_sun_switches_the_model_orbits_and_its_still_view
         "the window's pixels differ from render's PNG by {worst} of 255"
     );
 
+    // The truth traced from the window is the truth of the view: `render --model truth` with
+    // the same samples (and seed) gives the same frame, and the window's error figures are
+    // compare-render's.
+    let json = |name: &str| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(cwd.join(name)).unwrap()).unwrap()
+    };
+    let mut truth_args = render_args.clone();
+    truth_args.extend(["--model", "truth", "--set", "spp=16"]);
+    for (flag, value) in [("--out", "truth-render.exr"), ("--png", "truth-render.png")] {
+        let i = truth_args.iter().position(|a| *a == flag).unwrap();
+        truth_args[i + 1] = value;
+    }
+    let out = photometeor(&truth_args, &cwd);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    let traced = read_frame(&cwd.join("truth.truth.exr")).unwrap();
+    let rendered = read_frame(&cwd.join("truth-render.exr")).unwrap();
+    let summary = json("truth.json")["truth"].as_str().unwrap().to_string();
+    assert!(summary.contains("16 spp"), "{summary}");
+    let sigma = |f: &error_map::Frame, i: usize, c: usize| f.std_error.as_ref().unwrap()[i][c];
+    if summary.contains("on the CPU") {
+        // The CPU truth is deterministic: the same streams, passes and sums.
+        assert_eq!(traced.image.rgb, rendered.image.rgb);
+        for i in 0..traced.image.rgb.len() {
+            assert_eq!(sigma(&traced, i, 1), sigma(&rendered, i, 1));
+        }
+    } else {
+        // The GPU truth (a real adapter): the window's run and render's, each pixel within
+        // 5σ of the other.
+        for i in 0..traced.image.rgb.len() {
+            let d = (traced.image.rgb[i][1] - rendered.image.rgb[i][1]).abs();
+            let s = sigma(&traced, i, 1).hypot(sigma(&rendered, i, 1));
+            assert!(d <= 5.0 * s, "pixel {i}: {d} apart, σ {s}");
+        }
+    }
+    let window_report = &json("truth.json")["error_against_truth"];
+    assert!(
+        window_report["pixels"].as_u64().unwrap() > 100,
+        "{window_report}"
+    );
+    let out = photometeor(
+        &["compare-render", "truth.truth.exr", "truth.exr", "--json"],
+        &cwd,
+    );
+    assert!(out.status.success());
+    let cli_report: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(*window_report, cli_report);
+    // The truth on display is not the model's image.
+    let (_, _, model_shown) = shown_image(&cwd.join("still.png"));
+    let (_, _, truth_shown) = shown_image(&cwd.join("truth.png"));
+    assert_ne!(model_shown, truth_shown, "display = truth showed the model");
+
     // Moving the sun moves the bow: the rain's pixels change.
     let (_, _, sun) = read_rgba(&cwd.join("sun.exr"));
     let moved = volume_change(&sun, &still);
@@ -214,9 +268,6 @@ fn a_scripted_session_moves_the_sun_switches_the_model_orbits_and_its_still_view
     // The model switch and the orbit change the image and are recorded.
     let (_, _, model) = read_rgba(&cwd.join("model.exr"));
     assert!(volume_change(&model, &sun) > 0.01);
-    let json = |name: &str| -> serde_json::Value {
-        serde_json::from_str(&std::fs::read_to_string(cwd.join(name)).unwrap()).unwrap()
-    };
     assert_eq!(json("sun.json")["sun"]["elevation_deg"], 30.0);
     assert_eq!(json("model.json")["model"], "miyazaki");
     assert_ne!(

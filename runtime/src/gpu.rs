@@ -86,7 +86,8 @@ pub enum GpuError {
     Readback(String),
 }
 
-/// A headless device.
+/// A headless device; a clone shares the device (wgpu's handles are reference-counted).
+#[derive(Clone)]
 pub struct Gpu {
     /// The adapter the device was requested from.
     pub adapter: wgpu::Adapter,

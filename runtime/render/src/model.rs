@@ -30,6 +30,22 @@ pub trait Progress: Sync {
     /// `done` of `total` steps; `message` says what the step is or what it reached (e.g.
     /// "noise 2.1 %").
     fn update(&self, done: u64, total: u64, message: &str);
+
+    /// Whether a progressive model (the truth) should hand its frame so far to
+    /// [`Progress::running`] after each pass; making it costs a pass over the pixels.
+    fn wants_running(&self) -> bool {
+        false
+    }
+
+    /// A progressive model's frame so far, after each pass: the mean and the standard error
+    /// per pixel of the samples taken (`photometeor view` shows it while it converges).
+    fn running(&self, _frame: &crate::truth::TruthImage) {}
+
+    /// Whether a progressive model should end its frame after the pass under way; the samples
+    /// taken so far are the frame.
+    fn stop(&self) -> bool {
+        false
+    }
 }
 
 impl Progress for () {

@@ -15,7 +15,7 @@ use render::{ModelSettings, RenderScene, Rendered};
 
 use super::rebake::Rebake;
 use super::script::Step;
-use super::worker::{Request, Worker};
+use super::worker::{Request, TruthNews, TruthRun, Worker};
 
 /// What `run` hands the window.
 pub struct Options {
@@ -82,12 +82,16 @@ pub fn open(options: Options, scene: RenderScene, plan: BakePlan, worker: Worker
     result.map_err(|e| anyhow!("{e}"))
 }
 
+/// The samples per pixel the window's truth starts with.
+const DEFAULT_TRUTH_SPP: usize = 64;
+
 /// Width of the control panel (points).
 const PANEL_WIDTH: f32 = 330.0;
 
 /// What the window shows in its image.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Display {
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Display {
     Model,
     Truth,
     Error,
@@ -113,6 +117,8 @@ enum Action {
     /// Render the same view again (for the mean frame time).
     Repeat,
     Shot(PathBuf),
+    /// Wait for the truth run to end.
+    AwaitTruth,
     /// Wait this long (s), drawing and watching the scene file.
     Wait(f64),
     Exit,
@@ -165,6 +171,10 @@ struct App {
     truth: Option<error_map::Frame>,
     truth_view: (Camera, Sun, f64),
     display: Display,
+    /// The truth traced in the background, its samples per pixel, and where it stands.
+    truth_run: Option<TruthRun>,
+    truth_spp: usize,
+    truth_status: Option<String>,
     // Headless.
     actions: VecDeque<Action>,
     shot: Arc<Mutex<Option<Arc<egui::ColorImage>>>>,
@@ -187,7 +197,9 @@ impl App {
         for step in options.steps {
             let shot = step.screenshot.clone();
             let wait = step.wait_s;
+            let traces = step.truth_spp.is_some();
             actions.push_back(Action::Apply(Box::new(step)));
+            actions.extend(traces.then_some(Action::AwaitTruth));
             actions.extend(shot.map(Action::Shot));
             actions.extend(wait.map(Action::Wait));
         }
@@ -234,6 +246,9 @@ impl App {
             pixels_per_point: 1.0,
             truth: options.truth,
             display: Display::Model,
+            truth_run: None,
+            truth_spp: DEFAULT_TRUTH_SPP,
+            truth_status: None,
             actions,
             shot: Arc::new(Mutex::new(None)),
             shooting: None,
@@ -285,6 +300,64 @@ impl App {
                     self.show(ctx, rendered, request, shown.seconds);
                 }
             }
+        }
+    }
+
+    /// Starts the path-traced truth of the view as it is now, `spp` samples per pixel (the
+    /// scene's `[render.truth]` settings otherwise), replacing a run under way; its running
+    /// image becomes the A/B's truth pass by pass.
+    fn trace(&mut self, spp: usize) {
+        let settings = self
+            .scene
+            .model("truth", &[("spp".into(), toml::Value::Integer(spp as i64))]);
+        match settings {
+            Ok(model) => {
+                self.truth_run = Some(self.worker.trace(Request {
+                    generation: 0,
+                    model,
+                    camera: self.camera,
+                    sun: self.sun,
+                    density_scale: self.density_scale,
+                }));
+                self.truth_spp = spp;
+                self.truth_status = Some(format!("tracing this view, {spp} spp…"));
+            }
+            Err(e) => self.truth_status = Some(format!("truth: {}", e.0)),
+        }
+    }
+
+    /// Takes the truth run's news: each running frame becomes the truth of its view and the
+    /// frame on screen is compared with it again.
+    fn receive_truth(&mut self, ctx: &egui::Context) {
+        let Some(run) = self.truth_run.as_mut() else {
+            return;
+        };
+        let view = run.view;
+        let mut compare = false;
+        for news in run.news() {
+            match news {
+                TruthNews::Running { frame, spp, noise } => {
+                    self.truth = Some(frame);
+                    self.truth_view = view;
+                    self.truth_status = Some(format!(
+                        "tracing: {spp} of {} spp, noise {:.2} %",
+                        self.truth_spp,
+                        noise * 100.0
+                    ));
+                    compare = true;
+                }
+                TruthNews::Ended(Ok(summary)) => self.truth_status = Some(summary),
+                TruthNews::Ended(Err(e)) => {
+                    eprintln!("view: truth: {e}");
+                    if !self.actions.is_empty() {
+                        self.fail(ctx, format!("the truth failed: {e}"));
+                    }
+                    self.truth_status = Some(format!("truth: {e}"));
+                }
+            }
+        }
+        if compare {
+            self.retone(ctx);
         }
     }
 
@@ -385,6 +458,13 @@ impl App {
                 ));
                 self.shooting = Some(path);
             }
+            Action::AwaitTruth => {
+                if self.truth_run.as_ref().is_some_and(|r| !r.ended()) {
+                    self.actions.push_front(Action::AwaitTruth);
+                    ctx.request_repaint_after(Duration::from_millis(50));
+                    return;
+                }
+            }
             Action::Wait(s) => {
                 self.waiting = Some(Instant::now() + Duration::from_secs_f64(s));
             }
@@ -428,6 +508,9 @@ impl App {
         if let Some(e) = step.exposure {
             self.exposure = Some(e);
         }
+        if let Some(d) = step.display {
+            self.display = d;
+        }
         if let Some(sizes) = &step.field_size {
             let mut fields = self.plan.scene.fields.clone();
             for (name, value) in sizes {
@@ -440,6 +523,9 @@ impl App {
             if let Err(e) = self.bake_fields(fields, ctx) {
                 self.fail(ctx, format!("--script step: field_size: {e:#}"));
             }
+        }
+        if let Some(spp) = step.truth_spp {
+            self.trace(spp);
         }
         self.frame_times.clear();
         self.dirty = true;
@@ -473,6 +559,20 @@ impl App {
         let bytes = crate::commands::plot::png_rgb8(w as u32, h as u32, &rgb)?;
         format::write_output(&png, &bytes, &[])?;
         s.rendered.image.write_exr(&exr)?;
+        // The truth the frame is compared with, beside it (with its standard error).
+        let truth = self.truth.as_ref().filter(|_| s.report.is_some());
+        if let Some(t) = truth {
+            let extra = t.std_error.as_ref().map_or_else(Vec::new, |e| {
+                (0..3)
+                    .map(|c| {
+                        let name = format!("stderr.{}", ["R", "G", "B"][c]);
+                        (name, e.iter().map(|v| v[c]).collect())
+                    })
+                    .collect()
+            });
+            t.image
+                .write_exr_with(&path.with_extension("truth.exr"), extra)?;
+        }
         // The frames of this view: those since the last step (the `--frames` repeats).
         let n = self.frame_times.len();
         let mean = |f: fn(&(f64, f64)) -> f64| {
@@ -504,6 +604,7 @@ impl App {
             "figures": s.rendered.figures,
             "adapter": self.adapter,
             "error_against_truth": s.report,
+            "truth": self.truth_status,
         });
         format::write_output(
             &json,
@@ -567,6 +668,7 @@ impl eframe::App for App {
     fn ui(&mut self, ui: &mut egui::Ui, _frame: &mut eframe::Frame) {
         let ctx = ui.ctx().clone();
         self.receive(&ctx);
+        self.receive_truth(&ctx);
         self.watch_scene(&ctx);
         self.take_bake(&ctx);
         egui::Panel::left("controls")

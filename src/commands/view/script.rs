@@ -28,6 +28,12 @@ pub struct Step {
     pub density_scale: Option<f64>,
     /// The display's exposure, > 0.
     pub exposure: Option<f64>,
+    /// What the image shows: "model", "truth" or "error" (the last two with a truth of the
+    /// view on record).
+    pub display: Option<super::app::Display>,
+    /// Start the path-traced truth of the view as this step leaves it, with this many samples
+    /// per pixel, [1, 2²⁰]; the step's screenshot waits for it to end.
+    pub truth_spp: Option<usize>,
     /// A field's size, by field name: its distribution's size parameter (r_eff_um,
     /// median_radius_um, rain_rate_mm_h or radius_um) or a crystal's max_dimension_um; the
     /// field is re-baked before the step's frame.
@@ -96,6 +102,12 @@ impl Step {
         )?;
         range("exposure", self.exposure, |v| v > 0.0, "> 0")?;
         range("wait_s", self.wait_s, |v| v > 0.0 && v <= 600.0, "(0, 600]")?;
+        let (lo, hi) = render::truth::SPP_RANGE;
+        if let Some(spp) = self.truth_spp
+            && !(lo..=hi).contains(&spp)
+        {
+            bail!("--script step: truth_spp = {spp} is out of range; allowed [{lo}, {hi}]");
+        }
         if let Some([yaw, pitch]) = self.orbit_deg
             && !(yaw.is_finite() && pitch.is_finite() && yaw.abs() <= 3600.0 && pitch.abs() < 180.0)
         {

@@ -2,14 +2,17 @@
 //! renders the newest request it has (module docs of `view`).
 
 use std::collections::HashMap;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{Receiver, Sender, TryRecvError, channel};
 use std::sync::{Arc, OnceLock};
 use std::time::Instant;
 
 use anyhow::{Context, Result};
 use render::camera::{Camera, Sun};
-use render::model::Prepared;
+use render::error_map;
+use render::model::{Prepared, Progress};
 use render::relight::LightingCache;
+use render::truth::TruthImage;
 use render::{Frame, Job, ModelSettings, On, RenderScene, Rendered};
 use runtime::Tables;
 use runtime::gpu::Gpu;
@@ -35,6 +38,8 @@ enum Message {
     Render(Box<Request>),
     /// A new scene (edited file) with its tables, or with the ones in use (`None`).
     Scene(Box<RenderScene>, Option<Tables>),
+    /// Trace this view (its model: the truth's settings) on a thread of its own.
+    Truth(Box<Request>, Sink),
 }
 
 /// A finished frame.
@@ -115,6 +120,116 @@ impl Worker {
     pub fn finished(&self) -> Vec<Shown> {
         self.from.try_iter().collect()
     }
+
+    /// Starts the path-traced truth of `request`'s view (`request.model`: the truth with its
+    /// settings) in the background; the frames keep coming meanwhile.
+    pub fn trace(&self, request: Request) -> TruthRun {
+        let (news, inbox) = channel();
+        let stop = Arc::new(AtomicBool::new(false));
+        let run = TruthRun {
+            view: (request.camera, request.sun, request.density_scale),
+            news: inbox,
+            stop: stop.clone(),
+            ended: false,
+        };
+        let sink = Sink {
+            news,
+            stop,
+            repaint: self.repaint.clone(),
+        };
+        let _ = self.to.send(Message::Truth(Box::new(request), sink));
+        run
+    }
+}
+
+/// What a truth run tells the window.
+pub enum TruthNews {
+    /// The frame so far (after each pass of samples).
+    Running {
+        /// The mean and standard error per pixel.
+        frame: error_map::Frame,
+        /// Samples per pixel taken.
+        spp: usize,
+        /// The truth's noise figure (median relative standard error of the volume's pixels).
+        noise: f64,
+    },
+    /// The run has ended: its summary, or why it failed.
+    Ended(Result<String, String>),
+}
+
+/// A path-traced truth of one view, traced on a thread of its own; dropping it stops it after
+/// the pass under way.
+pub struct TruthRun {
+    /// The view it is of: the camera, the sun and the density scale.
+    pub view: (Camera, Sun, f64),
+    news: Receiver<TruthNews>,
+    stop: Arc<AtomicBool>,
+    ended: bool,
+}
+
+impl TruthRun {
+    /// The news since the last call, oldest first.
+    pub fn news(&mut self) -> Vec<TruthNews> {
+        let news: Vec<TruthNews> = self.news.try_iter().collect();
+        self.ended |= news.iter().any(|n| matches!(n, TruthNews::Ended(_)));
+        news
+    }
+
+    /// Whether the run has ended (and its end been taken by [`TruthRun::news`]).
+    pub fn ended(&self) -> bool {
+        self.ended
+    }
+
+    /// Ends the run after the pass under way.
+    pub fn stop(&self) {
+        self.stop.store(true, Ordering::Relaxed);
+    }
+}
+
+impl Drop for TruthRun {
+    fn drop(&mut self) {
+        self.stop();
+    }
+}
+
+/// The truth thread's end of a [`TruthRun`]: the running frames go to the window, which it
+/// tells to repaint, and the window's stop comes back.
+struct Sink {
+    news: Sender<TruthNews>,
+    stop: Arc<AtomicBool>,
+    repaint: Arc<OnceLock<eframe::egui::Context>>,
+}
+
+impl Sink {
+    fn send(&self, news: TruthNews) {
+        let _ = self.news.send(news);
+        if let Some(ctx) = self.repaint.get() {
+            ctx.request_repaint();
+        }
+    }
+}
+
+impl Progress for Sink {
+    fn update(&self, _: u64, _: u64, _: &str) {}
+
+    fn wants_running(&self) -> bool {
+        true
+    }
+
+    fn running(&self, t: &TruthImage) {
+        self.send(TruthNews::Running {
+            frame: error_map::Frame {
+                image: t.image.clone(),
+                std_error: Some(t.std_error.clone()),
+            },
+            spp: t.spp,
+            noise: t.noise,
+        });
+    }
+
+    fn stop(&self) -> bool {
+        self.stop.load(Ordering::Relaxed)
+    }
 }
 
 /// Waits for a request, applies every scene change that came with it, and returns the newest
@@ -123,6 +238,7 @@ fn next_request(inbox: &Receiver<Message>, state: &mut State) -> Option<Request>
     let take = |message: Message, state: &mut State, newest: &mut Option<Request>| match message {
         Message::Render(r) => *newest = Some(*r),
         Message::Scene(scene, tables) => state.set_scene(*scene, tables),
+        Message::Truth(r, sink) => state.trace(&r, sink),
     };
     let mut newest: Option<Request> = None;
     take(inbox.recv().ok()?, state, &mut newest);
@@ -169,34 +285,47 @@ impl State {
         self.scaled = None;
     }
 
-    fn render(&mut self, r: &Request) -> Result<Rendered> {
-        self.scene.camera = r.camera;
-        self.scene.sun = r.sun;
-        self.scene.check(&r.model)?;
-        let frame = match &mut self.base {
-            Err(e) => anyhow::bail!("{e}"),
-            Ok(base) if r.density_scale == 1.0 => base,
-            Ok(base) => {
-                if self
-                    .scaled
-                    .as_ref()
-                    .is_none_or(|(s, _)| *s != r.density_scale)
-                {
-                    let mut frame = base.clone();
-                    let s = r.density_scale as f32;
-                    frame.grid.data.iter_mut().flatten().for_each(|v| *v *= s);
-                    self.scaled = Some((r.density_scale, frame));
-                }
-                &mut self.scaled.as_mut().expect("set above").1
-            }
+    /// The scene's frame for `r`'s view and density scale.
+    fn frame(&mut self, r: &Request) -> Result<&mut Frame> {
+        view_frame(&mut self.scene, &mut self.base, &mut self.scaled, r)
+    }
+
+    /// Starts the truth of `r`'s view on a thread of its own, with copies of the frame, the
+    /// tables and the device (wgpu's handles are shared, not duplicated).
+    fn trace(&mut self, r: &Request, sink: Sink) {
+        let frame = match self.frame(r) {
+            Ok(frame) => frame.clone(),
+            Err(e) => return sink.send(TruthNews::Ended(Err(format!("{e:#}")))),
         };
-        frame.camera = r.camera;
-        frame.sun = r.sun;
+        let (gpu, tables, model) = (self.gpu.clone(), self.tables.clone(), r.model.clone());
+        let spawned = std::thread::Builder::new()
+            .name("truth".into())
+            .spawn(move || {
+                let traced = model.prepare(&gpu, &tables).and_then(|prepared| {
+                    let job = Job {
+                        tables: &tables,
+                        frame: &frame,
+                        progress: &sink,
+                        lighting: None,
+                    };
+                    model.render(&job, On::Gpu(&gpu, &prepared))
+                });
+                sink.send(TruthNews::Ended(
+                    traced.map(|t| t.summary).map_err(|e| e.to_string()),
+                ));
+            });
+        if let Err(e) = spawned {
+            eprintln!("view: starting the truth's thread: {e}");
+        }
+    }
+
+    fn render(&mut self, r: &Request) -> Result<Rendered> {
         let name = r.model.name();
         if !self.prepared.contains_key(name) {
             let prepared = r.model.prepare(&self.gpu, &self.tables)?;
             self.prepared.insert(name, prepared);
         }
+        let frame = view_frame(&mut self.scene, &mut self.base, &mut self.scaled, r)?;
         let job = Job {
             tables: &self.tables,
             frame,
@@ -206,4 +335,35 @@ impl State {
         Ok(r.model
             .render(&job, On::Gpu(&self.gpu, &self.prepared[name]))?)
     }
+}
+
+/// `scene`'s frame for `r`'s view: the base frame (density scale 1) or the one at `r`'s
+/// density scale, made once in `scaled` and kept while the scale stays.
+fn view_frame<'a>(
+    scene: &mut RenderScene,
+    base: &'a mut Result<Frame, String>,
+    scaled: &'a mut Option<(f64, Frame)>,
+    r: &Request,
+) -> Result<&'a mut Frame> {
+    scene.camera = r.camera;
+    scene.sun = r.sun;
+    scene.check(&r.model)?;
+    let base = match base {
+        Err(e) => anyhow::bail!("{e}"),
+        Ok(base) => base,
+    };
+    let frame = if r.density_scale == 1.0 {
+        base
+    } else {
+        if scaled.as_ref().is_none_or(|(s, _)| *s != r.density_scale) {
+            let mut frame = base.clone();
+            let s = r.density_scale as f32;
+            frame.grid.data.iter_mut().flatten().for_each(|v| *v *= s);
+            *scaled = Some((r.density_scale, frame));
+        }
+        &mut scaled.as_mut().expect("set above").1
+    };
+    frame.camera = r.camera;
+    frame.sun = r.sun;
+    Ok(frame)
 }

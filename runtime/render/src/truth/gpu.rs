@@ -616,7 +616,7 @@ fn trace(
         .map(f64::from)
         .collect();
 
-    let mut passes = Passes::new(settings, t_vol, progress);
+    let mut passes = Passes::new(settings, w, t_vol, progress);
     let mut last = (0usize, 0.0f64);
     // As the CPU truth's passes, but none larger than the last once a pass takes PASS_SECONDS.
     while let Some(batch) = passes.next_batch((last.1 > PASS_SECONDS).then_some(last.0)) {
@@ -663,7 +663,7 @@ fn trace(
             break;
         }
     }
-    Ok(passes.image(w, h))
+    Ok(passes.image())
 }
 
 #[cfg(test)]

@@ -1414,7 +1414,7 @@ pub fn render(
         .par_iter()
         .map(|&d| tracer.transparency(eye, d))
         .collect();
-    let mut passes = Passes::new(settings, transparency, progress);
+    let mut passes = Passes::new(settings, w, transparency, progress);
     while let Some(batch) = passes.next_batch(None) {
         let done = passes.done;
         passes.acc.par_iter_mut().enumerate().for_each(|(p, a)| {
@@ -1431,7 +1431,7 @@ pub fn render(
             break;
         }
     }
-    Ok(passes.image(w, h))
+    Ok(passes.image())
 }
 
 /// The passes of a traced frame, the CPU's or the GPU's: per pixel Σx and Σx² per channel
@@ -1442,6 +1442,7 @@ pub(crate) struct Passes<'a> {
     pub acc: Vec<([f64; 3], [f64; 3])>,
     /// Samples per pixel taken.
     pub done: usize,
+    width: usize,
     noise: f64,
     start: Instant,
     settings: &'a Settings,
@@ -1450,11 +1451,18 @@ pub(crate) struct Passes<'a> {
 }
 
 impl<'a> Passes<'a> {
-    /// No samples yet, over pixels of volume transparency `transparency`.
-    pub fn new(settings: &'a Settings, transparency: Vec<f64>, progress: &'a dyn Progress) -> Self {
+    /// No samples yet, over the pixels (rows of `width`) of volume transparency
+    /// `transparency`.
+    pub fn new(
+        settings: &'a Settings,
+        width: usize,
+        transparency: Vec<f64>,
+        progress: &'a dyn Progress,
+    ) -> Self {
         Self {
             acc: vec![([0.0; 3], [0.0; 3]); transparency.len()],
             done: 0,
+            width,
             noise: f64::INFINITY,
             start: Instant::now(),
             settings,
@@ -1480,8 +1488,9 @@ impl<'a> Passes<'a> {
         )
     }
 
-    /// A pass of `batch` samples per pixel has been added to `acc`: the noise, the progress,
-    /// and whether a stopping rule ends the frame.
+    /// A pass of `batch` samples per pixel has been added to `acc`: the noise, the progress
+    /// (and the running image, when it is wanted), and whether a stopping rule or the
+    /// progress's [`Progress::stop`] ends the frame.
     pub fn end_pass(&mut self, batch: usize) -> bool {
         self.done += batch;
         self.noise = noise_of(&self.acc, self.done, &self.transparency);
@@ -1490,15 +1499,20 @@ impl<'a> Passes<'a> {
             self.settings.spp as u64,
             &format!("noise {:.2} %", self.noise * 100.0),
         );
+        if self.progress.wants_running() {
+            self.progress.running(&self.image());
+        }
         (self.settings.target_noise > 0.0 && self.noise <= self.settings.target_noise)
             || (self.settings.max_seconds > 0.0
                 && self.start.elapsed().as_secs_f64() >= self.settings.max_seconds)
+            || self.progress.stop()
     }
 
-    /// The frame: each pixel's mean and standard error, and the figures.
-    pub fn image(self, width: usize, height: usize) -> TruthImage {
+    /// The frame so far: each pixel's mean and standard error, and the figures.
+    pub fn image(&self) -> TruthImage {
         let seconds = self.start.elapsed().as_secs_f64();
         let n = self.done as f64;
+        let (width, height) = (self.width, self.acc.len() / self.width.max(1));
         TruthImage {
             image: Image {
                 width,

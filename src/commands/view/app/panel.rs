@@ -33,10 +33,8 @@ impl App {
         self.view_controls(ui, ctx);
         ui.separator();
         self.field_controls(ui, ctx);
-        if self.truth.is_some() {
-            ui.separator();
-            self.truth_controls(ui);
-        }
+        ui.separator();
+        self.truth_controls(ui);
         for e in [
             &self.scene_error,
             &self.bake_error,
@@ -154,8 +152,37 @@ impl App {
         ui.small("drag: orbit · right drag: pan · wheel: dolly · W A S D, Q E: fly");
     }
 
-    /// The error figures against the truth and the A/B switch.
+    /// The truth of this view, traced in the background; the error figures against it and
+    /// the A/B switch.
     fn truth_controls(&mut self, ui: &mut egui::Ui) {
+        let (lo, hi) = render::truth::SPP_RANGE;
+        ui.horizontal(|ui| {
+            ui.add(
+                egui::DragValue::new(&mut self.truth_spp)
+                    .range(lo..=hi)
+                    .suffix(" spp"),
+            );
+            if ui
+                .button("trace this view")
+                .on_hover_text(
+                    "the path-traced truth of the view as it is now (the GPU's, or the CPU's \
+                     on a software adapter), shown as it converges",
+                )
+                .clicked()
+            {
+                self.trace(self.truth_spp);
+            }
+            let running = self.truth_run.as_ref().is_some_and(|r| !r.ended());
+            if running && ui.button("stop").clicked() {
+                self.truth_run.as_ref().expect("running").stop();
+            }
+        });
+        if let Some(status) = &self.truth_status {
+            ui.small(status);
+        }
+        if self.truth.is_none() {
+            return;
+        }
         ui.horizontal(|ui| {
             ui.selectable_value(&mut self.display, Display::Model, "model");
             ui.selectable_value(&mut self.display, Display::Truth, "truth");
@@ -169,7 +196,11 @@ impl App {
                 );
             }
             None => {
-                ui.label("the truth is of the scene's view: reset the view to compare");
+                ui.label("the truth is of another view");
+                if ui.button("go to the truth's view").clicked() {
+                    (self.camera, self.sun, self.density_scale) = self.truth_view;
+                    self.dirty = true;
+                }
             }
         }
     }
