@@ -1,6 +1,6 @@
-//! `bake --shard K/N` and `merge`: the default scene baked as N = 1, 3 and 4 shard processes
-//! and merged is byte-identical to the bake without shards; a missing, repeated or foreign
-//! shard is refused, naming it, and nothing is written.
+//! `bake --shard K/N` and `merge`: a scene with a swept field (and the default scene) baked as
+//! N = 1, 3 and 4 shard processes and merged is byte-identical to the bake without shards; a
+//! missing, repeated or foreign shard is refused, naming it, and nothing is written.
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -43,21 +43,44 @@ fn shards(cwd: &Path, prefix: &str, n: usize, extra: &[&str]) -> Vec<String> {
         .collect()
 }
 
+/// Cloud droplets swept over r_eff (three members), rain and ice.
+const SWEEP: &str = "[scene]\nname = \"sweep\"\nspectral = \"rgb3\"\nquality = \"draft\"\n\n\
+    [[field]]\nname = \"cloud\"\nkind = \"cloud\"\n\
+    distribution = { kind = \"gamma\", r_eff_um = 10, v_eff = 0.1 }\n\
+    sweep = { key = \"r_eff_um\", from = 5, to = 20, count = 3 }\n\n\
+    [[field]]\nname = \"rain\"\nkind = \"rain\"\n\
+    distribution = { kind = \"lognormal\", median_radius_um = 500, sigma_g = 1.4 }\n\n\
+    [[field]]\nname = \"ice\"\nkind = \"ice\"\n";
+
 #[test]
-fn sharded_and_merged_bakes_are_byte_identical_to_the_bake_without_shards() {
+fn sharded_and_merged_bakes_of_a_sweep_are_byte_identical_to_the_bake_without_shards() {
     let cwd = workdir("shard-identical");
+    std::fs::write(cwd.join("sweep.toml"), SWEEP).unwrap();
     ok(
-        &["bake", "--quality", "draft", "--quiet", "--out", "full"],
+        &[
+            "bake",
+            "sweep.toml",
+            "--quality",
+            "draft",
+            "--quiet",
+            "--out",
+            "full",
+        ],
         &cwd,
     );
     let full = published(&cwd.join("full"));
     assert!(
-        full.contains_key("manifest.json") && full.len() == 17,
+        full.contains_key("manifest.json") && full.len() == 21,
         "{:?}",
         full.keys()
     );
+    let manifest: serde_json::Value = serde_json::from_slice(&full["manifest.json"]).unwrap();
+    assert_eq!(
+        manifest["sweeps"][0]["fields"],
+        serde_json::json!(["cloud@00", "cloud@01", "cloud@02"])
+    );
     for n in [1, 3, 4] {
-        let dirs = shards(&cwd, "s", n, &[]);
+        let dirs = shards(&cwd, "s", n, &["sweep.toml"]);
         // Every field in exactly one shard, each shard with work where there are enough fields.
         let mut seen = Vec::new();
         for d in &dirs {
@@ -65,7 +88,7 @@ fn sharded_and_merged_bakes_are_byte_identical_to_the_bake_without_shards() {
                 serde_json::from_slice(&std::fs::read(cwd.join(d).join("shard.json")).unwrap())
                     .unwrap();
             let fields = record["fields"].as_array().unwrap();
-            assert!(!fields.is_empty(), "{d} got no field of 4");
+            assert!(!fields.is_empty(), "{d} got no field of 5");
             seen.extend(
                 fields
                     .iter()
@@ -73,7 +96,11 @@ fn sharded_and_merged_bakes_are_byte_identical_to_the_bake_without_shards() {
             );
         }
         seen.sort();
-        assert_eq!(seen, ["cloud", "ice", "rain", "snow"], "N = {n}");
+        assert_eq!(
+            seen,
+            ["cloud@00", "cloud@01", "cloud@02", "ice", "rain"],
+            "N = {n}"
+        );
         // Given in another order than their indices.
         let mut args = vec!["merge", "--quiet"];
         args.extend(dirs.iter().rev().map(String::as_str));

@@ -35,9 +35,10 @@ import json
 import os
 import sys
 import tempfile
+import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Dict, Mapping, Optional, Union
+from typing import Any, Callable, Dict, List, Mapping, Optional, Tuple, Union
 
 import numpy as np
 
@@ -50,6 +51,7 @@ __all__ = [
     "Bake",
     "Field",
     "SingleScattering",
+    "Sweep",
     "bake",
     "crystal_phase",
     "load",
@@ -129,6 +131,53 @@ class Field:
 
 
 @dataclass(frozen=True)
+class Sweep:
+    """A field swept over one microphysical key: its member fields, one per value.
+
+    Attributes
+    ----------
+    name : str
+        The swept field's name in the scene.
+    key : str
+        The swept key (``r_eff_um``, ``median_radius_um``, ``radius_um``, ``rain_rate_mm_h``,
+        ``max_dimension_um`` or ``roughness``), in its unit.
+    spacing : str
+        ``"log"`` or ``"linear"``.
+    values : (M,) float array
+        The values, increasing.
+    members : list of Field
+        The member fields (``<name>@00`` …), one per value.
+    """
+
+    name: str
+    key: str
+    spacing: str
+    values: np.ndarray
+    members: List[Field]
+
+    def shares(self, value: float) -> List[Tuple[int, float]]:
+        """The two members around ``value`` and their number-density shares, as renderers mix
+        them (README "Swept fields"): t linear in ln value (log spacing) or value, clamped to
+        the ends; extinction σ_k^(1−t)·σ_k+1^t (green channel)."""
+        v = self.values
+        value = float(np.clip(value, v[0], v[-1]))
+        k = int(np.clip(np.searchsorted(v, value, side="right"), 1, len(v) - 1)) - 1
+        at = np.log if self.spacing == "log" else (lambda x: x)
+        t = float(np.clip((at(value) - at(v[k])) / (at(v[k + 1]) - at(v[k])), 0.0, 1.0))
+        s0, s1 = self.members[k].sigma_ext_m2[1], self.members[k + 1].sigma_ext_m2[1]
+        sigma = s0 ** (1.0 - t) * s1**t
+        return [(k, (1.0 - t) * sigma / s0), (k + 1, t * sigma / s1)]
+
+    def ams_at(self, value: float) -> np.ndarray:
+        """Ams_n (N, K, 3) at ``value``: the two members around it mixed with their
+        :meth:`shares`, each weighted by share × σ_sca per channel."""
+        parts = [(self.members[k], w) for k, w in self.shares(value)]
+        weights = np.array([w * m.sigma_ext_m2 * m.albedo for m, w in parts])  # (2, 3)
+        weights /= weights.sum(axis=0)
+        return sum(w[None, None, :] * m.ams for (m, _), w in zip(parts, weights))
+
+
+@dataclass(frozen=True)
 class Bake:
     """A bake: every field's tables, checked against the manifest, in memory.
 
@@ -147,6 +196,8 @@ class Bake:
     report : dict or None
         For a bake made by :func:`bake`: fields computed and read from the cache, seconds,
         peak memory (``photometeor bake --json``); None for :func:`load`.
+    sweeps : dict of str → Sweep
+        The swept fields by name (their members are in ``fields`` too).
     """
 
     fields: Dict[str, Field]
@@ -155,6 +206,7 @@ class Bake:
     manifest: Dict[str, Any]
     dir: Optional[Path]
     report: Optional[Dict[str, Any]] = None
+    sweeps: Dict[str, Sweep] = dataclasses.field(default_factory=dict)
 
     def __repr__(self) -> str:
         names = ", ".join(f"{f.name} ({f.kind}, N = {f.n_max})" for f in self.fields.values())
@@ -212,7 +264,18 @@ def _bake_from(raw: Dict[str, Any], dir: Optional[Path], report: Optional[Dict[s
             entry=entry,
             single=None if single is None else SingleScattering(**single),
         )
+    sweeps = {
+        s["name"]: Sweep(
+            name=s["name"],
+            key=s["key"],
+            spacing=s["spacing"],
+            values=np.array(s["values"], dtype=float),
+            members=[fields[m] for m in s["fields"]],
+        )
+        for s in manifest.get("sweeps", [])
+    }
     return Bake(
+        sweeps=sweeps,
         fields=fields,
         theta_deg=raw["theta_deg"],
         theta_step_deg=raw["theta_step_deg"],

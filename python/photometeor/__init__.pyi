@@ -3,7 +3,7 @@
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Dict, Mapping, Optional, Sequence, Union
+from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple, Union
 
 import numpy as np
 import numpy.typing as npt
@@ -14,6 +14,7 @@ __all__ = [
     "Bake",
     "Field",
     "SingleScattering",
+    "Sweep",
     "bake",
     "crystal_phase",
     "load",
@@ -105,6 +106,16 @@ class Field:
     def n_max(self) -> int: ...
 
 @dataclass(frozen=True)
+class Sweep:
+    name: str
+    key: str
+    spacing: str
+    values: np.ndarray
+    members: List[Field]
+    def shares(self, value: float) -> List[Tuple[int, float]]: ...
+    def ams_at(self, value: float) -> np.ndarray: ...
+
+@dataclass(frozen=True)
 class Bake:
     fields: Dict[str, Field]
     theta_deg: np.ndarray
@@ -112,6 +123,7 @@ class Bake:
     manifest: Dict[str, Any]
     dir: Optional[Path]
     report: Optional[Dict[str, Any]] = None
+    sweeps: Dict[str, Sweep] = ...
 
 def load(dir: Union[str, "os.PathLike[str]"]) -> Bake:
     """Read and check a bake directory."""

@@ -160,3 +160,46 @@ def test_the_gil_is_released_during_long_work(baked, tmp_path):
         assert seconds > 0.1, f"the work took {seconds:.3f} s, too short to tell"
         # Held, the GIL would stop this thread for the whole call: no tick inside it.
         assert ticks > 100, f"{ticks} ticks during {seconds:.2f} s of work"
+
+
+SWEEP_SCENE = """[scene]
+name = "sweep"
+spectral = "rgb3"
+n_max = 4
+
+[[field]]
+name = "cloud"
+kind = "cloud"
+distribution = { kind = "gamma", r_eff_um = 10, v_eff = 0.1 }
+sweep = { key = "r_eff_um", from = 5, to = 20, count = 3 }
+"""
+
+
+def test_a_swept_field_is_its_members_and_mixes_between_them(tmp_path):
+    b = photometeor.bake(SWEEP_SCENE, tmp_path / "sweep", quality="draft")
+    assert list(b.fields) == ["cloud@00", "cloud@01", "cloud@02"]
+    s = b.sweeps["cloud"]
+    assert (s.key, s.spacing) == ("r_eff_um", "log")
+    np.testing.assert_allclose(s.values, [5.0, 10.0, 20.0], rtol=1e-12)
+    assert [m.name for m in s.members] == list(b.fields)
+    assert b.fields["cloud@01"].entry["microphysics"]["distribution"]["r_eff_um"] == pytest.approx(10.0)
+    # At a member's value, that member; beyond the ends, the end members.
+    for k, v in enumerate(s.values):
+        np.testing.assert_array_equal(s.ams_at(v), s.members[k].ams)
+    np.testing.assert_array_equal(s.ams_at(100.0), s.members[2].ams)
+    # Between them: the extinction log-linear in the size, each row still normalized.
+    value = 7.0
+    (k0, w0), (k1, w1) = s.shares(value)
+    t = math.log(value / 5.0) / math.log(2.0)
+    sigma = [m.sigma_ext_m2[1] for m in s.members]
+    assert (k0, k1) == (0, 1)
+    assert w0 * sigma[0] + w1 * sigma[1] == pytest.approx(sigma[0] ** (1 - t) * sigma[1] ** t, rel=1e-12)
+    ams = s.ams_at(value)
+    half = b.theta_step_deg / 2
+    lo = np.radians(np.clip(b.theta_deg - half, 0, 180))
+    hi = np.radians(np.clip(b.theta_deg + half, 0, 180))
+    energy = np.einsum("nkc,k->nc", ams, 2 * math.pi * (np.cos(lo) - np.cos(hi)))
+    assert np.max(np.abs(energy - 1)) < 2e-7
+    lo = np.minimum(s.members[0].ams, s.members[1].ams)
+    hi = np.maximum(s.members[0].ams, s.members[1].ams)
+    assert np.all(ams >= lo - 1e-12) and np.all(ams <= hi + 1e-12)

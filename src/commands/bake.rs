@@ -80,7 +80,10 @@ pub fn run(a: BakeArgs) -> Result<()> {
     if let Some(shard) = a.shard {
         let record = pool.install(|| bake::shard::run_shard(&plan, &text, shard, &progress))?;
         if a.json {
-            println!("{}", serde_json::to_string(&record)?);
+            // The record (shard.json's content) and the process's peak memory.
+            let mut json = serde_json::to_value(&record)?;
+            json["peak_rss_mib"] = serde_json::json!(bake::bake::peak_rss_mib());
+            println!("{json}");
         } else if !a.quiet {
             let names: Vec<&str> = record.fields.iter().map(|f| f.name.as_str()).collect();
             println!(

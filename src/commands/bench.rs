@@ -69,6 +69,11 @@ struct BakeBench {
     /// Keep the bakes in this directory (one subdirectory per preset) instead of a temporary one.
     #[arg(long)]
     keep: Option<PathBuf>,
+    /// Also bake the scene as N shards, one process after another (`bake --shard K/N`), and
+    /// merge them: each shard's wall time, CPU seconds and peak memory against the bake
+    /// without shards, and the merge's time; [2, 64].
+    #[arg(long, value_parser = clap::value_parser!(u32).range(2..=64))]
+    shards: Option<u32>,
     /// Print JSON.
     #[arg(long)]
     json: bool,
@@ -272,6 +277,17 @@ fn bake_once(
     preset: &str,
     jobs: Option<usize>,
 ) -> Result<(f64, serde_json::Value)> {
+    bake_process(scene, out, preset, jobs, &[])
+}
+
+/// [`bake_once`] with further arguments (`--shard K/N`).
+fn bake_process(
+    scene: &Option<PathBuf>,
+    out: &std::path::Path,
+    preset: &str,
+    jobs: Option<usize>,
+    extra: &[&str],
+) -> Result<(f64, serde_json::Value)> {
     let exe = std::env::current_exe().context("locating the photometeor executable")?;
     let mut cmd = Command::new(exe);
     cmd.arg("bake");
@@ -280,7 +296,8 @@ fn bake_once(
     }
     cmd.arg("--out")
         .arg(out)
-        .args(["--quality", preset, "--quiet", "--json"]);
+        .args(["--quality", preset, "--quiet", "--json"])
+        .args(extra);
     if let Some(j) = jobs {
         cmd.args(["--jobs", &j.to_string()]);
     }
@@ -363,7 +380,12 @@ fn bench_bake(b: BakeBench) -> Result<()> {
             .filter(|e| e.path().extension().is_some_and(|x| x == "exr"))
             .filter_map(|e| e.metadata().ok().map(|m| m.len()))
             .sum();
+        let shards = match b.shards {
+            Some(n) => Some(bench_shards(&b, &root, preset, n, first, &report)?),
+            None => None,
+        };
         rows.push(json!({
+            "shards": shards,
             "preset": preset,
             "first_s": first,
             "first_cpu_s": report["machine_cpu_s"],
@@ -402,8 +424,116 @@ fn bench_bake(b: BakeBench) -> Result<()> {
             r["peak_rss_mib"].as_f64().unwrap_or(f64::NAN),
             r["exr_bytes"].as_u64().unwrap_or(0) as f64 / 1024.0
         );
+        if let Some(shards) = r["shards"].as_object() {
+            let list = shards["shards"].as_array().cloned().unwrap_or_default();
+            for s in &list {
+                println!(
+                    "    shard {:>2}/{}: {:>8.2} s ({:>5.1} % of the bake without shards, {:.1} CPU s), \
+                     peak {:.0} MiB, fields {}",
+                    s["k"],
+                    list.len(),
+                    s["wall_s"].as_f64().unwrap_or(f64::NAN),
+                    100.0 * s["share_of_unsharded"].as_f64().unwrap_or(f64::NAN),
+                    s["cpu_s"].as_f64().unwrap_or(f64::NAN),
+                    s["peak_rss_mib"].as_f64().unwrap_or(f64::NAN),
+                    s["fields"]
+                );
+            }
+            println!(
+                "    merge: {:.2} s for {} fields ({:.3} s per field); merged = unsharded bytes: {}",
+                shards["merge_s"].as_f64().unwrap_or(f64::NAN),
+                shards["fields"],
+                shards["merge_s_per_field"].as_f64().unwrap_or(f64::NAN),
+                shards["byte_identical"]
+            );
+        }
     }
     Ok(())
+}
+
+/// The scene baked as `n` shards, one process after another, then merged: each shard's wall
+/// and CPU time and peak memory, the merge's time, and whether the merged files are the bytes
+/// of the bake without shards in `root/preset` (its wall time `unsharded_s`).
+fn bench_shards(
+    b: &BakeBench,
+    root: &std::path::Path,
+    preset: &str,
+    n: u32,
+    unsharded_s: f64,
+    unsharded: &serde_json::Value,
+) -> Result<serde_json::Value> {
+    let mut dirs = Vec::new();
+    let mut rows = Vec::new();
+    for k in 1..=n {
+        let dir = root.join(format!("{preset}-shard-{k}-of-{n}"));
+        if dir.exists() {
+            std::fs::remove_dir_all(&dir).with_context(|| format!("clearing {}", dir.display()))?;
+        }
+        let shard = format!("{k}/{n}");
+        let (wall, report) = bake_process(&b.scene, &dir, preset, b.jobs, &["--shard", &shard])?;
+        let record: serde_json::Value = serde_json::from_slice(
+            &std::fs::read(dir.join("shard.json")).context("reading shard.json")?,
+        )
+        .context("reading shard.json")?;
+        let fields: Vec<serde_json::Value> = record["fields"]
+            .as_array()
+            .map(|f| f.iter().map(|f| f["name"].clone()).collect())
+            .unwrap_or_default();
+        rows.push(json!({
+            "k": k,
+            "wall_s": wall,
+            "share_of_unsharded": wall / unsharded_s,
+            "cpu_s": report["machine_cpu_s"],
+            "peak_rss_mib": report["peak_rss_mib"],
+            "fields": fields,
+        }));
+        dirs.push(dir);
+    }
+    let merged = root.join(format!("{preset}-merged-{n}"));
+    if merged.exists() {
+        std::fs::remove_dir_all(&merged)
+            .with_context(|| format!("clearing {}", merged.display()))?;
+    }
+    let exe = std::env::current_exe().context("locating the photometeor executable")?;
+    let start = Instant::now();
+    let output = Command::new(exe)
+        .arg("merge")
+        .args(&dirs)
+        .arg("--out")
+        .arg(&merged)
+        .arg("--quiet")
+        .output()
+        .context("running photometeor merge")?;
+    let merge_s = start.elapsed().as_secs_f64();
+    if !output.status.success() {
+        bail!(
+            "photometeor merge failed: {}",
+            String::from_utf8_lossy(&output.stderr).trim()
+        );
+    }
+    let published = |dir: &std::path::Path| -> Result<Vec<(String, Vec<u8>)>> {
+        let mut files = Vec::new();
+        for e in std::fs::read_dir(dir)? {
+            let e = e?;
+            let name = e.file_name().to_string_lossy().to_string();
+            if e.file_type()?.is_file() && !name.starts_with('.') {
+                files.push((name, std::fs::read(e.path())?));
+            }
+        }
+        files.sort();
+        Ok(files)
+    };
+    let identical = published(&merged)? == published(&root.join(preset))?;
+    let fields = unsharded["computed"].as_array().map_or(0, Vec::len)
+        + unsharded["cached"].as_array().map_or(0, Vec::len);
+    Ok(json!({
+        "n": n,
+        "shards": rows,
+        "merge_s": merge_s,
+        "fields": fields,
+        "merge_s_per_field": merge_s / fields.max(1) as f64,
+        "byte_identical": identical,
+    }))
 }
 
 fn bench_crystal(c: CrystalBench) -> Result<()> {

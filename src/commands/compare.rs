@@ -7,7 +7,9 @@ use clap::Args as ClapArgs;
 pub struct CompareArgs {
     /// The bake to judge.
     dir: std::path::PathBuf,
-    /// The bake taken as truth (e.g. a `--quality reference` bake of the same scene).
+    /// The bake taken as truth (e.g. a `--quality reference` bake of the same scene). A
+    /// member of its sweeps that the bake lacks is judged against the bake's sweep of that
+    /// field interpolated at its value (bake the midpoints to measure the interpolation).
     reference: std::path::PathBuf,
     /// Smallest scattering angle of the error statistics, in degrees (the forward bins hold
     /// the unresolved diffraction peak).
@@ -45,6 +47,16 @@ pub fn run(a: CompareArgs) -> Result<()> {
             f.max_rel_all,
             f.max_abs_forward_fraction
         );
+        if let (Some((sweep, key, value)), "B") = (&f.interpolated, f.channel) {
+            println!(
+                "  {:<10}     interpolated from {}'s sweep {sweep} at {key} = {value:.4} \
+                 (σ_ext {:.2e}, g {:.1e} apart)",
+                "",
+                a.dir.display(),
+                f.rel_sigma_ext,
+                f.abs_g
+            );
+        }
     }
     Ok(())
 }

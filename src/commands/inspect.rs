@@ -62,5 +62,20 @@ pub fn run(a: InspectArgs) -> Result<()> {
             );
         }
     }
+    for s in &manifest.sweeps {
+        let first = |v: &[f64]| v.first().copied().unwrap_or(f64::NAN);
+        let last = |v: &[f64]| v.last().copied().unwrap_or(f64::NAN);
+        println!(
+            "  sweep {}: {} from {} to {}, {} values ({} spacing), fields {} … {}",
+            s.name,
+            s.key,
+            first(&s.values),
+            last(&s.values),
+            s.values.len(),
+            s.spacing,
+            s.fields.first().map_or("", String::as_str),
+            s.fields.last().map_or("", String::as_str),
+        );
+    }
     Ok(())
 }

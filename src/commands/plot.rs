@@ -129,6 +129,9 @@ fn plot_bake(
         forward.extend(forward_series(i, f, &image));
         written.push(colour_strips(&image, step, out, &f.name, protected)?);
     }
+    for sweep in &manifest.sweeps {
+        written.extend(plot_sweep(&bake, sweep, out, protected)?);
+    }
     let n_max = manifest.fields.iter().map(|f| f.n_max).max().unwrap_or(1);
     written.extend(save(
         &LinePlot {
@@ -144,6 +147,73 @@ fn plot_bake(
         "forward_fraction",
         protected,
     )?);
+    Ok(written)
+}
+
+/// A swept field's members over each of its kind's zooms, one curve of Ams_1 (G) per value
+/// coloured from blue (the first) to red (the last): the rings moving with the size.
+fn plot_sweep(
+    bake: &BakeDir,
+    sweep: &format::SweepEntry,
+    out: &Path,
+    protected: &[&Path],
+) -> Result<Vec<PathBuf>> {
+    let step = bake.manifest.theta_step_deg;
+    let mut members = Vec::new();
+    for name in &sweep.fields {
+        let entry = bake
+            .entry(name)
+            .with_context(|| format!("sweep {}: member {name}", sweep.name))?;
+        members.push((entry.kind.name(), bake.read_field(entry)?));
+    }
+    let count = members.len();
+    let label_every = count.div_ceil(6).max(1);
+    let mut written = Vec::new();
+    for (slug, title, a, b) in zooms(members[0].0) {
+        let series = members
+            .iter()
+            .zip(&sweep.values)
+            .enumerate()
+            .map(|(k, ((_, image), value))| {
+                let t = k as f64 / (count - 1).max(1) as f64;
+                let mixed = |from: u8, to: u8| (from as f64 + t * (to as f64 - from as f64)) as u8;
+                Series {
+                    label: if k % label_every == 0 || k + 1 == count {
+                        format!("{} = {value:.3}", sweep.key)
+                    } else {
+                        String::new()
+                    },
+                    colour: RGBColor(mixed(31, 214), mixed(119, 39), mixed(180, 40)),
+                    width: 2,
+                    points: image
+                        .row(1, 0)
+                        .iter()
+                        .enumerate()
+                        .map(|(i, &v)| (i as f64 * step, v))
+                        .filter(|&(t, v)| t >= *a && t <= *b && v > 0.0)
+                        .collect(),
+                }
+            })
+            .collect();
+        let plot = LinePlot {
+            title: format!(
+                "{} swept over {} ({} values): {title}, G",
+                sweep.name, sweep.key, count
+            ),
+            x_label: "scattering angle θ (°)".into(),
+            y_label: "Ams₁ = phase function (1/sr)".into(),
+            x_range: (*a, *b),
+            log_x: false,
+            log_y: true,
+            series,
+        };
+        written.extend(save(
+            &plot,
+            out,
+            &format!("{}_sweep_{slug}", sweep.name),
+            protected,
+        )?);
+    }
     Ok(written)
 }
 

@@ -244,6 +244,32 @@ pub fn prepare(
         .check_memory(&settings, limit)
         .map_err(|e| anyhow!("{origin}: {e}"))?;
     let used = render.fields();
+    for sweep in &scene.sweeps {
+        let members = sweep.members();
+        let (first, last) = (sweep.values[0], sweep.values[sweep.values.len() - 1]);
+        if used.contains(&sweep.name) {
+            bail!(
+                "{origin}: a [[volume]] uses the swept field {:?} ({} from {first} to {last}): \
+                 sampling a sweep per voxel is not built yet; give the volume one of its \
+                 members, {:?} ({} = {first}) … {:?} ({} = {last})",
+                sweep.name,
+                sweep.key,
+                members[0],
+                sweep.key,
+                members[members.len() - 1],
+                sweep.key
+            );
+        }
+        if !members.iter().any(|m| used.contains(m)) {
+            bail!(
+                "{origin}: [[field]] {:?} sweeps {} from {first} to {last} and no [[volume]] \
+                 uses it or one of its members: `render` bakes only what the scene shows; \
+                 bake the sweep with `photometeor bake`",
+                sweep.name,
+                sweep.key
+            );
+        }
+    }
     for name in &used {
         if !scene.fields.iter().any(|f| &f.name == name) {
             let have: Vec<&str> = scene.fields.iter().map(|f| f.name.as_str()).collect();
@@ -254,6 +280,10 @@ pub fn prepare(
     }
     // Model only what the scene requires.
     scene.fields.retain(|f| used.contains(&f.name));
+    // A sweep of which the volumes use only some members is baked as those fields alone.
+    scene
+        .sweeps
+        .retain(|s| s.members().iter().all(|m| used.contains(m)));
     let quality = match quality {
         Some(q) => Quality::parse(q).context("quality preset")?,
         None => scene.quality,

@@ -221,8 +221,17 @@ pub fn run(plan: &BakePlan, progress: &dyn Progress) -> Result<BakeReport, BakeE
     let previous = format::read_manifest(&plan.out_dir).ok();
     let channels = channel_definitions(&weights);
     let kept = kept_fields(plan, previous.as_ref(), &channels)?;
+    let sweeps = sweep_entries(plan, previous.as_ref(), &kept);
     write_cache_records(plan, &done)?;
-    let manifest = publish(plan, &lock, done, encoded, kept, channels, grid.len())?;
+    let manifest = publish(
+        plan,
+        &lock,
+        done,
+        encoded,
+        (kept, sweeps),
+        channels,
+        grid.len(),
+    )?;
     remove_stale_tables(plan, previous, &manifest);
     drop(lock);
     report.seconds = start.elapsed().as_secs_f64();
@@ -392,11 +401,15 @@ fn kept_fields(
         // Keep the other fields of a compatible previous bake (same grid and channels).
         let compatible =
             previous.theta_step_deg == plan.scene.theta_step_deg && previous.channels == *channels;
+        // A member of an earlier sweep of a field this scene has (swept or not) is ours too:
+        // the sweep may have shrunk.
+        let stem = |name: &str| name.split('@').next().unwrap_or_default().to_string();
         let ours = |old: &FieldEntry| {
-            plan.scene
-                .fields
-                .iter()
-                .any(|f| f.name == old.name || format!("{}.exr", f.name) == old.file)
+            plan.scene.fields.iter().any(|f| {
+                f.name == old.name
+                    || format!("{}.exr", f.name) == old.file
+                    || stem(&f.name) == stem(&old.name)
+            })
         };
         let others: Vec<&FieldEntry> = previous.fields.iter().filter(|o| !ours(o)).collect();
         if !others.is_empty() && !compatible {
@@ -410,6 +423,37 @@ fn kept_fields(
         kept = others.into_iter().cloned().collect();
     }
     Ok(kept)
+}
+
+/// The manifest's sweeps: the scene's, and those of the previous bake whose members are all
+/// kept.
+fn sweep_entries(
+    plan: &BakePlan,
+    previous: Option<&Manifest>,
+    kept: &[FieldEntry],
+) -> Vec<format::SweepEntry> {
+    let mut sweeps: Vec<format::SweepEntry> = plan
+        .scene
+        .sweeps
+        .iter()
+        .map(|s| format::SweepEntry {
+            name: s.name.clone(),
+            key: s.key.clone(),
+            spacing: match s.spacing {
+                crate::scene::Spacing::Log => "log".into(),
+                crate::scene::Spacing::Linear => "linear".into(),
+            },
+            values: s.values.clone(),
+            fields: s.members(),
+        })
+        .collect();
+    for old in previous.map_or(&[][..], |p| &p.sweeps) {
+        let all_kept = old.fields.iter().all(|m| kept.iter().any(|k| &k.name == m));
+        if all_kept && !sweeps.iter().any(|s| s.name == old.name) {
+            sweeps.push(old.clone());
+        }
+    }
+    sweeps
 }
 
 /// Writes the cache records of the fields computed in this run.
@@ -469,7 +513,7 @@ fn publish(
     lock: &BakeLock,
     done: Vec<Done>,
     encoded: Vec<Encoded>,
-    kept: Vec<FieldEntry>,
+    (kept, sweeps): (Vec<FieldEntry>, Vec<format::SweepEntry>),
     channels: format::Channels,
     angle_count: usize,
 ) -> Result<Manifest, BakeError> {
@@ -487,6 +531,7 @@ fn publish(
         angle_count,
         channels,
         fields: entries,
+        sweeps,
     };
     manifest
         .check()

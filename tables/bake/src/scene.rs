@@ -158,7 +158,7 @@ struct Header {
     quality: Option<String>,
 }
 
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct FieldFile {
     name: String,
@@ -184,6 +184,72 @@ struct FieldFile {
     dimension_sigma_g: Option<f64>,
     #[serde(default)]
     roughness: Option<f64>,
+    /// One microphysical key swept over a range: the field becomes one member per value.
+    #[serde(default)]
+    sweep: Option<SweepFile>,
+}
+
+/// `sweep = { key = "r_eff_um", from = 4, to = 32, count = 16, spacing = "log" }`.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SweepFile {
+    key: String,
+    from: f64,
+    to: f64,
+    #[serde(default)]
+    count: Option<usize>,
+    #[serde(default)]
+    spacing: Option<Spacing>,
+}
+
+/// The keys a sweep can take, and where each lives: the sphere distribution of that kind, or
+/// a crystal field.
+pub const SWEEP_KEYS: [&str; 6] = [
+    "r_eff_um",
+    "median_radius_um",
+    "radius_um",
+    "rain_rate_mm_h",
+    "max_dimension_um",
+    "roughness",
+];
+
+/// The most values a sweep may have.
+pub const MAX_SWEEP_COUNT: usize = 64;
+
+/// How a sweep's values are spaced between `from` and `to`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Spacing {
+    /// Equal ratios (the default: ring angles and the forward lobe scale with 1/size).
+    Log,
+    /// Equal steps.
+    Linear,
+}
+
+/// A field swept over one microphysical key: its values and the member fields, one per value,
+/// that the bake writes as ordinary fields named `<name>@<k>`.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Sweep {
+    /// The swept field's name in the scene.
+    pub name: String,
+    /// The swept key ([`SWEEP_KEYS`]).
+    pub key: String,
+    /// How the values are spaced.
+    pub spacing: Spacing,
+    /// The values, increasing, in the key's unit.
+    pub values: Vec<f64>,
+}
+
+impl Sweep {
+    /// The name of member `k` (the field at `values[k]`): `<name>@<k>`, two digits.
+    pub fn member(&self, k: usize) -> String {
+        format!("{}@{k:02}", self.name)
+    }
+
+    /// The member names, in the order of the values.
+    pub fn members(&self) -> Vec<String> {
+        (0..self.values.len()).map(|k| self.member(k)).collect()
+    }
 }
 
 /// What a particle field is made of: the format's own vocabulary, which manifests and the
@@ -268,8 +334,11 @@ pub struct Scene {
     pub poisson_max_depth: f64,
     /// Accuracy preset (default standard).
     pub quality: Quality,
-    /// The particle fields, at least one, with distinct names.
+    /// The particle fields, at least one, with distinct names; a swept field is here as its
+    /// members, one per value ([`Sweep::member`]).
     pub fields: Vec<Field>,
+    /// The swept fields, in the scene's order.
+    pub sweeps: Vec<Sweep>,
 }
 
 /// 1-based line of byte offset `at` in `text`.
@@ -355,14 +424,42 @@ impl Scene {
         let quality = header.quality(&keys)?;
 
         let mut fields: Vec<Field> = Vec::new();
+        let mut sweeps: Vec<Sweep> = Vec::new();
         for spanned in file.fields {
             let keys = Keys {
                 text,
                 origin,
                 span: spanned.span(),
             };
-            let field = spanned.into_inner().validated(&keys, &fields)?;
-            fields.push(field);
+            let mut field = spanned.into_inner();
+            if sweeps.iter().any(|s| s.name == field.name) {
+                fail!(keys.at("name"), "field name {:?} is used twice", field.name);
+            }
+            let Some(sweep) = field.sweep.take() else {
+                fields.push(field.validated(&keys, &fields)?);
+                continue;
+            };
+            let sweep = field.checked_sweep(&keys, sweep)?;
+            let before = fields.len();
+            for (k, &value) in sweep.values.iter().enumerate() {
+                let mut member = field.clone();
+                member.set(&sweep.key, value);
+                let mut validated = member.validated(&keys, &fields[..before]).map_err(|e| {
+                    let message = match e {
+                        SceneError::At { message, .. } | SceneError::Scene { message, .. } => {
+                            message
+                        }
+                        other => other.to_string(),
+                    };
+                    keys.at("sweep").error(format!(
+                        "field {:?}: sweep of {} at {} = {value}: {message}",
+                        field.name, sweep.key, sweep.key
+                    ))
+                })?;
+                validated.name = sweep.member(k);
+                fields.push(validated);
+            }
+            sweeps.push(sweep);
         }
         if fields.is_empty() {
             return Err(SceneError::Scene {
@@ -378,6 +475,7 @@ impl Scene {
             poisson_max_depth,
             quality,
             fields,
+            sweeps,
         })
     }
 }
@@ -579,6 +677,99 @@ impl FieldFile {
         })
     }
 
+    /// The checked sweep: a key this field has ([`SWEEP_KEYS`]), `from` < `to` (both > 0 for
+    /// log spacing), `count` in [2, [`MAX_SWEEP_COUNT`]] (default: [`default_sweep_count`]).
+    fn checked_sweep(&self, keys: &Keys, s: SweepFile) -> Result<Sweep, SceneError> {
+        let at = || keys.at("sweep");
+        let has = match (s.key.as_str(), self.distribution) {
+            ("r_eff_um", Some(SizeDistribution::Gamma { .. }))
+            | ("median_radius_um", Some(SizeDistribution::Lognormal { .. }))
+            | ("radius_um", Some(SizeDistribution::Monodisperse { .. }))
+            | ("rain_rate_mm_h", Some(SizeDistribution::MarshallPalmer { .. })) => true,
+            ("max_dimension_um" | "roughness", _) => {
+                matches!(self.kind, FieldKind::Ice | FieldKind::Snow)
+            }
+            _ => false,
+        };
+        if !has {
+            let what = match (self.kind, self.distribution) {
+                (FieldKind::Ice | FieldKind::Snow, _) => "a crystal field".to_string(),
+                (_, Some(d)) => format!("a {} distribution", distribution_kind(&d)),
+                (_, None) => "a field without a distribution".to_string(),
+            };
+            fail!(
+                at(),
+                "field {:?}: sweep key = {:?} cannot sweep {what}; the keys that can:                  r_eff_um (gamma), median_radius_um (lognormal), radius_um (monodisperse),                  rain_rate_mm_h (marshall_palmer), max_dimension_um and roughness (ice, snow)",
+                self.name,
+                s.key
+            );
+        }
+        let spacing = s.spacing.unwrap_or(Spacing::Log);
+        let (from, to) = (s.from, s.to);
+        if !(from.is_finite() && to.is_finite() && from < to) {
+            fail!(
+                at(),
+                "field {:?}: sweep from = {from}, to = {to}: from must be less than to (both finite)",
+                self.name
+            );
+        }
+        if spacing == Spacing::Log && from <= 0.0 {
+            fail!(
+                at(),
+                "field {:?}: sweep from = {from}: a log sweep needs from > 0 (or spacing = \"linear\")",
+                self.name
+            );
+        }
+        let count = s
+            .count
+            .unwrap_or_else(|| default_sweep_count(spacing, from, to));
+        if !(2..=MAX_SWEEP_COUNT).contains(&count) {
+            fail!(
+                at(),
+                "field {:?}: sweep count = {count} is outside the allowed range [2, {MAX_SWEEP_COUNT}]",
+                self.name
+            );
+        }
+        let values = (0..count)
+            .map(|k| {
+                let t = k as f64 / (count - 1) as f64;
+                match (k, spacing) {
+                    (0, _) => from,
+                    (k, _) if k + 1 == count => to,
+                    (_, Spacing::Log) => (from.ln() + t * (to / from).ln()).exp(),
+                    (_, Spacing::Linear) => from + t * (to - from),
+                }
+            })
+            .collect();
+        Ok(Sweep {
+            name: self.name.clone(),
+            key: s.key,
+            spacing,
+            values,
+        })
+    }
+
+    /// Sets the swept key to `value` (a key [`FieldFile::sweep`] accepted).
+    fn set(&mut self, key: &str, value: f64) {
+        use SizeDistribution as D;
+        match (key, &mut self.distribution) {
+            ("r_eff_um", Some(D::Gamma { r_eff_um, .. })) => *r_eff_um = value,
+            (
+                "median_radius_um",
+                Some(D::Lognormal {
+                    median_radius_um, ..
+                }),
+            ) => *median_radius_um = value,
+            ("radius_um", Some(D::Monodisperse { radius_um })) => *radius_um = value,
+            ("rain_rate_mm_h", Some(D::MarshallPalmer { rain_rate_mm_h })) => {
+                *rain_rate_mm_h = value
+            }
+            ("max_dimension_um", _) => self.max_dimension_um = Some(value),
+            ("roughness", _) => self.roughness = Some(value),
+            _ => unreachable!("sweep key {key} checked"),
+        }
+    }
+
     /// Refuses a name that is not 1 to 200 ASCII letters, digits, '_' or '-', or that an
     /// earlier field has.
     fn check_name(&self, keys: &Keys, earlier: &[Field]) -> Result<(), SceneError> {
@@ -595,7 +786,10 @@ impl FieldFile {
                 self.name
             );
         }
-        if earlier.iter().any(|g| g.name == self.name) {
+        if earlier
+            .iter()
+            .any(|g| g.name == self.name || g.name.split('@').next() == Some(&self.name))
+        {
             fail!(keys.at("name"), "field name {:?} is used twice", self.name);
         }
         Ok(())
@@ -778,6 +972,29 @@ impl FieldFile {
     }
 }
 
+/// A distribution's `kind` as a scene writes it.
+fn distribution_kind(d: &SizeDistribution) -> &'static str {
+    match d {
+        SizeDistribution::Lognormal { .. } => "lognormal",
+        SizeDistribution::Gamma { .. } => "gamma",
+        SizeDistribution::MarshallPalmer { .. } => "marshall_palmer",
+        SizeDistribution::Monodisperse { .. } => "monodisperse",
+    }
+}
+
+/// The values a sweep has when its `count` is not given: a log sweep one value per
+/// [`DEFAULT_SWEEP_RATIO`] step of the key (at least 2), a linear one 8.
+pub fn default_sweep_count(spacing: Spacing, from: f64, to: f64) -> usize {
+    match spacing {
+        Spacing::Log => ((to / from).ln() / DEFAULT_SWEEP_RATIO.ln()).ceil() as usize + 1,
+        Spacing::Linear => 8,
+    }
+    .max(2)
+}
+
+/// The ratio of neighbouring values of a default log sweep (docs: "Swept fields").
+pub const DEFAULT_SWEEP_RATIO: f64 = 1.2;
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -804,6 +1021,96 @@ mod tests {
 
     const HEAD: &str = "[scene]\nname = \"t\"\n";
     const RAIN: &str = "[[field]]\nname = \"rain\"\nkind = \"rain\"\ndistribution = { kind = \"lognormal\", median_radius_um = 500, sigma_g = 1.4 }\n";
+
+    const CLOUD: &str = "[[field]]\nname = \"cloud\"\nkind = \"cloud\"\ndistribution = { kind = \"gamma\", r_eff_um = 10, v_eff = 0.1 }\n";
+
+    #[test]
+    fn a_swept_field_becomes_one_member_per_value() {
+        let text = format!(
+            "{HEAD}{CLOUD}sweep = {{ key = \"r_eff_um\", from = 4, to = 32, count = 4 }}\n{RAIN}"
+        );
+        let s = Scene::parse(&text, "s").unwrap();
+        let names: Vec<&str> = s.fields.iter().map(|f| f.name.as_str()).collect();
+        assert_eq!(
+            names,
+            ["cloud@00", "cloud@01", "cloud@02", "cloud@03", "rain"]
+        );
+        assert_eq!(s.sweeps.len(), 1);
+        let sweep = &s.sweeps[0];
+        assert_eq!(
+            (sweep.key.as_str(), sweep.spacing),
+            ("r_eff_um", Spacing::Log)
+        );
+        // Log spacing: 4, 8, 16, 32 (the ends exact).
+        for (v, want) in sweep.values.iter().zip([4.0, 8.0, 16.0, 32.0]) {
+            assert!((v - want).abs() < 1e-12 * want, "{v} vs {want}");
+        }
+        for (f, v) in s.fields.iter().zip(&sweep.values) {
+            let Some(SizeDistribution::Gamma { r_eff_um, v_eff }) = f.distribution else {
+                panic!("{f:?}");
+            };
+            assert_eq!((r_eff_um, v_eff), (*v, 0.1));
+        }
+        // Linear, crystals, and the default count (one value per ×1.2 step).
+        let ice = "[[field]]\nname = \"ice\"\nkind = \"ice\"\nsweep = { key = \"roughness\", from = 0, to = 0.6, count = 3, spacing = \"linear\" }\n";
+        let s = Scene::parse(&format!("{HEAD}{ice}"), "s").unwrap();
+        let r: Vec<f64> = s
+            .fields
+            .iter()
+            .map(|f| f.crystal.unwrap().roughness)
+            .collect();
+        assert_eq!(r, [0.0, 0.3, 0.6]);
+        let text = format!("{HEAD}{CLOUD}sweep = {{ key = \"r_eff_um\", from = 4, to = 32 }}\n");
+        let s = Scene::parse(&text, "s").unwrap();
+        let n = (8f64.ln() / DEFAULT_SWEEP_RATIO.ln()).ceil() as usize + 1;
+        assert_eq!(s.sweeps[0].values.len(), n);
+    }
+
+    #[test]
+    fn bad_sweeps_are_refused_naming_key_line_and_range() {
+        let sweep = |body: &str| format!("{HEAD}{CLOUD}sweep = {{ {body} }}\n");
+        for (body, needle) in [
+            (
+                "key = \"r_eff_um\", from = 4, to = 32, count = 0",
+                "line 7: field \"cloud\": sweep count = 0 is outside the allowed range [2, 64]",
+            ),
+            (
+                "key = \"r_eff_um\", from = 4, to = 32, count = 65",
+                "count = 65 is outside the allowed range [2, 64]",
+            ),
+            (
+                "key = \"r_eff_um\", from = 32, to = 4",
+                "line 7: field \"cloud\": sweep from = 32, to = 4: from must be less than to",
+            ),
+            (
+                "key = \"v_eff\", from = 0.1, to = 0.3",
+                "line 7: field \"cloud\": sweep key = \"v_eff\" cannot sweep a gamma distribution",
+            ),
+            (
+                "key = \"median_radius_um\", from = 4, to = 32",
+                "cannot sweep a gamma distribution",
+            ),
+            (
+                "key = \"r_eff_um\", from = 0, to = 32, spacing = \"linear\"",
+                "line 7: field \"cloud\": sweep of r_eff_um at r_eff_um = 0: field \"cloud\": \
+                 distribution:",
+            ),
+            (
+                "key = \"r_eff_um\", from = 0, to = 32",
+                "a log sweep needs from > 0",
+            ),
+            ("key = \"r_eff_um\", from = 4, to = 32, step = 2", "line 7"),
+        ] {
+            let e = error_of(&sweep(body));
+            assert!(e.contains(needle), "{body}: {e}");
+        }
+        // A later field of a swept field's name.
+        let e = error_of(&format!(
+            "{HEAD}{CLOUD}sweep = {{ key = \"r_eff_um\", from = 4, to = 32 }}\n{}",
+            RAIN.replace("\"rain\"\nkind", "\"cloud\"\nkind")
+        ));
+        assert!(e.contains("line 9") && e.contains("used twice"), "{e}");
+    }
 
     #[test]
     fn malformed_scenes_name_the_key_and_line() {

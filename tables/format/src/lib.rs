@@ -37,7 +37,7 @@ pub use commit::{
 pub use exr::{ContractError, FieldImage, IoError, RGB_CHANNELS, read_field_exr, write_field_exr};
 pub use manifest::{
     BakeDir, FieldEntry, FieldFiles, MANIFEST_FILE, Manifest, ManifestCheck, ManifestError,
-    PerChannel, parse_manifest, read_manifest, write_manifest,
+    PerChannel, SweepEntry, parse_manifest, read_manifest, write_manifest,
 };
 pub use output::{OutputError, check_output, check_output_dir, write_output};
 pub use poisson::{PoissonTable, decode_poisson_exr, poisson_exr_bytes, poisson_file_name};

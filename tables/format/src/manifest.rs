@@ -102,8 +102,96 @@ pub struct Manifest {
     pub angle_count: usize,
     /// How R, G and B were formed (spectral mode, wavelengths, weights).
     pub channels: Channels,
-    /// One entry per field, in the scene's order.
+    /// One entry per field, in the scene's order (a swept field's members among them).
     pub fields: Vec<FieldEntry>,
+    /// The swept fields: each a key over increasing values, one member field per value;
+    /// absent when the bake has none.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub sweeps: Vec<SweepEntry>,
+}
+
+/// A field swept over one microphysical key (the sweep axis): the member fields in
+/// [`Manifest::fields`] hold its values, in order.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SweepEntry {
+    /// The swept field's name in the scene (volumes name it); no field has this name.
+    pub name: String,
+    /// The swept key, in the scene's words (e.g. `r_eff_um`).
+    pub key: String,
+    /// How the values were spaced: `"log"` or `"linear"`.
+    pub spacing: String,
+    /// The values, strictly increasing, in the key's unit.
+    pub values: Vec<f64>,
+    /// The member fields' names, one per value (`<name>@<k>`).
+    pub fields: Vec<String>,
+}
+
+impl SweepEntry {
+    /// The members on either side of `value` and their shares of the number density, given
+    /// each member's extinction cross-section `sigma_ext` (m², one channel): with t linear in
+    /// ln value (log spacing) or in value (linear) between the members' values, clamped to the
+    /// ends, `[(k, (1 − t)·σ/σ_k), (k + 1, t·σ/σ_k+1)]` with σ = σ_k^(1−t)·σ_k+1^t. A renderer
+    /// mixing the two members with these shares (as it mixes any two fields in one place,
+    /// Riley et al. 2004 Eq. 6, weight ∝ share × σ_sca) then has the extinction σ, exact where
+    /// σ_ext follows a power of the value (∝ r² for large drops), and the phase functions
+    /// weighted 1 − t and t (for albedo 1; nearly so for clouds).
+    pub fn shares(&self, value: f64, sigma_ext: &[f64]) -> [(usize, f64); 2] {
+        let v = &self.values;
+        let last = v.len() - 1;
+        let value = if value.is_nan() {
+            v[0]
+        } else {
+            value.clamp(v[0], v[last])
+        };
+        let k = v.partition_point(|&x| x <= value).clamp(1, last) - 1;
+        let at = |x: f64| if self.spacing == "log" { x.ln() } else { x };
+        let t = ((at(value) - at(v[k])) / (at(v[k + 1]) - at(v[k]))).clamp(0.0, 1.0);
+        let (s0, s1) = (sigma_ext[k], sigma_ext[k + 1]);
+        let sigma = s0.powf(1.0 - t) * s1.powf(t);
+        [(k, (1.0 - t) * sigma / s0), (k + 1, t * sigma / s1)]
+    }
+
+    /// Its members are fields of the manifest, one per value, of one kind; the values are
+    /// finite and strictly increasing; the name is no field's and no earlier sweep's.
+    fn check(&self, fields: &[FieldEntry], earlier: &[SweepEntry]) -> Result<(), String> {
+        let at = |what: String| format!("sweep {:?}: {what}", self.name);
+        if earlier.iter().any(|s| s.name == self.name) || fields.iter().any(|f| f.name == self.name)
+        {
+            return Err(at("name given twice".into()));
+        }
+        if self.values.len() < 2 || self.values.len() != self.fields.len() {
+            return Err(at(format!(
+                "{} values and {} fields: a sweep has at least 2 values, one field each",
+                self.values.len(),
+                self.fields.len()
+            )));
+        }
+        if !(self.values.iter().all(|v| v.is_finite())
+            && self.values.windows(2).all(|w| w[0] < w[1]))
+        {
+            return Err(at(format!(
+                "values {:?} are not finite and strictly increasing",
+                self.values
+            )));
+        }
+        if !matches!(self.spacing.as_str(), "log" | "linear") {
+            return Err(at(format!(
+                "spacing {:?} is not log or linear",
+                self.spacing
+            )));
+        }
+        let mut kind = None;
+        for name in &self.fields {
+            let Some(f) = fields.iter().find(|f| &f.name == name) else {
+                return Err(at(format!("member {name:?} is not a field of the bake")));
+            };
+            if kind.is_some_and(|k| k != f.kind) {
+                return Err(at(format!("member {name:?} is of another kind")));
+            }
+            kind = Some(f.kind);
+        }
+        Ok(())
+    }
 }
 
 /// The manifest entry of one particle field.
@@ -274,6 +362,9 @@ impl Manifest {
         }
         for (i, f) in self.fields.iter().enumerate() {
             f.check(i, &self.fields[..i])?;
+        }
+        for (i, s) in self.sweeps.iter().enumerate() {
+            s.check(&self.fields, &self.sweeps[..i])?;
         }
         Ok(())
     }

@@ -627,6 +627,7 @@ fn sample_manifest() -> Manifest {
         },
         // Not alphabetical: the scene's order must be kept.
         fields: vec![field("rain", "rain"), field("cloud", "cloud")],
+        sweeps: Vec::new(),
     }
 }
 
