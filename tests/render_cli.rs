@@ -189,6 +189,45 @@ fn bad_render_scenes_name_the_value_and_its_range_and_write_nothing() {
         );
         assert!(!cwd.join("bad.exr").exists(), "{to}: an image was written");
     }
+    // A swept field: refused where no volume uses it, and where a volume names the sweep
+    // itself (not one member), with the sweep's line, before anything is baked.
+    let base = format!("{}\n", base.trim_end());
+    let swept = "\n[[field]]\nname = \"cloud\"\nkind = \"cloud\"\n\
+                 distribution = { kind = \"gamma\", r_eff_um = 10, v_eff = 0.1 }\n\
+                 sweep = { key = \"r_eff_um\", from = 4, to = 32 }\n";
+    let line = base.lines().count() + 6;
+    let args = [
+        "render",
+        "bad.toml",
+        "--quality",
+        "draft",
+        "--tables",
+        "tables",
+        "--out",
+        "bad.exr",
+        "--cpu",
+        "--width",
+        "8",
+        "--height",
+        "8",
+    ];
+    std::fs::write(cwd.join("bad.toml"), format!("{base}{swept}")).unwrap();
+    assert_refused_before_any_work(
+        &args,
+        &cwd,
+        &format!(
+            "line {line}: [[field]] \"cloud\" sweeps r_eff_um from 4 to 32 and no [[volume]] uses it"
+        ),
+    );
+    let named = base.replace("field = \"rain\"", "field = \"cloud\"");
+    std::fs::write(cwd.join("bad.toml"), format!("{named}{swept}")).unwrap();
+    assert_refused_before_any_work(
+        &args,
+        &cwd,
+        &format!(
+            "line {line}: a [[volume]] uses the swept field \"cloud\" (r_eff_um from 4 to 32)"
+        ),
+    );
 }
 
 #[test]

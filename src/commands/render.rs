@@ -247,6 +247,10 @@ pub fn prepare(
     for sweep in &scene.sweeps {
         let members = sweep.members();
         let (first, last) = (sweep.values[0], sweep.values[sweep.values.len() - 1]);
+        let origin = match sweep_line(&text, &sweep.name) {
+            Some(line) => format!("{origin}: line {line}"),
+            None => origin.clone(),
+        };
         if used.contains(&sweep.name) {
             bail!(
                 "{origin}: a [[volume]] uses the swept field {:?} ({} from {first} to {last}): \
@@ -313,6 +317,26 @@ pub fn prepare(
 }
 
 /// A scene error found after parsing, placed on its key's line where one line sets that key.
+/// The 1-based line of `sweep =` in the `[[field]]` named `name`.
+fn sweep_line(text: &str, name: &str) -> Option<usize> {
+    let lines: Vec<&str> = text.lines().collect();
+    let quoted = format!("\"{name}\"");
+    let named = lines.iter().position(|l| {
+        let t = l.trim_start();
+        t.starts_with("name") && t.contains(&quoted)
+    })?;
+    let start = (0..=named)
+        .rev()
+        .find(|&i| lines[i].trim_start().starts_with('['))
+        .unwrap_or(0);
+    let end = (named + 1..lines.len())
+        .find(|&i| lines[i].trim_start().starts_with('['))
+        .unwrap_or(lines.len());
+    (start..end)
+        .find(|&i| lines[i].trim_start().starts_with("sweep"))
+        .map(|i| i + 1)
+}
+
 pub fn at_line(origin: &str, text: &str, message: &str) -> anyhow::Error {
     match render::scene::key_line(text, message) {
         Some(line) => anyhow!("{origin}: line {line}: {message}"),
