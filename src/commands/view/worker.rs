@@ -170,7 +170,21 @@ pub struct TruthRun {
 impl TruthRun {
     /// The news since the last call, oldest first.
     pub fn news(&mut self) -> Vec<TruthNews> {
-        let news: Vec<TruthNews> = self.news.try_iter().collect();
+        let mut news = Vec::new();
+        let disconnected = loop {
+            match self.news.try_recv() {
+                Ok(n) => news.push(n),
+                Err(TryRecvError::Empty) => break false,
+                Err(TryRecvError::Disconnected) => break true,
+            }
+        };
+        let ended = news.iter().any(|n| matches!(n, TruthNews::Ended(_)));
+        // A thread that panicked drops its end without a word: the run has ended all the same.
+        if disconnected && !ended && !self.ended {
+            news.push(TruthNews::Ended(Err(
+                "the truth's thread ended without a frame (it panicked; see stderr)".into(),
+            )));
+        }
         self.ended |= news.iter().any(|n| matches!(n, TruthNews::Ended(_)));
         news
     }
