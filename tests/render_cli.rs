@@ -144,6 +144,21 @@ fn rainbow_radius_in_the_render_matches_the_tables_primary_peak_red_outside() {
 fn bad_render_scenes_name_the_value_and_its_range_and_write_nothing() {
     let cwd = workdir("render-bad");
     let base = std::fs::read_to_string(scene_path("rainbow.toml")).unwrap();
+    let args = [
+        "render",
+        "bad.toml",
+        "--quality",
+        "draft",
+        "--tables",
+        "tables",
+        "--out",
+        "bad.exr",
+        "--cpu",
+        "--width",
+        "8",
+        "--height",
+        "8",
+    ];
     let cases = [
         (
             "elevation_deg = 12",
@@ -163,24 +178,7 @@ fn bad_render_scenes_name_the_value_and_its_range_and_write_nothing() {
         assert!(base.contains(from), "{from}");
         let scene = cwd.join("bad.toml");
         std::fs::write(&scene, base.replace(from, to)).unwrap();
-        let out = photometeor(
-            &[
-                "render",
-                "bad.toml",
-                "--quality",
-                "draft",
-                "--tables",
-                "tables",
-                "--out",
-                "bad.exr",
-                "--cpu",
-                "--width",
-                "8",
-                "--height",
-                "8",
-            ],
-            &cwd,
-        );
+        let out = photometeor(&args, &cwd);
         let stderr = String::from_utf8_lossy(&out.stderr);
         assert!(!out.status.success(), "{to}: accepted");
         assert!(
@@ -196,21 +194,6 @@ fn bad_render_scenes_name_the_value_and_its_range_and_write_nothing() {
                  distribution = { kind = \"gamma\", r_eff_um = 10, v_eff = 0.1 }\n\
                  sweep = { key = \"r_eff_um\", from = 4, to = 32 }\n";
     let line = base.lines().count() + 6;
-    let args = [
-        "render",
-        "bad.toml",
-        "--quality",
-        "draft",
-        "--tables",
-        "tables",
-        "--out",
-        "bad.exr",
-        "--cpu",
-        "--width",
-        "8",
-        "--height",
-        "8",
-    ];
     std::fs::write(cwd.join("bad.toml"), format!("{base}{swept}")).unwrap();
     assert_refused_before_any_work(
         &args,

@@ -7,7 +7,7 @@
 
 use std::path::Path;
 
-use format::BakeDir;
+use format::{BakeDir, FieldImage};
 use serde::Serialize;
 
 use crate::error::BakeError;
@@ -89,8 +89,8 @@ pub fn compare(
                 reference.display()
             )));
         };
-        let a = Judged::read(&ours_dir, &[(f, 1.0)])?;
-        let b = Judged::read(&theirs_dir, &[(r, 1.0)])?;
+        let a = Judged::read(&ours_dir, f)?;
+        let b = Judged::read(&theirs_dir, r)?;
         fields.extend(errors(&f.name, &a, &b, k0, None)?);
     }
     let same = |a: &format::SweepEntry, b: &format::SweepEntry| a.name == b.name && a.key == b.key;
@@ -104,13 +104,12 @@ pub fn compare(
             )));
         }
     }
-    let entry = |m: &'_ format::Manifest, name: &str| -> format::FieldEntry {
+    fn entry<'m>(m: &'m format::Manifest, name: &str) -> &'m format::FieldEntry {
         m.fields
             .iter()
             .find(|f| f.name == name)
             .expect("a checked manifest's sweep names its fields")
-            .clone()
-    };
+    }
     for rs in &theirs.sweeps {
         let Some(os) = ours.sweeps.iter().find(|os| same(os, rs)) else {
             return Err(BakeError::Incompatible(format!(
@@ -120,16 +119,23 @@ pub fn compare(
                 dir.display()
             )));
         };
+        // Each of our members read once, whichever midpoints it serves.
+        let members: Vec<&format::FieldEntry> = os.fields.iter().map(|m| entry(ours, m)).collect();
+        let images = members
+            .iter()
+            .map(|e| ours_dir.read_field(e))
+            .collect::<Result<Vec<_>, _>>()?;
+        let sigma: Vec<f64> = members.iter().map(|e| e.sigma_ext_m2.g).collect();
         let (lo, hi) = (os.values[0], os.values[os.values.len() - 1]);
         for (name, &value) in rs.fields.iter().zip(&rs.values) {
-            let b = Judged::read(&theirs_dir, &[(&entry(theirs, name), 1.0)])?;
+            let b = Judged::read(&theirs_dir, entry(theirs, name))?;
             let label = format!("{} {} = {value:.4}", rs.name, rs.key);
             if let Some(k) = os
                 .values
                 .iter()
                 .position(|v| (v - value).abs() <= 1e-9 * value.abs())
             {
-                let a = Judged::read(&ours_dir, &[(&entry(ours, &os.fields[k]), 1.0)])?;
+                let a = Judged::mix(&[(members[k], &images[k], 1.0)])?;
                 fields.extend(errors(&label, &a, &b, k0, None)?);
                 continue;
             }
@@ -140,14 +146,8 @@ pub fn compare(
                     dir.display()
                 )));
             }
-            let sigma: Vec<f64> = os
-                .fields
-                .iter()
-                .map(|m| entry(ours, m).sigma_ext_m2.g)
-                .collect();
-            let [(k0_, w0), (k1, w1)] = os.shares(value, &sigma);
-            let (e0, e1) = (entry(ours, &os.fields[k0_]), entry(ours, &os.fields[k1]));
-            let a = Judged::read(&ours_dir, &[(&e0, w0), (&e1, w1)])?;
+            let [(i, wi), (j, wj)] = os.shares(value, &sigma);
+            let a = Judged::mix(&[(members[i], &images[i], wi), (members[j], &images[j], wj)])?;
             let how = Some((rs.name.clone(), rs.key.clone(), value));
             fields.extend(errors(&label, &a, &b, k0, how)?);
         }
@@ -170,18 +170,22 @@ struct Judged {
 }
 
 impl Judged {
-    fn read(dir: &BakeDir, parts: &[(&format::FieldEntry, f64)]) -> Result<Self, BakeError> {
-        let images = parts
-            .iter()
-            .map(|(e, _)| dir.read_field(e))
-            .collect::<Result<Vec<_>, _>>()?;
+    /// One field of `dir`, read.
+    fn read(dir: &BakeDir, entry: &format::FieldEntry) -> Result<Self, BakeError> {
+        let image = dir.read_field(entry)?;
+        Self::mix(&[(entry, &image, 1.0)])
+    }
+
+    /// Fields already read, mixed with number shares.
+    fn mix(parts: &[(&format::FieldEntry, &FieldImage, f64)]) -> Result<Self, BakeError> {
+        let images: Vec<&FieldImage> = parts.iter().map(|(_, i, _)| *i).collect();
         let n = images[0].n_max();
         if images.iter().any(|i| i.n_max() != n) {
             return Err(BakeError::Incompatible(format!(
                 "the members {:?} differ in N",
                 parts
                     .iter()
-                    .map(|(e, _)| e.name.as_str())
+                    .map(|(e, _, _)| e.name.as_str())
                     .collect::<Vec<_>>()
             )));
         }
@@ -201,10 +205,10 @@ impl Judged {
             g: [0.0; 3],
         };
         for c in 0..3 {
-            let total: f64 = parts.iter().map(|(e, w)| w * per(e).1[c]).sum();
-            for ((e, w), image) in parts.iter().zip(&images) {
+            let total: f64 = parts.iter().map(|(e, _, w)| w * per(e).1[c]).sum();
+            for &(e, image, w) in parts {
                 let (ext, sca, g) = per(e);
-                let share = if total > 0.0 { w * sca[c] / total } else { *w };
+                let share = if total > 0.0 { w * sca[c] / total } else { w };
                 judged.sigma_ext[c] += w * ext[c];
                 judged.g[c] += share * g[c];
                 for r in 0..n {
