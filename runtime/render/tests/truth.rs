@@ -619,42 +619,36 @@ fn slabs_agree_with_disort() {
         }
         // Radiances by the camera-side estimator the renders use, in directions ≥ 30° from
         // the beam and from the glory (DISORT's own stream-doubling change there ≤ 0.1 %).
-        for (list, up) in [
-            ("I_up_reflected_top", true),
-            ("I_down_transmitted_bottom", false),
-        ] {
-            for r in case[list].as_array().unwrap() {
-                let (mu, phi) = (r["mu"].as_f64().unwrap(), r["phi_deg"].as_f64().unwrap());
-                let theta = r["scattering_angle_deg"].as_f64().unwrap();
-                if !((mu == 1.0 && phi == 0.0) || (mu == 0.8 && phi == 90.0))
-                    || !(30.0..=150.0).contains(&theta)
-                {
-                    continue;
-                }
-                let want = r["I"].as_f64().unwrap();
-                let (got, se) = if radiance_2pct {
-                    radiance_to(&tracer, outgoing(mu, phi, up), n_radiance, 9, 0.015 * want)
-                } else {
-                    radiance(&tracer, outgoing(mu, phi, up), n_radiance, 9)
-                };
-                let z = (got - want) / se;
-                worst_rz = worst_rz.max(z.abs());
-                eprintln!(
-                    "   I({mu}, {phi}°) {}: {got:.5} ± {se:.1e} vs {want:.5} ({:+.2} %, {z:+.2}σ)",
-                    if up { "up" } else { "down" },
+        for slabs::DisortRadiance {
+            list,
+            mu,
+            phi,
+            up,
+            want,
+        } in slabs::disort_radiances(case)
+        {
+            let (got, se) = if radiance_2pct {
+                radiance_to(&tracer, outgoing(mu, phi, up), n_radiance, 9, 0.015 * want)
+            } else {
+                radiance(&tracer, outgoing(mu, phi, up), n_radiance, 9)
+            };
+            let z = (got - want) / se;
+            worst_rz = worst_rz.max(z.abs());
+            eprintln!(
+                "   I({mu}, {phi}°) {}: {got:.5} ± {se:.1e} vs {want:.5} ({:+.2} %, {z:+.2}σ)",
+                if up { "up" } else { "down" },
+                (got - want) / want * 100.0
+            );
+            assert!(
+                z.abs() < 4.5,
+                "{phase} τ {tau} ω {omega} {list} μ {mu} φ {phi}"
+            );
+            if radiance_2pct && 3.0 * se < 0.02 * want {
+                assert!(
+                    ((got - want) / want).abs() < 0.02,
+                    "{phase} τ {tau} ω {omega} {list} μ {mu} φ {phi}: {:+.2} %",
                     (got - want) / want * 100.0
                 );
-                assert!(
-                    z.abs() < 4.5,
-                    "{phase} τ {tau} ω {omega} {list} μ {mu} φ {phi}"
-                );
-                if radiance_2pct && 3.0 * se < 0.02 * want {
-                    assert!(
-                        ((got - want) / want).abs() < 0.02,
-                        "{phase} τ {tau} ω {omega} {list} μ {mu} φ {phi}: {:+.2} %",
-                        (got - want) / want * 100.0
-                    );
-                }
             }
         }
     }

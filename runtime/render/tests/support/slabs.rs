@@ -144,6 +144,48 @@ pub fn outgoing(mu: f64, phi_deg: f64, up: bool) -> DVec3 {
     DVec3::new(s * phi.sin(), if up { mu } else { -mu }, -s * phi.cos())
 }
 
+/// One DISORT radiance the camera-side estimator is checked against.
+pub struct DisortRadiance {
+    /// The case's list it is from (`I_up_reflected_top` or `I_down_transmitted_bottom`).
+    pub list: &'static str,
+    /// Cosine to the normal and azimuth (degrees) of the outgoing direction.
+    pub mu: f64,
+    pub phi: f64,
+    /// Reflected (up) or transmitted (down).
+    pub up: bool,
+    /// DISORT's radiance.
+    pub want: f64,
+}
+
+/// A DISORT case's radiances the tests check: at μ 1 (φ 0°) and μ 0.8 (φ 90°), with the
+/// scattering angle in [30°, 150°] (≥ 30° from the beam and from the glory, where DISORT's own
+/// stream-doubling change is ≤ 0.1 %).
+pub fn disort_radiances(case: &serde_json::Value) -> Vec<DisortRadiance> {
+    let mut out = Vec::new();
+    for (list, up) in [
+        ("I_up_reflected_top", true),
+        ("I_down_transmitted_bottom", false),
+    ] {
+        for r in case[list].as_array().unwrap() {
+            let (mu, phi) = (r["mu"].as_f64().unwrap(), r["phi_deg"].as_f64().unwrap());
+            let theta = r["scattering_angle_deg"].as_f64().unwrap();
+            if ((mu == 1.0 && phi == 0.0) || (mu == 0.8 && phi == 90.0))
+                && (30.0..=150.0).contains(&theta)
+            {
+                let want = r["I"].as_f64().unwrap();
+                out.push(DisortRadiance {
+                    list,
+                    mu,
+                    phi,
+                    up,
+                    want,
+                });
+            }
+        }
+    }
+    out
+}
+
 /// The cloud phase function of data/reference/truth/cloud_550nm_phase.json (0.18° bins).
 pub fn cloud550_bins() -> Vec<f64> {
     let text = std::fs::read_to_string(concat!(
