@@ -207,10 +207,104 @@ fn bad_render_scenes_name_the_value_and_its_range_and_write_nothing() {
     assert_refused_before_any_work(
         &args,
         &cwd,
-        &format!(
-            "line {line}: a [[volume]] uses the swept field \"cloud\" (r_eff_um from 4 to 32)"
-        ),
+        "[[volume]] 1 (field \"cloud\"): \"cloud\" sweeps r_eff_um from 4 to 32; give the \
+         volume a size per voxel, `r_eff_um = { base = …, top = … }`",
     );
+    // A size profile: outside the sweep's values, on a field that is not swept, of a key the
+    // field does not sweep, or with a size ≤ 0.
+    let profiled = |profile: &str, field: &str| {
+        base.replace(
+            "field = \"rain\"",
+            &format!("field = \"{field}\"\n{profile}"),
+        )
+    };
+    let cases = [
+        (
+            profiled("r_eff_um = { base = 3, top = 12 }", "cloud"),
+            "r_eff_um = { base = 3, top = 12 } lies outside the sweep's values [4, 32]",
+        ),
+        (
+            profiled("r_eff_um = { base = 6, top = 12 }", "rain"),
+            "r_eff_um = { base, top } needs a swept field",
+        ),
+        (
+            profiled("median_radius_um = { base = 6, top = 12 }", "cloud"),
+            "the profile follows median_radius_um and \"cloud\" sweeps r_eff_um",
+        ),
+        (
+            profiled("r_eff_um = { base = 0, top = 12 }", "cloud"),
+            "base must be finite and > 0",
+        ),
+    ];
+    for (scene, named) in cases {
+        std::fs::write(cwd.join("bad.toml"), format!("{scene}{swept}")).unwrap();
+        assert_refused_before_any_work(&args, &cwd, named);
+    }
+}
+
+/// A volume whose size profile holds one member's value everywhere renders as a volume of that
+/// member: the per-voxel mixing of the sweep puts all of its particles in that member.
+#[test]
+fn a_size_profile_at_one_members_value_renders_as_that_member() {
+    let cwd = workdir("render-profile");
+    let base = std::fs::read_to_string(scene_path("rainbow.toml")).unwrap();
+    let swept = "\n[[field]]\nname = \"cloud\"\nkind = \"cloud\"\n\
+                 distribution = { kind = \"gamma\", r_eff_um = 10, v_eff = 0.1 }\n\
+                 sweep = { key = \"r_eff_um\", from = 4, to = 16, count = 3 }\n";
+    let render = |name: &str, volume: &str| {
+        let scene = format!(
+            "{}\n{swept}",
+            base.trim_end()
+                .replace("field = \"rain\"", volume)
+                .replace("number_density_per_m3 = 80", "number_density_per_m3 = 2e7")
+        );
+        std::fs::write(cwd.join(format!("{name}.toml")), scene).unwrap();
+        let (toml, exr) = (format!("{name}.toml"), format!("{name}.exr"));
+        let args = [
+            "render",
+            &toml,
+            "--quality",
+            "draft",
+            "--tables",
+            "tables",
+            "--out",
+            &exr,
+            "--cpu",
+            "--width",
+            "32",
+            "--height",
+            "24",
+            "--slices",
+            "32",
+        ];
+        let out = photometeor(&args, &cwd);
+        let stderr = String::from_utf8_lossy(&out.stderr).to_string();
+        assert!(out.status.success(), "{name}:\n{stderr}");
+        (read_rgba(&cwd.join(exr)).2, stderr)
+    };
+    // Members 4, 8 and 16 µm: a profile of 8 µm at base and top is all cloud@01.
+    let (member, _) = render("member", "field = \"cloud@01\"");
+    let (profile, said) = render(
+        "profile",
+        "field = \"cloud\"\nr_eff_um = { base = 8, top = 8 }",
+    );
+    assert!(
+        said.contains("cloud: a size per voxel from 2 of its members, r_eff_um = 8.000, 16.000"),
+        "{said}"
+    );
+    let (growing, said) = render(
+        "growing",
+        "field = \"cloud\"\nr_eff_um = { base = 4, top = 16 }",
+    );
+    assert!(said.contains("from 3 of its members"), "{said}");
+    let (a, b) = (member[..3].concat(), profile[..3].concat());
+    let peak = a.iter().fold(0f32, |m, v| m.max(v.abs()));
+    let apart = |b: &[f32]| a.iter().zip(b).fold(0f32, |m, (x, y)| m.max((x - y).abs()));
+    let (same, other) = (apart(&b), apart(&growing[..3].concat()));
+    eprintln!("peak {peak}, profile at the member {same}, growing profile {other}");
+    assert!(peak > 0.0 && same <= 1e-5 * peak, "{same} of peak {peak}");
+    // The growing cloud is another cloud (the test can tell them apart).
+    assert!(other > 0.05 * peak, "{other} of peak {peak}");
 }
 
 #[test]

@@ -243,7 +243,29 @@ pub fn prepare(
     render
         .check_memory(&settings, limit)
         .map_err(|e| anyhow!("{origin}: {e}"))?;
+    let entries: Vec<format::SweepEntry> = scene.sweeps.iter().map(|s| s.entry()).collect();
+    render
+        .choose_members(&entries)
+        .map_err(|e| at_line(&origin, &text, &e))?;
     let used = render.fields();
+    let sized = render
+        .volumes
+        .iter()
+        .find_map(|v| v.size.as_ref().and_then(|p| p.members.as_ref()));
+    if let Some(members) = sized.filter(|_| !quiet) {
+        let v = &members.values;
+        let step = (v[v.len() - 1] / v[0]).powf(1.0 / (v.len() - 1) as f64);
+        eprintln!(
+            "{}: a size per voxel from {} of its members, {} = {} (×{step:.2} apart)",
+            members.name,
+            v.len(),
+            members.key,
+            v.iter()
+                .map(|x| format!("{x:.3}"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+    }
     for sweep in &scene.sweeps {
         let members = sweep.members();
         let (first, last) = (sweep.values[0], sweep.values[sweep.values.len() - 1]);
@@ -251,19 +273,6 @@ pub fn prepare(
             Some(line) => format!("{origin}: line {line}"),
             None => origin.clone(),
         };
-        if used.contains(&sweep.name) {
-            bail!(
-                "{origin}: a [[volume]] uses the swept field {:?} ({} from {first} to {last}): \
-                 sampling a sweep per voxel is not built yet; give the volume one of its \
-                 members, {:?} ({} = {first}) … {:?} ({} = {last})",
-                sweep.name,
-                sweep.key,
-                members[0],
-                sweep.key,
-                members[members.len() - 1],
-                sweep.key
-            );
-        }
         if !members.iter().any(|m| used.contains(m)) {
             bail!(
                 "{origin}: [[field]] {:?} sweeps {} from {first} to {last} and no [[volume]] \

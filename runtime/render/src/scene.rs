@@ -291,6 +291,17 @@ struct VolumeKeys {
     min_m: Option<[f64; 3]>,
     max_m: Option<[f64; 3]>,
     seed: Option<u64>,
+    r_eff_um: Option<ProfileKeys>,
+    median_radius_um: Option<ProfileKeys>,
+    radius_um: Option<ProfileKeys>,
+}
+
+/// A size profile `{ base, top }` (crate::volume::SizeProfile).
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ProfileKeys {
+    base: f64,
+    top: f64,
 }
 
 /// What a render needs from a scene file: the parts every model shares, and each model's own
@@ -789,23 +800,114 @@ impl RenderScene {
     }
 
     /// The fields the volumes use, in order of first use, then the haze layer's, then the
-    /// media's.
+    /// media's; a volume with a size profile uses its chosen members (once chosen,
+    /// [`RenderScene::choose_members`]; before, the swept field's name).
     pub fn fields(&self) -> Vec<String> {
         let mut names: Vec<String> = Vec::new();
         let haze = self.haze.as_ref().map(|h| &h.field);
         let media = self.media.iter().map(|m| &m.field);
-        for name in self
-            .volumes
-            .iter()
-            .map(|v| &v.field)
-            .chain(haze)
-            .chain(media)
-        {
+        let volumes = self.volumes.iter().flat_map(|v| {
+            match v.size.as_ref().and_then(|p| p.members.as_ref()) {
+                Some(members) => members.fields.iter().collect(),
+                None => vec![&v.field],
+            }
+        });
+        for name in volumes.chain(haze).chain(media) {
             if !names.contains(name) {
                 names.push(name.clone());
             }
         }
         names
+    }
+
+    /// Chooses, for every volume with a size profile, the members of its swept field that the
+    /// renderer mixes ([`crate::volume::choose_members`]): `sweeps` are the scene's swept
+    /// fields. The fields other volumes, the haze and the media use take their channels first;
+    /// the rest of the [`MAX_FIELDS`](crate::MAX_FIELDS) go to the one swept field sampled
+    /// per voxel. Refuses, naming the volume and key: a profile on a field that is not swept or
+    /// sweeps another key, a profile outside the sweep's values, a swept field used without
+    /// a profile, two swept fields sampled per voxel, too few channels left.
+    pub fn choose_members(&mut self, sweeps: &[format::SweepEntry]) -> Result<(), String> {
+        let swept = |name: &str| sweeps.iter().find(|s| s.name == name);
+        let mut sized: Option<(&format::SweepEntry, f64, f64)> = None;
+        for (i, v) in self.volumes.iter().enumerate() {
+            let at = format!("[[volume]] {} (field {:?})", i + 1, v.field);
+            match (&v.size, swept(&v.field)) {
+                (None, Some(s)) => {
+                    return Err(format!(
+                        "{at}: {:?} sweeps {} from {} to {}; give the volume a size per voxel, \
+                         `{} = {{ base = …, top = … }}` (the adiabatic law between its base and \
+                         top), or one of its members, {:?} … {:?}",
+                        s.name,
+                        s.key,
+                        crate::Shown(s.values[0]),
+                        crate::Shown(s.values[s.values.len() - 1]),
+                        s.key,
+                        s.fields[0],
+                        s.fields[s.fields.len() - 1]
+                    ));
+                }
+                (Some(p), None) => {
+                    return Err(format!(
+                        "{at}: {} = {{ base, top }} needs a swept field (a [[field]] with \
+                         `sweep = {{ key = {:?}, … }}`); {:?} is not swept",
+                        p.key, p.key, v.field
+                    ));
+                }
+                (Some(p), Some(s)) => {
+                    if p.key != s.key {
+                        return Err(format!(
+                            "{at}: the profile follows {} and {:?} sweeps {}",
+                            p.key, s.name, s.key
+                        ));
+                    }
+                    let (lo, hi) = p.range();
+                    let (first, last) = (s.values[0], s.values[s.values.len() - 1]);
+                    if lo < first * (1.0 - 1e-9) || hi > last * (1.0 + 1e-9) {
+                        return Err(format!(
+                            "{at}: {} = {{ base = {}, top = {} }} lies outside the sweep's \
+                             values [{}, {}]",
+                            p.key,
+                            crate::Shown(p.base),
+                            crate::Shown(p.top),
+                            crate::Shown(first),
+                            crate::Shown(last)
+                        ));
+                    }
+                    sized = match sized {
+                        Some((other, _, _)) if other.name != s.name => {
+                            return Err(format!(
+                                "{at}: a render samples one swept field per voxel; {:?} and \
+                                 {:?} both have volumes with a size profile",
+                                other.name, s.name
+                            ));
+                        }
+                        Some((_, a, b)) => Some((s, a.min(lo), b.max(hi))),
+                        None => Some((s, lo, hi)),
+                    };
+                }
+                (None, None) => {}
+            }
+        }
+        let Some((sweep, lo, hi)) = sized else {
+            return Ok(());
+        };
+        let others = self.fields().iter().filter(|f| **f != sweep.name).count();
+        let budget = crate::MAX_FIELDS.saturating_sub(others);
+        let members = crate::volume::choose_members(sweep, lo, hi, budget).ok_or_else(|| {
+            format!(
+                "a render holds {} fields and the other volumes, the haze and the media use \
+                 {others}: the swept field {:?} needs 2 for a size per voxel",
+                crate::MAX_FIELDS,
+                sweep.name
+            )
+        })?;
+        for v in &mut self.volumes {
+            if let Some(p) = &mut v.size {
+                p.members = Some(members.clone());
+            }
+        }
+        Ok(())
     }
 
     /// The frame: volumes rasterized with channel i = `tables.fields[i]`.
@@ -822,10 +924,14 @@ impl RenderScene {
                 .position(|f| f.name == name)
                 .expect("checked above")
         };
+        let field = |name: &str| {
+            let i = index(name);
+            (i, tables.fields[i].sigma_ext_m2[1])
+        };
         let grid = if self.volumes.is_empty() {
             super::DensityGrid::empty() // a scene of [[medium]] tables only
         } else {
-            rasterize(&self.volumes, self.grid_resolution, index)?
+            rasterize(&self.volumes, self.grid_resolution, field)?
         };
         let mut frame = self.frame_with(grid);
         frame.haze = self.haze(index);
@@ -1048,11 +1154,42 @@ fn volume(v: &VolumeKeys, base: &Path) -> Result<Volume, String> {
             ));
         }
     };
+    let profiles = [
+        ("r_eff_um", &v.r_eff_um),
+        ("median_radius_um", &v.median_radius_um),
+        ("radius_um", &v.radius_um),
+    ];
+    let mut size = None;
+    for (key, p) in profiles {
+        let Some(p) = p else { continue };
+        if size.is_some() {
+            return Err(format!(
+                "{key} = {{ base, top }}: a volume has one size profile, of one of {}",
+                crate::volume::PROFILE_KEYS.join(", ")
+            ));
+        }
+        for (end, x) in [("base", p.base), ("top", p.top)] {
+            if !(x.is_finite() && x > 0.0) {
+                return Err(format!(
+                    "{key} = {{ base = {}, top = {} }}: {end} must be finite and > 0 (µm)",
+                    crate::Shown(p.base),
+                    crate::Shown(p.top)
+                ));
+            }
+        }
+        size = Some(crate::volume::SizeProfile {
+            key: key.to_string(),
+            base: p.base,
+            top: p.top,
+            members: None,
+        });
+    }
     Ok(Volume {
         field: v.field.clone(),
         number_density_per_m3: density,
         shape,
         seed: v.seed.unwrap_or(1),
+        size,
     })
 }
 

@@ -214,7 +214,8 @@ pub enum Shape {
 /// One volume of one field.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Volume {
-    /// Name of the scene's `[[field]]` (a field of the tables) this volume holds.
+    /// Name of the scene's `[[field]]` (a field of the tables) this volume holds; with a
+    /// [`SizeProfile`], the name of a swept field.
     pub field: String,
     /// Peak number density (particles/m³); β_ext = density · σ_ext (Riley Eq. 2).
     pub number_density_per_m3: f64,
@@ -222,6 +223,83 @@ pub struct Volume {
     pub shape: Shape,
     /// Seed of the blobs and noise of the procedural shapes (default 1).
     pub seed: u64,
+    /// A particle size that changes with height, sampled per voxel from a swept field.
+    pub size: Option<SizeProfile>,
+}
+
+/// The keys a volume's size profile may follow: droplet radii, which grow by the adiabatic law.
+pub const PROFILE_KEYS: [&str; 3] = ["r_eff_um", "median_radius_um", "radius_um"];
+
+/// A droplet size that grows with height inside a volume (`r_eff_um = { base = 6, top = 14 }`):
+/// the adiabatic law, r³ linear in the height above the volume's base (the liquid water of a
+/// rising parcel grows linearly with height at a constant droplet number, so r ∝ h^{1/3} above a
+/// base of zero size; docs/physics.md §11), from `base` at the bottom of the volume's box to
+/// `top` at its top. The renderers mix, per voxel, the two members of the swept field around
+/// that size with the shares of [`format::SweepEntry::shares`] (issue #40).
+#[derive(Debug, Clone, PartialEq)]
+pub struct SizeProfile {
+    /// The swept key, one of [`PROFILE_KEYS`]; the volume's field must sweep it.
+    pub key: String,
+    /// The size at the volume's base (the key's unit), finite and > 0.
+    pub base: f64,
+    /// The size at the volume's top, finite and > 0.
+    pub top: f64,
+    /// The members the renderer mixes (a sweep over some of the swept field's values), set
+    /// when the scene is prepared against its sweep ([`choose_members`]).
+    pub members: Option<format::SweepEntry>,
+}
+
+impl SizeProfile {
+    /// The size at height `y` (m) in a volume whose box spans heights [y0, y1]: r³ linear in
+    /// height, clamped to the box.
+    pub fn at(&self, y: f64, y0: f64, y1: f64) -> f64 {
+        let s = ((y - y0) / (y1 - y0)).clamp(0.0, 1.0);
+        let (b, t) = (self.base.powi(3), self.top.powi(3));
+        (b + (t - b) * s).cbrt()
+    }
+
+    /// The least and largest size in the volume.
+    pub fn range(&self) -> (f64, f64) {
+        (self.base.min(self.top), self.base.max(self.top))
+    }
+}
+
+/// The members of `sweep` a renderer holding `budget` fields mixes for sizes in [lo, hi]: the
+/// members from the last at or below `lo` to the first at or above `hi`, all of them if they
+/// fit, else `budget` of them spread evenly over that run of indices (both ends kept), so the
+/// interpolation spans a coarser step. `None` where `budget` < 2.
+pub fn choose_members(
+    sweep: &format::SweepEntry,
+    lo: f64,
+    hi: f64,
+    budget: usize,
+) -> Option<format::SweepEntry> {
+    if budget < 2 {
+        return None;
+    }
+    let v = &sweep.values;
+    let last = v.len() - 1;
+    let first = v.iter().rposition(|&x| x <= lo).unwrap_or(0);
+    let end = v
+        .iter()
+        .position(|&x| x >= hi)
+        .unwrap_or(last)
+        .max(first + 1);
+    let run = end - first;
+    let picks: Vec<usize> = if run < budget {
+        (first..=end).collect()
+    } else {
+        (0..budget)
+            .map(|i| first + (i * run + (budget - 1) / 2) / (budget - 1))
+            .collect()
+    };
+    Some(format::SweepEntry {
+        name: sweep.name.clone(),
+        key: sweep.key.clone(),
+        spacing: sweep.spacing.clone(),
+        values: picks.iter().map(|&k| v[k]).collect(),
+        fields: picks.iter().map(|&k| sweep.fields[k].clone()).collect(),
+    })
 }
 
 impl Volume {
@@ -533,12 +611,47 @@ pub fn joint_bounds(volumes: &[Volume]) -> (DVec3, DVec3) {
     (DVec3::from_array(lo), DVec3::from_array(hi))
 }
 
+/// Where one volume's particles go in the grid: one channel, or the members of a sweep by the
+/// size at each height.
+enum Channels {
+    One(usize),
+    Sized {
+        profile: Box<SizeProfile>,
+        sweep: format::SweepEntry,
+        channels: Vec<usize>,
+        sigma_ext: Vec<f64>,
+        heights: (f64, f64),
+    },
+}
+
+impl Channels {
+    /// Adds `n` particles/m³ at height `y` to `cell`.
+    fn add(&self, cell: &mut [f32; MAX_FIELDS], n: f64, y: f64) {
+        match self {
+            Channels::One(f) => cell[*f] += n as f32,
+            Channels::Sized {
+                profile,
+                sweep,
+                channels,
+                sigma_ext,
+                heights,
+            } => {
+                let size = profile.at(y, heights.0, heights.1);
+                for (k, share) in sweep.shares(size, sigma_ext) {
+                    cell[channels[k]] += (n * share) as f32;
+                }
+            }
+        }
+    }
+}
+
 /// Rasterizes `volumes` into one grid over their joint bounds, `resolution` voxels along the
-/// longest side; `field_index` maps a field name to its channel.
+/// longest side; `field` maps a field name to its channel and its extinction cross-section
+/// (m², green), which sets a sized volume's member shares.
 pub fn rasterize(
     volumes: &[Volume],
     resolution: usize,
-    field_index: impl Fn(&str) -> usize,
+    field: impl Fn(&str) -> (usize, f64),
 ) -> Result<DensityGrid, VolumeError> {
     if volumes.is_empty() {
         return Err(VolumeError("the scene has no [[volume]]".into()));
@@ -546,15 +659,29 @@ pub fn rasterize(
     let (lo, hi) = joint_bounds(volumes);
     let extent = [hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]];
     let dims = grid_dims(volumes, resolution);
-    let densities: Vec<(usize, f64, Density)> = volumes
-        .iter()
-        .map(|v| {
-            Ok((
-                field_index(&v.field),
-                v.number_density_per_m3,
-                Density::new(v)?,
-            ))
+    let channels = |v: &Volume| -> Result<Channels, String> {
+        let Some(profile) = &v.size else {
+            return Ok(Channels::One(field(&v.field).0));
+        };
+        let sweep = profile.members.clone().ok_or_else(|| {
+            format!(
+                "the volume of {:?} has a {} profile and no members chosen for it",
+                v.field, profile.key
+            )
+        })?;
+        let (channels, sigma_ext) = sweep.fields.iter().map(|m| field(m)).unzip();
+        let (a, b) = v.bounds();
+        Ok(Channels::Sized {
+            profile: Box::new(profile.clone()),
+            sweep,
+            channels,
+            sigma_ext,
+            heights: (a[1], b[1]),
         })
+    };
+    let densities: Vec<(Channels, f64, Density)> = volumes
+        .iter()
+        .map(|v| Ok((channels(v)?, v.number_density_per_m3, Density::new(v)?)))
         .collect::<Result<_, String>>()
         .map_err(VolumeError)?;
     let [nx, ny, nz] = dims;
@@ -571,8 +698,8 @@ pub fn rasterize(
                         lo[2] + (z as f64 + 0.5) * extent[2] / nz as f64,
                     );
                     let cell = &mut slab[x + nx * y];
-                    for (f, scale, d) in &densities {
-                        cell[*f] += (scale * d.at(p)) as f32;
+                    for (channels, scale, d) in &densities {
+                        channels.add(cell, scale * d.at(p), p[1]);
                     }
                 }
             }
@@ -600,6 +727,7 @@ mod tests {
                 top_m: 2000.0,
             },
             seed,
+            size: None,
         }
     }
 
@@ -613,12 +741,13 @@ mod tests {
                 height_m: 1500.0,
             },
             seed: 2,
+            size: None,
         }
     }
 
     #[test]
     fn rasterizing_is_deterministic_and_follows_the_seed() {
-        let index = |f: &str| usize::from(f == "cloud");
+        let index = |f: &str| (usize::from(f == "cloud"), 1.0);
         let a = rasterize(&[shaft(1), cumulus()], 40, index).unwrap();
         let b = rasterize(&[shaft(1), cumulus()], 40, index).unwrap();
         let c = rasterize(&[shaft(9), cumulus()], 40, index).unwrap();
@@ -633,6 +762,107 @@ mod tests {
         assert_eq!((peak[2], peak[3]), (0.0, 0.0));
         // Nothing outside the box.
         assert_eq!(a.sample(DVec3::new(0.0, 3000.0, 5000.0)), [0.0; MAX_FIELDS]);
+    }
+
+    fn sweep(values: &[f64]) -> format::SweepEntry {
+        format::SweepEntry {
+            name: "cloud".into(),
+            key: "r_eff_um".into(),
+            spacing: "log".into(),
+            values: values.to_vec(),
+            fields: (0..values.len()).map(|k| format!("cloud@{k:02}")).collect(),
+        }
+    }
+
+    #[test]
+    fn the_adiabatic_profile_grows_as_the_cube_root_of_height() {
+        let p = SizeProfile {
+            key: "r_eff_um".into(),
+            base: 6.0,
+            top: 14.0,
+            members: None,
+        };
+        assert_eq!(p.at(1000.0, 1000.0, 2000.0), 6.0);
+        assert!((p.at(2000.0, 1000.0, 2000.0) - 14.0).abs() < 1e-12);
+        // Halfway up, r³ is the mean of the ends' cubes; below and above, the ends.
+        let mid = p.at(1500.0, 1000.0, 2000.0);
+        assert!((mid.powi(3) - (6f64.powi(3) + 14f64.powi(3)) / 2.0).abs() < 1e-9);
+        assert_eq!(p.at(0.0, 1000.0, 2000.0), 6.0);
+        assert!((p.at(9e9, 1000.0, 2000.0) - 14.0).abs() < 1e-12);
+        assert_eq!(p.range(), (6.0, 14.0));
+    }
+
+    #[test]
+    fn members_are_chosen_around_the_profile_within_the_budget() {
+        let values: Vec<f64> = (0..16).map(|k| 4.0 * 2f64.powf(k as f64 / 5.0)).collect();
+        let s = sweep(&values);
+        // 6 … 14 µm: from the last value ≤ 6 (k = 2, 5.28) to the first ≥ 14 (k = 10, 16).
+        let all = choose_members(&s, 6.0, 14.0, 16).unwrap();
+        assert_eq!(all.values, values[2..=10].to_vec());
+        assert_eq!(all.fields.first().unwrap(), "cloud@02");
+        // Four channels: both ends kept, evenly spread in index.
+        let four = choose_members(&s, 6.0, 14.0, 4).unwrap();
+        assert_eq!(
+            four.fields,
+            ["cloud@02", "cloud@05", "cloud@07", "cloud@10"]
+        );
+        // A single size still takes two members; a value on a member takes it and the next.
+        let one = choose_members(&s, values[3], values[3], 4).unwrap();
+        assert_eq!(one.fields, ["cloud@03", "cloud@04"]);
+        assert!(choose_members(&s, 6.0, 14.0, 1).is_none());
+    }
+
+    #[test]
+    fn a_sized_volume_puts_each_voxel_between_the_two_members_around_its_size() {
+        let mut v = cumulus();
+        let values = [6.0, 8.0, 10.0, 14.0];
+        let sigma = [1.0, 1.8, 2.7, 5.3];
+        v.size = Some(SizeProfile {
+            key: "r_eff_um".into(),
+            base: 6.0,
+            top: 14.0,
+            members: Some(sweep(&values)),
+        });
+        let field = |name: &str| {
+            let k: usize = name[6..].parse().unwrap();
+            (k, sigma[k])
+        };
+        let g = rasterize(std::slice::from_ref(&v), 24, field).unwrap();
+        let plain = rasterize(&[cumulus()], 24, |_| (0, 1.0)).unwrap();
+        let [nx, ny, _] = g.dims;
+        let (y0, y1) = (g.min_m[1], g.max_m[1]);
+        let mut checked = 0;
+        for (i, (cell, n)) in g.data.iter().zip(&plain.data).enumerate() {
+            let n = f64::from(n[0]);
+            if n <= 0.0 {
+                assert_eq!(*cell, [0.0; MAX_FIELDS]);
+                continue;
+            }
+            let y =
+                y0 + ((i / nx) % ny) as f64 * (y1 - y0) / ny as f64 + (y1 - y0) / ny as f64 / 2.0;
+            let size = v.size.as_ref().unwrap().at(y, y0, y1);
+            // At most two neighbouring members hold particles, and the voxel's extinction is
+            // σ interpolated log-linearly in size between them.
+            let used: Vec<usize> = (0..MAX_FIELDS).filter(|&k| cell[k] > 0.0).collect();
+            assert!(
+                used.len() <= 2 && used.windows(2).all(|w| w[1] == w[0] + 1),
+                "{cell:?}"
+            );
+            let k = values.partition_point(|&x| x <= size).clamp(1, 3) - 1;
+            let t = (size / values[k]).ln() / (values[k + 1] / values[k]).ln();
+            let want = n * sigma[k].powf(1.0 - t) * sigma[k + 1].powf(t);
+            let have: f64 = (0..4).map(|k| f64::from(cell[k]) * sigma[k]).sum();
+            assert!(
+                (have / want - 1.0).abs() < 1e-5,
+                "{have} vs {want} at size {size}"
+            );
+            checked += 1;
+        }
+        assert!(checked > 1000, "{checked}");
+        // Nothing was prepared: the profile without members is an error, not a silent default.
+        v.size.as_mut().unwrap().members = None;
+        let e = rasterize(&[v], 24, field).unwrap_err();
+        assert!(e.0.contains("no members chosen"), "{}", e.0);
     }
 
     #[test]

@@ -436,16 +436,7 @@ fn sweep_entries(
         .scene
         .sweeps
         .iter()
-        .map(|s| format::SweepEntry {
-            name: s.name.clone(),
-            key: s.key.clone(),
-            spacing: match s.spacing {
-                crate::scene::Spacing::Log => "log".into(),
-                crate::scene::Spacing::Linear => "linear".into(),
-            },
-            values: s.values.clone(),
-            fields: s.members(),
-        })
+        .map(crate::scene::Sweep::entry)
         .collect();
     for old in previous.map_or(&[][..], |p| &p.sweeps) {
         let all_kept = old.fields.iter().all(|m| kept.iter().any(|k| &k.name == m));

@@ -250,6 +250,20 @@ impl Sweep {
     pub fn members(&self) -> Vec<String> {
         (0..self.values.len()).map(|k| self.member(k)).collect()
     }
+
+    /// The sweep as the manifest records it.
+    pub fn entry(&self) -> format::SweepEntry {
+        format::SweepEntry {
+            name: self.name.clone(),
+            key: self.key.clone(),
+            spacing: match self.spacing {
+                Spacing::Log => "log".into(),
+                Spacing::Linear => "linear".into(),
+            },
+            values: self.values.clone(),
+            fields: self.members(),
+        }
+    }
 }
 
 /// What a particle field is made of: the format's own vocabulary, which manifests and the

@@ -658,6 +658,7 @@ fn trace(
                 a.0[c] += f64::from(s[c]);
                 a.1[c] += f64::from(q[c]);
             }
+            passes.dropped += s[3] as u64;
         }
         if passes.end_pass(batch) {
             break;

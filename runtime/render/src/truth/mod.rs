@@ -230,7 +230,7 @@ impl Model for Truth {
 
 /// A traced frame as the models' [`Rendered`], traced on `on` (for the summary).
 fn rendered(truth: TruthImage, on: &str) -> Rendered {
-    let summary = format!(
+    let mut summary = format!(
         "path-traced truth: {}×{}, {} spp, noise {:.2} % (median relative standard error, \
          green, volume pixels), {:.1} s, {:.3} M paths/s on {on}",
         truth.image.width,
@@ -240,6 +240,13 @@ fn rendered(truth: TruthImage, on: &str) -> Rendered {
         truth.seconds,
         truth.paths_per_second / 1e6,
     );
+    if truth.dropped > 0 {
+        let all = (truth.image.width * truth.image.height * truth.spp) as f64;
+        summary += &format!(
+            "; {} of its {all:.3e} samples were not finite (f32) and counted as 0",
+            truth.dropped
+        );
+    }
     let extra = (0..3)
         .map(|c| {
             (
@@ -286,6 +293,9 @@ pub struct TruthImage {
     pub seconds: f64,
     /// Paths traced per second.
     pub paths_per_second: f64,
+    /// Samples that were not finite and counted as 0 (the GPU truth's f32 arithmetic; the
+    /// CPU truth has none).
+    pub dropped: u64,
 }
 
 /// The random stream of one sample (`Rng::stream(seed, pixel, sample)`).
@@ -1442,6 +1452,8 @@ pub(crate) struct Passes<'a> {
     pub acc: Vec<([f64; 3], [f64; 3])>,
     /// Samples per pixel taken.
     pub done: usize,
+    /// Samples that were not finite, counted as 0 ([`TruthImage::dropped`]).
+    pub dropped: u64,
     width: usize,
     noise: f64,
     start: Instant,
@@ -1462,6 +1474,7 @@ impl<'a> Passes<'a> {
         Self {
             acc: vec![([0.0; 3], [0.0; 3]); transparency.len()],
             done: 0,
+            dropped: 0,
             width,
             noise: f64::INFINITY,
             start: Instant::now(),
@@ -1533,6 +1546,7 @@ impl<'a> Passes<'a> {
             noise: self.noise,
             seconds,
             paths_per_second: (width * height * self.done) as f64 / seconds.max(1e-9),
+            dropped: self.dropped,
         }
     }
 }

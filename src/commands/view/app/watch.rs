@@ -57,6 +57,10 @@ impl App {
         scene
             .check_for(&self.model)
             .map_err(|e| at_line(&origin, &text, &e.to_string()))?;
+        let sweeps: Vec<format::SweepEntry> = fields.sweeps.iter().map(|s| s.entry()).collect();
+        scene
+            .choose_members(&sweeps)
+            .map_err(|e| at_line(&origin, &text, &e))?;
         let used = scene.fields();
         if let Some(missing) = used
             .iter()
