@@ -1,0 +1,140 @@
+"""The README's growing-droplet cumulus (data/scenes/growing_cumulus.toml, issue #40): droplets
+whose effective radius follows the adiabatic law from 6 µm at the base to 14 µm at the top,
+seen from above around the glory. Renders riley, coupled and max here, measures each against
+the path-traced truth with `photometeor compare-render`, and draws
+
+- `growing_cumulus-four.png`: truth, riley, coupled and max, 2 × 2 at one exposure (the truth's
+  automatic exposure, as `render --png` picks it);
+- `growing_cumulus-glory.png`: the glory's radial profile (mean luminance against the angle from
+  the antisolar point, over 10-12° = 1) of the truth, of the truth of the same cloud with one
+  size everywhere (cloud@02, 10.6 µm), of riley and of coupled;
+- `growing_cumulus.json`: the figures.
+
+The truths are the long part: give them as EXRs rendered at 384 × 256 (`--truth`,
+`--fixed-truth`), or they are rendered here with `--spp` samples (on the GPU where there is
+one; on 2 CPU cores 4096 spp would take about half an hour each).
+
+    python3 docs/renders/growing.py [--bin target/release/photometeor] [--truth T.exr]
+        [--fixed-truth F.exr] [--spp 4096]
+"""
+import argparse
+import json
+import re
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+from PIL import Image
+
+from pair import LUMA, render, srgb
+
+HERE = Path(__file__).resolve().parent
+SCENE = HERE.parents[1] / "data/scenes/growing_cumulus.toml"
+W, H, FOV = 384, 256, 36.0
+
+
+def fixed_scene(tmp):
+    """The scene with one size everywhere: the volume holds the member cloud@02 (10.6 µm)."""
+    text = SCENE.read_text()
+    text = re.sub(r"(?m)^r_eff_um = \{.*\}\n", "", text)
+    text = text.replace('field = "cloud"\nshape', 'field = "cloud@02"\nshape')
+    path = tmp / "growing_cumulus_fixed.toml"
+    path.write_text(text)
+    return path
+
+
+def read(exr):
+    with __import__("OpenEXR").File(str(exr), separate_channels=True) as f:
+        ch = f.channels()
+        return np.stack([ch[c].pixels for c in "RGB"], axis=-1).astype(np.float64)
+
+
+def profile(rgb, step=0.25, top=12.0):
+    """Mean luminance in rings of `step` degrees about the image centre (the antisolar point),
+    over the mean of the outer 2°."""
+    f = (H / 2) / np.tan(np.radians(FOV / 2))
+    y, x = np.mgrid[0:H, 0:W]
+    angle = np.degrees(np.arctan(np.hypot(x + 0.5 - W / 2, y + 0.5 - H / 2) / f))
+    edges = np.arange(0.0, top + 1e-9, step)
+    lum = rgb @ LUMA
+    ring = np.digitize(angle, edges)
+    mean = np.array([lum[ring == i].mean() for i in range(1, len(edges))])
+    return (edges[:-1] + step / 2), mean / mean[-int(2 / step):].mean()
+
+
+def main():
+    p = argparse.ArgumentParser()
+    p.add_argument("--bin", default=str(HERE.parents[1] / "target/release/photometeor"))
+    p.add_argument("--truth", help="truth EXR of the scene at 384×256")
+    p.add_argument("--fixed-truth", help="truth EXR of the one-size cloud at 384×256")
+    p.add_argument("--spp", type=int, default=4096)
+    a = p.parse_args()
+    tmp = Path(tempfile.mkdtemp(prefix="growing-"))
+    size = ["--width", str(W), "--height", str(H)]
+    truths = {}
+    for name, given, scene in [("truth", a.truth, SCENE),
+                               ("fixed-truth", a.fixed_truth, fixed_scene(tmp))]:
+        exr = given or str(tmp / f"{name}.exr")
+        if not given:
+            render([a.bin, "render", str(scene), "--model", "truth", *size, "--spp",
+                    str(a.spp), "--out", exr], exr)
+        truths[name] = exr
+    truth = read(truths["truth"])
+    frames = {"truth": truth}
+    report = {"size": [W, H], "truth": truths["truth"], "models": {}}
+    for model in ["riley", "coupled", "max"]:
+        exr = str(tmp / f"{model}.exr")
+        started = time.time()
+        frames[model] = render([a.bin, "render", str(SCENE), "--model", model, *size,
+                                "--out", exr], exr)
+        seconds = time.time() - started
+        out = subprocess.run([a.bin, "compare-render", truths["truth"], exr, "--json"],
+                             capture_output=True, text=True, check=True)
+        e = json.loads(out.stdout)
+        report["models"][model] = {"error": e, "wall_s_incl_start": seconds}
+        print(f"{model}: bias {e['bias']:+.1%}, median {e['median_rel_error']:.1%}, "
+              f"p95 {e['p95_rel_error']:.1%} (truth noise {e['truth_noise']:.1%}), {seconds:.1f} s")
+
+    lum = truth @ LUMA
+    exposure = 1.5 / np.sort(lum.ravel())[int((lum.size - 1) * 0.97)]
+    gap = np.zeros((H, 4, 3))
+    top = np.concatenate([frames["truth"], gap, frames["riley"]], axis=1)
+    bottom = np.concatenate([frames["coupled"], gap, frames["max"]], axis=1)
+    grid = np.concatenate([top, np.zeros((4, top.shape[1], 3)), bottom], axis=0)
+    img = srgb(1.0 - np.exp(-exposure * np.maximum(grid, 0.0)))
+    img[:, W:W + 4] = 1.0
+    img[H:H + 4, :] = 1.0
+    out = HERE / "growing_cumulus-four.png"
+    Image.fromarray(np.round(np.clip(img, 0, 1) * 255).astype(np.uint8)).save(out, optimize=True)
+    report["exposure"] = exposure
+
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    curves = {"truth, 6 → 14 µm with height": truth,
+              "truth, 10.6 µm everywhere": read(truths["fixed-truth"]),
+              "riley, 6 → 14 µm": frames["riley"], "coupled, 6 → 14 µm": frames["coupled"]}
+    fig, ax = plt.subplots(figsize=(7, 3.6), dpi=110)
+    report["glory_profile"] = {}
+    for (label, rgb), style in zip(curves.items(), ["k-", "k--", "C0-", "C1-"]):
+        theta, value = profile(rgb)
+        ax.plot(theta, value, style, label=label)
+        report["glory_profile"][label] = [round(v, 4) for v in value]
+    report["glory_profile"]["angle_deg"] = [round(t, 3) for t in theta]
+    ax.set_xlabel("angle from the antisolar point (°)")
+    ax.set_ylabel("mean luminance (10–12° = 1)")
+    ax.set_title("glory of the growing-droplet cumulus")
+    ax.set_xlim(0, 8)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(HERE / "growing_cumulus-glory.png")
+    (HERE / "growing_cumulus.json").write_text(json.dumps(report, indent=1) + "\n")
+    print(out)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
