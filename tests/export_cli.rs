@@ -675,3 +675,91 @@ fn every_format_succeeds_with_its_defaults_and_reports_its_choice() {
         "{sigma_t} {albedo}\n{xml}"
     );
 }
+
+/// A swept field exports as one axis: `--fields cloud` (the sweep's name) takes its members,
+/// npy stacks their arrays in the order of their values into `cloud.ams.npy` (values × orders ×
+/// R, G, B × θ) beside `cloud.values.npy`, and export.json names the axis with what a shader's
+/// `ams_sweep` takes.
+#[test]
+fn a_sweep_exports_as_one_axis() {
+    let root = workdir("export_sweep");
+    let scene = root.join("scene.toml");
+    fs::write(
+        &scene,
+        SCENE.replace(
+            "r_eff_um = 8, v_eff = 0.1 }",
+            "r_eff_um = 8, v_eff = 0.1 }\nsweep = { key = \"r_eff_um\", from = 4, to = 16, count = 3 }",
+        ),
+    )
+    .unwrap();
+    let tables = root.join("tables");
+    let (s, t) = (scene.to_str().unwrap(), tables.to_str().unwrap());
+    ok(&photometeor(
+        &["bake", s, "--out", t, "--quiet"],
+        Path::new("."),
+    ));
+    let out = root.join("npy");
+    let args = [
+        "export", t, "--format", "npy", "--fields", "cloud", "--orders", "1,3",
+    ];
+    let printed = ok(&photometeor(
+        &[&args[..], &["--out", out.to_str().unwrap()]].concat(),
+        Path::new("."),
+    ));
+    assert!(
+        printed.contains("cloud: sweep over r_eff_um (3 values) as one axis"),
+        "{printed}"
+    );
+    let data = |name: &str| {
+        let bytes = fs::read(out.join(name)).unwrap();
+        let header = u16::from_le_bytes([bytes[8], bytes[9]]) as usize;
+        (
+            String::from_utf8_lossy(&bytes[10..10 + header]).into_owned(),
+            bytes[10 + header..].to_vec(),
+        )
+    };
+    let (header, stacked) = data("cloud.ams.npy");
+    let k = Tables::open(&tables).unwrap().angle_count;
+    assert!(header.contains(&format!("(3, 2, 3, {k})")), "{header}");
+    let members: Vec<u8> = (0..3)
+        .flat_map(|m| data(&format!("cloud@{m:02}.ams.npy")).1)
+        .collect();
+    assert_eq!(stacked, members);
+    assert!(
+        !out.join("rain.ams.npy").exists(),
+        "--fields cloud exported rain"
+    );
+    let r = report(&out);
+    let sweep = &r["sweeps"]["cloud"];
+    assert_eq!(
+        sweep["members"],
+        serde_json::json!(["cloud@00", "cloud@01", "cloud@02"])
+    );
+    let values: Vec<f64> = serde_json::from_value(sweep["values"].clone()).unwrap();
+    assert!((values[0] - 4.0).abs() < 1e-12 && (values[2] - 16.0).abs() < 1e-12);
+    assert!(
+        (sweep["at_step"].as_f64().unwrap() - 2f64.ln()).abs() < 1e-12,
+        "{sweep}"
+    );
+    let (values_header, _) = data("cloud.values.npy");
+    assert!(values_header.contains("(3,)"), "{values_header}");
+    // An unknown name is refused with the fields and sweeps the bake has.
+    let bad = photometeor(
+        &[
+            "export",
+            t,
+            "--format",
+            "npy",
+            "--fields",
+            "fog",
+            "--out",
+            root.join("bad").to_str().unwrap(),
+        ],
+        Path::new("."),
+    );
+    let e = String::from_utf8_lossy(&bad.stderr);
+    assert!(
+        !bad.status.success() && e.contains("cloud@02, rain, cloud"),
+        "{e}"
+    );
+}

@@ -629,6 +629,22 @@ pub enum Lookup {
         /// The angle at the light from the foot point, radians in [−π/2, π/2].
         theta_rad: f32,
     },
+    /// `ams_sweep(field, count, at_first, at_step, at_value, n, cos θ)` and
+    /// `forward_fraction_sweep`: a swept field whose `count` members start at layer `field`.
+    Sweep {
+        /// The number of members.
+        count: u32,
+        /// at(v_0): ln v_0 for a log sweep, v_0 for a linear one.
+        at_first: f32,
+        /// at(v_1) − at(v_0).
+        at_step: f32,
+        /// at(value) of the size looked up.
+        at_value: f32,
+        /// The order n.
+        n: f32,
+        /// cos θ.
+        cos_theta: f32,
+    },
 }
 
 /// One query of [`evaluate`].
@@ -659,19 +675,63 @@ impl Query {
         Self { field, lookup }
     }
 
-    /// The kernel's vec4 (field, a, b, kind) (shaders::QUERY_KERNEL).
-    fn words(&self) -> [f32; 4] {
+    /// `ams_sweep` at `value` of `sweep`, whose members are the layers from `first` on.
+    pub fn ams_sweep(
+        first: u32,
+        sweep: &format::SweepEntry,
+        value: f64,
+        n: f32,
+        cos_theta: f32,
+    ) -> Self {
+        let at = |v: f64| if sweep.spacing == "log" { v.ln() } else { v };
+        let lookup = Lookup::Sweep {
+            count: sweep.values.len() as u32,
+            at_first: at(sweep.values[0]) as f32,
+            at_step: (at(sweep.values[1]) - at(sweep.values[0])) as f32,
+            at_value: at(value) as f32,
+            n,
+            cos_theta,
+        };
+        Self {
+            field: first,
+            lookup,
+        }
+    }
+
+    /// The kernel's two vec4 (field, a, b, kind), (c, d, e, f) (shaders::QUERY_KERNEL).
+    fn words(&self) -> [f32; 8] {
         let field = self.field as f32;
         match self.lookup {
-            Lookup::Ams { n, cos_theta } => [field, n, cos_theta, 0.0],
-            Lookup::Poisson { depth, cos_theta } => [field, depth, cos_theta, 1.0],
-            Lookup::BiriPrimitive { tau_h, theta_rad } => [field, tau_h, theta_rad, 2.0],
+            Lookup::Ams { n, cos_theta } => [field, n, cos_theta, 0.0, 0.0, 0.0, 0.0, 0.0],
+            Lookup::Poisson { depth, cos_theta } => {
+                [field, depth, cos_theta, 1.0, 0.0, 0.0, 0.0, 0.0]
+            }
+            Lookup::BiriPrimitive { tau_h, theta_rad } => {
+                [field, tau_h, theta_rad, 2.0, 0.0, 0.0, 0.0, 0.0]
+            }
+            Lookup::Sweep {
+                count,
+                at_first,
+                at_step,
+                at_value,
+                n,
+                cos_theta,
+            } => [
+                field,
+                n,
+                cos_theta,
+                3.0,
+                count as f32,
+                at_first,
+                at_step,
+                at_value,
+            ],
         }
     }
 }
 
 /// Evaluates each query's lookup in a compute shader and reads the results back: per query
-/// [Ams R, G, B, F_n G], [M R, G, B, 0] or [C R, G, B, 0]. Used by the tests and
+/// [Ams R, G, B, F_n G], [M R, G, B, 0], [C R, G, B, 0] or a sweep's [Ams R, G, B, F_n G]. Used by the tests and
 /// `photometeor` checks.
 pub fn evaluate(
     gpu: &Gpu,

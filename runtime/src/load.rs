@@ -87,6 +87,8 @@ pub struct Tables {
     /// from the manifest's `channels` (always present since the manifest's `channels` are
     /// typed; an `Option` for the renderers that match on it).
     pub spectrum: Option<Spectrum>,
+    /// The manifest's swept fields whose members are all among the selected fields.
+    pub sweeps: Vec<format::SweepEntry>,
 }
 
 /// How a bake's wavelengths make its R, G, B channels (the manifest's `channels`).
@@ -200,12 +202,19 @@ impl Tables {
                     .map(|t| t.as_array().map(|&v| v)),
             });
         }
+        let sweeps = manifest
+            .sweeps
+            .iter()
+            .filter(|s| s.fields.iter().all(|m| fields.iter().any(|f| &f.name == m)))
+            .cloned()
+            .collect();
         Ok(Self {
             dir: dir.to_path_buf(),
             theta_step_deg: manifest.theta_step_deg,
             angle_count: manifest.angle_count,
             fields,
             spectrum,
+            sweeps,
         })
     }
 

@@ -87,6 +87,43 @@ pub fn mix(
     })
 }
 
+/// Ams_n(θ) of a swept field at `value` (the key's unit): the two members around it
+/// (`members[k]` the field of `sweep.values[k]`) with the number shares of
+/// [`format::SweepEntry::shares`] (green σ_ext), mixed as [`mix`] mixes fields in one place.
+/// The exact reference of WGSL's `ams_sweep`.
+pub fn ams_sweep(
+    members: &[&FieldTable],
+    sweep: &format::SweepEntry,
+    theta_step_deg: f64,
+    value: f64,
+    n: f64,
+    cos_theta: f64,
+) -> [f64; 3] {
+    let (fields, shares) = sweep_shares(members, sweep, value);
+    mix(&fields, &shares, theta_step_deg, n, cos_theta)
+}
+
+/// F_n of a swept field at `value`, weighted like [`ams_sweep`].
+pub fn forward_fraction_sweep(
+    members: &[&FieldTable],
+    sweep: &format::SweepEntry,
+    value: f64,
+    n: f64,
+) -> [f64; 3] {
+    let (fields, shares) = sweep_shares(members, sweep, value);
+    forward_fraction_mix(&fields, &shares, n)
+}
+
+fn sweep_shares<'a>(
+    members: &[&'a FieldTable],
+    sweep: &format::SweepEntry,
+    value: f64,
+) -> ([&'a FieldTable; 2], [f64; 2]) {
+    let sigma: Vec<f64> = members.iter().map(|f| f.sigma_ext_m2[1]).collect();
+    let [(a, wa), (b, wb)] = sweep.shares(value, &sigma);
+    ([members[a], members[b]], [wa, wb])
+}
+
 /// F_n of a mixture, weighted like [`mix`]; 1 where nothing scatters (no light is lost there).
 pub fn forward_fraction_mix(fields: &[&FieldTable], densities: &[f64], n: f64) -> [f64; 3] {
     weighted(fields, densities, 1.0, |f| forward_fraction(f, n))

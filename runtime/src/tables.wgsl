@@ -117,6 +117,53 @@ fn ams_mix(densities: vec4<f32>, n: f32, cos_theta: f32) -> vec3<f32> {
     return select(vec3<f32>(0.0), num / den, den > vec3<f32>(0.0));
 }
 
+// A swept field (the manifest's `sweeps`: one member field per value) whose `count` members
+// are the consecutive layers first … first + count − 1, their values equally spaced in
+// at(value) = ln value (log spacing) or value (linear): at_first = at(v_0), at_step =
+// at(v_1) − at(v_0). The member layer below `at_value` (clamped to the sweep) and the weight t
+// of the next, linear in at(value) (format::SweepEntry::shares).
+struct SweepPoint {
+    layer: u32,
+    t: f32,
+}
+
+fn sweep_point(first: u32, count: u32, at_first: f32, at_step: f32, at_value: f32) -> SweepPoint {
+    let u = clamp((at_value - at_first) / at_step, 0.0, f32(count - 1u));
+    let k = min(u32(floor(u)), count - 2u);
+    return SweepPoint(first + k, u - f32(k));
+}
+
+// The two members' weights per channel in a mixture (Riley et al. 2004 Eq. 6) with the number
+// shares of format::SweepEntry::shares: (1 − t) σ_sca,c/σ_sca,G of the lower member and
+// t σ_sca,c/σ_sca,G of the upper, normalized. The shares divide by the green σ_ext, which the
+// shader does not hold; σ_sca in its place differs by the members' albedo, 1 − ω < 10⁻⁴ for
+// water and ice in the visible (runtime::sample::ams_sweep is the exact reference).
+fn sweep_weights(s: SweepPoint) -> array<vec3<f32>, 2> {
+    let a = ams_field_info[s.layer];
+    let b = ams_field_info[s.layer + 1u];
+    let w0 = (1.0 - s.t) * a.yzw / a.z;
+    let w1 = s.t * b.yzw / b.z;
+    let total = w0 + w1;
+    return array<vec3<f32>, 2>(w0 / total, w1 / total);
+}
+
+// Ams_n(θ) of a swept field at `at_value` (ln of the size for a log sweep): the members around
+// it mixed as one place mixes fields.
+fn ams_sweep(first: u32, count: u32, at_first: f32, at_step: f32, at_value: f32, n: f32,
+        cos_theta: f32) -> vec3<f32> {
+    let s = sweep_point(first, count, at_first, at_step, at_value);
+    let w = sweep_weights(s);
+    return w[0] * ams(s.layer, n, cos_theta) + w[1] * ams(s.layer + 1u, n, cos_theta);
+}
+
+// F_n of a swept field at `at_value`, weighted like ams_sweep.
+fn forward_fraction_sweep(first: u32, count: u32, at_first: f32, at_step: f32, at_value: f32,
+        n: f32) -> vec3<f32> {
+    let s = sweep_point(first, count, at_first, at_step, at_value);
+    let w = sweep_weights(s);
+    return w[0] * forward_fraction(s.layer, n) + w[1] * forward_fraction(s.layer + 1u, n);
+}
+
 // (J_P, J_B, first Poisson depth, first Biri depth) of `field` (see the layout above).
 fn model_header(field: u32) -> vec4<u32> {
     let b = 4u * field;

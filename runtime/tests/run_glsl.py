@@ -8,7 +8,7 @@ INPUT_DIR holds, as .npy, what runtime::gpu::GpuTables uploads and what the CPU 
   texture.npy (layers, n_stride, K, 4), forward_fraction.npy (layers * n_stride, 4),
   field_info.npy (layers, 4), params.npy (angle_count, n_stride, field_count, inv_step_rad),
   model_texture.npy (layers, J_P + J_B, K, 4), model_depths.npy (M,),
-  queries.npy (Q, 4) = (field, a, b, kind), expected.npy (Q, 4) = the kernel's results (kind 0:
+  queries.npy (Q, 8) = (field, a, b, kind, c, d, e, f), expected.npy (Q, 4) = the kernel's results (kind 0:
   Ams R, G, B, F_n G; 1: M R, G, B, 0; 2: C R, G, B, 0), denominator.npy (Q, 3) = what each
   channel's difference is divided by, tolerance.npy (Q,) = the largest ratio allowed.
 The shader is compiled by the OpenGL driver (Mesa's llvmpipe through EGL, headless, via the

@@ -154,7 +154,7 @@ fn the_glsl_runs_in_opengl_and_matches_the_cpu_sampler() {
         for n in [0.5f32, 1.0, 1.5, 2.75, 6.0, 9.0] {
             for i in 0..=400 {
                 let cos = (i as f64 * 0.45).to_radians().cos() as f32 as f64;
-                queries.extend([field, n as f64, cos, 0.0]);
+                queries.extend([field, n as f64, cos, 0.0, 0.0, 0.0, 0.0, 0.0]);
                 let a = ams(f, tables.theta_step_deg, n as f64, cos);
                 expected.extend([a[0], a[1], a[2], forward_fraction(f, n as f64)[1]]);
                 denominator.extend(a.map(|v| v.abs() + 1e-7 * top));
@@ -173,7 +173,7 @@ fn the_glsl_runs_in_opengl_and_matches_the_cpu_sampler() {
             for i in 0..=200 {
                 let cos = (i as f64 * 0.9).to_radians().cos() as f32 as f64;
                 let d = depth as f64;
-                queries.extend([field, d, cos, 1.0]);
+                queries.extend([field, d, cos, 1.0, 0.0, 0.0, 0.0, 0.0]);
                 let m = poisson(f, tables.theta_step_deg, [d; 3], cos).unwrap();
                 expected.extend([m[0], m[1], m[2], 0.0]);
                 denominator.extend(m.map(|v| v.abs() + 1e-6 * top_m));
@@ -186,7 +186,7 @@ fn the_glsl_runs_in_opengl_and_matches_the_cpu_sampler() {
             });
             for i in 0..=200 {
                 let theta = (-90.0 + 0.9 * i as f64).to_radians() as f32 as f64;
-                queries.extend([field, tau_h as f64, theta, 2.0]);
+                queries.extend([field, tau_h as f64, theta, 2.0, 0.0, 0.0, 0.0, 0.0]);
                 let c: [f64; 3] = std::array::from_fn(|c| {
                     biri_primitive(f, &grid, c, tau_h as f64, theta).unwrap()
                 });
@@ -213,7 +213,7 @@ fn the_glsl_runs_in_opengl_and_matches_the_cpu_sampler() {
             vec![models.depths.len()],
             &models.depths.iter().map(|&v| v as f64).collect(),
         ),
-        ("queries", vec![q, 4], &queries),
+        ("queries", vec![q, 8], &queries),
         ("expected", vec![q, 4], &expected),
         ("denominator", vec![q, 3], &denominator),
         ("tolerance", vec![q], &tolerance),

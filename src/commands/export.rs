@@ -67,7 +67,9 @@ pub struct ExportArgs {
     /// directory is refused).
     #[arg(long)]
     out: PathBuf,
-    /// Fields to export, comma-separated (default: every field of the bake).
+    /// Fields to export, comma-separated (default: every field of the bake); a swept field's
+    /// name takes its members, and npy then also writes the sweep as one axis
+    /// (`<sweep>.ams.npy`, values × orders × R, G, B × θ, and `<sweep>.values.npy`).
     #[arg(long, value_delimiter = ',')]
     fields: Vec<String>,
     /// Scattering orders n of Ams_n, comma-separated, each in [1, N] (N: the bake's rows).
@@ -225,10 +227,15 @@ fn check(a: &ExportArgs, t: &Tables) -> Result<()> {
         bail!("--orders is empty: give at least one order n ≥ 1");
     }
     for name in &a.fields {
-        if t.field(name).is_none() {
-            let have: Vec<&str> = t.fields.iter().map(|f| f.name.as_str()).collect();
+        if t.field(name).is_none() && !t.sweeps.iter().any(|s| &s.name == name) {
+            let have: Vec<&str> = t
+                .fields
+                .iter()
+                .map(|f| f.name.as_str())
+                .chain(t.sweeps.iter().map(|s| s.name.as_str()))
+                .collect();
             bail!(
-                "--fields: the bake has no field {name:?} (it has {})",
+                "--fields: the bake has no field or sweep {name:?} (it has {})",
                 have.join(", ")
             );
         }
@@ -272,12 +279,21 @@ fn check(a: &ExportArgs, t: &Tables) -> Result<()> {
     Ok(())
 }
 
+/// The fields `--fields` names (a sweep's name stands for its members), in the bake's order;
+/// every field by default.
 fn selected<'a>(t: &'a Tables, a: &ExportArgs) -> Vec<&'a FieldTable> {
-    if a.fields.is_empty() {
-        t.fields.iter().collect()
-    } else {
-        a.fields.iter().filter_map(|n| t.field(n)).collect()
-    }
+    let named = |f: &FieldTable| {
+        a.fields.iter().any(|n| {
+            *n == f.name
+                || t.sweeps
+                    .iter()
+                    .any(|s| &s.name == n && s.fields.contains(&f.name))
+        })
+    };
+    t.fields
+        .iter()
+        .filter(|f| a.fields.is_empty() || named(f))
+        .collect()
 }
 
 /// One table's values on the cos θ grid and its cost per channel.
@@ -344,6 +360,7 @@ fn write_all(
         )?;
     }
     let mut mitsuba_json = serde_json::Map::new();
+    let mut npy_of: std::collections::HashMap<String, Vec<f64>> = Default::default();
     for fr in fields {
         let f = fr.field;
         let (n, resampled) = field_tables(a, t, step, fr)?;
@@ -364,6 +381,9 @@ fn write_all(
                 order.to_string(),
                 json!({ "files": files, "channels": channels }),
             );
+        }
+        if a.format == ExportFormat::Npy && t.sweeps.iter().any(|s| s.fields.contains(&f.name)) {
+            npy_of.insert(f.name.clone(), parts.npy.clone());
         }
         ex.write_field(t, step, version, parts, &mut mitsuba_json)?;
         report_fields.insert(
@@ -389,7 +409,9 @@ fn write_all(
             .as_bytes(),
         )?;
     }
-    let report = export_report(a, step, version, report_fields);
+    let mut report = export_report(a, step, version, report_fields);
+    let mut sweep_text = String::new();
+    report["sweeps"] = export_sweeps(a, t, stage, &npy_of, &mut sweep_text)?;
     write_file(
         stage,
         "export.json",
@@ -405,9 +427,72 @@ fn write_all(
         } else {
             print!("{text}");
         }
+        print!("{sweep_text}");
         println!("wrote {} (report: export.json)", a.out.display());
     }
     Ok(report)
+}
+
+/// The sweeps whose members are all exported, as one axis: for npy `<sweep>.ams.npy` (values ×
+/// orders × R, G, B × θ bins, the members' arrays stacked in the order of their values) and
+/// `<sweep>.values.npy`; for every format the report's entry (key, spacing, values, members in
+/// order, and what a shader's `ams_sweep` takes: at_first and at_step).
+fn export_sweeps(
+    a: &ExportArgs,
+    t: &Tables,
+    stage: &Path,
+    npy_of: &std::collections::HashMap<String, Vec<f64>>,
+    text: &mut String,
+) -> Result<serde_json::Value> {
+    let exported: Vec<String> = selected(t, a).iter().map(|f| f.name.clone()).collect();
+    let mut out = serde_json::Map::new();
+    for s in &t.sweeps {
+        if !s.fields.iter().all(|m| exported.contains(m)) {
+            continue;
+        }
+        let at = |v: f64| if s.spacing == "log" { v.ln() } else { v };
+        let mut files = Vec::new();
+        if a.format == ExportFormat::Npy {
+            let k = t.angle_count;
+            let stacked: Vec<f64> = s.fields.iter().flat_map(|m| npy_of[m].clone()).collect();
+            let shape = [s.values.len(), a.orders.len(), 3, k];
+            let (ams, values) = (
+                format!("{}.ams.npy", s.name),
+                format!("{}.values.npy", s.name),
+            );
+            write_file(
+                stage,
+                &ams,
+                &format::export::npy_f64_bytes(&shape, &stacked),
+            )?;
+            write_file(
+                stage,
+                &values,
+                &format::export::npy_f64_bytes(&[s.values.len()], &s.values),
+            )?;
+            let _ = writeln!(
+                text,
+                "{}: sweep over {} ({} values) as one axis: {ams} {shape:?}, {values}",
+                s.name,
+                s.key,
+                s.values.len()
+            );
+            files = vec![ams, values];
+        }
+        out.insert(
+            s.name.clone(),
+            json!({
+                "key": s.key,
+                "spacing": s.spacing,
+                "values": s.values,
+                "members": s.fields,
+                "at_first": at(s.values[0]),
+                "at_step": at(s.values[1]) - at(s.values[0]),
+                "files": files,
+            }),
+        );
+    }
+    Ok(serde_json::Value::Object(out))
 }
 
 /// Writes `bytes` to the file `name` in the staging directory.

@@ -95,6 +95,7 @@ pub fn tables_spectral(
             biri: None,
         }],
         spectrum: Some(spectrum),
+        sweeps: Vec::new(),
     }
 }
 
