@@ -142,23 +142,41 @@ impl Stencil {
         });
     }
 
-    /// One Gauss–Seidel sweep over the voxels of colour `colour` ((x + y + z) mod 2).
-    fn sweep(&self, x: &mut [f64], b: &[f64], colour: usize) {
-        let [nx, ny, nz] = self.dims;
-        for z in 0..nz {
+    /// One Gauss–Seidel sweep over the voxels of colour `colour` ((x + y + z) mod 2). A voxel's
+    /// neighbours are all of the other colour, so the colour's new values depend only on the
+    /// other colour's: they are computed from `x` in parallel (plane by plane) into `scratch`,
+    /// then written back, the same arithmetic as a serial sweep.
+    fn sweep(&self, x: &mut [f64], b: &[f64], colour: usize, scratch: &mut [f64]) {
+        use rayon::prelude::*;
+        let [nx, ny, _] = self.dims;
+        let plane = nx * ny;
+        let each = |z: usize, f: &mut dyn FnMut(usize, usize)| {
             for y in 0..ny {
                 let start = (colour + y + z) % 2;
                 for xx in (start..nx).step_by(2) {
                     let i = xx + nx * (y + ny * z);
-                    let d = self.diag[i];
-                    if d <= 0.0 {
-                        continue;
+                    if self.diag[i] > 0.0 {
+                        f(i, xx + nx * y);
                     }
-                    let off = self.row_dot(x, i, [xx, y, z]) - d * x[i];
-                    x[i] = (b[i] - off) / d;
                 }
             }
-        }
+        };
+        let read: &[f64] = x;
+        scratch
+            .par_chunks_mut(plane)
+            .enumerate()
+            .for_each(|(z, out)| {
+                each(z, &mut |i, j| {
+                    let d = self.diag[i];
+                    let c = [j % nx, j / nx, z];
+                    let off = self.row_dot(read, i, c) - d * read[i];
+                    out[j] = (b[i] - off) / d;
+                });
+            });
+        x.par_chunks_mut(plane)
+            .zip(scratch.par_chunks(plane))
+            .enumerate()
+            .for_each(|(z, (out, new))| each(z, &mut |_, j| out[j] = new[j]));
     }
 
     /// The Galerkin coarse operator Pᵀ A P for piecewise-constant P over 2×2×2 blocks.
@@ -387,43 +405,56 @@ impl Hierarchy {
 
     /// z ≈ A⁻¹ r by one V-cycle from z = 0 (symmetric: see module docs).
     fn vcycle(&self, level: usize, r: &[f64], z: &mut [f64]) {
+        use rayon::prelude::*;
         let a = &self.levels[level];
-        z.iter_mut().for_each(|v| *v = 0.0);
+        z.par_iter_mut().for_each(|v| *v = 0.0);
+        let mut scratch = vec![0.0; a.len()];
         if level + 1 == self.levels.len() {
             for _ in 0..32 {
-                a.sweep(z, r, 0);
-                a.sweep(z, r, 1);
-                a.sweep(z, r, 1);
-                a.sweep(z, r, 0);
+                a.sweep(z, r, 0, &mut scratch);
+                a.sweep(z, r, 1, &mut scratch);
+                a.sweep(z, r, 1, &mut scratch);
+                a.sweep(z, r, 0, &mut scratch);
             }
             return;
         }
-        a.sweep(z, r, 0);
-        a.sweep(z, r, 1);
-        let mut res = vec![0.0; a.len()];
+        a.sweep(z, r, 0, &mut scratch);
+        a.sweep(z, r, 1, &mut scratch);
+        let mut res = scratch;
         a.apply(z, &mut res);
-        for (q, &rv) in res.iter_mut().zip(r) {
-            *q = rv - *q;
-        }
+        res.par_iter_mut().zip(r).for_each(|(q, &rv)| *q = rv - *q);
+        // Restriction: each coarse voxel sums its (up to 8) active fine voxels, in the order
+        // of the fine index.
         let coarse = &self.levels[level + 1];
         let cd = coarse.dims;
+        let [nx, ny, nz] = a.dims;
         let mut rc = vec![0.0; coarse.len()];
-        for i in 0..a.len() {
-            if a.diag[i] > 0.0 {
-                let c = a.coords(i).map(|v| v / 2);
-                rc[c[0] + cd[0] * (c[1] + cd[1] * c[2])] += res[i];
+        rc.par_iter_mut().enumerate().for_each(|(ci, out)| {
+            let c = [ci % cd[0], (ci / cd[0]) % cd[1], ci / (cd[0] * cd[1])];
+            let mut sum = 0.0;
+            for fz in 2 * c[2]..(2 * c[2] + 2).min(nz) {
+                for fy in 2 * c[1]..(2 * c[1] + 2).min(ny) {
+                    for fx in 2 * c[0]..(2 * c[0] + 2).min(nx) {
+                        let i = fx + nx * (fy + ny * fz);
+                        if a.diag[i] > 0.0 {
+                            sum += res[i];
+                        }
+                    }
+                }
             }
-        }
+            *out = sum;
+        });
         let mut zc = vec![0.0; coarse.len()];
         self.vcycle(level + 1, &rc, &mut zc);
-        for i in 0..a.len() {
+        z.par_iter_mut().enumerate().for_each(|(i, zi)| {
             if a.diag[i] > 0.0 {
                 let c = a.coords(i).map(|v| v / 2);
-                z[i] += zc[c[0] + cd[0] * (c[1] + cd[1] * c[2])];
+                *zi += zc[c[0] + cd[0] * (c[1] + cd[1] * c[2])];
             }
-        }
-        a.sweep(z, r, 1);
-        a.sweep(z, r, 0);
+        });
+        let mut scratch = res;
+        a.sweep(z, r, 1, &mut scratch);
+        a.sweep(z, r, 0, &mut scratch);
     }
 }
 
@@ -435,6 +466,7 @@ fn dot(a: &[f64], b: &[f64]) -> f64 {
 /// Solves `p` to relative residual `tolerance` within `max_iterations` conjugate-gradient
 /// iterations (module docs, "The solver").
 pub fn solve(p: &Problem, tolerance: f64, max_iterations: usize) -> Result<Solution, NotConverged> {
+    use rayon::prelude::*;
     let start = Instant::now();
     let (a, b) = assemble(p);
     let unknowns = a.diag.iter().filter(|&&d| d > 0.0).count();
@@ -463,10 +495,13 @@ pub fn solve(p: &Problem, tolerance: f64, max_iterations: usize) -> Result<Solut
     for it in 1..=max_iterations {
         a.apply(&d, &mut ad);
         let alpha = rz / dot(&d, &ad);
-        for i in 0..n {
-            x[i] += alpha * d[i];
-            r[i] -= alpha * ad[i];
-        }
+        x.par_iter_mut()
+            .zip(r.par_iter_mut())
+            .zip(d.par_iter().zip(&ad))
+            .for_each(|((xi, ri), (di, adi))| {
+                *xi += alpha * di;
+                *ri -= alpha * adi;
+            });
         residual = dot(&r, &r).sqrt() / b_norm;
         if residual < tolerance {
             return Ok(Solution {
@@ -482,9 +517,9 @@ pub fn solve(p: &Problem, tolerance: f64, max_iterations: usize) -> Result<Solut
         let rz_new = dot(&r, &z);
         let beta = rz_new / rz;
         rz = rz_new;
-        for i in 0..n {
-            d[i] = z[i] + beta * d[i];
-        }
+        d.par_iter_mut()
+            .zip(&z)
+            .for_each(|(di, zi)| *di = zi + beta * *di);
     }
     Err(NotConverged {
         residual,
