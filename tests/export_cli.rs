@@ -289,7 +289,10 @@ fn bad_arguments_are_refused_naming_the_value_and_nothing_is_written() {
             &["--format", "bevy", "--orders", "5"],
             "n = 5 is outside [1, 4]",
         ),
-        (&["--format", "bevy", "--fields", "fog"], "no field or sweep \"fog\""),
+        (
+            &["--format", "bevy", "--fields", "fog"],
+            "no field or sweep \"fog\"",
+        ),
         (
             &["--format", "bevy", "--samples", "9000"],
             "--samples 9000 is outside [2, 8192]",

@@ -51,23 +51,28 @@ pub fn voxels(fields: &[&FieldTable], grid: &DensityGrid) -> Voxels {
         g_sca: vec![[0.0; 3]; n],
     };
     let g: Vec<[f64; 3]> = fields.iter().map(|f| asymmetry(f)).collect();
-    for (i, rho) in grid.data.iter().enumerate() {
-        for (f, field) in fields.iter().enumerate() {
-            let r = f64::from(rho[f]);
-            if r <= 0.0 {
-                continue;
+    v.ext
+        .par_iter_mut()
+        .zip(v.sca.par_iter_mut())
+        .zip(v.transport.par_iter_mut().zip(v.g_sca.par_iter_mut()))
+        .zip(grid.data.par_iter())
+        .for_each(|(((ext, sca), (transport, g_sca)), rho)| {
+            for (f, field) in fields.iter().enumerate() {
+                let r = f64::from(rho[f]);
+                if r <= 0.0 {
+                    continue;
+                }
+                let tf = field.transport_factor.expect("checked by render");
+                for c in 0..3 {
+                    let e = r * field.sigma_ext_m2[c];
+                    let s = r * field.sigma_sca_m2[c];
+                    ext[c] += e;
+                    sca[c] += s;
+                    transport[c] += e * tf[c];
+                    g_sca[c] += s * g[f][c];
+                }
             }
-            let tf = field.transport_factor.expect("checked by render");
-            for c in 0..3 {
-                let ext = r * field.sigma_ext_m2[c];
-                let sca = r * field.sigma_sca_m2[c];
-                v.ext[i][c] += ext;
-                v.sca[i][c] += sca;
-                v.transport[i][c] += ext * tf[c];
-                v.g_sca[i][c] += sca * g[f][c];
-            }
-        }
-    }
+        });
     v
 }
 
@@ -261,16 +266,20 @@ impl Sky {
 
     /// Adds `radiance` per voxel arriving from direction `s` (travelling along −s) over the
     /// solid angle 4π/[`SKY_DIRECTIONS`].
-    pub fn add(&mut self, s: DVec3, radiance: impl Fn(usize) -> [f64; 3]) {
+    pub fn add(&mut self, s: DVec3, radiance: impl Fn(usize) -> [f64; 3] + Sync) {
         let omega = 4.0 * PI / SKY_DIRECTIONS as f64;
-        for j in 0..self.mean.len() {
-            let r = radiance(j);
-            for c in 0..3 {
-                let w = r[c] * omega / (4.0 * PI);
-                self.mean[j][c] += w;
-                self.flux[j][c] -= w * s;
-            }
-        }
+        self.mean
+            .par_iter_mut()
+            .zip(self.flux.par_iter_mut())
+            .enumerate()
+            .for_each(|(j, (mean, flux))| {
+                let r = radiance(j);
+                for c in 0..3 {
+                    let w = r[c] * omega / (4.0 * PI);
+                    mean[c] += w;
+                    flux[c] -= w * s;
+                }
+            });
     }
 }
 
