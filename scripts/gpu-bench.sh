@@ -5,6 +5,10 @@
 #   QUICK=1 scripts/gpu-bench.sh    # small sizes: checks the script on a software adapter
 #   BIN=target/release/photometeor scripts/gpu-bench.sh   # no build: a binary built elsewhere
 #
+# A binary built elsewhere links libfontconfig, libfreetype, libpng16, libexpat, libbrotli and
+# libz (plotters' text): on a bare machine without them, copy those of the build machine beside
+# it (`ldd BIN`) and set LD_LIBRARY_PATH, as the lent H200 runs of bench/gpu/ did.
+#
 # Builds the release binary, bakes each scene's tables (draft preset: frame time does not depend
 # on it), then runs `photometeor bench render` per scene with the models that scene takes,
 # interleaved in one run so their ratios are fair: riley, miyazaki, max and coupled on the clouds
