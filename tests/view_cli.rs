@@ -416,3 +416,38 @@ fn a_bad_script_is_refused_with_its_line_before_anything_opens() {
         assert!(stderr.contains(wanted), "{file}: {stderr}");
     }
 }
+
+/// A script may not resize one member of a swept field: the per-voxel mixing of a size
+/// profile relies on the members' sizes being the sweep's values.
+#[test]
+fn a_script_resizing_a_sweep_member_is_refused() {
+    let cwd = workdir("view-sweep-member");
+    std::fs::write(
+        cwd.join("s.toml"),
+        "[[step]]\nfield_size = { \"cloud@01\" = 9 }\n",
+    )
+    .unwrap();
+    let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("data/scenes/growing_cumulus.toml");
+    let args = [
+        scene.to_str().unwrap(),
+        "--quality",
+        "draft",
+        "--tables",
+        "tables",
+        "--script",
+        "s.toml",
+    ];
+    let Some(mut command) = view_command(&args, &cwd) else {
+        return;
+    };
+    let out = command.output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    if skipped_without_adapter(&out) {
+        return;
+    }
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains("field_size names \"cloud@01\", a member of a swept field"),
+        "{stderr}"
+    );
+}

@@ -128,6 +128,13 @@ impl Step {
                     "--script step: field_size names {name:?}; the scene's volumes use {fields:?}"
                 );
             }
+            if name.contains('@') {
+                bail!(
+                    "--script step: field_size names {name:?}, a member of a swept field: its \
+                     size is the sweep's value (change the sweep or the volume's size profile \
+                     in the scene file)"
+                );
+            }
             if !(size.is_finite() && *size > 0.0) {
                 bail!("--script step: field_size {name} = {size} must be > 0");
             }

@@ -127,6 +127,14 @@ impl App {
         let mut commit = false;
         for field in &mut fields {
             let name = field.name.clone();
+            if name.contains('@') {
+                // A sweep's member: its size is the sweep's value, which the per-voxel mixing
+                // relies on; the scene file's sweep and size profile change it.
+                if let Some((what, value, _)) = knobs(field).into_iter().next() {
+                    ui.label(format!("{name} {what} {value:.3} (sweep member)"));
+                }
+                continue;
+            }
             for (what, value, range) in knobs(field) {
                 let speed = (*value * 0.01).max(1e-3);
                 let r = ui.add(
