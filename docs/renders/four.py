@@ -7,16 +7,14 @@ EXR already rendered at the same size (`--truth`), or it is rendered here (`--tr
 """
 import argparse
 import json
-import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
 from PIL import Image
 
-from pair import LUMA, render, srgb
+from pair import against_truth, grid_2x2, read_exr, render
 
 HERE = Path(__file__).resolve().parent
 SCENE = HERE.parents[1] / "data/scenes/dense_cumulus.toml"
@@ -35,31 +33,12 @@ def main():
     if not a.truth:
         render([a.bin, "render", str(SCENE), "--model", "truth", *size, "--set", "spp=65536",
                 "--set", f"max_seconds={a.truth_seconds}", "--out", truth_exr], truth_exr)
-    with __import__("OpenEXR").File(truth_exr, separate_channels=True) as f:
-        ch = f.channels()
-        truth = np.stack([ch[c].pixels for c in "RGB"], axis=-1).astype(np.float64)
+    truth = read_exr(truth_exr)
     frames, report = {}, {"size": [W, H], "truth": truth_exr, "models": {}}
     for model in ["riley", "max", "coupled"]:
-        exr = str(tmp / f"{model}.exr")
-        started = time.time()
-        frames[model] = render([a.bin, "render", str(SCENE), "--model", model, *size,
-                                "--out", exr], exr)
-        seconds = time.time() - started
-        out = subprocess.run([a.bin, "compare-render", truth_exr, exr, "--json"],
-                             capture_output=True, text=True, check=True)
-        report["models"][model] = {"error": json.loads(out.stdout), "wall_s_incl_start": seconds}
-        e = report["models"][model]["error"]
-        print(f"{model}: bias {e['bias']:+.1%}, median {e['median_rel_error']:.1%}, "
-              f"p95 {e['p95_rel_error']:.1%} (truth noise {e['truth_noise']:.1%}), {seconds:.1f} s")
-    lum = truth @ LUMA
-    exposure = 1.5 / np.sort(lum.ravel())[int((lum.size - 1) * 0.97)]
-    gap = np.zeros((H, 4, 3))
-    top = np.concatenate([frames["riley"], gap, frames["max"]], axis=1)
-    bottom = np.concatenate([frames["coupled"], gap, truth], axis=1)
-    grid = np.concatenate([top, np.zeros((4, top.shape[1], 3)), bottom], axis=0)
-    img = srgb(1.0 - np.exp(-exposure * np.maximum(grid, 0.0)))
-    img[:, W:W + 4] = 1.0
-    img[H:H + 4, :] = 1.0
+        frames[model], report["models"][model] = against_truth(
+            a.bin, SCENE, model, size, truth_exr, str(tmp / f"{model}.exr"))
+    exposure, img = grid_2x2([(frames["riley"], frames["max"]), (frames["coupled"], truth)], truth)
     # Each pixel shown as 2 × 2 (nearest): the truth's cost grows with the pixels.
     img = img.repeat(2, axis=0).repeat(2, axis=1)
     out = HERE / "dense_cumulus-four.png"

@@ -20,16 +20,14 @@ one; on 2 CPU cores 4096 spp would take about half an hour each).
 import argparse
 import json
 import re
-import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
 from PIL import Image
 
-from pair import LUMA, render, srgb
+from pair import LUMA, against_truth, grid_2x2, read_exr, render
 
 HERE = Path(__file__).resolve().parent
 SCENE = HERE.parents[1] / "data/scenes/growing_cumulus.toml"
@@ -44,12 +42,6 @@ def fixed_scene(tmp):
     path = tmp / "growing_cumulus_fixed.toml"
     path.write_text(text)
     return path
-
-
-def read(exr):
-    with __import__("OpenEXR").File(str(exr), separate_channels=True) as f:
-        ch = f.channels()
-        return np.stack([ch[c].pixels for c in "RGB"], axis=-1).astype(np.float64)
 
 
 def profile(rgb, step=0.25, top=12.0):
@@ -82,31 +74,13 @@ def main():
             render([a.bin, "render", str(scene), "--model", "truth", *size, "--spp",
                     str(a.spp), "--out", exr], exr)
         truths[name] = exr
-    truth = read(truths["truth"])
+    truth = read_exr(truths["truth"])
     frames = {"truth": truth}
     report = {"size": [W, H], "truth": truths["truth"], "models": {}}
     for model in ["riley", "coupled", "max"]:
-        exr = str(tmp / f"{model}.exr")
-        started = time.time()
-        frames[model] = render([a.bin, "render", str(SCENE), "--model", model, *size,
-                                "--out", exr], exr)
-        seconds = time.time() - started
-        out = subprocess.run([a.bin, "compare-render", truths["truth"], exr, "--json"],
-                             capture_output=True, text=True, check=True)
-        e = json.loads(out.stdout)
-        report["models"][model] = {"error": e, "wall_s_incl_start": seconds}
-        print(f"{model}: bias {e['bias']:+.1%}, median {e['median_rel_error']:.1%}, "
-              f"p95 {e['p95_rel_error']:.1%} (truth noise {e['truth_noise']:.1%}), {seconds:.1f} s")
-
-    lum = truth @ LUMA
-    exposure = 1.5 / np.sort(lum.ravel())[int((lum.size - 1) * 0.97)]
-    gap = np.zeros((H, 4, 3))
-    top = np.concatenate([frames["truth"], gap, frames["riley"]], axis=1)
-    bottom = np.concatenate([frames["coupled"], gap, frames["max"]], axis=1)
-    grid = np.concatenate([top, np.zeros((4, top.shape[1], 3)), bottom], axis=0)
-    img = srgb(1.0 - np.exp(-exposure * np.maximum(grid, 0.0)))
-    img[:, W:W + 4] = 1.0
-    img[H:H + 4, :] = 1.0
+        frames[model], report["models"][model] = against_truth(
+            a.bin, SCENE, model, size, truths["truth"], str(tmp / f"{model}.exr"))
+    exposure, img = grid_2x2([(truth, frames["riley"]), (frames["coupled"], frames["max"])], truth)
     out = HERE / "growing_cumulus-four.png"
     Image.fromarray(np.round(np.clip(img, 0, 1) * 255).astype(np.uint8)).save(out, optimize=True)
     report["exposure"] = exposure
@@ -115,7 +89,7 @@ def main():
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     curves = {"truth, 6 → 14 µm with height": truth,
-              "truth, 10.6 µm everywhere": read(truths["fixed-truth"]),
+              "truth, 10.6 µm everywhere": read_exr(truths["fixed-truth"]),
               "riley, 6 → 14 µm": frames["riley"], "coupled, 6 → 14 µm": frames["coupled"]}
     fig, ax = plt.subplots(figsize=(7, 3.6), dpi=110)
     report["glory_profile"] = {}

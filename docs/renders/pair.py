@@ -1,7 +1,11 @@
-"""Shared by the README image scripts (shafts.py, beams.py): run `photometeor render`, read its
-EXR, and write two frames side by side at one exposure (the left one's automatic exposure, as
+"""Shared by the README image scripts (shafts.py, beams.py, four.py, growing.py): run
+`photometeor render`, read its EXR, measure a frame against a truth, and write two frames side
+by side (or four, 2 × 2) at one exposure (the left one's automatic exposure, as
 `photometeor render --png` picks it: the 97th percentile of luminance maps to 1 − e^{−1.5})."""
-import subprocess, sys
+import json
+import subprocess
+import sys
+import time
 
 import numpy as np
 import OpenEXR
@@ -37,3 +41,41 @@ def save_pair(left, right, out):
     img[:, w:w + 4] = 1.0
     Image.fromarray(np.round(np.clip(img, 0, 1) * 255).astype(np.uint8)).save(out, optimize=True)
     return exposure
+
+
+def read_exr(exr):
+    """A frame's linear R, G, B (height × width × 3) from its EXR."""
+    with OpenEXR.File(str(exr), separate_channels=True) as f:
+        ch = f.channels()
+        return np.stack([ch[c].pixels for c in "RGB"], axis=-1).astype(np.float64)
+
+
+def against_truth(binary, scene, model, size, truth_exr, exr):
+    """Renders `scene` with `model` (`size`: extra arguments) into `exr`, measures it against
+    `truth_exr` with `compare-render --json`, prints the figures, and returns the frame and
+    its report entry ({"error": compare-render's JSON, "wall_s_incl_start": s})."""
+    started = time.time()
+    frame = render([binary, "render", str(scene), "--model", model, *size, "--out", exr], exr)
+    seconds = time.time() - started
+    out = subprocess.run([binary, "compare-render", str(truth_exr), exr, "--json"],
+                         capture_output=True, text=True, check=True)
+    e = json.loads(out.stdout)
+    print(f"{model}: bias {e['bias']:+.1%}, median {e['median_rel_error']:.1%}, "
+          f"p95 {e['p95_rel_error']:.1%} (truth noise {e['truth_noise']:.1%}), {seconds:.1f} s")
+    return frame, {"error": e, "wall_s_incl_start": seconds}
+
+
+def grid_2x2(rows, exposure_of):
+    """Two rows of two frames (each height × width × 3) with 4 white pixels between them, at
+    the automatic exposure of frame `exposure_of` (as `render --png` picks it); returns the
+    exposure and the sRGB image (0…1)."""
+    lum = exposure_of @ LUMA
+    exposure = 1.5 / np.sort(lum.ravel())[int((lum.size - 1) * 0.97)]
+    h, w = rows[0][0].shape[:2]
+    gap = np.zeros((h, 4, 3))
+    lines = [np.concatenate([a, gap, b], axis=1) for a, b in rows]
+    grid = np.concatenate([lines[0], np.zeros((4, lines[0].shape[1], 3)), lines[1]], axis=0)
+    img = srgb(1.0 - np.exp(-exposure * np.maximum(grid, 0.0)))
+    img[:, w:w + 4] = 1.0
+    img[h:h + 4, :] = 1.0
+    return exposure, img

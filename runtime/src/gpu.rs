@@ -683,7 +683,7 @@ impl Query {
         n: f32,
         cos_theta: f32,
     ) -> Self {
-        let at = |v: f64| if sweep.spacing == "log" { v.ln() } else { v };
+        let at = |v: f64| sweep.at(v);
         let lookup = Lookup::Sweep {
             count: sweep.values.len() as u32,
             at_first: at(sweep.values[0]) as f32,

@@ -411,7 +411,7 @@ fn write_all(
     }
     let mut report = export_report(a, step, version, report_fields);
     let mut sweep_text = String::new();
-    report["sweeps"] = export_sweeps(a, t, stage, &npy_of, &mut sweep_text)?;
+    report["sweeps"] = export_sweeps(a, t, fields, stage, &npy_of, &mut sweep_text)?;
     write_file(
         stage,
         "export.json",
@@ -440,17 +440,21 @@ fn write_all(
 fn export_sweeps(
     a: &ExportArgs,
     t: &Tables,
+    fields: &[FieldRows],
     stage: &Path,
     npy_of: &std::collections::HashMap<String, Vec<f64>>,
     text: &mut String,
 ) -> Result<serde_json::Value> {
-    let exported: Vec<String> = selected(t, a).iter().map(|f| f.name.clone()).collect();
     let mut out = serde_json::Map::new();
     for s in &t.sweeps {
-        if !s.fields.iter().all(|m| exported.contains(m)) {
+        if !s
+            .fields
+            .iter()
+            .all(|m| fields.iter().any(|fr| &fr.field.name == m))
+        {
             continue;
         }
-        let at = |v: f64| if s.spacing == "log" { v.ln() } else { v };
+        let at = |v: f64| s.at(v);
         let mut files = Vec::new();
         if a.format == ExportFormat::Npy {
             let k = t.angle_count;

@@ -613,18 +613,40 @@ pub fn joint_bounds(volumes: &[Volume]) -> (DVec3, DVec3) {
 
 /// Where one volume's particles go in the grid: one channel, or the members of a sweep by the
 /// size at each height.
-enum Channels {
+enum Channels<'a> {
     One(usize),
     Sized {
-        profile: Box<SizeProfile>,
-        sweep: format::SweepEntry,
+        profile: &'a SizeProfile,
+        sweep: &'a format::SweepEntry,
         channels: Vec<usize>,
         sigma_ext: Vec<f64>,
         heights: (f64, f64),
     },
 }
 
-impl Channels {
+impl<'a> Channels<'a> {
+    /// Where `v`'s particles go; `field` maps a field name to its channel and σ_ext (green).
+    fn of(v: &'a Volume, field: &impl Fn(&str) -> (usize, f64)) -> Result<Self, String> {
+        let Some(profile) = &v.size else {
+            return Ok(Channels::One(field(&v.field).0));
+        };
+        let sweep = profile.members.as_ref().ok_or_else(|| {
+            format!(
+                "the volume of {:?} has a {} profile and no members chosen for it",
+                v.field, profile.key
+            )
+        })?;
+        let (channels, sigma_ext) = sweep.fields.iter().map(|m| field(m)).unzip();
+        let (a, b) = v.bounds();
+        Ok(Channels::Sized {
+            profile,
+            sweep,
+            channels,
+            sigma_ext,
+            heights: (a[1], b[1]),
+        })
+    }
+
     /// Adds `n` particles/m³ at height `y` to `cell`.
     fn add(&self, cell: &mut [f32; MAX_FIELDS], n: f64, y: f64) {
         match self {
@@ -659,29 +681,12 @@ pub fn rasterize(
     let (lo, hi) = joint_bounds(volumes);
     let extent = [hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]];
     let dims = grid_dims(volumes, resolution);
-    let channels = |v: &Volume| -> Result<Channels, String> {
-        let Some(profile) = &v.size else {
-            return Ok(Channels::One(field(&v.field).0));
-        };
-        let sweep = profile.members.clone().ok_or_else(|| {
-            format!(
-                "the volume of {:?} has a {} profile and no members chosen for it",
-                v.field, profile.key
-            )
-        })?;
-        let (channels, sigma_ext) = sweep.fields.iter().map(|m| field(m)).unzip();
-        let (a, b) = v.bounds();
-        Ok(Channels::Sized {
-            profile: Box::new(profile.clone()),
-            sweep,
-            channels,
-            sigma_ext,
-            heights: (a[1], b[1]),
-        })
-    };
     let densities: Vec<(Channels, f64, Density)> = volumes
         .iter()
-        .map(|v| Ok((channels(v)?, v.number_density_per_m3, Density::new(v)?)))
+        .map(|v| {
+            let c = Channels::of(v, &field)?;
+            Ok((c, v.number_density_per_m3, Density::new(v)?))
+        })
         .collect::<Result<_, String>>()
         .map_err(VolumeError)?;
     let [nx, ny, nz] = dims;

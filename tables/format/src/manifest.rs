@@ -127,6 +127,16 @@ pub struct SweepEntry {
 }
 
 impl SweepEntry {
+    /// The coordinate the members are equally spaced in: ln value for a log sweep, the value
+    /// for a linear one (what the shaders' `ams_sweep` takes as `at_value`).
+    pub fn at(&self, value: f64) -> f64 {
+        if self.spacing == "log" {
+            value.ln()
+        } else {
+            value
+        }
+    }
+
     /// The members on either side of `value` and their shares of the number density, given
     /// each member's extinction cross-section `sigma_ext` (m², one channel): with t linear in
     /// ln value (log spacing) or in value (linear) between the members' values, clamped to the
@@ -144,8 +154,8 @@ impl SweepEntry {
             value.clamp(v[0], v[last])
         };
         let k = v.partition_point(|&x| x <= value).clamp(1, last) - 1;
-        let at = |x: f64| if self.spacing == "log" { x.ln() } else { x };
-        let t = ((at(value) - at(v[k])) / (at(v[k + 1]) - at(v[k]))).clamp(0.0, 1.0);
+        let t = ((self.at(value) - self.at(v[k])) / (self.at(v[k + 1]) - self.at(v[k])))
+            .clamp(0.0, 1.0);
         let (s0, s1) = (sigma_ext[k], sigma_ext[k + 1]);
         let sigma = s0.powf(1.0 - t) * s1.powf(t);
         [(k, (1.0 - t) * sigma / s0), (k + 1, t * sigma / s1)]
