@@ -9,7 +9,7 @@ use rayon::prelude::*;
 
 use runtime::{FieldTable, Tables, sample};
 
-use super::{Emergent, Settings, Source, Split};
+use super::{Diffuse, Emergent, Settings, Source, Split, transport};
 use crate::diffusion::{self, Problem};
 use crate::geometry::box_span;
 use crate::lattice::{
@@ -26,6 +26,12 @@ pub struct CoupledReport {
     pub buffer_s: f64,
     /// Seconds for the three diffusion solves and the flux (step 3).
     pub diffusion_s: f64,
+    /// Seconds for the discrete-ordinates transport (0 with `diffuse = "diffusion"`).
+    pub transport_s: f64,
+    /// Its source iterations.
+    pub transport_iterations: usize,
+    /// The relative change of the mean radiance in its last iteration.
+    pub transport_change: f64,
     /// Conjugate-gradient iterations per channel.
     pub iterations: [usize; 3],
     /// Relative residual reached per channel.
@@ -72,6 +78,11 @@ pub struct Lighting {
     /// I_1 = 3J per voxel (x, y, z per channel): the P1 radiance's first moment, so the
     /// diffusion's radiance towards ω is I_0 + I_1·ω.
     pub p1: Vec<[f64; 9]>,
+    /// The diffuse radiance's spherical-harmonic moments per voxel when the discrete-ordinates
+    /// transport computed them ([`transport`]); empty otherwise.
+    pub sh: Vec<[f64; transport::PER_VOXEL]>,
+    /// Each field's Legendre moments χ_0 … χ_{L+1} per channel.
+    pub chis: Vec<[[f64; 3]; transport::DEGREE + 2]>,
     /// Whether a voxel took part in the solve.
     pub active: Vec<bool>,
     /// Each field's asymmetry parameter g per channel.
@@ -215,17 +226,17 @@ pub fn light_with(
     let l = -sun_dir;
     let mut report = CoupledReport::default();
 
-    progress.update(0, 2, "light buffer and skylight");
+    progress.update(0, 3, "light buffer and skylight");
     let start = Instant::now();
     let v = voxels(&fields, grid);
-    let peak = peaks(&fields);
+    let peak = peaks(&fields, settings);
     let state = buffer_sweep(&fields, frame, &v, l, settings, &peak);
     // E S_atm per voxel: the sun's irradiance at each voxel's height, before the volume.
     let sunlight = reduced_sun(frame, &vec![[0.0; 3]; v.ext.len()]);
     let sky = reduced_sky(frame, &v.ext);
     report.buffer_s = start.elapsed().as_secs_f64();
 
-    progress.update(1, 2, "diffusion solve");
+    progress.update(1, 3, "diffusion solve");
     let start = Instant::now();
     let h_voxel = (h[0] * h[1] * h[2]).cbrt();
     let active: Vec<bool> = v
@@ -282,11 +293,40 @@ pub fn light_with(
         report.budget.add(c, (&problem, &s.i0), &buffer, l);
     }
     report.diffusion_s = start.elapsed().as_secs_f64();
-    progress.update(2, 2, "lighting done");
+    let chis: Vec<Moments> = fields.iter().map(|f| legendre_moments(f)).collect();
+    let mut sh = Vec::new();
+    if settings.diffuse == Diffuse::Transport {
+        progress.update(2, 3, "discrete-ordinates transport");
+        let start = Instant::now();
+        let sources = Sources {
+            sunlight: &sunlight,
+            state: &state,
+            sky: &sky,
+            active: &active,
+        };
+        let diffusion = (i0.as_slice(), p1.as_slice());
+        let (moments, t) = transport_light(
+            &fields,
+            grid,
+            &v,
+            &sources,
+            (&chis, &peak),
+            l,
+            diffusion,
+            settings,
+        )?;
+        sh = moments;
+        report.transport_iterations = t.changes.len();
+        report.transport_change = t.changes.last().copied().unwrap_or(0.0);
+        report.transport_s = start.elapsed().as_secs_f64();
+    }
+    progress.update(3, 3, "lighting done");
     Ok(Lighting {
         buffer: state.iter().map(|s| [s[0], s[1], s[2], s[3]]).collect(),
         i0,
         p1,
+        sh,
+        chis,
         active,
         g: asymmetries(&fields),
         peak,
@@ -451,6 +491,14 @@ fn in_scattered(
     let i0 = trilinear(grid, &lighting.i0, Some(&lighting.active), p);
     let i1 = trilinear(grid, &lighting.p1, Some(&lighting.active), p);
     let sky = trilinear(grid, &lighting.sky_mean, None, p);
+    // The transport's radiance moments, the harmonics towards the eye and p′'s moments here.
+    let sh = (!lighting.sh.is_empty()).then(|| {
+        (
+            trilinear(grid, &lighting.sh, None, p),
+            transport::harmonics(-d),
+            reduced_moments(fields, &rho, &lighting.chis, &lighting.peak),
+        )
+    });
     let toward_eye = -d;
     let mut step = Step {
         ext,
@@ -478,7 +526,12 @@ fn in_scattered(
         } else {
             0.0
         };
-        let diffuse = ((1.0 - f) * i0[c] + along).max(0.0);
+        let diffuse = match &sh {
+            Some((m, y, chi)) => ((1.0 - f)
+                * transport::scattered(&m[c * transport::HARMONICS..], &chi[c], y))
+            .max(0.0),
+            None => ((1.0 - f) * i0[c] + along).max(0.0),
+        };
         step.light[c] = albedo * (phase[c] * sun + diffuse + (1.0 - f) * sky[c]);
     }
     Some(step)
@@ -514,9 +567,197 @@ fn asymmetries(fields: &[&FieldTable]) -> Vec<[f64; 3]> {
 
 /// Each field's forward peak f = g² per channel, the share of its scattering the δ-Eddington
 /// split treats as unscattered (Joseph, Wiscombe & Weinman 1976).
-fn peaks(fields: &[&FieldTable]) -> Vec<[f64; 3]> {
+fn peaks(fields: &[&FieldTable], settings: &Settings) -> Vec<[f64; 3]> {
+    if settings.diffuse == Diffuse::Transport {
+        return fields
+            .iter()
+            .map(|f| legendre_moments(f)[transport::DEGREE + 1])
+            .collect();
+    }
     asymmetries(fields)
         .into_iter()
         .map(|g| g.map(|g| g * g))
         .collect()
+}
+
+/// A field's Legendre moments χ_0 … χ_{L+1} per channel, (1/2)∫ p P_l dμ / (1/2)∫ p dμ, by
+/// integrating Ams_1 over θ.
+pub(crate) fn legendre_moments(field: &FieldTable) -> Moments {
+    let step = 0.01f64;
+    let mut sums = [[0.0; 3]; transport::DEGREE + 2];
+    let mut theta = 0.5 * step;
+    while theta < 180.0 {
+        let t = theta.to_radians();
+        let mu = t.cos();
+        let w = t.sin() * step.to_radians();
+        let p = sample::ams(field, 0.18, 1.0, mu);
+        let mut pl = [1.0, mu, 0.0, 0.0, 0.0, 0.0];
+        for l in 1..transport::DEGREE + 1 {
+            pl[l + 1] = ((2 * l + 1) as f64 * mu * pl[l] - l as f64 * pl[l - 1]) / (l + 1) as f64;
+        }
+        for (l, s) in sums.iter_mut().enumerate() {
+            for c in 0..3 {
+                s[c] += p[c] * w * pl[l];
+            }
+        }
+        theta += step;
+    }
+    let total = sums[0];
+    sums.map(|s| std::array::from_fn(|c| s[c] / total[c]))
+}
+
+/// The δ-M-reduced phase function's moments χ′_l = Σ β_sca(χ_l − f)/Σ β_sca(1 − f) of the
+/// mixture at densities `rho`, per channel.
+fn reduced_moments(
+    fields: &[&FieldTable],
+    rho: &[f64],
+    chis: &[Moments],
+    peaks: &[[f64; 3]],
+) -> [[f64; transport::DEGREE + 1]; 3] {
+    let den = mixed(fields, rho, |k| peaks[k].map(|f| 1.0 - f));
+    let mut out = [[0.0; transport::DEGREE + 1]; 3];
+    for l in 0..=transport::DEGREE {
+        let num = mixed(fields, rho, |k| {
+            std::array::from_fn(|c| chis[k][l][c] - peaks[k][c])
+        });
+        for c in 0..3 {
+            out[c][l] = if den[c] > 0.0 { num[c] / den[c] } else { 0.0 };
+        }
+    }
+    out
+}
+
+/// A field's Legendre moments χ_0 … χ_{L+1} per channel.
+type Moments = [[f64; 3]; transport::DEGREE + 2];
+
+/// What feeds the transport: E S_atm per voxel, the buffer's state, the reduced skylight, and
+/// the diffusion's active voxels.
+struct Sources<'a> {
+    sunlight: &'a [[f64; 3]],
+    state: &'a [[f64; STATE]],
+    sky: &'a crate::lattice::Sky,
+    active: &'a [bool],
+}
+
+/// The diffuse light by discrete ordinates ([`transport`]), from the diffusion's `(I_0, I_1)`:
+/// the δ-M-scaled medium (f = χ_{L+1} per field, `peaks`), the sunlit source Q(ω) = q p′(ω·l)
+/// with q the diffusion's Q_0 from the beam, the skylit source as the diffusion has it, and the
+/// source iteration accelerated by a diffusion solve of each round's change of the mean
+/// radiance (diffusion synthetic acceleration, Alcouffe 1977). Fails, naming the change, the
+/// tolerance and the cap, when it does not converge within `max_transport_iterations`.
+#[allow(clippy::too_many_arguments)]
+fn transport_light(
+    fields: &[&FieldTable],
+    grid: &crate::DensityGrid,
+    v: &Voxels,
+    sources: &Sources,
+    (chis, peak): (&[Moments], &[[f64; 3]]),
+    l: DVec3,
+    (i0, p1): (&[[f64; 3]], &[[f64; 9]]),
+    settings: &Settings,
+) -> Result<(Vec<[f64; transport::PER_VOXEL]>, transport::Report), FrameError> {
+    let n = v.ext.len();
+    let h = voxel_size(grid);
+    let mut medium = transport::Medium {
+        ext: vec![[0.0; 3]; n],
+        sca: vec![[0.0; 3]; n],
+        chi: vec![[[0.0; transport::DEGREE + 1]; 3]; n],
+        sun: vec![[0.0; 3]; n],
+        l,
+        sky: vec![[[0.0; 4]; 3]; n],
+    };
+    for i in 0..n {
+        let rho: [f64; MAX_FIELDS] = std::array::from_fn(|f| f64::from(grid.data[i][f]));
+        let f = mixed(fields, &rho, |k| peak[k]);
+        let chi = reduced_moments(fields, &rho, chis, peak);
+        for c in 0..3 {
+            let (ext, sca) = (v.ext[i][c], v.sca[i][c]);
+            medium.ext[i][c] = ext - sca * f[c];
+            medium.sca[i][c] = sca * (1.0 - f[c]);
+            medium.chi[i][c] = chi[c];
+            medium.sun[i][c] = sources.sunlight[i][c] * sources.state[i][10 + c] / (4.0 * PI);
+            let q1 = sources.sky.flux[i][c] * v.g_sca[i][c];
+            medium.sky[i][c] = [v.sca[i][c] * sources.sky.mean[i][c], q1.x, q1.y, q1.z];
+        }
+    }
+    // φ_00 = √(4π) I_0 and φ_1m = Y_1 (4π/3) I_1 of the P1 radiance I_0 + I_1·ω (m = −1, 0, 1:
+    // y, z, x).
+    let root = (4.0 * PI).sqrt();
+    let c1 = 0.488_602_511_902_919_9 * 4.0 * PI / 3.0;
+    let start: Vec<[f64; transport::PER_VOXEL]> = (0..n)
+        .map(|i| {
+            let mut m = [0.0; transport::PER_VOXEL];
+            for c in 0..3 {
+                let o = c * transport::HARMONICS;
+                m[o] = root * i0[i][c];
+                m[o + 1] = c1 * p1[i][3 * c + 1];
+                m[o + 2] = c1 * p1[i][3 * c + 2];
+                m[o + 3] = c1 * p1[i][3 * c];
+            }
+            m
+        })
+        .collect();
+    // The acceleration: the diffusion of each round's change of the mean radiance, scattered
+    // (the error's source), added to φ_00. (Correcting φ_1 by its flux as well diverged.)
+    let mut failed = None;
+    let accelerate = |old: &[[f64; transport::PER_VOXEL]],
+                      new: &mut [[f64; transport::PER_VOXEL]]| {
+        for c in 0..3 {
+            let o = c * transport::HARMONICS;
+            let problem = Problem {
+                dims: grid.dims,
+                h,
+                kappa_tr: (0..n)
+                    .map(|i| {
+                        if sources.active[i] {
+                            v.transport[i][c]
+                        } else {
+                            0.0
+                        }
+                    })
+                    .collect(),
+                kappa_a: (0..n)
+                    .map(|i| (v.ext[i][c] - v.sca[i][c]).max(0.0))
+                    .collect(),
+                q0: (0..n)
+                    .map(|i| medium.sca[i][c] * (new[i][o] - old[i][o]) / root)
+                    .collect(),
+                q1: vec![[0.0; 3]; n],
+            };
+            match diffusion::solve(
+                &problem,
+                settings.diffusion_tolerance.max(1e-4),
+                settings.max_diffusion_iterations,
+            ) {
+                Ok(s) => new
+                    .par_iter_mut()
+                    .zip(&s.i0)
+                    .for_each(|(m, d)| m[o] += root * d),
+                Err(e) => failed = Some(e),
+            }
+        }
+    };
+    let dirs = transport::directions(settings.directions);
+    let cap = settings.max_transport_iterations;
+    let (m, report) = transport::solve(
+        grid,
+        &medium,
+        start,
+        &dirs,
+        (settings.transport_tolerance, cap),
+        accelerate,
+    );
+    if let Some(e) = failed {
+        return Err(FrameError(format!("the transport's acceleration: {e}")));
+    }
+    let change = report.changes.last().copied().unwrap_or(0.0);
+    if change >= settings.transport_tolerance {
+        return Err(FrameError(format!(
+            "the transport did not converge: the mean radiance still changed by {change:.3e} \
+             (relative) in iteration {cap} (max_transport_iterations), transport_tolerance \
+             {}; raise max_transport_iterations or loosen transport_tolerance",
+            crate::Shown(settings.transport_tolerance)
+        )));
+    }
+    Ok((m, report))
 }

@@ -13,10 +13,11 @@ struct CoupledParams {
     grid_min: vec4<f32>,     // xyz; w = ground albedo
     grid_max: vec4<f32>,     // xyz; w = 1 for the P1 radiance, 0 for I_0 alone
     grid_dims: vec4<u32>,    // nx, ny, nz, field count
-    sizes: vec4<u32>,        // width, height, 0, 0
+    sizes: vec4<u32>,        // width, height, rows per voxel (5, or 24 with the transport), 0
     sigma_ext: array<vec4<f32>, 4>,  // per field, m² per channel
     asymmetry: array<vec4<f32>, 4>,  // per field, g per channel
     peak: array<vec4<f32>, 4>,       // per field, the forward peak f per channel
+    chi: array<array<vec4<f32>, 4>, 5>,  // per Legendre degree l ≤ 4 and field, χ_l per channel
     sky_beta: vec4<f32>,     // β at sea level per channel (1/m); w = γ (1/m)
     sun: vec4<f32>,          // unit vector towards the sun; w = cos(disk radius)
     irradiance: vec4<f32>,   // per channel; w = disk solid angle (sr)
@@ -25,13 +26,39 @@ struct CoupledParams {
 @group(1) @binding(0) var<uniform> rp: CoupledParams;
 @group(1) @binding(1) var<storage, read> density: array<vec4<f32>>;
 // Per voxel five rows: (beam I rgb, n), (I_0 rgb, 1 if in the diffusion solve),
-// (I_1 of R xyz, sky R), (I_1 of G xyz, sky G), (I_1 of B xyz, sky B).
+// (I_1 of R xyz, sky R), (I_1 of G xyz, sky G), (I_1 of B xyz, sky B); with the transport 19
+// more: its 75 spherical-harmonic moments φ_lm (25 per channel, R then G then B), 4 a row.
 @group(1) @binding(2) var<storage, read> lighting: array<vec4<f32>>;
 @group(1) @binding(3) var<storage, read_write> image: array<vec4<f32>>;  // rgb, T_vol (green)
 
 // Row `row` of the lighting at p (march.wgsl's `lighting_at`; the solve's mask in row 1's w).
 fn lit(p: vec3<f32>, row: u32, masked: bool) -> vec4<f32> {
-    return lighting_at(p, 5u, row, 1u, masked);
+    return lighting_at(p, rp.sizes.z, row, 1u, masked);
+}
+
+// The real, orthonormal spherical harmonics to degree 4 (render::coupled::transport::harmonics).
+fn harmonics(w: vec3<f32>) -> array<f32, 25> {
+    let x = w.x;
+    let y = w.y;
+    let z = w.z;
+    let x2 = x * x;
+    let y2 = y * y;
+    let z2 = z * z;
+    return array<f32, 25>(
+        0.28209479,
+        0.48860251 * y, 0.48860251 * z, 0.48860251 * x,
+        1.09254843 * x * y, 1.09254843 * y * z, 0.31539157 * (3.0 * z2 - 1.0),
+        1.09254843 * x * z, 0.54627422 * (x2 - y2),
+        0.59004359 * y * (3.0 * x2 - y2), 2.89061144 * x * y * z,
+        0.45704580 * y * (5.0 * z2 - 1.0), 0.37317633 * z * (5.0 * z2 - 3.0),
+        0.45704580 * x * (5.0 * z2 - 1.0), 1.44530572 * z * (x2 - y2),
+        0.59004359 * x * (x2 - 3.0 * y2),
+        2.50334294 * x * y * (x2 - y2), 1.77013077 * y * z * (3.0 * x2 - y2),
+        0.94617470 * x * y * (7.0 * z2 - 1.0), 0.66904654 * y * z * (7.0 * z2 - 3.0),
+        0.10578555 * (35.0 * z2 * z2 - 30.0 * z2 + 3.0), 0.66904654 * x * z * (7.0 * z2 - 3.0),
+        0.47308735 * (x2 - y2) * (7.0 * z2 - 1.0), 1.77013077 * x * z * (x2 - 3.0 * y2),
+        0.62583574 * (x2 * (x2 - 3.0 * y2) - y2 * (3.0 * x2 - y2)),
+    );
 }
 
 // A per-field quantity `values` of the mixture, weighted by ρ σ_sca
@@ -58,6 +85,8 @@ fn gather(@builtin(global_invocation_id) id: vec3<u32>) {
     let eye = rp.eye.xyz;
     let cos_theta = dot(rp.sun.xyz, d);
     let toward_eye = -d;
+    let transport = rp.sizes.z > 5u;
+    let y = harmonics(toward_eye);
     var l_vol = vec3<f32>(0.0);
     var tr = vec3<f32>(1.0);
     var seen = vec3<f32>(1.0);
@@ -81,6 +110,28 @@ fn gather(@builtin(global_invocation_id) id: vec3<u32>) {
             let phase = ams_mix(rho, beam.w + 1.0, cos_theta);
             let g = mixed(rho, rp.asymmetry);
             let f = select(vec3<f32>(0.0), mixed(rho, rp.peak), rp.up.w > 0.5);
+            // The transport's diffuse light towards the eye, Σ_l χ′_l Σ_m Y_lm φ_lm per channel
+            // (render::coupled::transport::scattered), χ′_l = (χ_l − f)/(1 − f) of the mixture.
+            var toward = vec3<f32>(0.0);
+            if (transport) {
+                var chi: array<vec3<f32>, 5>;
+                for (var l = 0u; l < 5u; l = l + 1u) {
+                    chi[l] = (mixed(rho, rp.chi[l]) - f) / max(1.0 - f, vec3<f32>(1e-6));
+                }
+                for (var r = 0u; r < 19u; r = r + 1u) {
+                    let m = lit(p, 5u + r, false);
+                    for (var j = 0u; j < 4u; j = j + 1u) {
+                        let q = 4u * r + j;
+                        if (q >= 75u) {
+                            break;
+                        }
+                        let c = q / 25u;
+                        let k = q % 25u;
+                        let l = u32(sqrt(f32(k) + 0.5));
+                        toward[c] = toward[c] + chi[l][c] * y[k] * m[j];
+                    }
+                }
+            }
             for (var c = 0u; c < 3u; c = c + 1u) {
                 if (ext[c] <= 0.0) {
                     continue;
@@ -94,7 +145,8 @@ fn gather(@builtin(global_invocation_id) id: vec3<u32>) {
                     flux = flux * (limit / len);
                 }
                 let along = select(0.0, (g[c] - f[c]) * dot(flux, toward_eye), rp.grid_max.w > 0.5);
-                let diffuse = max((1.0 - f[c]) * i0[c] + along, 0.0);
+                let diffuse = select(max((1.0 - f[c]) * i0[c] + along, 0.0),
+                    max((1.0 - f[c]) * toward[c], 0.0), transport);
                 let light = albedo * (phase[c] * sun[c] + diffuse + (1.0 - f[c]) * sky[c]);
                 let kept = 1.0 - albedo * f[c];
                 let scaled = ext[c] * kept * dt;

@@ -38,7 +38,7 @@ runtime::uniform! {
         pub grid_max: [f32; 4],
         /// nx, ny, nz, field count.
         pub grid_dims: [u32; 4],
-        /// Width, height, 0, 0.
+        /// Width, height, rows per voxel (5, or 24 with the transport's moments), 0.
         pub sizes: [u32; 4],
         /// Per field, σ_ext per channel (m²).
         pub sigma_ext: [[f32; 4]; MAX_FIELDS],
@@ -46,6 +46,8 @@ runtime::uniform! {
         pub asymmetry: [[f32; 4]; MAX_FIELDS],
         /// Per field, the forward peak f per channel.
         pub peak: [[f32; 4]; MAX_FIELDS],
+        /// Per Legendre degree l ≤ 4 and field, the phase function's χ_l per channel.
+        pub chi: [[[f32; 4]; MAX_FIELDS]; 5],
         /// β at sea level per channel (1/m); w = γ (1/m).
         pub sky_beta: [f32; 4],
         /// Unit vector towards the sun; w = cos(disk radius).
@@ -54,6 +56,9 @@ runtime::uniform! {
         pub irradiance: [f32; 4],
     }
 }
+
+/// Rows of four the transport's 75 moments take per voxel.
+const SH_ROWS: usize = super::transport::PER_VOXEL.div_ceil(4);
 
 /// The gather's WGSL ([`crate::gpu::gather_source`] puts the shared parts before it).
 pub const GATHER_WGSL: &str = include_str!("gather.wgsl");
@@ -114,10 +119,12 @@ impl Renderer {
         let (w, h) = (frame.width, frame.height);
         let grid = &frame.grid;
         let voxels = grid.data.len();
+        let transport = !lighting.sh.is_empty();
+        let rows_per_voxel = if transport { 5 + SH_ROWS } else { 5 };
         let GatherView {
             axes: (forward, right, up),
             step,
-        } = gather_view(device, frame, 80)?;
+        } = gather_view(device, frame, 16 * rows_per_voxel as u64)?;
         let FieldsAndSky {
             sigma_ext,
             sky_beta,
@@ -138,15 +145,18 @@ impl Renderer {
                 grid.dims[2] as u32,
                 tables.fields.len() as u32,
             ],
-            sizes: [w as u32, h as u32, 0, 0],
+            sizes: [w as u32, h as u32, rows_per_voxel as u32, 0],
             sigma_ext,
             asymmetry: per_field(&lighting.g),
             peak: per_field(&lighting.peak),
+            chi: std::array::from_fn(|l| {
+                per_field(&lighting.chis.iter().map(|m| m[l]).collect::<Vec<_>>())
+            }),
             sky_beta,
             sun,
             irradiance,
         };
-        let mut rows: Vec<[f32; 4]> = Vec::with_capacity(5 * voxels);
+        let mut rows: Vec<[f32; 4]> = Vec::with_capacity(rows_per_voxel * voxels);
         for i in 0..voxels {
             let b = lighting.buffer[i];
             rows.push(b.map(|v| v as f32));
@@ -156,6 +166,14 @@ impl Renderer {
             for c in 0..3 {
                 let i1 = &lighting.p1[i][3 * c..3 * c + 3];
                 rows.push([i1[0], i1[1], i1[2], lighting.sky_mean[i][c]].map(|v| v as f32));
+            }
+            if transport {
+                let m = &lighting.sh[i];
+                rows.extend(
+                    (0..SH_ROWS).map(|r| {
+                        std::array::from_fn(|j| m.get(4 * r + j).map_or(0.0, |&v| v as f32))
+                    }),
+                );
             }
         }
         let params = filled(
