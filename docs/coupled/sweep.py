@@ -12,6 +12,7 @@ Run from the repository root after `cargo build --release`:
     python3 docs/coupled/sweep.py                 # all cases -> docs/coupled/sweep.json, .md
     python3 docs/coupled/sweep.py --only cloud:8  # a subset (field:tau), printed, not written
     python3 docs/coupled/sweep.py --table-only    # the table again from sweep.json
+    python3 docs/coupled/sweep.py --only cloud:64 --merge   # those cases' rows replaced in it
 """
 import hashlib, json, os, subprocess, sys, time
 
@@ -147,6 +148,15 @@ def main():
         only = [tuple(s.split(":")) for s in sys.argv[sys.argv.index("--only") + 1].split(",")]
         cases = [c for c in cases if (c[0], str(c[1])) in only]
     rows = [case(*c, models) for c in cases]
+    if only is not None and "--merge" in sys.argv:
+        # Replace (or add) these cases' rows in sweep.json, keeping the others and the order.
+        data = json.load(open(out))
+        key = lambda r: (r["field"], r["tau"], r["azimuth_deg"], r["elevation_deg"])
+        new = {key(r): repo.portable(r, ROOT, WORK) for r in rows}
+        merged = [new.pop(key(r), r) for r in data["results"]] + list(new.values())
+        data = {"taus": TAUS, "size": SIZE, "models": models, "results": merged}
+        json.dump(data, open(out, "w"), indent=1)
+        open(out.replace(".json", ".md"), "w").write(table(merged, models))
     if only is None:
         data = {"taus": TAUS, "size": SIZE, "models": models, "results": rows}
         json.dump(repo.portable(data, ROOT, WORK), open(out, "w"), indent=1)
