@@ -66,9 +66,16 @@ bench data/scenes/dense_cumulus.toml riley,miyazaki --sizes "$SIZES" --slice-cou
 # apart, once per setting, so that it does not take most of the run (measured on an H200
 # machine: 16 s and 8 s per frame at grid 128, which over every slice count and two repeats
 # took 430 s of dense_cumulus alone).
-REPEAT=1 TAG=lighting bench data/scenes/dense_cumulus.toml max,coupled --sizes "$SIZES" --grids "$GRIDS"
-bench data/scenes/cumulus_dawn.toml riley,miyazaki,max,coupled
-REPEAT=1 bench data/scenes/rainbow.toml riley,miyazaki,max,coupled --sizes "$SIZES"
+# coupled with `diffuse = "diffusion"` over the sizes and grids (the figures of the first runs);
+# its default, the discrete-ordinates transport, costs minutes per sun on 2 cores at grid 128
+# (docs/rendering.md), so it is timed once per grid at the base size.
+DIFFUSION='diffuse="diffusion"'
+REPEAT=1 TAG=lighting bench data/scenes/dense_cumulus.toml max,coupled --sizes "$SIZES" \
+    --grids "$GRIDS" --set "$DIFFUSION"
+REPEAT=1 TAG=transport bench data/scenes/dense_cumulus.toml riley,coupled --grids "$GRIDS"
+bench data/scenes/cumulus_dawn.toml riley,miyazaki,max,coupled --set "$DIFFUSION"
+REPEAT=1 bench data/scenes/rainbow.toml riley,miyazaki,max,coupled --sizes "$SIZES" \
+    --set "$DIFFUSION"
 bench data/scenes/shafts.toml miyazaki --sizes "$SIZES"
 bench data/scenes/beams.toml biri --sizes "$SIZES"
 # The truth's paths/s on the GPU beside the CPU truth's on this machine's cores (--cpu); on a

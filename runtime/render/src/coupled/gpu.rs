@@ -60,6 +60,16 @@ runtime::uniform! {
 /// Rows of four the transport's 75 moments take per voxel.
 const SH_ROWS: usize = super::transport::PER_VOXEL.div_ceil(4);
 
+/// Rows of four f32 per voxel the gather reads of `lighting`: five, and the transport's
+/// moments when it has them.
+pub fn rows_per_voxel(lighting: &Lighting) -> usize {
+    if lighting.sh.is_empty() {
+        5
+    } else {
+        5 + SH_ROWS
+    }
+}
+
 /// The gather's WGSL ([`crate::gpu::gather_source`] puts the shared parts before it).
 pub const GATHER_WGSL: &str = include_str!("gather.wgsl");
 
@@ -120,7 +130,7 @@ impl Renderer {
         let grid = &frame.grid;
         let voxels = grid.data.len();
         let transport = !lighting.sh.is_empty();
-        let rows_per_voxel = if transport { 5 + SH_ROWS } else { 5 };
+        let rows_per_voxel = rows_per_voxel(lighting);
         let GatherView {
             axes: (forward, right, up),
             step,

@@ -293,8 +293,24 @@ impl Model for Coupled {
         let (lighting, reused) = crate::relight::lit(job.lighting, job.frame, s, || {
             cpu::light_with(job.tables, job.frame, s, job.progress)
         })?;
-        let (image, t) = renderer.gather(gpu, job.tables, tables, job.frame, s, &lighting)?;
-        let (gather, on) = (t.upload + t.frame + t.readback, gpu.describe());
+        // The transport's moments take 24 rows of 16 bytes a voxel: past the adapter's
+        // storage-binding limit the view is gathered on the CPU (same image, said so).
+        let bytes = 16 * gpu::rows_per_voxel(&lighting) as u64 * job.frame.grid.data.len() as u64;
+        let limit = gpu.device.limits().max_storage_buffer_binding_size;
+        let (image, gather, on) = if bytes > limit {
+            let start = Instant::now();
+            let image = cpu::gather(job.tables, job.frame, s, &lighting)?;
+            let on = format!(
+                "the CPU: the lighting's {} MiB exceed {}'s storage-binding limit of {} MiB",
+                bytes >> 20,
+                gpu.describe(),
+                limit >> 20
+            );
+            (image, start.elapsed().as_secs_f64(), on)
+        } else {
+            let (image, t) = renderer.gather(gpu, job.tables, tables, job.frame, s, &lighting)?;
+            (image, t.upload + t.frame + t.readback, gpu.describe())
+        };
         let mut report = lighting.report.clone();
         if reused {
             (report.buffer_s, report.diffusion_s, report.transport_s) = (0.0, 0.0, 0.0);
