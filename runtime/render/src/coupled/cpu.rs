@@ -32,6 +32,10 @@ pub struct CoupledReport {
     pub transport_iterations: usize,
     /// The relative change of the mean radiance in its last iteration.
     pub transport_change: f64,
+    /// The transport's energy balance per channel (its sources, what leaves the box, what
+    /// is absorbed; [`transport::balance`]).
+    #[serde(skip)]
+    pub transport_balance: [transport::Balance; 3],
     /// Conjugate-gradient iterations per channel.
     pub iterations: [usize; 3],
     /// Relative residual reached per channel.
@@ -305,7 +309,7 @@ pub fn light_with(
             active: &active,
         };
         let diffusion = (i0.as_slice(), p1.as_slice());
-        let (moments, t) = transport_light(
+        let (moments, t, balance) = transport_light(
             &fields,
             grid,
             &v,
@@ -316,6 +320,7 @@ pub fn light_with(
             settings,
         )?;
         sh = moments;
+        report.transport_balance = balance;
         report.transport_iterations = t.changes.len();
         report.transport_change = t.changes.last().copied().unwrap_or(0.0);
         report.transport_s = start.elapsed().as_secs_f64();
@@ -655,7 +660,14 @@ fn transport_light(
     l: DVec3,
     (i0, p1): (&[[f64; 3]], &[[f64; 9]]),
     settings: &Settings,
-) -> Result<(Vec<[f64; transport::PER_VOXEL]>, transport::Report), FrameError> {
+) -> Result<
+    (
+        Vec<[f64; transport::PER_VOXEL]>,
+        transport::Report,
+        [transport::Balance; 3],
+    ),
+    FrameError,
+> {
     let n = v.ext.len();
     let h = voxel_size(grid);
     let mut medium = transport::Medium {
@@ -750,6 +762,7 @@ fn transport_light(
     if let Some(e) = failed {
         return Err(FrameError(format!("the transport's acceleration: {e}")));
     }
+    let budget = transport::balance(grid, &medium, &m);
     let change = report.changes.last().copied().unwrap_or(0.0);
     if change >= settings.transport_tolerance {
         return Err(FrameError(format!(
@@ -759,5 +772,5 @@ fn transport_light(
             crate::Shown(settings.transport_tolerance)
         )));
     }
-    Ok((m, report))
+    Ok((m, report, budget))
 }

@@ -198,6 +198,57 @@ pub fn solve(
     (m, report)
 }
 
+/// The diffuse light's energy balance per channel (per unit irradiance, m² · radiance · sr):
+/// what the sources emit, ∫∫Q dω dV; what leaves through the box's faces, ∮F·n dA with the net
+/// flux F = ∫I ω dω = φ_1/Y_1 read at the outermost voxel centres; what is absorbed,
+/// ∫σ_a ∫I dω dV. Scattering moves light between directions only (p′ is normalized), so a
+/// converged solution has source = out + absorbed up to the discretization (the face read half
+/// a voxel inside, the sweeps' interpolation).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Balance {
+    /// ∫∫Q dω dV.
+    pub source: f64,
+    /// ∮F·n dA.
+    pub out: f64,
+    /// ∫σ_a ∫I dω dV.
+    pub absorbed: f64,
+}
+
+/// [`Balance`] of `moments` (per voxel, [`PER_VOXEL`]) in `medium` on `grid`, per channel.
+pub fn balance(grid: &DensityGrid, medium: &Medium, moments: &[[f64; PER_VOXEL]]) -> [Balance; 3] {
+    let dims = grid.dims;
+    let h: [f64; 3] = std::array::from_fn(|a| (grid.max_m[a] - grid.min_m[a]) / dims[a] as f64);
+    let volume = h[0] * h[1] * h[2];
+    let y1 = 0.488_602_511_902_919_9;
+    let root = (4.0 * PI).sqrt();
+    let mut out = [Balance::default(); 3];
+    for (i, m) in moments.iter().enumerate() {
+        let cell = [
+            i % dims[0],
+            (i / dims[0]) % dims[1],
+            i / (dims[0] * dims[1]),
+        ];
+        for (c, b) in out.iter_mut().enumerate() {
+            let o = c * HARMONICS;
+            let sky = medium.sky[i][c];
+            b.source += 4.0 * PI * (medium.sun[i][c] + sky[0]) * volume;
+            b.absorbed += (medium.ext[i][c] - medium.sca[i][c]) * root * m[o] * volume;
+            // Net flux per axis: φ_1m is (y, z, x) for m = −1, 0, 1.
+            let flux = [m[o + 3] / y1, m[o + 1] / y1, m[o + 2] / y1];
+            for a in 0..3 {
+                let area = volume / h[a];
+                if cell[a] == 0 {
+                    b.out -= flux[a] * area;
+                }
+                if cell[a] + 1 == dims[a] {
+                    b.out += flux[a] * area;
+                }
+            }
+        }
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
