@@ -309,7 +309,11 @@ pub fn light_with(
             active: &active,
         };
         let diffusion = (i0.as_slice(), p1.as_slice());
-        let (moments, t, balance) = transport_light(
+        let Transported {
+            moments,
+            report: t,
+            balance,
+        } = transport_light(
             &fields,
             grid,
             &v,
@@ -660,14 +664,7 @@ fn transport_light(
     l: DVec3,
     (i0, p1): (&[[f64; 3]], &[[f64; 9]]),
     settings: &Settings,
-) -> Result<
-    (
-        Vec<[f64; transport::PER_VOXEL]>,
-        transport::Report,
-        [transport::Balance; 3],
-    ),
-    FrameError,
-> {
+) -> Result<Transported, FrameError> {
     let n = v.ext.len();
     let h = voxel_size(grid);
     let mut medium = transport::Medium {
@@ -772,5 +769,17 @@ fn transport_light(
             crate::Shown(settings.transport_tolerance)
         )));
     }
-    Ok((m, report, budget))
+    Ok(Transported {
+        moments: m,
+        report,
+        balance: budget,
+    })
+}
+
+/// What [`transport_light`] found: the moments per voxel, the iteration's report and the
+/// energy balance per channel.
+struct Transported {
+    moments: Vec<[f64; transport::PER_VOXEL]>,
+    report: transport::Report,
+    balance: [transport::Balance; 3],
 }
