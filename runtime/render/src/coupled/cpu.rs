@@ -233,7 +233,11 @@ pub fn light_with(
     progress.update(0, 3, "light buffer and skylight");
     let start = Instant::now();
     let v = voxels(&fields, grid);
-    let peak = peaks(&fields, settings);
+    let chis: Vec<Moments> = fields
+        .iter()
+        .map(|f| legendre_moments(f, tables.theta_step_deg))
+        .collect();
+    let peak = peaks(&fields, &chis, settings);
     let state = buffer_sweep(&fields, frame, &v, l, settings, &peak);
     // E S_atm per voxel: the sun's irradiance at each voxel's height, before the volume.
     let sunlight = reduced_sun(frame, &vec![[0.0; 3]; v.ext.len()]);
@@ -297,7 +301,6 @@ pub fn light_with(
         report.budget.add(c, (&problem, &s.i0), &buffer, l);
     }
     report.diffusion_s = start.elapsed().as_secs_f64();
-    let chis: Vec<Moments> = fields.iter().map(|f| legendre_moments(f)).collect();
     let mut sh = Vec::new();
     if settings.diffuse == Diffuse::Transport {
         progress.update(2, 3, "discrete-ordinates transport");
@@ -574,14 +577,12 @@ fn asymmetries(fields: &[&FieldTable]) -> Vec<[f64; 3]> {
     fields.iter().map(|f| asymmetry(f)).collect()
 }
 
-/// Each field's forward peak f = g² per channel, the share of its scattering the δ-Eddington
-/// split treats as unscattered (Joseph, Wiscombe & Weinman 1976).
-fn peaks(fields: &[&FieldTable], settings: &Settings) -> Vec<[f64; 3]> {
+/// Each field's forward peak f per channel, the share of its scattering the split treats as
+/// unscattered: δ-M's χ_{L+1} (Wiscombe 1977; `chis`, the fields' Legendre moments) with the
+/// transport, δ-Eddington's g² (Joseph, Wiscombe & Weinman 1976) with the diffusion alone.
+fn peaks(fields: &[&FieldTable], chis: &[Moments], settings: &Settings) -> Vec<[f64; 3]> {
     if settings.diffuse == Diffuse::Transport {
-        return fields
-            .iter()
-            .map(|f| legendre_moments(f)[transport::DEGREE + 1])
-            .collect();
+        return chis.iter().map(|m| m[transport::DEGREE + 1]).collect();
     }
     asymmetries(fields)
         .into_iter()
@@ -590,8 +591,8 @@ fn peaks(fields: &[&FieldTable], settings: &Settings) -> Vec<[f64; 3]> {
 }
 
 /// A field's Legendre moments χ_0 … χ_{L+1} per channel, (1/2)∫ p P_l dμ / (1/2)∫ p dμ, by
-/// integrating Ams_1 over θ.
-pub(crate) fn legendre_moments(field: &FieldTable) -> Moments {
+/// integrating Ams_1 (its bins `theta_step_deg` wide) over θ in steps of 0.01°.
+pub(crate) fn legendre_moments(field: &FieldTable, theta_step_deg: f64) -> Moments {
     let step = 0.01f64;
     let mut sums = [[0.0; 3]; transport::DEGREE + 2];
     let mut theta = 0.5 * step;
@@ -599,8 +600,9 @@ pub(crate) fn legendre_moments(field: &FieldTable) -> Moments {
         let t = theta.to_radians();
         let mu = t.cos();
         let w = t.sin() * step.to_radians();
-        let p = sample::ams(field, 0.18, 1.0, mu);
-        let mut pl = [1.0, mu, 0.0, 0.0, 0.0, 0.0];
+        let p = sample::ams(field, theta_step_deg, 1.0, mu);
+        let mut pl = [0.0; transport::DEGREE + 2];
+        (pl[0], pl[1]) = (1.0, mu);
         for l in 1..transport::DEGREE + 1 {
             pl[l + 1] = ((2 * l + 1) as f64 * mu * pl[l] - l as f64 * pl[l - 1]) / (l + 1) as f64;
         }
