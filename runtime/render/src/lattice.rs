@@ -244,10 +244,15 @@ pub struct Sky {
 
 /// The [`SKY_DIRECTIONS`] directions (towards the sky, y up), a Fibonacci set.
 pub fn sky_directions() -> Vec<DVec3> {
+    fibonacci_directions(SKY_DIRECTIONS)
+}
+
+/// `count` directions of equal solid angle 4π/count, a Fibonacci set (y the polar axis).
+pub fn fibonacci_directions(count: usize) -> Vec<DVec3> {
     let golden = PI * (3.0 - 5f64.sqrt());
-    (0..SKY_DIRECTIONS)
+    (0..count)
         .map(|i| {
-            let z = 1.0 - (2.0 * i as f64 + 1.0) / SKY_DIRECTIONS as f64;
+            let z = 1.0 - (2.0 * i as f64 + 1.0) / count as f64;
             let r = (1.0 - z * z).sqrt();
             let phi = golden * i as f64;
             DVec3::new(r * phi.cos(), z, r * phi.sin())

@@ -420,6 +420,9 @@ pub fn gather(
         .into_par_iter()
         .map(|px| {
             let d = crate::camera::pixel_ray(axes, tan_half, (px % w, px / w), (w, hgt));
+            // The harmonics towards the eye, which the transport's light is scattered into.
+            let harmonics = (!lighting.sh.is_empty()).then(|| transport::harmonics(-d));
+            let towards = harmonics.as_ref();
             let (mut l_vol, mut tr, mut seen) = ([0.0f64; 3], [1.0f64; 3], [1.0f64; 3]);
             if let Some((t0, t1)) = box_span(grid.min_m, grid.max_m, eye, d) {
                 let t0 = t0.max(0.0);
@@ -427,7 +430,8 @@ pub fn gather(
                 let dt = (t1 - t0) / n as f64;
                 for k in 0..n {
                     let p = eye + (t0 + (k as f64 + 0.5) * dt) * d;
-                    let light = in_scattered(tables, &fields, frame, lighting, settings, p, d);
+                    let light =
+                        in_scattered(tables, &fields, frame, lighting, settings, p, (d, towards));
                     let Some(step) = light else { continue };
                     for c in 0..3 {
                         // The light is seen through the δ-scaled extinction β_ext(1 − αf)
@@ -475,7 +479,7 @@ fn in_scattered(
     lighting: &Lighting,
     settings: &Settings,
     p: DVec3,
-    d: DVec3,
+    (d, towards): (DVec3, Option<&[f64; transport::HARMONICS]>),
 ) -> Option<Step> {
     let grid = &frame.grid;
     let rho: [f64; MAX_FIELDS] = grid.sample(p);
@@ -503,11 +507,12 @@ fn in_scattered(
     let i0 = trilinear(grid, &lighting.i0, Some(&lighting.active), p);
     let i1 = trilinear(grid, &lighting.p1, Some(&lighting.active), p);
     let sky = trilinear(grid, &lighting.sky_mean, None, p);
-    // The transport's radiance moments, the harmonics towards the eye and p′'s moments here.
-    let sh = (!lighting.sh.is_empty()).then(|| {
+    // The transport's radiance moments and p′'s moments here, with the harmonics towards the
+    // eye (`towards`, once per ray).
+    let sh = towards.map(|y| {
         (
             trilinear(grid, &lighting.sh, None, p),
-            transport::harmonics(-d),
+            y,
             reduced_moments(fields, &rho, &lighting.chis, &lighting.peak),
         )
     });
@@ -711,32 +716,36 @@ fn transport_light(
     // The acceleration: the diffusion of each round's change of the mean radiance, scattered
     // (the error's source), added to φ_00. (Correcting φ_1 by its flux as well diverged.)
     let mut failed = None;
+    // The acceleration's operators, one per channel; only their sources change per round.
+    let mut problems: Vec<Problem> = (0..3)
+        .map(|c| Problem {
+            dims: grid.dims,
+            h,
+            kappa_tr: (0..n)
+                .map(|i| {
+                    if sources.active[i] {
+                        v.transport[i][c]
+                    } else {
+                        0.0
+                    }
+                })
+                .collect(),
+            kappa_a: (0..n)
+                .map(|i| (v.ext[i][c] - v.sca[i][c]).max(0.0))
+                .collect(),
+            q0: vec![0.0; n],
+            q1: vec![[0.0; 3]; n],
+        })
+        .collect();
     let accelerate = |old: &[[f64; transport::PER_VOXEL]],
                       new: &mut [[f64; transport::PER_VOXEL]]| {
-        for c in 0..3 {
+        for (c, problem) in problems.iter_mut().enumerate() {
             let o = c * transport::HARMONICS;
-            let problem = Problem {
-                dims: grid.dims,
-                h,
-                kappa_tr: (0..n)
-                    .map(|i| {
-                        if sources.active[i] {
-                            v.transport[i][c]
-                        } else {
-                            0.0
-                        }
-                    })
-                    .collect(),
-                kappa_a: (0..n)
-                    .map(|i| (v.ext[i][c] - v.sca[i][c]).max(0.0))
-                    .collect(),
-                q0: (0..n)
-                    .map(|i| medium.sca[i][c] * (new[i][o] - old[i][o]) / root)
-                    .collect(),
-                q1: vec![[0.0; 3]; n],
-            };
+            for (i, q) in problem.q0.iter_mut().enumerate() {
+                *q = medium.sca[i][c] * (new[i][o] - old[i][o]) / root;
+            }
             match diffusion::solve(
-                &problem,
+                problem,
                 settings.diffusion_tolerance.max(1e-4),
                 settings.max_diffusion_iterations,
             ) {
@@ -748,7 +757,7 @@ fn transport_light(
             }
         }
     };
-    let dirs = transport::directions(settings.directions);
+    let dirs = crate::lattice::fibonacci_directions(settings.directions);
     let cap = settings.max_transport_iterations;
     let (m, report) = transport::solve(
         grid,

@@ -91,19 +91,6 @@ pub struct Medium {
     pub sky: Vec<[[f64; 4]; 3]>,
 }
 
-/// `count` directions of equal solid angle, a Fibonacci set.
-pub fn directions(count: usize) -> Vec<DVec3> {
-    let golden = PI * (3.0 - 5f64.sqrt());
-    (0..count)
-        .map(|i| {
-            let z = 1.0 - (2.0 * i as f64 + 1.0) / count as f64;
-            let r = (1.0 - z * z).sqrt();
-            let phi = golden * i as f64;
-            DVec3::new(r * phi.cos(), z, r * phi.sin())
-        })
-        .collect()
-}
-
 /// What [`solve`] did: the relative change of φ_00 (green, over the grid) per iteration.
 #[derive(Debug, Clone, Default)]
 pub struct Report {
@@ -255,7 +242,7 @@ mod tests {
 
     #[test]
     fn the_harmonics_are_orthonormal() {
-        let dirs = directions(20_000);
+        let dirs = crate::lattice::fibonacci_directions(20_000);
         let w = 4.0 * PI / dirs.len() as f64;
         let mut gram = [[0.0; HARMONICS]; HARMONICS];
         for d in &dirs {
