@@ -13,7 +13,6 @@ use glam::DVec3;
 use rayon::prelude::*;
 
 use crate::DensityGrid;
-use crate::lattice::sweep;
 
 /// The highest spherical-harmonic degree kept.
 pub const DEGREE: usize = 4;
@@ -105,6 +104,364 @@ pub fn scattered(m: &[f64], chi: &[f64; DEGREE + 1], y: &[f64; HARMONICS]) -> f6
         .sum()
 }
 
+/// One direction of the transport's set: its harmonics and its step between layers.
+struct Ordinate {
+    /// Y_lm(ω), padded with zeros to [`PADDED`].
+    y: [f64; PADDED],
+    /// The point one layer back, in voxel units along the layer's two axes.
+    shift: (f64, f64),
+    /// The path length between two layers (m).
+    ds: f64,
+}
+
+/// Directions that share a sweep order: the axis each travels along most, and its sign.
+struct Group {
+    axis: usize,
+    forward: bool,
+    ordinates: Vec<Ordinate>,
+}
+
+/// Directions stepped side by side in the sweeps' inner loop (one AVX-512 register of f64).
+const LANES: usize = 8;
+
+/// The harmonics per channel padded to whole vector registers, so that sums over them
+/// vectorize.
+const PADDED: usize = 32;
+
+/// e^−τ for τ ≥ 0 in every lane, branch-free so that it vectorizes: τ log₂e split into an
+/// integer n and a remainder, e^−r by its Taylor series to degree 12 on |r| ≤ ln2/2 (error
+/// below 2·10⁻¹⁶ relative), times 2^−n from the exponent bits; 0 past τ = 700.
+fn exp_neg(tau: [f64; LANES]) -> [f64; LANES] {
+    const LN2_HI: f64 = 0.693_147_180_369_123_8;
+    const LN2_LO: f64 = 1.908_214_929_270_587_7e-10;
+    std::array::from_fn(|d| {
+        let x = -tau[d].min(700.0);
+        let n = (x * std::f64::consts::LOG2_E + 0.5).floor();
+        let r = (x - n * LN2_HI) - n * LN2_LO;
+        let mut p = 1.0 / 479_001_600.0;
+        for k in (0..12).rev() {
+            p = p * r + 1.0 / FACTORIALS[k];
+        }
+        // 2^n from the exponent bits: n + 1023 sits in the low mantissa bits of
+        // n + 1023 + 2⁵², and the shift moves it into the exponent (a cast would not vectorize).
+        let scale = f64::from_bits((n + (1023.0 + 4_503_599_627_370_496.0)).to_bits() << 52);
+        if tau[d] > 700.0 { 0.0 } else { p * scale }
+    })
+}
+
+/// k! for k = 0 … 11.
+const FACTORIALS: [f64; 12] = [
+    1.0,
+    1.0,
+    2.0,
+    6.0,
+    24.0,
+    120.0,
+    720.0,
+    5040.0,
+    40_320.0,
+    362_880.0,
+    3_628_800.0,
+    39_916_800.0,
+];
+
+/// The two axes across a layer normal to `axis`, the one whose voxels lie closer in memory
+/// first (x before y before z), so that a layer's voxels are visited in memory order.
+fn layer_axes(axis: usize) -> (usize, usize) {
+    match axis {
+        0 => (1, 2),
+        1 => (0, 2),
+        _ => (0, 1),
+    }
+}
+
+/// `dirs` grouped by the axis they travel along most and its sign (the six sweep orders).
+fn groups(grid: &DensityGrid, dirs: &[DVec3]) -> Vec<Group> {
+    let h = crate::lattice::voxel_size(grid);
+    let mut groups: Vec<Group> = Vec::new();
+    for &w in dirs {
+        let a = (0..3)
+            .max_by(|&i, &j| w[i].abs().total_cmp(&w[j].abs()))
+            .expect("three axes");
+        let (b, c) = layer_axes(a);
+        let ds = h[a] / w[a].abs();
+        let y = harmonics(w);
+        let ordinate = Ordinate {
+            y: std::array::from_fn(|k| if k < HARMONICS { y[k] } else { 0.0 }),
+            shift: (-ds * w[b] / h[b], -ds * w[c] / h[c]),
+            ds,
+        };
+        let forward = w[a] > 0.0;
+        match groups
+            .iter_mut()
+            .find(|g| g.axis == a && g.forward == forward)
+        {
+            Some(g) => g.ordinates.push(ordinate),
+            None => groups.push(Group {
+                axis: a,
+                forward,
+                ordinates: vec![ordinate],
+            }),
+        }
+    }
+    groups
+}
+
+/// The emission per voxel and channel as harmonics, S(ω) = Σ_k s_k Y_k(ω): the scattered
+/// light σ′_s χ′_l φ_lm (the addition theorem), the sunlit source q p′(ω·l) = 4π q Σ χ′_l
+/// Y_lm(l) Y_lm(ω), and the skylit q0 + 3 q1·ω (Y_00 = 1/√(4π), Y_1m = Y_1 (y, z, x)).
+fn emission(
+    medium: &Medium,
+    i: usize,
+    m: &[f64; PER_VOXEL],
+    y_sun: &[f64; HARMONICS],
+) -> [[f64; PADDED]; 3] {
+    const Y1: f64 = 0.488_602_511_902_919_9;
+    let mut s = [[0.0; PADDED]; 3];
+    for (c, s) in s.iter_mut().enumerate() {
+        let (chi, sca, sun) = (&medium.chi[i][c], medium.sca[i][c], medium.sun[i][c]);
+        let o = c * HARMONICS;
+        for k in 0..HARMONICS {
+            s[k] = chi[DEGREES[k]] * (sca * m[o + k] + 4.0 * PI * sun * y_sun[k]);
+        }
+        let sky = medium.sky[i][c];
+        s[0] += (4.0 * PI).sqrt() * sky[0];
+        s[1] += 3.0 * sky[2] / Y1;
+        s[2] += 3.0 * sky[3] / Y1;
+        s[3] += 3.0 * sky[1] / Y1;
+    }
+    s
+}
+
+/// The degree of each harmonic ([`degree_of`]).
+const DEGREES: [usize; HARMONICS] = [
+    0, 1, 1, 1, 2, 2, 2, 2, 2, 3, 3, 3, 3, 3, 3, 3, 4, 4, 4, 4, 4, 4, 4, 4, 4,
+];
+
+/// Σ_k a_k b_k over [`PADDED`] harmonics, in [`LANES`] partial sums. Not inlined: inlined
+/// into the loop over directions, the compiler vectorized that loop instead, with gathers.
+#[inline(never)]
+fn dot(a: &[f64; PADDED], b: &[f64; PADDED]) -> f64 {
+    let mut lanes = [0.0; LANES];
+    for (a, b) in a.chunks_exact(LANES).zip(b.chunks_exact(LANES)) {
+        for d in 0..LANES {
+            lanes[d] += a[d] * b[d];
+        }
+    }
+    ((lanes[0] + lanes[1]) + (lanes[2] + lanes[3]))
+        + ((lanes[4] + lanes[5]) + (lanes[6] + lanes[7]))
+}
+
+/// Σ_d v_d Y(ω_d) over `ordinates`, the sums kept in registers (not inlined, as [`dot`]).
+#[inline(never)]
+fn project(v: &[f64], ordinates: &[Ordinate]) -> [f64; PADDED] {
+    let mut sums = [0.0; PADDED];
+    for (v, o) in v.iter().zip(ordinates) {
+        for (sum, y) in sums.iter_mut().zip(&o.y) {
+            *sum += v * y;
+        }
+    }
+    sums
+}
+
+/// Layers of a sweep held before they are added to the round's moments: added one at a
+/// time, a layer across x touches one voxel in each row of the grid (a page apart at 128³),
+/// and the additions waited on memory; a block of layers adds a run of neighbours per row.
+const LAYER_BLOCK: usize = 8;
+
+/// Adds `block` (the entries of layers `ks` across `axis`, each layer's in [`layer_axes`]
+/// order, one after the other) to `into`, in parallel.
+fn add_layers(
+    dims: [usize; 3],
+    axis: usize,
+    ks: &[usize],
+    block: &[[f64; PER_VOXEL]],
+    into: &mut [[f64; PER_VOXEL]],
+) {
+    let add = |to: &mut [f64; PER_VOXEL], from: &[f64; PER_VOXEL]| {
+        for (t, f) in to.iter_mut().zip(from) {
+            *t += f;
+        }
+    };
+    let (nx, ny) = (dims[0], dims[1]);
+    let size = block.len() / ks.len();
+    match axis {
+        // Layers x = k, ordered y then z: row m (along x) holds voxel m of each layer.
+        0 => into.par_chunks_mut(nx).enumerate().for_each(|(m, row)| {
+            for (j, &k) in ks.iter().enumerate() {
+                add(&mut row[k], &block[j * size + m]);
+            }
+        }),
+        // Layers y = k, ordered x then z: in slab z, the row y = k.
+        1 => into
+            .par_chunks_mut(nx * ny)
+            .enumerate()
+            .for_each(|(z, slab)| {
+                for (j, &k) in ks.iter().enumerate() {
+                    let from = &block[j * size + z * nx..j * size + (z + 1) * nx];
+                    for (to, from) in slab[k * nx..(k + 1) * nx].iter_mut().zip(from) {
+                        add(to, from);
+                    }
+                }
+            }),
+        // Layers z = k, ordered x then y: the slabs themselves.
+        _ => {
+            for (j, &k) in ks.iter().enumerate() {
+                into[k * size..(k + 1) * size]
+                    .par_iter_mut()
+                    .zip(block[j * size..(j + 1) * size].par_iter())
+                    .for_each(|(to, from)| add(to, from));
+            }
+        }
+    }
+}
+
+/// One round of sweeps: every direction of `groups` with the emission from moments `m`,
+/// returning the new moments (equal weights `weight`). The directions of a group share the
+/// layer order, so each voxel's emission harmonics are formed once per group, and only two
+/// layers of each direction's state are kept. Per direction the step is
+/// [`crate::lattice::sweep`]'s: the state one layer back bilinear in that layer (blending to
+/// clear air, zero, between the outermost centres and the faces), σ′_t the mean of the step's
+/// ends and the emission linear between them.
+fn sweep_round(
+    grid: &DensityGrid,
+    medium: &Medium,
+    m: &[[f64; PER_VOXEL]],
+    groups: &[Group],
+    weight: f64,
+) -> Vec<[f64; PER_VOXEL]> {
+    let dims = grid.dims;
+    let stride = [1, dims[0], dims[0] * dims[1]];
+    let y_sun = harmonics(medium.l);
+    let mut next = vec![[0.0f64; PER_VOXEL]; m.len()];
+    // The share of clear air at coordinate u of an axis of n centres (0 between the centres,
+    // rising linearly to 1 at the faces half a voxel beyond them).
+    let face_share = |u: f64, n: f64| ((-u).max(u - (n - 1.0)) / 0.5).clamp(0.0, 1.0);
+    for group in groups {
+        let a = group.axis;
+        let (b, c) = layer_axes(a);
+        let (nb, nc) = (dims[b], dims[c]);
+        let count = group.ordinates.len();
+        // Per voxel of a layer, per direction: I, σ′_t and S per channel.
+        let mut prev = vec![[0.0f64; 9]; nb * nc * count];
+        let mut cur = prev.clone();
+        // The moments of the last layers, not yet added to `next`.
+        let mut block = vec![[0.0f64; PER_VOXEL]; nb * nc * LAYER_BLOCK];
+        let mut held: Vec<usize> = Vec::with_capacity(LAYER_BLOCK);
+        let layers: Vec<usize> = if group.forward {
+            (0..dims[a]).collect()
+        } else {
+            (0..dims[a]).rev().collect()
+        };
+        for (step, &k) in layers.iter().enumerate() {
+            let back_of = |d: usize, u: f64, v: f64| -> [f64; 9] {
+                let kept = (1.0 - face_share(u, nb as f64)) * (1.0 - face_share(v, nc as f64));
+                if kept <= 0.0 {
+                    return [0.0; 9];
+                }
+                let (u, v) = (u.clamp(0.0, (nb - 1) as f64), v.clamp(0.0, (nc - 1) as f64));
+                let (u0, v0) = (u.floor() as usize, v.floor() as usize);
+                let (u1, v1) = ((u0 + 1).min(nb - 1), (v0 + 1).min(nc - 1));
+                let (s, t) = (u - u0 as f64, v - v0 as f64);
+                let at = |ub: usize, vc: usize| &prev[(ub + vc * nb) * count + d];
+                let (p00, p10, p01, p11) = (at(u0, v0), at(u1, v0), at(u0, v1), at(u1, v1));
+                std::array::from_fn(|n| {
+                    kept * ((1.0 - s) * (1.0 - t) * p00[n]
+                        + s * (1.0 - t) * p10[n]
+                        + (1.0 - s) * t * p01[n]
+                        + s * t * p11[n])
+                })
+            };
+            let slot = held.len() * nb * nc;
+            cur.par_chunks_mut(count)
+                .zip(block[slot..slot + nb * nc].par_iter_mut())
+                .enumerate()
+                .for_each_init(
+                    // weight I_d per channel, then direction.
+                    || vec![0.0f64; 3 * count],
+                    |weighted, (mi, (states, acc))| {
+                        let (ub, vc) = (mi % nb, mi / nb);
+                        let i = k * stride[a] + ub * stride[b] + vc * stride[c];
+                        let s = emission(medium, i, &m[i], &y_sun);
+                        let ext = medium.ext[i];
+
+                        for (j, chunk) in group.ordinates.chunks(LANES).enumerate() {
+                            let first = j * LANES;
+                            let mut back = [[0.0f64; 9]; LANES];
+                            let mut ds = [1.0f64; LANES];
+                            // The emission towards each direction, S(ω_d) = Σ_k s_k Y_k(ω_d).
+                            let mut s_here = [[0.0f64; LANES]; 3];
+                            for (d, o) in chunk.iter().enumerate() {
+                                if step > 0 {
+                                    back[d] = back_of(
+                                        first + d,
+                                        ub as f64 + o.shift.0,
+                                        vc as f64 + o.shift.1,
+                                    );
+                                }
+                                ds[d] = o.ds;
+                                for ch in 0..3 {
+                                    s_here[ch][d] = dot(&s[ch], &o.y);
+                                }
+                            }
+                            let mut radiance = [[0.0f64; LANES]; 3];
+                            for ch in 0..3 {
+                                let mean_ext: [f64; LANES] =
+                                    std::array::from_fn(|d| 0.5 * (ext[ch] + back[d][3 + ch]));
+                                let tau: [f64; LANES] =
+                                    std::array::from_fn(|d| mean_ext[d] * ds[d]);
+                                let e = exp_neg(tau);
+                                radiance[ch] = std::array::from_fn(|d| {
+                                    let (i_back, s_back) = (back[d][ch], back[d][6 + ch]);
+                                    if tau[d] > 1e-6 {
+                                        let q = (1.0 - e[d]) / tau[d];
+                                        i_back * e[d]
+                                            + (s_here[ch][d] * (1.0 - q) + s_back * (q - e[d]))
+                                                / mean_ext[d]
+                                    } else {
+                                        i_back * (1.0 - tau[d])
+                                            + 0.5 * ds[d] * (s_here[ch][d] + s_back)
+                                    }
+                                });
+                            }
+                            for (d, state) in
+                                states[first..first + chunk.len()].iter_mut().enumerate()
+                            {
+                                *state = [
+                                    radiance[0][d],
+                                    radiance[1][d],
+                                    radiance[2][d],
+                                    ext[0],
+                                    ext[1],
+                                    ext[2],
+                                    s_here[0][d],
+                                    s_here[1][d],
+                                    s_here[2][d],
+                                ];
+                                for (ch, r) in radiance.iter().enumerate() {
+                                    weighted[ch * count + first + d] = weight * r[d];
+                                }
+                            }
+                        }
+                        // Σ_d weight I_d Y_k(ω_d) per channel.
+                        for (ch, w) in weighted.chunks_exact(count).enumerate() {
+                            let sums = project(w, &group.ordinates);
+                            acc[ch * HARMONICS..(ch + 1) * HARMONICS]
+                                .copy_from_slice(&sums[..HARMONICS]);
+                        }
+                    },
+                );
+            held.push(k);
+            if held.len() == LAYER_BLOCK || step + 1 == layers.len() {
+                add_layers(dims, a, &held, &block[..held.len() * nb * nc], &mut next);
+                held.clear();
+            }
+            std::mem::swap(&mut prev, &mut cur);
+        }
+    }
+    next
+}
+
 /// Source iteration from `start` (moments per voxel, [`PER_VOXEL`]): each round sweeps every
 /// direction of `dirs` with the source σ′_s (p′ ∗ I) + Q from the previous round's moments,
 /// gathers the new moments (equal weights 4π/N), and lets `accelerate` correct them from the
@@ -118,57 +475,12 @@ pub fn solve(
     (tolerance, max_iterations): (f64, usize),
     mut accelerate: impl FnMut(&[[f64; PER_VOXEL]], &mut [[f64; PER_VOXEL]]),
 ) -> (Vec<[f64; PER_VOXEL]>, Report) {
-    let n = medium.ext.len();
     let weight = 4.0 * PI / dirs.len() as f64;
+    let groups = groups(grid, dirs);
     let mut m = start;
     let mut report = Report::default();
     for _ in 0..max_iterations {
-        let mut next = vec![[0.0f64; PER_VOXEL]; n];
-        for &w in dirs {
-            let y = harmonics(w);
-            let p_sun = legendre(w.dot(medium.l));
-            // State: I, σ′_t and the emission S (radiance per metre) per channel. Over a step,
-            // σ′_t is the mean of its ends and S linear between them.
-            let state = sweep::<9>(grid, w, [0.0; 9], |i, back, ds| {
-                let mut out = [0.0; 9];
-                for c in 0..3 {
-                    let ext = medium.ext[i][c];
-                    let chi = &medium.chi[i][c];
-                    let moments = &m[i][c * HARMONICS..(c + 1) * HARMONICS];
-                    let phase_sun: f64 = (0..=DEGREE)
-                        .map(|l| (2 * l + 1) as f64 * chi[l] * p_sun[l])
-                        .sum();
-                    let sky = medium.sky[i][c];
-                    let s_here = medium.sca[i][c] * scattered(moments, chi, &y)
-                        + medium.sun[i][c] * phase_sun
-                        + sky[0]
-                        + 3.0 * (sky[1] * w.x + sky[2] * w.y + sky[3] * w.z);
-                    let mean_ext = 0.5 * (ext + back[3 + c]);
-                    let tau = mean_ext * ds;
-                    let (i_back, s_back) = (back[c], back[6 + c]);
-                    out[c] = if tau > 1e-6 {
-                        let e = (-tau).exp();
-                        let k = (1.0 - e) / tau;
-                        i_back * e + (s_here * (1.0 - k) + s_back * (k - e)) / mean_ext
-                    } else {
-                        i_back * (1.0 - tau) + 0.5 * ds * (s_here + s_back)
-                    };
-                    out[3 + c] = ext;
-                    out[6 + c] = s_here;
-                }
-                out
-            });
-            next.par_iter_mut()
-                .zip(state.par_iter())
-                .for_each(|(m, s)| {
-                    for c in 0..3 {
-                        let v = weight * s[c];
-                        for k in 0..HARMONICS {
-                            m[c * HARMONICS + k] += v * y[k];
-                        }
-                    }
-                });
-        }
+        let mut next = sweep_round(grid, medium, &m, &groups, weight);
         accelerate(&m, &mut next);
         let (mut d, mut t) = (0.0, 0.0);
         for (a, b) in next.iter().zip(&m) {
@@ -239,6 +551,117 @@ pub fn balance(grid: &DensityGrid, medium: &Medium, moments: &[[f64; PER_VOXEL]]
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// One round as a sweep per direction (`crate::lattice::sweep`), the emission summed in
+    /// its own terms: what [`sweep_round`] must equal.
+    fn round_by_direction(
+        grid: &DensityGrid,
+        medium: &Medium,
+        m: &[[f64; PER_VOXEL]],
+        dirs: &[DVec3],
+    ) -> Vec<[f64; PER_VOXEL]> {
+        let weight = 4.0 * PI / dirs.len() as f64;
+        let mut next = vec![[0.0f64; PER_VOXEL]; m.len()];
+        for &w in dirs {
+            let y = harmonics(w);
+            let p_sun = legendre(w.dot(medium.l));
+            let state = crate::lattice::sweep::<9>(grid, w, [0.0; 9], |i, back, ds| {
+                let mut out = [0.0; 9];
+                for c in 0..3 {
+                    let ext = medium.ext[i][c];
+                    let chi = &medium.chi[i][c];
+                    let phase_sun: f64 = (0..=DEGREE)
+                        .map(|l| (2 * l + 1) as f64 * chi[l] * p_sun[l])
+                        .sum();
+                    let sky = medium.sky[i][c];
+                    let s_here = medium.sca[i][c] * scattered(&m[i][c * HARMONICS..], chi, &y)
+                        + medium.sun[i][c] * phase_sun
+                        + sky[0]
+                        + 3.0 * (sky[1] * w.x + sky[2] * w.y + sky[3] * w.z);
+                    let mean_ext = 0.5 * (ext + back[3 + c]);
+                    let tau = mean_ext * ds;
+                    let e = (-tau).exp();
+                    let k = (1.0 - e) / tau;
+                    out[c] = back[c] * e + (s_here * (1.0 - k) + back[6 + c] * (k - e)) / mean_ext;
+                    out[3 + c] = ext;
+                    out[6 + c] = s_here;
+                }
+                out
+            });
+            for (n, s) in next.iter_mut().zip(&state) {
+                for c in 0..3 {
+                    for k in 0..HARMONICS {
+                        n[c * HARMONICS + k] += weight * s[c] * y[k];
+                    }
+                }
+            }
+        }
+        next
+    }
+
+    #[test]
+    fn a_round_of_grouped_sweeps_equals_a_sweep_per_direction() {
+        // A lumpy medium on an uneven grid (every axis leads some directions), lit by the sun
+        // and the sky, with moments that are not those of any one radiance.
+        let dims = [7, 5, 6];
+        let n = dims[0] * dims[1] * dims[2];
+        let grid = DensityGrid {
+            min_m: DVec3::new(-1.0, -0.5, 0.0),
+            max_m: DVec3::new(1.4, 0.7, 1.1),
+            dims,
+            data: vec![[0.0; crate::MAX_FIELDS]; n],
+        };
+        let wobble = |i: usize, k: usize| 0.5 + 0.5 * ((i * 7 + k * 13) as f64 * 0.61).sin();
+        let medium = Medium {
+            ext: (0..n)
+                .map(|i| std::array::from_fn(|c| 3.0 * wobble(i, c) + 0.2))
+                .collect(),
+            sca: (0..n)
+                .map(|i| std::array::from_fn(|c| 2.0 * wobble(i, c) + 0.1))
+                .collect(),
+            chi: (0..n)
+                .map(|i| {
+                    std::array::from_fn(|c| {
+                        std::array::from_fn(|l| {
+                            if l == 0 {
+                                1.0
+                            } else {
+                                0.8 * wobble(i, c + l) / l as f64
+                            }
+                        })
+                    })
+                })
+                .collect(),
+            sun: (0..n)
+                .map(|i| std::array::from_fn(|c| wobble(i, c + 5)))
+                .collect(),
+            l: DVec3::new(0.3, -0.4, -0.87).normalize(),
+            sky: (0..n)
+                .map(|i| {
+                    std::array::from_fn(|c| std::array::from_fn(|k| 0.1 * wobble(i, c + k + 9)))
+                })
+                .collect(),
+        };
+        let m: Vec<[f64; PER_VOXEL]> = (0..n)
+            .map(|i| {
+                std::array::from_fn(|k| wobble(i, k + 20) / (1 + degree_of(k % HARMONICS)) as f64)
+            })
+            .collect();
+        let dirs = crate::lattice::fibonacci_directions(40);
+        let want = round_by_direction(&grid, &medium, &m, &dirs);
+        let got = sweep_round(&grid, &medium, &m, &groups(&grid, &dirs), 4.0 * PI / 40.0);
+        let scale = want.iter().flatten().fold(0.0f64, |a, v| a.max(v.abs()));
+        let worst = want
+            .iter()
+            .flatten()
+            .zip(got.iter().flatten())
+            .fold(0.0f64, |a, (w, g)| a.max((w - g).abs()));
+        assert!(scale > 1.0, "the round carries light: {scale}");
+        assert!(
+            worst < 1e-12 * scale,
+            "worst difference {worst:e} of {scale}"
+        );
+    }
 
     #[test]
     fn the_harmonics_are_orthonormal() {
