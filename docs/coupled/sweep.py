@@ -13,6 +13,8 @@ Run from the repository root after `cargo build --release`:
     python3 docs/coupled/sweep.py --only cloud:8  # a subset (field:tau), printed, not written
     python3 docs/coupled/sweep.py --table-only    # the table again from sweep.json
     python3 docs/coupled/sweep.py --only cloud:64 --merge   # those cases' rows replaced in it
+    python3 docs/coupled/sweep.py --models coupled --update  # only these models re-rendered,
+                                                  # the other models' columns kept
 """
 import hashlib, json, os, subprocess, sys, time
 
@@ -151,6 +153,18 @@ def main():
         only = [tuple(s.split(":")) for s in sys.argv[sys.argv.index("--only") + 1].split(",")]
         cases = [c for c in cases if (c[0], str(c[1])) in only]
     rows = [case(*c, models) for c in cases]
+    if "--update" in sys.argv:
+        # Replace these models' entries in every row of sweep.json, keeping the other models.
+        data = json.load(open(out))
+        key = lambda r: (r["field"], r["tau"], r["azimuth_deg"], r["elevation_deg"])
+        new = {key(r): repo.portable(r, ROOT, WORK) for r in rows}
+        for r in data["results"]:
+            for name in models:
+                if key(r) in new:
+                    r[name] = new[key(r)][name]
+        json.dump(data, open(out, "w"), indent=1)
+        open(out.replace(".json", ".md"), "w").write(table(data["results"], data["models"]))
+        return
     if only is not None and "--merge" in sys.argv:
         # Replace (or add) these cases' rows in sweep.json, keeping the others and the order.
         data = json.load(open(out))

@@ -466,66 +466,120 @@ fn dot(a: &[f64], b: &[f64]) -> f64 {
 /// Solves `p` to relative residual `tolerance` within `max_iterations` conjugate-gradient
 /// iterations (module docs, "The solver").
 pub fn solve(p: &Problem, tolerance: f64, max_iterations: usize) -> Result<Solution, NotConverged> {
-    use rayon::prelude::*;
     let start = Instant::now();
     let (a, b) = assemble(p);
-    let unknowns = a.diag.iter().filter(|&&d| d > 0.0).count();
-    let n = a.len();
-    let b_norm = dot(&b, &b).sqrt();
-    let mut x = vec![0.0; n];
-    if b_norm == 0.0 || unknowns == 0 {
-        return Ok(Solution {
-            i0: x,
-            iterations: 0,
-            residual: 0.0,
-            levels: 0,
-            unknowns,
-            seconds: start.elapsed().as_secs_f64(),
-        });
+    let mut s = Operator::new(a).solve(&b, tolerance, max_iterations)?;
+    s.seconds = start.elapsed().as_secs_f64();
+    Ok(s)
+}
+
+/// A problem's operator and its multigrid hierarchy, assembled once for several sources
+/// (the transport's acceleration solves the same operator every round).
+pub struct Operator {
+    mg: Option<Hierarchy>,
+    diag: Vec<f64>,
+    volume: f64,
+}
+
+impl Operator {
+    /// The operator of `p` (its sources, which must have one value per voxel, are not used).
+    pub fn of(p: &Problem) -> Self {
+        let mut op = Self::new(assemble(p).0);
+        op.volume = p.h.iter().product();
+        op
     }
-    let mg = Hierarchy::new(a);
-    let a = &mg.levels[0];
-    let mut r = b.clone();
-    let mut z = vec![0.0; n];
-    mg.vcycle(0, &r, &mut z);
-    let mut d = z.clone();
-    let mut rz = dot(&r, &z);
-    let mut ad = vec![0.0; n];
-    let mut residual = 1.0;
-    for it in 1..=max_iterations {
-        a.apply(&d, &mut ad);
-        let alpha = rz / dot(&d, &ad);
-        x.par_iter_mut()
-            .zip(r.par_iter_mut())
-            .zip(d.par_iter().zip(&ad))
-            .for_each(|((xi, ri), (di, adi))| {
-                *xi += alpha * di;
-                *ri -= alpha * adi;
-            });
-        residual = dot(&r, &r).sqrt() / b_norm;
-        if residual < tolerance {
+
+    fn new(a: Stencil) -> Self {
+        let unknowns = a.diag.iter().filter(|&&d| d > 0.0).count();
+        let diag = a.diag.clone();
+        Self {
+            mg: (unknowns > 0).then(|| Hierarchy::new(a)),
+            diag,
+            volume: 0.0,
+        }
+    }
+
+    /// Solves for an isotropic source `q0` per voxel (Q_1 = 0), as [`solve`].
+    pub fn solve_isotropic(
+        &self,
+        q0: &[f64],
+        tolerance: f64,
+        max_iterations: usize,
+    ) -> Result<Solution, NotConverged> {
+        let b: Vec<f64> = q0
+            .iter()
+            .zip(&self.diag)
+            .map(|(q, d)| if *d > 0.0 { self.volume * q } else { 0.0 })
+            .collect();
+        self.solve(&b, tolerance, max_iterations)
+    }
+
+    /// Conjugate gradients preconditioned by one V-cycle, for the right-hand side `b`.
+    fn solve(
+        &self,
+        b: &[f64],
+        tolerance: f64,
+        max_iterations: usize,
+    ) -> Result<Solution, NotConverged> {
+        use rayon::prelude::*;
+        let start = Instant::now();
+        let unknowns = self.diag.iter().filter(|&&d| d > 0.0).count();
+        let n = self.diag.len();
+        let b_norm = dot(b, b).sqrt();
+        let mut x = vec![0.0; n];
+        let Some(mg) = self.mg.as_ref().filter(|_| b_norm > 0.0) else {
             return Ok(Solution {
                 i0: x,
-                iterations: it,
-                residual,
-                levels: mg.levels.len(),
+                iterations: 0,
+                residual: 0.0,
+                levels: 0,
                 unknowns,
                 seconds: start.elapsed().as_secs_f64(),
             });
-        }
+        };
+        let a = &mg.levels[0];
+        let mut r = b.to_vec();
+        let mut z = vec![0.0; n];
         mg.vcycle(0, &r, &mut z);
-        let rz_new = dot(&r, &z);
-        let beta = rz_new / rz;
-        rz = rz_new;
-        d.par_iter_mut()
-            .zip(&z)
-            .for_each(|(di, zi)| *di = zi + beta * *di);
+        let mut d = z.clone();
+        let mut rz = dot(&r, &z);
+        let mut ad = vec![0.0; n];
+        let mut residual = 1.0;
+        for it in 1..=max_iterations {
+            a.apply(&d, &mut ad);
+            let alpha = rz / dot(&d, &ad);
+            x.par_iter_mut()
+                .zip(r.par_iter_mut())
+                .zip(d.par_iter().zip(&ad))
+                .for_each(|((xi, ri), (di, adi))| {
+                    *xi += alpha * di;
+                    *ri -= alpha * adi;
+                });
+            residual = dot(&r, &r).sqrt() / b_norm;
+            if residual < tolerance {
+                return Ok(Solution {
+                    i0: x,
+                    iterations: it,
+                    residual,
+                    levels: mg.levels.len(),
+                    unknowns,
+                    seconds: start.elapsed().as_secs_f64(),
+                });
+            }
+            mg.vcycle(0, &r, &mut z);
+            let rz_new = dot(&r, &z);
+            let beta = rz_new / rz;
+            rz = rz_new;
+            d.par_iter_mut()
+                .zip(&z)
+                .for_each(|(di, zi)| *di = zi + beta * *di);
+        }
+        Err(NotConverged {
+            residual,
+            iterations: max_iterations,
+            tolerance,
+        })
     }
-    Err(NotConverged {
-        residual,
-        iterations: max_iterations,
-        tolerance,
-    })
 }
 
 #[cfg(test)]
