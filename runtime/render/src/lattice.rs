@@ -289,17 +289,32 @@ impl Sky {
 }
 
 /// The reduced skylight per voxel: the sky model's radiance from [`SKY_DIRECTIONS`] directions,
-/// each attenuated through the grid by its own sweep.
-pub fn reduced_sky(frame: &Frame, ext: &[[f64; 3]]) -> Sky {
+/// each attenuated through the grid by its own sweep. Below the horizon it is the air's and the
+/// sunlit ground's (Lambertian, `[ground] albedo`, lit through the volume as `ground_lit` says,
+/// as [`crate::shading::compose`] shades it), both as seen from the middle of the box.
+pub fn reduced_sky(frame: &Frame, ext: &[[f64; 3]], ground_lit: impl Fn(DVec3) -> [f64; 3]) -> Sky {
     let mut sky = Sky::zero(ext.len());
     let grid = &frame.grid;
     let sun = frame.sun.direction();
     // The sky's radiance as seen from the middle of the box (Eqs. 11–15).
-    let y = 0.5 * (grid.min_m.y + grid.max_m.y);
+    let middle = 0.5 * (grid.min_m + grid.max_m);
+    let y = middle.y;
+    let atm = &frame.atmosphere;
     for s in sky_directions() {
         let k_end = if s.y < 0.0 { y / -s.y } else { f64::INFINITY };
-        let l = frame.atmosphere.inscatter(y, s.y, k_end, sun.y, s.dot(sun));
-        let radiance: [f64; 3] = std::array::from_fn(|c| frame.sun.irradiance[c] * l[c]);
+        let l = atm.inscatter(y, s.y, k_end, sun.y, s.dot(sun));
+        let ground: [f64; 3] = if frame.ground_albedo > 0.0 && k_end.is_finite() && sun.y > 0.0 {
+            let (lit, sun0, t) = (
+                ground_lit(middle + k_end * s),
+                atm.sunlight(0.0, sun.y),
+                atm.transparency(y, s.y, k_end),
+            );
+            std::array::from_fn(|c| frame.ground_albedo / PI * sun.y * sun0[c] * lit[c] * t[c])
+        } else {
+            [0.0; 3]
+        };
+        let radiance: [f64; 3] =
+            std::array::from_fn(|c| frame.sun.irradiance[c] * (l[c] + ground[c]));
         if radiance.iter().all(|&v| v <= 0.0) {
             continue;
         }

@@ -243,7 +243,9 @@ pub fn light_with(
     let state = buffer_sweep(&fields, frame, &v, l, settings, &peak);
     // E S_atm per voxel: the sun's irradiance at each voxel's height, before the volume.
     let sunlight = reduced_sun(frame, &vec![[0.0; 3]; v.ext.len()]);
-    let sky = reduced_sky(frame, &v.ext);
+    let sky = reduced_sky(frame, &v.ext, |g| {
+        transmittance_to_sun(&fields, grid, g, sun_dir)
+    });
     report.buffer_s = start.elapsed().as_secs_f64();
 
     progress.update(1, 3, "diffusion solve");

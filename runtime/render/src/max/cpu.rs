@@ -206,7 +206,9 @@ pub fn light_with(
     let v = voxels(&fields, grid);
     let tau_sun = sun_depths(grid, &v.ext, -sun_dir);
     let reduced = reduced_sun(frame, &tau_sun);
-    let mut sky = reduced_sky(frame, &v.ext);
+    let mut sky = reduced_sky(frame, &v.ext, |g| {
+        transmittance_to_sun(&fields, grid, g, sun_dir)
+    });
     report.propagation_s = start.elapsed().as_secs_f64();
 
     // 3: diffusion per channel.
