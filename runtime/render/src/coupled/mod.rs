@@ -92,9 +92,10 @@ pub struct Coupled;
 /// and its flux 96, the skylight 96).
 pub const MEMORY_PER_VOXEL: u64 = 520;
 
-/// Bytes the discrete-ordinates transport adds per voxel at its peak: two sets of 75 moments
-/// (1200), the scaled medium and its sources (288), a direction's sweep state (72), the
-/// acceleration's problem and solver (≈ 240).
+/// Bytes the discrete-ordinates transport adds per voxel at its peak, uncoarsened (an upper
+/// bound with `transport_coarsening`): two sets of 75 moments (1200), the scaled medium and
+/// its sources (288), the acceleration's operators and solver (≈ 240), the sweeps' layers
+/// (a few layers of the grid, ≈ 72 at 64 along an axis).
 pub const TRANSPORT_MEMORY_PER_VOXEL: u64 = 1800;
 
 /// The automatic `transport_coarsening` keeps at least this many transport voxels along the
