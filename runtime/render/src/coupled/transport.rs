@@ -129,8 +129,8 @@ const LANES: usize = 8;
 const PADDED: usize = 32;
 
 /// e^−τ for τ ≥ 0 in every lane, branch-free so that it vectorizes: τ log₂e split into an
-/// integer n and a remainder, e^−r by its Taylor series to degree 12 on |r| ≤ ln2/2 (error
-/// below 2·10⁻¹⁶ relative), times 2^−n from the exponent bits; 0 past τ = 700.
+/// integer n and a remainder, e^−r by its Taylor series to degree 12 on |r| ≤ ln2/2, times
+/// 2^−n from the exponent bits (within 3.3·10⁻¹⁶ of the library's, relative); 0 past τ = 700.
 fn exp_neg(tau: [f64; LANES]) -> [f64; LANES] {
     const LN2_HI: f64 = 0.693_147_180_369_123_8;
     const LN2_LO: f64 = 1.908_214_929_270_587_7e-10;
@@ -350,10 +350,9 @@ fn add_layers(
 /// One round of sweeps: every direction of `groups` with the emission from moments `m`,
 /// returning the new moments (equal weights `weight`). The directions of a group share the
 /// layer order, so each voxel's emission harmonics are formed once per group, and only two
-/// layers of each direction's state are kept. Per direction the step is
-/// [`crate::lattice::sweep`]'s: the state one layer back bilinear in that layer (blending to
-/// clear air, zero, between the outermost centres and the faces), σ′_t the mean of the step's
-/// ends and the emission linear between them.
+/// layers of each direction's state are kept. Per direction the state one layer back is
+/// bilinear in that layer as in [`crate::lattice::sweep`] (blending to clear air, zero,
+/// between the outermost centres and the faces), and the step is [`advance`]'s.
 fn sweep_round(
     grid: &DensityGrid,
     medium: &Medium,
@@ -886,6 +885,27 @@ mod tests {
         }
         assert!(inside > 40, "{inside}");
     }
+
+    #[test]
+    fn the_vectorized_exponential_agrees_with_the_library_s() {
+        let mut worst: f64 = 0.0;
+        for i in 0..=70_000 {
+            let tau: [f64; LANES] = std::array::from_fn(|d| (i * LANES + d) as f64 * 1.25e-3);
+            for (d, e) in exp_neg(tau).iter().enumerate() {
+                if tau[d] <= 700.0 {
+                    worst = worst.max((e / (-tau[d]).exp() - 1.0).abs());
+                } else {
+                    assert_eq!(*e, 0.0);
+                }
+            }
+        }
+        eprintln!("exp_neg: worst relative error {worst:e}");
+        assert!(worst < EXP_TOLERANCE, "worst relative error {worst:e}");
+    }
+
+    /// [`exp_neg`]'s worst relative error over τ ∈ [0, 700] (steps of 1/800), just above the
+    /// measured 3.3·10⁻¹⁶ against the library's e^−τ.
+    const EXP_TOLERANCE: f64 = 4e-16;
 
     #[test]
     fn the_harmonics_are_orthonormal() {

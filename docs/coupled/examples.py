@@ -1,0 +1,138 @@
+#!/usr/bin/env python3
+"""The fast models against the path-traced truth on the example scenes of data/scenes/
+(cumulus_dawn, glory, rainbow, halo), each scene as it is written (its sky, its ground, its
+grid) but with `draft` tables and a small image: riley, max and coupled (CPU references)
+against `--model truth`, compared by `photometeor compare-render` over the volume's pixels.
+For the glory, also the ring contrast: the mean luminance in rings of 0.25° about the
+antisolar point (the image centre), the first bright ring over the minimum before it.
+
+Each truth is rendered once (--noise 0.03, at most 16384 spp and `max_seconds` per scene)
+and cached under $EXAMPLES_WORK by its command, so re-running after a model change renders
+only the models. Writes docs/coupled/examples.json, examples.md and an error map per scene
+for coupled (examples-<scene>-coupled.png: red too bright, blue too dark, full at ±50 %, grey
+within 3σ of the truth's noise).
+
+Run from the repository root after `cargo build --release`, with the test venv's Python
+(numpy, OpenEXR):
+    .venv/bin/python docs/coupled/examples.py [--max-seconds 300]
+"""
+import argparse, hashlib, json, os, subprocess, sys, time
+
+import numpy as np
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+ROOT = os.path.dirname(os.path.dirname(HERE))
+sys.path.insert(0, os.path.join(ROOT, "docs", "renders"))
+from pair import LUMA, read_exr  # noqa: E402
+
+BIN = os.environ.get("PHOTOMETEOR", os.path.join(ROOT, "target", "release", "photometeor"))
+WORK = os.environ.get("EXAMPLES_WORK", "/tmp/photometeor-examples")
+# Scene, image size (the glory larger, for its rings: 0.14° a pixel).
+SCENES = [("cumulus_dawn", 160, 120), ("glory", 256, 256), ("rainbow", 160, 120),
+          ("halo", 160, 120)]
+MODELS = ["riley", "max", "coupled"]
+
+
+def run(args):
+    r = subprocess.run([BIN] + args, capture_output=True, text=True)
+    if r.returncode != 0:
+        sys.exit(f"{' '.join(args)}: {r.stderr}")
+    return r
+
+
+def rings(rgb, fov_deg, step=0.25, top=12.0):
+    """Mean luminance in rings of `step` degrees about the image centre, over the mean of the
+    outer 2°, and the ring centres (the vertical field of view `fov_deg`)."""
+    h, w = rgb.shape[:2]
+    f = (h / 2) / np.tan(np.radians(fov_deg / 2))
+    y, x = np.mgrid[0:h, 0:w]
+    angle = np.degrees(np.arctan(np.hypot(x + 0.5 - w / 2, y + 0.5 - h / 2) / f))
+    edges = np.arange(0.0, top + 1e-9, step)
+    lum = rgb @ LUMA
+    ring = np.digitize(angle, edges)
+    mean = np.array([lum[ring == i].mean() for i in range(1, len(edges))])
+    return edges[:-1] + step / 2, mean / mean[-int(2 / step):].mean()
+
+
+def contrast(theta, value):
+    """The first minimum beyond 0.5° and the brightest ring within 2° after it: (minimum's
+    angle, peak's angle, peak / minimum − 1)."""
+    start = int(np.searchsorted(theta, 0.5))
+    lo = start + int(np.argmin(value[start:start + 12]))
+    hi = lo + int(np.argmax(value[lo:lo + 8]))
+    return float(theta[lo]), float(theta[hi]), float(value[hi] / value[lo] - 1.0)
+
+
+def main():
+    p = argparse.ArgumentParser()
+    p.add_argument("--max-seconds", type=float, default=300.0)
+    a = p.parse_args()
+    os.makedirs(WORK, exist_ok=True)
+    report = {"quality": "draft", "scenes": {}}
+    for name, w, h in SCENES:
+        scene = os.path.join(ROOT, "data", "scenes", f"{name}.toml")
+        size = ["--width", str(w), "--height", str(h), "--quality", "draft"]
+        args = ["render", scene, "--model", "truth", *size, "--cpu", "--spp", "16384",
+                "--noise", "0.03", "--set", f"max_seconds={a.max_seconds}"]
+        key = hashlib.sha256((open(scene).read() + " ".join(args[2:])).encode()).hexdigest()[:16]
+        truth = f"{WORK}/{name}-truth-{key}.exr"
+        if not os.path.exists(truth):
+            t0 = time.time()
+            r = run(args + ["--out", truth + ".part.exr"])
+            os.rename(truth + ".part.exr", truth)
+            open(truth + ".txt", "w").write(
+                f"{r.stderr.strip().splitlines()[-1]} [{time.time() - t0:.0f} s]")
+        row = {"size": [w, h], "truth": open(truth + ".txt").read(), "models": {}}
+        print(f"{name}: truth {row['truth']}", flush=True)
+        frames = {"truth": read_exr(truth)}
+        for model in MODELS:
+            out = f"{WORK}/{name}-{model}.exr"
+            t0 = time.time()
+            r = run(["render", scene, "--model", model, *size, "--cpu", "--out", out])
+            seconds = time.time() - t0
+            map_args = []
+            if model == "coupled":
+                map_args = ["--map", os.path.join(HERE, f"examples-{name}-coupled.png")]
+            e = json.loads(run(["compare-render", truth, out, "--json", *map_args]).stdout)
+            e["seconds"] = round(seconds, 1)
+            e["summary"] = r.stderr.strip().splitlines()[-1]
+            row["models"][model] = e
+            frames[model] = read_exr(out)
+            print(f"  {model:8s} bias {e['bias']:+7.1%} median {e['median_rel_error']:6.1%} "
+                  f"p95 {e['p95_rel_error']:6.1%} (truth noise {e['truth_noise']:.1%}) "
+                  f"[{seconds:.1f} s]", flush=True)
+        if name == "glory":
+            fov = 36.0
+            row["rings"] = {}
+            for label, rgb in frames.items():
+                theta, value = rings(rgb, fov)
+                lo, hi, c = contrast(theta, value)
+                row["rings"][label] = {"minimum_deg": lo, "peak_deg": hi, "contrast": c,
+                                       "profile": [round(v, 4) for v in value]}
+                print(f"  rings {label:8s}: minimum {lo:.3f}°, bright ring {hi:.3f}°, "
+                      f"contrast {c:+.1%}", flush=True)
+            row["rings"]["angle_deg"] = [round(t, 3) for t in theta]
+        report["scenes"][name] = row
+    json.dump(report, open(os.path.join(HERE, "examples.json"), "w"), indent=1)
+    md = ["| scene | size | truth | " + " | ".join(
+        f"{m}: bias / median / p95" for m in MODELS) + " | coupled error map |",
+          "|" + "---|" * (4 + len(MODELS))]
+    for name, row in report["scenes"].items():
+        cells = [f"{row['models'][m]['bias']:+.1%} / {row['models'][m]['median_rel_error']:.1%}"
+                 f" / {row['models'][m]['p95_rel_error']:.1%}" for m in MODELS]
+        noise = row["models"]["coupled"]["truth_noise"]
+        md.append(f"| {name} | {row['size'][0]}×{row['size'][1]} | noise {noise:.1%} | "
+                  + " | ".join(cells) + f" | ![](examples-{name}-coupled.png) |")
+    if "glory" in report["scenes"]:
+        md += ["", "Glory rings (glory.toml, 0.25° rings about the antisolar point, over 10–12°):",
+               "", "| frame | first minimum | first bright ring | contrast |", "|---|---|---|---|"]
+        for label, r in report["scenes"]["glory"]["rings"].items():
+            if label != "angle_deg":
+                md.append(f"| {label} | {r['minimum_deg']:.3f}° | {r['peak_deg']:.3f}° | "
+                          f"{r['contrast']:+.1%} |")
+    open(os.path.join(HERE, "examples.md"), "w").write(
+        "\n".join(md).replace("%", " %") + "\n")
+
+
+if __name__ == "__main__":
+    main()
