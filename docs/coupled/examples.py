@@ -18,12 +18,11 @@ Run from the repository root after `cargo build --release`, with the test venv's
 """
 import argparse, hashlib, json, os, subprocess, sys, time
 
-import numpy as np
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(os.path.dirname(HERE))
 sys.path.insert(0, os.path.join(ROOT, "docs", "renders"))
-from pair import LUMA, read_exr  # noqa: E402
+from pair import read_exr, rings  # noqa: E402
 
 BIN = os.environ.get("PHOTOMETEOR", os.path.join(ROOT, "target", "release", "photometeor"))
 WORK = os.environ.get("EXAMPLES_WORK", "/tmp/photometeor-examples")
@@ -40,20 +39,6 @@ def run(args):
     if r.returncode != 0:
         sys.exit(f"{' '.join(args)}: {r.stderr}")
     return r
-
-
-def rings(rgb, fov_deg, step=0.25, top=12.0):
-    """Mean luminance in rings of `step` degrees about the image centre, over the mean of the
-    outer 2°, and the ring centres (the vertical field of view `fov_deg`)."""
-    h, w = rgb.shape[:2]
-    f = (h / 2) / np.tan(np.radians(fov_deg / 2))
-    y, x = np.mgrid[0:h, 0:w]
-    angle = np.degrees(np.arctan(np.hypot(x + 0.5 - w / 2, y + 0.5 - h / 2) / f))
-    edges = np.arange(0.0, top + 1e-9, step)
-    lum = rgb @ LUMA
-    ring = np.digitize(angle, edges)
-    mean = np.array([lum[ring == i].mean() for i in range(1, len(edges))])
-    return edges[:-1] + step / 2, mean / mean[-int(2 / step):].mean()
 
 
 def contrast(theta, value, dark=(0.5, 1.0), bright=(1.0, 2.0)):

@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 from PIL import Image
 
-from pair import LUMA, against_truth, grid_2x2, read_exr, render
+from pair import against_truth, grid_2x2, read_exr, render, rings
 
 HERE = Path(__file__).resolve().parent
 SCENE = HERE.parents[1] / "data/scenes/growing_cumulus.toml"
@@ -42,19 +42,6 @@ def fixed_scene(tmp):
     path = tmp / "growing_cumulus_fixed.toml"
     path.write_text(text)
     return path
-
-
-def profile(rgb, step=0.25, top=12.0):
-    """Mean luminance in rings of `step` degrees about the image centre (the antisolar point),
-    over the mean of the outer 2°."""
-    f = (H / 2) / np.tan(np.radians(FOV / 2))
-    y, x = np.mgrid[0:H, 0:W]
-    angle = np.degrees(np.arctan(np.hypot(x + 0.5 - W / 2, y + 0.5 - H / 2) / f))
-    edges = np.arange(0.0, top + 1e-9, step)
-    lum = rgb @ LUMA
-    ring = np.digitize(angle, edges)
-    mean = np.array([lum[ring == i].mean() for i in range(1, len(edges))])
-    return (edges[:-1] + step / 2), mean / mean[-int(2 / step):].mean()
 
 
 def main():
@@ -94,7 +81,7 @@ def main():
     fig, ax = plt.subplots(figsize=(7, 3.6), dpi=110)
     report["glory_profile"] = {}
     for (label, rgb), style in zip(curves.items(), ["k-", "k--", "C0-", "C1-"]):
-        theta, value = profile(rgb)
+        theta, value = rings(rgb, FOV)
         ax.plot(theta, value, style, label=label)
         report["glory_profile"][label] = [round(v, 4) for v in value]
     report["glory_profile"]["angle_deg"] = [round(t, 3) for t in theta]

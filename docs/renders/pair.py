@@ -1,4 +1,5 @@
-"""Shared by the README image scripts (shafts.py, beams.py, four.py, growing.py): run
+"""Shared by the README image scripts (shafts.py, beams.py, four.py, growing.py) and
+docs/coupled/examples.py: run
 `photometeor render`, read its EXR, measure a frame against a truth, and write two frames side
 by side (or four, 2 × 2) at one exposure (the left one's automatic exposure, as
 `photometeor render --png` picks it: the 97th percentile of luminance maps to 1 − e^{−1.5})."""
@@ -41,6 +42,21 @@ def save_pair(left, right, out):
     img[:, w:w + 4] = 1.0
     Image.fromarray(np.round(np.clip(img, 0, 1) * 255).astype(np.uint8)).save(out, optimize=True)
     return exposure
+
+
+def rings(rgb, fov_deg, step=0.25, top=12.0):
+    """Mean luminance in rings of `step` degrees about the image centre (a glory's antisolar
+    point), over the mean of the outer 2°, and the rings' centres; `fov_deg` the vertical
+    field of view."""
+    h, w = rgb.shape[:2]
+    f = (h / 2) / np.tan(np.radians(fov_deg / 2))
+    y, x = np.mgrid[0:h, 0:w]
+    angle = np.degrees(np.arctan(np.hypot(x + 0.5 - w / 2, y + 0.5 - h / 2) / f))
+    edges = np.arange(0.0, top + 1e-9, step)
+    lum = rgb @ LUMA
+    ring = np.digitize(angle, edges)
+    mean = np.array([lum[ring == i].mean() for i in range(1, len(edges))])
+    return edges[:-1] + step / 2, mean / mean[-int(2 / step):].mean()
 
 
 def read_exr(exr):

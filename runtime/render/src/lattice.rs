@@ -112,31 +112,15 @@ pub fn sweep<const N: usize>(
     } else {
         (0..dims[a]).rev().collect()
     };
-    // The share of `outside` at coordinate u of an axis of n centres (0 between the centres,
-    // rising linearly to 1 at the faces half a voxel beyond them).
-    let face_share = |u: f64, n: f64| ((-u).max(u - (n - 1.0)) / 0.5).clamp(0.0, 1.0);
     for (step, &k) in layers.iter().enumerate() {
         let prev = (step > 0).then(|| layers[step - 1]);
-        let (nb, nc) = (dims[b] as f64, dims[c] as f64);
         let back_of = |layer: usize, u: f64, v: f64| -> [f64; N] {
-            let kept = (1.0 - face_share(u, nb)) * (1.0 - face_share(v, nc));
-            if kept <= 0.0 {
-                return outside;
-            }
-            let (u, v) = (u.clamp(0.0, nb - 1.0), v.clamp(0.0, nc - 1.0));
-            let (u0, v0) = (u.floor() as usize, v.floor() as usize);
-            let (u1, v1) = ((u0 + 1).min(dims[b] - 1), (v0 + 1).min(dims[c] - 1));
-            let (s, t) = (u - u0 as f64, v - v0 as f64);
-            let at =
-                |ub: usize, vc: usize| &state[layer * stride[a] + ub * stride[b] + vc * stride[c]];
-            let (p00, p10, p01, p11) = (at(u0, v0), at(u1, v0), at(u0, v1), at(u1, v1));
-            std::array::from_fn(|n| {
-                let inside = (1.0 - s) * (1.0 - t) * p00[n]
-                    + s * (1.0 - t) * p10[n]
-                    + (1.0 - s) * t * p01[n]
-                    + s * t * p11[n];
-                kept * inside + (1.0 - kept) * outside[n]
-            })
+            upwind(
+                |ub, vc| &state[layer * stride[a] + ub * stride[b] + vc * stride[c]],
+                (dims[b], dims[c]),
+                (u, v),
+                outside,
+            )
         };
         let layer: Vec<(usize, [f64; N])> = (0..dims[b] * dims[c])
             .into_par_iter()
@@ -154,6 +138,39 @@ pub fn sweep<const N: usize>(
         }
     }
     state
+}
+
+/// The state at the point (u, v) of a layer of nb × nc centres (in voxel units), `at(ub, vc)`
+/// each centre's: bilinear between the centres; between the outermost centres and the
+/// layer's edges half a voxel beyond them it blends linearly to `outside` (the light arriving
+/// from clear air), and beyond the edges it is `outside`. The upwind sweeps' lookup one layer
+/// back ([`sweep`] and the transport's).
+#[inline(always)]
+pub(crate) fn upwind<'a, const N: usize>(
+    at: impl Fn(usize, usize) -> &'a [f64; N],
+    (nb, nc): (usize, usize),
+    (u, v): (f64, f64),
+    outside: [f64; N],
+) -> [f64; N] {
+    // The share of `outside` at coordinate u of an axis of n centres (0 between the centres,
+    // rising linearly to 1 at the faces half a voxel beyond them).
+    let face_share = |u: f64, n: f64| ((-u).max(u - (n - 1.0)) / 0.5).clamp(0.0, 1.0);
+    let kept = (1.0 - face_share(u, nb as f64)) * (1.0 - face_share(v, nc as f64));
+    if kept <= 0.0 {
+        return outside;
+    }
+    let (u, v) = (u.clamp(0.0, (nb - 1) as f64), v.clamp(0.0, (nc - 1) as f64));
+    let (u0, v0) = (u.floor() as usize, v.floor() as usize);
+    let (u1, v1) = ((u0 + 1).min(nb - 1), (v0 + 1).min(nc - 1));
+    let (s, t) = (u - u0 as f64, v - v0 as f64);
+    let (p00, p10, p01, p11) = (at(u0, v0), at(u1, v0), at(u0, v1), at(u1, v1));
+    std::array::from_fn(|n| {
+        let inside = (1.0 - s) * (1.0 - t) * p00[n]
+            + s * (1.0 - t) * p10[n]
+            + (1.0 - s) * t * p01[n]
+            + s * t * p11[n];
+        kept * inside + (1.0 - kept) * outside[n]
+    })
 }
 
 /// Optical depth towards the light at every voxel centre, per channel:
@@ -304,12 +321,9 @@ pub fn reduced_sky(frame: &Frame, ext: &[[f64; 3]], ground_lit: impl Fn(DVec3) -
         let k_end = if s.y < 0.0 { y / -s.y } else { f64::INFINITY };
         let l = atm.inscatter(y, s.y, k_end, sun.y, s.dot(sun));
         let ground: [f64; 3] = if frame.ground_albedo > 0.0 && k_end.is_finite() && sun.y > 0.0 {
-            let (lit, sun0, t) = (
-                ground_lit(middle + k_end * s),
-                atm.sunlight(0.0, sun.y),
-                atm.transparency(y, s.y, k_end),
-            );
-            std::array::from_fn(|c| frame.ground_albedo / PI * sun.y * sun0[c] * lit[c] * t[c])
+            let g = crate::shading::ground_radiance(frame, ground_lit(middle + k_end * s));
+            let t = atm.transparency(y, s.y, k_end);
+            std::array::from_fn(|c| g[c] * t[c])
         } else {
             [0.0; 3]
         };

@@ -106,11 +106,8 @@ pub(crate) fn compose(
     let on_disk = k_end.is_infinite() && cos_sun >= cos_disk;
     let t_all = atm.transparency(y, d[1], k_end);
     let ground: [f64; 3] = if frame.ground_albedo > 0.0 && k_end.is_finite() && k_end > 0.0 {
-        let lit = ground_lit(eye + k_end * d);
-        let sun0 = atm.sunlight(0.0, l_y);
-        std::array::from_fn(|c| {
-            frame.ground_albedo / std::f64::consts::PI * l_y * sun0[c] * lit[c] * t_all[c]
-        })
+        let g = ground_radiance(frame, ground_lit(eye + k_end * d));
+        std::array::from_fn(|c| g[c] * t_all[c])
     } else {
         [0.0; 3]
     };
@@ -123,6 +120,15 @@ pub(crate) fn compose(
         v += t_vol[c] * i_s * ground[c];
         v as f32
     })
+}
+
+/// The Lambertian ground's radiance per unit solar irradiance, per channel (Eq. 12):
+/// albedo/π × sin(elevation) × the sunlight reaching the ground through the air, × `lit`, the
+/// fraction the volume leaves there.
+pub(crate) fn ground_radiance(frame: &Frame, lit: [f64; 3]) -> [f64; 3] {
+    let l_y = frame.sun.direction()[1];
+    let sun0 = frame.atmosphere.sunlight(0.0, l_y);
+    std::array::from_fn(|c| frame.ground_albedo / std::f64::consts::PI * l_y * sun0[c] * lit[c])
 }
 
 /// The largest constant a model may add to a phase function (Riley's ξ, Miyazaki's k_multi),

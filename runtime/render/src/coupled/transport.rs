@@ -56,24 +56,6 @@ pub fn harmonics(w: DVec3) -> [f64; HARMONICS] {
     ]
 }
 
-/// The degree l of harmonic k.
-pub fn degree_of(k: usize) -> usize {
-    (k as f64).sqrt() as usize
-}
-
-/// Legendre polynomials P_0 … P_L at μ.
-pub fn legendre(mu: f64) -> [f64; DEGREE + 1] {
-    let mut p = [0.0; DEGREE + 1];
-    p[0] = 1.0;
-    if DEGREE > 0 {
-        p[1] = mu;
-    }
-    for l in 1..DEGREE {
-        p[l + 1] = ((2 * l + 1) as f64 * mu * p[l] - l as f64 * p[l - 1]) / (l + 1) as f64;
-    }
-    p
-}
-
 /// The δ-M-scaled medium and the diffuse light's fixed sources, per voxel and channel.
 pub struct Medium {
     /// σ′_t = β_ext (1 − αf) (1/m).
@@ -99,9 +81,7 @@ pub struct Report {
 
 /// (1/4π)∫ p′ I dω′ towards `y` (the harmonics of ω) from moments `m` with p′'s `chi`.
 pub fn scattered(m: &[f64], chi: &[f64; DEGREE + 1], y: &[f64; HARMONICS]) -> f64 {
-    (0..HARMONICS)
-        .map(|k| chi[degree_of(k)] * y[k] * m[k])
-        .sum()
+    (0..HARMONICS).map(|k| chi[DEGREES[k]] * y[k] * m[k]).sum()
 }
 
 /// One direction of the transport's set: its harmonics and its step between layers.
@@ -233,7 +213,7 @@ fn emission(
     s
 }
 
-/// The degree of each harmonic ([`degree_of`]).
+/// The degree l of each harmonic k.
 const DEGREES: [usize; HARMONICS] = [
     0, 1, 1, 1, 2, 2, 2, 2, 2, 3, 3, 3, 3, 3, 3, 3, 4, 4, 4, 4, 4, 4, 4, 4, 4,
 ];
@@ -351,8 +331,7 @@ fn add_layers(
 /// returning the new moments (equal weights `weight`). The directions of a group share the
 /// layer order, so each voxel's emission harmonics are formed once per group, and only two
 /// layers of each direction's state are kept. Per direction the state one layer back is
-/// bilinear in that layer as in [`crate::lattice::sweep`] (blending to clear air, zero,
-/// between the outermost centres and the faces), and the step is [`advance`]'s.
+/// [`crate::lattice::upwind`]'s (clear air outside: zero), and the step is [`advance`]'s.
 fn sweep_round(
     grid: &DensityGrid,
     medium: &Medium,
@@ -364,9 +343,6 @@ fn sweep_round(
     let stride = [1, dims[0], dims[0] * dims[1]];
     let y_sun = harmonics(medium.l);
     let mut next = vec![[0.0f64; PER_VOXEL]; m.len()];
-    // The share of clear air at coordinate u of an axis of n centres (0 between the centres,
-    // rising linearly to 1 at the faces half a voxel beyond them).
-    let face_share = |u: f64, n: f64| ((-u).max(u - (n - 1.0)) / 0.5).clamp(0.0, 1.0);
     for group in groups {
         let a = group.axis;
         let (b, c) = layer_axes(a);
@@ -385,22 +361,8 @@ fn sweep_round(
         };
         for (step, &k) in layers.iter().enumerate() {
             let back_of = |d: usize, u: f64, v: f64| -> [f64; 9] {
-                let kept = (1.0 - face_share(u, nb as f64)) * (1.0 - face_share(v, nc as f64));
-                if kept <= 0.0 {
-                    return [0.0; 9];
-                }
-                let (u, v) = (u.clamp(0.0, (nb - 1) as f64), v.clamp(0.0, (nc - 1) as f64));
-                let (u0, v0) = (u.floor() as usize, v.floor() as usize);
-                let (u1, v1) = ((u0 + 1).min(nb - 1), (v0 + 1).min(nc - 1));
-                let (s, t) = (u - u0 as f64, v - v0 as f64);
                 let at = |ub: usize, vc: usize| &prev[(ub + vc * nb) * count + d];
-                let (p00, p10, p01, p11) = (at(u0, v0), at(u1, v0), at(u0, v1), at(u1, v1));
-                std::array::from_fn(|n| {
-                    kept * ((1.0 - s) * (1.0 - t) * p00[n]
-                        + s * (1.0 - t) * p10[n]
-                        + (1.0 - s) * t * p01[n]
-                        + s * t * p11[n])
-                })
+                crate::lattice::upwind(at, (nb, nc), (u, v), [0.0; 9])
             };
             let slot = held.len() * nb * nc;
             cur.par_chunks_mut(count)
@@ -720,6 +682,19 @@ pub fn balance(grid: &DensityGrid, medium: &Medium, moments: &[[f64; PER_VOXEL]]
 mod tests {
     use super::*;
 
+    /// Legendre polynomials P_0 … P_L at μ.
+    fn legendre(mu: f64) -> [f64; DEGREE + 1] {
+        let mut p = [0.0; DEGREE + 1];
+        p[0] = 1.0;
+        if DEGREE > 0 {
+            p[1] = mu;
+        }
+        for l in 1..DEGREE {
+            p[l + 1] = ((2 * l + 1) as f64 * mu * p[l] - l as f64 * p[l - 1]) / (l + 1) as f64;
+        }
+        p
+    }
+
     /// One round as a sweep per direction (`crate::lattice::sweep`), the emission summed in
     /// its own terms: what [`sweep_round`] must equal.
     fn round_by_direction(
@@ -809,7 +784,7 @@ mod tests {
         };
         let m: Vec<[f64; PER_VOXEL]> = (0..n)
             .map(|i| {
-                std::array::from_fn(|k| wobble(i, k + 20) / (1 + degree_of(k % HARMONICS)) as f64)
+                std::array::from_fn(|k| wobble(i, k + 20) / (1 + DEGREES[k % HARMONICS]) as f64)
             })
             .collect();
         let dirs = crate::lattice::fibonacci_directions(40);
