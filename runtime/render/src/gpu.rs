@@ -206,26 +206,29 @@ pub fn slicing_source(wgsl: &str) -> String {
 /// module, [`slicing_source`]; `tables`' layout as bind group 0).
 /// Bind group 1 has `bindings` buffers: 0 the params uniform, 5 the slice uniforms (dynamic
 /// offset), those in `read_only` read-only storage (1, the densities, always among them),
-/// every other one read-write storage.
+/// every other one read-write storage; and, for a shader with [`COMPOSE_WGSL`], the sky-light
+/// table at [`SKY_LIGHT_BINDING`] (`compose` true).
 pub(crate) fn build(
     gpu: &Gpu,
     tables: &GpuTables,
     label: &str,
     source: String,
-    bindings: u32,
+    (bindings, compose): (u32, bool),
     read_only: &[u32],
     names: &[&str],
 ) -> (wgpu::BindGroupLayout, Vec<wgpu::ComputePipeline>) {
     use wgpu::BufferBindingType::{Storage, Uniform};
     let device = &gpu.device;
+    let sky = compose.then_some(SKY_LIGHT_BINDING);
     let entries: Vec<wgpu::BindGroupLayoutEntry> = (0..bindings)
+        .chain(sky)
         .map(|b| match b {
             0 => entry(0, Uniform, false),
             5 => entry(5, Uniform, true),
             b => entry(
                 b,
                 Storage {
-                    read_only: read_only.contains(&b),
+                    read_only: read_only.contains(&b) || Some(b) == sky,
                 },
                 false,
             ),
@@ -294,14 +297,34 @@ pub(crate) fn storage(
     })
 }
 
+/// The binding of the sky-light table ([`crate::skylight`]) in bind group 1 of the shaders
+/// that compose pixels ([`COMPOSE_WGSL`]).
+pub(crate) const SKY_LIGHT_BINDING: u32 = 15;
+
+/// The sky-light table of `frame` as a read-only storage buffer.
+pub(crate) fn sky_light_buffer(device: &wgpu::Device, frame: &Frame) -> wgpu::Buffer {
+    filled(
+        device,
+        "photometeor sky light",
+        bytemuck::cast_slice(&crate::skylight::SkyLight::of(frame).gpu_table()),
+        wgpu::BufferUsages::STORAGE,
+    )
+}
+
 /// Bind group 1: `buffers[i]` at binding i, whole, except the slice uniforms at binding 5,
-/// bound as one 16-byte entry (the dynamic offset picks the slice).
+/// bound as one 16-byte entry (the dynamic offset picks the slice); `sky` at
+/// [`SKY_LIGHT_BINDING`].
 pub(crate) fn bind(
     device: &wgpu::Device,
     layout: &wgpu::BindGroupLayout,
     label: &str,
     buffers: &[&wgpu::Buffer],
+    sky: Option<&wgpu::Buffer>,
 ) -> wgpu::BindGroup {
+    let sky = sky.map(|b| wgpu::BindGroupEntry {
+        binding: SKY_LIGHT_BINDING,
+        resource: b.as_entire_binding(),
+    });
     let entries: Vec<wgpu::BindGroupEntry> = buffers
         .iter()
         .enumerate()
@@ -317,6 +340,7 @@ pub(crate) fn bind(
                 buffer.as_entire_binding()
             },
         })
+        .chain(sky)
         .collect();
     device.create_bind_group(&wgpu::BindGroupDescriptor {
         label: Some(label),

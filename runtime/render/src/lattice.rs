@@ -11,6 +11,7 @@ use runtime::FieldTable;
 
 use crate::geometry::box_span;
 use crate::shading::coefficients;
+use crate::skylight::SkyLight;
 use crate::{DensityGrid, Frame};
 
 /// Voxels of smaller optical depth β_ext h (green) are left out of the diffusion solve.
@@ -317,9 +318,15 @@ pub fn reduced_sky(frame: &Frame, ext: &[[f64; 3]], ground_lit: impl Fn(DVec3) -
     let middle = 0.5 * (grid.min_m + grid.max_m);
     let y = middle.y;
     let atm = &frame.atmosphere;
+    let multiple = SkyLight::of(frame);
     for s in sky_directions() {
         let k_end = if s.y < 0.0 { y / -s.y } else { f64::INFINITY };
-        let l = atm.inscatter(y, s.y, k_end, sun.y, s.dot(sun));
+        let mut l = atm.inscatter(y, s.y, k_end, sun.y, s.dot(sun));
+        // The air's light beyond single scattering (and the sky-lit ground).
+        let ms = multiple.radiance(y, s, sun);
+        for c in 0..3 {
+            l[c] += ms[c];
+        }
         let ground: [f64; 3] = if frame.ground_albedo > 0.0 && k_end.is_finite() && sun.y > 0.0 {
             let g = crate::shading::ground_radiance(frame, ground_lit(middle + k_end * s));
             let t = atm.transparency(y, s.y, k_end);

@@ -69,6 +69,7 @@ pub mod rng;
 pub mod scene;
 pub mod shading;
 pub mod sky;
+pub mod skylight;
 pub mod truth;
 pub mod volume;
 

@@ -8,6 +8,7 @@ use glam::DVec3;
 use runtime::{FieldTable, Tables};
 
 use crate::geometry::box_span;
+use crate::skylight::SkyLight;
 use crate::{Frame, FrameError, MAX_FIELDS, SUN_DIAMETER_DEG};
 
 /// Extinction and scattering coefficients (1/m) per channel at densities ρ.
@@ -74,13 +75,19 @@ pub(crate) fn over_footprint(res: usize, uv: [f64; 2]) -> bool {
 /// middle, before the air in front) and transparency `t_vol` per channel: the air in front of
 /// and behind the box (Eqs. 11–15), the sun's disk and a Lambertian ground lit through the air
 /// (Eq. 12) and through the volume as `ground_lit` says (the fraction of sunlight left at a
-/// ground point). Every slicing model composes its pixels this way.
+/// ground point), and the air's light beyond single scattering from `sky` in front and behind
+/// (the ground lit by the sky included; [`crate::skylight`]). The sun's disk is seen through
+/// the volume's transparency `t_vol`, the smooth background (air and ground behind) through
+/// `t_smooth` — the same, except for a model whose volume light leaves a forward peak in the
+/// beam (coupled's δ-scaled extinction: what the peak scatters out of a smooth background, it
+/// scatters in from next to it). Every slicing model composes its pixels this way.
 pub(crate) fn compose(
     frame: &Frame,
+    sky: &SkyLight,
     eye: DVec3,
     d: DVec3,
     l_vol: [f64; 3],
-    t_vol: [f64; 3],
+    (t_vol, t_smooth): ([f64; 3], [f64; 3]),
     ground_lit: impl Fn(DVec3) -> [f64; 3],
 ) -> [f32; 3] {
     let atm = &frame.atmosphere;
@@ -100,8 +107,19 @@ pub(crate) fn compose(
     };
     let k_mid = k_mid.min(k_end);
     let cos_sun = d.dot(sun_dir);
-    let front = atm.inscatter(y, d[1], k_mid, l_y, cos_sun);
-    let all = atm.inscatter(y, d[1], k_end, l_y, cos_sun);
+    let mut front = atm.inscatter(y, d[1], k_mid, l_y, cos_sun);
+    let mut all = atm.inscatter(y, d[1], k_end, l_y, cos_sun);
+    if k_end > 0.0 {
+        // The whole ray's multiply-scattered light ends at the ground or in space alike.
+        let (f, a) = (
+            sky.inscatter(y, d, k_mid, sun_dir),
+            sky.radiance(y, d, sun_dir),
+        );
+        for c in 0..3 {
+            front[c] += f[c];
+            all[c] += a[c];
+        }
+    }
     let t_mid = atm.transparency(y, d[1], k_mid);
     let on_disk = k_end.is_infinite() && cos_sun >= cos_disk;
     let t_all = atm.transparency(y, d[1], k_end);
@@ -113,11 +131,11 @@ pub(crate) fn compose(
     };
     std::array::from_fn(|c| {
         let i_s = frame.sun.irradiance[c];
-        let mut v = i_s * (front[c] + t_vol[c] * (all[c] - front[c])) + t_mid[c] * l_vol[c];
+        let mut v = i_s * (front[c] + t_smooth[c] * (all[c] - front[c])) + t_mid[c] * l_vol[c];
         if on_disk {
             v += t_vol[c] * i_s * t_all[c] / disk_sr;
         }
-        v += t_vol[c] * i_s * ground[c];
+        v += t_smooth[c] * i_s * ground[c];
         v as f32
     })
 }

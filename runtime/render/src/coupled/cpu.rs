@@ -17,6 +17,7 @@ use crate::lattice::{
     transmittance_to_sun, trilinear, voxel_size, voxels,
 };
 use crate::shading::{check_fields, coefficients, compose};
+use crate::skylight::SkyLight;
 use crate::{Frame, FrameError, Image, MAX_FIELDS};
 
 /// What the lighting of a `coupled` frame spent and found.
@@ -422,6 +423,7 @@ pub fn gather(
     let (w, hgt) = (frame.width, frame.height);
     let eye = frame.camera.position_m;
     let sun_dir = frame.sun.direction();
+    let sky = SkyLight::of(frame);
     let pixels: Vec<([f32; 3], f32)> = (0..w * hgt)
         .into_par_iter()
         .map(|px| {
@@ -441,8 +443,10 @@ pub fn gather(
                     let Some(step) = light else { continue };
                     for c in 0..3 {
                         // The light is seen through the δ-scaled extinction β_ext(1 − αf)
-                        // (what the forward peak scatters still travels towards the eye); the
-                        // background through the true one.
+                        // (what the forward peak scatters still travels towards the eye), and
+                        // so is the smooth background (the air and the ground behind: what the
+                        // peak scatters out of the ray it scatters in from next to it); the
+                        // sun's disk and T_vol through the true one.
                         let scaled = step.ext[c] * step.kept[c] * dt;
                         let true_slab = (-step.ext[c] * dt).exp();
                         if scaled > 0.0 {
@@ -458,7 +462,10 @@ pub fn gather(
                 }
             }
             let ground_lit = |g: DVec3| transmittance_to_sun(&fields, grid, g, sun_dir);
-            (compose(frame, eye, d, l_vol, tr, ground_lit), tr[1] as f32)
+            (
+                compose(frame, &sky, eye, d, l_vol, (tr, seen), ground_lit),
+                tr[1] as f32,
+            )
         })
         .collect();
     Ok(Image::from_pixels(w, hgt, &pixels))

@@ -17,7 +17,7 @@ use super::Settings;
 use super::cpu::{Lighting, check, delta_scaled};
 use crate::gpu::{
     FieldsAndSky, GatherView, RenderError, Timings, bind, build, fields_and_sky, filled,
-    gather_source, gather_view, storage, timed_frame, v4,
+    gather_source, gather_view, sky_light_buffer, storage, timed_frame, v4,
 };
 use crate::{Frame, Image, MAX_FIELDS};
 
@@ -103,7 +103,7 @@ impl Renderer {
             tables,
             "photometeor coupled gather",
             source(),
-            4,
+            (4, true),
             &[1, 2],
             &["gather"],
         );
@@ -215,6 +215,7 @@ impl Renderer {
             &self.layout,
             "photometeor coupled gather bindings",
             &[&params, &density, &lighting_buffer, &image],
+            Some(&sky_light_buffer(device, frame)),
         );
         timed_frame(
             gpu,

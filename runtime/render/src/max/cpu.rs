@@ -17,6 +17,7 @@ use crate::lattice::{
     sweep, transmittance_to_sun, trilinear, voxel_length, voxel_size, voxels,
 };
 use crate::shading::{check_fields, coefficients, compose};
+use crate::skylight::SkyLight;
 use crate::{DensityGrid, Frame, FrameError, Image, MAX_FIELDS};
 
 /// What a `max` render spent and found.
@@ -389,6 +390,7 @@ pub fn gather(
         h_voxel: voxel_length(grid),
         step: 0.5 * h.iter().copied().fold(f64::INFINITY, f64::min),
         sun_dir: frame.sun.direction(),
+        sky: SkyLight::of(frame),
     };
     let mut report = lighting.report.clone();
     let start = Instant::now();
@@ -429,6 +431,8 @@ struct Gather<'a> {
     step: f64,
     /// Unit vector towards the sun.
     sun_dir: DVec3,
+    /// The air's light beyond single scattering.
+    sky: SkyLight,
 }
 
 /// A ray's march so far: the volume's radiance and transparency, the current edge segment's
@@ -464,7 +468,7 @@ impl Gather<'_> {
             }
         }
         let ground_lit = |g: DVec3| transmittance_to_sun(&self.fields, grid, g, self.sun_dir);
-        let rgb = compose(frame, eye, d, m.l_vol, m.tr, ground_lit);
+        let rgb = compose(frame, &self.sky, eye, d, m.l_vol, (m.tr, m.tr), ground_lit);
         (rgb, m.tr[1] as f32, m.largest)
     }
 

@@ -129,6 +129,6 @@ fn gather(@builtin(global_invocation_id) id: vec3<u32>) {
     if (rp.grid_min.w > 0.0 && k_end > 0.0) {
         lit = transmittance_to_sun(eye + k_end * d);
     }
-    let v = compose(d, l_vol, tr, lit);
+    let v = compose(d, l_vol, tr, tr, lit);
     image[id.x + rp.sizes.x * id.y] = vec4<f32>(v, tr.g);
 }

@@ -19,7 +19,7 @@ use super::Settings;
 use super::cpu::{Lighting, check};
 use crate::gpu::{
     FieldsAndSky, GatherView, RenderError, Timings, bind, build, fields_and_sky, filled,
-    gather_source, gather_view, storage, timed_frame, v4,
+    gather_source, gather_view, sky_light_buffer, storage, timed_frame, v4,
 };
 use crate::lattice::voxel_length;
 use crate::{Frame, FrameError, Image, MAX_FIELDS};
@@ -78,7 +78,7 @@ impl Renderer {
             tables,
             "photometeor max gather",
             source(),
-            5,
+            (5, true),
             &[1, 2],
             &["gather"],
         );
@@ -174,6 +174,7 @@ impl Renderer {
             &self.layout,
             "photometeor max gather bindings",
             &[&params, &density, &lighting_buffer, &image, &largest],
+            Some(&sky_light_buffer(device, frame)),
         );
         let (image, timings) = timed_frame(
             gpu,

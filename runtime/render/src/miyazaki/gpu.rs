@@ -149,7 +149,7 @@ impl Renderer {
             tables,
             "photometeor svs",
             source(),
-            7,
+            (7, false),
             &[1],
             &["clear", "shadow_slice", "eye_slice", "composite"],
         );
@@ -233,6 +233,7 @@ impl Renderer {
                 &slice_buffer,
                 &pixel_tex,
             ],
+            None,
         );
         Ok(run_slices(
             gpu,

@@ -10,6 +10,7 @@ use runtime::{FieldTable, Tables};
 
 use super::{Settings, Setup};
 use crate::shading::{bilinear_taps, check_fields, coefficients, compose, over_footprint};
+use crate::skylight::SkyLight;
 use crate::{Frame, FrameError, Image, LightUpdate, MAX_FIELDS};
 
 /// Light-buffer texel: intensity per channel (fraction of the sunlight at that height) and the
@@ -89,6 +90,8 @@ struct Slicer<'a> {
     light_thickness: f64,
     /// The sun direction's y component.
     l_y: f64,
+    /// The air's light beyond single scattering.
+    sky: SkyLight,
 }
 
 /// A pixel's volume radiance L and transparency T per channel, accumulated over the slices.
@@ -189,7 +192,15 @@ impl Slicer<'_> {
             }
         };
         (
-            compose(self.frame, self.setup.eye, d, l_vol, t_vol, ground_lit),
+            compose(
+                self.frame,
+                &self.sky,
+                self.setup.eye,
+                d,
+                l_vol,
+                (t_vol, t_vol),
+                ground_lit,
+            ),
             t_vol[1] as f32,
         )
     }
@@ -207,6 +218,7 @@ pub fn render(tables: &Tables, frame: &Frame, settings: &Settings) -> Result<Ima
         h_dot_e: setup.half.dot(setup.eye),
         light_thickness: setup.slice_step / setup.half.dot(setup.light),
         l_y: frame.sun.direction()[1],
+        sky: SkyLight::of(frame),
         setup,
     };
     let (w, h) = (frame.width, frame.height);

@@ -12,7 +12,8 @@ use runtime::gpu::{Gpu, GpuTables};
 
 use crate::gpu::{
     COMPOSE_WGSL, Dispatch, FieldsAndSky, RenderError, Timings, bind, build, check_sizes,
-    fields_and_sky, filled, run_slices, slice_uniforms, slicing_source, storage, v4,
+    fields_and_sky, filled, run_slices, sky_light_buffer, slice_uniforms, slicing_source, storage,
+    v4,
 };
 use crate::{Frame, Image, MAX_FIELDS};
 
@@ -83,7 +84,7 @@ impl Renderer {
             tables,
             "photometeor render",
             source(),
-            6,
+            (6, true),
             &[1],
             &["clear", "eye_slice", "light_slice", "composite"],
         );
@@ -192,6 +193,7 @@ impl Renderer {
                 &image,
                 &slice_buffer,
             ],
+            Some(&sky_light_buffer(device, frame)),
         );
         Ok(run_slices(
             gpu,

@@ -197,6 +197,6 @@ fn composite(@builtin(global_invocation_id) id: vec3<u32>) {
             lit = light_at(g).rgb;
         }
     }
-    let v = compose(d, l_vol, t_vol, lit);
+    let v = compose(d, l_vol, t_vol, t_vol, lit);
     image[i] = vec4<f32>(v, t_vol.g);
 }

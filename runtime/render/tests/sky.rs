@@ -1,0 +1,113 @@
+//! The fast models' sky (`render::sky`, single scattering in closed form, and
+//! `render::skylight`, the light it leaves out) against the path-traced truth's air, which
+//! scatters any number of times: clear air over a Lambertian ground, no volume, looking up,
+//! along the horizon and down at the ground.
+
+use glam::DVec3;
+use rayon::prelude::*;
+use render::skylight::SkyLight;
+use render::truth::{Rng, Settings, Tracer};
+use render::{Atmosphere, Frame};
+
+#[path = "support/slabs.rs"]
+mod slabs;
+
+use slabs::{hg_bins, slab_frame, tables_of};
+
+/// Clear air (the default atmosphere) over a ground of albedo `albedo`, the sun at
+/// `elevation` degrees; the slab's droplets are negligible.
+fn clear_air(albedo: f64, elevation: f64) -> Frame {
+    // The tracer refuses a grid of zeros: a slab of τ 10⁻⁹ just above the ground.
+    let mut frame = slab_frame(1e-9);
+    frame.atmosphere = Atmosphere::default();
+    frame.ground_albedo = albedo;
+    frame.sun.elevation_deg = elevation;
+    frame
+}
+
+/// The truth's radiance per channel along view ray `d` from `eye`: mean and standard error of
+/// `n` paths.
+fn truth(tracer: &Tracer, eye: DVec3, d: DVec3, n: usize) -> [(f64, f64); 3] {
+    let sums = (0..n)
+        .into_par_iter()
+        .map(|i| {
+            let mut rng = Rng::stream(7, 0, i as u64);
+            let l = tracer.radiance(eye, d, &mut rng);
+            [l, l.map(|v| v * v)]
+        })
+        .reduce(
+            || [[0.0; 3]; 2],
+            |a, b| [0, 1].map(|i| std::array::from_fn(|c| a[i][c] + b[i][c])),
+        );
+    std::array::from_fn(|c| {
+        let (s, q) = (sums[0][c], sums[1][c]);
+        (s / n as f64, render::truth::std_error(s, q, n as f64))
+    })
+}
+
+/// The fast models' radiance along `d` from height `y` (what `shading::compose` gives a pixel
+/// without volume): single scattering and the sunlit ground (Eqs. 11–15), plus, with `sky`,
+/// the multiply-scattered light.
+fn model(frame: &Frame, sky: Option<&SkyLight>, y: f64, d: DVec3) -> [f64; 3] {
+    let atm = &frame.atmosphere;
+    let sun = frame.sun.direction();
+    let k_end = if d.y < 0.0 { y / -d.y } else { f64::INFINITY };
+    let single = atm.inscatter(y, d.y, k_end, sun.y, d.dot(sun));
+    let multiple = sky.map_or([0.0; 3], |s| s.radiance(y, d, sun));
+    let ground: [f64; 3] = if k_end.is_finite() {
+        let (lit, t) = (atm.sunlight(0.0, sun.y), atm.transparency(y, d.y, k_end));
+        std::array::from_fn(|c| frame.ground_albedo / std::f64::consts::PI * sun.y * lit[c] * t[c])
+    } else {
+        [0.0; 3]
+    };
+    std::array::from_fn(|c| single[c] + multiple[c] + ground[c])
+}
+
+#[test]
+fn the_sky_light_matches_the_truths_air() {
+    let tables = tables_of(&hg_bins(&grid::ThetaGrid::new(1.0).unwrap(), 0.5), 1.0, 1.0);
+    // A view (elevation above the horizon, azimuth from the sun's) per row.
+    let views = [
+        (90.0, 0.0),
+        (30.0, 0.0),
+        (10.0, 180.0),
+        (3.0, 90.0),
+        (45.0, 135.0),
+        (-20.0, 60.0),
+    ];
+    let mut worst = 0.0f64;
+    for &(albedo, elevation) in &[(0.1, 20.0), (0.6, 50.0), (0.0, 6.0)] {
+        let frame = clear_air(albedo, elevation);
+        let tracer = Tracer::new(&tables, &frame, &Settings::default()).unwrap();
+        let sky = SkyLight::of(&frame);
+        let sun = frame.sun.direction();
+        let eye = DVec3::new(0.0, 300.0, 0.0);
+        for &(e, a) in &views {
+            // Azimuth measured from the sun's horizontal direction.
+            let (e, a) = (f64::to_radians(e), f64::to_radians(a));
+            let sh = DVec3::new(sun.x, 0.0, sun.z).normalize();
+            let side = DVec3::Y.cross(sh);
+            let d = (e.cos() * (a.cos() * sh + a.sin() * side) + e.sin() * DVec3::Y).normalize();
+            let t = truth(&tracer, eye, d, 40_000);
+            let with = model(&frame, Some(&sky), eye.y, d);
+            let without = model(&frame, None, eye.y, d);
+            for c in 0..3 {
+                let (mean, se) = t[c];
+                let z = (with[c] - mean) / se;
+                println!(
+                    "albedo {albedo} sun {elevation:>2}° view ({:>5.1}°, {:>5.1}°) ch {c}: truth \
+                     {mean:.4e} ± {:.2} %, single scattering {:+6.1} %, with the sky light \
+                     {:+6.2} % ({z:+.1}σ)",
+                    e.to_degrees(),
+                    a.to_degrees(),
+                    100.0 * se / mean,
+                    100.0 * (without[c] / mean - 1.0),
+                    100.0 * (with[c] / mean - 1.0),
+                );
+                worst = worst.max(z.abs());
+            }
+        }
+    }
+    println!("largest |z| {worst:.2}");
+    assert!(worst < 4.0, "the sky light is off the truth by {worst:.2}σ");
+}
