@@ -113,7 +113,14 @@ fn rainbow_radius_in_the_render_matches_the_tables_primary_peak_red_outside() {
     );
     let image_radius: Vec<f64> = (0..3)
         .map(|c| {
-            let mean: Vec<f64> = (0..nbins).map(|b| sums[b][c] / counts[b] as f64).collect();
+            // The rings' mean less the straight line through the two end rings: the bow is a
+            // peak on the sky's smooth gradient (the sky light makes the green and blue sky
+            // brighter towards 36° than the bow is above it).
+            let raw: Vec<f64> = (0..nbins).map(|b| sums[b][c] / counts[b] as f64).collect();
+            let (first, last) = (raw[0], raw[nbins - 1]);
+            let mean: Vec<f64> = (0..nbins)
+                .map(|b| raw[b] - first - (last - first) * b as f64 / (nbins - 1) as f64)
+                .collect();
             let b = (1..nbins - 1)
                 .max_by(|&a, &b| mean[a].total_cmp(&mean[b]))
                 .unwrap();
