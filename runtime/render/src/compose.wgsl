@@ -50,6 +50,79 @@ fn sky_light_inscatter(y: f32, d: vec3<f32>, k: f32) -> vec3<f32> {
     return near - air_transparency(y, d.y, k) * sky_light_radiance(y + k * d.y, d);
 }
 
+// Samples of the volume's shadow on the air along a ray (render::shading::AIR_SHADOW_STEPS).
+const AIR_SHADOW_STEPS: u32 = 32u;
+
+struct AirShadow {
+    front: vec3<f32>,
+    all: vec3<f32>,
+}
+
+// The air's single scattering the volume's shadow takes from the view ray d in its first k_mid
+// metres and in all of it up to k_end (< 0: ∞), over the part of the ray below the grid and
+// within reach of its shadow, lit by the including shader's sun_left(p) (the fraction of
+// sunlight the volume leaves there) (render::shading::air_shadow).
+fn air_shadow(d: vec3<f32>, k_mid: f32, k_end: f32) -> AirShadow {
+    var out = AirShadow(vec3<f32>(0.0), vec3<f32>(0.0));
+    let bottom = rp.grid_min.y;
+    let sun = rp.sun.xyz;
+    if (all(rp.sky_beta.rgb <= vec3<f32>(0.0)) || bottom <= 0.0 || sun.y <= 0.0) {
+        return out;
+    }
+    let eye = rp.eye.xyz;
+    var s0 = 0.0;
+    var s1 = select(k_end, 1e30, k_end < 0.0);
+    if (eye.y > bottom) {
+        if (d.y >= 0.0) {
+            return out;
+        }
+        s0 = (eye.y - bottom) / -d.y;
+    } else if (d.y > 0.0) {
+        s1 = min(s1, (bottom - eye.y) / d.y);
+    }
+    let c = 0.5 * (rp.grid_min.xyz + rp.grid_max.xyz);
+    let half = 0.5 * (rp.grid_max.xyz - rp.grid_min.xyz);
+    let reach = length(half.xz) + bottom * sqrt(max(1.0 - sun.y * sun.y, 0.0)) / sun.y;
+    let o = vec2<f32>(eye.x - c.x, eye.z - c.z);
+    let dh = vec2<f32>(d.x, d.z);
+    let a = dot(dh, dh);
+    let b = dot(o, dh);
+    let q = dot(o, o) - reach * reach;
+    if (a > 1e-12) {
+        let disc = b * b - a * q;
+        if (disc <= 0.0) {
+            return out;
+        }
+        let r = sqrt(disc);
+        s0 = max(s0, (-b - r) / a);
+        s1 = min(s1, (-b + r) / a);
+    } else if (q > 0.0) {
+        return out;
+    }
+    if (s1 >= 1e29 || s1 <= s0) {
+        return out;
+    }
+    let cos_sun = dot(d, sun);
+    let phase = 3.0 / (16.0 * 3.14159265358979) * (1.0 + cos_sun * cos_sun);
+    let g = rp.sky_beta.w;
+    let ds = (s1 - s0) / f32(AIR_SHADOW_STEPS);
+    for (var i = 0u; i < AIR_SHADOW_STEPS; i = i + 1u) {
+        let s = s0 + (f32(i) + 0.5) * ds;
+        let p = eye + s * d;
+        let left = sun_left(p);
+        if (all(left >= vec3<f32>(1.0))) {
+            continue;
+        }
+        let loss = air_transparency(eye.y, d.y, s) * rp.sky_beta.rgb * exp(-g * p.y)
+            * sunlight(p.y, sun.y) * phase * (vec3<f32>(1.0) - left) * ds;
+        out.all = out.all + loss;
+        if (s < k_mid) {
+            out.front = out.front + loss;
+        }
+    }
+    return out;
+}
+
 // The air in front of and behind the volume (Eqs. 11–15 and the light they leave out), the sun
 // disk and the Lambertian ground, lit by `lit` (the sunlight the volume leaves at the ground
 // point), around the volume's radiance `l_vol` along d; the disk seen through the volume's
@@ -68,8 +141,9 @@ fn compose(d: vec3<f32>, l_vol: vec3<f32>, t_vol: vec3<f32>, t_smooth: vec3<f32>
     var front = inscatter(y, d.y, k_mid, cos_sun, l_y);
     var all_sky = inscatter(y, d.y, k_end, cos_sun, l_y);
     if (k_end != 0.0) {
-        front = front + sky_light_inscatter(y, d, k_mid);
-        all_sky = all_sky + sky_light_radiance(y, d);
+        let shadow = air_shadow(d, k_mid, k_end);
+        front = front + sky_light_inscatter(y, d, k_mid) - shadow.front;
+        all_sky = all_sky + sky_light_radiance(y, d) - shadow.all;
     }
     let t_mid = air_transparency(y, d.y, k_mid);
     let i_s = rp.irradiance.rgb;

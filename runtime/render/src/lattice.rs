@@ -219,12 +219,16 @@ pub fn trilinear<const N: usize>(
 }
 
 /// The fraction of the sunlight the volume leaves at `p` along the sun direction `sun`, by a
-/// ray march of half-voxel steps (for points outside the box: the ground).
+/// ray march of half-voxel steps (for points outside the box: the ground and the air below
+/// it). With `peaks` (each field's forward peak f per channel, δ-scaling's) the extinction is
+/// β_ext − Σ_k ρ_k σ_sca,k f_k: the forward peak's light still reaches `p`, as in a δ-scaled
+/// beam.
 pub fn transmittance_to_sun(
     fields: &[&FieldTable],
     grid: &DensityGrid,
     p: DVec3,
     sun: DVec3,
+    peaks: Option<&[[f64; 3]]>,
 ) -> [f64; 3] {
     let Some((t0, t1)) = box_span(grid.min_m, grid.max_m, p, sun) else {
         return [1.0; 3];
@@ -239,7 +243,14 @@ pub fn transmittance_to_sun(
     let mut tau = [0.0; 3];
     for i in 0..n {
         let rho = grid.sample(p + (t0 + (i as f64 + 0.5) * dt) * sun);
-        let (ext, _) = coefficients(fields, &rho);
+        let (mut ext, _) = coefficients(fields, &rho);
+        if let Some(peaks) = peaks {
+            for (k, (f, r)) in fields.iter().zip(rho).enumerate() {
+                for c in 0..3 {
+                    ext[c] -= r * f.sigma_sca_m2[c] * peaks[k][c];
+                }
+            }
+        }
         for c in 0..3 {
             tau[c] += ext[c] * dt;
         }

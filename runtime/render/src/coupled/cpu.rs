@@ -244,8 +244,10 @@ pub fn light_with(
     let state = buffer_sweep(&fields, frame, &v, l, settings, &peak);
     // E S_atm per voxel: the sun's irradiance at each voxel's height, before the volume.
     let sunlight = reduced_sun(frame, &vec![[0.0; 3]; v.ext.len()]);
+    // The ground lit as the composite lights it (through the δ-scaled extinction).
+    let scaled = delta_scaled(settings).then_some(peak.as_slice());
     let sky = reduced_sky(frame, &v.ext, |g| {
-        transmittance_to_sun(&fields, grid, g, sun_dir)
+        transmittance_to_sun(&fields, grid, g, sun_dir, scaled)
     });
     report.buffer_s = start.elapsed().as_secs_f64();
 
@@ -461,7 +463,10 @@ pub fn gather(
                     }
                 }
             }
-            let ground_lit = |g: DVec3| transmittance_to_sun(&fields, grid, g, sun_dir);
+            // The ground and the air below the grid lit through the δ-scaled extinction, as the
+            // beam is: what the forward peak scatters still reaches them.
+            let scaled = delta_scaled(settings).then_some(lighting.peak.as_slice());
+            let ground_lit = |g: DVec3| transmittance_to_sun(&fields, grid, g, sun_dir, scaled);
             (
                 compose(frame, &sky, eye, d, l_vol, (tr, seen), ground_lit),
                 tr[1] as f32,

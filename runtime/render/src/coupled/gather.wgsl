@@ -167,8 +167,32 @@ fn gather(@builtin(global_invocation_id) id: vec3<u32>) {
     var ground = vec3<f32>(1.0);
     let k_end = ground_distance(d);
     if (rp.grid_min.w > 0.0 && k_end > 0.0) {
-        ground = transmittance_to_sun(eye + k_end * d);
+        ground = sun_left(eye + k_end * d);
     }
     let v = compose(d, l_vol, tr, seen, ground);
     image[id.x + rp.sizes.x * id.y] = vec4<f32>(v, tr.g);
+}
+
+// The fraction of sunlight the volume leaves at a point (compose.wgsl's ground and air below
+// the grid): march.wgsl's march to the sun, through the δ-scaled extinction β_ext − Σ ρ σ_sca f
+// in the δ-split (render::lattice::transmittance_to_sun with the peaks).
+fn sun_left(p: vec3<f32>) -> vec3<f32> {
+    let span = box_span(p, rp.sun.xyz);
+    if (span.y < 0.0) {
+        return vec3<f32>(1.0);
+    }
+    let n = max(u32(ceil((span.y - span.x) / rp.eye.w)), 1u);
+    let dt = (span.y - span.x) / f32(n);
+    var tau = vec3<f32>(0.0);
+    for (var k = 0u; k < n; k = k + 1u) {
+        let rho = densities(p + (span.x + (f32(k) + 0.5) * dt) * rp.sun.xyz);
+        var ext = extinction(rho);
+        if (rp.up.w > 0.5) {
+            for (var i = 0u; i < min(rp.grid_dims.w, 4u); i = i + 1u) {
+                ext = ext - rho[i] * ams_field_info[i].yzw * rp.peak[i].rgb;
+            }
+        }
+        tau = tau + ext * dt;
+    }
+    return exp(-tau);
 }

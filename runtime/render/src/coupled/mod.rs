@@ -56,8 +56,10 @@
 //!    (1 − f) Σ_l χ′_l Σ_m Y_lm(ω) φ_lm, its moments scattered by p′ towards the eye. The beam term is Nakajima & Tanaka's (1988) TMS correction:
 //!    the single scattering of the δ-scaled beam with the untruncated phase function, so
 //!    glories, fogbows and rainbows keep their exact shape; the thin limit is exact single
-//!    scattering (f cancels to first order in τ). The ground and the sky behind are seen
-//!    through the δ-scaled extinction too (what the forward peak scatters out of a smooth
+//!    scattering (f cancels to first order in τ). The ground and the air below the grid are
+//!    lit through the δ-scaled extinction (the forward peak's light still arrives; the halo
+//!    scene's clear-sky pixels read −4.7 % lit through the true one, +2.3 % through this), and
+//!    the ground and the sky behind are seen through the δ-scaled extinction too (what the forward peak scatters out of a smooth
 //!    background it scatters in from next to it; the rainbow scene read −26.4 % through the
 //!    true extinction, +1.8 % through the δ-scaled), the sun's disk and T_vol through the true
 //!    one.

@@ -208,7 +208,7 @@ pub fn light_with(
     let tau_sun = sun_depths(grid, &v.ext, -sun_dir);
     let reduced = reduced_sun(frame, &tau_sun);
     let mut sky = reduced_sky(frame, &v.ext, |g| {
-        transmittance_to_sun(&fields, grid, g, sun_dir)
+        transmittance_to_sun(&fields, grid, g, sun_dir, None)
     });
     report.propagation_s = start.elapsed().as_secs_f64();
 
@@ -467,7 +467,7 @@ impl Gather<'_> {
                 }
             }
         }
-        let ground_lit = |g: DVec3| transmittance_to_sun(&self.fields, grid, g, self.sun_dir);
+        let ground_lit = |g: DVec3| transmittance_to_sun(&self.fields, grid, g, self.sun_dir, None);
         let rgb = compose(frame, &self.sky, eye, d, m.l_vol, (m.tr, m.tr), ground_lit);
         (rgb, m.tr[1] as f32, m.largest)
     }

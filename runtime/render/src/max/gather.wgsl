@@ -132,3 +132,9 @@ fn gather(@builtin(global_invocation_id) id: vec3<u32>) {
     let v = compose(d, l_vol, tr, tr, lit);
     image[id.x + rp.sizes.x * id.y] = vec4<f32>(v, tr.g);
 }
+
+// The fraction of sunlight the volume leaves at a point (compose.wgsl's ground and air below
+// the grid).
+fn sun_left(p: vec3<f32>) -> vec3<f32> {
+    return transmittance_to_sun(p);
+}

@@ -176,6 +176,18 @@ fn light_slice(@builtin(global_invocation_id) id: vec3<u32>) {
     light_buffer[id.x + res * id.y] = vec4<f32>(lit, n);
 }
 
+// The fraction of sunlight the volume leaves at a point past it: the final light buffer, 1
+// outside its footprint (the ground's and the air's below the grid, compose.wgsl).
+fn sun_left(g: vec3<f32>) -> vec3<f32> {
+    let res = f32(rp.sizes.z);
+    let u = (dot(rp.light_u.xyz, g) - rp.light_u.w) / rp.light_texel.x - 0.5;
+    let w = (dot(rp.light_w.xyz, g) - rp.light_w.w) / rp.light_texel.y - 0.5;
+    if (u >= -0.5 && u <= res - 0.5 && w >= -0.5 && w <= res - 0.5) {
+        return light_at(g).rgb;
+    }
+    return vec3<f32>(1.0);
+}
+
 @compute @workgroup_size(8, 8)
 fn composite(@builtin(global_invocation_id) id: vec3<u32>) {
     if (id.x >= rp.sizes.x || id.y >= rp.sizes.y) {
@@ -189,13 +201,7 @@ fn composite(@builtin(global_invocation_id) id: vec3<u32>) {
     var lit = vec3<f32>(1.0);
     let k_end = ground_distance(d);
     if (rp.grid_min.w > 0.0 && k_end > 0.0) {
-        let g = rp.eye.xyz + k_end * d;
-        let res = f32(rp.sizes.z);
-        let u = (dot(rp.light_u.xyz, g) - rp.light_u.w) / rp.light_texel.x - 0.5;
-        let w = (dot(rp.light_w.xyz, g) - rp.light_w.w) / rp.light_texel.y - 0.5;
-        if (u >= -0.5 && u <= res - 0.5 && w >= -0.5 && w <= res - 0.5) {
-            lit = light_at(g).rgb;
-        }
+        lit = sun_left(rp.eye.xyz + k_end * d);
     }
     let v = compose(d, l_vol, t_vol, t_vol, lit);
     image[i] = vec4<f32>(v, t_vol.g);
