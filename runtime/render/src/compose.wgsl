@@ -38,6 +38,38 @@ fn sky_light_radiance(y: f32, d: vec3<f32>) -> vec3<f32> {
     return out;
 }
 
+// Where the grid models' shadow map starts in sky_light: after the table's (SKY_LEVELS + 1)
+// levels × 2 SKY_MU directions × 3 modes.
+const SHADOW_MAP: u32 = (SKY_LEVELS + 1u) * 2u * SKY_MU * 3u;
+
+// The sunlight the volume leaves at p (at or below the grid's bottom) from the shadow map
+// after the sky light's table (render::lattice::ShadowMap::at); 1 without a map.
+fn shadow_map_at(p: vec3<f32>) -> vec3<f32> {
+    let h0 = sky_light[SHADOW_MAP];
+    let h1 = sky_light[SHADOW_MAP + 1u];
+    let nx = u32(h1.x);
+    let nz = u32(h1.y);
+    if (nx < 2u || nz < 2u) {
+        return vec3<f32>(1.0);
+    }
+    let q = p + ((h1.z - p.y) / rp.sun.y) * rp.sun.xyz;
+    let u = (q.x - h0.x) / h0.z - 0.5;
+    let w = (q.z - h0.y) / h0.w - 0.5;
+    if (u < -0.5 || w < -0.5 || u > f32(nx) - 0.5 || w > f32(nz) - 0.5) {
+        return vec3<f32>(1.0);
+    }
+    let i = min(u32(max(floor(u), 0.0)), nx - 2u);
+    let j = min(u32(max(floor(w), 0.0)), nz - 2u);
+    let s = clamp(u - f32(i), 0.0, 1.0);
+    let t = clamp(w - f32(j), 0.0, 1.0);
+    let base = SHADOW_MAP + 2u;
+    let v00 = sky_light[base + i + nx * j].rgb;
+    let v10 = sky_light[base + i + 1u + nx * j].rgb;
+    let v01 = sky_light[base + i + nx * (j + 1u)].rgb;
+    let v11 = sky_light[base + i + 1u + nx * (j + 1u)].rgb;
+    return mix(mix(v00, v10, s), mix(v01, v11, s), t);
+}
+
 // The multiply-scattered light the first k metres of the view ray gather (k < 0: all of it).
 fn sky_light_inscatter(y: f32, d: vec3<f32>, k: f32) -> vec3<f32> {
     let near = sky_light_radiance(y, d);

@@ -301,12 +301,22 @@ pub(crate) fn storage(
 /// that compose pixels ([`COMPOSE_WGSL`]).
 pub(crate) const SKY_LIGHT_BINDING: u32 = 15;
 
-/// The sky-light table of `frame` as a read-only storage buffer.
-pub(crate) fn sky_light_buffer(device: &wgpu::Device, frame: &Frame) -> wgpu::Buffer {
+/// The sky-light table of `frame` as a read-only storage buffer, followed by the grid models'
+/// `shadow` map (its two header rows zero without one: compose.wgsl's `shadow_map_at`).
+pub(crate) fn sky_light_buffer(
+    device: &wgpu::Device,
+    frame: &Frame,
+    shadow: Option<&crate::lattice::ShadowMap>,
+) -> wgpu::Buffer {
+    let mut rows = crate::skylight::SkyLight::of(frame).gpu_table();
+    match shadow {
+        Some(map) => rows.extend(map.gpu_rows()),
+        None => rows.extend([[0.0; 4]; 2]),
+    }
     filled(
         device,
         "photometeor sky light",
-        bytemuck::cast_slice(&crate::skylight::SkyLight::of(frame).gpu_table()),
+        bytemuck::cast_slice(&rows),
         wgpu::BufferUsages::STORAGE,
     )
 }

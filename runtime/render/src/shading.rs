@@ -152,8 +152,8 @@ pub const AIR_SHADOW_STEPS: usize = 32;
 /// [`AIR_SHADOW_STEPS`] steps, over the part of the ray below the grid's bottom and within
 /// reach of its shadow (horizontally within the footprint's half diagonal plus bottom/tan e of
 /// its centre). `lit` is the fraction of sunlight the volume leaves at a point, as for the
-/// ground: below the grid every model knows it exactly (Riley's final light buffer, the grid
-/// models' march to the sun); beside and inside the grid the air is left unshadowed.
+/// ground: below the grid every model knows it (Riley's final light buffer, the grid models'
+/// [`crate::lattice::ShadowMap`]); beside and inside the grid the air is left unshadowed.
 pub(crate) fn air_shadow(
     frame: &Frame,
     eye: DVec3,

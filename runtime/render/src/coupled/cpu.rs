@@ -13,7 +13,7 @@ use super::{Diffuse, Emergent, Settings, Source, Split, transport};
 use crate::diffusion::{self, Problem};
 use crate::geometry::box_span;
 use crate::lattice::{
-    MIN_DIFFUSION_VOXEL_DEPTH, Voxels, asymmetry, reduced_sky, reduced_sun, sweep,
+    MIN_DIFFUSION_VOXEL_DEPTH, ShadowMap, Voxels, asymmetry, reduced_sky, reduced_sun, sweep,
     transmittance_to_sun, trilinear, voxel_size, voxels,
 };
 use crate::shading::{check_fields, coefficients, compose};
@@ -424,8 +424,8 @@ pub fn gather(
     let tan_half = frame.camera.tan_half_fov();
     let (w, hgt) = (frame.width, frame.height);
     let eye = frame.camera.position_m;
-    let sun_dir = frame.sun.direction();
     let sky = SkyLight::of(frame);
+    let shadow = shadow_map(tables, frame, settings, lighting);
     let pixels: Vec<([f32; 3], f32)> = (0..w * hgt)
         .into_par_iter()
         .map(|px| {
@@ -463,10 +463,7 @@ pub fn gather(
                     }
                 }
             }
-            // The ground and the air below the grid lit through the δ-scaled extinction, as the
-            // beam is: what the forward peak scatters still reaches them.
-            let scaled = delta_scaled(settings).then_some(lighting.peak.as_slice());
-            let ground_lit = |g: DVec3| transmittance_to_sun(&fields, grid, g, sun_dir, scaled);
+            let ground_lit = |g: DVec3| shadow.at(g);
             (
                 compose(frame, &sky, eye, d, l_vol, (tr, seen), ground_lit),
                 tr[1] as f32,
@@ -575,6 +572,23 @@ fn in_scattered(
 /// Whether the gather treats a forward peak as unscattered (the δ-Eddington split).
 pub(crate) fn delta_scaled(settings: &Settings) -> bool {
     (settings.source, settings.split) == (Source::Buffer, Split::DeltaEddington)
+}
+
+/// The sunlight the volume leaves below the grid (the ground's and the air's light), through
+/// the δ-scaled extinction as the beam is: what the forward peak scatters still reaches them
+/// (the GPU gather reads the same map).
+pub(crate) fn shadow_map(
+    tables: &Tables,
+    frame: &Frame,
+    settings: &Settings,
+    lighting: &Lighting,
+) -> ShadowMap {
+    let fields: Vec<&FieldTable> = tables.fields.iter().collect();
+    let sun = frame.sun.direction();
+    let scaled = delta_scaled(settings).then_some(lighting.peak.as_slice());
+    ShadowMap::new(&frame.grid, sun, |q| {
+        transmittance_to_sun(&fields, &frame.grid, q, sun, scaled)
+    })
 }
 
 /// A per-field quantity `value(f)` of the mixture at densities `rho`, per channel, weighted by

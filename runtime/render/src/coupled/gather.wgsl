@@ -173,26 +173,9 @@ fn gather(@builtin(global_invocation_id) id: vec3<u32>) {
     image[id.x + rp.sizes.x * id.y] = vec4<f32>(v, tr.g);
 }
 
-// The fraction of sunlight the volume leaves at a point (compose.wgsl's ground and air below
-// the grid): march.wgsl's march to the sun, through the δ-scaled extinction β_ext − Σ ρ σ_sca f
-// in the δ-split (render::lattice::transmittance_to_sun with the peaks).
+// The fraction of sunlight the volume leaves at a point below the grid (compose.wgsl's ground
+// and air): the shadow map the CPU marched through the δ-scaled extinction
+// (render::coupled::cpu::shadow_map).
 fn sun_left(p: vec3<f32>) -> vec3<f32> {
-    let span = box_span(p, rp.sun.xyz);
-    if (span.y < 0.0) {
-        return vec3<f32>(1.0);
-    }
-    let n = max(u32(ceil((span.y - span.x) / rp.eye.w)), 1u);
-    let dt = (span.y - span.x) / f32(n);
-    var tau = vec3<f32>(0.0);
-    for (var k = 0u; k < n; k = k + 1u) {
-        let rho = densities(p + (span.x + (f32(k) + 0.5) * dt) * rp.sun.xyz);
-        var ext = extinction(rho);
-        if (rp.up.w > 0.5) {
-            for (var i = 0u; i < min(rp.grid_dims.w, 4u); i = i + 1u) {
-                ext = ext - rho[i] * ams_field_info[i].yzw * rp.peak[i].rgb;
-            }
-        }
-        tau = tau + ext * dt;
-    }
-    return exp(-tau);
+    return shadow_map_at(p);
 }

@@ -215,7 +215,11 @@ impl Renderer {
             &self.layout,
             "photometeor coupled gather bindings",
             &[&params, &density, &lighting_buffer, &image],
-            Some(&sky_light_buffer(device, frame)),
+            Some(&sky_light_buffer(
+                device,
+                frame,
+                Some(&super::cpu::shadow_map(tables, frame, settings, lighting)),
+            )),
         );
         timed_frame(
             gpu,

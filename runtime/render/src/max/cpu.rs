@@ -13,8 +13,8 @@ use super::Settings;
 use crate::diffusion::{self, Problem};
 use crate::geometry::box_span;
 use crate::lattice::{
-    MIN_DIFFUSION_VOXEL_DEPTH, Sky, Voxels, reduced_sky, reduced_sun, sky_directions, sun_depths,
-    sweep, transmittance_to_sun, trilinear, voxel_length, voxel_size, voxels,
+    MIN_DIFFUSION_VOXEL_DEPTH, ShadowMap, Sky, Voxels, reduced_sky, reduced_sun, sky_directions,
+    sun_depths, sweep, transmittance_to_sun, trilinear, voxel_length, voxel_size, voxels,
 };
 use crate::shading::{check_fields, coefficients, compose};
 use crate::skylight::SkyLight;
@@ -391,6 +391,7 @@ pub fn gather(
         step: 0.5 * h.iter().copied().fold(f64::INFINITY, f64::min),
         sun_dir: frame.sun.direction(),
         sky: SkyLight::of(frame),
+        shadow: shadow_map(tables, frame),
     };
     let mut report = lighting.report.clone();
     let start = Instant::now();
@@ -433,6 +434,18 @@ struct Gather<'a> {
     sun_dir: DVec3,
     /// The air's light beyond single scattering.
     sky: SkyLight,
+    /// The sunlight left below the grid (the ground's and the air's).
+    shadow: ShadowMap,
+}
+
+/// The sunlight the volume leaves below the grid, through β_ext (the ground's and the air's
+/// light; the GPU gather reads the same map).
+pub(crate) fn shadow_map(tables: &Tables, frame: &Frame) -> ShadowMap {
+    let fields: Vec<&FieldTable> = tables.fields.iter().collect();
+    let sun = frame.sun.direction();
+    ShadowMap::new(&frame.grid, sun, |q| {
+        transmittance_to_sun(&fields, &frame.grid, q, sun, None)
+    })
 }
 
 /// A ray's march so far: the volume's radiance and transparency, the current edge segment's
@@ -467,7 +480,7 @@ impl Gather<'_> {
                 }
             }
         }
-        let ground_lit = |g: DVec3| transmittance_to_sun(&self.fields, grid, g, self.sun_dir, None);
+        let ground_lit = |g: DVec3| self.shadow.at(g);
         let rgb = compose(frame, &self.sky, eye, d, m.l_vol, (m.tr, m.tr), ground_lit);
         (rgb, m.tr[1] as f32, m.largest)
     }

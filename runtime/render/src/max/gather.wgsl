@@ -127,14 +127,14 @@ fn gather(@builtin(global_invocation_id) id: vec3<u32>) {
     var lit = vec3<f32>(1.0);
     let k_end = ground_distance(d);
     if (rp.grid_min.w > 0.0 && k_end > 0.0) {
-        lit = transmittance_to_sun(eye + k_end * d);
+        lit = sun_left(eye + k_end * d);
     }
     let v = compose(d, l_vol, tr, tr, lit);
     image[id.x + rp.sizes.x * id.y] = vec4<f32>(v, tr.g);
 }
 
-// The fraction of sunlight the volume leaves at a point (compose.wgsl's ground and air below
-// the grid).
+// The fraction of sunlight the volume leaves at a point below the grid (compose.wgsl's ground
+// and air): the shadow map the CPU marched (render::max::cpu::shadow_map).
 fn sun_left(p: vec3<f32>) -> vec3<f32> {
-    return transmittance_to_sun(p);
+    return shadow_map_at(p);
 }

@@ -174,7 +174,11 @@ impl Renderer {
             &self.layout,
             "photometeor max gather bindings",
             &[&params, &density, &lighting_buffer, &image, &largest],
-            Some(&sky_light_buffer(device, frame)),
+            Some(&sky_light_buffer(
+                device,
+                frame,
+                Some(&super::cpu::shadow_map(tables, frame)),
+            )),
         );
         let (image, timings) = timed_frame(
             gpu,

@@ -193,7 +193,7 @@ impl Renderer {
                 &image,
                 &slice_buffer,
             ],
-            Some(&sky_light_buffer(device, frame)),
+            Some(&sky_light_buffer(device, frame, None)),
         );
         Ok(run_slices(
             gpu,
