@@ -117,3 +117,47 @@ fn the_sky_light_matches_the_truths_air() {
     println!("largest |z| {worst:.2}");
     assert!(worst < 4.0, "the sky light is off the truth by {worst:.2}σ");
 }
+
+/// The same through a model's whole composite: Riley's CPU reference renders clear air (its
+/// grid a negligible slab 1 m up) over a grey ground, looking along the horizon across the
+/// sun's side; every pixel against the truth's radiance along the pixel's ray.
+#[test]
+fn the_composite_sky_matches_the_truth() {
+    let tables = tables_of(&hg_bins(&grid::ThetaGrid::new(1.0).unwrap(), 0.5), 1.0, 1.0);
+    let mut frame = clear_air(0.3, 25.0);
+    frame.camera.position_m = DVec3::new(0.0, 200.0, 0.0);
+    frame.camera.look_at_m = DVec3::new(1000.0, 250.0, -300.0);
+    frame.camera.fov_deg = 60.0;
+    (frame.width, frame.height) = (8, 6);
+    let settings = render::riley::Settings::default();
+    let image = render::riley::cpu::render(&tables, &frame, &settings).unwrap();
+    let setup = render::riley::Setup::new(&frame, &settings).unwrap();
+    let tracer = Tracer::new(&tables, &frame, &Settings::default()).unwrap();
+    let (w, h) = (frame.width, frame.height);
+    let mut worst = 0.0f64;
+    for j in 0..h {
+        for i in 0..w {
+            let d = setup.ray(i, j, w, h);
+            let t = truth(&tracer, frame.camera.position_m, d, 20_000);
+            let pixel = image.rgb[i + w * j];
+            for c in 0..3 {
+                let z = (pixel[c] as f64 - t[c].0) / t[c].1;
+                worst = worst.max(z.abs());
+                if c == 1 {
+                    println!(
+                        "pixel ({i}, {j}) d_y {:+.3}: truth {:.4e} ± {:.1} %, composite {:+.2} %",
+                        d.y,
+                        t[c].0,
+                        100.0 * t[c].1 / t[c].0,
+                        100.0 * (pixel[c] as f64 / t[c].0 - 1.0)
+                    );
+                }
+            }
+        }
+    }
+    println!("largest |z| {worst:.2}");
+    assert!(
+        worst < 4.0,
+        "the composite's sky is off the truth by {worst:.2}σ"
+    );
+}
