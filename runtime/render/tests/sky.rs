@@ -4,15 +4,14 @@
 //! along the horizon and down at the ground.
 
 use glam::DVec3;
-use rayon::prelude::*;
 use render::skylight::SkyLight;
-use render::truth::{Rng, Settings, Tracer};
+use render::truth::{Settings, Tracer};
 use render::{Atmosphere, Frame};
 
 #[path = "support/slabs.rs"]
 mod slabs;
 
-use slabs::{hg_bins, slab_frame, tables_of};
+use slabs::{hg_bins, radiance_along, slab_frame, tables_of};
 
 /// Clear air (the default atmosphere) over a ground of albedo `albedo`, the sun at
 /// `elevation` degrees; the slab's droplets are negligible.
@@ -28,21 +27,7 @@ fn clear_air(albedo: f64, elevation: f64) -> Frame {
 /// The truth's radiance per channel along view ray `d` from `eye`: mean and standard error of
 /// `n` paths.
 fn truth(tracer: &Tracer, eye: DVec3, d: DVec3, n: usize) -> [(f64, f64); 3] {
-    let sums = (0..n)
-        .into_par_iter()
-        .map(|i| {
-            let mut rng = Rng::stream(7, 0, i as u64);
-            let l = tracer.radiance(eye, d, &mut rng);
-            [l, l.map(|v| v * v)]
-        })
-        .reduce(
-            || [[0.0; 3]; 2],
-            |a, b| [0, 1].map(|i| std::array::from_fn(|c| a[i][c] + b[i][c])),
-        );
-    std::array::from_fn(|c| {
-        let (s, q) = (sums[0][c], sums[1][c]);
-        (s / n as f64, render::truth::std_error(s, q, n as f64))
-    })
+    radiance_along(tracer, eye, d, n, 7)
 }
 
 /// The fast models' radiance along `d` from height `y` (what `shading::compose` gives a pixel

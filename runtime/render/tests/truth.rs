@@ -24,7 +24,9 @@ mod common;
 #[path = "support/slabs.rs"]
 mod slabs;
 
-use slabs::{hg_bins, outgoing, single_scatter_slab, slab_frame, tables_of, tables_spectral};
+use slabs::{
+    hg_bins, outgoing, radiance_along, single_scatter_slab, slab_frame, tables_of, tables_spectral,
+};
 
 /// Mean and standard error of `n` radiance samples along `-w` seen from just outside the slab.
 fn radiance(tracer: &Tracer, w: DVec3, n: usize, seed: u64) -> (f64, f64) {
@@ -82,21 +84,7 @@ fn radiance_rgb(tracer: &Tracer, w: DVec3, n: usize, seed: u64) -> [(f64, f64); 
     } else {
         DVec3::new(0.0, 1.0 - 1e-9, 0.0)
     };
-    let sums = (0..n)
-        .into_par_iter()
-        .map(|i| {
-            let mut rng = Rng::stream(seed, 0, i as u64);
-            let l = tracer.radiance(origin, -w, &mut rng);
-            [l, l.map(|v| v * v)]
-        })
-        .reduce(
-            || [[0.0; 3]; 2],
-            |a, b| [0, 1].map(|i| std::array::from_fn(|c| a[i][c] + b[i][c])),
-        );
-    std::array::from_fn(|c| {
-        let (s, q) = (sums[0][c], sums[1][c]);
-        (s / n as f64, render::truth::std_error(s, q, n as f64))
-    })
+    radiance_along(tracer, origin, -w, n, seed)
 }
 
 #[test]

@@ -137,6 +137,33 @@ pub fn slab_frame(tau: f64) -> Frame {
     }
 }
 
+/// Per channel: mean and standard error of `n` of the truth's radiance samples along `dir`
+/// from `origin` (paths of `seed`'s streams, in parallel).
+pub fn radiance_along(
+    tracer: &render::truth::Tracer,
+    origin: DVec3,
+    dir: DVec3,
+    n: usize,
+    seed: u64,
+) -> [(f64, f64); 3] {
+    use rayon::prelude::*;
+    let sums = (0..n)
+        .into_par_iter()
+        .map(|i| {
+            let mut rng = render::truth::Rng::stream(seed, 0, i as u64);
+            let l = tracer.radiance(origin, dir, &mut rng);
+            [l, l.map(|v| v * v)]
+        })
+        .reduce(
+            || [[0.0; 3]; 2],
+            |a, b| [0, 1].map(|i| std::array::from_fn(|c| a[i][c] + b[i][c])),
+        );
+    std::array::from_fn(|c| {
+        let (s, q) = (sums[0][c], sums[1][c]);
+        (s / n as f64, render::truth::std_error(s, q, n as f64))
+    })
+}
+
 /// The outgoing direction at cosine μ to the normal (`up`: reflected, else transmitted) and
 /// azimuth φ (0: the horizontal direction the beam travels, −z).
 pub fn outgoing(mu: f64, phi_deg: f64, up: bool) -> DVec3 {
