@@ -70,16 +70,16 @@ fn shadow_map_at(p: vec3<f32>) -> vec3<f32> {
     return mix(mix(v00, v10, s), mix(v01, v11, s), t);
 }
 
-// The multiply-scattered light the first k metres of the view ray gather (k < 0: all of it).
-fn sky_light_inscatter(y: f32, d: vec3<f32>, k: f32) -> vec3<f32> {
-    let near = sky_light_radiance(y, d);
+// The multiply-scattered light of the view ray's first k metres, given `whole`, the whole
+// ray's (sky_light_radiance(y, d)) (render::skylight::SkyLight::inscatter).
+fn sky_light_first(y: f32, d: vec3<f32>, k: f32, whole: vec3<f32>) -> vec3<f32> {
     if (k < 0.0) {
-        return near;
+        return whole;
     }
     if (k == 0.0) {
         return vec3<f32>(0.0);
     }
-    return near - air_transparency(y, d.y, k) * sky_light_radiance(y + k * d.y, d);
+    return whole - air_transparency(y, d.y, k) * sky_light_radiance(y + k * d.y, d);
 }
 
 // Samples of the volume's shadow on the air along a ray (render::shading::AIR_SHADOW_STEPS).
@@ -174,8 +174,9 @@ fn compose(d: vec3<f32>, l_vol: vec3<f32>, t_vol: vec3<f32>, t_smooth: vec3<f32>
     var all_sky = inscatter(y, d.y, k_end, cos_sun, l_y);
     if (k_end != 0.0) {
         let shadow = air_shadow(d, k_mid, k_end);
-        front = front + sky_light_inscatter(y, d, k_mid) - shadow.front;
-        all_sky = all_sky + sky_light_radiance(y, d) - shadow.all;
+        let whole = sky_light_radiance(y, d);
+        front = front + sky_light_first(y, d, k_mid, whole) - shadow.front;
+        all_sky = all_sky + whole - shadow.all;
     }
     let t_mid = air_transparency(y, d.y, k_mid);
     let i_s = rp.irradiance.rgb;

@@ -283,6 +283,15 @@ impl ShadowMap {
         }
     }
 
+    /// The map of `frame`'s grid and sun through the extinction of `fields`, less each field's
+    /// forward peak share with `peaks` ([`transmittance_to_sun`]).
+    pub fn of(fields: &[&FieldTable], frame: &Frame, peaks: Option<&[[f64; 3]]>) -> Self {
+        let sun = frame.sun.direction();
+        Self::new(&frame.grid, sun, |q| {
+            transmittance_to_sun(fields, &frame.grid, q, sun, peaks)
+        })
+    }
+
     /// The fraction of sunlight left at `p` (at or below the grid's bottom).
     pub fn at(&self, p: DVec3) -> [f64; 3] {
         let q = p + ((self.bottom - p.y) / self.sun.y) * self.sun;

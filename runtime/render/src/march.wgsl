@@ -42,18 +42,9 @@ fn scattering_of(rho: vec4<f32>) -> vec3<f32> {
     return s;
 }
 
-// The sunlight the volume leaves at p (outside the box: the ground) along the sun, by a march
-// of half-voxel steps.
-fn transmittance_to_sun(p: vec3<f32>) -> vec3<f32> {
-    let span = box_span(p, rp.sun.xyz);
-    if (span.y < 0.0) {
-        return vec3<f32>(1.0);
-    }
-    let n = max(u32(ceil((span.y - span.x) / rp.eye.w)), 1u);
-    let dt = (span.y - span.x) / f32(n);
-    var tau = vec3<f32>(0.0);
-    for (var k = 0u; k < n; k = k + 1u) {
-        tau = tau + extinction(densities(p + (span.x + (f32(k) + 0.5) * dt) * rp.sun.xyz)) * dt;
-    }
-    return exp(-tau);
+// The fraction of sunlight the volume leaves at a point below the grid (compose.wgsl's ground
+// and air): the lighting's shadow map, which the CPU marched (render::lattice::ShadowMap; max
+// through β_ext, coupled through its δ-scaled extinction).
+fn sun_left(p: vec3<f32>) -> vec3<f32> {
+    return shadow_map_at(p);
 }

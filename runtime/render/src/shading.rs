@@ -113,10 +113,7 @@ pub(crate) fn compose(
     if k_end > 0.0 {
         // The whole ray's multiply-scattered light ends at the ground or in space alike; the
         // volume's shadow on the air below it takes from the singly scattered.
-        let (f, a) = (
-            sky.inscatter(y, d, k_mid, sun_dir),
-            sky.radiance(y, d, sun_dir),
-        );
+        let (a, f) = sky.inscatter(y, d, k_mid, sun_dir);
         let (sf, sa) = air_shadow(frame, eye, d, (k_mid, k_end), &ground_lit);
         for c in 0..3 {
             front[c] += f[c] - sf[c];

@@ -78,40 +78,6 @@ pub struct SkyLight {
     table: Vec<[f64; 3]>,
     /// Orders of scattering the solve took (per channel, the largest).
     pub orders: usize,
-    /// The diffuse light's flux down onto the ground, per unit solar irradiance and channel
-    /// (the direct beam's l_y e^{−τ*/l_y} not included).
-    pub flux_down_ground: [f64; 3],
-    /// The diffuse light's flux up out of the top, per unit solar irradiance and channel.
-    pub flux_up_top: [f64; 3],
-}
-
-/// Gauss–Legendre nodes and weights on (0, 1), weights summing to 1.
-fn gauss_legendre(n: usize) -> (Vec<f64>, Vec<f64>) {
-    let (mut x, mut w) = (vec![0.0; n], vec![0.0; n]);
-    for i in 0..n {
-        // Newton's method on P_n from the Chebyshev guess.
-        let mut z = (PI * (i as f64 + 0.75) / (n as f64 + 0.5)).cos();
-        let mut dp = 1.0;
-        for _ in 0..100 {
-            let (mut p0, mut p1) = (1.0, z);
-            for k in 2..=n {
-                let p2 = ((2 * k - 1) as f64 * z * p1 - (k - 1) as f64 * p0) / k as f64;
-                p0 = p1;
-                p1 = p2;
-            }
-            dp = n as f64 * (z * p1 - p0) / (z * z - 1.0);
-            let step = p1 / dp;
-            z -= step;
-            if step.abs() < 1e-15 {
-                break;
-            }
-        }
-        // Mapped from (−1, 1) to (0, 1): weight 2/((1 − z²) P′²) halved, then halved again
-        // so that the n weights sum to 1.
-        x[i] = 0.5 * (1.0 - z);
-        w[i] = 1.0 / ((1.0 - z * z) * dp * dp);
-    }
-    (x, w)
 }
 
 /// P_m(μ, μ′) of the module docs, 1/sr.
@@ -171,8 +137,11 @@ struct Channel {
     /// Orders of scattering summed.
     orders: usize,
     /// The whole diffuse field's upward flux at the top and downward flux at the ground (per
-    /// unit irradiance; the direct beam's own l_y e^{−τ*/l_y} not included).
+    /// unit irradiance; the direct beam's own l_y e^{−τ*/l_y} not included): the energy check
+    /// of the tests.
+    #[cfg_attr(not(test), allow(dead_code))]
     flux_up_top: f64,
+    #[cfg_attr(not(test), allow(dead_code))]
     flux_down_ground: f64,
 }
 
@@ -190,7 +159,8 @@ fn solve_channel(tau_star: f64, l_y: f64, albedo: f64) -> Channel {
     }
     let dtau = tau_star / LEVELS as f64;
     let tau = |k: usize| k as f64 * dtau;
-    let (x, w) = gauss_legendre(NODES);
+    // Gauss–Legendre on (0, 1): the weights sum to 1.
+    let (x, w) = mie::quadrature::gauss_legendre_on(NODES, 0.0, 1.0);
     // Node directions (travelling): down (−x) then up (+x), each with weight w.
     let mu: Vec<f64> = x.iter().map(|&v| -v).chain(x.iter().copied()).collect();
     let weight: Vec<f64> = w.iter().chain(w.iter()).copied().collect();
@@ -297,8 +267,6 @@ impl SkyLight {
             atmosphere: *atmosphere,
             table,
             orders: channels.iter().map(|c| c.orders).max().unwrap_or(0),
-            flux_down_ground: std::array::from_fn(|c| channels[c].flux_down_ground),
-            flux_up_top: std::array::from_fn(|c| channels[c].flux_up_top),
         }
     }
 
@@ -378,35 +346,26 @@ impl SkyLight {
         out
     }
 
-    /// The missing light the first `k` metres of a view ray `d` from height `y` gather (module
-    /// docs); `k` = ∞ is the whole ray.
-    pub fn inscatter(&self, y: f64, d: DVec3, k: f64, sun: DVec3) -> [f64; 3] {
-        let near = self.radiance(y, d, sun);
-        if k.is_infinite() {
-            return near;
-        }
-        if k <= 0.0 {
-            return [0.0; 3];
-        }
-        let far = self.radiance(y + k * d.y, d, sun);
-        let t = self.atmosphere.transparency(y, d.y, k);
-        std::array::from_fn(|c| near[c] - t[c] * far[c])
+    /// The missing light a view ray `d` from height `y` gathers over its whole length
+    /// ([`SkyLight::radiance`]) and over its first `k` metres (module docs), in that order.
+    pub fn inscatter(&self, y: f64, d: DVec3, k: f64, sun: DVec3) -> ([f64; 3], [f64; 3]) {
+        let whole = self.radiance(y, d, sun);
+        let first = if k.is_infinite() {
+            whole
+        } else if k <= 0.0 {
+            [0.0; 3]
+        } else {
+            let far = self.radiance(y + k * d.y, d, sun);
+            let t = self.atmosphere.transparency(y, d.y, k);
+            std::array::from_fn(|c| whole[c] - t[c] * far[c])
+        };
+        (whole, first)
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn gauss_legendre_integrates_polynomials() {
-        let (x, w) = gauss_legendre(NODES);
-        // Exact for degree ≤ 2n − 1 on (0, 1): ∫ x^p = 1/(p + 1).
-        for p in 0..(2 * NODES) {
-            let q: f64 = x.iter().zip(&w).map(|(x, w)| w * x.powi(p as i32)).sum();
-            assert!((q - 1.0 / (p + 1) as f64).abs() < 1e-14, "degree {p}: {q}");
-        }
-    }
 
     #[test]
     fn conservative_atmosphere_keeps_the_sunlight() {

@@ -102,6 +102,10 @@ pub struct Lighting {
     pub dims: [usize; 3],
     /// Unit vector towards the sun it was computed for.
     pub sun_dir: DVec3,
+    /// The sunlight left below the grid (the ground's and the air's light), through the
+    /// δ-scaled extinction as the beam is: what the forward peak scatters still reaches them;
+    /// the GPU gather reads it too.
+    pub shadow: ShadowMap,
     /// Times, iterations, residuals and the energy budget.
     pub report: CoupledReport,
 }
@@ -342,6 +346,7 @@ pub fn light_with(
         report.transport_s = start.elapsed().as_secs_f64();
     }
     progress.update(3, 3, "lighting done");
+    let shadow = ShadowMap::of(&fields, frame, delta_scaled(settings).then_some(&peak));
     Ok(Lighting {
         buffer: state.iter().map(|s| [s[0], s[1], s[2], s[3]]).collect(),
         i0,
@@ -354,6 +359,7 @@ pub fn light_with(
         sky_mean: sky.mean,
         dims: grid.dims,
         sun_dir,
+        shadow,
         report,
     })
 }
@@ -425,7 +431,6 @@ pub fn gather(
     let (w, hgt) = (frame.width, frame.height);
     let eye = frame.camera.position_m;
     let sky = SkyLight::of(frame);
-    let shadow = shadow_map(tables, frame, settings, lighting);
     let pixels: Vec<([f32; 3], f32)> = (0..w * hgt)
         .into_par_iter()
         .map(|px| {
@@ -463,7 +468,7 @@ pub fn gather(
                     }
                 }
             }
-            let ground_lit = |g: DVec3| shadow.at(g);
+            let ground_lit = |g: DVec3| lighting.shadow.at(g);
             (
                 compose(frame, &sky, eye, d, l_vol, (tr, seen), ground_lit),
                 tr[1] as f32,
@@ -572,23 +577,6 @@ fn in_scattered(
 /// Whether the gather treats a forward peak as unscattered (the δ-Eddington split).
 pub(crate) fn delta_scaled(settings: &Settings) -> bool {
     (settings.source, settings.split) == (Source::Buffer, Split::DeltaEddington)
-}
-
-/// The sunlight the volume leaves below the grid (the ground's and the air's light), through
-/// the δ-scaled extinction as the beam is: what the forward peak scatters still reaches them
-/// (the GPU gather reads the same map).
-pub(crate) fn shadow_map(
-    tables: &Tables,
-    frame: &Frame,
-    settings: &Settings,
-    lighting: &Lighting,
-) -> ShadowMap {
-    let fields: Vec<&FieldTable> = tables.fields.iter().collect();
-    let sun = frame.sun.direction();
-    let scaled = delta_scaled(settings).then_some(lighting.peak.as_slice());
-    ShadowMap::new(&frame.grid, sun, |q| {
-        transmittance_to_sun(&fields, &frame.grid, q, sun, scaled)
-    })
 }
 
 /// A per-field quantity `value(f)` of the mixture at densities `rho`, per channel, weighted by

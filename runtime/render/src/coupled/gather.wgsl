@@ -172,10 +172,3 @@ fn gather(@builtin(global_invocation_id) id: vec3<u32>) {
     let v = compose(d, l_vol, tr, seen, ground);
     image[id.x + rp.sizes.x * id.y] = vec4<f32>(v, tr.g);
 }
-
-// The fraction of sunlight the volume leaves at a point below the grid (compose.wgsl's ground
-// and air): the shadow map the CPU marched through the δ-scaled extinction
-// (render::coupled::cpu::shadow_map).
-fn sun_left(p: vec3<f32>) -> vec3<f32> {
-    return shadow_map_at(p);
-}

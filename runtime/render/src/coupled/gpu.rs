@@ -215,11 +215,7 @@ impl Renderer {
             &self.layout,
             "photometeor coupled gather bindings",
             &[&params, &density, &lighting_buffer, &image],
-            Some(&sky_light_buffer(
-                device,
-                frame,
-                Some(&super::cpu::shadow_map(tables, frame, settings, lighting)),
-            )),
+            Some(&sky_light_buffer(device, frame, Some(&lighting.shadow))),
         );
         timed_frame(
             gpu,

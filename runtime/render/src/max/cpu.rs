@@ -116,6 +116,9 @@ pub struct Lighting {
     pub dims: [usize; 3],
     /// Unit vector towards the sun.
     pub sun_dir: DVec3,
+    /// The sunlight left below the grid (the ground's and the air's light; the GPU gather
+    /// reads it too).
+    pub shadow: ShadowMap,
     /// The time, iterations and residuals of steps 1–4.
     pub report: MaxReport,
 }
@@ -259,6 +262,7 @@ pub fn light_with(
         sky_mean: sky.mean,
         dims: grid.dims,
         sun_dir,
+        shadow: ShadowMap::of(&fields, frame, None),
         report,
     })
 }
@@ -391,7 +395,6 @@ pub fn gather(
         step: 0.5 * h.iter().copied().fold(f64::INFINITY, f64::min),
         sun_dir: frame.sun.direction(),
         sky: SkyLight::of(frame),
-        shadow: shadow_map(tables, frame),
     };
     let mut report = lighting.report.clone();
     let start = Instant::now();
@@ -434,18 +437,6 @@ struct Gather<'a> {
     sun_dir: DVec3,
     /// The air's light beyond single scattering.
     sky: SkyLight,
-    /// The sunlight left below the grid (the ground's and the air's).
-    shadow: ShadowMap,
-}
-
-/// The sunlight the volume leaves below the grid, through β_ext (the ground's and the air's
-/// light; the GPU gather reads the same map).
-pub(crate) fn shadow_map(tables: &Tables, frame: &Frame) -> ShadowMap {
-    let fields: Vec<&FieldTable> = tables.fields.iter().collect();
-    let sun = frame.sun.direction();
-    ShadowMap::new(&frame.grid, sun, |q| {
-        transmittance_to_sun(&fields, &frame.grid, q, sun, None)
-    })
 }
 
 /// A ray's march so far: the volume's radiance and transparency, the current edge segment's
@@ -480,7 +471,7 @@ impl Gather<'_> {
                 }
             }
         }
-        let ground_lit = |g: DVec3| self.shadow.at(g);
+        let ground_lit = |g: DVec3| self.lighting.shadow.at(g);
         let rgb = compose(frame, &self.sky, eye, d, m.l_vol, (m.tr, m.tr), ground_lit);
         (rgb, m.tr[1] as f32, m.largest)
     }

@@ -174,11 +174,7 @@ impl Renderer {
             &self.layout,
             "photometeor max gather bindings",
             &[&params, &density, &lighting_buffer, &image, &largest],
-            Some(&sky_light_buffer(
-                device,
-                frame,
-                Some(&super::cpu::shadow_map(tables, frame)),
-            )),
+            Some(&sky_light_buffer(device, frame, Some(&lighting.shadow))),
         );
         let (image, timings) = timed_frame(
             gpu,
