@@ -63,6 +63,14 @@
 //!   draws: its weight is 1/(1 − ε)). Unbiased for every ε < 1; on the DISORT slabs it turns the
 //!   cloud's camera-side radiances from heavy-tailed (18–35 % low at 5·10⁴ paths) into ones
 //!   that agree within 3σ, and it cuts the variance of HG double scattering 27-fold.
+//!   Air and ground vertices are guided the same way ([`Tracer::continue_guided`]: the lobe
+//!   of a field drawn uniformly, q = (1 − ε) own(ω) + ε (1/F) Σ_f p_f(sun, ω)/(1 − f_f), own
+//!   the Rayleigh phase function or the cosine): the air under a cirrus of 100 µm columns
+//!   (first bin ≈ 10⁴ /sr) is lit by the sun's forward-scattered aureole, which a Rayleigh
+//!   continuation finds rarely and pays for with a weight of up to 10⁴: unguided, the halo
+//!   scene's truth at 16 384 spp had 1 % of its pixels as fireflies holding 14 % of the
+//!   image's light; at 4 096 spp its median pixel read 9 % below the guided one's and two
+//!   seeds' image sums were 2.7 % apart (guided: 0.03 %).
 //! - **Paths** end when they leave the scene (black space), on a black ground, by Russian
 //!   roulette once the largest weight n·f_m/Σ_k p_k falls below [`ROULETTE_WEIGHT`]
 //!   (survivors carry exactly that weight, never more), or after [`MAX_BOUNCES`] scatterings (a safety bound far beyond any
@@ -355,6 +363,16 @@ impl Carried {
         self.f[m] *= k;
         self.r[m] *= k;
     }
+}
+
+/// The density an air or ground vertex continues with when it is not guided
+/// ([`Tracer::continue_guided`]).
+#[derive(Debug, Clone, Copy)]
+enum Own {
+    /// Rayleigh scattering about the path's direction.
+    Air(DVec3),
+    /// Lambertian reflection about the normal, of albedo a.
+    Ground(DVec3, f64),
 }
 
 /// What ends a free path.
@@ -953,6 +971,76 @@ impl<'a> Tracer<'a> {
         next
     }
 
+    /// The continuation at an air or ground vertex (module docs, "Guided continuations"):
+    /// with probability ε from the smooth lobe about the sun of a field drawn uniformly,
+    /// else from the vertex's own density (Rayleigh about the path, the cosine about the
+    /// ground's normal), weighted by the one-sample MIS ratio value(ω)/q(ω) with q = (1 − ε)
+    /// own(ω) + ε (1/F) Σ_f p_f(sun, ω)/(1 − δ_f), each carried wavelength's q_m with its own
+    /// phase functions. Unbiased for any ε < 1.
+    fn continue_guided(&self, c: &mut Carried, own: Own, eps: f64, rng: &mut Rng) -> DVec3 {
+        let next = if eps > 0.0 && rng.uniform() < eps {
+            let field = ((rng.uniform() * self.n_fields as f64) as usize).min(self.n_fields - 1);
+            let (omm, sin) = self.band_of(c, 0).fields[field]
+                .phase
+                .sample_smooth(rng.uniform(), rng.uniform());
+            rotate(self.sun, omm, sin, rng.uniform())
+        } else {
+            match own {
+                Own::Air(d) => {
+                    let mu = sample_rayleigh(rng.uniform());
+                    rotate(d, 1.0 - mu, (1.0 - mu * mu).max(0.0).sqrt(), rng.uniform())
+                }
+                Own::Ground(normal, _) => {
+                    let (r, phi) = (rng.uniform().sqrt(), 2.0 * PI * rng.uniform());
+                    let (e1, e2) = basis(normal);
+                    (r * phi.cos() * e1
+                        + r * phi.sin() * e2
+                        + (1.0 - r * r).max(0.0).sqrt() * normal)
+                        .normalize()
+                }
+            }
+        };
+        // The own density and the value (phase function, or BRDF × cosine) towards `next`.
+        let (pdf, value) = match own {
+            Own::Air(d) => {
+                let p = rayleigh(d.dot(next));
+                (p, p)
+            }
+            Own::Ground(normal, a) => {
+                let p = next.dot(normal).max(0.0) / PI;
+                (p, a * p)
+            }
+        };
+        if eps == 0.0 {
+            let ratio = if pdf > 0.0 { value / pdf } else { 0.0 };
+            for f in c.f.iter_mut() {
+                *f *= ratio;
+            }
+            return next;
+        }
+        let ks = self.band_of(c, 0).fields[0].phase.bin(self.sun, next);
+        let q: [f64; MAX_CARRIED] = std::array::from_fn(|m| {
+            if m >= c.n {
+                return 0.0;
+            }
+            let guide = self.band_of(c, m).fields[..self.n_fields]
+                .iter()
+                .map(|f| f.phase.value(ks) / (1.0 - f.phase.delta()))
+                .sum::<f64>()
+                / self.n_fields as f64;
+            (1.0 - eps) * pdf + eps * guide
+        });
+        if q[0] <= 0.0 {
+            c.f = [0.0; MAX_CARRIED];
+            return next;
+        }
+        for m in 0..c.n {
+            c.f[m] *= value / q[0];
+            c.r[m] *= q[m] / q[0];
+        }
+        next
+    }
+
     /// The weight window on the path's largest effective weight n·W_m (module docs, "Paths"),
     /// computed once: below [`ROULETTE_WEIGHT`] Russian roulette (survivors scaled so that it
     /// becomes that weight); with `split`, above [`SPLIT_WEIGHT`] k = ⌈n·W_m⌉ branches (at most
@@ -1046,21 +1134,9 @@ impl<'a> Tracer<'a> {
                 d = match event {
                     Event::Volume(field) => self.continue_volume(&mut c, field, d, self.guide, rng),
                     Event::Surface(normal, a) => {
-                        for f in c.f.iter_mut() {
-                            *f *= a;
-                        }
-                        // Cosine-weighted about the normal.
-                        let (r, phi) = (rng.uniform().sqrt(), 2.0 * PI * rng.uniform());
-                        let (e1, e2) = basis(normal);
-                        (r * phi.cos() * e1
-                            + r * phi.sin() * e2
-                            + (1.0 - r * r).max(0.0).sqrt() * normal)
-                            .normalize()
+                        self.continue_guided(&mut c, Own::Ground(normal, a), self.guide, rng)
                     }
-                    _ => {
-                        let mu = sample_rayleigh(rng.uniform());
-                        rotate(d, 1.0 - mu, (1.0 - mu * mu).max(0.0).sqrt(), rng.uniform())
-                    }
+                    _ => self.continue_guided(&mut c, Own::Air(d), self.guide, rng),
                 };
                 if bounce + 1 >= self.max_scatterings {
                     break;
@@ -1091,10 +1167,7 @@ impl<'a> Tracer<'a> {
             d = match event {
                 Event::Surface(..) | Event::Escape => return Some((d, c.f[0])),
                 Event::Volume(field) => self.continue_volume(&mut c, field, d, 0.0, rng),
-                Event::Air => {
-                    let mu = sample_rayleigh(rng.uniform());
-                    rotate(d, 1.0 - mu, (1.0 - mu * mu).max(0.0).sqrt(), rng.uniform())
-                }
+                Event::Air => self.continue_guided(&mut c, Own::Air(d), 0.0, rng),
             };
             if Self::weight_window(&mut c, rng, false) == 0 {
                 return None;

@@ -646,6 +646,57 @@ fn continue_volume(c: ptr<function, Carried>, field: u32, d: vec3<f32>, eps: f32
     return next;
 }
 
+// The continuation at an air or ground vertex (Tracer::continue_guided): with probability ε
+// from the smooth lobe about the sun of a field drawn uniformly, else Rayleigh about d (air) or
+// the cosine about the normal n (ground, albedo a), weighted by value/q.
+fn continue_guided(c: ptr<function, Carried>, ground: bool, d: vec3<f32>, n: vec3<f32>, a: f32,
+                   eps: f32) -> vec3<f32> {
+    let fields = rp.grid_dims.w;
+    var next: vec3<f32>;
+    if (eps > 0.0 && rand() < eps) {
+        let field = min(u32(rand() * f32(fields)), fields - 1u);
+        let s = phase_sample_smooth((*c).band[0], field, rand(), rand(), rand());
+        next = rotate(rp.sun.xyz, s.x, s.y, rand());
+    } else if (ground) {
+        let r = sqrt(rand());
+        let phi = 2.0 * PI * rand();
+        let e1 = basis1(n);
+        let e2 = cross(n, e1);
+        next = normalize(r * cos(phi) * e1 + r * sin(phi) * e2 + sqrt(max(1.0 - r * r, 0.0)) * n);
+    } else {
+        let mu = sample_rayleigh(rand());
+        next = rotate(d, 1.0 - mu, sqrt(max(1.0 - mu * mu, 0.0)), rand());
+    }
+    // The own density and the value (phase function, or BRDF × cosine) towards `next`.
+    var pdf = rayleigh(dot(d, next));
+    var value = pdf;
+    if (ground) {
+        pdf = max(dot(next, n), 0.0) / PI;
+        value = a * pdf;
+    }
+    if (eps == 0.0) {
+        (*c).f = (*c).f * select(0.0, value / pdf, pdf > 0.0);
+        return next;
+    }
+    let ks = phase_bin(rp.sun.xyz, next);
+    var q = vec4<f32>(0.0);
+    for (var m = 0u; m < (*c).n; m = m + 1u) {
+        let b = (*c).band[m];
+        var guide = 0.0;
+        for (var f = 0u; f < fields; f = f + 1u) {
+            guide = guide + phase_value(b, f, ks) / (1.0 - field_optics(b, f).z);
+        }
+        q[m] = (1.0 - eps) * pdf + eps * guide / f32(fields);
+    }
+    if (q[0] <= 0.0) {
+        (*c).f = vec4<f32>(0.0);
+        return next;
+    }
+    (*c).f = (*c).f * value / q[0];
+    (*c).r = (*c).r * q / q[0];
+    return next;
+}
+
 // The weight window (Tracer::weight_window): roulette below ROULETTE_WEIGHT, with `room` > 0
 // a split into k ≤ room + 1 branches above SPLIT_WEIGHT. The branches, 0 when the path ends.
 fn weight_window(c: ptr<function, Carried>, room: u32) -> u32 {
@@ -841,16 +892,8 @@ fn event(slot: u32, path: ptr<function, Path>) -> bool {
     var next: vec3<f32>;
     if (ev.kind == EV_VOLUME) {
         next = continue_volume(&c, ev.field, d, rp.track.y);
-    } else if (ev.kind == EV_SURFACE) {
-        c.f = c.f * v.a;
-        let r = sqrt(rand());
-        let phi = 2.0 * PI * rand();
-        let e1 = basis1(v.n);
-        let e2 = cross(v.n, e1);
-        next = normalize(r * cos(phi) * e1 + r * sin(phi) * e2 + sqrt(max(1.0 - r * r, 0.0)) * v.n);
     } else {
-        let mu = sample_rayleigh(rand());
-        next = rotate(d, 1.0 - mu, sqrt(max(1.0 - mu * mu, 0.0)), rand());
+        next = continue_guided(&c, ev.kind == EV_SURFACE, d, v.n, v.a, rp.track.y);
     }
     (*path).d = next;
     (*path).bounce = (*path).bounce + 1u;
