@@ -91,11 +91,11 @@ pub struct NotConverged {
 
 /// A 7-point symmetric operator: A_ii = diag, A_{i,i+e_a} = −w[a][i].
 #[derive(Debug, Clone)]
-struct Stencil {
-    dims: [usize; 3],
-    diag: Vec<f64>,
+pub(crate) struct Stencil {
+    pub(crate) dims: [usize; 3],
+    pub(crate) diag: Vec<f64>,
     /// Couplings to the +x, +y, +z neighbours (≥ 0), 0 where either side is inactive.
-    w: [Vec<f64>; 3],
+    pub(crate) w: [Vec<f64>; 3],
 }
 
 impl Stencil {
@@ -131,7 +131,7 @@ impl Stencil {
         s
     }
 
-    fn apply(&self, x: &[f64], out: &mut [f64]) {
+    pub(crate) fn apply(&self, x: &[f64], out: &mut [f64]) {
         use rayon::prelude::*;
         out.par_iter_mut().enumerate().for_each(|(i, o)| {
             *o = if self.diag[i] > 0.0 {
@@ -386,6 +386,9 @@ struct Hierarchy {
     levels: Vec<Stencil>,
 }
 
+/// Sweeps of each colour, in the order 0, 1, 1, 0, that solve the coarsest level of a V-cycle.
+pub(crate) const COARSEST_SWEEPS: usize = 32;
+
 /// Coarsening stops below this many voxels; the coarsest level is smoothed to convergence.
 const COARSEST_VOXELS: usize = 64;
 
@@ -410,7 +413,7 @@ impl Hierarchy {
         z.par_iter_mut().for_each(|v| *v = 0.0);
         let mut scratch = vec![0.0; a.len()];
         if level + 1 == self.levels.len() {
-            for _ in 0..32 {
+            for _ in 0..COARSEST_SWEEPS {
                 a.sweep(z, r, 0, &mut scratch);
                 a.sweep(z, r, 1, &mut scratch);
                 a.sweep(z, r, 1, &mut scratch);
@@ -473,6 +476,24 @@ pub fn solve(p: &Problem, tolerance: f64, max_iterations: usize) -> Result<Solut
     Ok(s)
 }
 
+/// [`solve`] on the GPU ([`crate::diffusion_gpu`]): the same operator, hierarchy and
+/// right-hand side, the conjugate gradients in f32 inside an f64 refinement.
+pub fn solve_on(
+    p: &Problem,
+    (tolerance, max_iterations): (f64, usize),
+    gpu: &runtime::gpu::Gpu,
+    solver: &crate::diffusion_gpu::Solver,
+) -> Result<Solution, crate::diffusion_gpu::SolveError> {
+    let start = Instant::now();
+    let (a, b) = assemble(p);
+    let op = Operator::new(a);
+    let mut s = solver
+        .upload(gpu, &op)?
+        .solve(&b, tolerance, max_iterations)?;
+    s.seconds = start.elapsed().as_secs_f64();
+    Ok(s)
+}
+
 /// A problem's operator and its multigrid hierarchy, assembled once for several sources
 /// (the transport's acceleration solves the same operator every round).
 pub struct Operator {
@@ -506,12 +527,20 @@ impl Operator {
         tolerance: f64,
         max_iterations: usize,
     ) -> Result<Solution, NotConverged> {
-        let b: Vec<f64> = q0
-            .iter()
+        self.solve(&self.isotropic(q0), tolerance, max_iterations)
+    }
+
+    /// The right-hand side of an isotropic source `q0` per voxel.
+    pub fn isotropic(&self, q0: &[f64]) -> Vec<f64> {
+        q0.iter()
             .zip(&self.diag)
             .map(|(q, d)| if *d > 0.0 { self.volume * q } else { 0.0 })
-            .collect();
-        self.solve(&b, tolerance, max_iterations)
+            .collect()
+    }
+
+    /// The multigrid hierarchy's operators, finest first (none without unknowns).
+    pub(crate) fn levels(&self) -> &[Stencil] {
+        self.mg.as_ref().map_or(&[], |m| &m.levels)
     }
 
     /// Conjugate gradients preconditioned by one V-cycle, for the right-hand side `b`.

@@ -54,6 +54,7 @@ pub mod biri;
 pub mod camera;
 pub mod coupled;
 pub mod diffusion;
+pub mod diffusion_gpu;
 pub mod error_map;
 pub mod geometry;
 pub mod gpu;

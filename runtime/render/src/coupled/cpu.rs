@@ -31,6 +31,8 @@ pub struct CoupledReport {
     pub transport_s: f64,
     /// Its source iterations.
     pub transport_iterations: usize,
+    /// Where its sweeps ran.
+    pub transport_on: String,
     /// The transport's grid (the render's, or coarser by `transport_coarsening`).
     pub transport_dims: [usize; 3],
     /// The relative change of the mean radiance in its last iteration.
@@ -229,6 +231,29 @@ pub fn light_with(
     settings: &Settings,
     progress: &dyn crate::model::Progress,
 ) -> Result<Lighting, FrameError> {
+    light_on(tables, frame, settings, progress, None)
+}
+
+/// An adapter and the per-sun passes compiled for it: the transport's sweeps
+/// ([`super::sweep_gpu`]) and the diffusion solves ([`crate::diffusion_gpu`]).
+#[derive(Clone, Copy)]
+pub struct OnGpu<'a> {
+    /// The adapter.
+    pub gpu: &'a runtime::gpu::Gpu,
+    /// The sweeps' pipeline.
+    pub sweeper: &'a super::sweep_gpu::Sweeper,
+    /// The solver's pipelines.
+    pub solver: &'a crate::diffusion_gpu::Solver,
+}
+
+/// [`light_with`], the transport's sweeps and the diffusion solves on `on` when given.
+pub fn light_on(
+    tables: &Tables,
+    frame: &Frame,
+    settings: &Settings,
+    progress: &dyn crate::model::Progress,
+    on: Option<OnGpu>,
+) -> Result<Lighting, FrameError> {
     check(tables, frame, settings)?;
     let fields: Vec<&FieldTable> = tables.fields.iter().collect();
     let grid = &frame.grid;
@@ -288,12 +313,17 @@ pub fn light_with(
                 })
                 .collect(),
         };
-        let s = diffusion::solve(
-            &problem,
+        let limits = (
             settings.diffusion_tolerance,
             settings.max_diffusion_iterations,
-        )
-        .map_err(|e| FrameError(format!("channel {}: {e}", ["R", "G", "B"][c])))?;
+        );
+        let channel = ["R", "G", "B"][c];
+        let s = match on {
+            Some(on) => diffusion::solve_on(&problem, limits, on.gpu, on.solver)
+                .map_err(|e| FrameError(format!("channel {channel} on the GPU: {e}")))?,
+            None => diffusion::solve(&problem, limits.0, limits.1)
+                .map_err(|e| FrameError(format!("channel {channel}: {e}")))?,
+        };
         report.iterations[c] = s.iterations;
         report.residual[c] = s.residual;
         report.unknowns = s.unknowns;
@@ -324,6 +354,7 @@ pub fn light_with(
         };
         let diffusion = (i0.as_slice(), p1.as_slice());
         let Transported {
+            on: swept_on,
             moments,
             report: t,
             balance,
@@ -336,9 +367,10 @@ pub fn light_with(
             (&chis, &peak),
             l,
             diffusion,
-            settings,
+            (settings, on),
         )?;
         sh = moments;
+        report.transport_on = swept_on;
         report.transport_balance = balance;
         report.transport_iterations = t.changes.len();
         report.transport_dims = dims;
@@ -696,7 +728,7 @@ fn transport_light(
     (chis, peak): (&[Moments], &[[f64; 3]]),
     l: DVec3,
     (i0, p1): (&[[f64; 3]], &[[f64; 9]]),
-    settings: &Settings,
+    (settings, on): (&Settings, Option<OnGpu>),
 ) -> Result<Transported, FrameError> {
     let n = v.ext.len();
     // Per voxel: σ′_t, σ′_s, p′'s moments, the sunlit and the skylit source.
@@ -798,6 +830,17 @@ fn transport_light(
             })
         })
         .collect();
+    // On the GPU, each operator's hierarchy uploaded once.
+    let uploaded = match on {
+        Some(on) => Some(
+            operators
+                .iter()
+                .map(|op| on.solver.upload(on.gpu, op))
+                .collect::<Result<Vec<_>, _>>()
+                .map_err(|e| FrameError(format!("the transport's acceleration on the GPU: {e}")))?,
+        ),
+        None => None,
+    };
     let mut q0 = vec![0.0; n];
     let accelerate = |old: &[[f64; transport::PER_VOXEL]],
                       new: &mut [[f64; transport::PER_VOXEL]]| {
@@ -806,11 +849,16 @@ fn transport_light(
             for (i, q) in q0.iter_mut().enumerate() {
                 *q = medium.sca[i][c] * (new[i][o] - old[i][o]) / root;
             }
-            match operator.solve_isotropic(
-                &q0,
-                ACCELERATION_TOLERANCE,
-                settings.max_diffusion_iterations,
-            ) {
+            let (tolerance, cap) = (ACCELERATION_TOLERANCE, settings.max_diffusion_iterations);
+            let solved = match &uploaded {
+                Some(u) => u[c]
+                    .solve(&operator.isotropic(&q0), tolerance, cap)
+                    .map_err(|e| e.to_string()),
+                None => operator
+                    .solve_isotropic(&q0, tolerance, cap)
+                    .map_err(|e| e.to_string()),
+            };
+            match solved {
                 Ok(s) => new
                     .par_iter_mut()
                     .zip(&s.i0)
@@ -821,14 +869,34 @@ fn transport_light(
     };
     let dirs = crate::lattice::fibonacci_directions(settings.directions);
     let cap = settings.max_transport_iterations;
-    let (m, report) = transport::solve(
-        grid,
-        &medium,
-        start,
-        &dirs,
-        (settings.transport_tolerance, cap),
-        accelerate,
-    );
+    let limits = (settings.transport_tolerance, cap);
+    // On the GPU when asked and the adapter can hold the sweeps; `auto` falls back to the CPU
+    // (and says why), `gpu` fails naming the limit.
+    let sweeps = match on {
+        None => None,
+        Some(on) => match on.sweeper.prepare(on.gpu, grid, &medium, &dirs) {
+            Ok(sweeps) => Some(Ok(sweeps)),
+            Err(e) if settings.per_sun == super::PerSun::Gpu => {
+                return Err(FrameError(e.to_string()));
+            }
+            Err(e) => Some(Err(e.to_string())),
+        },
+    };
+    let (on, (m, report)) = match sweeps {
+        Some(Ok(sweeps)) => (
+            sweeps.describe(),
+            transport::solve_with(start, limits, |m| sweeps.round(m), accelerate)
+                .map_err(|e| FrameError(format!("the transport's sweeps on the GPU: {e}")))?,
+        ),
+        Some(Err(refused)) => (
+            format!("the CPU ({refused})"),
+            transport::solve(grid, &medium, start, &dirs, limits, accelerate),
+        ),
+        None => (
+            "the CPU".into(),
+            transport::solve(grid, &medium, start, &dirs, limits, accelerate),
+        ),
+    };
     if let Some(e) = failed {
         return Err(FrameError(format!("the transport's acceleration: {e}")));
     }
@@ -843,6 +911,7 @@ fn transport_light(
         )));
     }
     Ok(Transported {
+        on,
         moments: match &coarse {
             None => m,
             Some(c) => c.interpolate(&m),
@@ -856,6 +925,8 @@ fn transport_light(
 /// What [`transport_light`] found: the moments per voxel, the iteration's report, the energy
 /// balance per channel and the grid it ran on.
 struct Transported {
+    /// Where the sweeps ran.
+    on: String,
     moments: Vec<[f64; transport::PER_VOXEL]>,
     report: transport::Report,
     balance: [transport::Balance; 3],

@@ -82,6 +82,10 @@ pub fn source() -> String {
 pub struct Renderer {
     layout: wgpu::BindGroupLayout,
     pipeline: wgpu::ComputePipeline,
+    /// The transport's sweeps ([`super::sweep_gpu`]), for the lighting.
+    pub sweeper: super::sweep_gpu::Sweeper,
+    /// The diffusion solves ([`crate::diffusion_gpu`]), for the lighting.
+    pub solver: crate::diffusion_gpu::Solver,
 }
 
 /// Per field, a per-channel quantity as the uniform's rows (zero past the fields).
@@ -108,7 +112,12 @@ impl Renderer {
             &["gather"],
         );
         let [pipeline] = <[_; 1]>::try_from(pipelines).expect("one pipeline");
-        Self { layout, pipeline }
+        Self {
+            layout,
+            pipeline,
+            sweeper: super::sweep_gpu::Sweeper::new(gpu),
+            solver: crate::diffusion_gpu::Solver::new(gpu),
+        }
     }
 
     /// Step 4 of the model for `frame` from `lighting` ([`super::cpu::light`] of a frame with

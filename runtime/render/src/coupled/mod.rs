@@ -77,6 +77,7 @@
 
 pub mod cpu;
 pub mod gpu;
+pub mod sweep_gpu;
 pub mod transport;
 
 use std::time::Instant;
@@ -173,6 +174,32 @@ pub enum Diffuse {
     Diffusion,
 }
 
+/// Where a GPU render's per-sun passes run (the transport's sweeps, [`sweep_gpu`], and the
+/// diffusion solves, [`crate::diffusion_gpu`]); a CPU render runs them on the CPU.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum PerSun {
+    /// On the GPU when the adapter is one, on the CPU when it emulates one on the CPU
+    /// (lavapipe, where they took several times the CPU reference's time, docs/rendering.md).
+    #[default]
+    Auto,
+    /// On the GPU, whatever the adapter.
+    Gpu,
+    /// On the CPU.
+    Cpu,
+}
+
+impl PerSun {
+    /// Whether a GPU render runs them on `gpu`.
+    pub fn on_gpu(self, gpu: &Gpu) -> bool {
+        match self {
+            PerSun::Auto => gpu.adapter.get_info().device_type != wgpu::DeviceType::Cpu,
+            PerSun::Gpu => true,
+            PerSun::Cpu => false,
+        }
+    }
+}
+
 /// The model's settings, `[render.coupled]`.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -203,6 +230,10 @@ pub struct Settings {
     /// that leaves the transport at least [`AUTO_TRANSPORT_VOXELS`] voxels along the grid's
     /// longest side.
     pub transport_coarsening: Option<usize>,
+    /// Where a GPU render's per-sun passes (the transport's sweeps, the diffusion solves)
+    /// run: "auto" (the default: on the GPU unless the adapter is a CPU emulation such as
+    /// lavapipe), "gpu" or "cpu".
+    pub per_sun: PerSun,
 }
 
 impl Default for Settings {
@@ -218,6 +249,7 @@ impl Default for Settings {
             transport_tolerance: 0.01,
             max_transport_iterations: 40,
             transport_coarsening: None,
+            per_sun: PerSun::Auto,
         }
     }
 }
@@ -329,7 +361,12 @@ impl Model for Coupled {
         tables: &GpuTables,
     ) -> Result<Rendered, RenderError> {
         let (lighting, reused) = crate::relight::lit(job.lighting, job.frame, s, || {
-            cpu::light_with(job.tables, job.frame, s, job.progress)
+            let on = s.per_sun.on_gpu(gpu).then_some(cpu::OnGpu {
+                gpu,
+                sweeper: &renderer.sweeper,
+                solver: &renderer.solver,
+            });
+            cpu::light_on(job.tables, job.frame, s, job.progress, on)
         })?;
         // The transport's moments take 24 rows of 16 bytes a voxel: past the adapter's
         // storage-binding limit the view is gathered on the CPU (same image, said so).
@@ -370,7 +407,8 @@ fn rendered(
     (frame, settings): (&Frame, &Settings),
 ) -> Rendered {
     let summary = format!(
-        "beam + δ-scaled diffusion (lighting on the CPU, {} threads; gather on {on}): {}×{}, \
+        "beam + δ-scaled diffusion (lighting on the CPU, {} threads, but where the transport \
+         says; gather on {on}): {}×{}, \
          grid {:?}: beam {:.2} s, diffusion {:.2} s ({} unknowns, {} levels, {:?} CG iterations to residuals \
          {:.1e}/{:.1e}/{:.1e}), {}gather {gather_s:.2} s; of the sunlight entering (green): \
          {:.1} % leaves in the buffer, {:.1} % is absorbed from it, {:.1} % feeds the \
@@ -389,11 +427,12 @@ fn rendered(
         report.residual[2],
         if report.transport_iterations > 0 {
             format!(
-                "transport {:.2} s ({} directions on a grid {:?}, {} iterations to a change \
-                 of {:.1e}), ",
+                "transport {:.2} s ({} directions on a grid {:?}, swept on {}, {} iterations \
+                 to a change of {:.1e}), ",
                 report.transport_s,
                 settings.directions,
                 report.transport_dims,
+                report.transport_on,
                 report.transport_iterations,
                 report.transport_change
             )

@@ -85,20 +85,20 @@ pub fn scattered(m: &[f64], chi: &[f64; DEGREE + 1], y: &[f64; HARMONICS]) -> f6
 }
 
 /// One direction of the transport's set: its harmonics and its step between layers.
-struct Ordinate {
+pub(crate) struct Ordinate {
     /// Y_lm(ω), padded with zeros to [`PADDED`].
-    y: [f64; PADDED],
+    pub(crate) y: [f64; PADDED],
     /// The point one layer back, in voxel units along the layer's two axes.
-    shift: (f64, f64),
+    pub(crate) shift: (f64, f64),
     /// The path length between two layers (m).
-    ds: f64,
+    pub(crate) ds: f64,
 }
 
 /// Directions that share a sweep order: the axis each travels along most, and its sign.
-struct Group {
-    axis: usize,
-    forward: bool,
-    ordinates: Vec<Ordinate>,
+pub(crate) struct Group {
+    pub(crate) axis: usize,
+    pub(crate) forward: bool,
+    pub(crate) ordinates: Vec<Ordinate>,
 }
 
 /// Directions stepped side by side in the sweeps' inner loop (one AVX-512 register of f64).
@@ -147,7 +147,7 @@ const FACTORIALS: [f64; 12] = [
 
 /// The two axes across a layer normal to `axis`, the one whose voxels lie closer in memory
 /// first (x before y before z), so that a layer's voxels are visited in memory order.
-fn layer_axes(axis: usize) -> (usize, usize) {
+pub(crate) fn layer_axes(axis: usize) -> (usize, usize) {
     match axis {
         0 => (1, 2),
         1 => (0, 2),
@@ -156,7 +156,7 @@ fn layer_axes(axis: usize) -> (usize, usize) {
 }
 
 /// `dirs` grouped by the axis they travel along most and its sign (the six sweep orders).
-fn groups(grid: &DensityGrid, dirs: &[DVec3]) -> Vec<Group> {
+pub(crate) fn groups(grid: &DensityGrid, dirs: &[DVec3]) -> Vec<Group> {
     let h = crate::lattice::voxel_size(grid);
     let mut groups: Vec<Group> = Vec::new();
     for &w in dirs {
@@ -451,6 +451,23 @@ fn sweep_round(
     next
 }
 
+/// One round of sweeps over every direction of `dirs` with the emission from moments `m`: the
+/// new moments, unaccelerated (what [`solve`] does per iteration before the acceleration).
+pub fn sweep_once(
+    grid: &DensityGrid,
+    medium: &Medium,
+    m: &[[f64; PER_VOXEL]],
+    dirs: &[DVec3],
+) -> Vec<[f64; PER_VOXEL]> {
+    sweep_round(
+        grid,
+        medium,
+        m,
+        &groups(grid, dirs),
+        4.0 * PI / dirs.len() as f64,
+    )
+}
+
 /// Source iteration from `start` (moments per voxel, [`PER_VOXEL`]): each round sweeps every
 /// direction of `dirs` with the source σ′_s (p′ ∗ I) + Q from the previous round's moments,
 /// gathers the new moments (equal weights 4π/N), and lets `accelerate` correct them from the
@@ -461,15 +478,32 @@ pub fn solve(
     medium: &Medium,
     start: Vec<[f64; PER_VOXEL]>,
     dirs: &[DVec3],
-    (tolerance, max_iterations): (f64, usize),
-    mut accelerate: impl FnMut(&[[f64; PER_VOXEL]], &mut [[f64; PER_VOXEL]]),
+    limits: (f64, usize),
+    accelerate: impl FnMut(&[[f64; PER_VOXEL]], &mut [[f64; PER_VOXEL]]),
 ) -> (Vec<[f64; PER_VOXEL]>, Report) {
     let weight = 4.0 * PI / dirs.len() as f64;
     let groups = groups(grid, dirs);
+    let round = |m: &[[f64; PER_VOXEL]]| {
+        Ok::<_, std::convert::Infallible>(sweep_round(grid, medium, m, &groups, weight))
+    };
+    match solve_with(start, limits, round, accelerate) {
+        Ok(solved) => solved,
+        Err(never) => match never {},
+    }
+}
+
+/// [`solve`]'s iteration with the sweeps of a round done by `round` (the CPU's
+/// [`sweep_round`], or the GPU's [`super::sweep_gpu::Sweeps::round`]), which may fail.
+pub fn solve_with<E>(
+    start: Vec<[f64; PER_VOXEL]>,
+    (tolerance, max_iterations): (f64, usize),
+    mut round: impl FnMut(&[[f64; PER_VOXEL]]) -> Result<Vec<[f64; PER_VOXEL]>, E>,
+    mut accelerate: impl FnMut(&[[f64; PER_VOXEL]], &mut [[f64; PER_VOXEL]]),
+) -> Result<(Vec<[f64; PER_VOXEL]>, Report), E> {
     let mut m = start;
     let mut report = Report::default();
     for _ in 0..max_iterations {
-        let mut next = sweep_round(grid, medium, &m, &groups, weight);
+        let mut next = round(&m)?;
         accelerate(&m, &mut next);
         let (mut d, mut t) = (0.0, 0.0);
         for (a, b) in next.iter().zip(&m) {
@@ -483,7 +517,7 @@ pub fn solve(
             break;
         }
     }
-    (m, report)
+    Ok((m, report))
 }
 
 /// A coarser grid for the transport: blocks of `factor`³ voxels of a fine grid (the last

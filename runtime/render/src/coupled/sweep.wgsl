@@ -1,0 +1,206 @@
+// One layer of the discrete-ordinates transport's sweeps (render::coupled::transport::sweep_round)
+// on the GPU, in f32: one workgroup per voxel of the layer, its invocations the directions of
+// one group (the directions that travel most along the same axis and sign). Each voxel's
+// emission harmonics are formed once in workgroup memory (transport::emission), each direction
+// steps its radiance from the layer behind (lattice::upwind, transport::advance), and the
+// workgroup projects the radiances onto the harmonics and adds them to the round's moments.
+
+struct Params {
+    dims: vec4<u32>,         // nx, ny, nz, moments' stride per voxel (floats)
+    weight: vec4<f32>,       // x = the quadrature weight 4π/N
+    y_sun: array<vec4<f32>, 7>, // Y_k(l) for the sun's direction of travel l, k < 25
+}
+
+// Per dispatch (a dynamic offset): the layer's axis a and across-axes b, c, its index k,
+// whether it is the group's first layer, the group's first ordinate and its count, and which
+// half of the state buffer holds the layer behind.
+struct Step {
+    axes: vec4<u32>,         // a, b, c, k
+    group: vec4<u32>,        // first layer (1/0), first ordinate, count, parity
+}
+
+@group(0) @binding(0) var<uniform> params: Params;
+@group(0) @binding(1) var<uniform> stp: Step;
+// Per voxel MEDIUM_ROWS rows: σ′_t (rgb), σ′_s (rgb), p′'s χ′_0..3 per channel (three rows),
+// χ′_4 per channel, the sunlit source q (rgb), the skylit source (q0, q1 x, y, z) per channel.
+@group(0) @binding(2) var<storage, read> medium: array<vec4<f32>>;
+@group(0) @binding(3) var<storage, read> moments: array<f32>;
+@group(0) @binding(4) var<storage, read_write> next: array<f32>;
+// Per ordinate ORD_ROWS rows: Y_k(ω) (seven rows, zero past k = 24), then (shift u, shift v,
+// ds, 0).
+@group(0) @binding(5) var<storage, read> ordinates: array<vec4<f32>>;
+// Per (layer voxel, direction of the group) three rows, in two halves (the layer behind, this
+// one): I (rgb), σ′_t (rgb), S (rgb) — lattice's upwind state of sweep_round.
+@group(0) @binding(6) var<storage, read_write> state: array<vec4<f32>>;
+
+const MEDIUM_ROWS: u32 = 10u;
+const ORD_ROWS: u32 = 8u;
+const HARMONICS: u32 = 25u;
+const WG: u32 = 16u;
+const MAX_GROUP: u32 = 512u;
+const PI: f32 = 3.14159265358979;
+
+// The emission harmonics per channel (transport::emission).
+var<workgroup> emission: array<f32, 75>;
+// weight × I per channel and direction.
+var<workgroup> weighted: array<f32, 1536>;
+
+fn degree(k: u32) -> u32 {
+    if (k == 0u) { return 0u; }
+    if (k < 4u) { return 1u; }
+    if (k < 9u) { return 2u; }
+    if (k < 16u) { return 3u; }
+    return 4u;
+}
+
+fn chi(i: u32, c: u32, l: u32) -> f32 {
+    if (l < 4u) {
+        return medium[i * MEDIUM_ROWS + 2u + c][l];
+    }
+    return medium[i * MEDIUM_ROWS + 5u][c];
+}
+
+fn y_of(d: u32, k: u32) -> f32 {
+    return ordinates[d * ORD_ROWS + k / 4u][k % 4u];
+}
+
+// The state (9 floats as three rows) of direction slot `j` at layer voxel (u, v) in half `h`.
+fn state_index(h: u32, u: u32, v: u32, j: u32, nb: u32, nc: u32, count: u32) -> u32 {
+    return ((h * nb * nc + u + v * nb) * count + j) * 3u;
+}
+
+// transport::advance. In f32, 1 − q and q − e lose their digits for a thin step (1 − q ≈ τ/2
+// against an ulp of 6·10⁻⁸, times A = S/σ′, large where σ′ is small): below τ = 10⁻² the
+// step is the same expression expanded in τ, (A + B)(q − e) = (S + S_back) ds (q − e)/τ and
+// A((1 − q) − (q − e)), whose series are exact to τ³.
+fn advance(i_back: f32, ds: f32, tau: f32, e: f32, s_here: f32, ext_here: f32, s_back: f32) -> f32 {
+    let mean_ext = tau / ds;
+    if (tau > 1e-2) {
+        let total = (s_here + s_back) / mean_ext;
+        let a = s_here / max(ext_here, mean_ext);
+        let q = (1.0 - e) / tau;
+        return i_back * e + a * (1.0 - q) + (total - a) * (q - e);
+    }
+    let both = (s_here + s_back) * ds * (0.5 - tau / 3.0 + tau * tau / 8.0);
+    var thick = 0.0;
+    if (tau > 0.0) {
+        thick = s_here / max(ext_here, mean_ext) * tau * tau * (1.0 / 6.0 - tau / 12.0);
+    }
+    return i_back * e + both + thick;
+}
+
+@compute @workgroup_size(16)
+fn sweep(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) t: u32) {
+    var dims = params.dims;
+    let a = stp.axes.x;
+    let b = stp.axes.y;
+    let c = stp.axes.z;
+    let k = stp.axes.w;
+    let nb = dims[b];
+    let nc = dims[c];
+    let ub = wg.x;
+    let vc = wg.y;
+    let first_layer = stp.group.x == 1u;
+    let first = stp.group.y;
+    let count = stp.group.z;
+    let behind = stp.group.w;
+    var stride = vec3<u32>(1u, dims.x, dims.x * dims.y);
+    let i = k * stride[a] + ub * stride[b] + vc * stride[c];
+    let base = i * MEDIUM_ROWS;
+    var ext = medium[base].xyz;
+    let stride_m = dims.w;
+    // The emission harmonics, one per invocation (transport::emission).
+    for (var n = t; n < 75u; n = n + WG) {
+        let ch = n / HARMONICS;
+        let kk = n % HARMONICS;
+        let sca = medium[base + 1u][ch];
+        let sun = medium[base + 6u][ch];
+        let y_sun = params.y_sun[kk / 4u][kk % 4u];
+        var s = chi(i, ch, degree(kk)) * (sca * moments[i * stride_m + n] + 4.0 * PI * sun * y_sun);
+        let sky = medium[base + 7u + ch];
+        let y1 = 0.4886025119029199;
+        if (kk == 0u) {
+            s = s + sqrt(4.0 * PI) * sky.x;
+        } else if (kk == 1u) {
+            s = s + 3.0 * sky.z / y1;
+        } else if (kk == 2u) {
+            s = s + 3.0 * sky.w / y1;
+        } else if (kk == 3u) {
+            s = s + 3.0 * sky.y / y1;
+        }
+        emission[n] = s;
+    }
+    workgroupBarrier();
+    let weight = params.weight.x;
+    for (var j = t; j < count; j = j + WG) {
+        let d = first + j;
+        var s_here = vec3<f32>(0.0);
+        for (var kk = 0u; kk < HARMONICS; kk = kk + 1u) {
+            let y = y_of(d, kk);
+            s_here = s_here + y * vec3<f32>(emission[kk], emission[HARMONICS + kk],
+                                            emission[2u * HARMONICS + kk]);
+        }
+        let o = ordinates[d * ORD_ROWS + 7u];
+        let ds = o.z;
+        // The state one layer back (lattice::upwind; clear air outside: zero).
+        var back_i = vec3<f32>(0.0);
+        var back_ext = vec3<f32>(0.0);
+        var back_s = vec3<f32>(0.0);
+        if (!first_layer) {
+            let u = f32(ub) + o.x;
+            let v = f32(vc) + o.y;
+            let fb = f32(nb);
+            let fc = f32(nc);
+            let share_u = clamp(max(-u, u - (fb - 1.0)) / 0.5, 0.0, 1.0);
+            let share_v = clamp(max(-v, v - (fc - 1.0)) / 0.5, 0.0, 1.0);
+            let kept = (1.0 - share_u) * (1.0 - share_v);
+            if (kept > 0.0) {
+                let uc = clamp(u, 0.0, fb - 1.0);
+                let vcl = clamp(v, 0.0, fc - 1.0);
+                let u0 = u32(floor(uc));
+                let v0 = u32(floor(vcl));
+                let u1 = min(u0 + 1u, nb - 1u);
+                let v1 = min(v0 + 1u, nc - 1u);
+                let s = uc - f32(u0);
+                let tt = vcl - f32(v0);
+                var w = array<f32, 4>((1.0 - s) * (1.0 - tt), s * (1.0 - tt), (1.0 - s) * tt, s * tt);
+                var us = array<u32, 4>(u0, u1, u0, u1);
+                var vs = array<u32, 4>(v0, v0, v1, v1);
+                for (var q = 0u; q < 4u; q = q + 1u) {
+                    let at = state_index(behind, us[q], vs[q], j, nb, nc, count);
+                    back_i = back_i + w[q] * state[at].xyz;
+                    back_ext = back_ext + w[q] * state[at + 1u].xyz;
+                    back_s = back_s + w[q] * state[at + 2u].xyz;
+                }
+                back_i = kept * back_i;
+                back_ext = kept * back_ext;
+                back_s = kept * back_s;
+            }
+        }
+        var radiance = vec3<f32>(0.0);
+        for (var ch = 0u; ch < 3u; ch = ch + 1u) {
+            let mean_ext = 0.5 * (ext[ch] + back_ext[ch]);
+            let tau = mean_ext * ds;
+            let e = exp(-min(tau, 700.0));
+            radiance[ch] = advance(back_i[ch], ds, tau, e, s_here[ch], ext[ch], back_s[ch]);
+        }
+        let at = state_index(1u - behind, ub, vc, j, nb, nc, count);
+        state[at] = vec4<f32>(radiance, 0.0);
+        state[at + 1u] = vec4<f32>(ext, 0.0);
+        state[at + 2u] = vec4<f32>(s_here, 0.0);
+        for (var ch = 0u; ch < 3u; ch = ch + 1u) {
+            weighted[ch * MAX_GROUP + j] = weight * radiance[ch];
+        }
+    }
+    workgroupBarrier();
+    // Σ_d weight I_d Y_k(ω_d) per channel, added to the round's moments.
+    for (var n = t; n < 75u; n = n + WG) {
+        let ch = n / HARMONICS;
+        let kk = n % HARMONICS;
+        var sum = 0.0;
+        for (var j = 0u; j < count; j = j + 1u) {
+            sum = sum + weighted[ch * MAX_GROUP + j] * y_of(first + j, kk);
+        }
+        next[i * stride_m + n] = next[i * stride_m + n] + sum;
+    }
+}

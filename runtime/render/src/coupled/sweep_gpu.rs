@@ -1,0 +1,366 @@
+//! The discrete-ordinates transport's sweeps on wgpu (`sweep.wgsl`): a round of
+//! [`super::transport`]'s source iteration — every direction swept upwind through the grid,
+//! layer by layer, the radiances projected onto the spherical harmonics — with one dispatch
+//! per layer of each group of directions (one workgroup per voxel of the layer, one
+//! invocation per direction), in f32. The iteration around it (the diffusion synthetic
+//! acceleration, the convergence test) stays on the CPU in f64: each round uploads the
+//! moments and reads the new ones back ([`super::transport::solve_with`]).
+
+use glam::DVec3;
+
+use runtime::gpu::{Gpu, read_back};
+
+use super::transport::{HARMONICS, Medium, PER_VOXEL, groups, harmonics, layer_axes};
+use crate::DensityGrid;
+use crate::gpu::{RenderError, entry, filled, storage};
+
+/// The sweeps' WGSL.
+pub const SWEEP_WGSL: &str = include_str!("sweep.wgsl");
+
+/// Floats per voxel of the moments on the GPU (75, padded to whole rows of four).
+const STRIDE: usize = PER_VOXEL.div_ceil(4) * 4;
+/// Rows of four per voxel of the medium (`sweep.wgsl`'s MEDIUM_ROWS).
+const MEDIUM_ROWS: usize = 10;
+/// Rows of four per ordinate (`sweep.wgsl`'s ORD_ROWS).
+const ORD_ROWS: usize = 8;
+/// The most directions one group may hold (`sweep.wgsl`'s MAX_GROUP, its workgroup memory).
+pub const MAX_GROUP: usize = 512;
+/// Bytes between two dispatches' [`Step`]s in their uniform buffer (wgpu's largest required
+/// dynamic-offset alignment).
+const STEP_ALIGN: u64 = 256;
+
+runtime::uniform! {
+    /// `Params` of `sweep.wgsl`.
+    pub struct SweepParams as "Params" {
+        /// nx, ny, nz, floats per voxel of the moments.
+        pub dims: [u32; 4],
+        /// x: the quadrature weight 4π/N.
+        pub weight: [f32; 4],
+        /// Y_k(l) of the sun's direction of travel, k < 25 (zero past).
+        pub y_sun: [[f32; 4]; 7],
+    }
+}
+
+/// The sweeps' pipeline, built once per adapter.
+pub struct Sweeper {
+    layout: wgpu::BindGroupLayout,
+    pipeline: wgpu::ComputePipeline,
+}
+
+impl Sweeper {
+    /// Compiles `sweep.wgsl`.
+    pub fn new(gpu: &Gpu) -> Self {
+        use wgpu::BufferBindingType::{Storage, Uniform};
+        let device = &gpu.device;
+        let entries = [
+            entry(0, Uniform, false),
+            entry(1, Uniform, true),
+            entry(2, Storage { read_only: true }, false),
+            entry(3, Storage { read_only: true }, false),
+            entry(4, Storage { read_only: false }, false),
+            entry(5, Storage { read_only: true }, false),
+            entry(6, Storage { read_only: false }, false),
+        ];
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("photometeor transport sweep layout"),
+            entries: &entries,
+        });
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("photometeor transport sweep"),
+            source: wgpu::ShaderSource::Wgsl(SWEEP_WGSL.into()),
+        });
+        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("photometeor transport sweep pipeline layout"),
+            bind_group_layouts: &[Some(&layout)],
+            immediate_size: 0,
+        });
+        let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some("sweep"),
+            layout: Some(&pipeline_layout),
+            module: &module,
+            entry_point: Some("sweep"),
+            compilation_options: Default::default(),
+            cache: None,
+        });
+        Self { layout, pipeline }
+    }
+
+    /// The buffers of one transport solve: `medium` on `grid` with the directions `dirs`.
+    /// Refused, naming the value, when a group of directions exceeds [`MAX_GROUP`], a layer
+    /// exceeds the adapter's workgroups per dimension, or a buffer its storage-binding limit.
+    pub fn prepare<'a>(
+        &'a self,
+        gpu: &'a Gpu,
+        grid: &DensityGrid,
+        medium: &Medium,
+        dirs: &[DVec3],
+    ) -> Result<Sweeps<'a>, RenderError> {
+        let device = &gpu.device;
+        let limits = device.limits();
+        let dims = grid.dims;
+        let voxels = medium.ext.len();
+        let groups = groups(grid, dirs);
+        if let Some(g) = groups.iter().find(|g| g.ordinates.len() > MAX_GROUP) {
+            return Err(gpu_refusal(format!(
+                "the transport's GPU sweeps hold at most {MAX_GROUP} directions per sweep order; \
+                 {} of the {} directions travel mostly along axis {}: lower [render.coupled] \
+                 directions",
+                g.ordinates.len(),
+                dirs.len(),
+                g.axis
+            )));
+        }
+        if let Some(&n) = dims
+            .iter()
+            .find(|&&n| n as u32 > limits.max_compute_workgroups_per_dimension)
+        {
+            return Err(gpu_refusal(format!(
+                "the transport's grid has {n} voxels along an axis, more than the adapter's {} \
+                 workgroups per dimension",
+                limits.max_compute_workgroups_per_dimension
+            )));
+        }
+        // The medium's rows (sweep.wgsl's MEDIUM_ROWS).
+        let mut rows: Vec<[f32; 4]> = Vec::with_capacity(MEDIUM_ROWS * voxels);
+        let f = |v: [f64; 3]| [v[0] as f32, v[1] as f32, v[2] as f32, 0.0];
+        for i in 0..voxels {
+            rows.push(f(medium.ext[i]));
+            rows.push(f(medium.sca[i]));
+            for c in 0..3 {
+                let chi = &medium.chi[i][c];
+                rows.push([chi[0], chi[1], chi[2], chi[3]].map(|v| v as f32));
+            }
+            rows.push(f(std::array::from_fn(|c| medium.chi[i][c][4])));
+            rows.push(f(medium.sun[i]));
+            for c in 0..3 {
+                rows.push(medium.sky[i][c].map(|v| v as f32));
+            }
+        }
+        // The ordinates, group after group, and one step per layer of each group.
+        let mut ordinates: Vec<[f32; 4]> = Vec::with_capacity(ORD_ROWS * dirs.len());
+        let mut steps: Vec<u8> = Vec::new();
+        let mut layers: Vec<(usize, usize)> = Vec::new();
+        let mut largest_state = 0usize;
+        for g in &groups {
+            let first = ordinates.len() / ORD_ROWS;
+            for o in &g.ordinates {
+                ordinates.extend((0..7).map(|r| {
+                    std::array::from_fn(|j| {
+                        let k = 4 * r + j;
+                        if k < HARMONICS { o.y[k] as f32 } else { 0.0 }
+                    })
+                }));
+                ordinates.push([o.shift.0 as f32, o.shift.1 as f32, o.ds as f32, 0.0]);
+            }
+            let (b, c) = layer_axes(g.axis);
+            let count = g.ordinates.len();
+            largest_state = largest_state.max(2 * dims[b] * dims[c] * count * 3);
+            let order: Vec<usize> = if g.forward {
+                (0..dims[g.axis]).collect()
+            } else {
+                (0..dims[g.axis]).rev().collect()
+            };
+            for (s, &k) in order.iter().enumerate() {
+                let words: [u32; 8] = [
+                    g.axis as u32,
+                    b as u32,
+                    c as u32,
+                    k as u32,
+                    u32::from(s == 0),
+                    first as u32,
+                    count as u32,
+                    (s % 2) as u32,
+                ];
+                let mut block = bytemuck::cast_slice::<u32, u8>(&words).to_vec();
+                block.resize(STEP_ALIGN as usize, 0);
+                steps.extend(block);
+                layers.push((dims[b], dims[c]));
+            }
+        }
+        let moments_bytes = (4 * STRIDE * voxels) as u64;
+        let state_bytes = (16 * largest_state.max(1)) as u64;
+        let medium_bytes = (16 * rows.len()) as u64;
+        let limit = limits.max_storage_buffer_binding_size;
+        for (what, bytes) in [
+            ("moments", moments_bytes),
+            ("medium", medium_bytes),
+            ("layer state", state_bytes),
+        ] {
+            if bytes > limit {
+                return Err(gpu_refusal(format!(
+                    "the transport's {what} take {} MiB on a {:?} grid, more than {}'s \
+                     storage-binding limit of {} MiB: raise [render.coupled] \
+                     transport_coarsening or lower [render] grid_resolution",
+                    bytes >> 20,
+                    dims,
+                    gpu.describe(),
+                    limit >> 20
+                )));
+            }
+        }
+        let y_sun = harmonics(medium.l);
+        let params = SweepParams {
+            dims: [
+                dims[0] as u32,
+                dims[1] as u32,
+                dims[2] as u32,
+                STRIDE as u32,
+            ],
+            weight: [
+                (4.0 * std::f64::consts::PI / dirs.len() as f64) as f32,
+                0.0,
+                0.0,
+                0.0,
+            ],
+            y_sun: std::array::from_fn(|r| {
+                std::array::from_fn(|j| y_sun.get(4 * r + j).map_or(0.0, |&v| v as f32))
+            }),
+        };
+        use wgpu::BufferUsages as U;
+        let params = filled(
+            device,
+            "photometeor sweep params",
+            bytemuck::bytes_of(&params),
+            U::UNIFORM,
+        );
+        let steps = filled(device, "photometeor sweep steps", &steps, U::UNIFORM);
+        let medium_buffer = filled(
+            device,
+            "photometeor sweep medium",
+            bytemuck::cast_slice(&rows),
+            U::STORAGE,
+        );
+        let ordinates = filled(
+            device,
+            "photometeor sweep ordinates",
+            bytemuck::cast_slice(&ordinates),
+            U::STORAGE,
+        );
+        let moments = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("photometeor sweep moments"),
+            size: moments_bytes,
+            usage: U::STORAGE | U::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let next = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("photometeor sweep next"),
+            size: moments_bytes,
+            usage: U::STORAGE | U::COPY_SRC | U::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let state = storage(device, "photometeor sweep state", state_bytes, false);
+        fn whole(b: &wgpu::Buffer) -> wgpu::BindingResource<'_> {
+            b.as_entire_binding()
+        }
+        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("photometeor sweep bindings"),
+            layout: &self.layout,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: whole(&params),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                        buffer: &steps,
+                        offset: 0,
+                        size: wgpu::BufferSize::new(32),
+                    }),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: whole(&medium_buffer),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 3,
+                    resource: whole(&moments),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 4,
+                    resource: whole(&next),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 5,
+                    resource: whole(&ordinates),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 6,
+                    resource: whole(&state),
+                },
+            ],
+        });
+        Ok(Sweeps {
+            gpu,
+            pipeline: &self.pipeline,
+            bind_group,
+            moments,
+            next,
+            layers,
+            voxels,
+            _keep: [params, steps, medium_buffer, ordinates, state],
+        })
+    }
+}
+
+/// A refusal of the GPU sweeps, naming the value.
+fn gpu_refusal(message: String) -> RenderError {
+    RenderError::Frame(crate::FrameError(message))
+}
+
+/// One transport solve's buffers on the GPU ([`Sweeper::prepare`]).
+pub struct Sweeps<'a> {
+    gpu: &'a Gpu,
+    pipeline: &'a wgpu::ComputePipeline,
+    bind_group: wgpu::BindGroup,
+    moments: wgpu::Buffer,
+    next: wgpu::Buffer,
+    /// Per dispatch, the layer's extent (its workgroups).
+    layers: Vec<(usize, usize)>,
+    voxels: usize,
+    /// Buffers the bind group reads.
+    _keep: [wgpu::Buffer; 5],
+}
+
+impl Sweeps<'_> {
+    /// The adapter the sweeps run on.
+    pub fn describe(&self) -> String {
+        self.gpu.describe()
+    }
+
+    /// One round of sweeps from moments `m`: the new moments, as
+    /// [`super::transport::sweep_once`] computes them (in f32).
+    pub fn round(&self, m: &[[f64; PER_VOXEL]]) -> Result<Vec<[f64; PER_VOXEL]>, RenderError> {
+        let (device, queue) = (&self.gpu.device, &self.gpu.queue);
+        let mut data = vec![0f32; STRIDE * self.voxels];
+        for (to, from) in data.chunks_exact_mut(STRIDE).zip(m) {
+            for (t, f) in to.iter_mut().zip(from) {
+                *t = *f as f32;
+            }
+        }
+        queue.write_buffer(&self.moments, 0, bytemuck::cast_slice(&data));
+        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+            label: Some("photometeor sweeps"),
+        });
+        encoder.clear_buffer(&self.next, 0, None);
+        {
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("photometeor sweeps"),
+                timestamp_writes: None,
+            });
+            pass.set_pipeline(self.pipeline);
+            for (s, &(nb, nc)) in self.layers.iter().enumerate() {
+                pass.set_bind_group(0, &self.bind_group, &[(s as u64 * STEP_ALIGN) as u32]);
+                pass.dispatch_workgroups(nb as u32, nc as u32, 1);
+            }
+        }
+        queue.submit([encoder.finish()]);
+        let rows = read_back(self.gpu, &self.next, (4 * STRIDE * self.voxels) as u64)
+            .map_err(RenderError::from)?;
+        let floats: &[f32] = bytemuck::cast_slice(&rows);
+        Ok(floats
+            .chunks_exact(STRIDE)
+            .map(|v| std::array::from_fn(|k| f64::from(v[k])))
+            .collect())
+    }
+}

@@ -1,0 +1,581 @@
+//! The diffusion solve of [`crate::diffusion`] on wgpu (`diffusion.wgsl`): the same operator
+//! and multigrid hierarchy (assembled and coarsened on the CPU, uploaded once), conjugate
+//! gradients preconditioned by the same V-cycle (red-black Gauss–Seidel, the Galerkin coarse
+//! levels, the coarsest smoothed [`crate::diffusion::COARSEST_SWEEPS`] times), every vector
+//! operation a dispatch.
+//!
+//! f32 cannot take a relative residual much below 10⁻⁵, and the models ask for 10⁻⁶: the
+//! conjugate gradients run in f32 on the GPU to [`INNER_TOLERANCE`] for a correction e of
+//! A e = r, and an outer loop on the CPU in f64 adds it, x ← x + e, and forms the true residual
+//! r = b − A x (mixed-precision iterative refinement, Wilkinson 1963; Moler 1967), until
+//! ‖r‖/‖b‖ is below the tolerance. Each refinement gains about three digits. The iterations
+//! reported are the inner ones, the residual the outer f64 one. The scalars of each iteration
+//! (r·z, d·Ad, r·r) are summed per workgroup on the GPU and the partial sums on the CPU in
+//! f64.
+
+use std::time::Instant;
+
+use runtime::gpu::{Gpu, GpuError, read_back};
+
+use crate::diffusion::{COARSEST_SWEEPS, NotConverged, Operator, Solution, Stencil};
+use crate::gpu::entry;
+
+/// The inner solve's relative residual on the GPU (f32) per refinement.
+pub const INNER_TOLERANCE: f64 = 1e-3;
+
+/// The diffusion's WGSL.
+pub const DIFFUSION_WGSL: &str = include_str!("diffusion.wgsl");
+
+/// Invocations per workgroup and workgroups along x of a dispatch (`diffusion.wgsl`).
+const WG: usize = 64;
+const ROW: usize = 1024;
+/// Bytes between two dispatches' parameters (wgpu's largest required dynamic-offset alignment).
+const ALIGN: u64 = 256;
+
+/// The kernels of `diffusion.wgsl`, in [`KERNELS`]'s order.
+#[derive(Debug, Clone, Copy)]
+enum Kernel {
+    GaussSeidel,
+    Residual,
+    Restriction,
+    Prolong,
+    Zero,
+    Dots,
+    UpdateXr,
+    UpdateD,
+}
+
+const KERNELS: [&str; 8] = [
+    "gauss_seidel",
+    "residual",
+    "restriction",
+    "prolong",
+    "zero",
+    "dots",
+    "update_xr",
+    "update_d",
+];
+
+/// A solve that failed: it did not converge, or the device did.
+#[derive(Debug, thiserror::Error)]
+pub enum SolveError {
+    /// The iteration cap was reached.
+    #[error(transparent)]
+    NotConverged(#[from] NotConverged),
+    /// The device failed, or the problem exceeds its limits.
+    #[error(transparent)]
+    Gpu(#[from] GpuError),
+}
+
+/// The solver's pipelines, built once per adapter.
+pub struct Solver {
+    layout: wgpu::BindGroupLayout,
+    pipelines: Vec<wgpu::ComputePipeline>,
+}
+
+impl Solver {
+    /// Compiles `diffusion.wgsl`.
+    pub fn new(gpu: &Gpu) -> Self {
+        use wgpu::BufferBindingType::{Storage, Uniform};
+        let device = &gpu.device;
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("photometeor diffusion layout"),
+            entries: &[
+                entry(0, Uniform, true),
+                entry(1, Storage { read_only: true }, false),
+                entry(2, Storage { read_only: false }, false),
+                entry(3, Storage { read_only: false }, false),
+                entry(4, Storage { read_only: true }, false),
+            ],
+        });
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("photometeor diffusion"),
+            source: wgpu::ShaderSource::Wgsl(DIFFUSION_WGSL.into()),
+        });
+        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("photometeor diffusion pipeline layout"),
+            bind_group_layouts: &[Some(&layout)],
+            immediate_size: 0,
+        });
+        let pipelines = KERNELS
+            .iter()
+            .map(|name| {
+                device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                    label: Some(name),
+                    layout: Some(&pipeline_layout),
+                    module: &module,
+                    entry_point: Some(name),
+                    compilation_options: Default::default(),
+                    cache: None,
+                })
+            })
+            .collect();
+        Self { layout, pipelines }
+    }
+
+    /// `op`'s hierarchy on the GPU, ready for [`Uploaded::solve`].
+    pub fn upload<'a>(&'a self, gpu: &'a Gpu, op: &'a Operator) -> Result<Uploaded<'a>, GpuError> {
+        Uploaded::new(self, gpu, op)
+    }
+}
+
+/// One dispatch: its kernel, its parameters' slot and its workgroups.
+#[derive(Debug, Clone, Copy)]
+struct Call {
+    kernel: Kernel,
+    slot: u32,
+    groups: (u32, u32),
+}
+
+/// Workgroups for `n` invocations (x up to [`ROW`], the rest along y).
+fn groups(n: usize) -> (u32, u32) {
+    let wgs = n.div_ceil(WG).max(1);
+    (wgs.min(ROW) as u32, wgs.div_ceil(ROW) as u32)
+}
+
+/// The parameters of every dispatch, and the sequences of dispatches the solve submits.
+#[derive(Default)]
+struct Plan {
+    params: Vec<[u32; 16]>,
+}
+
+impl Plan {
+    fn call(&mut self, kernel: Kernel, words: [u32; 16], n: usize) -> Call {
+        self.params.push(words);
+        Call {
+            kernel,
+            slot: (self.params.len() - 1) as u32,
+            groups: groups(n),
+        }
+    }
+}
+
+/// Where a level's vectors live in the vector buffer.
+#[derive(Debug, Clone, Copy)]
+struct Level {
+    dims: [u32; 3],
+    n: u32,
+    /// First stencil row (= its offset in each per-level array).
+    o: u32,
+}
+
+/// An operator's hierarchy and the solve's vectors on the GPU.
+pub struct Uploaded<'a> {
+    gpu: &'a Gpu,
+    solver: &'a Solver,
+    op: &'a Operator,
+    bind_group: wgpu::BindGroup,
+    v: wgpu::Buffer,
+    partial: wgpu::Buffer,
+    coef: wgpu::Buffer,
+    _keep: [wgpu::Buffer; 2],
+    /// Workgroups of a level-0 vector operation (one partial sum each).
+    partials: usize,
+    /// Offsets in the vector buffer: x, d, Ad, r_0, z_0.
+    x: u64,
+    r0: u64,
+    n0: usize,
+    levels: usize,
+    first: Vec<Call>,
+    apply: Vec<Call>,
+    update_xr: Vec<Call>,
+    after_vcycle: Vec<Call>,
+    update_d: Vec<Call>,
+}
+
+impl<'a> Uploaded<'a> {
+    fn new(solver: &'a Solver, gpu: &'a Gpu, op: &'a Operator) -> Result<Self, GpuError> {
+        let device = &gpu.device;
+        let stencils: &[Stencil] = op.levels();
+        let mut levels = Vec::new();
+        let mut o = 0usize;
+        for s in stencils {
+            levels.push(Level {
+                dims: s.dims.map(|d| d as u32),
+                n: s.diag.len() as u32,
+                o: o as u32,
+            });
+            o += s.diag.len();
+        }
+        let total = o.max(1);
+        let n0 = stencils.first().map_or(0, |s| s.diag.len());
+        // Vector offsets: z, r, res per level; x, d, Ad of level 0.
+        let (z, r, res) = (0usize, total, 2 * total);
+        let (x, d, ad) = (3 * total, 3 * total + n0, 3 * total + 2 * n0);
+        let floats = 3 * total + 3 * n0.max(1);
+        let partials = groups(n0).0 as usize * groups(n0).1 as usize;
+        let limit = device.limits().max_storage_buffer_binding_size;
+        if (4 * floats) as u64 > limit {
+            return Err(GpuError::Limit {
+                what: "bytes of the diffusion's vectors (all levels)",
+                value: (4 * floats) as u64,
+                limit,
+            });
+        }
+        let mut rows: Vec<[f32; 4]> = Vec::with_capacity(total);
+        for s in stencils {
+            for i in 0..s.diag.len() {
+                rows.push([s.diag[i], s.w[0][i], s.w[1][i], s.w[2][i]].map(|v| v as f32));
+            }
+        }
+        if rows.is_empty() {
+            rows.push([0.0; 4]);
+        }
+        let mut plan = Plan::default();
+        let u = |v: usize| v as u32;
+        let words = |l: &Level, c: Option<&Level>, colour: u32, sel: [usize; 4]| -> [u32; 16] {
+            let c = c.copied().unwrap_or(*l);
+            [
+                l.dims[0],
+                l.dims[1],
+                l.dims[2],
+                colour,
+                c.dims[0],
+                c.dims[1],
+                c.dims[2],
+                c.n,
+                l.o,
+                c.o,
+                l.n,
+                0,
+                u(sel[0]),
+                u(sel[1]),
+                u(sel[2]),
+                u(sel[3]),
+            ]
+        };
+        // The V-cycle from level 0 (diffusion::Hierarchy::vcycle), z_l from r_l.
+        let mut vcycle = Vec::new();
+        for (k, l) in levels.iter().enumerate() {
+            let at = |base: usize, l: &Level| base + l.o as usize;
+            let n = l.n as usize;
+            vcycle.push(plan.call(Kernel::Zero, words(l, None, 0, [0, 0, at(z, l), 0]), n));
+            let gs = |plan: &mut Plan, colour: u32| {
+                plan.call(
+                    Kernel::GaussSeidel,
+                    words(l, None, colour, [at(r, l), 0, at(z, l), 0]),
+                    n,
+                )
+            };
+            if k + 1 == levels.len() {
+                for _ in 0..COARSEST_SWEEPS {
+                    for colour in [0, 1, 1, 0] {
+                        vcycle.push(gs(&mut plan, colour));
+                    }
+                }
+                break;
+            }
+            vcycle.push(gs(&mut plan, 0));
+            vcycle.push(gs(&mut plan, 1));
+            let c = &levels[k + 1];
+            vcycle.push(plan.call(
+                Kernel::Residual,
+                words(l, None, 0, [at(r, l), at(z, l), at(res, l), 0]),
+                n,
+            ));
+            vcycle.push(plan.call(
+                Kernel::Restriction,
+                words(l, Some(c), 0, [at(res, l), 0, at(r, c), 0]),
+                c.n as usize,
+            ));
+        }
+        // Back up: prolong and post-smooth each level from the second-coarsest to the finest.
+        for k in (0..levels.len().saturating_sub(1)).rev() {
+            let (l, c) = (&levels[k], &levels[k + 1]);
+            let at = |base: usize, l: &Level| base + l.o as usize;
+            let n = l.n as usize;
+            vcycle.push(plan.call(
+                Kernel::Prolong,
+                words(l, Some(c), 0, [0, 0, at(z, l), at(z, c)]),
+                n,
+            ));
+            for colour in [1, 0] {
+                vcycle.push(plan.call(
+                    Kernel::GaussSeidel,
+                    words(l, None, colour, [at(r, l), 0, at(z, l), 0]),
+                    n,
+                ));
+            }
+        }
+        let (mut first, mut apply, mut update_xr, mut after_vcycle, mut update_d) =
+            (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
+        if let Some(l0) = levels.first() {
+            let dots = |plan: &mut Plan, a: usize, b: usize, slot: usize| {
+                plan.call(
+                    Kernel::Dots,
+                    words(l0, None, 0, [a, b, slot * partials, 0]),
+                    n0,
+                )
+            };
+            let zero = |plan: &mut Plan, at: usize| {
+                plan.call(Kernel::Zero, words(l0, None, 0, [0, 0, at, 0]), n0)
+            };
+            let ud = plan.call(Kernel::UpdateD, words(l0, None, 0, [z, 0, d, 0]), n0);
+            // x = 0, d = 0, z = M r, d = z (β = 0), r·z, r·r.
+            first.extend([zero(&mut plan, x), zero(&mut plan, d)]);
+            first.extend(vcycle.iter().copied());
+            first.push(ud);
+            first.push(dots(&mut plan, r, z, 0));
+            first.push(dots(&mut plan, r, r, 1));
+            apply.push(plan.call(Kernel::Residual, words(l0, None, 0, [0, d, ad, 1]), n0));
+            apply.push(dots(&mut plan, d, ad, 0));
+            update_xr.push(plan.call(Kernel::UpdateXr, words(l0, None, 0, [x, d, r, ad]), n0));
+            update_xr.push(dots(&mut plan, r, r, 1));
+            after_vcycle.extend(vcycle.iter().copied());
+            after_vcycle.push(dots(&mut plan, r, z, 0));
+            update_d.push(ud);
+        }
+        use wgpu::BufferUsages as U;
+        let params: Vec<u8> = plan
+            .params
+            .iter()
+            .flat_map(|w| {
+                let mut block = bytemuck::cast_slice::<u32, u8>(w).to_vec();
+                block.resize(ALIGN as usize, 0);
+                block
+            })
+            .collect();
+        let filled =
+            |label: &str, bytes: &[u8], usage| crate::gpu::filled(device, label, bytes, usage);
+        let params = filled("photometeor diffusion dispatches", &params, U::UNIFORM);
+        let stencil = filled(
+            "photometeor diffusion operators",
+            bytemuck::cast_slice(&rows),
+            U::STORAGE,
+        );
+        let v = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("photometeor diffusion vectors"),
+            size: (4 * floats) as u64,
+            usage: U::STORAGE | U::COPY_DST | U::COPY_SRC,
+            mapped_at_creation: false,
+        });
+        let partial = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("photometeor diffusion partial sums"),
+            size: (4 * (2 * partials).div_ceil(4) * 4) as u64,
+            usage: U::STORAGE | U::COPY_SRC,
+            mapped_at_creation: false,
+        });
+        let coef = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("photometeor diffusion α β"),
+            size: 16,
+            usage: U::STORAGE | U::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("photometeor diffusion bindings"),
+            layout: &solver.layout,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                        buffer: &params,
+                        offset: 0,
+                        size: wgpu::BufferSize::new(64),
+                    }),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: stencil.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: v.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 3,
+                    resource: partial.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 4,
+                    resource: coef.as_entire_binding(),
+                },
+            ],
+        });
+        Ok(Self {
+            gpu,
+            solver,
+            op,
+            bind_group,
+            v,
+            partial,
+            coef,
+            _keep: [params, stencil],
+            partials,
+            x: (4 * x) as u64,
+            r0: (4 * r) as u64,
+            n0,
+            levels: levels.len(),
+            first,
+            apply,
+            update_xr,
+            after_vcycle,
+            update_d,
+        })
+    }
+
+    /// Records `calls` into one compute pass and submits it.
+    fn submit(&self, calls: &[Call]) {
+        let mut encoder = self
+            .gpu
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("photometeor diffusion"),
+            });
+        {
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("photometeor diffusion"),
+                timestamp_writes: None,
+            });
+            for c in calls {
+                pass.set_pipeline(&self.solver.pipelines[c.kernel as usize]);
+                pass.set_bind_group(0, &self.bind_group, &[(u64::from(c.slot) * ALIGN) as u32]);
+                pass.dispatch_workgroups(c.groups.0, c.groups.1, 1);
+            }
+        }
+        self.gpu.queue.submit([encoder.finish()]);
+    }
+
+    /// The sums of the partial sums in slots 0 and 1 (f64).
+    fn sums(&self) -> Result<[f64; 2], GpuError> {
+        let size = self.partial.size();
+        let rows = read_back(self.gpu, &self.partial, size)?;
+        let floats: &[f32] = bytemuck::cast_slice(&rows);
+        let sum = |s: usize| {
+            floats[s * self.partials..(s + 1) * self.partials]
+                .iter()
+                .map(|&v| f64::from(v))
+                .sum::<f64>()
+        };
+        Ok([sum(0), sum(1)])
+    }
+
+    fn set_coef(&self, index: u64, value: f64) {
+        self.gpu
+            .queue
+            .write_buffer(&self.coef, 4 * index, bytemuck::bytes_of(&(value as f32)));
+    }
+
+    /// One f32 solve of A e = r to [`INNER_TOLERANCE`] within `cap` iterations: e and the
+    /// iterations taken.
+    fn inner(&self, r: &[f64], cap: usize) -> Result<(Vec<f64>, usize), GpuError> {
+        let data: Vec<f32> = r.iter().map(|&v| v as f32).collect();
+        self.gpu
+            .queue
+            .write_buffer(&self.v, self.r0, bytemuck::cast_slice(&data));
+        self.set_coef(1, 0.0);
+        self.submit(&self.first);
+        let [mut rz, rr0] = self.sums()?;
+        let r0 = rr0.sqrt();
+        let mut taken = 0;
+        while taken < cap && r0 > 0.0 {
+            self.submit(&self.apply);
+            let [dad, _] = self.sums()?;
+            if dad <= 0.0 {
+                break;
+            }
+            self.set_coef(0, rz / dad);
+            self.submit(&self.update_xr);
+            taken += 1;
+            let [_, rr] = self.sums()?;
+            if rr.sqrt() <= INNER_TOLERANCE * r0 {
+                break;
+            }
+            self.submit(&self.after_vcycle);
+            let [rz_new, _] = self.sums()?;
+            self.set_coef(1, rz_new / rz);
+            rz = rz_new;
+            self.submit(&self.update_d);
+        }
+        let size = (4 * self.n0).div_ceil(16) as u64 * 16;
+        let e = read_back_at(self.gpu, &self.v, self.x, size)?;
+        Ok((e[..self.n0].iter().map(|&v| f64::from(v)).collect(), taken))
+    }
+
+    /// Solves A x = `b` to relative residual `tolerance` within `max_iterations` inner
+    /// iterations in all (module docs).
+    pub fn solve(
+        &self,
+        b: &[f64],
+        tolerance: f64,
+        max_iterations: usize,
+    ) -> Result<Solution, SolveError> {
+        let start = Instant::now();
+        let n = self.n0;
+        let unknowns = self
+            .op
+            .levels()
+            .first()
+            .map_or(0, |s| s.diag.iter().filter(|&&d| d > 0.0).count());
+        let b_norm = b.iter().map(|v| v * v).sum::<f64>().sqrt();
+        let mut x = vec![0.0; b.len()];
+        let Some(a) = self.op.levels().first().filter(|_| b_norm > 0.0) else {
+            return Ok(Solution {
+                i0: x,
+                iterations: 0,
+                residual: 0.0,
+                levels: 0,
+                unknowns,
+                seconds: start.elapsed().as_secs_f64(),
+            });
+        };
+        let mut r = b.to_vec();
+        let mut ax = vec![0.0; n];
+        let mut iterations = 0;
+        loop {
+            let residual = r.iter().map(|v| v * v).sum::<f64>().sqrt() / b_norm;
+            if residual < tolerance {
+                return Ok(Solution {
+                    i0: x,
+                    iterations,
+                    residual,
+                    levels: self.levels,
+                    unknowns,
+                    seconds: start.elapsed().as_secs_f64(),
+                });
+            }
+            if iterations >= max_iterations {
+                return Err(NotConverged {
+                    residual,
+                    iterations,
+                    tolerance,
+                }
+                .into());
+            }
+            let (e, taken) = self.inner(&r, max_iterations - iterations)?;
+            iterations += taken.max(1);
+            for (xi, ei) in x.iter_mut().zip(&e) {
+                *xi += ei;
+            }
+            a.apply(&x, &mut ax);
+            for ((ri, bi), axi) in r.iter_mut().zip(b).zip(&ax) {
+                *ri = bi - axi;
+            }
+        }
+    }
+}
+
+/// `size` bytes of `source` from byte `offset`, as f32.
+fn read_back_at(
+    gpu: &Gpu,
+    source: &wgpu::Buffer,
+    offset: u64,
+    size: u64,
+) -> Result<Vec<f32>, GpuError> {
+    let staging = gpu.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("photometeor diffusion result"),
+        size,
+        usage: wgpu::BufferUsages::STORAGE
+            | wgpu::BufferUsages::COPY_SRC
+            | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    let mut encoder = gpu
+        .device
+        .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+            label: Some("photometeor diffusion result"),
+        });
+    encoder.copy_buffer_to_buffer(source, offset, &staging, 0, size);
+    gpu.queue.submit([encoder.finish()]);
+    let rows = read_back(gpu, &staging, size)?;
+    Ok(bytemuck::cast_slice::<[f32; 4], f32>(&rows).to_vec())
+}
