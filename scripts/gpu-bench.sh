@@ -16,8 +16,9 @@
 # biri on the lamp beams, and the path-traced truth (GPU and CPU; paths/s) on the dense cumulus.
 # Writes OUT/<scene>.json, OUT/machine.txt (adapter, CPU, date) and prints a summary. On an H200
 # machine of 16 threads the parts of this run were timed on 2026-12-04 (docs/rendering.md, "On a
-# real GPU"): max's and coupled's lighting (CPU) are most of it, about 5 minutes in all; on 2
-# cores with lavapipe use QUICK=1.
+# real GPU"): max's and coupled's lighting (CPU) were most of it, about 5 minutes in all; on 2
+# cores with lavapipe use QUICK=1. Since 2026-12-05 coupled's transport sweeps and diffusion
+# solves run on the GPU (`per_sun = "auto"` on a real adapter); its JSON's passes say how long.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 OUT=${1:-${OUT:-bench/gpu}}
@@ -73,6 +74,9 @@ DIFFUSION='diffuse="diffusion"'
 REPEAT=1 TAG=lighting bench data/scenes/dense_cumulus.toml max,coupled --sizes "$SIZES" \
     --grids "$GRIDS" --set "$DIFFUSION"
 REPEAT=1 TAG=transport bench data/scenes/dense_cumulus.toml riley,coupled --grids "$GRIDS"
+# The same with coupled's per-sun passes on this machine's CPU, for the ratio.
+REPEAT=1 TAG=transport-cpu bench data/scenes/dense_cumulus.toml riley,coupled --grids "$GRIDS" \
+    --set 'per_sun="cpu"'
 bench data/scenes/cumulus_dawn.toml riley,miyazaki,max,coupled --set "$DIFFUSION"
 REPEAT=1 bench data/scenes/rainbow.toml riley,miyazaki,max,coupled --sizes "$SIZES" \
     --set "$DIFFUSION"

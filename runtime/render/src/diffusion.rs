@@ -73,6 +73,20 @@ pub struct Solution {
     pub seconds: f64,
 }
 
+impl Solution {
+    /// The solution of a system without unknowns or sources: zero everywhere.
+    pub(crate) fn zero(n: usize, unknowns: usize, start: Instant) -> Self {
+        Self {
+            i0: vec![0.0; n],
+            iterations: 0,
+            residual: 0.0,
+            levels: 0,
+            unknowns,
+            seconds: start.elapsed().as_secs_f64(),
+        }
+    }
+}
+
 /// A solve that did not reach its tolerance.
 #[derive(Debug, thiserror::Error)]
 #[error(
@@ -555,17 +569,10 @@ impl Operator {
         let unknowns = self.diag.iter().filter(|&&d| d > 0.0).count();
         let n = self.diag.len();
         let b_norm = dot(b, b).sqrt();
-        let mut x = vec![0.0; n];
         let Some(mg) = self.mg.as_ref().filter(|_| b_norm > 0.0) else {
-            return Ok(Solution {
-                i0: x,
-                iterations: 0,
-                residual: 0.0,
-                levels: 0,
-                unknowns,
-                seconds: start.elapsed().as_secs_f64(),
-            });
+            return Ok(Solution::zero(n, unknowns, start));
         };
+        let mut x = vec![0.0; n];
         let a = &mg.levels[0];
         let mut r = b.to_vec();
         let mut z = vec![0.0; n];

@@ -88,28 +88,13 @@ impl Solver {
                 entry(4, Storage { read_only: true }, false),
             ],
         });
-        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("photometeor diffusion"),
-            source: wgpu::ShaderSource::Wgsl(DIFFUSION_WGSL.into()),
-        });
-        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("photometeor diffusion pipeline layout"),
-            bind_group_layouts: &[Some(&layout)],
-            immediate_size: 0,
-        });
-        let pipelines = KERNELS
-            .iter()
-            .map(|name| {
-                device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                    label: Some(name),
-                    layout: Some(&pipeline_layout),
-                    module: &module,
-                    entry_point: Some(name),
-                    compilation_options: Default::default(),
-                    cache: None,
-                })
-            })
-            .collect();
+        let pipelines = crate::gpu::compute_pipelines(
+            device,
+            "photometeor diffusion",
+            DIFFUSION_WGSL.into(),
+            &[&layout],
+            &KERNELS,
+        );
         Self { layout, pipelines }
     }
 
@@ -507,17 +492,10 @@ impl<'a> Uploaded<'a> {
             .first()
             .map_or(0, |s| s.diag.iter().filter(|&&d| d > 0.0).count());
         let b_norm = b.iter().map(|v| v * v).sum::<f64>().sqrt();
-        let mut x = vec![0.0; b.len()];
         let Some(a) = self.op.levels().first().filter(|_| b_norm > 0.0) else {
-            return Ok(Solution {
-                i0: x,
-                iterations: 0,
-                residual: 0.0,
-                levels: 0,
-                unknowns,
-                seconds: start.elapsed().as_secs_f64(),
-            });
+            return Ok(Solution::zero(b.len(), unknowns, start));
         };
+        let mut x = vec![0.0; n];
         let mut r = b.to_vec();
         let mut ax = vec![0.0; n];
         let mut iterations = 0;

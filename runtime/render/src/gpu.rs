@@ -238,16 +238,29 @@ pub(crate) fn build(
         label: Some(&format!("{label} layout")),
         entries: &entries,
     });
+    let pipelines = compute_pipelines(device, label, source, &[&tables.layout, &layout], names);
+    (layout, pipelines)
+}
+
+/// The compute pipelines `names` of the WGSL module `source`, over the bind group `layouts`.
+pub(crate) fn compute_pipelines(
+    device: &wgpu::Device,
+    label: &str,
+    source: String,
+    layouts: &[&wgpu::BindGroupLayout],
+    names: &[&str],
+) -> Vec<wgpu::ComputePipeline> {
     let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
         label: Some(label),
         source: wgpu::ShaderSource::Wgsl(source.into()),
     });
+    let layouts: Vec<Option<&wgpu::BindGroupLayout>> = layouts.iter().map(|&l| Some(l)).collect();
     let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
         label: Some(&format!("{label} pipeline layout")),
-        bind_group_layouts: &[Some(&tables.layout), Some(&layout)],
+        bind_group_layouts: &layouts,
         immediate_size: 0,
     });
-    let pipelines = names
+    names
         .iter()
         .map(|name| {
             device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
@@ -259,8 +272,7 @@ pub(crate) fn build(
                 cache: None,
             })
         })
-        .collect();
-    (layout, pipelines)
+        .collect()
 }
 
 /// A buffer holding `bytes`.

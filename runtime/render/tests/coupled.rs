@@ -204,6 +204,14 @@ fn a_thin_box_gives_single_scattering() {
     }
 }
 
+/// The GPU tests' scene: the τ 30 soft ball side-lit over a ground of albedo 0.3, the sky on.
+fn lit_ball(tables: &Tables) -> Frame {
+    let mut frame = ball(tables, 30.0, 70.0);
+    frame.ground_albedo = 0.3;
+    frame.atmosphere = render::Atmosphere::default();
+    frame
+}
+
 /// The gather on the GPU (`coupled::gpu`, f32, lavapipe in CI) equals the CPU reference's from
 /// the same lighting: a τ 30 soft ball side-lit over a lit ground with the sky on, for the
 /// transport (its moments), the diffusion alone and the hemisphere split (Riley's n and
@@ -213,9 +221,7 @@ fn the_gpu_gather_equals_the_cpu_reference() {
     let Some(gpu) = common::gpu() else { return };
     let (_tmp, dir) = bake(&fields());
     let tables = Tables::open(&dir).unwrap();
-    let mut frame = ball(&tables, 30.0, 70.0);
-    frame.ground_albedo = 0.3;
-    frame.atmosphere = render::Atmosphere::default();
+    let mut frame = lit_ball(&tables);
     // Lifted 400 m off the ground, so that the composite's air below it is in its shadow
     // (shading::air_shadow) and the sky light takes part.
     frame.grid.min_m.y += 400.0;
@@ -273,9 +279,7 @@ fn the_gpu_lighting_equals_the_cpu_reference() {
     let Some(gpu) = common::gpu() else { return };
     let (_tmp, dir) = bake(&fields());
     let tables = Tables::open(&dir).unwrap();
-    let mut frame = ball(&tables, 30.0, 70.0);
-    frame.ground_albedo = 0.3;
-    frame.atmosphere = render::Atmosphere::default();
+    let frame = lit_ball(&tables);
     let sweeper = render::coupled::sweep_gpu::Sweeper::new(&gpu);
     let solver = render::diffusion_gpu::Solver::new(&gpu);
     let settings = Settings {

@@ -73,6 +73,18 @@
 //! - `source = "first-scatter"`: f = 0, Max's first-scattered sources (no δ-scaling);
 //! - `emergent = "isotropic"`: the diffusion's light without its I_1 term, as Max.
 //!
+//! # Where each pass runs
+//! The CPU reference (`--cpu`) runs everything on the CPU in f64 (rayon). A GPU render runs
+//! the gather on the GPU ([`gpu`]) and, with `per_sun = "auto"` on a real GPU or `"gpu"`
+//! anywhere, the per-sun passes that cost the most: the transport's sweeps ([`sweep_gpu`]:
+//! one dispatch per layer of each sweep order, a workgroup per voxel of the layer, an
+//! invocation per direction, in f32) and every diffusion solve — the three channels' and the
+//! transport's acceleration — ([`crate::diffusion_gpu`]: the same conjugate gradients and
+//! V-cycle in f32 inside an f64 refinement). The source iteration's control (acceleration
+//! sources, the convergence test), the beam's sweep, the sources, the flux and the budget stay
+//! on the CPU. On lavapipe (a CPU emulating a GPU) the GPU passes are slower than the CPU
+//! reference, so `auto` keeps them on the CPU there.
+//!
 //! Units: radiance per unit solar irradiance outside the atmosphere (1/sr) per channel.
 
 pub mod cpu;

@@ -65,23 +65,14 @@ impl Sweeper {
             label: Some("photometeor transport sweep layout"),
             entries: &entries,
         });
-        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("photometeor transport sweep"),
-            source: wgpu::ShaderSource::Wgsl(SWEEP_WGSL.into()),
-        });
-        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("photometeor transport sweep pipeline layout"),
-            bind_group_layouts: &[Some(&layout)],
-            immediate_size: 0,
-        });
-        let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some("sweep"),
-            layout: Some(&pipeline_layout),
-            module: &module,
-            entry_point: Some("sweep"),
-            compilation_options: Default::default(),
-            cache: None,
-        });
+        let [pipeline] = <[_; 1]>::try_from(crate::gpu::compute_pipelines(
+            device,
+            "photometeor transport sweep",
+            SWEEP_WGSL.into(),
+            &[&layout],
+            &["sweep"],
+        ))
+        .expect("one pipeline");
         Self { layout, pipeline }
     }
 
