@@ -6,7 +6,7 @@ against `--model truth`, compared by `photometeor compare-render` over the volum
 For the glory, also the ring contrast: the mean luminance in rings of 0.25° about the
 antisolar point (the image centre), the first bright ring over the minimum before it.
 
-Each truth is rendered once (--noise 0.03, at most 16384 spp and `max_seconds` per scene)
+Each truth is rendered once (--noise 0.03, at most `--spp` (65536) and `max_seconds` per scene)
 and cached under $EXAMPLES_WORK by its command, so re-running after a model change renders
 only the models. Writes docs/coupled/examples.json, examples.md and an error map per scene
 for coupled (examples-<scene>-coupled.png: red too bright, blue too dark, full at ±50 %, grey
@@ -55,6 +55,8 @@ def contrast(theta, value, dark=(0.5, 1.0), bright=(1.0, 2.0)):
 def main():
     p = argparse.ArgumentParser()
     p.add_argument("--max-seconds", type=float, default=300.0)
+    p.add_argument("--spp", type=int, default=65536,
+                   help="the truths' cap on samples per pixel (with --noise 0.03 and max_seconds)")
     a = p.parse_args()
     os.makedirs(WORK, exist_ok=True)
     report = {"quality": "draft", "scenes": {}}
@@ -70,7 +72,7 @@ def main():
     for name, scene, w, h in cases:
         file = name.replace(" (sky off)", "-sky-off")
         size = ["--width", str(w), "--height", str(h), "--quality", "draft"]
-        args = ["render", scene, "--model", "truth", *size, "--cpu", "--spp", "16384",
+        args = ["render", scene, "--model", "truth", *size, "--cpu", "--spp", str(a.spp),
                 "--noise", "0.03", "--set", f"max_seconds={a.max_seconds}"]
         key = hashlib.sha256((open(scene).read() + " ".join(args[2:])).encode()).hexdigest()[:16]
         truth = f"{WORK}/{file}-truth-{key}.exr"
