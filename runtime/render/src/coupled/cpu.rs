@@ -9,8 +9,9 @@ use rayon::prelude::*;
 
 use runtime::{FieldTable, Tables, sample};
 
-use super::{Diffuse, Emergent, Settings, Source, Split, transport};
+use super::{Diffuse, Emergent, PerSun, Settings, Source, Split, transport};
 use crate::diffusion::{self, Problem};
+use crate::diffusion_gpu::SolveError;
 use crate::geometry::box_span;
 use crate::lattice::{
     MIN_DIFFUSION_VOXEL_DEPTH, ShadowMap, Voxels, asymmetry, reduced_sky, reduced_sun, sweep,
@@ -318,11 +319,17 @@ pub fn light_on(
             settings.max_diffusion_iterations,
         );
         let channel = ["R", "G", "B"][c];
-        let s = match on {
-            Some(on) => diffusion::solve_on(&problem, limits, on.gpu, on.solver)
-                .map_err(|e| FrameError(format!("channel {channel} on the GPU: {e}")))?,
-            None => diffusion::solve(&problem, limits.0, limits.1)
-                .map_err(|e| FrameError(format!("channel {channel}: {e}")))?,
+        // On the GPU when asked; `auto` falls back to the CPU where the adapter cannot hold
+        // the solve, `gpu` fails naming the limit.
+        let on_cpu = || {
+            diffusion::solve(&problem, limits.0, limits.1)
+                .map_err(|e| FrameError(format!("channel {channel}: {e}")))
+        };
+        let s = match on.map(|on| diffusion::solve_on(&problem, limits, on.gpu, on.solver)) {
+            None => on_cpu()?,
+            Some(Ok(s)) => s,
+            Some(Err(SolveError::Gpu(_))) if settings.per_sun == PerSun::Auto => on_cpu()?,
+            Some(Err(e)) => return Err(FrameError(format!("channel {channel} on the GPU: {e}"))),
         };
         report.iterations[c] = s.iterations;
         report.residual[c] = s.residual;
@@ -830,16 +837,22 @@ fn transport_light(
             })
         })
         .collect();
-    // On the GPU, each operator's hierarchy uploaded once.
-    let uploaded = match on {
-        Some(on) => Some(
-            operators
-                .iter()
-                .map(|op| on.solver.upload(on.gpu, op))
-                .collect::<Result<Vec<_>, _>>()
-                .map_err(|e| FrameError(format!("the transport's acceleration on the GPU: {e}")))?,
-        ),
+    // On the GPU, each operator's hierarchy uploaded once (`auto` falls back to the CPU where
+    // the adapter cannot hold them).
+    let uploaded = match on.map(|on| {
+        operators
+            .iter()
+            .map(|op| on.solver.upload(on.gpu, op))
+            .collect::<Result<Vec<_>, _>>()
+    }) {
         None => None,
+        Some(Ok(uploaded)) => Some(uploaded),
+        Some(Err(_)) if settings.per_sun == PerSun::Auto => None,
+        Some(Err(e)) => {
+            return Err(FrameError(format!(
+                "the transport's acceleration on the GPU: {e}"
+            )));
+        }
     };
     let mut q0 = vec![0.0; n];
     let accelerate = |old: &[[f64; transport::PER_VOXEL]],
@@ -876,7 +889,7 @@ fn transport_light(
         None => None,
         Some(on) => match on.sweeper.prepare(on.gpu, grid, &medium, &dirs) {
             Ok(sweeps) => Some(Ok(sweeps)),
-            Err(e) if settings.per_sun == super::PerSun::Gpu => {
+            Err(e) if settings.per_sun == PerSun::Gpu => {
                 return Err(FrameError(e.to_string()));
             }
             Err(e) => Some(Err(e.to_string())),

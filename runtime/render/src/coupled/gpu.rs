@@ -82,10 +82,10 @@ pub fn source() -> String {
 pub struct Renderer {
     layout: wgpu::BindGroupLayout,
     pipeline: wgpu::ComputePipeline,
-    /// The transport's sweeps ([`super::sweep_gpu`]), for the lighting.
-    pub sweeper: super::sweep_gpu::Sweeper,
-    /// The diffusion solves ([`crate::diffusion_gpu`]), for the lighting.
-    pub solver: crate::diffusion_gpu::Solver,
+    /// The per-sun passes' pipelines (the transport's sweeps, [`super::sweep_gpu`], and the
+    /// diffusion solves, [`crate::diffusion_gpu`]), compiled on first use: a renderer whose
+    /// per-sun passes stay on the CPU (`per_sun = "auto"` on lavapipe) never compiles them.
+    per_sun: std::sync::OnceLock<(super::sweep_gpu::Sweeper, crate::diffusion_gpu::Solver)>,
 }
 
 /// Per field, a per-channel quantity as the uniform's rows (zero past the fields).
@@ -115,8 +115,23 @@ impl Renderer {
         Self {
             layout,
             pipeline,
-            sweeper: super::sweep_gpu::Sweeper::new(gpu),
-            solver: crate::diffusion_gpu::Solver::new(gpu),
+            per_sun: std::sync::OnceLock::new(),
+        }
+    }
+
+    /// The per-sun passes on `gpu` (the adapter this renderer was built for), compiled on the
+    /// first call.
+    pub fn per_sun<'a>(&'a self, gpu: &'a Gpu) -> super::cpu::OnGpu<'a> {
+        let (sweeper, solver) = self.per_sun.get_or_init(|| {
+            (
+                super::sweep_gpu::Sweeper::new(gpu),
+                crate::diffusion_gpu::Solver::new(gpu),
+            )
+        });
+        super::cpu::OnGpu {
+            gpu,
+            sweeper,
+            solver,
         }
     }
 

@@ -373,11 +373,7 @@ impl Model for Coupled {
         tables: &GpuTables,
     ) -> Result<Rendered, RenderError> {
         let (lighting, reused) = crate::relight::lit(job.lighting, job.frame, s, || {
-            let on = s.per_sun.on_gpu(gpu).then_some(cpu::OnGpu {
-                gpu,
-                sweeper: &renderer.sweeper,
-                solver: &renderer.solver,
-            });
+            let on = s.per_sun.on_gpu(gpu).then(|| renderer.per_sun(gpu));
             cpu::light_on(job.tables, job.frame, s, job.progress, on)
         })?;
         // The transport's moments take 24 rows of 16 bytes a voxel: past the adapter's
