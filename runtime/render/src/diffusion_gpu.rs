@@ -311,6 +311,10 @@ impl<'a> Uploaded<'a> {
             update_d.push(ud);
         }
         use wgpu::BufferUsages as U;
+        // A problem without unknowns dispatches nothing, but binds one block.
+        if plan.params.is_empty() {
+            plan.params.push([0; 16]);
+        }
         let params: Vec<u8> = plan
             .params
             .iter()
