@@ -28,6 +28,8 @@ pub struct CoupledReport {
     pub buffer_s: f64,
     /// Seconds for the three diffusion solves and the flux (step 3).
     pub diffusion_s: f64,
+    /// Where the three diffusion solves ran.
+    pub diffusion_on: String,
     /// Seconds for the discrete-ordinates transport (0 with `diffuse = "diffusion"`).
     pub transport_s: f64,
     /// Its source iterations.
@@ -325,12 +327,18 @@ pub fn light_on(
             diffusion::solve(&problem, limits.0, limits.1)
                 .map_err(|e| FrameError(format!("channel {channel}: {e}")))
         };
-        let s = match on.map(|on| diffusion::solve_on(&problem, limits, on.gpu, on.solver)) {
-            None => on_cpu()?,
-            Some(Ok(s)) => s,
-            Some(Err(SolveError::Gpu(_))) if settings.per_sun == PerSun::Auto => on_cpu()?,
-            Some(Err(e)) => return Err(FrameError(format!("channel {channel} on the GPU: {e}"))),
-        };
+        let (s, solved_on) =
+            match on.map(|on| diffusion::solve_on(&problem, limits, on.gpu, on.solver)) {
+                None => (on_cpu()?, "the CPU".to_string()),
+                Some(Ok(s)) => (s, on.map_or(String::new(), |on| on.gpu.describe())),
+                Some(Err(SolveError::Gpu(e))) if settings.per_sun == PerSun::Auto => {
+                    (on_cpu()?, format!("the CPU ({e})"))
+                }
+                Some(Err(e)) => {
+                    return Err(FrameError(format!("channel {channel} on the GPU: {e}")));
+                }
+            };
+        report.diffusion_on = solved_on;
         report.iterations[c] = s.iterations;
         report.residual[c] = s.residual;
         report.unknowns = s.unknowns;

@@ -415,9 +415,9 @@ fn rendered(
     (frame, settings): (&Frame, &Settings),
 ) -> Rendered {
     let summary = format!(
-        "beam + δ-scaled diffusion (lighting on the CPU, {} threads, but where the transport \
-         says; gather on {on}): {}×{}, \
-         grid {:?}: beam {:.2} s, diffusion {:.2} s ({} unknowns, {} levels, {:?} CG iterations to residuals \
+        "beam + δ-scaled diffusion (lighting on the CPU, {} threads, but where the diffusion \
+         and the transport say; gather on {on}): {}×{}, \
+         grid {:?}: beam {:.2} s, diffusion {:.2} s on {} ({} unknowns, {} levels, {:?} CG iterations to residuals \
          {:.1e}/{:.1e}/{:.1e}), {}gather {gather_s:.2} s; of the sunlight entering (green): \
          {:.1} % leaves in the buffer, {:.1} % is absorbed from it, {:.1} % feeds the \
          diffusion, which sends {:.1} % out and absorbs {:.1} %",
@@ -427,6 +427,7 @@ fn rendered(
         frame.grid.dims,
         report.buffer_s,
         report.diffusion_s,
+        report.diffusion_on,
         report.unknowns,
         report.levels,
         report.iterations,
