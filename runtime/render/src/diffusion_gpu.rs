@@ -118,7 +118,7 @@ fn groups(n: usize) -> (u32, u32) {
     (wgs.min(ROW) as u32, wgs.div_ceil(ROW) as u32)
 }
 
-/// The parameters of every dispatch, and the sequences of dispatches the solve submits.
+/// The parameters of every dispatch the solve records, one block of 16 words each.
 #[derive(Default)]
 struct Plan {
     params: Vec<[u32; 16]>,

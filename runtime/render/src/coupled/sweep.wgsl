@@ -36,6 +36,8 @@ struct Step {
 const MEDIUM_ROWS: u32 = 10u;
 const ORD_ROWS: u32 = 8u;
 const HARMONICS: u32 = 25u;
+// Invocations per workgroup: 96 directions make about 16 per sweep order (on lavapipe a round
+// at 32 directions took 1.84 s with 16, 2.73 s with 64, most of them idle).
 const WG: u32 = 16u;
 const MAX_GROUP: u32 = 512u;
 const PI: f32 = 3.14159265358979;
