@@ -385,12 +385,7 @@ fn the_gpu_diffusion_solve_equals_the_cpu_reference() {
     let solver = render::diffusion_gpu::Solver::new(&gpu);
     let cpu_s = render::diffusion::solve(&problem, 1e-6, 500).unwrap();
     let gpu_s = render::diffusion::solve_on(&problem, (1e-6, 500), &gpu, &solver).unwrap();
-    let scale = cpu_s.i0.iter().fold(0.0f64, |a, v| a.max(v.abs()));
-    let worst = cpu_s
-        .i0
-        .iter()
-        .zip(&gpu_s.i0)
-        .fold(0.0f64, |a, (x, y)| a.max((x - y).abs() / scale));
+    let worst = worst_share(&cpu_s.i0, &gpu_s.i0);
     eprintln!(
         "diffusion: {} unknowns, {} levels; CPU {} iterations to {:.1e} in {:.3} s, GPU {} to \
          {:.1e} in {:.3} s; worst |GPU − CPU| {worst:.2e} of the largest I_0",
@@ -417,12 +412,7 @@ fn the_gpu_diffusion_solve_equals_the_cpu_reference() {
     };
     let cpu_s = render::diffusion::solve(&line, 1e-6, 500).unwrap();
     let gpu_s = render::diffusion::solve_on(&line, (1e-6, 500), &gpu, &solver).unwrap();
-    let scale = cpu_s.i0.iter().fold(0.0f64, |a, v| a.max(v.abs()));
-    let worst = cpu_s
-        .i0
-        .iter()
-        .zip(&gpu_s.i0)
-        .fold(0.0f64, |a, (x, y)| a.max((x - y).abs() / scale));
+    let worst = worst_share(&cpu_s.i0, &gpu_s.i0);
     eprintln!("a line of voxels: worst |GPU − CPU| {worst:.2e} of the largest I_0");
     assert!(worst < GPU_DIFFUSION_TOLERANCE, "a line of voxels: {worst}");
     let empty = render::diffusion::Problem {
@@ -431,6 +421,14 @@ fn the_gpu_diffusion_solve_equals_the_cpu_reference() {
     };
     let s = render::diffusion::solve_on(&empty, (1e-6, 500), &gpu, &solver).unwrap();
     assert!(s.i0.iter().all(|&v| v == 0.0) && s.iterations == 0 && s.unknowns == 0);
+}
+
+/// The largest |a − b| over the largest |a|.
+fn worst_share(a: &[f64], b: &[f64]) -> f64 {
+    let scale = a.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    a.iter()
+        .zip(b)
+        .fold(0.0f64, |m, (x, y)| m.max((x - y).abs() / scale))
 }
 
 /// The GPU solve's worst difference above (measured on lavapipe: 1.82·10⁻⁷ on the ball,
@@ -488,15 +486,10 @@ fn one_round_of_gpu_sweeps_equals_the_cpu_round_on_thin_grids() {
         let cpu_round = sweep_once(&grid, &medium, &m, &dirs);
         let sweeps = sweeper.prepare(&gpu, &grid, &medium, &dirs).unwrap();
         let gpu_round = sweeps.round(&m).unwrap();
-        let scale = cpu_round
-            .iter()
-            .flatten()
-            .fold(0.0f64, |a, x| a.max(x.abs()));
-        for (a, b) in cpu_round.iter().zip(&gpu_round) {
-            for k in 0..PER_VOXEL {
-                worst = worst.max((a[k] - b[k]).abs() / scale);
-            }
-        }
+        worst = worst.max(worst_share(
+            cpu_round.as_flattened(),
+            gpu_round.as_flattened(),
+        ));
     }
     eprintln!("one round on thin grids: worst |GPU − CPU| {worst:.2e} of the largest moment");
     assert!(worst < GPU_ROUND_TOLERANCE, "{worst}");

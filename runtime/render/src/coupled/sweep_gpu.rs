@@ -240,46 +240,22 @@ impl Sweeper {
             mapped_at_creation: false,
         });
         let state = storage(device, "photometeor sweep state", state_bytes, false);
-        fn whole(b: &wgpu::Buffer) -> wgpu::BindingResource<'_> {
-            b.as_entire_binding()
-        }
+        let step = wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+            buffer: &steps,
+            offset: 0,
+            size: wgpu::BufferSize::new(32),
+        });
+        let whole = [&params, &medium_buffer, &moments, &next, &ordinates, &state]
+            .map(|b| b.as_entire_binding());
+        let entries: Vec<wgpu::BindGroupEntry> = std::iter::once(step)
+            .chain(whole)
+            .zip([1, 0, 2, 3, 4, 5, 6])
+            .map(|(resource, binding)| wgpu::BindGroupEntry { binding, resource })
+            .collect();
         let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("photometeor sweep bindings"),
             layout: &self.layout,
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: whole(&params),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                        buffer: &steps,
-                        offset: 0,
-                        size: wgpu::BufferSize::new(32),
-                    }),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: whole(&medium_buffer),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 3,
-                    resource: whole(&moments),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 4,
-                    resource: whole(&next),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 5,
-                    resource: whole(&ordinates),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 6,
-                    resource: whole(&state),
-                },
-            ],
+            entries: &entries,
         });
         Ok(Sweeps {
             gpu,
