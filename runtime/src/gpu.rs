@@ -820,34 +820,66 @@ pub fn evaluate(
 /// Copies `size` bytes of `source` (a `COPY_SRC` buffer) into a mappable buffer, waits, and
 /// returns them as RGBA f32 quadruples.
 pub fn read_back(gpu: &Gpu, source: &wgpu::Buffer, size: u64) -> Result<Vec<[f32; 4]>, GpuError> {
-    let device = &gpu.device;
-    let readback = device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("photometeor readback"),
-        size,
-        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-        mapped_at_creation: false,
-    });
-    let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
-        label: Some("photometeor readback"),
-    });
-    encoder.copy_buffer_to_buffer(source, 0, &readback, 0, size);
-    gpu.queue.submit([encoder.finish()]);
-    let (tx, rx) = std::sync::mpsc::channel();
-    readback.map_async(wgpu::MapMode::Read, .., move |r| {
-        let _ = tx.send(r);
-    });
-    device
-        .poll(wgpu::PollType::wait_indefinitely())
-        .map_err(|e| GpuError::Readback(e.to_string()))?;
-    rx.recv()
-        .map_err(|e| GpuError::Readback(e.to_string()))?
-        .map_err(|e| GpuError::Readback(e.to_string()))?;
-    let view = readback
-        .get_mapped_range(..)
-        .map_err(|e| GpuError::Readback(e.to_string()))?;
-    let floats: &[f32] = bytemuck::cast_slice(&view);
-    Ok(floats
-        .chunks_exact(4)
-        .map(|c| [c[0], c[1], c[2], c[3]])
-        .collect())
+    Readback::new(gpu, size).read(gpu, source, 0, size)
+}
+
+/// A mappable buffer to read results back through, kept by a caller that reads many times
+/// (an iterative solver's sums each iteration) instead of allocating one per read.
+pub struct Readback {
+    buffer: wgpu::Buffer,
+}
+
+impl Readback {
+    /// A readback of at most `size` bytes (a multiple of 16).
+    pub fn new(gpu: &Gpu, size: u64) -> Self {
+        let buffer = gpu.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("photometeor readback"),
+            size,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        Self { buffer }
+    }
+
+    /// Copies `size` bytes of `source` (a `COPY_SRC` buffer) from byte `offset` (both
+    /// multiples of 16, `size` at most this readback's), waits, and returns them as RGBA f32
+    /// quadruples.
+    pub fn read(
+        &self,
+        gpu: &Gpu,
+        source: &wgpu::Buffer,
+        offset: u64,
+        size: u64,
+    ) -> Result<Vec<[f32; 4]>, GpuError> {
+        let device = &gpu.device;
+        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+            label: Some("photometeor readback"),
+        });
+        encoder.copy_buffer_to_buffer(source, offset, &self.buffer, 0, size);
+        gpu.queue.submit([encoder.finish()]);
+        let (tx, rx) = std::sync::mpsc::channel();
+        self.buffer
+            .map_async(wgpu::MapMode::Read, ..size, move |r| {
+                let _ = tx.send(r);
+            });
+        device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map_err(|e| GpuError::Readback(e.to_string()))?;
+        rx.recv()
+            .map_err(|e| GpuError::Readback(e.to_string()))?
+            .map_err(|e| GpuError::Readback(e.to_string()))?;
+        let rows = {
+            let view = self
+                .buffer
+                .get_mapped_range(..size)
+                .map_err(|e| GpuError::Readback(e.to_string()))?;
+            let floats: &[f32] = bytemuck::cast_slice(&view);
+            floats
+                .chunks_exact(4)
+                .map(|c| [c[0], c[1], c[2], c[3]])
+                .collect()
+        };
+        self.buffer.unmap();
+        Ok(rows)
+    }
 }

@@ -15,7 +15,7 @@
 
 use std::time::Instant;
 
-use runtime::gpu::{Gpu, GpuError, read_back};
+use runtime::gpu::{Gpu, GpuError, Readback};
 
 use crate::diffusion::{COARSEST_SWEEPS, NotConverged, Operator, Solution, Stencil};
 use crate::gpu::entry;
@@ -153,6 +153,8 @@ pub struct Uploaded<'a> {
     v: wgpu::Buffer,
     partial: wgpu::Buffer,
     coef: wgpu::Buffer,
+    /// The one mappable buffer the sums and the solution are read through.
+    readback: Readback,
     _keep: [wgpu::Buffer; 2],
     /// Workgroups of a level-0 vector operation (one partial sum each).
     partials: usize,
@@ -386,6 +388,7 @@ impl<'a> Uploaded<'a> {
             op,
             bind_group,
             v,
+            readback: Readback::new(gpu, partial.size().max(solution_bytes(n0))),
             partial,
             coef,
             _keep: [params, stencil],
@@ -427,7 +430,7 @@ impl<'a> Uploaded<'a> {
     /// The sums of the partial sums in slots 0 and 1 (f64).
     fn sums(&self) -> Result<[f64; 2], GpuError> {
         let size = self.partial.size();
-        let rows = read_back(self.gpu, &self.partial, size)?;
+        let rows = self.readback.read(self.gpu, &self.partial, 0, size)?;
         let floats: &[f32] = bytemuck::cast_slice(&rows);
         let sum = |s: usize| {
             floats[s * self.partials..(s + 1) * self.partials]
@@ -475,8 +478,10 @@ impl<'a> Uploaded<'a> {
             rz = rz_new;
             self.submit(&self.update_d);
         }
-        let size = (4 * self.n0).div_ceil(16) as u64 * 16;
-        let e = read_back_at(self.gpu, &self.v, self.x, size)?;
+        let rows = self
+            .readback
+            .read(self.gpu, &self.v, self.x, solution_bytes(self.n0))?;
+        let e: &[f32] = bytemuck::cast_slice(&rows);
         Ok((e[..self.n0].iter().map(|&v| f64::from(v)).collect(), taken))
     }
 
@@ -536,28 +541,7 @@ impl<'a> Uploaded<'a> {
     }
 }
 
-/// `size` bytes of `source` from byte `offset`, as f32.
-fn read_back_at(
-    gpu: &Gpu,
-    source: &wgpu::Buffer,
-    offset: u64,
-    size: u64,
-) -> Result<Vec<f32>, GpuError> {
-    let staging = gpu.device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("photometeor diffusion result"),
-        size,
-        usage: wgpu::BufferUsages::STORAGE
-            | wgpu::BufferUsages::COPY_SRC
-            | wgpu::BufferUsages::COPY_DST,
-        mapped_at_creation: false,
-    });
-    let mut encoder = gpu
-        .device
-        .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-            label: Some("photometeor diffusion result"),
-        });
-    encoder.copy_buffer_to_buffer(source, offset, &staging, 0, size);
-    gpu.queue.submit([encoder.finish()]);
-    let rows = read_back(gpu, &staging, size)?;
-    Ok(bytemuck::cast_slice::<[f32; 4], f32>(&rows).to_vec())
+/// The bytes a level-0 vector of `n0` f32 is read back in (whole RGBA rows).
+fn solution_bytes(n0: usize) -> u64 {
+    (4 * n0.max(1)).div_ceil(16) as u64 * 16
 }
