@@ -4,7 +4,10 @@
 grid) but with `draft` tables and a small image: riley, max and coupled (CPU references)
 against `--model truth`, compared by `photometeor compare-render` over the volume's pixels.
 For the glory, also the ring contrast: the mean luminance in rings of 0.25° about the
-antisolar point (the image centre), the first bright ring over the minimum before it.
+antisolar point (the image centre), the first bright ring over the minimum before it; and the
+fogbow's, from the same scene seen with a 100° field of view ("glory (fogbow)"): rings of 1°
+over the lower half of the image (whose rays all meet the deck), the fogbow (~39° from the
+antisolar point for these droplets) over the dark band inside it.
 
 Each truth is rendered once (--noise 0.03, at most `--spp` (65536) and `max_seconds` per scene)
 and cached under $EXAMPLES_WORK by its command, so re-running after a model change renders
@@ -15,6 +18,7 @@ within 3σ of the truth's noise).
 Run from the repository root after `cargo build --release`, with the test venv's Python
 (numpy, OpenEXR):
     .venv/bin/python docs/coupled/examples.py [--max-seconds 300]
+    .venv/bin/python docs/coupled/examples.py --only glory --models coupled  # printed only
 """
 import argparse, hashlib, json, os, subprocess, sys, time
 
@@ -22,7 +26,8 @@ import argparse, hashlib, json, os, subprocess, sys, time
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(os.path.dirname(HERE))
 sys.path.insert(0, os.path.join(ROOT, "docs", "renders"))
-from pair import read_exr, rings  # noqa: E402
+from pair import LUMA, read_exr, rings  # noqa: E402
+import numpy as np  # noqa: E402
 
 BIN = os.environ.get("PHOTOMETEOR", os.path.join(ROOT, "target", "release", "photometeor"))
 WORK = os.environ.get("EXAMPLES_WORK", "/tmp/photometeor-examples")
@@ -32,6 +37,8 @@ WORK = os.environ.get("EXAMPLES_WORK", "/tmp/photometeor-examples")
 SCENES = [("cumulus_dawn", 160, 120, False), ("glory", 256, 256, True),
           ("rainbow", 160, 120, True), ("halo", 160, 120, False)]
 MODELS = ["riley", "max", "coupled"]
+# The fogbow's view: the glory scene with this field of view (degrees), this image size.
+FOGBOW_FOV, FOGBOW_SIZE = 100.0, 192
 
 
 def run(args):
@@ -52,12 +59,33 @@ def contrast(theta, value, dark=(0.5, 1.0), bright=(1.0, 2.0)):
     return float(theta[i]), float(theta[j]), float(value[j] / value[i] - 1.0)
 
 
+def lower_rings(rgb, fov_deg, step=1.0, top=50.0):
+    """Mean luminance in rings of `step` degrees about the image centre over the pixels below
+    it (in the glory scene, the rays that meet the deck at every angle up to `top`), relative to
+    their mean, and the rings' centres; `fov_deg` the vertical field of view."""
+    h, w = rgb.shape[:2]
+    f = (h / 2) / np.tan(np.radians(fov_deg / 2))
+    y, x = np.mgrid[0:h, 0:w]
+    angle = np.degrees(np.arctan(np.hypot(x + 0.5 - w / 2, y + 0.5 - h / 2) / f))
+    lower = y + 0.5 > h / 2
+    lum = rgb @ LUMA
+    edges = np.arange(0.0, top + 1e-9, step)
+    ring = np.digitize(angle, edges)
+    mean = np.array([lum[(ring == i) & lower].mean() for i in range(1, len(edges))])
+    return edges[:-1] + step / 2, mean / mean.mean()
+
+
 def main():
     p = argparse.ArgumentParser()
     p.add_argument("--max-seconds", type=float, default=300.0)
     p.add_argument("--spp", type=int, default=65536,
                    help="the truths' cap on samples per pixel (with --noise 0.03 and max_seconds)")
+    p.add_argument("--only", help="comma-separated cases (e.g. 'glory,glory (sky off)'): "
+                   "printed, not written")
+    p.add_argument("--models", default=",".join(MODELS), help="the models to render")
     a = p.parse_args()
+    only = a.only.split(",") if a.only else None
+    models = a.models.split(",")
     os.makedirs(WORK, exist_ok=True)
     report = {"quality": "draft", "scenes": {}}
     cases = []
@@ -69,8 +97,15 @@ def main():
             path = os.path.join(WORK, f"{name}.toml")
             open(path, "w").write(open(scene).read() + "\n[sky]\nenabled = false\n")
             cases.append((f"{name} (sky off)", path, w, h))
+        if name == "glory":
+            path = os.path.join(WORK, "glory-fogbow.toml")
+            text = open(scene).read().replace("fov_deg = 36", f"fov_deg = {FOGBOW_FOV:g}")
+            open(path, "w").write(text)
+            cases.append(("glory (fogbow)", path, FOGBOW_SIZE, FOGBOW_SIZE))
     for name, scene, w, h in cases:
-        file = name.replace(" (sky off)", "-sky-off")
+        if only and name not in only:
+            continue
+        file = name.replace(" (sky off)", "-sky-off").replace(" (fogbow)", "-fogbow")
         size = ["--width", str(w), "--height", str(h), "--quality", "draft"]
         args = ["render", scene, "--model", "truth", *size, "--cpu", "--spp", str(a.spp),
                 "--noise", "0.03", "--set", f"max_seconds={a.max_seconds}"]
@@ -85,13 +120,13 @@ def main():
         row = {"size": [w, h], "truth": open(truth + ".txt").read(), "models": {}}
         print(f"{name}: truth {row['truth']}", flush=True)
         frames = {"truth": read_exr(truth)}
-        for model in MODELS:
+        for model in models:
             out = f"{WORK}/{file}-{model}.exr"
             t0 = time.time()
             r = run(["render", scene, "--model", model, *size, "--cpu", "--out", out])
             seconds = time.time() - t0
             map_args = []
-            if model == "coupled":
+            if model == "coupled" and not only:
                 map_args = ["--map", os.path.join(HERE, f"examples-{file}-coupled.png")]
             e = json.loads(run(["compare-render", truth, out, "--json", *map_args]).stdout)
             e["seconds"] = round(seconds, 1)
@@ -101,7 +136,18 @@ def main():
             print(f"  {model:8s} bias {e['bias']:+7.1%} median {e['median_rel_error']:6.1%} "
                   f"p95 {e['p95_rel_error']:6.1%} (truth noise {e['truth_noise']:.1%}) "
                   f"[{seconds:.1f} s]", flush=True)
-        if name.startswith("glory"):
+        if name == "glory (fogbow)":
+            row["rings"] = {}
+            for label, rgb in frames.items():
+                theta, value = lower_rings(rgb, FOGBOW_FOV)
+                # The dark band inside the fogbow and the bow (coupled's profile: 33° and 39°).
+                lo, hi, c = contrast(theta, value, dark=(28.0, 36.0), bright=(36.0, 44.0))
+                row["rings"][label] = {"minimum_deg": lo, "peak_deg": hi, "contrast": c,
+                                       "profile": [round(v, 4) for v in value]}
+                print(f"  fogbow {label:8s}: minimum {lo:.1f}°, bow {hi:.1f}°, "
+                      f"contrast {c:+.1%}", flush=True)
+            row["rings"]["angle_deg"] = [round(t, 3) for t in theta]
+        elif name.startswith("glory"):
             fov = 36.0
             row["rings"] = {}
             for label, rgb in frames.items():
@@ -113,6 +159,8 @@ def main():
                       f"contrast {c:+.1%}", flush=True)
             row["rings"]["angle_deg"] = [round(t, 3) for t in theta]
         report["scenes"][name] = row
+    if only or models != MODELS:
+        return
     json.dump(report, open(os.path.join(HERE, "examples.json"), "w"), indent=1)
     md = ["| scene | size | truth | " + " | ".join(
         f"{m}: bias / median / p95" for m in MODELS) + " | coupled error map |",
@@ -126,7 +174,10 @@ def main():
                   + f" | ![](examples-{name.replace(' (sky off)', '-sky-off')}-coupled.png) |")
     for glory in [n for n in report["scenes"] if n.startswith("glory")]:
         md += ["", f"Glory rings ({glory}: 0.25° rings about the antisolar point, over 10–12°; "
-               "the darkest within 0.5–1°, the brightest within 1–2°):", "",
+               "the darkest within 0.5–1°, the brightest within 1–2°):" if glory != "glory (fogbow)"
+               else "The fogbow (glory.toml with a 100° view: 1° rings about the antisolar point "
+               "over the lower half of the image; the darkest within 28–36°, the brightest "
+               "within 36–44°):", "",
                "| frame | darkest ring | brightest ring | contrast |", "|---|---|---|---|"]
         for label, r in report["scenes"][glory]["rings"].items():
             if label != "angle_deg":

@@ -9,6 +9,7 @@ use rayon::prelude::*;
 
 use runtime::{FieldTable, Tables, sample};
 
+use super::peak::PeakBlur;
 use super::{Diffuse, Emergent, PerSun, Settings, Source, Split, transport};
 use crate::diffusion::{self, Problem};
 use crate::diffusion_gpu::SolveError;
@@ -52,6 +53,9 @@ pub struct CoupledReport {
     pub unknowns: usize,
     /// Multigrid levels.
     pub levels: usize,
+    /// The forward peak's fit per field that the beam's single scattering is blurred by
+    /// ([`super::peak`]; green): its name, half width (degrees) and share of the scattering.
+    pub peaks: Vec<(String, f64, f64)>,
     /// Where the sunlight went, per channel, as fractions of what entered the box: kept in
     /// the buffer to its exit, absorbed from it, and handed to the diffusion as its source.
     pub budget: Budget,
@@ -83,7 +87,8 @@ pub struct Budget {
 /// the camera (steps 1–3 of the [module docs](super)); [`gather`] renders a view from it.
 #[derive(Debug, Clone)]
 pub struct Lighting {
-    /// The buffer per voxel: I per channel and n.
+    /// The buffer per voxel: I per channel and, with the hemisphere split, Riley's n, with the
+    /// δ-split the forward peak's optical depth D from the box's face ([`super::peak`]).
     pub buffer: Vec<[f64; 4]>,
     /// I_0 per voxel and channel.
     pub i0: Vec<[f64; 3]>,
@@ -101,6 +106,8 @@ pub struct Lighting {
     pub g: Vec<[f64; 3]>,
     /// Each field's forward peak f per channel (the δ-split's unscattered share).
     pub peak: Vec<[f64; 3]>,
+    /// The blur of the beam's single scattering by the forward peak, with the δ-split.
+    pub blur: Option<PeakBlur>,
     /// The reduced skylight's mean radiance per voxel and channel.
     pub sky_mean: Vec<[f64; 3]>,
     /// The grid's dimensions this lighting was computed for.
@@ -157,7 +164,7 @@ pub fn light(tables: &Tables, frame: &Frame, settings: &Settings) -> Result<Ligh
     light_with(tables, frame, settings, &())
 }
 
-/// The buffer's state per voxel: I (0..3), n (3), β_ext (4..7) and β_sca (7..10) for the next
+/// The buffer's state per voxel: I (0..3), n or D (3), β_ext (4..7) and β_sca (7..10) for the next
 /// step's trapezoid, the dropped (scattered out of the beam) loss per unit length (10..13) and
 /// its forward part α(g − f)/(1 − αf) per unit length (13..16), and the whole loss per unit
 /// length (16..19), all per unit irradiance.
@@ -170,7 +177,7 @@ fn buffer_sweep(
     v: &Voxels,
     l: DVec3,
     settings: &Settings,
-    peaks: &[[f64; 3]],
+    (peaks, blur): (&[[f64; 3]], Option<&PeakBlur>),
 ) -> Vec<[f64; STATE]> {
     let grid = &frame.grid;
     // Outside the box: the sunlight unscattered (I = 1, n = 0) in clear air.
@@ -202,11 +209,13 @@ fn buffer_sweep(
         let mut out = [0.0; STATE];
         out[3] = n0;
         if ext[1] > 0.0 {
-            // The scatterings the beam kept (Riley's n counts them all in the hemisphere split).
             // Riley's n counts the scatterings the beam kept (the hemisphere split); in the
-            // δ-split the beam is unscattered (n stays 0, Ams_1 in the gather).
+            // δ-split the beam's light is Ams_1's, blurred by the peak's scatterings, whose
+            // optical depth D this counts (the peak's share of the scattering here).
             if settings.split == Split::Hemisphere {
                 out[3] += sca[1] / ext[1] * tau[1];
+            } else if let Some(blur) = blur.filter(|_| sca_h[1] > 0.0) {
+                out[3] += sca[1] * path * blur.coefficient(fields, &rho) / sca_h[1];
             }
         }
         for c in 0..3 {
@@ -273,7 +282,16 @@ pub fn light_on(
         .map(|f| legendre_moments(f, tables.theta_step_deg))
         .collect();
     let peak = peaks(&fields, &chis, settings);
-    let state = buffer_sweep(&fields, frame, &v, l, settings, &peak);
+    let blur = delta_scaled(settings).then(|| PeakBlur::of(&fields, tables.theta_step_deg, &peak));
+    let state = buffer_sweep(&fields, frame, &v, l, settings, (&peak, blur.as_ref()));
+    if let Some(blur) = &blur {
+        report.peaks = fields
+            .iter()
+            .zip(&blur.fields)
+            .filter(|(_, b)| b.share[1] > 0.0)
+            .map(|(f, b)| (f.name.clone(), b.half_width_deg[1], b.share[1]))
+            .collect();
+    }
     // E S_atm per voxel: the sun's irradiance at each voxel's height, before the volume.
     let sunlight = reduced_sun(frame, &vec![[0.0; 3]; v.ext.len()]);
     // The ground lit as the composite lights it (through the δ-scaled extinction).
@@ -403,6 +421,7 @@ pub fn light_on(
         active,
         g: asymmetries(&fields),
         peak,
+        blur,
         sky_mean: sky.mean,
         dims: grid.dims,
         sun_dir,
@@ -486,15 +505,18 @@ pub fn gather(
             let harmonics = (!lighting.sh.is_empty()).then(|| transport::harmonics(-d));
             let towards = harmonics.as_ref();
             let (mut l_vol, mut tr, mut seen) = ([0.0f64; 3], [1.0f64; 3], [1.0f64; 3]);
+            // The forward peak's optical depth from the eye ([`super::peak`]).
+            let mut depth_out = 0.0;
             if let Some((t0, t1)) = box_span(grid.min_m, grid.max_m, eye, d) {
                 let t0 = t0.max(0.0);
                 let n = (((t1 - t0) / step).ceil() as usize).max(1);
                 let dt = (t1 - t0) / n as f64;
                 for k in 0..n {
                     let p = eye + (t0 + (k as f64 + 0.5) * dt) * d;
-                    let light =
-                        in_scattered(tables, &fields, frame, lighting, settings, p, (d, towards));
+                    let ray = (d, towards, (depth_out, dt));
+                    let light = in_scattered(tables, &fields, frame, lighting, settings, p, ray);
                     let Some(step) = light else { continue };
+                    depth_out += step.peak * dt;
                     for c in 0..3 {
                         // The light is seen through the δ-scaled extinction β_ext(1 − αf)
                         // (what the forward peak scatters still travels towards the eye), and
@@ -535,6 +557,8 @@ struct Step {
     /// light scattered by the phase function, the diffusion's P1 radiance scattered by the
     /// phase function less its forward peak, and the skylight's mean likewise.
     light: [f64; 3],
+    /// The forward peak's scattering coefficient (1/m, green; [`super::peak`]).
+    peak: f64,
 }
 
 /// At `p` on the ray `d` from the eye, the [`Step`] (module docs step 4); `None` where nothing
@@ -546,7 +570,7 @@ fn in_scattered(
     lighting: &Lighting,
     settings: &Settings,
     p: DVec3,
-    (d, towards): (DVec3, Option<&[f64; transport::HARMONICS]>),
+    (d, towards, (depth_out, dt)): (DVec3, Option<&[f64; transport::HARMONICS]>, (f64, f64)),
 ) -> Option<Step> {
     let grid = &frame.grid;
     let rho: [f64; MAX_FIELDS] = grid.sample(p);
@@ -558,13 +582,25 @@ fn in_scattered(
     let p1_on = settings.emergent == Emergent::P1;
     let buffer = trilinear(grid, &lighting.buffer, None, p);
     let s_atm = frame.atmosphere.sunlight(p.y, sun_dir.y);
-    let phase = sample::mix(
-        fields,
-        &rho,
-        tables.theta_step_deg,
-        buffer[3] + 1.0,
-        sun_dir.dot(d),
-    );
+    // The beam scattered by Ams_1 blurred by the peak's scatterings on the way in and out to
+    // the middle of this step (the δ-split), or by Ams_{n+1} (the hemisphere split).
+    let peak_coefficient = lighting
+        .blur
+        .as_ref()
+        .map_or(0.0, |b| b.coefficient(fields, &rho));
+    let phase = match &lighting.blur {
+        Some(blur) => {
+            let depth = buffer[3] + depth_out + 0.5 * peak_coefficient * dt;
+            blur.phase(fields, &rho, depth, sun_dir.dot(d))
+        }
+        None => sample::mix(
+            fields,
+            &rho,
+            tables.theta_step_deg,
+            buffer[3] + 1.0,
+            sun_dir.dot(d),
+        ),
+    };
     let g = mixed(fields, &rho, |f| lighting.g[f]);
     let peak = if delta_scaled(settings) {
         mixed(fields, &rho, |f| lighting.peak[f])
@@ -588,6 +624,7 @@ fn in_scattered(
         ext,
         kept: [1.0; 3],
         light: [0.0; 3],
+        peak: peak_coefficient,
     };
     for c in 0..3 {
         if ext[c] <= 0.0 {

@@ -16,7 +16,8 @@ struct CoupledParams {
     sizes: vec4<u32>,        // width, height, rows per voxel (5, or 24 with the transport), 0
     sigma_ext: array<vec4<f32>, 4>,  // per field, m² per channel
     asymmetry: array<vec4<f32>, 4>,  // per field, g per channel
-    peak: array<vec4<f32>, 4>,       // per field, the forward peak f per channel
+    peak: array<vec4<f32>, 4>,       // per field, the forward peak f per channel; w = the
+                                     // blur's peak share s (green; coupled::peak)
     chi: array<array<vec4<f32>, 4>, 5>,  // per Legendre degree l ≤ 4 and field, χ_l per channel
     sky_beta: vec4<f32>,     // β at sea level per channel (1/m); w = γ (1/m)
     sun: vec4<f32>,          // unit vector towards the sun; w = cos(disk radius)
@@ -30,6 +31,48 @@ struct CoupledParams {
 // more: its 75 spherical-harmonic moments φ_lm (25 per channel, R then G then B), 4 a row.
 @group(1) @binding(2) var<storage, read> lighting: array<vec4<f32>>;
 @group(1) @binding(3) var<storage, read_write> image: array<vec4<f32>>;  // rgb, T_vol (green)
+// With the δ-split, the phase functions blurred by the forward peak (render::coupled::peak):
+// p^(D_j)(θ_k) at ((field · PEAK_DEPTHS + j) · 3 + channel) · K + k, D_j = j · PEAK_DEPTH_STEP.
+@group(1) @binding(4) var<storage, read> blurred: array<f32>;
+
+const PEAK_DEPTH_STEP: f32 = 0.25;
+const PEAK_DEPTHS: u32 = 41u;
+
+// p^(D)(θ) of the mixture, linear in θ and D (render::coupled::peak::PeakBlur::phase).
+fn peak_blurred(rho: vec4<f32>, depth: f32, cos_theta: f32) -> vec3<f32> {
+    let col = ams_column(cos_theta);
+    let k_len = ams_params.angle_count;
+    let v = min(max(depth, 0.0) / PEAK_DEPTH_STEP, f32(PEAK_DEPTHS - 1u));
+    let j0 = min(u32(floor(v)), PEAK_DEPTHS - 2u);
+    let s = v - f32(j0);
+    var num = vec3<f32>(0.0);
+    var den = vec3<f32>(0.0);
+    for (var i = 0u; i < min(rp.grid_dims.w, 4u); i = i + 1u) {
+        if (rho[i] > 0.0) {
+            var p = vec3<f32>(0.0);
+            for (var c = 0u; c < 3u; c = c + 1u) {
+                let r0 = ((i * PEAK_DEPTHS + j0) * 3u + c) * k_len + col.k0;
+                let r1 = r0 + 3u * k_len;
+                let a = mix(blurred[r0], blurred[r0 + 1u], col.t);
+                let b = mix(blurred[r1], blurred[r1 + 1u], col.t);
+                p[c] = mix(a, b, s);
+            }
+            let w = rho[i] * ams_field_info[i].yzw;
+            num = num + w * p;
+            den = den + w;
+        }
+    }
+    return select(vec3<f32>(0.0), num / den, den > vec3<f32>(0.0));
+}
+
+// The forward peak's scattering coefficient Σ ρ σ_sca s (green; 1/m).
+fn peak_coefficient(rho: vec4<f32>) -> f32 {
+    var sum = 0.0;
+    for (var i = 0u; i < min(rp.grid_dims.w, 4u); i = i + 1u) {
+        sum = sum + max(rho[i], 0.0) * ams_field_info[i].z * rp.peak[i].w;
+    }
+    return sum;
+}
 
 // Row `row` of the lighting at p (march.wgsl's `lighting_at`; the solve's mask in row 1's w).
 fn lit(p: vec3<f32>, row: u32, masked: bool) -> vec4<f32> {
@@ -90,6 +133,8 @@ fn gather(@builtin(global_invocation_id) id: vec3<u32>) {
     var l_vol = vec3<f32>(0.0);
     var tr = vec3<f32>(1.0);
     var seen = vec3<f32>(1.0);
+    // The forward peak's optical depth from the eye (coupled::peak).
+    var depth_out = 0.0;
     let span = box_span(eye, d);
     if (span.y >= 0.0) {
         let n = max(u32(ceil((span.y - span.x) / rp.eye.w)), 1u);
@@ -107,7 +152,16 @@ fn gather(@builtin(global_invocation_id) id: vec3<u32>) {
             let i1 = array<vec4<f32>, 3>(lit(p, 2u, true), lit(p, 3u, true), lit(p, 4u, true));
             let sky = vec3<f32>(lit(p, 2u, false).w, lit(p, 3u, false).w, lit(p, 4u, false).w);
             let sun = rp.irradiance.rgb * sunlight(p.y, rp.sun.y) * beam.rgb;
-            let phase = ams_mix(rho, beam.w + 1.0, cos_theta);
+            // The beam scattered by Ams_1 blurred by the peak's scatterings in (beam.w) and
+            // out to the middle of this step (the δ-split), or by Ams_{n+1} (beam.w = n).
+            var phase: vec3<f32>;
+            if (rp.up.w > 0.5) {
+                let peak = peak_coefficient(rho) * dt;
+                phase = peak_blurred(rho, beam.w + depth_out + 0.5 * peak, cos_theta);
+                depth_out = depth_out + peak;
+            } else {
+                phase = ams_mix(rho, beam.w + 1.0, cos_theta);
+            }
             let g = mixed(rho, rp.asymmetry);
             let f = select(vec3<f32>(0.0), mixed(rho, rp.peak), rp.up.w > 0.5);
             // The transport's diffuse light towards the eye, Σ_l χ′_l Σ_m Y_lm φ_lm per channel

@@ -6,7 +6,8 @@
 //! times both).
 //!
 //! Bind group 0: the tables ([`GpuTables`]: `ams_mix`). Bind group 1: the params uniform, the
-//! densities, the lighting (five rows per voxel), the image (rgb, T_vol).
+//! densities, the lighting (five rows per voxel), the image (rgb, T_vol), the phase functions
+//! blurred by the forward peak ([`super::peak`]).
 
 use std::time::Instant;
 
@@ -44,7 +45,7 @@ runtime::uniform! {
         pub sigma_ext: [[f32; 4]; MAX_FIELDS],
         /// Per field, g per channel.
         pub asymmetry: [[f32; 4]; MAX_FIELDS],
-        /// Per field, the forward peak f per channel.
+        /// Per field, the forward peak f per channel; w = the blur's peak share s (green).
         pub peak: [[f32; 4]; MAX_FIELDS],
         /// Per Legendre degree l ≤ 4 and field, the phase function's χ_l per channel.
         pub chi: [[[f32; 4]; MAX_FIELDS]; 5],
@@ -97,18 +98,30 @@ fn per_field(values: &[[f64; 3]]) -> [[f32; 4]; MAX_FIELDS] {
     })
 }
 
+/// Per field, the forward peak f per channel and the blur's peak share s (green) as w.
+fn peaks(lighting: &Lighting) -> [[f32; 4]; MAX_FIELDS] {
+    let mut rows = per_field(&lighting.peak);
+    if let Some(blur) = &lighting.blur {
+        for (row, field) in rows.iter_mut().zip(&blur.fields) {
+            row[3] = field.share[1] as f32;
+        }
+    }
+    rows
+}
+
 impl Renderer {
     /// Compiles `gather.wgsl` after the tables' and the slicing renderers' WGSL, `tables`'
     /// layout as bind group 0.
     pub fn new(gpu: &Gpu, tables: &GpuTables) -> Self {
-        // Bindings: params, densities and lighting (read-only), image.
+        // Bindings: params, densities and lighting (read-only), image, the blurred phase
+        // functions (read-only).
         let (layout, pipelines) = build(
             gpu,
             tables,
             "photometeor coupled gather",
             source(),
-            (4, true),
-            &[1, 2],
+            (5, true),
+            &[1, 2, 4],
             &["gather"],
         );
         let [pipeline] = <[_; 1]>::try_from(pipelines).expect("one pipeline");
@@ -182,7 +195,7 @@ impl Renderer {
             sizes: [w as u32, h as u32, rows_per_voxel as u32, 0],
             sigma_ext,
             asymmetry: per_field(&lighting.g),
-            peak: per_field(&lighting.peak),
+            peak: peaks(lighting),
             chi: std::array::from_fn(|l| {
                 per_field(&lighting.chis.iter().map(|m| m[l]).collect::<Vec<_>>())
             }),
@@ -234,11 +247,19 @@ impl Renderer {
             16 * (w * h) as u64,
             true,
         );
+        // The blurred phase functions (one unread value without the δ-split).
+        let blurred = lighting.blur.as_ref().map_or(vec![0.0f32], |b| b.rows());
+        let blurred = filled(
+            device,
+            "photometeor coupled blurred phase functions",
+            bytemuck::cast_slice(&blurred),
+            wgpu::BufferUsages::STORAGE,
+        );
         let bind_group = bind(
             device,
             &self.layout,
             "photometeor coupled gather bindings",
-            &[&params, &density, &lighting_buffer, &image],
+            &[&params, &density, &lighting_buffer, &image, &blurred],
             Some(&sky_light_buffer(device, frame, Some(&lighting.shadow))),
         );
         timed_frame(
