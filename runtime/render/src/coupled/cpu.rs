@@ -53,8 +53,9 @@ pub struct CoupledReport {
     pub unknowns: usize,
     /// Multigrid levels.
     pub levels: usize,
-    /// The forward peak's fit per field that the beam's single scattering is blurred by
-    /// ([`super::peak`]; green): its name, half width (degrees) and share of the scattering.
+    /// The forward peak per field that the beam's single scattering is blurred by
+    /// ([`super::peak`]; green): its name, the cone it fills (degrees) and its share of the
+    /// scattering.
     pub peaks: Vec<(String, f64, f64)>,
     /// Where the sunlight went, per channel, as fractions of what entered the box: kept in
     /// the buffer to its exit, absorbed from it, and handed to the diffusion as its source.
@@ -106,7 +107,8 @@ pub struct Lighting {
     pub g: Vec<[f64; 3]>,
     /// Each field's forward peak f per channel (the δ-split's unscattered share).
     pub peak: Vec<[f64; 3]>,
-    /// The blur of the beam's single scattering by the forward peak, with the δ-split.
+    /// The blur of the beam's single scattering by the forward peak, with δ-M's split (the
+    /// transport's).
     pub blur: Option<PeakBlur>,
     /// The reduced skylight's mean radiance per voxel and channel.
     pub sky_mean: Vec<[f64; 3]>,
@@ -282,14 +284,17 @@ pub fn light_on(
         .map(|f| legendre_moments(f, tables.theta_step_deg))
         .collect();
     let peak = peaks(&fields, &chis, settings);
-    let blur = delta_scaled(settings).then(|| PeakBlur::of(&fields, tables.theta_step_deg, &peak));
+    // The peak's blur with δ-M's split (the transport's): δ-Eddington's f = g² holds the light
+    // scattered within ~20°, whose blur brightened the dense ball from −13.1 to +16.5 %.
+    let blurred = delta_scaled(settings) && settings.diffuse == Diffuse::Transport;
+    let blur = blurred.then(|| PeakBlur::of(&fields, tables.theta_step_deg, &peak));
     let state = buffer_sweep(&fields, frame, &v, l, settings, (&peak, blur.as_ref()));
     if let Some(blur) = &blur {
         report.peaks = fields
             .iter()
             .zip(&blur.fields)
             .filter(|(_, b)| b.share[1] > 0.0)
-            .map(|(f, b)| (f.name.clone(), b.half_width_deg[1], b.share[1]))
+            .map(|(f, b)| (f.name.clone(), b.reach_deg[1], b.share[1]))
             .collect();
     }
     // E S_atm per voxel: the sun's irradiance at each voxel's height, before the volume.

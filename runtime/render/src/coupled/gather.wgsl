@@ -13,7 +13,8 @@ struct CoupledParams {
     grid_min: vec4<f32>,     // xyz; w = ground albedo
     grid_max: vec4<f32>,     // xyz; w = 1 for the P1 radiance, 0 for I_0 alone
     grid_dims: vec4<u32>,    // nx, ny, nz, field count
-    sizes: vec4<u32>,        // width, height, rows per voxel (5, or 24 with the transport), 0
+    sizes: vec4<u32>,        // width, height, rows per voxel (5, or 24 with the transport),
+                             // 1 where the sun's single scattering is blurred (coupled::peak)
     sigma_ext: array<vec4<f32>, 4>,  // per field, m² per channel
     asymmetry: array<vec4<f32>, 4>,  // per field, g per channel
     peak: array<vec4<f32>, 4>,       // per field, the forward peak f per channel; w = the
@@ -32,11 +33,9 @@ struct CoupledParams {
 @group(1) @binding(2) var<storage, read> lighting: array<vec4<f32>>;
 @group(1) @binding(3) var<storage, read_write> image: array<vec4<f32>>;  // rgb, T_vol (green)
 // With the δ-split, the phase functions blurred by the forward peak (render::coupled::peak):
-// p^(D_j)(θ_k) at ((field · PEAK_DEPTHS + j) · 3 + channel) · K + k, D_j = j · PEAK_DEPTH_STEP.
+// p^(D_j)(θ_k) at ((field · PEAK_DEPTHS + j) · 3 + channel) · K + k, D_j = j · PEAK_DEPTH_STEP
+// (both constants put before this file by coupled::gpu::source).
 @group(1) @binding(4) var<storage, read> blurred: array<f32>;
-
-const PEAK_DEPTH_STEP: f32 = 0.25;
-const PEAK_DEPTHS: u32 = 41u;
 
 // p^(D)(θ) of the mixture, linear in θ and D (render::coupled::peak::PeakBlur::phase).
 fn peak_blurred(rho: vec4<f32>, depth: f32, cos_theta: f32) -> vec3<f32> {
@@ -153,9 +152,10 @@ fn gather(@builtin(global_invocation_id) id: vec3<u32>) {
             let sky = vec3<f32>(lit(p, 2u, false).w, lit(p, 3u, false).w, lit(p, 4u, false).w);
             let sun = rp.irradiance.rgb * sunlight(p.y, rp.sun.y) * beam.rgb;
             // The beam scattered by Ams_1 blurred by the peak's scatterings in (beam.w) and
-            // out to the middle of this step (the δ-split), or by Ams_{n+1} (beam.w = n).
+            // out to the middle of this step (δ-M's split), or by Ams_{n+1} (beam.w = n; 0
+            // with δ-Eddington's).
             var phase: vec3<f32>;
-            if (rp.up.w > 0.5) {
+            if (rp.sizes.w == 1u) {
                 let peak = peak_coefficient(rho) * dt;
                 phase = peak_blurred(rho, beam.w + depth_out + 0.5 * peak, cos_theta);
                 depth_out = depth_out + peak;

@@ -39,7 +39,8 @@ runtime::uniform! {
         pub grid_max: [f32; 4],
         /// nx, ny, nz, field count.
         pub grid_dims: [u32; 4],
-        /// Width, height, rows per voxel (5, or 24 with the transport's moments), 0.
+        /// Width, height, rows per voxel (5, or 24 with the transport's moments), 1 where the
+        /// sun's single scattering is blurred by the forward peak.
         pub sizes: [u32; 4],
         /// Per field, σ_ext per channel (m²).
         pub sigma_ext: [[f32; 4]; MAX_FIELDS],
@@ -74,9 +75,15 @@ pub fn rows_per_voxel(lighting: &Lighting) -> usize {
 /// The gather's WGSL ([`crate::gpu::gather_source`] puts the shared parts before it).
 pub const GATHER_WGSL: &str = include_str!("gather.wgsl");
 
-/// The model's whole shader module, as the renderer compiles it.
+/// The model's whole shader module, as the renderer compiles it: the blur table's depths
+/// ([`super::peak::DEPTH_STEP`], [`super::peak::DEPTHS`]) as constants before the gather.
 pub fn source() -> String {
-    gather_source(GATHER_WGSL)
+    let depths = format!(
+        "const PEAK_DEPTH_STEP: f32 = {:?};\nconst PEAK_DEPTHS: u32 = {}u;\n",
+        super::peak::DEPTH_STEP as f32,
+        super::peak::DEPTHS
+    );
+    gather_source(&format!("{depths}{GATHER_WGSL}"))
 }
 
 /// The gather's pipeline, built once.
@@ -192,7 +199,12 @@ impl Renderer {
                 grid.dims[2] as u32,
                 tables.fields.len() as u32,
             ],
-            sizes: [w as u32, h as u32, rows_per_voxel as u32, 0],
+            sizes: [
+                w as u32,
+                h as u32,
+                rows_per_voxel as u32,
+                u32::from(lighting.blur.is_some()),
+            ],
             sigma_ext,
             asymmetry: per_field(&lighting.g),
             peak: peaks(lighting),

@@ -459,7 +459,7 @@ fn rendered(
             let fits: Vec<String> = report
                 .peaks
                 .iter()
-                .map(|(name, h, s)| format!("{name} half width {h:.2}°, share {s:.2}"))
+                .map(|(name, h, s)| format!("{name} within {h:.2}°, share {s:.2}"))
                 .collect();
             format!(
                 "the sun's single scattering blurred by the forward peak: {}",
