@@ -53,9 +53,8 @@ pub struct CoupledReport {
     pub unknowns: usize,
     /// Multigrid levels.
     pub levels: usize,
-    /// The forward peak per field that the beam's single scattering is blurred by
-    /// ([`super::peak`]; green): its name, the cone it fills (degrees) and its share of the
-    /// scattering.
+    /// The forward peak's fit per field that the beam's single scattering is blurred by
+    /// ([`super::peak`]; green): its name, half width (degrees) and share of the scattering.
     pub peaks: Vec<(String, f64, f64)>,
     /// Where the sunlight went, per channel, as fractions of what entered the box: kept in
     /// the buffer to its exit, absorbed from it, and handed to the diffusion as its source.
@@ -284,8 +283,8 @@ pub fn light_on(
         .map(|f| legendre_moments(f, tables.theta_step_deg))
         .collect();
     let peak = peaks(&fields, &chis, settings);
-    // The peak's blur with δ-M's split (the transport's): δ-Eddington's f = g² holds the light
-    // scattered within ~20°, whose blur brightened the dense ball from −13.1 to +16.5 %.
+    // The peak's blur with δ-M's split (the transport's), whose gather it was measured with;
+    // the diffusion alone keeps the exact Ams_1.
     let blurred = delta_scaled(settings) && settings.diffuse == Diffuse::Transport;
     let blur = blurred.then(|| PeakBlur::of(&fields, tables.theta_step_deg, &peak));
     let state = buffer_sweep(&fields, frame, &v, l, settings, (&peak, blur.as_ref()));
@@ -294,7 +293,7 @@ pub fn light_on(
             .iter()
             .zip(&blur.fields)
             .filter(|(_, b)| b.share[1] > 0.0)
-            .map(|(f, b)| (f.name.clone(), b.reach_deg[1], b.share[1]))
+            .map(|(f, b)| (f.name.clone(), b.half_width_deg[1], b.share[1]))
             .collect();
     }
     // E S_atm per voxel: the sun's irradiance at each voxel's height, before the volume.

@@ -59,8 +59,8 @@
 //!    scattering (f cancels to first order in τ). That phase function is blurred by the
 //!    scatterings of the forward peak the beam and the eye's ray kept ([`peak`]: Ams_1
 //!    convolved with a Poisson number of Gaussian peaks fitted to the table's forward lobe,
-//!    its optical depth counted along the beam and the ray): the glory's rings, 1–2° apart,
-//!    wash out as the truth's do under the cloud droplets' ~1° diffraction peak. The ground and the air below the grid are
+//!    its optical depth counted along the beam and the ray; with the transport): the glory's
+//!    rings, 0.5° apart, wash out as the truth's do under the droplets' ~1° diffraction peak. The ground and the air below the grid are
 //!    lit through the δ-scaled extinction (the forward peak's light still arrives; the halo
 //!    scene's clear-sky pixels read −4.7 % lit through the true one, +2.3 % through this), and
 //!    the ground and the sky behind are seen through the δ-scaled extinction too (what the forward peak scatters out of a smooth
@@ -459,7 +459,7 @@ fn rendered(
             let fits: Vec<String> = report
                 .peaks
                 .iter()
-                .map(|(name, h, s)| format!("{name} within {h:.2}°, share {s:.2}"))
+                .map(|(name, h, s)| format!("{name} half width {h:.2}°, share {s:.2}"))
                 .collect();
             format!(
                 "the sun's single scattering blurred by the forward peak: {}",
