@@ -23,7 +23,8 @@
 //! truncation at the table's resolution (l ≤ 1.2 · 180°/Δθ) rings nowhere; every term keeps
 //! ∫p dΩ (the l = 0 term's e^{−D(1 − π_0)} = 1). D adds along the way in and out
 //! (e^{−D₁(1−π)} e^{−D₂(1−π)}), tabulated at D_j = j/4, j < 41, linear between, the last row
-//! beyond (at D = 10 the beam has kept e^{−0.37 τ} ≲ e^{−7} of the sun).
+//! beyond (for the cloud D = 10 is τ ≈ 27 along the beam, which has kept e^{−(1 − αf)τ} ≈
+//! e^{−12} of the sun there).
 //!
 //! D is the optical depth of the peak's scattering, ∫ β_sca s ds, s the share of the
 //! scattering the Gaussian holds: its integral (p(0) − p(3θ_h)) π σ² over ∫ p dΩ (above the
