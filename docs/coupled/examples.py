@@ -26,8 +26,7 @@ import argparse, hashlib, json, os, subprocess, sys, time
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(os.path.dirname(HERE))
 sys.path.insert(0, os.path.join(ROOT, "docs", "renders"))
-from pair import LUMA, read_exr, rings  # noqa: E402
-import numpy as np  # noqa: E402
+from pair import read_exr, rings  # noqa: E402
 
 BIN = os.environ.get("PHOTOMETEOR", os.path.join(ROOT, "target", "release", "photometeor"))
 WORK = os.environ.get("EXAMPLES_WORK", "/tmp/photometeor-examples")
@@ -63,16 +62,8 @@ def lower_rings(rgb, fov_deg, step=1.0, top=50.0):
     """Mean luminance in rings of `step` degrees about the image centre over the pixels below
     it (in the glory scene, the rays that meet the deck at every angle up to `top`), relative to
     their mean, and the rings' centres; `fov_deg` the vertical field of view."""
-    h, w = rgb.shape[:2]
-    f = (h / 2) / np.tan(np.radians(fov_deg / 2))
-    y, x = np.mgrid[0:h, 0:w]
-    angle = np.degrees(np.arctan(np.hypot(x + 0.5 - w / 2, y + 0.5 - h / 2) / f))
-    lower = y + 0.5 > h / 2
-    lum = rgb @ LUMA
-    edges = np.arange(0.0, top + 1e-9, step)
-    ring = np.digitize(angle, edges)
-    mean = np.array([lum[(ring == i) & lower].mean() for i in range(1, len(edges))])
-    return edges[:-1] + step / 2, mean / mean.mean()
+    theta, value = rings(rgb, fov_deg, step, top, lower=True)
+    return theta, value / value.mean()
 
 
 def main():

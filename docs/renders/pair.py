@@ -44,10 +44,10 @@ def save_pair(left, right, out):
     return exposure
 
 
-def rings(rgb, fov_deg, step=0.25, top=12.0):
+def rings(rgb, fov_deg, step=0.25, top=12.0, lower=False):
     """Mean luminance in rings of `step` degrees about the image centre (a glory's antisolar
     point), over the mean of the outer 2°, and the rings' centres; `fov_deg` the vertical
-    field of view."""
+    field of view; `lower`: over the pixels below the centre only."""
     h, w = rgb.shape[:2]
     f = (h / 2) / np.tan(np.radians(fov_deg / 2))
     y, x = np.mgrid[0:h, 0:w]
@@ -55,6 +55,8 @@ def rings(rgb, fov_deg, step=0.25, top=12.0):
     edges = np.arange(0.0, top + 1e-9, step)
     lum = rgb @ LUMA
     ring = np.digitize(angle, edges)
+    if lower:
+        ring = np.where(y + 0.5 > h / 2, ring, 0)
     mean = np.array([lum[ring == i].mean() for i in range(1, len(edges))])
     return edges[:-1] + step / 2, mean / mean[-int(2 / step):].mean()
 

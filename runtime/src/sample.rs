@@ -24,14 +24,19 @@ fn order(field: &FieldTable, n: f64) -> (usize, usize, f64) {
     (r0, r1, n - lo)
 }
 
-/// Ams_n(θ) per channel R, G, B (1/sr), linear in θ and in n.
-pub fn ams(field: &FieldTable, theta_step_deg: f64, n: f64, cos_theta: f64) -> [f64; 3] {
-    let ams = &field.image.ams;
-    let k_len = field.image.angle_count();
+/// The sample k0 below θ = acos(cos θ) on a grid of `k_len` samples θ_k = k·Δθ and the
+/// weight t of sample k0 + 1 (linear in θ; the last interval beyond the grid).
+pub fn column(theta_step_deg: f64, k_len: usize, cos_theta: f64) -> (usize, f64) {
     let theta = cos_theta.clamp(-1.0, 1.0).acos().to_degrees();
     let u = (theta / theta_step_deg).min((k_len - 1) as f64);
     let k0 = (u.floor() as usize).min(k_len - 2);
-    let t = u - k0 as f64;
+    (k0, u - k0 as f64)
+}
+
+/// Ams_n(θ) per channel R, G, B (1/sr), linear in θ and in n.
+pub fn ams(field: &FieldTable, theta_step_deg: f64, n: f64, cos_theta: f64) -> [f64; 3] {
+    let ams = &field.image.ams;
+    let (k0, t) = column(theta_step_deg, field.image.angle_count(), cos_theta);
     let (r0, r1, s) = order(field, n);
     std::array::from_fn(|c| {
         let at = |r: usize| ams[[c, r, k0]] * (1.0 - t) + ams[[c, r, k0 + 1]] * t;
@@ -142,11 +147,7 @@ pub fn poisson(
 ) -> Option<[f64; 3]> {
     let table = field.poisson.as_ref()?;
     let rows = &table.rows;
-    let k_len = rows.dim().2;
-    let theta = cos_theta.clamp(-1.0, 1.0).acos().to_degrees();
-    let u = (theta / theta_step_deg).min((k_len - 1) as f64);
-    let k0 = (u.floor() as usize).min(k_len - 2);
-    let t = u - k0 as f64;
+    let (k0, t) = column(theta_step_deg, rows.dim().2, cos_theta);
     let depths = &table.depths;
     Some(std::array::from_fn(|c| {
         let d = depth[c];

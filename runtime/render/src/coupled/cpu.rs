@@ -286,7 +286,10 @@ pub fn light_on(
     // The peak's blur with δ-M's split (the transport's), whose gather it was measured with;
     // the diffusion alone keeps the exact Ams_1.
     let blurred = delta_scaled(settings) && settings.diffuse == Diffuse::Transport;
-    let blur = blurred.then(|| PeakBlur::of(&fields, tables.theta_step_deg, &peak));
+    // None where no field's peak is blurred (rain, ice): Ams_1 as it is, without the tables.
+    let blur = blurred
+        .then(|| PeakBlur::of(&fields, tables.theta_step_deg, &peak))
+        .filter(PeakBlur::blurs);
     let state = buffer_sweep(&fields, frame, &v, l, settings, (&peak, blur.as_ref()));
     if let Some(blur) = &blur {
         report.peaks = fields
@@ -587,23 +590,19 @@ fn in_scattered(
     let buffer = trilinear(grid, &lighting.buffer, None, p);
     let s_atm = frame.atmosphere.sunlight(p.y, sun_dir.y);
     // The beam scattered by Ams_1 blurred by the peak's scatterings on the way in and out to
-    // the middle of this step (the δ-split), or by Ams_{n+1} (the hemisphere split).
-    let peak_coefficient = lighting
-        .blur
-        .as_ref()
-        .map_or(0.0, |b| b.coefficient(fields, &rho));
-    let phase = match &lighting.blur {
+    // the middle of this step (δ-M's split), or by Ams_{n+1} (n = 0 but with the hemisphere
+    // split), and the peak's scattering coefficient here.
+    let (phase, peak_coefficient) = match &lighting.blur {
         Some(blur) => {
-            let depth = buffer[3] + depth_out + 0.5 * peak_coefficient * dt;
-            blur.phase(fields, &rho, depth, sun_dir.dot(d))
+            let k = blur.coefficient(fields, &rho);
+            let depth = buffer[3] + depth_out + 0.5 * k * dt;
+            (blur.phase(fields, &rho, depth, sun_dir.dot(d)), k)
         }
-        None => sample::mix(
-            fields,
-            &rho,
-            tables.theta_step_deg,
-            buffer[3] + 1.0,
-            sun_dir.dot(d),
-        ),
+        None => {
+            let n = buffer[3] + 1.0;
+            let phase = sample::mix(fields, &rho, tables.theta_step_deg, n, sun_dir.dot(d));
+            (phase, 0.0)
+        }
     };
     let g = mixed(fields, &rho, |f| lighting.g[f]);
     let peak = if delta_scaled(settings) {

@@ -92,6 +92,11 @@ impl PeakBlur {
         }
     }
 
+    /// Whether any field's peak is blurred (its share above 0 in some channel).
+    pub fn blurs(&self) -> bool {
+        self.fields.iter().any(|b| b.share.iter().any(|&s| s > 0.0))
+    }
+
     /// The peak's scattering coefficient per unit of `rho` (green), Σ ρ_f σ_sca,f s_f: its
     /// product with a path length is the peak depth D.
     pub fn coefficient(&self, fields: &[&FieldTable], rho: &[f64]) -> f64 {
@@ -114,10 +119,7 @@ impl PeakBlur {
         cos_theta: f64,
     ) -> [f64; 3] {
         let k_len = self.angle_count;
-        let theta = cos_theta.clamp(-1.0, 1.0).acos().to_degrees();
-        let u = (theta / self.theta_step_deg).min((k_len - 1) as f64);
-        let k0 = (u.floor() as usize).min(k_len - 2);
-        let t = u - k0 as f64;
+        let (k0, t) = runtime::sample::column(self.theta_step_deg, k_len, cos_theta);
         let v = (depth.max(0.0) / DEPTH_STEP).min((DEPTHS - 1) as f64);
         let j0 = (v.floor() as usize).min(DEPTHS - 2);
         let s = v - j0 as f64;
