@@ -442,11 +442,10 @@ impl Sky {
 }
 
 /// The reduced skylight per voxel: the sky model's radiance from [`SKY_DIRECTIONS`] directions,
-/// each attenuated through the grid by its own sweep. Below the horizon it is the air's and the
+/// each attenuated through the grid ([`sky_sweeps`]). Below the horizon it is the air's and the
 /// sunlit ground's (Lambertian, `[ground] albedo`, lit through the volume as `ground_lit` says,
 /// as [`crate::shading::compose`] shades it), both as seen from the middle of the box.
 pub fn reduced_sky(frame: &Frame, ext: &[[f64; 3]], ground_lit: impl Fn(DVec3) -> [f64; 3]) -> Sky {
-    let mut sky = Sky::zero(ext.len());
     let grid = &frame.grid;
     let sun = frame.sun.direction();
     // The sky's radiance as seen from the middle of the box (Eqs. 11–15).
@@ -454,6 +453,7 @@ pub fn reduced_sky(frame: &Frame, ext: &[[f64; 3]], ground_lit: impl Fn(DVec3) -
     let y = middle.y;
     let atm = &frame.atmosphere;
     let multiple = SkyLight::of(frame);
+    let mut lit = Vec::new();
     for s in sky_directions() {
         let k_end = if s.y < 0.0 { y / -s.y } else { f64::INFINITY };
         let mut l = atm.inscatter(y, s.y, k_end, sun.y, s.dot(sun));
@@ -471,13 +471,110 @@ pub fn reduced_sky(frame: &Frame, ext: &[[f64; 3]], ground_lit: impl Fn(DVec3) -
         };
         let radiance: [f64; 3] =
             std::array::from_fn(|c| frame.sun.irradiance[c] * (l[c] + ground[c]));
-        if radiance.iter().all(|&v| v <= 0.0) {
-            continue;
+        if radiance.iter().any(|&v| v > 0.0) {
+            lit.push((s, radiance));
         }
-        let tau = sun_depths(grid, ext, -s);
-        sky.add(s, |j| {
-            std::array::from_fn(|c| radiance[c] * (-tau[j][c]).exp())
-        });
+    }
+    sky_sweeps(grid, ext, &lit)
+}
+
+/// The skylight arriving from each `(s, radiance)` of `lit` (towards the sky, radiance per
+/// channel beyond the box), attenuated through the grid: per direction what [`sun_depths`]
+/// along −s and [`Sky::add`] give, in one sweep per layer order. The directions that travel
+/// most along the same axis and sign share the sweep, so each voxel's β_ext is read once per
+/// sweep, and only two layers of each direction's state (τ and β_ext one layer back) are kept
+/// instead of a grid per direction (at 128³ the 32 sweeps one after the other took 3.3 s of
+/// the coupled model's 3.6 s of beam and sky on 2 cores).
+pub fn sky_sweeps(grid: &DensityGrid, ext: &[[f64; 3]], lit: &[(DVec3, [f64; 3])]) -> Sky {
+    let mut sky = Sky::zero(ext.len());
+    let dims = grid.dims;
+    let h = voxel_size(grid);
+    let stride = [1, dims[0], dims[0] * dims[1]];
+    let omega = 4.0 * PI / SKY_DIRECTIONS as f64;
+    // Per direction: its sweep's axis a and sign (as `sweep` chooses them), the step ds
+    // between layers and the point one layer back along b, c in voxel units.
+    struct Way {
+        s: DVec3,
+        weight: [f64; 3],
+        ds: f64,
+        shift: (f64, f64),
+    }
+    let mut orders: Vec<((usize, bool), Vec<Way>)> = Vec::new();
+    for &(s, radiance) in lit {
+        let l = -s;
+        let a = (0..3)
+            .max_by(|&i, &j| l[i].abs().total_cmp(&l[j].abs()))
+            .expect("three axes");
+        let (b, c) = ((a + 1) % 3, (a + 2) % 3);
+        let ds = h[a] / l[a].abs();
+        let way = Way {
+            s,
+            weight: radiance.map(|r| r * omega / (4.0 * PI)),
+            ds,
+            shift: (-ds * l[b] / h[b], -ds * l[c] / h[c]),
+        };
+        let key = (a, l[a] > 0.0);
+        match orders.iter_mut().find(|(k, _)| *k == key) {
+            Some((_, ways)) => ways.push(way),
+            None => orders.push((key, vec![way])),
+        }
+    }
+    for ((a, forward), ways) in &orders {
+        let a = *a;
+        let (b, c) = ((a + 1) % 3, (a + 2) % 3);
+        let (nb, nc) = (dims[b], dims[c]);
+        let count = ways.len();
+        // Per voxel of a layer, per direction: τ (rgb), then β_ext (rgb) for the trapezoid.
+        let mut prev = vec![[0.0f64; 6]; nb * nc * count];
+        let mut cur = prev.clone();
+        let layers: Vec<usize> = if *forward {
+            (0..dims[a]).collect()
+        } else {
+            (0..dims[a]).rev().collect()
+        };
+        for (step, &k) in layers.iter().enumerate() {
+            let light: Vec<([f64; 3], [DVec3; 3])> = cur
+                .par_chunks_mut(count)
+                .enumerate()
+                .map(|(m, states)| {
+                    let (ub, vc) = (m % nb, m / nb);
+                    let i = k * stride[a] + ub * stride[b] + vc * stride[c];
+                    let here = ext[i];
+                    let (mut mean, mut flux) = ([0.0; 3], [DVec3::ZERO; 3]);
+                    for (d, (state, way)) in states.iter_mut().zip(ways).enumerate() {
+                        let back = if step == 0 {
+                            [0.0; 6]
+                        } else {
+                            upwind(
+                                |u, v| &prev[(u + v * nb) * count + d],
+                                (nb, nc),
+                                (ub as f64 + way.shift.0, vc as f64 + way.shift.1),
+                                [0.0; 6],
+                            )
+                        };
+                        *state = std::array::from_fn(|n| match n {
+                            0..=2 => back[n] + 0.5 * way.ds * (here[n] + back[n + 3]),
+                            _ => here[n - 3],
+                        });
+                        for ch in 0..3 {
+                            let w = way.weight[ch] * (-state[ch]).exp();
+                            mean[ch] += w;
+                            flux[ch] -= w * way.s;
+                        }
+                    }
+                    (mean, flux)
+                })
+                .collect();
+            for (m, (mean, flux)) in light.into_iter().enumerate() {
+                let (ub, vc) = (m % nb, m / nb);
+                let i = k * stride[a] + ub * stride[b] + vc * stride[c];
+                for ch in 0..3 {
+                    sky.mean[i][ch] += mean[ch];
+                    sky.flux[i][ch] += flux[ch];
+                }
+            }
+            std::mem::swap(&mut prev, &mut cur);
+        }
     }
     sky
 }
@@ -510,4 +607,55 @@ pub fn reduced_sun(frame: &Frame, tau_sun: &[[f64; 3]]) -> Vec<[f64; 3]> {
 pub fn voxel_length(grid: &DensityGrid) -> f64 {
     let h = voxel_size(grid);
     (h[0] * h[1] * h[2]).cbrt()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The grouped sweeps give per direction what a sweep of its own and [`Sky::add`] give: a
+    /// lumpy medium on an uneven grid, every direction of the sky set with its own radiance.
+    #[test]
+    fn the_grouped_sky_sweeps_equal_a_sweep_per_direction() {
+        let dims = [7, 5, 6];
+        let n = dims[0] * dims[1] * dims[2];
+        let grid = DensityGrid {
+            min_m: DVec3::new(-1.0, -0.5, 0.0),
+            max_m: DVec3::new(1.4, 0.7, 1.1),
+            dims,
+            data: vec![[0.0; crate::MAX_FIELDS]; n],
+        };
+        let wobble = |i: usize, k: usize| 0.5 + 0.5 * ((i * 7 + k * 13) as f64 * 0.61).sin();
+        let ext: Vec<[f64; 3]> = (0..n)
+            .map(|i| std::array::from_fn(|c| 3.0 * wobble(i, c) + 0.2))
+            .collect();
+        let lit: Vec<(DVec3, [f64; 3])> = sky_directions()
+            .into_iter()
+            .enumerate()
+            .map(|(d, s)| (s, std::array::from_fn(|c| 1.0 + wobble(d, c))))
+            .collect();
+        let mut want = Sky::zero(n);
+        for &(s, radiance) in &lit {
+            let tau = sun_depths(&grid, &ext, -s);
+            want.add(s, |j| {
+                std::array::from_fn(|c| radiance[c] * (-tau[j][c]).exp())
+            });
+        }
+        let got = sky_sweeps(&grid, &ext, &lit);
+        let (mut worst, mut scale) = (0.0f64, 0.0f64);
+        for i in 0..n {
+            for c in 0..3 {
+                scale = scale.max(want.mean[i][c]);
+                worst = worst.max((got.mean[i][c] - want.mean[i][c]).abs());
+                worst = worst.max((got.flux[i][c] - want.flux[i][c]).abs().max_element());
+            }
+        }
+        eprintln!("sky sweeps: worst difference {worst:.2e} of {scale:.3}");
+        // Only the order of the sums differs.
+        assert!(scale > 0.1, "the sky reaches the voxels: {scale}");
+        assert!(
+            worst < 1e-14 * scale,
+            "worst difference {worst:e} of {scale}"
+        );
+    }
 }
