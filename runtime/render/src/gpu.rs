@@ -205,7 +205,7 @@ pub fn slicing_source(wgsl: &str) -> String {
 /// Bind group 1's layout and the compute pipelines `names` of a shader `source` (a whole
 /// module, [`slicing_source`]; `tables`' layout as bind group 0).
 /// Bind group 1 has `bindings` buffers: 0 the params uniform, 5 the slice uniforms (dynamic
-/// offset), those in `read_only` read-only storage (1, the densities, always among them),
+/// offset) unless `read_only` names it, those in `read_only` read-only storage (1, the densities, always among them),
 /// every other one read-write storage; and, for a shader with [`COMPOSE_WGSL`], the sky-light
 /// table at [`SKY_LIGHT_BINDING`] (`compose` true).
 pub(crate) fn build(
@@ -224,7 +224,8 @@ pub(crate) fn build(
         .chain(sky)
         .map(|b| match b {
             0 => entry(0, Uniform, false),
-            5 => entry(5, Uniform, true),
+            // The slicing renderers' per-slice uniform, where binding 5 is not a storage one.
+            5 if !read_only.contains(&5) => entry(5, Uniform, true),
             b => entry(
                 b,
                 Storage {
@@ -333,8 +334,8 @@ pub(crate) fn sky_light_buffer(
     )
 }
 
-/// Bind group 1: `buffers[i]` at binding i, whole, except the slice uniforms at binding 5,
-/// bound as one 16-byte entry (the dynamic offset picks the slice); `sky` at
+/// Bind group 1: `buffers[i]` at binding i, whole, except the slice uniforms at binding 5 (a
+/// uniform buffer there), bound as one 16-byte entry (the dynamic offset picks the slice); `sky` at
 /// [`SKY_LIGHT_BINDING`].
 pub(crate) fn bind(
     device: &wgpu::Device,
@@ -352,7 +353,7 @@ pub(crate) fn bind(
         .enumerate()
         .map(|(i, buffer)| wgpu::BindGroupEntry {
             binding: i as u32,
-            resource: if i == 5 {
+            resource: if i == 5 && buffer.usage().contains(wgpu::BufferUsages::UNIFORM) {
                 wgpu::BindingResource::Buffer(wgpu::BufferBinding {
                     buffer,
                     offset: 0,

@@ -20,7 +20,7 @@ use crate::lattice::{
 };
 use crate::shading::{check_fields, coefficients, compose};
 use crate::skylight::SkyLight;
-use crate::{Frame, FrameError, Image, MAX_FIELDS};
+use crate::{DensityGrid, Frame, FrameError, Image, MAX_FIELDS};
 
 /// What the lighting of a `coupled` frame spent and found.
 #[derive(Debug, Clone, Default, serde::Serialize)]
@@ -95,9 +95,14 @@ pub struct Lighting {
     /// I_1 = 3J per voxel (x, y, z per channel): the P1 radiance's first moment, so the
     /// diffusion's radiance towards ω is I_0 + I_1·ω.
     pub p1: Vec<[f64; 9]>,
-    /// The diffuse radiance's spherical-harmonic moments per voxel when the discrete-ordinates
-    /// transport computed them ([`transport`]); empty otherwise.
+    /// The diffuse radiance's spherical-harmonic moments per voxel of `sh_grid` when the
+    /// discrete-ordinates transport computed them ([`transport`]); empty otherwise.
     pub sh: Vec<[f64; transport::PER_VOXEL]>,
+    /// The grid the transport ran on, whose voxel centres the moments are at: the frame's, or
+    /// its blocks with `transport_coarsening` (only its box and dims; its data is empty). The
+    /// gathers interpolate the moments there, so a lighting at 128³ on 64³ blocks holds them
+    /// for 64³ voxels (150 MiB in f64; 600 MiB at every voxel of the 128³ grid).
+    pub sh_grid: DensityGrid,
     /// Each field's Legendre moments χ_0 … χ_{L+1} per channel.
     pub chis: Vec<[[f64; 3]; transport::DEGREE + 2]>,
     /// Whether a voxel took part in the solve.
@@ -383,6 +388,7 @@ pub fn light_on(
     }
     report.diffusion_s = start.elapsed().as_secs_f64();
     let mut sh = Vec::new();
+    let mut sh_grid = box_of(grid);
     if settings.diffuse == Diffuse::Transport {
         progress.update(2, 3, "discrete-ordinates transport");
         let start = Instant::now();
@@ -398,7 +404,7 @@ pub fn light_on(
             moments,
             report: t,
             balance,
-            dims,
+            grid: on_grid,
         } = transport_light(
             &fields,
             grid,
@@ -410,10 +416,11 @@ pub fn light_on(
             (settings, on),
         )?;
         sh = moments;
+        sh_grid = on_grid;
         report.transport_on = swept_on;
         report.transport_balance = balance;
         report.transport_iterations = t.changes.len();
-        report.transport_dims = dims;
+        report.transport_dims = sh_grid.dims;
         report.transport_change = t.changes.last().copied().unwrap_or(0.0);
         report.transport_s = start.elapsed().as_secs_f64();
     }
@@ -424,6 +431,7 @@ pub fn light_on(
         i0,
         p1,
         sh,
+        sh_grid,
         chis,
         active,
         g: asymmetries(&fields),
@@ -617,7 +625,7 @@ fn in_scattered(
     // eye (`towards`, once per ray).
     let sh = towards.map(|y| {
         (
-            trilinear(grid, &lighting.sh, None, p),
+            trilinear(&lighting.sh_grid, &lighting.sh, None, p),
             y,
             reduced_moments(fields, &rho, &lighting.chis, &lighting.peak),
         )
@@ -842,7 +850,7 @@ fn transport_light(
         })
         .collect();
     // On a coarser grid when asked: the medium, the sources and the start averaged over
-    // blocks of voxels, the moments interpolated back at the end.
+    // blocks of voxels; the moments stay there (the gathers interpolate them).
     let kappa_tr: Vec<[f64; 3]> = (0..n)
         .map(|i| {
             if sources.active[i] {
@@ -973,23 +981,30 @@ fn transport_light(
     }
     Ok(Transported {
         on,
-        moments: match &coarse {
-            None => m,
-            Some(c) => c.interpolate(&m),
-        },
+        moments: m,
         report,
         balance: budget,
-        dims: grid.dims,
+        grid: box_of(grid),
     })
 }
 
-/// What [`transport_light`] found: the moments per voxel, the iteration's report, the energy
-/// balance per channel and the grid it ran on.
+/// `grid`'s box and dims without its densities.
+fn box_of(grid: &DensityGrid) -> DensityGrid {
+    DensityGrid {
+        min_m: grid.min_m,
+        max_m: grid.max_m,
+        dims: grid.dims,
+        data: Vec::new(),
+    }
+}
+
+/// What [`transport_light`] found: the moments per voxel of the grid it ran on, the
+/// iteration's report, the energy balance per channel and that grid (box and dims).
 struct Transported {
     /// Where the sweeps ran.
     on: String,
     moments: Vec<[f64; transport::PER_VOXEL]>,
     report: transport::Report,
     balance: [transport::Balance; 3],
-    dims: [usize; 3],
+    grid: DensityGrid,
 }

@@ -13,8 +13,10 @@ struct CoupledParams {
     grid_min: vec4<f32>,     // xyz; w = ground albedo
     grid_max: vec4<f32>,     // xyz; w = 1 for the P1 radiance, 0 for I_0 alone
     grid_dims: vec4<u32>,    // nx, ny, nz, field count
-    sizes: vec4<u32>,        // width, height, rows per voxel (5, or 24 with the transport),
-                             // 1 where the sun's single scattering is blurred (coupled::peak)
+    sizes: vec4<u32>,        // width, height, rows per voxel (5), 1 where the sun's single
+                             // scattering is blurred (coupled::peak)
+    sh_max: vec4<f32>,       // the transport grid's upper corner (its lower is grid_min's)
+    sh_dims: vec4<u32>,      // its voxels along x, y, z; w = 1 with the transport's moments
     sigma_ext: array<vec4<f32>, 4>,  // per field, m² per channel
     asymmetry: array<vec4<f32>, 4>,  // per field, g per channel
     peak: array<vec4<f32>, 4>,       // per field, the forward peak f per channel; w = the
@@ -28,14 +30,41 @@ struct CoupledParams {
 @group(1) @binding(0) var<uniform> rp: CoupledParams;
 @group(1) @binding(1) var<storage, read> density: array<vec4<f32>>;
 // Per voxel five rows: (beam I rgb, n), (I_0 rgb, 1 if in the diffusion solve),
-// (I_1 of R xyz, sky R), (I_1 of G xyz, sky G), (I_1 of B xyz, sky B); with the transport 19
-// more: its 75 spherical-harmonic moments φ_lm (25 per channel, R then G then B), 4 a row.
+// (I_1 of R xyz, sky R), (I_1 of G xyz, sky G), (I_1 of B xyz, sky B).
 @group(1) @binding(2) var<storage, read> lighting: array<vec4<f32>>;
 @group(1) @binding(3) var<storage, read_write> image: array<vec4<f32>>;  // rgb, T_vol (green)
 // With the δ-split, the phase functions blurred by the forward peak (render::coupled::peak):
 // p^(D_j)(θ_k) at ((field · PEAK_DEPTHS + j) · 3 + channel) · K + k, D_j = j · PEAK_DEPTH_STEP
 // (both constants put before this file by coupled::gpu::source).
 @group(1) @binding(4) var<storage, read> blurred: array<f32>;
+// With the transport, per voxel of its grid (sh_dims, the frame's grid or its blocks) 19 rows:
+// the 75 spherical-harmonic moments φ_lm (25 per channel, R then G then B), 4 a row.
+@group(1) @binding(5) var<storage, read> moments: array<vec4<f32>>;
+
+// Row `row` of the transport's moments at p, trilinear between its grid's voxel centres,
+// clamped to the edge voxels (as slicing.wgsl's `taps` on the frame's grid); zero outside the
+// frame's box.
+fn moments_at(p: vec3<f32>, row: u32) -> vec4<f32> {
+    if (!inside_box(p)) {
+        return vec4<f32>(0.0);
+    }
+    let dims = vec3<f32>(rp.sh_dims.xyz);
+    let u = clamp((p - rp.grid_min.xyz) / (rp.sh_max.xyz - rp.grid_min.xyz) * dims - 0.5,
+        vec3<f32>(0.0), dims - 1.0);
+    let top = max(vec3<i32>(rp.sh_dims.xyz) - 2, vec3<i32>(0));
+    let lo = vec3<u32>(min(vec3<i32>(floor(u)), top));
+    let t = select(vec3<f32>(0.0), u - vec3<f32>(lo), rp.sh_dims.xyz > vec3<u32>(1u));
+    let s = vec3<u32>(rp.sh_dims.xyz > vec3<u32>(1u));
+    var sum = vec4<f32>(0.0);
+    for (var corner = 0u; corner < 8u; corner = corner + 1u) {
+        let d = vec3<u32>(corner & 1u, (corner >> 1u) & 1u, (corner >> 2u) & 1u);
+        let w3 = select(1.0 - t, t, d == vec3<u32>(1u));
+        let at = lo + d * s;
+        let i = at.x + rp.sh_dims.x * (at.y + rp.sh_dims.y * at.z);
+        sum = sum + w3.x * w3.y * w3.z * moments[19u * i + row];
+    }
+    return sum;
+}
 
 // p^(D)(θ) of the mixture, linear in θ and D (render::coupled::peak::PeakBlur::phase).
 fn peak_blurred(rho: vec4<f32>, depth: f32, cos_theta: f32) -> vec3<f32> {
@@ -127,7 +156,7 @@ fn gather(@builtin(global_invocation_id) id: vec3<u32>) {
     let eye = rp.eye.xyz;
     let cos_theta = dot(rp.sun.xyz, d);
     let toward_eye = -d;
-    let transport = rp.sizes.z > 5u;
+    let transport = rp.sh_dims.w == 1u;
     let y = harmonics(toward_eye);
     var l_vol = vec3<f32>(0.0);
     var tr = vec3<f32>(1.0);
@@ -173,7 +202,7 @@ fn gather(@builtin(global_invocation_id) id: vec3<u32>) {
                     chi[l] = (mixed(rho, rp.chi[l]) - f) / max(1.0 - f, vec3<f32>(1e-6));
                 }
                 for (var r = 0u; r < 19u; r = r + 1u) {
-                    let m = lit(p, 5u + r, false);
+                    let m = moments_at(p, r);
                     for (var j = 0u; j < 4u; j = j + 1u) {
                         let q = 4u * r + j;
                         if (q >= 75u) {

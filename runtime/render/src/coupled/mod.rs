@@ -242,7 +242,8 @@ pub struct Settings {
     /// Source iterations allowed, [1, 1000]. Default 40.
     pub max_transport_iterations: usize,
     /// The transport's voxels span this many of the grid's along each axis: 1, 2 or 4 (the
-    /// medium and the sources averaged over each block, the radiance interpolated back; at 2
+    /// medium and the sources averaged over each block, the radiance's moments kept on the
+    /// blocks and looked up there by the gathers; at 2
     /// the sweeps cost an eighth, docs/rendering.md gives the error). Default: the largest
     /// that leaves the transport at least [`AUTO_TRANSPORT_VOXELS`] voxels along the grid's
     /// longest side.
@@ -381,15 +382,18 @@ impl Model for Coupled {
             let on = s.per_sun.on_gpu(gpu).then(|| renderer.per_sun(gpu));
             cpu::light_on(job.tables, job.frame, s, job.progress, on)
         })?;
-        // The transport's moments take 24 rows of 16 bytes a voxel: past the adapter's
-        // storage-binding limit the view is gathered on the CPU (same image, said so).
-        let bytes = 16 * gpu::rows_per_voxel(&lighting) as u64 * job.frame.grid.data.len() as u64;
+        // The lighting takes 5 rows of 16 bytes a voxel, the transport's moments 19 a voxel of
+        // its grid: past the adapter's storage-binding limit the view is gathered on the CPU
+        // (same image, said so).
         let limit = gpu.device.limits().max_storage_buffer_binding_size;
-        let (image, gather, on) = if bytes > limit {
+        let over = gpu::binding_sizes(&lighting)
+            .into_iter()
+            .find(|&(_, bytes)| bytes > limit);
+        let (image, gather, on) = if let Some((what, bytes)) = over {
             let start = Instant::now();
             let image = cpu::gather(job.tables, job.frame, s, &lighting)?;
             let on = format!(
-                "the CPU: the lighting's {} MiB exceed {}'s storage-binding limit of {} MiB",
+                "the CPU: {what}'s {} MiB exceed {}'s storage-binding limit of {} MiB",
                 bytes >> 20,
                 gpu.describe(),
                 limit >> 20

@@ -574,41 +574,6 @@ impl Coarse {
         out
     }
 
-    /// `values` (per coarse voxel) at every fine voxel's centre, trilinear between the
-    /// coarse centres and constant beyond the outermost.
-    pub fn interpolate<const N: usize>(&self, values: &[[f64; N]]) -> Vec<[f64; N]> {
-        let [cx, cy, cz] = self.grid.dims;
-        let f = self.factor as f64;
-        let weights = |i: usize, n: usize| {
-            let u = ((i as f64 + 0.5) / f - 0.5).clamp(0.0, (n - 1) as f64);
-            let i0 = u.floor() as usize;
-            (i0, (i0 + 1).min(n - 1), u - i0 as f64)
-        };
-        let mut out = vec![[0.0; N]; self.fine.iter().product()];
-        out.par_iter_mut().enumerate().for_each(|(i, o)| {
-            let (x, y, z) = (
-                i % self.fine[0],
-                (i / self.fine[0]) % self.fine[1],
-                i / (self.fine[0] * self.fine[1]),
-            );
-            let (x0, x1, tx) = weights(x, cx);
-            let (y0, y1, ty) = weights(y, cy);
-            let (z0, z1, tz) = weights(z, cz);
-            for (zi, wz) in [(z0, 1.0 - tz), (z1, tz)] {
-                for (yi, wy) in [(y0, 1.0 - ty), (y1, ty)] {
-                    for (xi, wx) in [(x0, 1.0 - tx), (x1, tx)] {
-                        let w = wx * wy * wz;
-                        let v = &values[(zi * cy + yi) * cx + xi];
-                        for n in 0..N {
-                            o[n] += w * v[n];
-                        }
-                    }
-                }
-            }
-        });
-        out
-    }
-
     /// `medium` averaged over each block: σ′_t, σ′_s and the sources by their means, p′'s
     /// moments weighted by σ′_s (what the block scatters).
     pub fn medium(&self, medium: &Medium) -> Medium {
@@ -838,7 +803,7 @@ mod tests {
     }
 
     #[test]
-    fn a_coarse_grid_keeps_the_totals_and_interpolates_linear_fields_exactly() {
+    fn a_coarse_grid_keeps_the_totals_and_its_lookup_is_exact_for_linear_fields() {
         // 7 × 6 × 5 voxels in blocks of 2: the last blocks along x and z reach past the box.
         let fine = DensityGrid {
             min_m: DVec3::new(-1.0, 0.0, 2.0),
@@ -861,7 +826,8 @@ mod tests {
             );
         }
         // A field linear in position, given at the coarse centres, comes back exactly at the
-        // fine centres between them (trilinear interpolation is exact for it).
+        // fine centres between them as the gathers look it up there (lattice::trilinear on
+        // the coarse grid, exact for it).
         let h = 0.2; // the fine voxel along every axis
         let linear = |x: f64, y: f64, z: f64| 1.0 + 2.0 * x - 3.0 * y + 0.5 * z;
         let at_coarse: Vec<[f64; 1]> = (0..36)
@@ -874,10 +840,12 @@ mod tests {
                 )]
             })
             .collect();
-        let back = coarse.interpolate(&at_coarse);
         let mut inside = 0;
-        for (i, v) in back.iter().enumerate() {
+        for i in 0..210 {
             let (x, y, z) = (i % 7, (i / 7) % 6, i / 42);
+            let centre = |k: usize| (k as f64 + 0.5) * h;
+            let p = fine.min_m + DVec3::new(centre(x), centre(y), centre(z));
+            let v = crate::lattice::trilinear(&coarse.grid, &at_coarse, None, p);
             let u = |k: usize, n: usize| {
                 (k as f64 + 0.5) / 2.0 - 0.5 >= 0.0
                     && (k as f64 + 0.5) / 2.0 - 0.5 <= (n - 1) as f64
