@@ -19,6 +19,8 @@
 use std::sync::{Arc, Mutex, Weak};
 use std::time::Instant;
 
+use rayon::prelude::*;
+
 use runtime::Tables;
 use runtime::gpu::{Gpu, GpuTables};
 
@@ -318,26 +320,30 @@ impl Renderer {
 /// blurred phase functions (one unread value without the δ-split) and the transport's moments
 /// (one unread row without the transport).
 fn upload(device: &wgpu::Device, lighting: &Arc<Lighting>, voxels: usize) -> Resident {
-    let mut rows: Vec<[f32; 4]> = Vec::with_capacity(ROWS_PER_VOXEL * voxels);
-    for i in 0..voxels {
-        let b = lighting.buffer[i];
-        rows.push(b.map(|v| v as f32));
-        let i0 = lighting.i0[i];
-        let active = f64::from(u8::from(lighting.active[i]));
-        rows.push([i0[0], i0[1], i0[2], active].map(|v| v as f32));
-        for c in 0..3 {
-            let i1 = &lighting.p1[i][3 * c..3 * c + 3];
-            rows.push([i1[0], i1[1], i1[2], lighting.sky_mean[i][c]].map(|v| v as f32));
-        }
-    }
-    let mut moments: Vec<[f32; 4]> = lighting
-        .sh
-        .iter()
-        .flat_map(|m| {
-            (0..SH_ROWS)
-                .map(|r| std::array::from_fn(|j| m.get(4 * r + j).map_or(0.0, |&v| v as f32)))
-        })
-        .collect();
+    // Converted on every thread (dense_cumulus, 1.1 M voxels, a first view at 64 × 48 on 2
+    // cores and lavapipe: 0.45 s with the conversion on one thread, 0.38 s).
+    let mut rows = vec![[0.0f32; 4]; ROWS_PER_VOXEL * voxels];
+    rows.par_chunks_mut(ROWS_PER_VOXEL)
+        .enumerate()
+        .for_each(|(i, out)| {
+            out[0] = lighting.buffer[i].map(|v| v as f32);
+            let i0 = lighting.i0[i];
+            let active = f64::from(u8::from(lighting.active[i]));
+            out[1] = [i0[0], i0[1], i0[2], active].map(|v| v as f32);
+            for c in 0..3 {
+                let i1 = &lighting.p1[i][3 * c..3 * c + 3];
+                out[2 + c] = [i1[0], i1[1], i1[2], lighting.sky_mean[i][c]].map(|v| v as f32);
+            }
+        });
+    let mut moments = vec![[0.0f32; 4]; SH_ROWS * lighting.sh.len()];
+    moments
+        .par_chunks_mut(SH_ROWS)
+        .zip(&lighting.sh)
+        .for_each(|(out, m)| {
+            for (r, row) in out.iter_mut().enumerate() {
+                *row = std::array::from_fn(|j| m.get(4 * r + j).map_or(0.0, |&v| v as f32));
+            }
+        });
     if moments.is_empty() {
         moments.push([0.0; 4]);
     }
