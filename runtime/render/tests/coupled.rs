@@ -718,3 +718,67 @@ fn bad_settings_and_a_solve_over_its_cap_are_refused() {
         assert!(e.contains(want), "{e}");
     }
 }
+
+/// Counts the progress a render tells.
+#[derive(Default)]
+struct Told(std::sync::atomic::AtomicUsize);
+
+impl render::model::Progress for Told {
+    fn update(&self, _done: u64, _total: u64, _message: &str) {
+        self.0.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    }
+}
+
+/// `per_view = "gpu"` refuses, before the lighting starts, a grid whose lighting would exceed
+/// the adapter's storage-binding limit, naming the buffer, its size and the limit (`auto` would
+/// gather such a view on the CPU). Checked where the limit is within a 160³ grid's reach
+/// (lavapipe's 128 MiB in CI); an adapter with more says so and checks nothing.
+#[test]
+fn per_view_gpu_refuses_a_lighting_past_the_adapters_limit_before_any_work() {
+    let Some(gpu) = common::gpu() else { return };
+    let limit = gpu.device.limits().max_storage_buffer_binding_size;
+    // The lighting's 80 bytes a voxel past the limit: the smallest cube that does it.
+    let side = (1..=160).find(|&n| 80 * (n as u64).pow(3) > limit);
+    let Some(side) = side else {
+        eprintln!("the adapter binds {limit} bytes: no grid up to 160³ exceeds it");
+        return;
+    };
+    let (_tmp, dir) = bake(&fields());
+    let tables = Tables::open(&dir).unwrap();
+    let (text, base) = common::soft_ball(&fields());
+    let mut scene = RenderScene::parse(&text, "ball", &base).unwrap();
+    (scene.width, scene.height, scene.grid_resolution) = (8, 8, side);
+    let frame = scene.frame(&tables).unwrap();
+    let settings = render::ModelSettings::Coupled(Settings {
+        per_view: render::coupled::Place::Gpu,
+        ..Settings::default()
+    });
+    let prepared = settings.prepare(&gpu, &tables).unwrap();
+    let told = Told::default();
+    let job = render::Job {
+        tables: &tables,
+        frame: &frame,
+        progress: &told,
+        lighting: None,
+    };
+    let started = std::time::Instant::now();
+    let err = settings
+        .render(&job, render::On::Gpu(&gpu, &prepared))
+        .err()
+        .expect("refused")
+        .to_string();
+    eprintln!(
+        "{side}³ grid: refused in {:.3} s: {err}",
+        started.elapsed().as_secs_f64()
+    );
+    assert!(
+        err.contains("per_view = \"gpu\"")
+            && err.contains("the lighting's")
+            && err.contains(&format!(
+                "storage-binding limit of {:.1} MiB",
+                limit as f64 / 1048576.0
+            )),
+        "{err}"
+    );
+    assert_eq!(told.0.load(std::sync::atomic::Ordering::Relaxed), 0);
+}

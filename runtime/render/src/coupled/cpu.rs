@@ -10,7 +10,7 @@ use rayon::prelude::*;
 use runtime::{FieldTable, Tables, sample};
 
 use super::peak::PeakBlur;
-use super::{Diffuse, Emergent, PerSun, Settings, Source, Split, transport};
+use super::{Diffuse, Emergent, Place, Settings, Source, Split, transport};
 use crate::diffusion::{self, Problem};
 use crate::diffusion_gpu::SolveError;
 use crate::geometry::box_span;
@@ -361,7 +361,7 @@ pub fn light_on(
             match on.map(|on| diffusion::solve_on(&problem, limits, on.gpu, on.solver)) {
                 None => (on_cpu()?, "the CPU".to_string()),
                 Some(Ok(s)) => (s, on.map_or(String::new(), |on| on.gpu.describe())),
-                Some(Err(SolveError::Gpu(e))) if settings.per_sun == PerSun::Auto => {
+                Some(Err(SolveError::Gpu(e))) if settings.per_sun == Place::Auto => {
                     (on_cpu()?, format!("the CPU ({e})"))
                 }
                 Some(Err(e)) => {
@@ -903,7 +903,7 @@ fn transport_light(
     }) {
         None => None,
         Some(Ok(uploaded)) => Some(uploaded),
-        Some(Err(_)) if settings.per_sun == PerSun::Auto => None,
+        Some(Err(_)) if settings.per_sun == Place::Auto => None,
         Some(Err(e)) => {
             return Err(FrameError(format!(
                 "the transport's acceleration on the GPU: {e}"
@@ -945,7 +945,7 @@ fn transport_light(
         None => None,
         Some(on) => match on.sweeper.prepare(on.gpu, grid, &medium, &dirs) {
             Ok(sweeps) => Some(Ok(sweeps)),
-            Err(e) if settings.per_sun == PerSun::Gpu => {
+            Err(e) if settings.per_sun == Place::Gpu => {
                 return Err(FrameError(e.to_string()));
             }
             Err(e) => Some(Err(e.to_string())),

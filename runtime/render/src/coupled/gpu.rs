@@ -79,17 +79,13 @@ const SH_ROWS: usize = super::transport::PER_VOXEL.div_ceil(4);
 /// Rows of four f32 per voxel of the frame's grid the gather reads of a lighting.
 const ROWS_PER_VOXEL: usize = 5;
 
-/// The bytes of the two large buffers the gather binds for `lighting`: its rows per voxel of
-/// the frame's grid, and the transport's moments per voxel of its grid. Each must be within
-/// the adapter's storage-binding limit.
-pub fn binding_sizes(lighting: &Lighting) -> [(&'static str, u64); 2] {
-    let voxels = lighting.dims.iter().product::<usize>() as u64;
+/// The bytes of the two large buffers the gather binds for a lighting of `voxels` voxels
+/// whose transport's moments are at `moments` voxels (0 without the transport): its rows per
+/// voxel, and the moments. Each must be within the adapter's storage-binding limit.
+pub fn binding_sizes(voxels: usize, moments: usize) -> [(&'static str, u64); 2] {
     [
-        ("the lighting", (16 * ROWS_PER_VOXEL) as u64 * voxels),
-        (
-            "the transport's moments",
-            (16 * SH_ROWS) as u64 * lighting.sh.len() as u64,
-        ),
+        ("the lighting", (16 * ROWS_PER_VOXEL * voxels) as u64),
+        ("the transport's moments", (16 * SH_ROWS * moments) as u64),
     ]
 }
 

@@ -191,13 +191,15 @@ pub enum Diffuse {
     Diffusion,
 }
 
-/// Where a GPU render's per-sun passes run (the transport's sweeps, [`sweep_gpu`], and the
-/// diffusion solves, [`crate::diffusion_gpu`]); a CPU render runs them on the CPU.
+/// Where a GPU render runs a pass: the per-sun passes (`per_sun`: the transport's sweeps,
+/// [`sweep_gpu`], and the diffusion solves, [`crate::diffusion_gpu`]) or the per-view gather
+/// (`per_view`, [`gpu`]); a CPU render runs them on the CPU.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
 #[serde(rename_all = "kebab-case")]
-pub enum PerSun {
+pub enum Place {
     /// On the GPU when the adapter is one, on the CPU when it emulates one on the CPU
-    /// (lavapipe, where they took several times the CPU reference's time, docs/rendering.md).
+    /// (lavapipe, where the per-sun passes took 6–7× and the gather 3× the CPU reference's
+    /// time, docs/rendering.md).
     #[default]
     Auto,
     /// On the GPU, whatever the adapter.
@@ -206,13 +208,13 @@ pub enum PerSun {
     Cpu,
 }
 
-impl PerSun {
-    /// Whether a GPU render runs them on `gpu`.
+impl Place {
+    /// Whether a GPU render runs the pass on `gpu`.
     pub fn on_gpu(self, gpu: &Gpu) -> bool {
         match self {
-            PerSun::Auto => gpu.adapter.get_info().device_type != wgpu::DeviceType::Cpu,
-            PerSun::Gpu => true,
-            PerSun::Cpu => false,
+            Place::Auto => gpu.adapter.get_info().device_type != wgpu::DeviceType::Cpu,
+            Place::Gpu => true,
+            Place::Cpu => false,
         }
     }
 }
@@ -251,7 +253,11 @@ pub struct Settings {
     /// Where a GPU render's per-sun passes (the transport's sweeps, the diffusion solves)
     /// run: "auto" (the default: on the GPU unless the adapter is a CPU emulation such as
     /// lavapipe), "gpu" or "cpu".
-    pub per_sun: PerSun,
+    pub per_sun: Place,
+    /// Where a GPU render's gather (per view) runs, as `per_sun`: "auto" (the default),
+    /// "gpu" (fails, naming the limit, where the lighting exceeds the adapter's buffers) or
+    /// "cpu".
+    pub per_view: Place,
 }
 
 impl Default for Settings {
@@ -267,7 +273,8 @@ impl Default for Settings {
             transport_tolerance: 0.01,
             max_transport_iterations: 40,
             transport_coarsening: None,
-            per_sun: PerSun::Auto,
+            per_sun: Place::Auto,
+            per_view: Place::Auto,
         }
     }
 }
@@ -378,27 +385,58 @@ impl Model for Coupled {
         gpu: &Gpu,
         tables: &GpuTables,
     ) -> Result<Rendered, RenderError> {
+        // The lighting takes 5 rows of 16 bytes a voxel, the transport's moments 19 a voxel of
+        // its grid: past the adapter's storage-binding limit the view is gathered on the CPU
+        // (same image, said so), or refused before any work with `per_view = "gpu"`; on a CPU
+        // adapter `auto` gathers on the CPU.
+        let dims = job.frame.grid.dims;
+        let moments = if s.diffuse == Diffuse::Transport {
+            let factor = s.coarsening(dims);
+            dims.iter().map(|d| d.div_ceil(factor)).product()
+        } else {
+            0
+        };
+        let limit = gpu.device.limits().max_storage_buffer_binding_size;
+        let over = gpu::binding_sizes(dims.iter().product(), moments)
+            .into_iter()
+            .find(|&(_, bytes)| bytes > limit)
+            .map(|(what, bytes)| {
+                let mib = |b: u64| b as f64 / f64::from(1u32 << 20);
+                format!(
+                    "{what}'s {:.1} MiB exceed {}'s storage-binding limit of {:.1} MiB",
+                    mib(bytes),
+                    gpu.describe(),
+                    mib(limit)
+                )
+            });
+        let on_cpu = match (s.per_view, over) {
+            (Place::Gpu, Some(over)) => {
+                return Err(FrameError(format!(
+                    "[render.coupled] per_view = \"gpu\": {over}; lower [render] \
+                     grid_resolution or set per_view = \"auto\""
+                ))
+                .into());
+            }
+            (_, Some(over)) => Some(over),
+            (place, None) if !place.on_gpu(gpu) => Some(format!(
+                "per_view = \"{}\" on {}",
+                if place == Place::Cpu { "cpu" } else { "auto" },
+                gpu.describe()
+            )),
+            _ => None,
+        };
         let (lighting, reused) = crate::relight::lit(job.lighting, job.frame, s, || {
             let on = s.per_sun.on_gpu(gpu).then(|| renderer.per_sun(gpu));
             cpu::light_on(job.tables, job.frame, s, job.progress, on)
         })?;
-        // The lighting takes 5 rows of 16 bytes a voxel, the transport's moments 19 a voxel of
-        // its grid: past the adapter's storage-binding limit the view is gathered on the CPU
-        // (same image, said so).
-        let limit = gpu.device.limits().max_storage_buffer_binding_size;
-        let over = gpu::binding_sizes(&lighting)
-            .into_iter()
-            .find(|&(_, bytes)| bytes > limit);
-        let (image, gather, on) = if let Some((what, bytes)) = over {
+        let (image, gather, on) = if let Some(why) = on_cpu {
             let start = Instant::now();
             let image = cpu::gather(job.tables, job.frame, s, &lighting)?;
-            let on = format!(
-                "the CPU: {what}'s {} MiB exceed {}'s storage-binding limit of {} MiB",
-                bytes >> 20,
-                gpu.describe(),
-                limit >> 20
-            );
-            (image, start.elapsed().as_secs_f64(), on)
+            (
+                image,
+                start.elapsed().as_secs_f64(),
+                format!("the CPU: {why}"),
+            )
         } else {
             let (image, t) = renderer.gather(gpu, job.tables, tables, job.frame, s, &lighting)?;
             (image, t.upload + t.frame + t.readback, gpu.describe())
