@@ -764,8 +764,7 @@ fn per_view_gpu_refuses_a_lighting_past_the_adapters_limit_before_any_work() {
     let started = std::time::Instant::now();
     let err = settings
         .render(&job, render::On::Gpu(&gpu, &prepared))
-        .err()
-        .expect("refused")
+        .expect_err("refused")
         .to_string();
     eprintln!(
         "{side}³ grid: refused in {:.3} s: {err}",
