@@ -73,7 +73,10 @@ bench data/scenes/dense_cumulus.toml riley,miyazaki --sizes "$SIZES" --slice-cou
 DIFFUSION='diffuse="diffusion"'
 REPEAT=1 TAG=lighting bench data/scenes/dense_cumulus.toml max,coupled --sizes "$SIZES" \
     --grids "$GRIDS" --set "$DIFFUSION"
-REPEAT=1 TAG=transport bench data/scenes/dense_cumulus.toml riley,coupled --grids "$GRIDS"
+# With --camera-moves: coupled's frames that reuse the lighting (the viewer's camera move,
+# the lighting's buffers kept on the GPU), `camera_move_s` in the JSON.
+REPEAT=1 TAG=transport bench data/scenes/dense_cumulus.toml riley,coupled --grids "$GRIDS" \
+    --camera-moves
 # The same with coupled's per-sun passes on this machine's CPU, for the ratio.
 REPEAT=1 TAG=transport-cpu bench data/scenes/dense_cumulus.toml riley,coupled --grids "$GRIDS" \
     --set 'per_sun="cpu"'

@@ -56,6 +56,11 @@ pub struct RenderBench {
     /// Also time the CPU reference of each model that has a GPU renderer.
     #[arg(long)]
     cpu: bool,
+    /// Also time a camera move of the models that keep their per-sun lighting (max,
+    /// coupled): frames of the same view that reuse the lighting, as the viewer renders them
+    /// (best of --repeat, after one lit frame).
+    #[arg(long)]
+    camera_moves: bool,
     /// Print JSON.
     #[arg(long)]
     json: bool,
@@ -212,6 +217,11 @@ pub fn run(b: RenderBench) -> Result<()> {
             }
         }
         for (i, m) in at.iter().enumerate() {
+            let move_s = if b.camera_moves {
+                camera_move(m, &frame, &p.tables, || on(i), b.repeat.max(1))?
+            } else {
+                None
+            };
             let cpu_s = if b.cpu && m.has_gpu() {
                 let r = m.render(&job, On::Cpu)?;
                 Some(r.passes.iter().map(|p| p.seconds).sum::<f64>())
@@ -237,6 +247,7 @@ pub fn run(b: RenderBench) -> Result<()> {
                 "cost_over_base": cost(&best[i]) / base_cost[i],
                 "figures": r.figures.iter().map(|(k, v)| json!({"name": k, "value": v})).collect::<Vec<_>>(),
                 "cpu_reference_s": cpu_s,
+                "camera_move_s": move_s,
             }));
         }
     }
@@ -252,6 +263,39 @@ pub fn run(b: RenderBench) -> Result<()> {
         print_table(&report);
     }
     Ok(())
+}
+
+/// The best of `repeat` frames of `frame`'s view that reuse `m`'s lighting (a camera move in
+/// the viewer), after one frame that lights it; `None` for a model that lights every frame.
+fn camera_move<'a>(
+    m: &ModelSettings,
+    frame: &render::Frame,
+    tables: &runtime::Tables,
+    on: impl Fn() -> On<'a>,
+    repeat: usize,
+) -> Result<Option<f64>> {
+    let cache = render::relight::LightingCache::new();
+    let job = Job {
+        tables,
+        frame,
+        progress: &(),
+        lighting: Some(&cache),
+    };
+    m.render(&job, on())?;
+    let mut best = f64::INFINITY;
+    for _ in 0..repeat {
+        let started = std::time::Instant::now();
+        let r = m.render(&job, on())?;
+        if !r
+            .figures
+            .iter()
+            .any(|&(k, v)| k == "lighting reused" && v == 1.0)
+        {
+            return Ok(None);
+        }
+        best = best.min(started.elapsed().as_secs_f64());
+    }
+    Ok(Some(best))
 }
 
 /// One line per model and setting: size, slices, grid, the cost against the base setting,
@@ -286,6 +330,10 @@ fn print_table(report: &serde_json::Value) {
         let cpu = r["cpu_reference_s"].as_f64().map_or(String::new(), |s| {
             format!("; CPU reference {:.1} ms", s * 1e3)
         });
+        let cpu = match r["camera_move_s"].as_f64() {
+            Some(s) => format!("{cpu}; camera move {:.1} ms", s * 1e3),
+            None => cpu,
+        };
         println!(
             "{:>9} {:>5}² grid {}{slices}: {:.1} ms (× base {:.2}) [{}]{}{cpu}",
             r["model"].as_str().unwrap_or("?"),
