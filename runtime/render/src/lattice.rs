@@ -441,11 +441,18 @@ impl Sky {
     }
 }
 
-/// The reduced skylight per voxel: the sky model's radiance from [`SKY_DIRECTIONS`] directions,
-/// each attenuated through the grid ([`sky_sweeps`]). Below the horizon it is the air's and the
-/// sunlit ground's (Lambertian, `[ground] albedo`, lit through the volume as `ground_lit` says,
-/// as [`crate::shading::compose`] shades it), both as seen from the middle of the box.
+/// The reduced skylight per voxel: the sky model's radiance from [`SKY_DIRECTIONS`] directions
+/// ([`sky_light`]), each attenuated through the grid ([`sky_sweeps`]).
 pub fn reduced_sky(frame: &Frame, ext: &[[f64; 3]], ground_lit: impl Fn(DVec3) -> [f64; 3]) -> Sky {
+    sky_sweeps(&frame.grid, ext, &sky_light(frame, ground_lit))
+}
+
+/// The sky's radiance arriving at the box from each of the [`SKY_DIRECTIONS`] directions s
+/// (towards the sky) that carries light, per channel: above the horizon the air's, below it
+/// the air's and the sunlit ground's (Lambertian, `[ground] albedo`, lit through the volume as
+/// `ground_lit` says, as [`crate::shading::compose`] shades it), both as seen from the middle
+/// of the box.
+pub fn sky_light(frame: &Frame, ground_lit: impl Fn(DVec3) -> [f64; 3]) -> Vec<(DVec3, [f64; 3])> {
     let grid = &frame.grid;
     let sun = frame.sun.direction();
     // The sky's radiance as seen from the middle of the box (Eqs. 11–15).
@@ -475,7 +482,51 @@ pub fn reduced_sky(frame: &Frame, ext: &[[f64; 3]], ground_lit: impl Fn(DVec3) -
             lit.push((s, radiance));
         }
     }
-    sky_sweeps(grid, ext, &lit)
+    lit
+}
+
+/// One direction of the skylight's sweeps ([`sky_orders`]).
+pub(crate) struct SkyWay {
+    /// The direction towards the sky.
+    pub(crate) s: DVec3,
+    /// Its radiance times its solid angle's share of the sphere, 1/[`SKY_DIRECTIONS`].
+    pub(crate) weight: [f64; 3],
+    /// The step between two layers (m).
+    pub(crate) ds: f64,
+    /// The point one layer back along the layer's axes b, c (voxel units).
+    pub(crate) shift: (f64, f64),
+}
+
+/// The sweep orders of `lit` ([`sky_sweeps`]): per order its axis a (along which the
+/// directions travel most, as [`sweep`] chooses it; the layers' axes are (a + 1) % 3 and
+/// (a + 2) % 3), whether they travel towards +a, and its directions.
+pub(crate) fn sky_orders(
+    grid: &DensityGrid,
+    lit: &[(DVec3, [f64; 3])],
+) -> Vec<((usize, bool), Vec<SkyWay>)> {
+    let h = voxel_size(grid);
+    let omega = 4.0 * PI / SKY_DIRECTIONS as f64;
+    let mut orders: Vec<((usize, bool), Vec<SkyWay>)> = Vec::new();
+    for &(s, radiance) in lit {
+        let l = -s;
+        let a = (0..3)
+            .max_by(|&i, &j| l[i].abs().total_cmp(&l[j].abs()))
+            .expect("three axes");
+        let (b, c) = ((a + 1) % 3, (a + 2) % 3);
+        let ds = h[a] / l[a].abs();
+        let way = SkyWay {
+            s,
+            weight: radiance.map(|r| r * omega / (4.0 * PI)),
+            ds,
+            shift: (-ds * l[b] / h[b], -ds * l[c] / h[c]),
+        };
+        let key = (a, l[a] > 0.0);
+        match orders.iter_mut().find(|(k, _)| *k == key) {
+            Some((_, ways)) => ways.push(way),
+            None => orders.push((key, vec![way])),
+        }
+    }
+    orders
 }
 
 /// The skylight arriving from each `(s, radiance)` of `lit` (towards the sky, radiance per
@@ -488,38 +539,8 @@ pub fn reduced_sky(frame: &Frame, ext: &[[f64; 3]], ground_lit: impl Fn(DVec3) -
 pub fn sky_sweeps(grid: &DensityGrid, ext: &[[f64; 3]], lit: &[(DVec3, [f64; 3])]) -> Sky {
     let mut sky = Sky::zero(ext.len());
     let dims = grid.dims;
-    let h = voxel_size(grid);
     let stride = [1, dims[0], dims[0] * dims[1]];
-    let omega = 4.0 * PI / SKY_DIRECTIONS as f64;
-    // Per direction: its sweep's axis a and sign (as `sweep` chooses them), the step ds
-    // between layers and the point one layer back along b, c in voxel units.
-    struct Way {
-        s: DVec3,
-        weight: [f64; 3],
-        ds: f64,
-        shift: (f64, f64),
-    }
-    let mut orders: Vec<((usize, bool), Vec<Way>)> = Vec::new();
-    for &(s, radiance) in lit {
-        let l = -s;
-        let a = (0..3)
-            .max_by(|&i, &j| l[i].abs().total_cmp(&l[j].abs()))
-            .expect("three axes");
-        let (b, c) = ((a + 1) % 3, (a + 2) % 3);
-        let ds = h[a] / l[a].abs();
-        let way = Way {
-            s,
-            weight: radiance.map(|r| r * omega / (4.0 * PI)),
-            ds,
-            shift: (-ds * l[b] / h[b], -ds * l[c] / h[c]),
-        };
-        let key = (a, l[a] > 0.0);
-        match orders.iter_mut().find(|(k, _)| *k == key) {
-            Some((_, ways)) => ways.push(way),
-            None => orders.push((key, vec![way])),
-        }
-    }
-    for ((a, forward), ways) in &orders {
+    for ((a, forward), ways) in &sky_orders(grid, lit) {
         let a = *a;
         let (b, c) = ((a + 1) % 3, (a + 2) % 3);
         let (nb, nc) = (dims[b], dims[c]);

@@ -299,8 +299,9 @@ fn the_gpu_gather_equals_the_cpu_reference() {
     }
 }
 
-/// The per-sun passes on the GPU (the transport's sweeps, `coupled::sweep_gpu`, and the
-/// diffusion solves, `diffusion_gpu`; f32, lavapipe in CI) give the CPU reference's lighting:
+/// The per-sun passes on the GPU (the transport's sweeps, `coupled::sweep_gpu`, the skylight's,
+/// `coupled::sky_gpu`, and the diffusion solves, `diffusion_gpu`; f32, lavapipe in CI) give the
+/// CPU reference's lighting:
 /// the τ 30 soft ball side-lit over a lit ground with the sky on, 32 directions on a 16³
 /// transport grid (to keep the test short on lavapipe), every source iteration's round swept
 /// and accelerated on the GPU (the convergence test on the CPU, f64, as in the reference).
@@ -311,6 +312,7 @@ fn the_gpu_lighting_equals_the_cpu_reference() {
     let tables = Tables::open(&dir).unwrap();
     let frame = lit_ball(&tables);
     let sweeper = render::coupled::sweep_gpu::Sweeper::new(&gpu);
+    let sky = render::coupled::sky_gpu::SkySweeper::new(&gpu);
     let solver = render::diffusion_gpu::Solver::new(&gpu);
     let settings = Settings {
         directions: 32,
@@ -321,6 +323,7 @@ fn the_gpu_lighting_equals_the_cpu_reference() {
     let on = cpu::OnGpu {
         gpu: &gpu,
         sweeper: &sweeper,
+        sky: &sky,
         solver: &solver,
     };
     let gpu_light = cpu::light_on(&tables, &frame, &settings, &(), Some(on)).unwrap();
@@ -352,6 +355,20 @@ fn the_gpu_lighting_equals_the_cpu_reference() {
             }
         }
     }
+    assert_eq!(gpu_light.report.sky_on, gpu.describe());
+    let scale = cpu_light
+        .sky_mean
+        .iter()
+        .flatten()
+        .fold(0.0f64, |a, v| a.max(*v));
+    let sky_worst = cpu_light
+        .sky_mean
+        .iter()
+        .flatten()
+        .zip(gpu_light.sky_mean.iter().flatten())
+        .fold(0.0f64, |a, (x, y)| a.max((x - y).abs() / scale));
+    eprintln!("skylight: worst |GPU − CPU| {sky_worst:.2e} of the largest mean");
+    assert!(sky_worst < GPU_SKY_TOLERANCE, "{sky_worst:e}");
     let r = (&gpu_light.report, &cpu_light.report);
     eprintln!(
         "diffusion: CG iterations {:?} (CPU {:?}), worst |GPU − CPU| {diffusion:.2e}, {:.2} s \
@@ -372,10 +389,59 @@ fn the_gpu_lighting_equals_the_cpu_reference() {
 }
 
 /// The worst differences above, the diffusion's and the transport's (measured on lavapipe:
-/// 1.78·10⁻⁵ and 2.48·10⁻⁵). Each solve stops anywhere within its tolerance (relative residual
+/// 1.77·10⁻⁵ and 2.58·10⁻⁵ with the skylight swept on the GPU too; 1.78·10⁻⁵ and 2.48·10⁻⁵
+/// before). Each solve stops anywhere within its tolerance (relative residual
 /// 10⁻⁶, the acceleration's 10⁻²), so the two lightings differ by that, not by f32: with the
 /// CPU's solves and the GPU's sweeps the transport differed by 3.99·10⁻⁶.
 const GPU_LIGHTING_TOLERANCE: (f64, f64) = (2e-5, 2.8e-5);
+
+/// The skylight's sweeps on the GPU (`coupled::sky_gpu`) give `lattice::sky_sweeps`' mean
+/// skylight and flux in f32: a lumpy medium on an uneven grid (every axis leads some
+/// directions), τ per voxel from 10⁻⁶ to 40 (the light past the thick voxels e^{−40}), each
+/// of the 32 directions with its own radiance.
+#[test]
+fn the_gpu_skylight_equals_the_cpu_sweeps() {
+    let Some(gpu) = common::gpu() else { return };
+    let dims = [9, 5, 7];
+    let n = dims[0] * dims[1] * dims[2];
+    let grid = render::DensityGrid {
+        min_m: glam::DVec3::new(-100.0, 0.0, 50.0),
+        max_m: glam::DVec3::new(260.0, 100.0, 330.0),
+        dims,
+        data: vec![[0.0; render::MAX_FIELDS]; n],
+    };
+    // 40 m voxels: β from 2.5·10⁻⁸ to 1 per metre.
+    let wobble = |i: usize, k: usize| 0.5 + 0.5 * ((i * 7 + k * 13) as f64 * 0.61).sin();
+    let ext: Vec<[f64; 3]> = (0..n)
+        .map(|i| std::array::from_fn(|c| 10f64.powf(-7.6 + 7.6 * wobble(i, c))))
+        .collect();
+    let lit: Vec<(glam::DVec3, [f64; 3])> = render::lattice::sky_directions()
+        .into_iter()
+        .enumerate()
+        .map(|(d, s)| (s, std::array::from_fn(|c| 1.0 + wobble(d, c))))
+        .collect();
+    let want = render::lattice::sky_sweeps(&grid, &ext, &lit);
+    let got = render::coupled::sky_gpu::SkySweeper::new(&gpu)
+        .sweep(&gpu, &grid, &ext, &lit)
+        .unwrap();
+    let scale = want.mean.iter().flatten().fold(0.0f64, |a, v| a.max(*v));
+    let (mut mean, mut flux): (f64, f64) = (0.0, 0.0);
+    for i in 0..n {
+        for c in 0..3 {
+            mean = mean.max((got.mean[i][c] - want.mean[i][c]).abs() / scale);
+            flux = flux.max((got.flux[i][c] - want.flux[i][c]).abs().max_element() / scale);
+        }
+    }
+    eprintln!(
+        "GPU skylight: worst mean {mean:.2e}, flux {flux:.2e} of the largest mean {scale:.3}"
+    );
+    assert!(scale > 0.1, "the sky reaches the voxels: {scale}");
+    assert!(mean.max(flux) < GPU_SKY_TOLERANCE, "{mean:e} {flux:e}");
+}
+
+/// The GPU skylight's worst difference from the CPU's, of the largest mean skylight, just
+/// above the measured (lavapipe, f32): 4.85·10⁻⁷ on the lumpy grid, 3.67·10⁻⁷ in the lit ball.
+const GPU_SKY_TOLERANCE: f64 = 6e-7;
 
 /// The diffusion solve on the GPU (`diffusion_gpu`: f32 conjugate gradients and V-cycles
 /// inside an f64 refinement) reaches the CPU reference's solution: a ball of varying κ_tr

@@ -15,8 +15,8 @@ use crate::diffusion::{self, Problem};
 use crate::diffusion_gpu::SolveError;
 use crate::geometry::box_span;
 use crate::lattice::{
-    MIN_DIFFUSION_VOXEL_DEPTH, ShadowMap, Voxels, asymmetry, reduced_sky, reduced_sun, sweep,
-    transmittance_to_sun, trilinear, voxel_size, voxels,
+    MIN_DIFFUSION_VOXEL_DEPTH, ShadowMap, Voxels, asymmetry, reduced_sun, sky_light, sky_sweeps,
+    sweep, transmittance_to_sun, trilinear, voxel_size, voxels,
 };
 use crate::shading::{check_fields, coefficients, compose};
 use crate::skylight::SkyLight;
@@ -31,6 +31,8 @@ pub struct CoupledReport {
     pub diffusion_s: f64,
     /// Where the three diffusion solves ran.
     pub diffusion_on: String,
+    /// Where the reduced skylight's sweeps ran.
+    pub sky_on: String,
     /// Seconds for the discrete-ordinates transport (0 with `diffuse = "diffusion"`).
     pub transport_s: f64,
     /// Its source iterations.
@@ -253,13 +255,16 @@ pub fn light_with(
 }
 
 /// An adapter and the per-sun passes compiled for it: the transport's sweeps
-/// ([`super::sweep_gpu`]) and the diffusion solves ([`crate::diffusion_gpu`]).
+/// ([`super::sweep_gpu`]), the skylight's ([`super::sky_gpu`]) and the diffusion solves
+/// ([`crate::diffusion_gpu`]).
 #[derive(Clone, Copy)]
 pub struct OnGpu<'a> {
     /// The adapter.
     pub gpu: &'a runtime::gpu::Gpu,
     /// The sweeps' pipeline.
     pub sweeper: &'a super::sweep_gpu::Sweeper,
+    /// The skylight sweeps' pipeline.
+    pub sky: &'a super::sky_gpu::SkySweeper,
     /// The solver's pipelines.
     pub solver: &'a crate::diffusion_gpu::Solver,
 }
@@ -308,9 +313,20 @@ pub fn light_on(
     let sunlight = reduced_sun(frame, &vec![[0.0; 3]; v.ext.len()]);
     // The ground lit as the composite lights it (through the δ-scaled extinction).
     let scaled = delta_scaled(settings).then_some(peak.as_slice());
-    let sky = reduced_sky(frame, &v.ext, |g| {
+    let lit = sky_light(frame, |g| {
         transmittance_to_sun(&fields, grid, g, sun_dir, scaled)
     });
+    // On the GPU when asked; `auto` falls back to the CPU where the adapter cannot hold the
+    // sweeps, `gpu` fails naming the limit.
+    let (sky, sky_on) = match on.map(|on| on.sky.sweep(on.gpu, grid, &v.ext, &lit)) {
+        None => (sky_sweeps(grid, &v.ext, &lit), "the CPU".to_string()),
+        Some(Ok(sky)) => (sky, on.map_or(String::new(), |on| on.gpu.describe())),
+        Some(Err(e)) if settings.per_sun == Place::Auto => {
+            (sky_sweeps(grid, &v.ext, &lit), format!("the CPU ({e})"))
+        }
+        Some(Err(e)) => return Err(FrameError(format!("the skylight on the GPU: {e}"))),
+    };
+    report.sky_on = sky_on;
     report.buffer_s = start.elapsed().as_secs_f64();
 
     progress.update(1, 3, "diffusion solve");

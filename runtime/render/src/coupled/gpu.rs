@@ -120,7 +120,11 @@ pub struct Renderer {
     /// The per-sun passes' pipelines (the transport's sweeps, [`super::sweep_gpu`], and the
     /// diffusion solves, [`crate::diffusion_gpu`]), compiled on first use: a renderer whose
     /// per-sun passes stay on the CPU (`per_sun = "auto"` on lavapipe) never compiles them.
-    per_sun: std::sync::OnceLock<(super::sweep_gpu::Sweeper, crate::diffusion_gpu::Solver)>,
+    per_sun: std::sync::OnceLock<(
+        super::sweep_gpu::Sweeper,
+        super::sky_gpu::SkySweeper,
+        crate::diffusion_gpu::Solver,
+    )>,
     /// The last lighting's buffers: a view of the same lighting uploads only its own.
     resident: Mutex<Option<Resident>>,
 }
@@ -172,15 +176,17 @@ impl Renderer {
     /// The per-sun passes on `gpu` (the adapter this renderer was built for), compiled on the
     /// first call.
     pub fn per_sun<'a>(&'a self, gpu: &'a Gpu) -> super::cpu::OnGpu<'a> {
-        let (sweeper, solver) = self.per_sun.get_or_init(|| {
+        let (sweeper, sky, solver) = self.per_sun.get_or_init(|| {
             (
                 super::sweep_gpu::Sweeper::new(gpu),
+                super::sky_gpu::SkySweeper::new(gpu),
                 crate::diffusion_gpu::Solver::new(gpu),
             )
         });
         super::cpu::OnGpu {
             gpu,
             sweeper,
+            sky,
             solver,
         }
     }

@@ -94,6 +94,7 @@
 pub mod cpu;
 pub mod gpu;
 pub mod peak;
+pub mod sky_gpu;
 pub mod sweep_gpu;
 pub mod transport;
 
@@ -462,9 +463,9 @@ fn rendered(
     (frame, settings): (&Frame, &Settings),
 ) -> Rendered {
     let summary = format!(
-        "beam + δ-scaled diffusion (lighting on the CPU, {} threads, but where the diffusion \
-         and the transport say; gather on {on}): {}×{}, \
-         grid {:?}: beam {:.2} s, diffusion {:.2} s on {} ({} unknowns, {} levels, {:?} CG iterations to residuals \
+        "beam + δ-scaled diffusion (lighting on the CPU, {} threads, but where the skylight, \
+         the diffusion and the transport say; gather on {on}): {}×{}, \
+         grid {:?}: beam {:.2} s (skylight swept on {}), diffusion {:.2} s on {} ({} unknowns, {} levels, {:?} CG iterations to residuals \
          {:.1e}/{:.1e}/{:.1e}), {}gather {gather_s:.2} s ({}); of the sunlight entering (green): \
          {:.1} % leaves in the buffer, {:.1} % is absorbed from it, {:.1} % feeds the \
          diffusion, which sends {:.1} % out and absorbs {:.1} %",
@@ -473,6 +474,7 @@ fn rendered(
         image.height,
         frame.grid.dims,
         report.buffer_s,
+        report.sky_on,
         report.diffusion_s,
         report.diffusion_on,
         report.unknowns,

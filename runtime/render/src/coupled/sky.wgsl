@@ -1,0 +1,108 @@
+// One layer of the reduced skylight's sweeps (render::lattice::sky_sweeps) on the GPU, in f32:
+// one invocation per voxel of the layer, looping over the directions of one sweep order (those
+// that travel most along the same axis and sign). Per direction the optical depth one layer back
+// is interpolated (lattice::upwind; clear air beyond the box: zero), the step's trapezoid of
+// β_ext added (lattice::sun_depths), and the direction's radiance, attenuated, added to the
+// voxel's mean skylight and flux (lattice::Sky::add).
+
+struct Params {
+    dims: vec4<u32>,         // nx, ny, nz, 0
+}
+
+// Per dispatch (a dynamic offset): the layer's axis a and across-axes b, c, its index k,
+// whether it is the order's first layer, the order's first direction and its count, and which
+// half of the state buffer holds the layer behind.
+struct Step {
+    axes: vec4<u32>,         // a, b, c, k
+    group: vec4<u32>,        // first layer (1/0), first direction, count, half behind
+}
+
+@group(0) @binding(0) var<uniform> params: Params;
+@group(0) @binding(1) var<uniform> stp: Step;
+// β_ext per voxel (rgb).
+@group(0) @binding(2) var<storage, read> ext: array<vec4<f32>>;
+// Per direction three rows: (shift u, shift v, ds, 0), (radiance × 1/SKY_DIRECTIONS rgb, 0),
+// (s, the direction towards the sky, 0).
+@group(0) @binding(3) var<storage, read> ways: array<vec4<f32>>;
+// Per (half, layer voxel, direction of the order) two rows: τ (rgb), β_ext (rgb).
+@group(0) @binding(4) var<storage, read_write> state: array<vec4<f32>>;
+// Per voxel four rows: the mean skylight (rgb), its flux per channel (R, G, B: xyz).
+@group(0) @binding(5) var<storage, read_write> sky: array<vec4<f32>>;
+
+fn state_index(h: u32, u: u32, v: u32, j: u32, nb: u32, nc: u32, count: u32) -> u32 {
+    return ((h * nb * nc + u + v * nb) * count + j) * 2u;
+}
+
+@compute @workgroup_size(64)
+fn sweep(@builtin(global_invocation_id) id: vec3<u32>) {
+    var dims = params.dims;
+    let a = stp.axes.x;
+    let b = stp.axes.y;
+    let c = stp.axes.z;
+    let k = stp.axes.w;
+    let nb = dims[b];
+    let nc = dims[c];
+    if (id.x >= nb * nc) {
+        return;
+    }
+    let ub = id.x % nb;
+    let vc = id.x / nb;
+    let first_layer = stp.group.x == 1u;
+    let first = stp.group.y;
+    let count = stp.group.z;
+    let behind = stp.group.w;
+    var stride = vec3<u32>(1u, dims.x, dims.x * dims.y);
+    let i = k * stride[a] + ub * stride[b] + vc * stride[c];
+    let here = ext[i].xyz;
+    var mean = vec3<f32>(0.0);
+    var flux = array<vec3<f32>, 3>(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0));
+    for (var j = 0u; j < count; j = j + 1u) {
+        let d = first + j;
+        let o = ways[3u * d];
+        var back_tau = vec3<f32>(0.0);
+        var back_ext = vec3<f32>(0.0);
+        if (!first_layer) {
+            let u = f32(ub) + o.x;
+            let v = f32(vc) + o.y;
+            let fb = f32(nb);
+            let fc = f32(nc);
+            let share_u = clamp(max(-u, u - (fb - 1.0)) / 0.5, 0.0, 1.0);
+            let share_v = clamp(max(-v, v - (fc - 1.0)) / 0.5, 0.0, 1.0);
+            let kept = (1.0 - share_u) * (1.0 - share_v);
+            if (kept > 0.0) {
+                let uc = clamp(u, 0.0, fb - 1.0);
+                let vcl = clamp(v, 0.0, fc - 1.0);
+                let u0 = u32(floor(uc));
+                let v0 = u32(floor(vcl));
+                let u1 = min(u0 + 1u, nb - 1u);
+                let v1 = min(v0 + 1u, nc - 1u);
+                let s = uc - f32(u0);
+                let t = vcl - f32(v0);
+                var w = array<f32, 4>((1.0 - s) * (1.0 - t), s * (1.0 - t), (1.0 - s) * t, s * t);
+                var us = array<u32, 4>(u0, u1, u0, u1);
+                var vs = array<u32, 4>(v0, v0, v1, v1);
+                for (var q = 0u; q < 4u; q = q + 1u) {
+                    let at = state_index(behind, us[q], vs[q], j, nb, nc, count);
+                    back_tau = back_tau + w[q] * state[at].xyz;
+                    back_ext = back_ext + w[q] * state[at + 1u].xyz;
+                }
+                back_tau = kept * back_tau;
+                back_ext = kept * back_ext;
+            }
+        }
+        let tau = back_tau + 0.5 * o.z * (here + back_ext);
+        let at = state_index(1u - behind, ub, vc, j, nb, nc, count);
+        state[at] = vec4<f32>(tau, 0.0);
+        state[at + 1u] = vec4<f32>(here, 0.0);
+        let light = ways[3u * d + 1u].xyz * exp(-min(tau, vec3<f32>(700.0)));
+        let towards = ways[3u * d + 2u].xyz;
+        mean = mean + light;
+        for (var ch = 0u; ch < 3u; ch = ch + 1u) {
+            flux[ch] = flux[ch] - light[ch] * towards;
+        }
+    }
+    sky[4u * i] = sky[4u * i] + vec4<f32>(mean, 0.0);
+    for (var ch = 0u; ch < 3u; ch = ch + 1u) {
+        sky[4u * i + 1u + ch] = sky[4u * i + 1u + ch] + vec4<f32>(flux[ch], 0.0);
+    }
+}

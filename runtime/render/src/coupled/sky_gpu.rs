@@ -1,0 +1,225 @@
+//! The reduced skylight's sweeps ([`crate::lattice::sky_sweeps`]) on wgpu (`sky.wgsl`), one of
+//! the per-sun passes a GPU render runs there with `per_sun = "auto"` on a real adapter or
+//! `"gpu"`: one dispatch per layer of each sweep order (the directions that travel most along
+//! one axis and sign), one invocation per voxel of the layer looping over the order's
+//! directions, in f32; the lit directions ([`crate::lattice::sky_light`]) come from the CPU and
+//! the mean skylight and its flux per voxel go back to it.
+
+use glam::DVec3;
+
+use runtime::gpu::{Gpu, read_back};
+
+use crate::DensityGrid;
+use crate::gpu::{RenderError, entry, filled, storage};
+use crate::lattice::{Sky, sky_orders};
+
+/// The sweeps' WGSL.
+pub const SKY_WGSL: &str = include_str!("sky.wgsl");
+
+/// Bytes between two dispatches' steps in their uniform buffer (wgpu's largest required
+/// dynamic-offset alignment).
+const STEP_ALIGN: u64 = 256;
+/// Invocations per workgroup (`sky.wgsl`).
+const WG: usize = 64;
+
+runtime::uniform! {
+    /// `Params` of `sky.wgsl`.
+    pub struct SkyParams as "Params" {
+        /// nx, ny, nz, 0.
+        pub dims: [u32; 4],
+    }
+}
+
+/// The skylight sweeps' pipeline, built once per adapter.
+pub struct SkySweeper {
+    layout: wgpu::BindGroupLayout,
+    pipeline: wgpu::ComputePipeline,
+}
+
+impl SkySweeper {
+    /// Compiles `sky.wgsl`.
+    pub fn new(gpu: &Gpu) -> Self {
+        use wgpu::BufferBindingType::{Storage, Uniform};
+        let entries = [
+            entry(0, Uniform, false),
+            entry(1, Uniform, true),
+            entry(2, Storage { read_only: true }, false),
+            entry(3, Storage { read_only: true }, false),
+            entry(4, Storage { read_only: false }, false),
+            entry(5, Storage { read_only: false }, false),
+        ];
+        let layout = gpu
+            .device
+            .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: Some("photometeor sky sweep layout"),
+                entries: &entries,
+            });
+        let [pipeline] = <[_; 1]>::try_from(crate::gpu::compute_pipelines(
+            &gpu.device,
+            "photometeor sky sweep",
+            SKY_WGSL.into(),
+            &[&layout],
+            &["sweep"],
+        ))
+        .expect("one pipeline");
+        Self { layout, pipeline }
+    }
+
+    /// The skylight of `lit` (towards the sky, radiance per channel beyond the box) through
+    /// the grid of β_ext `ext`, as [`crate::lattice::sky_sweeps`] gives it (in f32). Refused,
+    /// naming the value, where a layer exceeds the adapter's workgroups or a buffer its
+    /// storage-binding limit.
+    pub fn sweep(
+        &self,
+        gpu: &Gpu,
+        grid: &DensityGrid,
+        ext: &[[f64; 3]],
+        lit: &[(DVec3, [f64; 3])],
+    ) -> Result<Sky, RenderError> {
+        let (device, queue) = (&gpu.device, &gpu.queue);
+        let limits = device.limits();
+        let dims = grid.dims;
+        let voxels = ext.len();
+        let f = |v: [f64; 3]| [v[0] as f32, v[1] as f32, v[2] as f32, 0.0];
+        let mut ways: Vec<[f32; 4]> = Vec::with_capacity(3 * lit.len());
+        let mut steps: Vec<u8> = Vec::new();
+        let mut layers: Vec<usize> = Vec::new();
+        let mut largest_state = 0usize;
+        for ((a, forward), order) in sky_orders(grid, lit) {
+            let first = ways.len() / 3;
+            for w in &order {
+                ways.push([w.shift.0 as f32, w.shift.1 as f32, w.ds as f32, 0.0]);
+                ways.push(f(w.weight));
+                ways.push(f(w.s.to_array()));
+            }
+            let (b, c) = ((a + 1) % 3, (a + 2) % 3);
+            let count = order.len();
+            largest_state = largest_state.max(2 * dims[b] * dims[c] * count * 2);
+            let run: Vec<usize> = if forward {
+                (0..dims[a]).collect()
+            } else {
+                (0..dims[a]).rev().collect()
+            };
+            for (s, &k) in run.iter().enumerate() {
+                let words: [u32; 8] = [
+                    a as u32,
+                    b as u32,
+                    c as u32,
+                    k as u32,
+                    u32::from(s == 0),
+                    first as u32,
+                    count as u32,
+                    (s % 2) as u32,
+                ];
+                let mut block = bytemuck::cast_slice::<u32, u8>(&words).to_vec();
+                block.resize(STEP_ALIGN as usize, 0);
+                steps.extend(block);
+                layers.push((dims[b] * dims[c]).div_ceil(WG));
+            }
+        }
+        let mut sky = Sky::zero(voxels);
+        if layers.is_empty() {
+            return Ok(sky);
+        }
+        if let Some(&n) = layers
+            .iter()
+            .find(|&&n| n as u32 > limits.max_compute_workgroups_per_dimension)
+        {
+            return Err(RenderError::Frame(crate::FrameError(format!(
+                "the skylight's GPU sweeps need {n} workgroups for a layer of the {dims:?} grid, \
+                 more than {}'s {} per dimension: lower [render] grid_resolution",
+                gpu.describe(),
+                limits.max_compute_workgroups_per_dimension
+            ))));
+        }
+        let sky_bytes = (64 * voxels) as u64;
+        let state_bytes = (16 * largest_state) as u64;
+        let limit = limits.max_storage_buffer_binding_size;
+        for (what, bytes) in [("light", sky_bytes), ("layer state", state_bytes)] {
+            if bytes > limit {
+                return Err(RenderError::Frame(crate::FrameError(format!(
+                    "the skylight's {what} take {} MiB on a {dims:?} grid, more than {}'s \
+                     storage-binding limit of {} MiB: lower [render] grid_resolution",
+                    bytes >> 20,
+                    gpu.describe(),
+                    limit >> 20
+                ))));
+            }
+        }
+        let rows: Vec<[f32; 4]> = ext.iter().map(|&e| f(e)).collect();
+        let params = SkyParams {
+            dims: [dims[0] as u32, dims[1] as u32, dims[2] as u32, 0],
+        };
+        use wgpu::BufferUsages as U;
+        let params = filled(
+            device,
+            "photometeor sky params",
+            bytemuck::bytes_of(&params),
+            U::UNIFORM,
+        );
+        let steps = filled(device, "photometeor sky steps", &steps, U::UNIFORM);
+        let ext_buffer = filled(
+            device,
+            "photometeor sky extinction",
+            bytemuck::cast_slice(&rows),
+            U::STORAGE,
+        );
+        let ways = filled(
+            device,
+            "photometeor sky directions",
+            bytemuck::cast_slice(&ways),
+            U::STORAGE,
+        );
+        let state = storage(device, "photometeor sky state", state_bytes, false);
+        let light = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("photometeor sky light"),
+            size: sky_bytes,
+            usage: U::STORAGE | U::COPY_SRC | U::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let step = wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+            buffer: &steps,
+            offset: 0,
+            size: wgpu::BufferSize::new(32),
+        });
+        let whole = [&params, &ext_buffer, &ways, &state, &light].map(|b| b.as_entire_binding());
+        let entries: Vec<wgpu::BindGroupEntry> = std::iter::once(step)
+            .chain(whole)
+            .zip([1, 0, 2, 3, 4, 5])
+            .map(|(resource, binding)| wgpu::BindGroupEntry { binding, resource })
+            .collect();
+        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("photometeor sky bindings"),
+            layout: &self.layout,
+            entries: &entries,
+        });
+        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+            label: Some("photometeor sky sweeps"),
+        });
+        encoder.clear_buffer(&light, 0, None);
+        {
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("photometeor sky sweeps"),
+                timestamp_writes: None,
+            });
+            pass.set_pipeline(&self.pipeline);
+            for (s, &groups) in layers.iter().enumerate() {
+                pass.set_bind_group(0, &bind_group, &[(s as u64 * STEP_ALIGN) as u32]);
+                pass.dispatch_workgroups(groups as u32, 1, 1);
+            }
+        }
+        queue.submit([encoder.finish()]);
+        let back = read_back(gpu, &light, sky_bytes).map_err(RenderError::from)?;
+        for (i, v) in back.chunks_exact(4).enumerate() {
+            sky.mean[i] = std::array::from_fn(|c| f64::from(v[0][c]));
+            sky.flux[i] = std::array::from_fn(|c| {
+                DVec3::new(
+                    f64::from(v[1 + c][0]),
+                    f64::from(v[1 + c][1]),
+                    f64::from(v[1 + c][2]),
+                )
+            });
+        }
+        Ok(sky)
+    }
+}
