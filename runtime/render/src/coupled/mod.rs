@@ -78,16 +78,18 @@
 //! - `emergent = "isotropic"`: the diffusion's light without its I_1 term, as Max.
 //!
 //! # Where each pass runs
-//! The CPU reference (`--cpu`) runs everything on the CPU in f64 (rayon). A GPU render runs
-//! the gather on the GPU ([`gpu`]) and, with `per_sun = "auto"` on a real GPU or `"gpu"`
-//! anywhere, the per-sun passes that cost the most: the transport's sweeps ([`sweep_gpu`]:
-//! one dispatch per layer of each sweep order, a workgroup per voxel of the layer, an
-//! invocation per direction, in f32) and every diffusion solve — the three channels' and the
-//! transport's acceleration — ([`crate::diffusion_gpu`]: the same conjugate gradients and
-//! V-cycle in f32 inside an f64 refinement). The source iteration's control (acceleration
-//! sources, the convergence test), the beam's sweep, the sources, the flux and the budget stay
-//! on the CPU. On lavapipe (a CPU emulating a GPU) the GPU passes are slower than the CPU
-//! reference, so `auto` keeps them on the CPU there.
+//! The CPU reference (`--cpu`) runs everything on the CPU in f64 (rayon). A GPU render runs,
+//! with `per_view = "auto"` on a real GPU or `"gpu"` anywhere, the gather on the GPU ([`gpu`],
+//! the lighting's buffers kept there between views) and, with `per_sun = "auto"` on a real
+//! GPU or `"gpu"` anywhere, the per-sun passes that cost the most: the transport's sweeps
+//! ([`sweep_gpu`]: one dispatch per layer of each sweep order, a workgroup per voxel of the
+//! layer, an invocation per direction, in f32), the skylight's sweeps ([`sky_gpu`]) and every
+//! diffusion solve — the three channels' and the transport's acceleration —
+//! ([`crate::diffusion_gpu`]: the same conjugate gradients and V-cycle in f32 inside an f64
+//! refinement). The source iteration's control (acceleration sources, the convergence test),
+//! the beam's sweep, the sources, the flux and the budget stay on the CPU. On lavapipe (a CPU
+//! emulating a GPU) the GPU passes are slower than the CPU reference, so `auto` keeps them on
+//! the CPU there.
 //!
 //! Units: radiance per unit solar irradiance outside the atmosphere (1/sr) per channel.
 
@@ -193,8 +195,9 @@ pub enum Diffuse {
 }
 
 /// Where a GPU render runs a pass: the per-sun passes (`per_sun`: the transport's sweeps,
-/// [`sweep_gpu`], and the diffusion solves, [`crate::diffusion_gpu`]) or the per-view gather
-/// (`per_view`, [`gpu`]); a CPU render runs them on the CPU.
+/// [`sweep_gpu`], the skylight's, [`sky_gpu`], and the diffusion solves,
+/// [`crate::diffusion_gpu`]) or the per-view gather (`per_view`, [`gpu`]); a CPU render runs
+/// them on the CPU.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
 #[serde(rename_all = "kebab-case")]
 pub enum Place {
@@ -251,8 +254,8 @@ pub struct Settings {
     /// that leaves the transport at least [`AUTO_TRANSPORT_VOXELS`] voxels along the grid's
     /// longest side.
     pub transport_coarsening: Option<usize>,
-    /// Where a GPU render's per-sun passes (the transport's sweeps, the diffusion solves)
-    /// run: "auto" (the default: on the GPU unless the adapter is a CPU emulation such as
+    /// Where a GPU render's per-sun passes (the transport's and the skylight's sweeps, the
+    /// diffusion solves) run: "auto" (the default: on the GPU unless the adapter is a CPU emulation such as
     /// lavapipe), "gpu" or "cpu".
     pub per_sun: Place,
     /// Where a GPU render's gather (per view) runs, as `per_sun`: "auto" (the default),
