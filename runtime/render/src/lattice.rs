@@ -630,23 +630,39 @@ pub fn voxel_length(grid: &DensityGrid) -> f64 {
     (h[0] * h[1] * h[2]).cbrt()
 }
 
+/// What the sweeps' tests light: an uneven grid and a lumpy medium on it.
+#[cfg(test)]
+pub(crate) mod fixture {
+    use super::*;
+
+    /// 7 × 5 × 6 voxels of uneven size, so that every axis leads some directions.
+    pub(crate) fn uneven_grid() -> DensityGrid {
+        let dims = [7, 5, 6];
+        DensityGrid {
+            min_m: DVec3::new(-1.0, -0.5, 0.0),
+            max_m: DVec3::new(1.4, 0.7, 1.1),
+            dims,
+            data: vec![[0.0; crate::MAX_FIELDS]; dims.iter().product()],
+        }
+    }
+
+    /// A smooth, deterministic value in [0, 1] per index `i` and key `k` (a lumpy field).
+    pub(crate) fn wobble(i: usize, k: usize) -> f64 {
+        0.5 + 0.5 * ((i * 7 + k * 13) as f64 * 0.61).sin()
+    }
+}
+
 #[cfg(test)]
 mod tests {
+    use super::fixture::{uneven_grid, wobble};
     use super::*;
 
     /// The grouped sweeps give per direction what a sweep of its own and [`Sky::add`] give: a
     /// lumpy medium on an uneven grid, every direction of the sky set with its own radiance.
     #[test]
     fn the_grouped_sky_sweeps_equal_a_sweep_per_direction() {
-        let dims = [7, 5, 6];
-        let n = dims[0] * dims[1] * dims[2];
-        let grid = DensityGrid {
-            min_m: DVec3::new(-1.0, -0.5, 0.0),
-            max_m: DVec3::new(1.4, 0.7, 1.1),
-            dims,
-            data: vec![[0.0; crate::MAX_FIELDS]; n],
-        };
-        let wobble = |i: usize, k: usize| 0.5 + 0.5 * ((i * 7 + k * 13) as f64 * 0.61).sin();
+        let grid = uneven_grid();
+        let n = grid.data.len();
         let ext: Vec<[f64; 3]> = (0..n)
             .map(|i| std::array::from_fn(|c| 3.0 * wobble(i, c) + 0.2))
             .collect();

@@ -23,14 +23,18 @@ struct Taps {
 }
 
 fn taps(p: vec3<f32>) -> Taps {
-    let dims = vec3<f32>(rp.grid_dims.xyz);
-    let u = clamp((p - rp.grid_min.xyz) / (rp.grid_max.xyz - rp.grid_min.xyz) * dims - 0.5,
-        vec3<f32>(0.0), dims - 1.0);
-    let top = max(vec3<i32>(rp.grid_dims.xyz) - 2, vec3<i32>(0));
-    let lo = vec3<u32>(min(vec3<i32>(floor(u)), top));
-    let t = select(vec3<f32>(0.0), u - vec3<f32>(lo), rp.grid_dims.xyz > vec3<u32>(1u));
-    let s = vec3<u32>(rp.grid_dims.xyz > vec3<u32>(1u));
-    return Taps(lo, s, t);
+    return taps_in(p, rp.grid_min.xyz, rp.grid_max.xyz, rp.grid_dims.xyz);
+}
+
+// `taps` on a grid of `n` voxels over the box from `lo` to `hi`.
+fn taps_in(p: vec3<f32>, lo: vec3<f32>, hi: vec3<f32>, n: vec3<u32>) -> Taps {
+    let dims = vec3<f32>(n);
+    let u = clamp((p - lo) / (hi - lo) * dims - 0.5, vec3<f32>(0.0), dims - 1.0);
+    let top = max(vec3<i32>(n) - 2, vec3<i32>(0));
+    let first = vec3<u32>(min(vec3<i32>(floor(u)), top));
+    let t = select(vec3<f32>(0.0), u - vec3<f32>(first), n > vec3<u32>(1u));
+    let s = vec3<u32>(n > vec3<u32>(1u));
+    return Taps(first, s, t);
 }
 
 // Trilinear densities at p, voxel centres, clamped to the edge voxels; zero outside the box.

@@ -19,8 +19,8 @@ fn every_uniform_mirrors_its_wgsl_struct() {
     check::<render::gpu::SliceParams>(&render::miyazaki::gpu::source());
     check::<render::max::gpu::MaxParams>(&render::max::gpu::source());
     check::<render::coupled::gpu::CoupledParams>(&render::coupled::gpu::source());
-    check::<render::coupled::sweep_gpu::SweepParams>(render::coupled::sweep_gpu::SWEEP_WGSL);
-    check::<render::coupled::sky_gpu::SkyParams>(render::coupled::sky_gpu::SKY_WGSL);
+    check::<render::coupled::sweep_gpu::SweepParams>(&render::coupled::sweep_gpu::source());
+    check::<render::coupled::sky_gpu::SkyParams>(&render::coupled::sky_gpu::source());
     check::<render::biri::gpu::BiriParams>(&render::biri::gpu::source());
     check::<render::truth::gpu::TruthParams>(&render::truth::gpu::source());
     check::<render::truth::gpu::StepParams>(&render::truth::gpu::source());

@@ -48,18 +48,12 @@ fn moments_at(p: vec3<f32>, row: u32) -> vec4<f32> {
     if (!inside_box(p)) {
         return vec4<f32>(0.0);
     }
-    let dims = vec3<f32>(rp.sh_dims.xyz);
-    let u = clamp((p - rp.grid_min.xyz) / (rp.sh_max.xyz - rp.grid_min.xyz) * dims - 0.5,
-        vec3<f32>(0.0), dims - 1.0);
-    let top = max(vec3<i32>(rp.sh_dims.xyz) - 2, vec3<i32>(0));
-    let lo = vec3<u32>(min(vec3<i32>(floor(u)), top));
-    let t = select(vec3<f32>(0.0), u - vec3<f32>(lo), rp.sh_dims.xyz > vec3<u32>(1u));
-    let s = vec3<u32>(rp.sh_dims.xyz > vec3<u32>(1u));
+    let tap = taps_in(p, rp.grid_min.xyz, rp.sh_max.xyz, rp.sh_dims.xyz);
     var sum = vec4<f32>(0.0);
     for (var corner = 0u; corner < 8u; corner = corner + 1u) {
         let d = vec3<u32>(corner & 1u, (corner >> 1u) & 1u, (corner >> 2u) & 1u);
-        let w3 = select(1.0 - t, t, d == vec3<u32>(1u));
-        let at = lo + d * s;
+        let w3 = select(1.0 - tap.t, tap.t, d == vec3<u32>(1u));
+        let at = tap.lo + d * tap.s;
         let i = at.x + rp.sh_dims.x * (at.y + rp.sh_dims.y * at.z);
         sum = sum + w3.x * w3.y * w3.z * moments[19u * i + row];
     }

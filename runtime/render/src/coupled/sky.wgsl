@@ -62,32 +62,15 @@ fn sweep(@builtin(global_invocation_id) id: vec3<u32>) {
         var back_tau = vec3<f32>(0.0);
         var back_ext = vec3<f32>(0.0);
         if (!first_layer) {
-            let u = f32(ub) + o.x;
-            let v = f32(vc) + o.y;
-            let fb = f32(nb);
-            let fc = f32(nc);
-            let share_u = clamp(max(-u, u - (fb - 1.0)) / 0.5, 0.0, 1.0);
-            let share_v = clamp(max(-v, v - (fc - 1.0)) / 0.5, 0.0, 1.0);
-            let kept = (1.0 - share_u) * (1.0 - share_v);
-            if (kept > 0.0) {
-                let uc = clamp(u, 0.0, fb - 1.0);
-                let vcl = clamp(v, 0.0, fc - 1.0);
-                let u0 = u32(floor(uc));
-                let v0 = u32(floor(vcl));
-                let u1 = min(u0 + 1u, nb - 1u);
-                let v1 = min(v0 + 1u, nc - 1u);
-                let s = uc - f32(u0);
-                let t = vcl - f32(v0);
-                var w = array<f32, 4>((1.0 - s) * (1.0 - t), s * (1.0 - t), (1.0 - s) * t, s * t);
-                var us = array<u32, 4>(u0, u1, u0, u1);
-                var vs = array<u32, 4>(v0, v0, v1, v1);
+            var up = upwind(f32(ub) + o.x, f32(vc) + o.y, nb, nc);
+            if (up.kept > 0.0) {
                 for (var q = 0u; q < 4u; q = q + 1u) {
-                    let at = state_index(behind, us[q], vs[q], j, nb, nc, count);
-                    back_tau = back_tau + w[q] * state[at].xyz;
-                    back_ext = back_ext + w[q] * state[at + 1u].xyz;
+                    let at = state_index(behind, up.u[q], up.v[q], j, nb, nc, count);
+                    back_tau = back_tau + up.w[q] * state[at].xyz;
+                    back_ext = back_ext + up.w[q] * state[at + 1u].xyz;
                 }
-                back_tau = kept * back_tau;
-                back_ext = kept * back_ext;
+                back_tau = up.kept * back_tau;
+                back_ext = up.kept * back_ext;
             }
         }
         let tau = back_tau + 0.5 * o.z * (here + back_ext);

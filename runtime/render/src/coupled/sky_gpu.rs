@@ -9,16 +9,19 @@ use glam::DVec3;
 
 use runtime::gpu::{Gpu, read_back};
 
+use super::sweep_gpu::{bind_with_steps, dispatch_steps, push_step, with_upwind};
 use crate::DensityGrid;
 use crate::gpu::{RenderError, entry, filled, storage};
 use crate::lattice::{Sky, sky_orders};
 
-/// The sweeps' WGSL.
+/// The sweeps' WGSL, without the shared upwind lookup ([`source`] puts it before).
 pub const SKY_WGSL: &str = include_str!("sky.wgsl");
 
-/// Bytes between two dispatches' steps in their uniform buffer (wgpu's largest required
-/// dynamic-offset alignment).
-const STEP_ALIGN: u64 = 256;
+/// The sweeps' whole shader module.
+pub fn source() -> String {
+    with_upwind(SKY_WGSL)
+}
+
 /// Invocations per workgroup (`sky.wgsl`).
 const WG: usize = 64;
 
@@ -57,7 +60,7 @@ impl SkySweeper {
         let [pipeline] = <[_; 1]>::try_from(crate::gpu::compute_pipelines(
             &gpu.device,
             "photometeor sky sweep",
-            SKY_WGSL.into(),
+            source(),
             &[&layout],
             &["sweep"],
         ))
@@ -83,7 +86,7 @@ impl SkySweeper {
         let f = |v: [f64; 3]| [v[0] as f32, v[1] as f32, v[2] as f32, 0.0];
         let mut ways: Vec<[f32; 4]> = Vec::with_capacity(3 * lit.len());
         let mut steps: Vec<u8> = Vec::new();
-        let mut layers: Vec<usize> = Vec::new();
+        let mut layers: Vec<(usize, usize)> = Vec::new();
         let mut largest_state = 0usize;
         for ((a, forward), order) in sky_orders(grid, lit) {
             let first = ways.len() / 3;
@@ -101,29 +104,18 @@ impl SkySweeper {
                 (0..dims[a]).rev().collect()
             };
             for (s, &k) in run.iter().enumerate() {
-                let words: [u32; 8] = [
-                    a as u32,
-                    b as u32,
-                    c as u32,
-                    k as u32,
-                    u32::from(s == 0),
-                    first as u32,
-                    count as u32,
-                    (s % 2) as u32,
-                ];
-                let mut block = bytemuck::cast_slice::<u32, u8>(&words).to_vec();
-                block.resize(STEP_ALIGN as usize, 0);
-                steps.extend(block);
-                layers.push((dims[b] * dims[c]).div_ceil(WG));
+                let words = [a, b, c, k, usize::from(s == 0), first, count, s % 2];
+                push_step(&mut steps, words.map(|w| w as u32));
+                layers.push(((dims[b] * dims[c]).div_ceil(WG), 1));
             }
         }
         let mut sky = Sky::zero(voxels);
         if layers.is_empty() {
             return Ok(sky);
         }
-        if let Some(&n) = layers
+        if let Some(&(n, _)) = layers
             .iter()
-            .find(|&&n| n as u32 > limits.max_compute_workgroups_per_dimension)
+            .find(|&&(n, _)| n as u32 > limits.max_compute_workgroups_per_dimension)
         {
             return Err(RenderError::Frame(crate::FrameError(format!(
                 "the skylight's GPU sweeps need {n} workgroups for a layer of the {dims:?} grid, \
@@ -177,37 +169,24 @@ impl SkySweeper {
             usage: U::STORAGE | U::COPY_SRC | U::COPY_DST,
             mapped_at_creation: false,
         });
-        let step = wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-            buffer: &steps,
-            offset: 0,
-            size: wgpu::BufferSize::new(32),
-        });
-        let whole = [&params, &ext_buffer, &ways, &state, &light].map(|b| b.as_entire_binding());
-        let entries: Vec<wgpu::BindGroupEntry> = std::iter::once(step)
-            .chain(whole)
-            .zip([1, 0, 2, 3, 4, 5])
-            .map(|(resource, binding)| wgpu::BindGroupEntry { binding, resource })
-            .collect();
-        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("photometeor sky bindings"),
-            layout: &self.layout,
-            entries: &entries,
-        });
+        let bind_group = bind_with_steps(
+            device,
+            &self.layout,
+            "photometeor sky bindings",
+            &steps,
+            &[&params, &ext_buffer, &ways, &state, &light],
+        );
         let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
             label: Some("photometeor sky sweeps"),
         });
         encoder.clear_buffer(&light, 0, None);
-        {
-            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some("photometeor sky sweeps"),
-                timestamp_writes: None,
-            });
-            pass.set_pipeline(&self.pipeline);
-            for (s, &groups) in layers.iter().enumerate() {
-                pass.set_bind_group(0, &bind_group, &[(s as u64 * STEP_ALIGN) as u32]);
-                pass.dispatch_workgroups(groups as u32, 1, 1);
-            }
-        }
+        dispatch_steps(
+            &mut encoder,
+            "photometeor sky sweeps",
+            &self.pipeline,
+            &bind_group,
+            &layers,
+        );
         queue.submit([encoder.finish()]);
         let back = read_back(gpu, &light, sky_bytes).map_err(RenderError::from)?;
         for (i, v) in back.chunks_exact(4).enumerate() {

@@ -150,34 +150,17 @@ fn sweep(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) 
         var back_ext = vec3<f32>(0.0);
         var back_s = vec3<f32>(0.0);
         if (!first_layer) {
-            let u = f32(ub) + o.x;
-            let v = f32(vc) + o.y;
-            let fb = f32(nb);
-            let fc = f32(nc);
-            let share_u = clamp(max(-u, u - (fb - 1.0)) / 0.5, 0.0, 1.0);
-            let share_v = clamp(max(-v, v - (fc - 1.0)) / 0.5, 0.0, 1.0);
-            let kept = (1.0 - share_u) * (1.0 - share_v);
-            if (kept > 0.0) {
-                let uc = clamp(u, 0.0, fb - 1.0);
-                let vcl = clamp(v, 0.0, fc - 1.0);
-                let u0 = u32(floor(uc));
-                let v0 = u32(floor(vcl));
-                let u1 = min(u0 + 1u, nb - 1u);
-                let v1 = min(v0 + 1u, nc - 1u);
-                let s = uc - f32(u0);
-                let tt = vcl - f32(v0);
-                var w = array<f32, 4>((1.0 - s) * (1.0 - tt), s * (1.0 - tt), (1.0 - s) * tt, s * tt);
-                var us = array<u32, 4>(u0, u1, u0, u1);
-                var vs = array<u32, 4>(v0, v0, v1, v1);
+            var up = upwind(f32(ub) + o.x, f32(vc) + o.y, nb, nc);
+            if (up.kept > 0.0) {
                 for (var q = 0u; q < 4u; q = q + 1u) {
-                    let at = state_index(behind, us[q], vs[q], j, nb, nc, count);
-                    back_i = back_i + w[q] * state[at].xyz;
-                    back_ext = back_ext + w[q] * state[at + 1u].xyz;
-                    back_s = back_s + w[q] * state[at + 2u].xyz;
+                    let at = state_index(behind, up.u[q], up.v[q], j, nb, nc, count);
+                    back_i = back_i + up.w[q] * state[at].xyz;
+                    back_ext = back_ext + up.w[q] * state[at + 1u].xyz;
+                    back_s = back_s + up.w[q] * state[at + 2u].xyz;
                 }
-                back_i = kept * back_i;
-                back_ext = kept * back_ext;
-                back_s = kept * back_s;
+                back_i = up.kept * back_i;
+                back_ext = up.kept * back_ext;
+                back_s = up.kept * back_s;
             }
         }
         var radiance = vec3<f32>(0.0);

@@ -14,8 +14,78 @@ use super::transport::{HARMONICS, Medium, PER_VOXEL, groups, harmonics, layer_ax
 use crate::DensityGrid;
 use crate::gpu::{RenderError, entry, filled, storage};
 
-/// The sweeps' WGSL.
+/// The sweeps' WGSL, without the shared [`UPWIND_WGSL`] ([`source`] puts it before).
 pub const SWEEP_WGSL: &str = include_str!("sweep.wgsl");
+/// The upwind lookup one layer back that the transport's and the skylight's sweeps share.
+pub const UPWIND_WGSL: &str = include_str!("upwind.wgsl");
+
+/// The sweeps' whole shader module: [`UPWIND_WGSL`], then [`SWEEP_WGSL`].
+pub fn source() -> String {
+    with_upwind(SWEEP_WGSL)
+}
+
+/// `wgsl` after [`UPWIND_WGSL`].
+pub(crate) fn with_upwind(wgsl: &str) -> String {
+    format!("{UPWIND_WGSL}\n{wgsl}")
+}
+
+/// Appends one dispatch's step to `steps`: its eight words, padded to [`STEP_ALIGN`] (the
+/// sweeps' `Step` uniform, read at a dynamic offset).
+pub(crate) fn push_step(steps: &mut Vec<u8>, words: [u32; 8]) {
+    let start = steps.len();
+    steps.extend_from_slice(bytemuck::cast_slice(&words));
+    steps.resize(start + STEP_ALIGN as usize, 0);
+}
+
+/// A sweep's bind group: `buffers[0]` at binding 0, the steps at binding 1 (one 32-byte
+/// `Step` at a dynamic offset), `buffers[1..]` at bindings 2, 3, …
+pub(crate) fn bind_with_steps(
+    device: &wgpu::Device,
+    layout: &wgpu::BindGroupLayout,
+    label: &str,
+    steps: &wgpu::Buffer,
+    buffers: &[&wgpu::Buffer],
+) -> wgpu::BindGroup {
+    let step = wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+        buffer: steps,
+        offset: 0,
+        size: wgpu::BufferSize::new(32),
+    });
+    let entries: Vec<wgpu::BindGroupEntry> = std::iter::once((1, step))
+        .chain(
+            buffers
+                .iter()
+                .zip(std::iter::once(0).chain(2..))
+                .map(|(b, binding)| (binding, b.as_entire_binding())),
+        )
+        .map(|(binding, resource)| wgpu::BindGroupEntry { binding, resource })
+        .collect();
+    device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some(label),
+        layout,
+        entries: &entries,
+    })
+}
+
+/// Records one compute pass of `pipeline` with one dispatch per step: step s at its dynamic
+/// offset, `groups[s]` workgroups (x, y).
+pub(crate) fn dispatch_steps(
+    encoder: &mut wgpu::CommandEncoder,
+    label: &str,
+    pipeline: &wgpu::ComputePipeline,
+    bind_group: &wgpu::BindGroup,
+    groups: &[(usize, usize)],
+) {
+    let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+        label: Some(label),
+        timestamp_writes: None,
+    });
+    pass.set_pipeline(pipeline);
+    for (s, &(x, y)) in groups.iter().enumerate() {
+        pass.set_bind_group(0, bind_group, &[(s as u64 * STEP_ALIGN) as u32]);
+        pass.dispatch_workgroups(x as u32, y as u32, 1);
+    }
+}
 
 /// Floats per voxel of the moments on the GPU (75, padded to whole rows of four).
 const STRIDE: usize = PER_VOXEL.div_ceil(4) * 4;
@@ -68,7 +138,7 @@ impl Sweeper {
         let [pipeline] = <[_; 1]>::try_from(crate::gpu::compute_pipelines(
             device,
             "photometeor transport sweep",
-            SWEEP_WGSL.into(),
+            source(),
             &[&layout],
             &["sweep"],
         ))
@@ -152,19 +222,8 @@ impl Sweeper {
                 (0..dims[g.axis]).rev().collect()
             };
             for (s, &k) in order.iter().enumerate() {
-                let words: [u32; 8] = [
-                    g.axis as u32,
-                    b as u32,
-                    c as u32,
-                    k as u32,
-                    u32::from(s == 0),
-                    first as u32,
-                    count as u32,
-                    (s % 2) as u32,
-                ];
-                let mut block = bytemuck::cast_slice::<u32, u8>(&words).to_vec();
-                block.resize(STEP_ALIGN as usize, 0);
-                steps.extend(block);
+                let words = [g.axis, b, c, k, usize::from(s == 0), first, count, s % 2];
+                push_step(&mut steps, words.map(|w| w as u32));
                 layers.push((dims[b], dims[c]));
             }
         }
@@ -240,23 +299,13 @@ impl Sweeper {
             mapped_at_creation: false,
         });
         let state = storage(device, "photometeor sweep state", state_bytes, false);
-        let step = wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-            buffer: &steps,
-            offset: 0,
-            size: wgpu::BufferSize::new(32),
-        });
-        let whole = [&params, &medium_buffer, &moments, &next, &ordinates, &state]
-            .map(|b| b.as_entire_binding());
-        let entries: Vec<wgpu::BindGroupEntry> = std::iter::once(step)
-            .chain(whole)
-            .zip([1, 0, 2, 3, 4, 5, 6])
-            .map(|(resource, binding)| wgpu::BindGroupEntry { binding, resource })
-            .collect();
-        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("photometeor sweep bindings"),
-            layout: &self.layout,
-            entries: &entries,
-        });
+        let bind_group = bind_with_steps(
+            device,
+            &self.layout,
+            "photometeor sweep bindings",
+            &steps,
+            &[&params, &medium_buffer, &moments, &next, &ordinates, &state],
+        );
         Ok(Sweeps {
             gpu,
             pipeline: &self.pipeline,
@@ -310,17 +359,13 @@ impl Sweeps<'_> {
             label: Some("photometeor sweeps"),
         });
         encoder.clear_buffer(&self.next, 0, None);
-        {
-            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some("photometeor sweeps"),
-                timestamp_writes: None,
-            });
-            pass.set_pipeline(self.pipeline);
-            for (s, &(nb, nc)) in self.layers.iter().enumerate() {
-                pass.set_bind_group(0, &self.bind_group, &[(s as u64 * STEP_ALIGN) as u32]);
-                pass.dispatch_workgroups(nb as u32, nc as u32, 1);
-            }
-        }
+        dispatch_steps(
+            &mut encoder,
+            "photometeor sweeps",
+            self.pipeline,
+            &self.bind_group,
+            &self.layers,
+        );
         queue.submit([encoder.finish()]);
         let rows = read_back(self.gpu, &self.next, (4 * STRIDE * self.voxels) as u64)
             .map_err(RenderError::from)?;

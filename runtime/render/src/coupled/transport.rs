@@ -742,15 +742,9 @@ mod tests {
     fn a_round_of_grouped_sweeps_equals_a_sweep_per_direction() {
         // A lumpy medium on an uneven grid (every axis leads some directions), lit by the sun
         // and the sky, with moments that are not those of any one radiance.
-        let dims = [7, 5, 6];
-        let n = dims[0] * dims[1] * dims[2];
-        let grid = DensityGrid {
-            min_m: DVec3::new(-1.0, -0.5, 0.0),
-            max_m: DVec3::new(1.4, 0.7, 1.1),
-            dims,
-            data: vec![[0.0; crate::MAX_FIELDS]; n],
-        };
-        let wobble = |i: usize, k: usize| 0.5 + 0.5 * ((i * 7 + k * 13) as f64 * 0.61).sin();
+        let grid = crate::lattice::fixture::uneven_grid();
+        let n = grid.data.len();
+        let wobble = crate::lattice::fixture::wobble;
         let medium = Medium {
             ext: (0..n)
                 .map(|i| std::array::from_fn(|c| 3.0 * wobble(i, c) + 0.2))

@@ -1,0 +1,33 @@
+// The upwind sweeps' lookup one layer back (render::lattice::upwind), shared by sweep.wgsl and
+// sky.wgsl (put before each by coupled::sweep_gpu::with_upwind): for the point (u, v) in a
+// layer of nb × nc voxel centres (voxel units), the four centres around it and their bilinear
+// weights, and the share `kept` of the layer's state there — 1 between the centres, falling
+// linearly to 0 over the half voxel beyond the outermost ones (the rest is clear air's light:
+// zero); the weights are zero where nothing is kept.
+struct Upwind {
+    kept: f32,
+    u: array<u32, 4>,
+    v: array<u32, 4>,
+    w: array<f32, 4>,
+}
+
+fn upwind(u: f32, v: f32, nb: u32, nc: u32) -> Upwind {
+    let fb = f32(nb);
+    let fc = f32(nc);
+    let share_u = clamp(max(-u, u - (fb - 1.0)) / 0.5, 0.0, 1.0);
+    let share_v = clamp(max(-v, v - (fc - 1.0)) / 0.5, 0.0, 1.0);
+    let kept = (1.0 - share_u) * (1.0 - share_v);
+    let uc = clamp(u, 0.0, fb - 1.0);
+    let vc = clamp(v, 0.0, fc - 1.0);
+    let u0 = u32(floor(uc));
+    let v0 = u32(floor(vc));
+    let u1 = min(u0 + 1u, nb - 1u);
+    let v1 = min(v0 + 1u, nc - 1u);
+    let s = uc - f32(u0);
+    let t = vc - f32(v0);
+    var w = array<f32, 4>((1.0 - s) * (1.0 - t), s * (1.0 - t), (1.0 - s) * t, s * t);
+    if (kept <= 0.0) {
+        w = array<f32, 4>(0.0, 0.0, 0.0, 0.0);
+    }
+    return Upwind(max(kept, 0.0), array<u32, 4>(u0, u1, u0, u1), array<u32, 4>(v0, v0, v1, v1), w);
+}
