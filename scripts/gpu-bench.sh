@@ -17,7 +17,7 @@
 # Writes OUT/<scene>.json, OUT/machine.txt (adapter, CPU, date) and prints a summary. On an H200
 # machine of 16 threads the parts of this run were timed on 2026-12-04 (docs/rendering.md, "On a
 # real GPU"): max's and coupled's lighting (CPU) were most of it, about 5 minutes in all; on 2
-# cores with lavapipe use QUICK=1. Since 2026-12-05 coupled's transport sweeps, skylight
+# cores with lavapipe use QUICK=1 (347 s on 2026-12-05, the JSON as on a GPU). Since 2026-12-05 coupled's transport sweeps, skylight
 # sweeps and diffusion solves run on the GPU (`per_sun = "auto"` on a real adapter); its JSON's
 # passes say how long.
 set -euo pipefail

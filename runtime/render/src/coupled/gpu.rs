@@ -117,8 +117,9 @@ pub fn source() -> String {
 pub struct Renderer {
     layout: wgpu::BindGroupLayout,
     pipeline: wgpu::ComputePipeline,
-    /// The per-sun passes' pipelines (the transport's sweeps, [`super::sweep_gpu`], and the
-    /// diffusion solves, [`crate::diffusion_gpu`]), compiled on first use: a renderer whose
+    /// The per-sun passes' pipelines (the transport's sweeps, [`super::sweep_gpu`], the
+    /// skylight's, [`super::sky_gpu`], and the diffusion solves, [`crate::diffusion_gpu`]),
+    /// compiled on first use: a renderer whose
     /// per-sun passes stay on the CPU (`per_sun = "auto"` on lavapipe) never compiles them.
     per_sun: std::sync::OnceLock<(
         super::sweep_gpu::Sweeper,

@@ -62,15 +62,10 @@ fn sweep(@builtin(global_invocation_id) id: vec3<u32>) {
         var back_tau = vec3<f32>(0.0);
         var back_ext = vec3<f32>(0.0);
         if (!first_layer) {
-            var up = upwind(f32(ub) + o.x, f32(vc) + o.y, nb, nc);
+            let up = upwind(f32(ub) + o.x, f32(vc) + o.y, nb, nc);
             if (up.kept > 0.0) {
-                for (var q = 0u; q < 4u; q = q + 1u) {
-                    let at = state_index(behind, up.u[q], up.v[q], j, nb, nc, count);
-                    back_tau = back_tau + up.w[q] * state[at].xyz;
-                    back_ext = back_ext + up.w[q] * state[at + 1u].xyz;
-                }
-                back_tau = up.kept * back_tau;
-                back_ext = up.kept * back_ext;
+                back_tau = up.kept * upwind_row(up, behind, j, nb, nc, count, 0u);
+                back_ext = up.kept * upwind_row(up, behind, j, nb, nc, count, 1u);
             }
         }
         let tau = back_tau + 0.5 * o.z * (here + back_ext);

@@ -150,17 +150,11 @@ fn sweep(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) 
         var back_ext = vec3<f32>(0.0);
         var back_s = vec3<f32>(0.0);
         if (!first_layer) {
-            var up = upwind(f32(ub) + o.x, f32(vc) + o.y, nb, nc);
+            let up = upwind(f32(ub) + o.x, f32(vc) + o.y, nb, nc);
             if (up.kept > 0.0) {
-                for (var q = 0u; q < 4u; q = q + 1u) {
-                    let at = state_index(behind, up.u[q], up.v[q], j, nb, nc, count);
-                    back_i = back_i + up.w[q] * state[at].xyz;
-                    back_ext = back_ext + up.w[q] * state[at + 1u].xyz;
-                    back_s = back_s + up.w[q] * state[at + 2u].xyz;
-                }
-                back_i = up.kept * back_i;
-                back_ext = up.kept * back_ext;
-                back_s = up.kept * back_s;
+                back_i = up.kept * upwind_row(up, behind, j, nb, nc, count, 0u);
+                back_ext = up.kept * upwind_row(up, behind, j, nb, nc, count, 1u);
+                back_s = up.kept * upwind_row(up, behind, j, nb, nc, count, 2u);
             }
         }
         var radiance = vec3<f32>(0.0);

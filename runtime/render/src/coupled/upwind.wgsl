@@ -31,3 +31,15 @@ fn upwind(u: f32, v: f32, nb: u32, nc: u32) -> Upwind {
     }
     return Upwind(max(kept, 0.0), array<u32, 4>(u0, u1, u0, u1), array<u32, 4>(v0, v0, v1, v1), w);
 }
+
+// Row `row` of the state one layer back at `up`, for direction slot `j` of the layer in half
+// `h`: the bilinear sum over the four centres, not yet scaled by `up.kept`. It reads the
+// including shader's `state` array through its `state_index(h, u, v, j, nb, nc, count)`.
+fn upwind_row(up: Upwind, h: u32, j: u32, nb: u32, nc: u32, count: u32, row: u32) -> vec3<f32> {
+    var at = up;
+    var sum = vec3<f32>(0.0);
+    for (var q = 0u; q < 4u; q = q + 1u) {
+        sum = sum + at.w[q] * state[state_index(h, at.u[q], at.v[q], j, nb, nc, count) + row].xyz;
+    }
+    return sum;
+}
