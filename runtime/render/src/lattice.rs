@@ -108,11 +108,7 @@ pub fn sweep<const N: usize>(
     // The point one layer back, in voxel units along b and c.
     let (shift_b, shift_c) = (-ds * l[b] / h[b], -ds * l[c] / h[c]);
     let mut state = vec![[0.0f64; N]; grid.data.len()];
-    let layers: Vec<usize> = if l[a] > 0.0 {
-        (0..dims[a]).collect()
-    } else {
-        (0..dims[a]).rev().collect()
-    };
+    let layers = layer_order(dims[a], l[a] > 0.0);
     for (step, &k) in layers.iter().enumerate() {
         let prev = (step > 0).then(|| layers[step - 1]);
         let back_of = |layer: usize, u: f64, v: f64| -> [f64; N] {
@@ -139,6 +135,16 @@ pub fn sweep<const N: usize>(
         }
     }
     state
+}
+
+/// The layers 0 … n − 1 of an upwind sweep in the order it visits them: ascending when its
+/// direction travels towards +axis (`forward`), else descending.
+pub(crate) fn layer_order(n: usize, forward: bool) -> Vec<usize> {
+    if forward {
+        (0..n).collect()
+    } else {
+        (0..n).rev().collect()
+    }
 }
 
 /// The state at the point (u, v) of a layer of nb × nc centres (in voxel units), `at(ub, vc)`
@@ -548,11 +554,7 @@ pub fn sky_sweeps(grid: &DensityGrid, ext: &[[f64; 3]], lit: &[(DVec3, [f64; 3])
         // Per voxel of a layer, per direction: τ (rgb), then β_ext (rgb) for the trapezoid.
         let mut prev = vec![[0.0f64; 6]; nb * nc * count];
         let mut cur = prev.clone();
-        let layers: Vec<usize> = if *forward {
-            (0..dims[a]).collect()
-        } else {
-            (0..dims[a]).rev().collect()
-        };
+        let layers = layer_order(dims[a], *forward);
         for (step, &k) in layers.iter().enumerate() {
             let light: Vec<([f64; 3], [DVec3; 3])> = cur
                 .par_chunks_mut(count)

@@ -395,8 +395,9 @@ impl Model for Coupled {
         // adapter `auto` gathers on the CPU.
         let dims = job.frame.grid.dims;
         let moments = if s.diffuse == Diffuse::Transport {
-            let factor = s.coarsening(dims);
-            dims.iter().map(|d| d.div_ceil(factor)).product()
+            transport::Coarse::dims(dims, s.coarsening(dims))
+                .iter()
+                .product()
         } else {
             0
         };

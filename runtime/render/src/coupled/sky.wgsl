@@ -9,16 +9,8 @@ struct Params {
     dims: vec4<u32>,         // nx, ny, nz, 0
 }
 
-// Per dispatch (a dynamic offset): the layer's axis a and across-axes b, c, its index k,
-// whether it is the order's first layer, the order's first direction and its count, and which
-// half of the state buffer holds the layer behind.
-struct Step {
-    axes: vec4<u32>,         // a, b, c, k
-    group: vec4<u32>,        // first layer (1/0), first direction, count, half behind
-}
-
 @group(0) @binding(0) var<uniform> params: Params;
-@group(0) @binding(1) var<uniform> stp: Step;
+// Binding 1: the dispatch's `Step` (upwind.wgsl).
 // β_ext per voxel (rgb).
 @group(0) @binding(2) var<storage, read> ext: array<vec4<f32>>;
 // Per direction three rows: (shift u, shift v, ds, 0), (radiance × 1/SKY_DIRECTIONS rgb, 0),

@@ -98,11 +98,7 @@ impl SkySweeper {
             let (b, c) = ((a + 1) % 3, (a + 2) % 3);
             let count = order.len();
             largest_state = largest_state.max(2 * dims[b] * dims[c] * count * 2);
-            let run: Vec<usize> = if forward {
-                (0..dims[a]).collect()
-            } else {
-                (0..dims[a]).rev().collect()
-            };
+            let run = crate::lattice::layer_order(dims[a], forward);
             for (s, &k) in run.iter().enumerate() {
                 let words = [a, b, c, k, usize::from(s == 0), first, count, s % 2];
                 push_step(&mut steps, words.map(|w| w as u32));

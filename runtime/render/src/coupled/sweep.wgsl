@@ -11,16 +11,8 @@ struct Params {
     y_sun: array<vec4<f32>, 7>, // Y_k(l) for the sun's direction of travel l, k < 25
 }
 
-// Per dispatch (a dynamic offset): the layer's axis a and across-axes b, c, its index k,
-// whether it is the group's first layer, the group's first ordinate and its count, and which
-// half of the state buffer holds the layer behind.
-struct Step {
-    axes: vec4<u32>,         // a, b, c, k
-    group: vec4<u32>,        // first layer (1/0), first ordinate, count, parity
-}
-
 @group(0) @binding(0) var<uniform> params: Params;
-@group(0) @binding(1) var<uniform> stp: Step;
+// Binding 1: the dispatch's `Step` (upwind.wgsl).
 // Per voxel MEDIUM_ROWS rows: σ′_t (rgb), σ′_s (rgb), p′'s χ′_0..3 per channel (three rows),
 // χ′_4 per channel, the sunlit source q (rgb), the skylit source (q0, q1 x, y, z) per channel.
 @group(0) @binding(2) var<storage, read> medium: array<vec4<f32>>;

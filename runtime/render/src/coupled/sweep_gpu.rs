@@ -216,11 +216,7 @@ impl Sweeper {
             let (b, c) = layer_axes(g.axis);
             let count = g.ordinates.len();
             largest_state = largest_state.max(2 * dims[b] * dims[c] * count * 3);
-            let order: Vec<usize> = if g.forward {
-                (0..dims[g.axis]).collect()
-            } else {
-                (0..dims[g.axis]).rev().collect()
-            };
+            let order = crate::lattice::layer_order(dims[g.axis], g.forward);
             for (s, &k) in order.iter().enumerate() {
                 let words = [g.axis, b, c, k, usize::from(s == 0), first, count, s % 2];
                 push_step(&mut steps, words.map(|w| w as u32));

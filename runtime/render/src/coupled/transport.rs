@@ -354,11 +354,7 @@ fn sweep_round(
         // The moments of the last layers, not yet added to `next`.
         let mut block = vec![[0.0f64; PER_VOXEL]; nb * nc * LAYER_BLOCK];
         let mut held: Vec<usize> = Vec::with_capacity(LAYER_BLOCK);
-        let layers: Vec<usize> = if group.forward {
-            (0..dims[a]).collect()
-        } else {
-            (0..dims[a]).rev().collect()
-        };
+        let layers = crate::lattice::layer_order(dims[a], group.forward);
         for (step, &k) in layers.iter().enumerate() {
             let back_of = |d: usize, u: f64, v: f64| -> [f64; 9] {
                 let at = |ub: usize, vc: usize| &prev[(ub + vc * nb) * count + d];
@@ -533,7 +529,7 @@ pub struct Coarse {
 impl Coarse {
     /// The blocks of `factor`³ voxels of `fine`.
     pub fn new(fine: &DensityGrid, factor: usize) -> Self {
-        let dims = fine.dims.map(|d| d.div_ceil(factor));
+        let dims = Self::dims(fine.dims, factor);
         let h = crate::lattice::voxel_size(fine);
         let extent = DVec3::from_array(std::array::from_fn(|a| (dims[a] * factor) as f64 * h[a]));
         Self {
@@ -546,6 +542,12 @@ impl Coarse {
             factor,
             fine: fine.dims,
         }
+    }
+
+    /// The blocks of `factor`³ voxels along each axis of a grid of `fine` voxels (the last
+    /// may reach past the grid).
+    pub fn dims(fine: [usize; 3], factor: usize) -> [usize; 3] {
+        fine.map(|d| d.div_ceil(factor))
     }
 
     /// The mean of `values` (per fine voxel) over each block, voxels past the fine box

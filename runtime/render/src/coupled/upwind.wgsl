@@ -1,9 +1,21 @@
-// The upwind sweeps' lookup one layer back (render::lattice::upwind), shared by sweep.wgsl and
-// sky.wgsl (put before each by coupled::sweep_gpu::with_upwind): for the point (u, v) in a
+// What the transport's and the skylight's GPU sweeps share (put before sweep.wgsl and sky.wgsl
+// by coupled::sweep_gpu::with_upwind): their per-dispatch `Step`, and the lookup one layer
+// back (render::lattice::upwind): for the point (u, v) in a
 // layer of nb × nc voxel centres (voxel units), the four centres around it and their bilinear
 // weights, and the share `kept` of the layer's state there — 1 between the centres, falling
 // linearly to 0 over the half voxel beyond the outermost ones (the rest is clear air's light:
 // zero); the weights are zero where nothing is kept.
+// Per dispatch of either sweep (a dynamic offset into its steps, sweep_gpu::push_step): the
+// layer's axis a and across-axes b, c, its index k; whether it is the sweep order's first
+// layer, the order's first direction and its count, and which half of the state buffer holds
+// the layer behind.
+struct Step {
+    axes: vec4<u32>,         // a, b, c, k
+    group: vec4<u32>,        // first layer (1/0), first direction, count, half behind
+}
+
+@group(0) @binding(1) var<uniform> stp: Step;
+
 struct Upwind {
     kept: f32,
     u: array<u32, 4>,
