@@ -312,11 +312,11 @@ fn legendre(mu: f64, degree: usize, mut each: impl FnMut(usize, f64)) {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
     /// A field whose Ams_1 is `p(θ)` (θ in radians) in every channel on a 0.18° grid.
-    fn field(p: impl Fn(f64) -> f64) -> FieldTable {
+    pub(crate) fn field(p: impl Fn(f64) -> f64) -> FieldTable {
         let step = 0.18;
         let k_len = 1001;
         let ams = ndarray::Array3::from_shape_fn((3, 1, k_len), |(_, _, k)| {
