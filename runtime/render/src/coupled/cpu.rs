@@ -728,7 +728,7 @@ fn peaks(fields: &[&FieldTable], chis: &[Moments], settings: &Settings) -> Vec<[
 
 /// A field's Legendre moments χ_0 … χ_{L+1} per channel, ∫ p P_l dΩ / ∫ p dΩ, with each of
 /// Ams_1's samples the phase function's mean over its bin θ_k ± Δθ/2 (as the tables are baked
-/// and the truth reads them, `truth::phase`), integrated exactly over the bin:
+/// and the truth's sampler reads them), integrated exactly over the bin:
 /// ∫ P_l dμ = (P_{l+1} − P_{l−1})/(2l + 1). A forward peak the bins do not resolve is the
 /// first sample's mass, its bin's solid angle π(Δθ/2)² times the sample: integrating the
 /// samples linearly interpolated instead gave it 4/3 of that (rain's δ 0.54 of the
