@@ -98,17 +98,12 @@ pub fn sweep<const N: usize>(
     update: impl Fn(usize, [f64; N], f64) -> [f64; N] + Sync,
 ) -> Vec<[f64; N]> {
     let dims = grid.dims;
-    let h = voxel_size(grid);
-    let a = (0..3)
-        .max_by(|&i, &j| l[i].abs().total_cmp(&l[j].abs()))
-        .expect("three axes");
+    let way = Way::along(grid, l);
+    let (a, ds, (shift_b, shift_c)) = (way.axis, way.ds, way.shift);
     let (b, c) = ((a + 1) % 3, (a + 2) % 3);
     let stride = [1, dims[0], dims[0] * dims[1]];
-    let ds = h[a] / l[a].abs();
-    // The point one layer back, in voxel units along b and c.
-    let (shift_b, shift_c) = (-ds * l[b] / h[b], -ds * l[c] / h[c]);
     let mut state = vec![[0.0f64; N]; grid.data.len()];
-    let layers = layer_order(dims[a], l[a] > 0.0);
+    let layers = layer_order(dims[a], way.forward);
     for (step, &k) in layers.iter().enumerate() {
         let prev = (step > 0).then(|| layers[step - 1]);
         let back_of = |layer: usize, u: f64, v: f64| -> [f64; N] {
@@ -135,6 +130,34 @@ pub fn sweep<const N: usize>(
         }
     }
     state
+}
+
+/// How an upwind sweep along the direction of travel `l` crosses the grid: layer by layer
+/// along the axis it travels most along (towards +axis when `forward`), the step `ds` (m)
+/// between two layers, and the point one layer back along the layer's axes (axis + 1) % 3,
+/// (axis + 2) % 3, in voxel units.
+pub(crate) struct Way {
+    pub(crate) axis: usize,
+    pub(crate) forward: bool,
+    pub(crate) ds: f64,
+    pub(crate) shift: (f64, f64),
+}
+
+impl Way {
+    pub(crate) fn along(grid: &DensityGrid, l: DVec3) -> Self {
+        let h = voxel_size(grid);
+        let a = (0..3)
+            .max_by(|&i, &j| l[i].abs().total_cmp(&l[j].abs()))
+            .expect("three axes");
+        let (b, c) = ((a + 1) % 3, (a + 2) % 3);
+        let ds = h[a] / l[a].abs();
+        Self {
+            axis: a,
+            forward: l[a] > 0.0,
+            ds,
+            shift: (-ds * l[b] / h[b], -ds * l[c] / h[c]),
+        }
+    }
 }
 
 /// The layers 0 … n − 1 of an upwind sweep in the order it visits them: ascending when its
@@ -510,23 +533,17 @@ pub(crate) fn sky_orders(
     grid: &DensityGrid,
     lit: &[(DVec3, [f64; 3])],
 ) -> Vec<((usize, bool), Vec<SkyWay>)> {
-    let h = voxel_size(grid);
     let omega = 4.0 * PI / SKY_DIRECTIONS as f64;
     let mut orders: Vec<((usize, bool), Vec<SkyWay>)> = Vec::new();
     for &(s, radiance) in lit {
-        let l = -s;
-        let a = (0..3)
-            .max_by(|&i, &j| l[i].abs().total_cmp(&l[j].abs()))
-            .expect("three axes");
-        let (b, c) = ((a + 1) % 3, (a + 2) % 3);
-        let ds = h[a] / l[a].abs();
+        let along = Way::along(grid, -s);
         let way = SkyWay {
             s,
             weight: radiance.map(|r| r * omega / (4.0 * PI)),
-            ds,
-            shift: (-ds * l[b] / h[b], -ds * l[c] / h[c]),
+            ds: along.ds,
+            shift: along.shift,
         };
-        let key = (a, l[a] > 0.0);
+        let key = (along.axis, along.forward);
         match orders.iter_mut().find(|(k, _)| *k == key) {
             Some((_, ways)) => ways.push(way),
             None => orders.push((key, vec![way])),

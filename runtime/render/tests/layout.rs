@@ -21,6 +21,7 @@ fn every_uniform_mirrors_its_wgsl_struct() {
     check::<render::coupled::gpu::CoupledParams>(&render::coupled::gpu::source());
     check::<render::coupled::sweep_gpu::SweepParams>(&render::coupled::sweep_gpu::source());
     check::<render::coupled::sky_gpu::SkyParams>(&render::coupled::sky_gpu::source());
+    check::<render::coupled::beam_gpu::BeamParams>(&render::coupled::beam_gpu::source());
     check::<render::biri::gpu::BiriParams>(&render::biri::gpu::source());
     check::<render::truth::gpu::TruthParams>(&render::truth::gpu::source());
     check::<render::truth::gpu::StepParams>(&render::truth::gpu::source());

@@ -33,6 +33,8 @@ pub struct CoupledReport {
     pub diffusion_on: String,
     /// Where the reduced skylight's sweeps ran.
     pub sky_on: String,
+    /// Where the beam's sweep ran.
+    pub beam_on: String,
     /// Seconds for the discrete-ordinates transport (0 with `diffuse = "diffusion"`).
     pub transport_s: f64,
     /// Its source iterations.
@@ -176,54 +178,106 @@ pub fn light(tables: &Tables, frame: &Frame, settings: &Settings) -> Result<Ligh
 /// step's trapezoid, the dropped (scattered out of the beam) loss per unit length (10..13) and
 /// its forward part α(g − f)/(1 − αf) per unit length (13..16), and the whole loss per unit
 /// length (16..19), all per unit irradiance.
-const STATE: usize = 19;
+pub const BEAM_STATE: usize = 19;
+const STATE: usize = BEAM_STATE;
 
-/// Step 1 and the loss of step 2: the buffer swept along `l`, the direction of travel.
-fn buffer_sweep(
+/// What the beam's sweep needs of a voxel: β_ext and β_sca, the split's forward peak f (but
+/// for the hemisphere split, whose F_n depends on the scatterings the beam kept), the
+/// asymmetry g, and the share of β_sca (green) whose scatterings the forward peak's blur
+/// counts (0 without a blur).
+#[derive(Debug, Clone, Copy)]
+pub struct BeamMedium {
+    /// β_ext per channel (1/m).
+    pub ext: [f64; 3],
+    /// β_sca per channel (1/m).
+    pub sca: [f64; 3],
+    /// The split's forward peak f per channel (0 for the hemisphere split and without the
+    /// buffer's source).
+    pub f: [f64; 3],
+    /// The asymmetry parameter g per channel.
+    pub g: [f64; 3],
+    /// The share of β_sca (green) whose scatterings the peak's blur counts.
+    pub share: f64,
+}
+
+/// Each voxel's [`BeamMedium`].
+fn beam_medium(
     fields: &[&FieldTable],
-    frame: &Frame,
+    grid: &DensityGrid,
     v: &Voxels,
-    l: DVec3,
     settings: &Settings,
     (peaks, blur): (&[[f64; 3]], Option<&PeakBlur>),
+) -> Vec<BeamMedium> {
+    (0..grid.data.len())
+        .into_par_iter()
+        .map(|i| {
+            let (ext, sca) = (v.ext[i], v.sca[i]);
+            let rho: [f64; MAX_FIELDS] = std::array::from_fn(|f| f64::from(grid.data[i][f]));
+            let g = std::array::from_fn(|c| {
+                if sca[c] > 0.0 {
+                    v.g_sca[i][c] / sca[c]
+                } else {
+                    0.0
+                }
+            });
+            let f = match (settings.source, settings.split) {
+                (Source::Buffer, Split::DeltaEddington) => mixed(fields, &rho, |f| peaks[f]),
+                _ => [0.0; 3],
+            };
+            // In the δ-split the beam's light is Ams_1's, blurred by the peak's scatterings,
+            // whose optical depth D the sweep counts (the peak's share of the scattering).
+            let share = match blur {
+                Some(blur) if settings.split != Split::Hemisphere && sca[1] > 0.0 => {
+                    blur.coefficient(fields, &rho) / sca[1]
+                }
+                _ => 0.0,
+            };
+            BeamMedium {
+                ext,
+                sca,
+                f,
+                g,
+                share,
+            }
+        })
+        .collect()
+}
+
+/// Step 1 and the loss of step 2: the buffer swept along `l`, the direction of travel,
+/// through `medium`.
+pub fn beam_sweep(
+    fields: &[&FieldTable],
+    grid: &DensityGrid,
+    medium: &[BeamMedium],
+    l: DVec3,
+    settings: &Settings,
 ) -> Vec<[f64; STATE]> {
-    let grid = &frame.grid;
     // Outside the box: the sunlight unscattered (I = 1, n = 0) in clear air.
     let mut outside = [0.0; STATE];
     outside[..3].copy_from_slice(&[1.0; 3]);
+    let hemisphere = (settings.source, settings.split) == (Source::Buffer, Split::Hemisphere);
     sweep::<STATE>(grid, l, outside, |i, b, ds| {
-        let (ext_h, sca_h) = (v.ext[i], v.sca[i]);
-        let rho: [f64; MAX_FIELDS] = std::array::from_fn(|f| f64::from(grid.data[i][f]));
+        let m = &medium[i];
         // From the point one layer back (trapezoid; clear air beyond the box's faces).
         let (start, n0, path) = ([b[0], b[1], b[2]], b[3], ds);
-        let ext: [f64; 3] = std::array::from_fn(|c| 0.5 * (b[4 + c] + ext_h[c]));
-        let sca: [f64; 3] = std::array::from_fn(|c| 0.5 * (b[7 + c] + sca_h[c]));
+        let ext: [f64; 3] = std::array::from_fn(|c| 0.5 * (b[4 + c] + m.ext[c]));
+        let sca: [f64; 3] = std::array::from_fn(|c| 0.5 * (b[7 + c] + m.sca[c]));
         let tau: [f64; 3] = ext.map(|e| e * path);
-        let g: [f64; 3] = std::array::from_fn(|c| {
-            if sca_h[c] > 0.0 {
-                v.g_sca[i][c] / sca_h[c]
-            } else {
-                0.0
-            }
-        });
-        let peak = mixed(fields, &rho, |f| peaks[f]);
-        let f = match (settings.source, settings.split) {
-            (Source::FirstScatter, _) => [0.0; 3],
-            (Source::Buffer, Split::Hemisphere) => {
-                sample::forward_fraction_mix(fields, &rho, n0 + 1.0 + tau[1])
-            }
-            (Source::Buffer, Split::DeltaEddington) => peak,
+        let f = if hemisphere {
+            let rho: [f64; MAX_FIELDS] = std::array::from_fn(|f| f64::from(grid.data[i][f]));
+            sample::forward_fraction_mix(fields, &rho, n0 + 1.0 + tau[1])
+        } else {
+            m.f
         };
         let mut out = [0.0; STATE];
         out[3] = n0;
         if ext[1] > 0.0 {
-            // Riley's n counts the scatterings the beam kept (the hemisphere split); in the
-            // δ-split the beam's light is Ams_1's, blurred by the peak's scatterings, whose
-            // optical depth D this counts (the peak's share of the scattering here).
+            // Riley's n counts the scatterings the beam kept (the hemisphere split); the
+            // δ-split counts the peak's optical depth D.
             if settings.split == Split::Hemisphere {
                 out[3] += sca[1] / ext[1] * tau[1];
-            } else if let Some(blur) = blur.filter(|_| sca_h[1] > 0.0) {
-                out[3] += sca[1] * path * blur.coefficient(fields, &rho) / sca_h[1];
+            } else {
+                out[3] += sca[1] * path * m.share;
             }
         }
         for c in 0..3 {
@@ -231,12 +285,12 @@ fn buffer_sweep(
             let lost = 1.0 - albedo * f[c];
             let kept = start[c] * (-tau[c] * lost).exp();
             out[c] = kept;
-            out[4 + c] = ext_h[c];
-            out[7 + c] = sca_h[c];
+            out[4 + c] = m.ext[c];
+            out[7 + c] = m.sca[c];
             if lost > 1e-12 && ds > 0.0 {
                 let loss = (start[c] - kept) / ds;
                 out[10 + c] = loss * albedo * (1.0 - f[c]) / lost;
-                out[13 + c] = loss * albedo * (g[c] - f[c]) / lost;
+                out[13 + c] = loss * albedo * (m.g[c] - f[c]) / lost;
                 out[16 + c] = loss;
             }
         }
@@ -265,6 +319,8 @@ pub struct OnGpu<'a> {
     pub sweeper: &'a super::sweep_gpu::Sweeper,
     /// The skylight sweeps' pipeline.
     pub sky: &'a super::sky_gpu::SkySweeper,
+    /// The beam sweep's pipeline.
+    pub beam: &'a super::beam_gpu::BeamSweeper,
     /// The solver's pipelines.
     pub solver: &'a crate::diffusion_gpu::Solver,
 }
@@ -300,7 +356,23 @@ pub fn light_on(
     let blur = blurred
         .then(|| PeakBlur::of(&fields, tables.theta_step_deg, &peak))
         .filter(PeakBlur::blurs);
-    let state = buffer_sweep(&fields, frame, &v, l, settings, (&peak, blur.as_ref()));
+    let medium = beam_medium(&fields, grid, &v, settings, (&peak, blur.as_ref()));
+    // The beam on the GPU when asked (but for the hemisphere split, whose F_n the sweep looks
+    // up as it goes); `auto` falls back to the CPU as the skylight does.
+    let gpu_beam = on.filter(|_| settings.split != Split::Hemisphere);
+    let (state, beam_on) = match gpu_beam.map(|on| on.beam.sweep(on.gpu, grid, &medium, l)) {
+        None => (
+            beam_sweep(&fields, grid, &medium, l, settings),
+            "the CPU".to_string(),
+        ),
+        Some(Ok(state)) => (state, on.map_or(String::new(), |on| on.gpu.describe())),
+        Some(Err(e)) if settings.per_sun == Place::Auto => (
+            beam_sweep(&fields, grid, &medium, l, settings),
+            format!("the CPU ({e})"),
+        ),
+        Some(Err(e)) => return Err(FrameError(format!("the beam on the GPU: {e}"))),
+    };
+    report.beam_on = beam_on;
     if let Some(blur) = &blur {
         report.peaks = fields
             .iter()

@@ -118,12 +118,14 @@ pub struct Renderer {
     layout: wgpu::BindGroupLayout,
     pipeline: wgpu::ComputePipeline,
     /// The per-sun passes' pipelines (the transport's sweeps, [`super::sweep_gpu`], the
-    /// skylight's, [`super::sky_gpu`], and the diffusion solves, [`crate::diffusion_gpu`]),
+    /// skylight's, [`super::sky_gpu`], the beam's, [`super::beam_gpu`], and the diffusion
+    /// solves, [`crate::diffusion_gpu`]),
     /// compiled on first use: a renderer whose
     /// per-sun passes stay on the CPU (`per_sun = "auto"` on lavapipe) never compiles them.
     per_sun: std::sync::OnceLock<(
         super::sweep_gpu::Sweeper,
         super::sky_gpu::SkySweeper,
+        super::beam_gpu::BeamSweeper,
         crate::diffusion_gpu::Solver,
     )>,
     /// The last lighting's buffers: a view of the same lighting uploads only its own.
@@ -177,10 +179,11 @@ impl Renderer {
     /// The per-sun passes on `gpu` (the adapter this renderer was built for), compiled on the
     /// first call.
     pub fn per_sun<'a>(&'a self, gpu: &'a Gpu) -> super::cpu::OnGpu<'a> {
-        let (sweeper, sky, solver) = self.per_sun.get_or_init(|| {
+        let (sweeper, sky, beam, solver) = self.per_sun.get_or_init(|| {
             (
                 super::sweep_gpu::Sweeper::new(gpu),
                 super::sky_gpu::SkySweeper::new(gpu),
+                super::beam_gpu::BeamSweeper::new(gpu),
                 crate::diffusion_gpu::Solver::new(gpu),
             )
         });
@@ -188,6 +191,7 @@ impl Renderer {
             gpu,
             sweeper,
             sky,
+            beam,
             solver,
         }
     }

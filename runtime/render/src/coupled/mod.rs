@@ -81,18 +81,20 @@
 //! The CPU reference (`--cpu`) runs everything on the CPU in f64 (rayon). A GPU render runs,
 //! with `per_view = "auto"` on a real GPU or `"gpu"` anywhere, the gather on the GPU ([`gpu`],
 //! the lighting's buffers kept there between views) and, with `per_sun = "auto"` on a real
-//! GPU or `"gpu"` anywhere, the per-sun passes that cost the most: the transport's sweeps
-//! ([`sweep_gpu`]: one dispatch per layer of each sweep order, a workgroup per voxel of the
-//! layer, an invocation per direction, in f32), the skylight's sweeps ([`sky_gpu`]) and every
-//! diffusion solve — the three channels' and the transport's acceleration —
-//! ([`crate::diffusion_gpu`]: the same conjugate gradients and V-cycle in f32 inside an f64
-//! refinement). The source iteration's control (acceleration sources, the convergence test),
-//! the beam's sweep, the sources, the flux and the budget stay on the CPU. On lavapipe (a CPU
+//! GPU or `"gpu"` anywhere, the per-sun passes: the transport's sweeps ([`sweep_gpu`]: one
+//! dispatch per layer of each sweep order, a workgroup per voxel of the layer, an invocation
+//! per direction, in f32), the skylight's sweeps ([`sky_gpu`]), the beam's ([`beam_gpu`]; but
+//! for the hemisphere split) and every diffusion solve — the three channels' and the
+//! transport's acceleration — ([`crate::diffusion_gpu`]: the same conjugate gradients and
+//! V-cycle in f32 inside an f64 refinement). The source iteration's control (acceleration
+//! sources, the convergence test), the medium per voxel, the sources, the flux and the budget
+//! stay on the CPU. On lavapipe (a CPU
 //! emulating a GPU) the GPU passes are slower than the CPU reference, so `auto` keeps them on
 //! the CPU there.
 //!
 //! Units: radiance per unit solar irradiance outside the atmosphere (1/sr) per channel.
 
+pub mod beam_gpu;
 pub mod cpu;
 pub mod gpu;
 pub mod peak;
@@ -195,8 +197,8 @@ pub enum Diffuse {
 }
 
 /// Where a GPU render runs a pass: the per-sun passes (`per_sun`: the transport's sweeps,
-/// [`sweep_gpu`], the skylight's, [`sky_gpu`], and the diffusion solves,
-/// [`crate::diffusion_gpu`]) or the per-view gather (`per_view`, [`gpu`]); a CPU render runs
+/// [`sweep_gpu`], the skylight's, [`sky_gpu`], the beam's, [`beam_gpu`], and the diffusion
+/// solves, [`crate::diffusion_gpu`]) or the per-view gather (`per_view`, [`gpu`]); a CPU render runs
 /// them on the CPU.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
 #[serde(rename_all = "kebab-case")]
@@ -254,8 +256,8 @@ pub struct Settings {
     /// that leaves the transport at least [`AUTO_TRANSPORT_VOXELS`] voxels along the grid's
     /// longest side.
     pub transport_coarsening: Option<usize>,
-    /// Where a GPU render's per-sun passes (the transport's and the skylight's sweeps, the
-    /// diffusion solves) run: "auto" (the default: on the GPU unless the adapter is a CPU emulation such as
+    /// Where a GPU render's per-sun passes (the beam's, the skylight's and the transport's
+    /// sweeps, the diffusion solves) run: "auto" (the default: on the GPU unless the adapter is a CPU emulation such as
     /// lavapipe), "gpu" or "cpu".
     pub per_sun: Place,
     /// Where a GPU render's gather (per view) runs, as `per_sun`: "auto" (the default),
@@ -467,9 +469,9 @@ fn rendered(
     (frame, settings): (&Frame, &Settings),
 ) -> Rendered {
     let summary = format!(
-        "beam + δ-scaled diffusion (lighting on the CPU, {} threads, but where the skylight, \
-         the diffusion and the transport say; gather on {on}): {}×{}, \
-         grid {:?}: beam {:.2} s (skylight swept on {}), diffusion {:.2} s on {} ({} unknowns, {} levels, {:?} CG iterations to residuals \
+        "beam + δ-scaled diffusion (lighting on the CPU, {} threads, but where the beam, the \
+         skylight, the diffusion and the transport say; gather on {on}): {}×{}, \
+         grid {:?}: beam {:.2} s (swept on {}, skylight on {}), diffusion {:.2} s on {} ({} unknowns, {} levels, {:?} CG iterations to residuals \
          {:.1e}/{:.1e}/{:.1e}), {}gather {gather_s:.2} s ({}); of the sunlight entering (green): \
          {:.1} % leaves in the buffer, {:.1} % is absorbed from it, {:.1} % feeds the \
          diffusion, which sends {:.1} % out and absorbs {:.1} %",
@@ -478,6 +480,7 @@ fn rendered(
         image.height,
         frame.grid.dims,
         report.buffer_s,
+        report.beam_on,
         report.sky_on,
         report.diffusion_s,
         report.diffusion_on,

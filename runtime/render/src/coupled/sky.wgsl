@@ -54,7 +54,7 @@ fn sweep(@builtin(global_invocation_id) id: vec3<u32>) {
         var back_tau = vec3<f32>(0.0);
         var back_ext = vec3<f32>(0.0);
         if (!first_layer) {
-            let up = upwind(f32(ub) + o.x, f32(vc) + o.y, nb, nc);
+            let up = upwind(ub, vc, o.xy, nb, nc);
             if (up.kept > 0.0) {
                 back_tau = up.kept * upwind_row(up, behind, j, nb, nc, count, 0u);
                 back_ext = up.kept * upwind_row(up, behind, j, nb, nc, count, 1u);

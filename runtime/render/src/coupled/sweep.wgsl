@@ -142,7 +142,7 @@ fn sweep(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) 
         var back_ext = vec3<f32>(0.0);
         var back_s = vec3<f32>(0.0);
         if (!first_layer) {
-            let up = upwind(f32(ub) + o.x, f32(vc) + o.y, nb, nc);
+            let up = upwind(ub, vc, o.xy, nb, nc);
             if (up.kept > 0.0) {
                 back_i = up.kept * upwind_row(up, behind, j, nb, nc, count, 0u);
                 back_ext = up.kept * upwind_row(up, behind, j, nb, nc, count, 1u);

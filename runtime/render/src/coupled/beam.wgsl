@@ -1,0 +1,105 @@
+// One layer of the beam's sweep (coupled::cpu::beam_sweep, step 1 of the model and the loss of
+// step 2) on the GPU, in f32: one invocation per voxel of the layer. The state one layer back
+// along the sun's direction is interpolated (lattice::upwind; beyond the box the sunlight
+// unscattered in clear air: I = 1, D = 0), the step's trapezoid of β_ext and β_sca taken, the
+// continuum update kept e^{−τ(1 − αf)} of the light, and what the beam loses split into the
+// diffuse light's sources.
+
+struct Params {
+    dims: vec4<u32>,         // nx, ny, nz, 0
+    way: vec4<f32>,          // shift u, shift v one layer back (voxel units), ds (metres), 0
+}
+
+@group(0) @binding(0) var<uniform> params: Params;
+// Binding 1: the dispatch's `Step` (upwind.wgsl).
+// Per voxel four rows: β_ext (rgb), β_sca (rgb), (f rgb, the peak's share of β_sca in green),
+// (g rgb).
+@group(0) @binding(2) var<storage, read> medium: array<vec4<f32>>;
+// Per (half, layer voxel) four rows: I (rgb), β_ext (rgb), β_sca (rgb), (D, 0, 0).
+@group(0) @binding(3) var<storage, read_write> state: array<vec4<f32>>;
+// Per voxel four rows: (I rgb, D), the diffuse light's isotropic source (rgb), its forward
+// source (rgb), the beam's loss (rgb), each per metre of the step.
+@group(0) @binding(4) var<storage, read_write> beam: array<vec4<f32>>;
+
+fn state_index(h: u32, u: u32, v: u32, j: u32, nb: u32, nc: u32, count: u32) -> u32 {
+    return ((h * nb * nc + u + v * nb) * count + j) * 4u;
+}
+
+// 1 − e^{−x} without the cancellation of small x.
+fn one_minus_exp(x: f32) -> f32 {
+    if (x < 1e-3) {
+        return x * (1.0 - x * (0.5 - x / 6.0));
+    }
+    return 1.0 - exp(-min(x, 700.0));
+}
+
+@compute @workgroup_size(64)
+fn sweep(@builtin(global_invocation_id) id: vec3<u32>) {
+    var dims = params.dims;
+    let a = stp.axes.x;
+    let b = stp.axes.y;
+    let c = stp.axes.z;
+    let k = stp.axes.w;
+    let nb = dims[b];
+    let nc = dims[c];
+    if (id.x >= nb * nc) {
+        return;
+    }
+    let ub = id.x % nb;
+    let vc = id.x / nb;
+    let behind = stp.group.w;
+    var stride = vec3<u32>(1u, dims.x, dims.x * dims.y);
+    let i = k * stride[a] + ub * stride[b] + vc * stride[c];
+    let ext_h = medium[4u * i].xyz;
+    let sca_h = medium[4u * i + 1u].xyz;
+    let f = medium[4u * i + 2u].xyz;
+    let share = medium[4u * i + 2u].w;
+    let g = medium[4u * i + 3u].xyz;
+    // One layer back: clear air's sunlight outside the box, blended over the last half voxel.
+    var start = vec3<f32>(1.0);
+    var back_ext = vec3<f32>(0.0);
+    var back_sca = vec3<f32>(0.0);
+    var n0 = 0.0;
+    if (stp.group.x == 0u) {
+        let up = upwind(ub, vc, params.way.xy, nb, nc);
+        start = up.kept * upwind_row(up, behind, 0u, nb, nc, 1u, 0u) + vec3<f32>(1.0 - up.kept);
+        back_ext = up.kept * upwind_row(up, behind, 0u, nb, nc, 1u, 1u);
+        back_sca = up.kept * upwind_row(up, behind, 0u, nb, nc, 1u, 2u);
+        n0 = up.kept * upwind_row(up, behind, 0u, nb, nc, 1u, 3u).x;
+    }
+    let ds = params.way.z;
+    let ext = 0.5 * (back_ext + ext_h);
+    let sca = 0.5 * (back_sca + sca_h);
+    let tau = ext * ds;
+    var n = n0;
+    if (ext.y > 0.0) {
+        n = n + sca.y * ds * share;
+    }
+    var kept = vec3<f32>(0.0);
+    var source = vec3<f32>(0.0);
+    var forward = vec3<f32>(0.0);
+    var loss = vec3<f32>(0.0);
+    for (var ch = 0u; ch < 3u; ch = ch + 1u) {
+        var albedo = 0.0;
+        if (ext[ch] > 0.0) {
+            albedo = sca[ch] / ext[ch];
+        }
+        let lost = 1.0 - albedo * f[ch];
+        let gone = start[ch] * one_minus_exp(tau[ch] * lost);
+        kept[ch] = start[ch] - gone;
+        if (lost > 1e-12 && ds > 0.0) {
+            loss[ch] = gone / ds;
+            source[ch] = loss[ch] * albedo * (1.0 - f[ch]) / lost;
+            forward[ch] = loss[ch] * albedo * (g[ch] - f[ch]) / lost;
+        }
+    }
+    let at = state_index(1u - behind, ub, vc, 0u, nb, nc, 1u);
+    state[at] = vec4<f32>(kept, 0.0);
+    state[at + 1u] = vec4<f32>(ext_h, 0.0);
+    state[at + 2u] = vec4<f32>(sca_h, 0.0);
+    state[at + 3u] = vec4<f32>(n, 0.0, 0.0, 0.0);
+    beam[4u * i] = vec4<f32>(kept, n);
+    beam[4u * i + 1u] = vec4<f32>(source, 0.0);
+    beam[4u * i + 2u] = vec4<f32>(forward, 0.0);
+    beam[4u * i + 3u] = vec4<f32>(loss, 0.0);
+}
