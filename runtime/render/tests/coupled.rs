@@ -401,6 +401,23 @@ fn the_gpu_lighting_equals_the_cpu_reference() {
 /// 10⁻⁹ it stays 4.35·10⁻⁵ with the GPU beam, 2.34·10⁻⁶ with the CPU's.
 const GPU_LIGHTING_TOLERANCE: (f64, f64) = (4.5e-5, 2.8e-5);
 
+/// The GPU sweep tests' grid: 9 × 5 × 7 voxels of 40 × 20 × 40 m (every axis leads some
+/// directions), empty (the tests give β per voxel, from 2.5·10⁻⁸ to 1 per metre by [`wobble`]).
+fn uneven_grid() -> render::DensityGrid {
+    let dims = [9, 5, 7];
+    render::DensityGrid {
+        min_m: glam::DVec3::new(-100.0, 0.0, 50.0),
+        max_m: glam::DVec3::new(260.0, 100.0, 330.0),
+        dims,
+        data: vec![[0.0; render::MAX_FIELDS]; dims[0] * dims[1] * dims[2]],
+    }
+}
+
+/// A lumpy value in [0, 1] per voxel `i` and quantity `k`.
+fn wobble(i: usize, k: usize) -> f64 {
+    0.5 + 0.5 * ((i * 7 + k * 13) as f64 * 0.61).sin()
+}
+
 /// The beam's sweep on the GPU (`coupled::beam_gpu`) gives `coupled::cpu::beam_sweep`'s beam,
 /// peak depth and losses in f32: a lumpy medium on an uneven grid, τ per voxel from 10⁻⁶ to
 /// 40, the split's f, g and the peak's share varying per voxel, the sun travelling most along
@@ -408,16 +425,8 @@ const GPU_LIGHTING_TOLERANCE: (f64, f64) = (4.5e-5, 2.8e-5);
 #[test]
 fn the_gpu_beam_equals_the_cpu_sweep() {
     let Some(gpu) = common::gpu() else { return };
-    let dims = [9, 5, 7];
-    let n = dims[0] * dims[1] * dims[2];
-    let grid = render::DensityGrid {
-        min_m: glam::DVec3::new(-100.0, 0.0, 50.0),
-        max_m: glam::DVec3::new(260.0, 100.0, 330.0),
-        dims,
-        data: vec![[0.0; render::MAX_FIELDS]; n],
-    };
-    // 40 m voxels: β from 2.5·10⁻⁸ to 1 per metre.
-    let wobble = |i: usize, k: usize| 0.5 + 0.5 * ((i * 7 + k * 13) as f64 * 0.61).sin();
+    let grid = uneven_grid();
+    let n = grid.data.len();
     let medium: Vec<cpu::BeamMedium> = (0..n)
         .map(|i| {
             let ext: [f64; 3] = std::array::from_fn(|c| 10f64.powf(-7.6 + 7.6 * wobble(i, c)));
@@ -482,16 +491,8 @@ const GPU_BEAM_TOLERANCE: f64 = 9e-7;
 #[test]
 fn the_gpu_skylight_equals_the_cpu_sweeps() {
     let Some(gpu) = common::gpu() else { return };
-    let dims = [9, 5, 7];
-    let n = dims[0] * dims[1] * dims[2];
-    let grid = render::DensityGrid {
-        min_m: glam::DVec3::new(-100.0, 0.0, 50.0),
-        max_m: glam::DVec3::new(260.0, 100.0, 330.0),
-        dims,
-        data: vec![[0.0; render::MAX_FIELDS]; n],
-    };
-    // 40 m voxels: β from 2.5·10⁻⁸ to 1 per metre.
-    let wobble = |i: usize, k: usize| 0.5 + 0.5 * ((i * 7 + k * 13) as f64 * 0.61).sin();
+    let grid = uneven_grid();
+    let n = grid.data.len();
     let ext: Vec<[f64; 3]> = (0..n)
         .map(|i| std::array::from_fn(|c| 10f64.powf(-7.6 + 7.6 * wobble(i, c))))
         .collect();

@@ -35,21 +35,16 @@ fn one_minus_exp(x: f32) -> f32 {
 
 @compute @workgroup_size(64)
 fn sweep(@builtin(global_invocation_id) id: vec3<u32>) {
-    var dims = params.dims;
-    let a = stp.axes.x;
-    let b = stp.axes.y;
-    let c = stp.axes.z;
-    let k = stp.axes.w;
-    let nb = dims[b];
-    let nc = dims[c];
+    let size = layer_size();
+    let nb = size.x;
+    let nc = size.y;
     if (id.x >= nb * nc) {
         return;
     }
     let ub = id.x % nb;
     let vc = id.x / nb;
     let behind = stp.group.w;
-    var stride = vec3<u32>(1u, dims.x, dims.x * dims.y);
-    let i = k * stride[a] + ub * stride[b] + vc * stride[c];
+    let i = voxel_at(ub, vc);
     let ext_h = medium[4u * i].xyz;
     let sca_h = medium[4u * i + 1u].xyz;
     let f = medium[4u * i + 2u].xyz;

@@ -10,9 +10,12 @@ use glam::DVec3;
 use runtime::gpu::{Gpu, read_back};
 
 use super::cpu::{BEAM_STATE, BeamMedium};
-use super::sweep_gpu::{bind_with_steps, dispatch_steps, push_step, with_upwind};
+use super::sweep_gpu::{
+    bind_with_steps, buffers_fit, dispatch_steps, layer_fits, push_step, sweep_pipeline,
+    with_upwind,
+};
 use crate::DensityGrid;
-use crate::gpu::{RenderError, entry, filled, storage};
+use crate::gpu::{RenderError, filled, storage};
 
 /// The sweep's WGSL, without the shared upwind lookup ([`source`] puts it before).
 pub const BEAM_WGSL: &str = include_str!("beam.wgsl");
@@ -45,28 +48,12 @@ pub struct BeamSweeper {
 impl BeamSweeper {
     /// Compiles `beam.wgsl`.
     pub fn new(gpu: &Gpu) -> Self {
-        use wgpu::BufferBindingType::{Storage, Uniform};
-        let entries = [
-            entry(0, Uniform, false),
-            entry(1, Uniform, true),
-            entry(2, Storage { read_only: true }, false),
-            entry(3, Storage { read_only: false }, false),
-            entry(4, Storage { read_only: false }, false),
-        ];
-        let layout = gpu
-            .device
-            .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-                label: Some("photometeor beam sweep layout"),
-                entries: &entries,
-            });
-        let [pipeline] = <[_; 1]>::try_from(crate::gpu::compute_pipelines(
-            &gpu.device,
+        let (layout, pipeline) = sweep_pipeline(
+            gpu,
             "photometeor beam sweep",
             source(),
-            &[&layout],
-            &["sweep"],
-        ))
-        .expect("one pipeline");
+            &[true, false, false],
+        );
         Self { layout, pipeline }
     }
 
@@ -81,37 +68,24 @@ impl BeamSweeper {
         l: DVec3,
     ) -> Result<Vec<[f64; BEAM_STATE]>, RenderError> {
         let (device, queue) = (&gpu.device, &gpu.queue);
-        let limits = device.limits();
         let dims = grid.dims;
         let voxels = medium.len();
         let way = crate::lattice::Way::along(grid, l);
         let (a, b, c) = (way.axis, (way.axis + 1) % 3, (way.axis + 2) % 3);
         let groups = (dims[b] * dims[c]).div_ceil(WG);
-        if groups as u32 > limits.max_compute_workgroups_per_dimension {
-            return Err(RenderError::Frame(crate::FrameError(format!(
-                "the beam's GPU sweep needs {groups} workgroups for a layer of the {dims:?} \
-                 grid, more than {}'s {} per dimension: lower [render] grid_resolution",
-                gpu.describe(),
-                limits.max_compute_workgroups_per_dimension
-            ))));
-        }
+        layer_fits(gpu, "the beam's GPU sweep", groups, dims)?;
         let beam_bytes = (64 * voxels) as u64;
         let state_bytes = (2 * 64 * dims[b] * dims[c]) as u64;
-        let limit = limits.max_storage_buffer_binding_size;
-        for (what, bytes) in [
-            ("medium and beam", beam_bytes),
-            ("layer state", state_bytes),
-        ] {
-            if bytes > limit {
-                return Err(RenderError::Frame(crate::FrameError(format!(
-                    "the beam's {what} take {} MiB each on a {dims:?} grid, more than {}'s \
-                     storage-binding limit of {} MiB: lower [render] grid_resolution",
-                    bytes >> 20,
-                    gpu.describe(),
-                    limit >> 20
-                ))));
-            }
-        }
+        buffers_fit(
+            gpu,
+            "the beam's",
+            dims,
+            &[
+                ("medium and beam", beam_bytes),
+                ("layer state", state_bytes),
+            ],
+            "lower [render] grid_resolution",
+        )?;
         let mut steps: Vec<u8> = Vec::new();
         let run = crate::lattice::layer_order(dims[a], way.forward);
         for (s, &k) in run.iter().enumerate() {

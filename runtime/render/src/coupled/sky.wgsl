@@ -27,13 +27,9 @@ fn state_index(h: u32, u: u32, v: u32, j: u32, nb: u32, nc: u32, count: u32) -> 
 
 @compute @workgroup_size(64)
 fn sweep(@builtin(global_invocation_id) id: vec3<u32>) {
-    var dims = params.dims;
-    let a = stp.axes.x;
-    let b = stp.axes.y;
-    let c = stp.axes.z;
-    let k = stp.axes.w;
-    let nb = dims[b];
-    let nc = dims[c];
+    let size = layer_size();
+    let nb = size.x;
+    let nc = size.y;
     if (id.x >= nb * nc) {
         return;
     }
@@ -43,8 +39,7 @@ fn sweep(@builtin(global_invocation_id) id: vec3<u32>) {
     let first = stp.group.y;
     let count = stp.group.z;
     let behind = stp.group.w;
-    var stride = vec3<u32>(1u, dims.x, dims.x * dims.y);
-    let i = k * stride[a] + ub * stride[b] + vc * stride[c];
+    let i = voxel_at(ub, vc);
     let here = ext[i].xyz;
     var mean = vec3<f32>(0.0);
     var flux = array<vec3<f32>, 3>(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0));

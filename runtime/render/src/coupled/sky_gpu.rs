@@ -9,9 +9,12 @@ use glam::DVec3;
 
 use runtime::gpu::{Gpu, read_back};
 
-use super::sweep_gpu::{bind_with_steps, dispatch_steps, push_step, with_upwind};
+use super::sweep_gpu::{
+    bind_with_steps, buffers_fit, dispatch_steps, layer_fits, push_step, sweep_pipeline,
+    with_upwind,
+};
 use crate::DensityGrid;
-use crate::gpu::{RenderError, entry, filled, storage};
+use crate::gpu::{RenderError, filled, storage};
 use crate::lattice::{Sky, sky_orders};
 
 /// The sweeps' WGSL, without the shared upwind lookup ([`source`] puts it before).
@@ -42,29 +45,12 @@ pub struct SkySweeper {
 impl SkySweeper {
     /// Compiles `sky.wgsl`.
     pub fn new(gpu: &Gpu) -> Self {
-        use wgpu::BufferBindingType::{Storage, Uniform};
-        let entries = [
-            entry(0, Uniform, false),
-            entry(1, Uniform, true),
-            entry(2, Storage { read_only: true }, false),
-            entry(3, Storage { read_only: true }, false),
-            entry(4, Storage { read_only: false }, false),
-            entry(5, Storage { read_only: false }, false),
-        ];
-        let layout = gpu
-            .device
-            .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-                label: Some("photometeor sky sweep layout"),
-                entries: &entries,
-            });
-        let [pipeline] = <[_; 1]>::try_from(crate::gpu::compute_pipelines(
-            &gpu.device,
+        let (layout, pipeline) = sweep_pipeline(
+            gpu,
             "photometeor sky sweep",
             source(),
-            &[&layout],
-            &["sweep"],
-        ))
-        .expect("one pipeline");
+            &[true, true, false, false],
+        );
         Self { layout, pipeline }
     }
 
@@ -80,7 +66,6 @@ impl SkySweeper {
         lit: &[(DVec3, [f64; 3])],
     ) -> Result<Sky, RenderError> {
         let (device, queue) = (&gpu.device, &gpu.queue);
-        let limits = device.limits();
         let dims = grid.dims;
         let voxels = ext.len();
         let f = |v: [f64; 3]| [v[0] as f32, v[1] as f32, v[2] as f32, 0.0];
@@ -109,31 +94,18 @@ impl SkySweeper {
         if layers.is_empty() {
             return Ok(sky);
         }
-        if let Some(&(n, _)) = layers
-            .iter()
-            .find(|&&(n, _)| n as u32 > limits.max_compute_workgroups_per_dimension)
-        {
-            return Err(RenderError::Frame(crate::FrameError(format!(
-                "the skylight's GPU sweeps need {n} workgroups for a layer of the {dims:?} grid, \
-                 more than {}'s {} per dimension: lower [render] grid_resolution",
-                gpu.describe(),
-                limits.max_compute_workgroups_per_dimension
-            ))));
+        for &(n, _) in &layers {
+            layer_fits(gpu, "the skylight's GPU sweeps", n, dims)?;
         }
         let sky_bytes = (64 * voxels) as u64;
         let state_bytes = (16 * largest_state) as u64;
-        let limit = limits.max_storage_buffer_binding_size;
-        for (what, bytes) in [("light", sky_bytes), ("layer state", state_bytes)] {
-            if bytes > limit {
-                return Err(RenderError::Frame(crate::FrameError(format!(
-                    "the skylight's {what} take {} MiB on a {dims:?} grid, more than {}'s \
-                     storage-binding limit of {} MiB: lower [render] grid_resolution",
-                    bytes >> 20,
-                    gpu.describe(),
-                    limit >> 20
-                ))));
-            }
-        }
+        buffers_fit(
+            gpu,
+            "the skylight's",
+            dims,
+            &[("light", sky_bytes), ("layer state", state_bytes)],
+            "lower [render] grid_resolution",
+        )?;
         let rows: Vec<[f32; 4]> = ext.iter().map(|&e| f(e)).collect();
         let params = SkyParams {
             dims: [dims[0] as u32, dims[1] as u32, dims[2] as u32, 0],

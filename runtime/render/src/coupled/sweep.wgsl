@@ -86,24 +86,19 @@ fn advance(i_back: f32, ds: f32, tau: f32, e: f32, s_here: f32, ext_here: f32, s
 
 @compute @workgroup_size(16)
 fn sweep(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) t: u32) {
-    var dims = params.dims;
-    let a = stp.axes.x;
-    let b = stp.axes.y;
-    let c = stp.axes.z;
-    let k = stp.axes.w;
-    let nb = dims[b];
-    let nc = dims[c];
+    let size = layer_size();
+    let nb = size.x;
+    let nc = size.y;
     let ub = wg.x;
     let vc = wg.y;
     let first_layer = stp.group.x == 1u;
     let first = stp.group.y;
     let count = stp.group.z;
     let behind = stp.group.w;
-    var stride = vec3<u32>(1u, dims.x, dims.x * dims.y);
-    let i = k * stride[a] + ub * stride[b] + vc * stride[c];
+    let i = voxel_at(ub, vc);
     let base = i * MEDIUM_ROWS;
     var ext = medium[base].xyz;
-    let stride_m = dims.w;
+    let stride_m = params.dims.w;
     // The emission harmonics, one per invocation (transport::emission).
     for (var n = t; n < 75u; n = n + WG) {
         let ch = n / HARMONICS;

@@ -87,6 +87,84 @@ pub(crate) fn dispatch_steps(
     }
 }
 
+/// A sweep's bind group layout and pipeline (entry point `sweep` of `source`): its `Params`
+/// at binding 0, the steps at binding 1 (dynamic offset), then one storage buffer per entry of
+/// `read_only` at bindings 2, 3, … (read-only where true).
+pub(crate) fn sweep_pipeline(
+    gpu: &Gpu,
+    label: &str,
+    source: String,
+    read_only: &[bool],
+) -> (wgpu::BindGroupLayout, wgpu::ComputePipeline) {
+    use wgpu::BufferBindingType::{Storage, Uniform};
+    let entries: Vec<wgpu::BindGroupLayoutEntry> =
+        [entry(0, Uniform, false), entry(1, Uniform, true)]
+            .into_iter()
+            .chain(
+                read_only
+                    .iter()
+                    .zip(2..)
+                    .map(|(&read_only, b)| entry(b, Storage { read_only }, false)),
+            )
+            .collect();
+    let layout = gpu
+        .device
+        .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some(&format!("{label} layout")),
+            entries: &entries,
+        });
+    let [pipeline] = <[_; 1]>::try_from(crate::gpu::compute_pipelines(
+        &gpu.device,
+        label,
+        source,
+        &[&layout],
+        &["sweep"],
+    ))
+    .expect("one pipeline");
+    (layout, pipeline)
+}
+
+/// Refused, naming the sizes, where `whose` layer of `groups` workgroups exceeds the adapter's
+/// workgroups per dimension.
+pub(crate) fn layer_fits(
+    gpu: &Gpu,
+    whose: &str,
+    groups: usize,
+    dims: [usize; 3],
+) -> Result<(), RenderError> {
+    let most = gpu.device.limits().max_compute_workgroups_per_dimension;
+    if groups as u32 > most {
+        return Err(gpu_refusal(format!(
+            "{whose} needs {groups} workgroups for a layer of the {dims:?} grid, more than {}'s \
+             {most} per dimension: lower [render] grid_resolution",
+            gpu.describe()
+        )));
+    }
+    Ok(())
+}
+
+/// Refused, naming the buffer, its size and the limit, where one of `buffers` (what, bytes)
+/// exceeds the adapter's storage-binding limit; `remedy` says what to lower.
+pub(crate) fn buffers_fit(
+    gpu: &Gpu,
+    whose: &str,
+    dims: [usize; 3],
+    buffers: &[(&str, u64)],
+    remedy: &str,
+) -> Result<(), RenderError> {
+    let limit = gpu.device.limits().max_storage_buffer_binding_size;
+    match buffers.iter().find(|&&(_, bytes)| bytes > limit) {
+        Some(&(what, bytes)) => Err(gpu_refusal(format!(
+            "{whose} {what} take {} MiB on a {dims:?} grid, more than {}'s storage-binding \
+             limit of {} MiB: {remedy}",
+            bytes >> 20,
+            gpu.describe(),
+            limit >> 20
+        ))),
+        None => Ok(()),
+    }
+}
+
 /// Floats per voxel of the moments on the GPU (75, padded to whole rows of four).
 const STRIDE: usize = PER_VOXEL.div_ceil(4) * 4;
 /// Rows of four per voxel of the medium (`sweep.wgsl`'s MEDIUM_ROWS).
@@ -120,29 +198,12 @@ pub struct Sweeper {
 impl Sweeper {
     /// Compiles `sweep.wgsl`.
     pub fn new(gpu: &Gpu) -> Self {
-        use wgpu::BufferBindingType::{Storage, Uniform};
-        let device = &gpu.device;
-        let entries = [
-            entry(0, Uniform, false),
-            entry(1, Uniform, true),
-            entry(2, Storage { read_only: true }, false),
-            entry(3, Storage { read_only: true }, false),
-            entry(4, Storage { read_only: false }, false),
-            entry(5, Storage { read_only: true }, false),
-            entry(6, Storage { read_only: false }, false),
-        ];
-        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("photometeor transport sweep layout"),
-            entries: &entries,
-        });
-        let [pipeline] = <[_; 1]>::try_from(crate::gpu::compute_pipelines(
-            device,
+        let (layout, pipeline) = sweep_pipeline(
+            gpu,
             "photometeor transport sweep",
             source(),
-            &[&layout],
-            &["sweep"],
-        ))
-        .expect("one pipeline");
+            &[true, true, false, true, false],
+        );
         Self { layout, pipeline }
     }
 
@@ -226,24 +287,17 @@ impl Sweeper {
         let moments_bytes = (4 * STRIDE * voxels) as u64;
         let state_bytes = (16 * largest_state.max(1)) as u64;
         let medium_bytes = (16 * rows.len()) as u64;
-        let limit = limits.max_storage_buffer_binding_size;
-        for (what, bytes) in [
-            ("moments", moments_bytes),
-            ("medium", medium_bytes),
-            ("layer state", state_bytes),
-        ] {
-            if bytes > limit {
-                return Err(gpu_refusal(format!(
-                    "the transport's {what} take {} MiB on a {:?} grid, more than {}'s \
-                     storage-binding limit of {} MiB: raise [render.coupled] \
-                     transport_coarsening or lower [render] grid_resolution",
-                    bytes >> 20,
-                    dims,
-                    gpu.describe(),
-                    limit >> 20
-                )));
-            }
-        }
+        buffers_fit(
+            gpu,
+            "the transport's",
+            dims,
+            &[
+                ("moments", moments_bytes),
+                ("medium", medium_bytes),
+                ("layer state", state_bytes),
+            ],
+            "raise [render.coupled] transport_coarsening or lower [render] grid_resolution",
+        )?;
         let y_sun = harmonics(medium.l);
         let params = SweepParams {
             dims: [

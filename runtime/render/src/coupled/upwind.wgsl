@@ -17,6 +17,20 @@ struct Step {
 
 @group(0) @binding(1) var<uniform> stp: Step;
 
+// The step's layer: its size nb × nc along the across-axes b, c (of the including shader's
+// `params.dims`).
+fn layer_size() -> vec2<u32> {
+    var dims = params.dims;
+    return vec2<u32>(dims[stp.axes.y], dims[stp.axes.z]);
+}
+
+// The grid index of the layer's voxel (ub, vc) (x fastest).
+fn voxel_at(ub: u32, vc: u32) -> u32 {
+    var dims = params.dims;
+    var stride = vec3<u32>(1u, dims.x, dims.x * dims.y);
+    return stp.axes.w * stride[stp.axes.x] + ub * stride[stp.axes.y] + vc * stride[stp.axes.z];
+}
+
 struct Upwind {
     kept: f32,
     u: array<u32, 4>,
