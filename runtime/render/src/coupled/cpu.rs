@@ -325,6 +325,24 @@ pub struct OnGpu<'a> {
     pub solver: &'a crate::diffusion_gpu::Solver,
 }
 
+/// A per-sun pass (`what`) and where it ran: on `on`'s GPU when given, else on the CPU; where
+/// the GPU refuses it (its limits), `auto` falls back to the CPU, saying why, and `gpu` fails
+/// naming the refusal.
+fn on_gpu_or_cpu<T>(
+    on: Option<OnGpu>,
+    per_sun: Place,
+    what: &str,
+    gpu: impl FnOnce(OnGpu) -> Result<T, crate::gpu::RenderError>,
+    cpu: impl FnOnce() -> T,
+) -> Result<(T, String), FrameError> {
+    match on.map(|on| (on.gpu.describe(), gpu(on))) {
+        None => Ok((cpu(), "the CPU".to_string())),
+        Some((adapter, Ok(done))) => Ok((done, adapter)),
+        Some((_, Err(e))) if per_sun == Place::Auto => Ok((cpu(), format!("the CPU ({e})"))),
+        Some((_, Err(e))) => Err(FrameError(format!("{what} on the GPU: {e}"))),
+    }
+}
+
 /// [`light_with`], the transport's sweeps and the diffusion solves on `on` when given.
 pub fn light_on(
     tables: &Tables,
@@ -358,20 +376,14 @@ pub fn light_on(
         .filter(PeakBlur::blurs);
     let medium = beam_medium(&fields, grid, &v, settings, (&peak, blur.as_ref()));
     // The beam on the GPU when asked (but for the hemisphere split, whose F_n the sweep looks
-    // up as it goes); `auto` falls back to the CPU as the skylight does.
-    let gpu_beam = on.filter(|_| settings.split != Split::Hemisphere);
-    let (state, beam_on) = match gpu_beam.map(|on| on.beam.sweep(on.gpu, grid, &medium, l)) {
-        None => (
-            beam_sweep(&fields, grid, &medium, l, settings),
-            "the CPU".to_string(),
-        ),
-        Some(Ok(state)) => (state, on.map_or(String::new(), |on| on.gpu.describe())),
-        Some(Err(e)) if settings.per_sun == Place::Auto => (
-            beam_sweep(&fields, grid, &medium, l, settings),
-            format!("the CPU ({e})"),
-        ),
-        Some(Err(e)) => return Err(FrameError(format!("the beam on the GPU: {e}"))),
-    };
+    // up as it goes).
+    let (state, beam_on) = on_gpu_or_cpu(
+        on.filter(|_| settings.split != Split::Hemisphere),
+        settings.per_sun,
+        "the beam",
+        |on| on.beam.sweep(on.gpu, grid, &medium, l),
+        || beam_sweep(&fields, grid, &medium, l, settings),
+    )?;
     report.beam_on = beam_on;
     if let Some(blur) = &blur {
         report.peaks = fields
@@ -388,16 +400,13 @@ pub fn light_on(
     let lit = sky_light(frame, |g| {
         transmittance_to_sun(&fields, grid, g, sun_dir, scaled)
     });
-    // On the GPU when asked; `auto` falls back to the CPU where the adapter cannot hold the
-    // sweeps, `gpu` fails naming the limit.
-    let (sky, sky_on) = match on.map(|on| on.sky.sweep(on.gpu, grid, &v.ext, &lit)) {
-        None => (sky_sweeps(grid, &v.ext, &lit), "the CPU".to_string()),
-        Some(Ok(sky)) => (sky, on.map_or(String::new(), |on| on.gpu.describe())),
-        Some(Err(e)) if settings.per_sun == Place::Auto => {
-            (sky_sweeps(grid, &v.ext, &lit), format!("the CPU ({e})"))
-        }
-        Some(Err(e)) => return Err(FrameError(format!("the skylight on the GPU: {e}"))),
-    };
+    let (sky, sky_on) = on_gpu_or_cpu(
+        on,
+        settings.per_sun,
+        "the skylight",
+        |on| on.sky.sweep(on.gpu, grid, &v.ext, &lit),
+        || sky_sweeps(grid, &v.ext, &lit),
+    )?;
     report.sky_on = sky_on;
     report.buffer_s = start.elapsed().as_secs_f64();
 
@@ -811,10 +820,7 @@ pub(crate) fn legendre_moments(field: &FieldTable, theta_step_deg: f64) -> Momen
     // P_0 … P_{TOP} at μ.
     let legendre = |mu: f64| {
         let mut pl = [0.0; TOP + 1];
-        (pl[0], pl[1]) = (1.0, mu);
-        for l in 1..TOP {
-            pl[l + 1] = ((2 * l + 1) as f64 * mu * pl[l] - l as f64 * pl[l - 1]) / (l + 1) as f64;
-        }
+        super::peak::legendre(mu, TOP, |l, v| pl[l] = v);
         pl
     };
     let mut sums = [[0.0; 3]; TOP];

@@ -298,7 +298,7 @@ fn sample_at(p: &[f64], u: f64) -> f64 {
 }
 
 /// Calls `each(l, P_l(μ))` for l = 0 … `degree` (the upward recurrence, stable for |μ| ≤ 1).
-fn legendre(mu: f64, degree: usize, mut each: impl FnMut(usize, f64)) {
+pub(super) fn legendre(mu: f64, degree: usize, mut each: impl FnMut(usize, f64)) {
     let (mut prev, mut cur) = (1.0, mu);
     each(0, 1.0);
     if degree >= 1 {
