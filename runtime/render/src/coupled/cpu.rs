@@ -58,8 +58,9 @@ pub struct CoupledReport {
     /// Multigrid levels.
     pub levels: usize,
     /// The forward peak's fit per field that the beam's single scattering is blurred by
-    /// ([`super::peak`]; green): its name, half width (degrees) and share of the scattering.
-    pub peaks: Vec<(String, f64, f64)>,
+    /// ([`super::peak`]; green): its name, half width (degrees), share of the scattering, and
+    /// the share of the cone beyond it that blurs the backward half.
+    pub peaks: Vec<(String, f64, f64, f64)>,
     /// Where the sunlight went, per channel, as fractions of what entered the box: kept in
     /// the buffer to its exit, absorbed from it, and handed to the diffusion as its source.
     pub budget: Budget,
@@ -390,7 +391,14 @@ pub fn light_on(
             .iter()
             .zip(&blur.fields)
             .filter(|(_, b)| b.share[1] > 0.0)
-            .map(|(f, b)| (f.name.clone(), b.half_width_deg[1], b.share[1]))
+            .map(|(f, b)| {
+                (
+                    f.name.clone(),
+                    b.half_width_deg[1],
+                    b.share[1],
+                    b.cone_share[1],
+                )
+            })
             .collect();
     }
     // E S_atm per voxel: the sun's irradiance at each voxel's height, before the volume.

@@ -60,7 +60,9 @@
 //!    scatterings of the forward peak the beam and the eye's ray kept ([`peak`]: Ams_1
 //!    convolved with a Poisson number of Gaussian peaks fitted to the table's forward lobe,
 //!    its optical depth counted along the beam and the ray; with the transport): the glory's
-//!    rings, 0.5° apart, wash out as the truth's do under the droplets' ~1° diffraction peak. The ground and the air below the grid are
+//!    rings, 0.5° apart, wash out as the truth's do under the droplets' ~1° diffraction peak;
+//!    beyond 90°–120° of scattering the rest of δ-M's forward cone (to ~12°) blurs it too, so
+//!    the fogbow's 4° bow softens as the truth's does. The ground and the air below the grid are
 //!    lit through the δ-scaled extinction (the forward peak's light still arrives; the halo
 //!    scene's clear-sky pixels read −4.7 % lit through the true one, +2.3 % through this), and
 //!    the ground and the sky behind are seen through the δ-scaled extinction too (what the forward peak scatters out of a smooth
@@ -510,7 +512,9 @@ fn rendered(
             let fits: Vec<String> = report
                 .peaks
                 .iter()
-                .map(|(name, h, s)| format!("{name} half width {h:.2}°, share {s:.2}"))
+                .map(|(name, h, s, c)| {
+                    format!("{name} half width {h:.2}°, share {s:.2}, cone beyond it {c:.2}")
+                })
                 .collect();
             format!(
                 "the sun's single scattering blurred by the forward peak: {}",
