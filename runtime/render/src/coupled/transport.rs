@@ -628,12 +628,17 @@ impl Coarse {
     }
 }
 
-/// The diffuse light's energy balance per channel (per unit irradiance, m² · radiance · sr):
-/// what the sources emit, ∫∫Q dω dV; what leaves through the box's faces, ∮F·n dA with the net
-/// flux F = ∫I ω dω = φ_1/Y_1 read at the outermost voxel centres; what is absorbed,
-/// ∫σ_a ∫I dω dV. Scattering moves light between directions only (p′ is normalized), so a
-/// converged solution has source = out + absorbed up to the discretization (the face read half
-/// a voxel inside, the sweeps' interpolation).
+/// The diffuse light's energy balance per channel (per unit irradiance, m² · radiance · sr)
+/// over the box of the outermost voxel centres: what the sources inside it emit, ∫∫Q dω dV;
+/// what leaves through its faces, ∮F·n dA with the net flux F = ∫I ω dω = φ_1/Y_1 read at
+/// the centres on them; what is absorbed inside it, ∫σ_a ∫I dω dV. Both integrals by the
+/// trapezoid over the centres (a centre on a face of that box weighs ½ per axis it lies on
+/// the face of, in volume and in area), so the surface is closed: read on the grid's own faces
+/// with their whole areas instead, the flux half a voxel inside was counted over more than the
+/// whole sphere around the light (a point source in a box of n voxels: 6 · 4 arcsin(1/(1 +
+/// (1 − 1/n)²)) against 4π, +7.2 % at n = 16). Scattering moves light between directions only
+/// (p′ is normalized), so a converged solution has source = out + absorbed up to the sweeps'
+/// discretization.
 #[derive(Debug, Clone, Copy, Default)]
 pub struct Balance {
     /// ∫∫Q dω dV.
@@ -658,15 +663,21 @@ pub fn balance(grid: &DensityGrid, medium: &Medium, moments: &[[f64; PER_VOXEL]]
             (i / dims[0]) % dims[1],
             i / (dims[0] * dims[1]),
         ];
+        // The trapezoid's weight along each axis: ½ on the outermost centres.
+        let edge = |a: usize| cell[a] == 0 || cell[a] + 1 == dims[a];
+        let along: [f64; 3] =
+            std::array::from_fn(|a| if dims[a] > 1 && edge(a) { 0.5 } else { 1.0 });
+        let weight = along[0] * along[1] * along[2];
         for (c, b) in out.iter_mut().enumerate() {
             let o = c * HARMONICS;
             let sky = medium.sky[i][c];
-            b.source += 4.0 * PI * (medium.sun[i][c] + sky[0]) * volume;
-            b.absorbed += (medium.ext[i][c] - medium.sca[i][c]) * root * m[o] * volume;
+            b.source += 4.0 * PI * (medium.sun[i][c] + sky[0]) * volume * weight;
+            b.absorbed += (medium.ext[i][c] - medium.sca[i][c]) * root * m[o] * volume * weight;
             // Net flux per axis: φ_1m is (y, z, x) for m = −1, 0, 1.
             let flux = [m[o + 3] / y1, m[o + 1] / y1, m[o + 2] / y1];
             for a in 0..3 {
-                let area = volume / h[a];
+                // The face's area element at this centre: the trapezoid over the other axes.
+                let area = volume / h[a] * weight / along[a];
                 if cell[a] == 0 {
                     b.out -= flux[a] * area;
                 }
