@@ -139,38 +139,12 @@ fn blob(tables: &Tables, dir: &Path, tau: f64, grid: usize) -> Frame {
     // Through the centre ∫ e^{−x²/2s²} dx = s √(2π) of the box.
     let cloud = tables.field("cloud").unwrap();
     let density = tau / (1000.0 * s * (2.0 * std::f64::consts::PI).sqrt()) / cloud.sigma_ext_m2[1];
-    let text = format!(
-        r#"{fields}
-[render]
-width = 8
-height = 8
-grid_resolution = {grid}
-
-[camera]
-position_m = [0, 1500, 0]
-look_at_m = [0, 1500, 5000]
-fov_deg = 20
-
-[sun]
-elevation_deg = 20
-azimuth_deg = 90
-
-[sky]
-enabled = false
-
-[ground]
-albedo = 0.0
-
-[[volume]]
-field = "cloud"
-shape = "grid"
-number_density_per_m3 = {density}
-file = "blob.f32"
-dims = [{n}, {n}, {n}]
-min_m = [-500, 1000, 4500]
-max_m = [500, 2000, 5500]
-"#,
-        fields = fields()
+    let text = support::box_scene(
+        &fields(),
+        ("blob.f32", n, density),
+        (8, grid),
+        (20.0, 90.0),
+        false,
     );
     RenderScene::parse(&text, "blob", dir)
         .unwrap()

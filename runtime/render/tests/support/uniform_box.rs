@@ -22,12 +22,35 @@ pub fn uniform_box(
     let density = tau / 1000.0 / cloud.sigma_ext_m2[1];
     let ones: Vec<u8> = (0..64).flat_map(|_| 1f32.to_le_bytes()).collect();
     std::fs::write(dir.join("ones.f32"), ones).unwrap();
-    let text = format!(
+    let text = box_scene(
+        fields,
+        ("ones.f32", 4, density),
+        (32, 32),
+        (elevation, 160.0),
+        sky,
+    );
+    RenderScene::parse(&text, "box", dir)
+        .unwrap()
+        .frame(tables)
+        .unwrap()
+}
+
+/// The scene text of a 1 km box of the field "cloud" of `fields`, 5 km ahead of a camera with a
+/// 20° view: its density file `file` of n³ values times `density` (per m³), `size`² pixels on
+/// `grid`³ voxels, the sun at (`elevation`, `azimuth`) degrees, a black ground.
+pub fn box_scene(
+    fields: &str,
+    (file, n, density): (&str, usize, f64),
+    (size, grid): (usize, usize),
+    (elevation, azimuth): (f64, f64),
+    sky: bool,
+) -> String {
+    format!(
         r#"{fields}
 [render]
-width = 32
-height = 32
-grid_resolution = 32
+width = {size}
+height = {size}
+grid_resolution = {grid}
 
 [camera]
 position_m = [0, 1500, 0]
@@ -36,7 +59,7 @@ fov_deg = 20
 
 [sun]
 elevation_deg = {elevation}
-azimuth_deg = 160
+azimuth_deg = {azimuth}
 
 [sky]
 enabled = {sky}
@@ -48,16 +71,12 @@ albedo = 0.0
 field = "cloud"
 shape = "grid"
 number_density_per_m3 = {density}
-file = "ones.f32"
-dims = [4, 4, 4]
+file = "{file}"
+dims = [{n}, {n}, {n}]
 min_m = [-500, 1000, 4500]
 max_m = [500, 2000, 5500]
 "#
-    );
-    RenderScene::parse(&text, "box", dir)
-        .unwrap()
-        .frame(tables)
-        .unwrap()
+    )
 }
 
 /// Worst relative difference of `image` (a render of `frame`, a [`uniform_box`]) from single
