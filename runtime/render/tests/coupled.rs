@@ -123,19 +123,23 @@ const GROUND_LIGHT: f64 = 1e-5;
 /// voxels (from a 96³ file written into `dir`), no sky, a black ground.
 fn blob(tables: &Tables, dir: &Path, tau: f64, grid: usize) -> Frame {
     let (n, s) = (96usize, 0.12f64);
-    let mut bytes = Vec::with_capacity(4 * n * n * n);
-    for k in 0..n {
-        for j in 0..n {
-            for i in 0..n {
-                let r2: f64 = [i, j, k]
-                    .iter()
-                    .map(|&x| ((x as f64 + 0.5) / n as f64 - 0.5).powi(2))
-                    .sum();
-                bytes.extend_from_slice(&((-r2 / (2.0 * s * s)).exp() as f32).to_le_bytes());
+    // The same file for every optical depth: written by the first call.
+    let file = dir.join("blob.f32");
+    if !file.exists() {
+        let mut bytes = Vec::with_capacity(4 * n * n * n);
+        for k in 0..n {
+            for j in 0..n {
+                for i in 0..n {
+                    let r2: f64 = [i, j, k]
+                        .iter()
+                        .map(|&x| ((x as f64 + 0.5) / n as f64 - 0.5).powi(2))
+                        .sum();
+                    bytes.extend_from_slice(&((-r2 / (2.0 * s * s)).exp() as f32).to_le_bytes());
+                }
             }
         }
+        std::fs::write(&file, bytes).unwrap();
     }
-    std::fs::write(dir.join("blob.f32"), bytes).unwrap();
     // Through the centre ∫ e^{−x²/2s²} dx = s √(2π) of the box.
     let cloud = tables.field("cloud").unwrap();
     let density = tau / (1000.0 * s * (2.0 * std::f64::consts::PI).sqrt()) / cloud.sigma_ext_m2[1];

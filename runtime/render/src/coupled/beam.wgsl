@@ -21,9 +21,8 @@ struct Params {
 // source (rgb), the beam's loss (rgb), each per metre of the step.
 @group(0) @binding(4) var<storage, read_write> beam: array<vec4<f32>>;
 
-fn state_index(h: u32, u: u32, v: u32, j: u32, nb: u32, nc: u32, count: u32) -> u32 {
-    return ((h * nb * nc + u + v * nb) * count + j) * 4u;
-}
+// The state's rows per voxel (upwind.wgsl's state_index).
+const STATE_ROWS: u32 = 4u;
 
 // 1 − e^{−x} without the cancellation of small x.
 fn one_minus_exp(x: f32) -> f32 {

@@ -21,9 +21,8 @@ struct Params {
 // Per voxel four rows: the mean skylight (rgb), its flux per channel (R, G, B: xyz).
 @group(0) @binding(5) var<storage, read_write> sky: array<vec4<f32>>;
 
-fn state_index(h: u32, u: u32, v: u32, j: u32, nb: u32, nc: u32, count: u32) -> u32 {
-    return ((h * nb * nc + u + v * nb) * count + j) * 2u;
-}
+// The state's rows per direction (upwind.wgsl's state_index).
+const STATE_ROWS: u32 = 2u;
 
 @compute @workgroup_size(64)
 fn sweep(@builtin(global_invocation_id) id: vec3<u32>) {

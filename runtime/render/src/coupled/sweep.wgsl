@@ -58,10 +58,8 @@ fn y_of(d: u32, k: u32) -> f32 {
     return ordinates[d * ORD_ROWS + k / 4u][k % 4u];
 }
 
-// The state (9 floats as three rows) of direction slot `j` at layer voxel (u, v) in half `h`.
-fn state_index(h: u32, u: u32, v: u32, j: u32, nb: u32, nc: u32, count: u32) -> u32 {
-    return ((h * nb * nc + u + v * nb) * count + j) * 3u;
-}
+// The state per direction: 9 floats as three rows (upwind.wgsl's state_index).
+const STATE_ROWS: u32 = 3u;
 
 // transport::advance. In f32, 1 − q and q − e lose their digits for a thin step (1 − q ≈ τ/2
 // against an ulp of 6·10⁻⁸, times A = S/σ′, large where σ′ is small): below τ = 0.1 the step
