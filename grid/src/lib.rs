@@ -3,6 +3,9 @@
 //! One type, [`ThetaGrid`], serves the solver (`photometeor-mie` integrates its phase functions
 //! inside these bins), the tables (`photometeor-tables` maps bin averages to Legendre
 //! coefficients), the file format and the runtime (which check a bake's width against it).
+//! Beside it, the numerics every crate above shares, each computed once: [`legendre`], the
+//! exact integrals of P_l over the bins (the Legendre moments of a binned table, for the bake
+//! and the renderers alike), and [`quadrature`], Gauss–Legendre rules.
 //!
 //! # Convention
 //! θ_k = k·Δθ, k = 0..K−1 with K = 180°/Δθ + 1 (Δθ must divide 180°). Bin k covers
@@ -26,6 +29,9 @@
 //!   kernel that is even or odd in μ can evaluate each ± pair once.
 
 #![warn(missing_docs)]
+
+pub mod legendre;
+pub mod quadrature;
 
 use thiserror::Error;
 

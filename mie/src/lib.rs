@@ -25,7 +25,7 @@ pub mod ensemble;
 pub mod error;
 pub mod grid;
 pub mod phase;
-pub mod quadrature;
+pub use ::grid::quadrature;
 pub mod reference;
 pub mod refractive;
 pub mod sphere;

@@ -7,7 +7,8 @@ use std::path::PathBuf;
 
 use anyhow::{Result, bail};
 use clap::Args;
-use render::model::{MODEL_NAMES, Pass};
+use render::model::Pass;
+use render::registry::MODEL_NAMES;
 use render::{Job, ModelSettings, On, RenderScene, Rendered};
 use serde_json::json;
 
@@ -137,6 +138,30 @@ fn cost(passes: &[Pass]) -> f64 {
         .map_or_else(|| passes.iter().map(|p| p.seconds).sum(), |p| p.seconds)
 }
 
+/// One model's row of the report: its frame at `setting` on `device` over a grid of `dims`,
+/// the best of its passes, its cost over the first setting's (`base`), the CPU reference's
+/// time and the camera move's, and the figures of its last frame `r`.
+fn row(
+    m: &ModelSettings,
+    r: &Rendered,
+    (setting, dims, device): (Setting, [usize; 3], &str),
+    (best, base, cpu_s, move_s): (&[Pass], f64, Option<f64>, Option<f64>),
+) -> serde_json::Value {
+    json!({
+        "model": m.name(),
+        "width": setting.size, "height": setting.size,
+        "slices": m.to_table().get("slices").and_then(|v| v.as_integer()),
+        "grid": dims,
+        "device": device,
+        "passes": best.iter().map(|p| json!({"name": p.name, "seconds": p.seconds})).collect::<Vec<_>>(),
+        "cost_s": cost(best),
+        "cost_over_base": cost(best) / base,
+        "figures": r.figures.iter().map(|(k, v)| json!({"name": k, "value": v})).collect::<Vec<_>>(),
+        "cpu_reference_s": cpu_s,
+        "camera_move_s": move_s,
+    })
+}
+
 pub fn run(b: RenderBench) -> Result<()> {
     for m in &b.model {
         if !MODEL_NAMES.contains(&m.as_str()) {
@@ -236,19 +261,8 @@ pub fn run(b: RenderBench) -> Result<()> {
                 (Some(g), true) => g.describe(),
                 _ => format!("CPU, {} threads", rayon::current_num_threads()),
             };
-            rows.push(json!({
-                "model": m.name(),
-                "width": setting.size, "height": setting.size,
-                "slices": m.to_table().get("slices").and_then(|v| v.as_integer()),
-                "grid": frame.grid.dims,
-                "device": device_name,
-                "passes": best[i].iter().map(|p| json!({"name": p.name, "seconds": p.seconds})).collect::<Vec<_>>(),
-                "cost_s": cost(&best[i]),
-                "cost_over_base": cost(&best[i]) / base_cost[i],
-                "figures": r.figures.iter().map(|(k, v)| json!({"name": k, "value": v})).collect::<Vec<_>>(),
-                "cpu_reference_s": cpu_s,
-                "camera_move_s": move_s,
-            }));
+            let timed = (best[i].as_slice(), base_cost[i], cpu_s, move_s);
+            rows.push(row(m, r, (setting, frame.grid.dims, &device_name), timed));
         }
     }
     let report = json!({

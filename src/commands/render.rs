@@ -107,7 +107,7 @@ pub struct RenderArgs {
 /// `--model`'s values, each with its model's one-line description for `--help`.
 pub fn model_parser() -> clap::builder::PossibleValuesParser {
     clap::builder::PossibleValuesParser::new(
-        render::model::model_descriptions()
+        render::registry::model_descriptions()
             .into_iter()
             .map(|(name, about)| clap::builder::PossibleValue::new(name).help(about)),
     )
@@ -221,7 +221,7 @@ pub fn prepare(
     adjust(&mut render);
     for (flag, key, _) in overrides {
         if !RenderScene::model_has(model, key) {
-            let keys = render::model::model_keys()
+            let keys = render::registry::model_keys()
                 .into_iter()
                 .find(|(m, _)| *m == model)
                 .map(|(_, k)| k.join(", "))

@@ -2,6 +2,9 @@
 
 use glam::DVec3;
 
+/// Angular diameter of the sun disk (Riley et al. 2004 §4.2.4), degrees.
+pub const SUN_DIAMETER_DEG: f64 = 0.5;
+
 /// A pinhole camera; y is up, metres, sea level at y = 0.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Camera {

@@ -19,7 +19,7 @@ use std::path::Path;
 
 use serde::Serialize;
 
-use crate::Image;
+use crate::image::Image;
 
 /// An EXR frame as `photometeor render` writes it: R, G, B, A and any further channels.
 #[derive(Debug, Clone)]

@@ -565,6 +565,13 @@ pub fn box_span(grid_min: DVec3, grid_max: DVec3, origin: DVec3, d: DVec3) -> Op
     (a < b).then_some((a, b))
 }
 
+/// Two unit vectors completing the unit vector `d` to an orthonormal basis (d, e1, e2).
+pub fn basis(d: DVec3) -> (DVec3, DVec3) {
+    let helper = if d.x.abs() < 0.9 { DVec3::X } else { DVec3::Y };
+    let e1 = (helper - helper.dot(d) * d).normalize();
+    (e1, d.cross(e1))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

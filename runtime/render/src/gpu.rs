@@ -11,7 +11,9 @@ use wgpu::util::DeviceExt;
 use runtime::Tables;
 use runtime::gpu::{Gpu, GpuError, GpuTables, WGSL, read_back};
 
-use crate::{Frame, FrameError, Image, MAX_FIELDS, SUN_DIAMETER_DEG};
+use crate::{
+    camera::SUN_DIAMETER_DEG, checks::FrameError, frame::Frame, image::Image, volume::MAX_FIELDS,
+};
 
 /// The pieces the slicing renderers' shaders share (grid sampling, camera rays, the sky).
 pub const SLICING_WGSL: &str = include_str!("slicing.wgsl");
@@ -99,25 +101,6 @@ impl Timings {
             self.frame * 1e3,
             self.readback * 1e3
         )
-    }
-
-    /// The three as named passes.
-    pub fn passes(&self) -> Vec<crate::model::Pass> {
-        use crate::model::Pass;
-        vec![
-            Pass {
-                name: "upload",
-                seconds: self.upload,
-            },
-            Pass {
-                name: "frame",
-                seconds: self.frame,
-            },
-            Pass {
-                name: "readback",
-                seconds: self.readback,
-            },
-        ]
     }
 }
 
@@ -315,17 +298,15 @@ pub(crate) fn storage(
 pub(crate) const SKY_LIGHT_BINDING: u32 = 15;
 
 /// The sky-light table of `frame` as a read-only storage buffer, followed by the grid models'
-/// `shadow` map (its two header rows zero without one: compose.wgsl's `shadow_map_at`).
+/// `shadow` map's rows (`ShadowMap::gpu_rows`; two header rows of zeros without one:
+/// compose.wgsl's `shadow_map_at`).
 pub(crate) fn sky_light_buffer(
     device: &wgpu::Device,
     frame: &Frame,
-    shadow: Option<&crate::lattice::ShadowMap>,
+    shadow: Option<Vec<[f32; 4]>>,
 ) -> wgpu::Buffer {
     let mut rows = crate::skylight::SkyLight::of(frame).gpu_table();
-    match shadow {
-        Some(map) => rows.extend(map.gpu_rows()),
-        None => rows.extend([[0.0; 4]; 2]),
-    }
+    rows.extend(shadow.unwrap_or_else(|| vec![[0.0; 4]; 2]));
     filled(
         device,
         "photometeor sky light",

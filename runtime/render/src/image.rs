@@ -10,7 +10,31 @@ use exr::prelude::{
     LineOrder, SmallVec, Vec2, WritableImage,
 };
 
-use crate::Image;
+/// A rendered frame: linear radiance per pixel (rows top to bottom) and the volume's
+/// transparency (green channel) per pixel.
+#[derive(Debug, Clone)]
+pub struct Image {
+    /// Width in pixels.
+    pub width: usize,
+    /// Height in pixels.
+    pub height: usize,
+    /// Linear R, G, B radiance per pixel, row-major (1/sr per unit solar irradiance).
+    pub rgb: Vec<[f32; 3]>,
+    /// The volume's transparency T_vol (green channel) per pixel, 0…1.
+    pub transparency: Vec<f32>,
+}
+
+impl Image {
+    /// An image from (rgb, T_vol) per pixel, row-major.
+    pub fn from_pixels(width: usize, height: usize, pixels: &[([f32; 3], f32)]) -> Self {
+        Self {
+            width,
+            height,
+            rgb: pixels.iter().map(|p| p.0).collect(),
+            transparency: pixels.iter().map(|p| p.1).collect(),
+        }
+    }
+}
 
 /// Why a frame could not be written.
 #[derive(Debug, thiserror::Error)]

@@ -3,9 +3,10 @@
 //! A model is a module with a unit type implementing [`Model`]: its name (`--model` and the
 //! scene's `[render.<name>]` table), its settings (a serde struct read from that table, keys
 //! it does not know refused), its checks (made before anything is baked), its CPU reference
-//! and its GPU renderer. [`ModelSettings`] is the enum front the scene parser, `render`,
-//! `bench render` and the viewer dispatch through; it is written by the [`models!`] list at
-//! the end of this file, so adding a model is its module plus one line there.
+//! and its GPU renderer. The registry ([`crate::registry`]) names every model and writes the
+//! [`ModelSettings`](crate::registry::ModelSettings) enum the scene parser, `render`, `bench
+//! render` and the viewer dispatch through; this module names none, so adding a model is its
+//! module plus one line there.
 //!
 //! ```text
 //! scene file ──▶ RenderScene (shared: camera, sun, sky, volumes, lights, media, occluders)
@@ -21,8 +22,10 @@ use serde::de::DeserializeOwned;
 use runtime::Tables;
 use runtime::gpu::{Gpu, GpuTables, TexelFormat};
 
+use crate::checks::FrameError;
+use crate::frame::Frame;
 use crate::gpu::RenderError;
-use crate::{Frame, FrameError, Image};
+use crate::image::Image;
 
 /// Progress of long work (the path tracer's passes, the diffusion's sweeps), reported from the
 /// library to whoever runs it; the library decides nothing about terminals or verbosity.
@@ -37,9 +40,10 @@ pub trait Progress: Sync {
         false
     }
 
-    /// A progressive model's frame so far, after each pass: the mean and the standard error
-    /// per pixel of the samples taken (`photometeor view` shows it while it converges).
-    fn running(&self, _frame: &crate::truth::TruthImage) {}
+    /// A progressive model's frame so far, after each pass: the mean `image` and the
+    /// `std_error` per pixel and channel of the `spp` samples per pixel taken, and its median
+    /// relative noise (`photometeor view` shows it while it converges).
+    fn running(&self, _image: &Image, _std_error: &[[f32; 3]], _spp: usize, _noise: f64) {}
 
     /// Whether a progressive model should end its frame after the pass under way; the samples
     /// taken so far are the frame.
@@ -73,6 +77,26 @@ pub struct Pass {
     pub name: &'static str,
     /// Seconds.
     pub seconds: f64,
+}
+
+impl Pass {
+    /// A GPU frame's three timed parts: "upload", "frame" and "readback".
+    pub fn of_gpu(t: &crate::gpu::Timings) -> Vec<Self> {
+        vec![
+            Self {
+                name: "upload",
+                seconds: t.upload,
+            },
+            Self {
+                name: "frame",
+                seconds: t.frame,
+            },
+            Self {
+                name: "readback",
+                seconds: t.readback,
+            },
+        ]
+    }
 }
 
 /// A rendered frame and what it cost.
@@ -201,219 +225,5 @@ pub trait Model {
         _tables: &GpuTables,
     ) -> Result<Vec<Pass>, RenderError> {
         Ok(Vec::new())
-    }
-}
-
-/// Where a frame is rendered.
-pub enum On<'a> {
-    /// The CPU reference.
-    Cpu,
-    /// The GPU, with a model's prepared renderer (or the CPU when the model has none).
-    Gpu(&'a Gpu, &'a Prepared),
-}
-
-/// A model's settings that cannot be used: the model, the key and what is wrong.
-#[derive(Debug, thiserror::Error)]
-#[error("{0}")]
-pub struct ModelError(pub String);
-
-/// Reads `[render.<model>]` (an empty table when absent) into the model's settings and checks
-/// them, naming the model and the key (and the model a misplaced key belongs to).
-pub(crate) fn parse_settings<M: Model>(table: &toml::Table) -> Result<M::Settings, ModelError> {
-    let known = keys_of::<M>();
-    if let Some(key) = table.keys().find(|k| !known.contains(k)) {
-        let owners: Vec<&str> = model_keys()
-            .into_iter()
-            .filter(|(_, keys)| keys.contains(key))
-            .map(|(name, _)| name)
-            .collect();
-        let hint = if owners.is_empty() {
-            String::new()
-        } else {
-            format!("; it is a key of --model {}", owners.join(", "))
-        };
-        return Err(ModelError(format!(
-            "[render.{}] {key}: --model {} has no such setting (its keys: {}){hint}",
-            M::NAME,
-            M::NAME,
-            known.join(", ")
-        )));
-    }
-    let settings: M::Settings =
-        toml::Value::Table(table.clone())
-            .try_into()
-            .map_err(|e: toml::de::Error| {
-                ModelError(format!("[render.{}]: {}", M::NAME, e.message().trim_end()))
-            })?;
-    M::check(&settings).map_err(|e| ModelError(format!("[render.{}] {}", M::NAME, e.0)))?;
-    Ok(settings)
-}
-
-/// The keys of `M`'s settings, from their serialized defaults.
-fn keys_of<M: Model>() -> Vec<String> {
-    match toml::Value::try_from(M::Settings::default()) {
-        Ok(toml::Value::Table(t)) => t.keys().cloned().collect(),
-        _ => Vec::new(),
-    }
-}
-
-/// Declares the models: the [`ModelSettings`] and [`Prepared`] enums and their dispatch.
-macro_rules! models {
-    ($($variant:ident => $model:path),* $(,)?) => {
-        /// A render model and its settings.
-        #[derive(Debug, Clone, PartialEq)]
-        pub enum ModelSettings {
-            $(
-                #[doc = concat!("`--model ", stringify!($variant), "`.")]
-                $variant(<$model as Model>::Settings),
-            )*
-        }
-
-        /// A model's GPU side for one device and table set (built once, reused per frame).
-        pub enum Prepared {
-            $(
-                #[doc = concat!("`--model ", stringify!($variant), "`.")]
-                $variant(GpuTables, Option<<$model as Model>::Renderer>),
-            )*
-        }
-
-        /// Every model's name, in the order of `--help`.
-        pub const MODEL_NAMES: &[&str] = &[$(<$model as Model>::NAME),*];
-
-        /// Each model's name and one-line description.
-        pub fn model_descriptions() -> Vec<(&'static str, &'static str)> {
-            vec![$((<$model as Model>::NAME, <$model as Model>::ABOUT)),*]
-        }
-
-        /// The keys each model's `[render.<name>]` table takes.
-        pub fn model_keys() -> Vec<(&'static str, Vec<String>)> {
-            vec![$((<$model as Model>::NAME, keys_of::<$model>())),*]
-        }
-
-        impl ModelSettings {
-            /// Model `name` with its `[render.<name>]` table, checked.
-            pub fn parse(name: &str, table: &toml::Table) -> Result<Self, ModelError> {
-                $(
-                    if name == <$model as Model>::NAME {
-                        return Ok(Self::$variant(parse_settings::<$model>(table)?));
-                    }
-                )*
-                Err(ModelError(format!(
-                    "--model {name:?} is not one of {}",
-                    MODEL_NAMES.join(", ")
-                )))
-            }
-
-            /// The model's name.
-            pub fn name(&self) -> &'static str {
-                match self {
-                    $(Self::$variant(_) => <$model as Model>::NAME,)*
-                }
-            }
-
-            /// The texel format the model's GPU renderer wants.
-            pub fn texels(&self) -> TexelFormat {
-                match self {
-                    $(Self::$variant(_) => <$model as Model>::TEXELS,)*
-                }
-            }
-
-            /// The settings as their `[render.<name>]` table (every key, defaults included).
-            pub fn to_table(&self) -> toml::Table {
-                let value = match self {
-                    $(Self::$variant(s) => toml::Value::try_from(s),)*
-                };
-                match value {
-                    Ok(toml::Value::Table(t)) => t,
-                    _ => toml::Table::new(),
-                }
-            }
-
-            /// The memory a frame of `pixels` pixels over `voxels` voxels takes beyond the grid.
-            pub fn memory(&self, pixels: u64, voxels: u64) -> Vec<Need> {
-                match self {
-                    $(Self::$variant(s) => <$model as Model>::memory(s, pixels, voxels),)*
-                }
-            }
-
-            /// What the model needs of `frame` and refuses in it (before anything is baked).
-            pub fn check_frame(&self, frame: &Frame) -> Result<(), FrameError> {
-                match self {
-                    $(Self::$variant(s) => <$model as Model>::check_frame(s, frame),)*
-                }
-            }
-
-            /// Uploads `tables` in the model's texel format and builds its GPU renderer.
-            pub fn prepare(&self, gpu: &Gpu, tables: &Tables) -> Result<Prepared, RenderError> {
-                let uploaded = GpuTables::upload(gpu, tables, self.texels())?;
-                Ok(match self {
-                    $(Self::$variant(_) => {
-                        let r = <$model as Model>::renderer(gpu, &uploaded);
-                        Prepared::$variant(uploaded, r)
-                    })*
-                })
-            }
-
-            /// Renders `job` on the CPU reference or on the GPU. A model without a GPU
-            /// renderer runs on the CPU either way.
-            pub fn render(&self, job: &Job, on: On) -> Result<Rendered, RenderError> {
-                match (self, on) {
-                    $(
-                        (Self::$variant(s), On::Gpu(gpu, Prepared::$variant(t, Some(r)))) => {
-                            <$model as Model>::render_gpu(r, s, job, gpu, t)
-                        }
-                        (Self::$variant(s), _) => <$model as Model>::render_cpu(s, job),
-                    )*
-                }
-            }
-
-            /// Whether the model has a GPU renderer (`render` without `--cpu` uses it).
-            pub fn has_gpu(&self) -> bool {
-                match self {
-                    $(Self::$variant(_) => <$model as Model>::GPU,)*
-                }
-            }
-
-            /// The parts of a GPU frame the model times on their own ([`Model::bench_parts`]).
-            pub fn bench_parts(
-                &self,
-                job: &Job,
-                gpu: &Gpu,
-                prepared: &Prepared,
-            ) -> Result<Vec<Pass>, RenderError> {
-                match (self, prepared) {
-                    $(
-                        (Self::$variant(s), Prepared::$variant(t, Some(r))) => {
-                            <$model as Model>::bench_parts(r, s, job, gpu, t)
-                        }
-                    )*
-                    _ => Ok(Vec::new()),
-                }
-            }
-        }
-
-        impl Prepared {
-            /// The tables as uploaded.
-            pub fn tables(&self) -> &GpuTables {
-                match self {
-                    $(Self::$variant(t, _) => t,)*
-                }
-            }
-        }
-    };
-}
-
-models! {
-    Riley => crate::riley::Riley,
-    Miyazaki => crate::miyazaki::Miyazaki,
-    Max => crate::max::Max,
-    Coupled => crate::coupled::Coupled,
-    Biri => crate::biri::Biri,
-    Truth => crate::truth::Truth,
-}
-
-impl Default for ModelSettings {
-    fn default() -> Self {
-        Self::Riley(Default::default())
     }
 }

@@ -125,13 +125,16 @@ impl Occluder {
 }
 
 /// The index in `tables` of the field a `[[medium]]` uses.
-pub fn field_index(tables: &runtime::Tables, name: &str) -> Result<usize, crate::FrameError> {
+pub fn field_index(
+    tables: &runtime::Tables,
+    name: &str,
+) -> Result<usize, crate::checks::FrameError> {
     tables
         .fields
         .iter()
         .position(|f| f.name == name)
         .ok_or_else(|| {
-            crate::FrameError(format!(
+            crate::checks::FrameError(format!(
                 "a [[medium]] uses field {name:?}, which the tables do not hold"
             ))
         })
@@ -139,8 +142,8 @@ pub fn field_index(tables: &runtime::Tables, name: &str) -> Result<usize, crate:
 
 /// Refuses media that overlap, or a medium filling the scene beside others: the models that
 /// draw media attenuate each ray by one medium at a time.
-pub fn check_media(media: &[Medium]) -> Result<(), crate::FrameError> {
-    let bad = |s: String| Err(crate::FrameError(s));
+pub fn check_media(media: &[Medium]) -> Result<(), crate::checks::FrameError> {
+    let bad = |s: String| Err(crate::checks::FrameError(s));
     let everywhere = media.iter().position(|m| m.region == Region::Everywhere);
     if let Some(i) = everywhere
         && media.len() > 1
@@ -180,11 +183,14 @@ pub fn check_media(media: &[Medium]) -> Result<(), crate::FrameError> {
 }
 
 /// Refuses a light inside an occluder (for every model that draws occluders).
-pub fn check_lights(lights: &[Light], occluders: &[Occluder]) -> Result<(), crate::FrameError> {
+pub fn check_lights(
+    lights: &[Light],
+    occluders: &[Occluder],
+) -> Result<(), crate::checks::FrameError> {
     for (i, l) in lights.iter().enumerate() {
         for (k, o) in occluders.iter().enumerate() {
             if o.contains(l.position_m) {
-                return Err(crate::FrameError(format!(
+                return Err(crate::checks::FrameError(format!(
                     "[[light]] {}: position_m = {:?} is inside [[occluder]] {}: its light could \
                      never leave it",
                     i + 1,

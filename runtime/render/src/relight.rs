@@ -2,13 +2,13 @@
 //! once per sun (their lighting depends on the sun, the grid, the sky, the ground, the scene's
 //! objects and the settings, never on the camera or the image size) and then gather a view from
 //! it. A caller that renders many views of one lighting (the viewer) hands the models a
-//! [`LightingCache`] through [`crate::Job::lighting`]; a view that changes only the camera then
+//! [`LightingCache`] through [`crate::model::Job::lighting`]; a view that changes only the camera then
 //! costs the gather alone. `render` and `bench render` hand none: every frame is lit anew.
 
 use std::any::Any;
 use std::sync::{Arc, Mutex};
 
-use crate::Frame;
+use crate::frame::Frame;
 
 /// The last lighting a model computed, with what it was computed from (module docs).
 #[derive(Default)]
@@ -97,7 +97,7 @@ mod tests {
     use glam::DVec3;
 
     use super::*;
-    use crate::{Atmosphere, Camera, DensityGrid, Sun};
+    use crate::{camera::Camera, camera::Sun, sky::Atmosphere, volume::DensityGrid};
 
     fn frame() -> Frame {
         Frame {

@@ -9,7 +9,7 @@ use runtime::{FieldTable, Tables};
 
 use crate::geometry::box_span;
 use crate::skylight::SkyLight;
-use crate::{Frame, FrameError, MAX_FIELDS, SUN_DIAMETER_DEG};
+use crate::{camera::SUN_DIAMETER_DEG, checks::FrameError, frame::Frame, volume::MAX_FIELDS};
 
 /// Extinction and scattering coefficients (1/m) per channel at densities ρ.
 pub fn coefficients(fields: &[&FieldTable], rho: &[f64; MAX_FIELDS]) -> ([f64; 3], [f64; 3]) {
@@ -150,7 +150,7 @@ pub const AIR_SHADOW_STEPS: usize = 32;
 /// reach of its shadow (horizontally within the footprint's half diagonal plus bottom/tan e of
 /// its centre). `lit` is the fraction of sunlight the volume leaves at a point, as for the
 /// ground: below the grid every model knows it (Riley's final light buffer, the grid models'
-/// [`crate::lattice::ShadowMap`]); beside and inside the grid the air is left unshadowed.
+/// [`crate::lighting::sun::ShadowMap`]); beside and inside the grid the air is left unshadowed.
 pub(crate) fn air_shadow(
     frame: &Frame,
     eye: DVec3,
@@ -264,7 +264,7 @@ pub fn check_slicing(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::{Atmosphere, Camera, DensityGrid, Sun};
+    use crate::{camera::Camera, camera::Sun, sky::Atmosphere, volume::DensityGrid};
 
     /// Clear air under a wide grid whose bottom is 5 km up, the sun 40° up.
     fn frame() -> Frame {

@@ -48,7 +48,7 @@ use std::sync::Mutex;
 use glam::DVec3;
 use rayon::prelude::*;
 
-use crate::Frame;
+use crate::frame::Frame;
 use crate::sky::Atmosphere;
 
 /// Layers of the table, uniform in u = e^{−y/H} (so in τ, for every channel).
@@ -160,7 +160,7 @@ fn solve_channel(tau_star: f64, l_y: f64, albedo: f64) -> Channel {
     let dtau = tau_star / LEVELS as f64;
     let tau = |k: usize| k as f64 * dtau;
     // Gauss–Legendre on (0, 1): the weights sum to 1.
-    let (x, w) = mie::quadrature::gauss_legendre_on(NODES, 0.0, 1.0);
+    let (x, w) = grid::quadrature::gauss_legendre_on(NODES, 0.0, 1.0);
     // Node directions (travelling): down (−x) then up (+x), each with weight w.
     let mu: Vec<f64> = x.iter().map(|&v| -v).chain(x.iter().copied()).collect();
     let weight: Vec<f64> = w.iter().chain(w.iter()).copied().collect();

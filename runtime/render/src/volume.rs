@@ -6,7 +6,8 @@ use std::path::{Path, PathBuf};
 
 use glam::DVec3;
 
-use crate::MAX_FIELDS;
+/// Up to this many fields take part in one render (one RGBA texel per voxel).
+pub const MAX_FIELDS: usize = 4;
 
 /// Number densities on a regular grid; voxel (x, y, z) is centred at
 /// min + (i + ½)·(max − min)/dims and holds one value per field (channel = field index in the

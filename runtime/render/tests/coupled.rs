@@ -5,7 +5,8 @@
 
 use std::path::Path;
 
-use render::coupled::{Diffuse, Emergent, Settings, Split, cpu};
+use render::coupled::{Diffuse, Emergent, Settings, Split, gather, light};
+use render::lighting::beam::{BeamState, Depth, PeakFrom, beam_sweep};
 use render::{Frame, RenderScene};
 use runtime::Tables;
 
@@ -52,7 +53,7 @@ fn the_budget_balances_in_a_white_furnace() {
             diffuse: Diffuse::Diffusion,
             ..Settings::default()
         };
-        let lighting = cpu::light(&tables, &frame, &settings).unwrap();
+        let lighting = light::light(&tables, &frame, &settings).unwrap();
         let b = &lighting.report.budget;
         for c in 0..3 {
             let beam = b.buffer_out[c] + b.buffer_absorbed[c] + b.dropped[c];
@@ -98,9 +99,9 @@ fn the_ground_lights_the_volume_from_below() {
     let tables = Tables::open(&dir).unwrap();
     let mut frame = ball(&tables, 1e-5, 90.0);
     let settings = Settings::default();
-    let black = cpu::light(&tables, &frame, &settings).unwrap();
+    let black = light::light(&tables, &frame, &settings).unwrap();
     frame.ground_albedo = 0.3;
-    let lit = cpu::light(&tables, &frame, &settings).unwrap();
+    let lit = light::light(&tables, &frame, &settings).unwrap();
     let sine = 20f64.to_radians().sin();
     let mut worst: f64 = 0.0;
     for (b, l) in black.sky_mean.iter().zip(&lit.sky_mean) {
@@ -171,7 +172,7 @@ fn the_transport_conserves_energy() {
             max_transport_iterations: 100,
             ..Settings::default()
         };
-        let lighting = cpu::light(&tables, &frame, &settings).unwrap();
+        let lighting = light::light(&tables, &frame, &settings).unwrap();
         let r = &lighting.report;
         for (c, b) in r.transport_balance.iter().enumerate() {
             let error = (b.out + b.absorbed - b.source) / b.source;
@@ -197,8 +198,8 @@ const TRANSPORT_BALANCE: (f64, f64) = (0.0052, 0.0064);
 /// from single scattering, over the pixels whose chord is ≥ 500 m.
 fn thin_box_error(tables: &Tables, dir: &Path, tau: f64, settings: &Settings) -> (f64, usize) {
     let frame = uniform_box(tables, dir, tau, 30.0);
-    let lighting = cpu::light(tables, &frame, settings).unwrap();
-    let image = cpu::gather(tables, &frame, settings, &lighting).unwrap();
+    let lighting = light::light(tables, &frame, settings).unwrap();
+    let image = gather::gather(tables, &frame, settings, &lighting).unwrap();
     support::single_scatter_error(tables, &frame, &image)
 }
 
@@ -286,17 +287,17 @@ fn the_gpu_gather_equals_the_cpu_reference() {
         ..Settings::default()
     };
     let blocks = Settings {
-        transport_coarsening: Some(2),
+        transport_coarsening: 2,
         ..transport
     };
     for settings in [transport, blocks, diffusion, hemisphere] {
         // Each lighting's buffers stay on the GPU for its second camera.
-        let lighting = std::sync::Arc::new(cpu::light(&tables, &frame, &settings).unwrap());
+        let lighting = std::sync::Arc::new(light::light(&tables, &frame, &settings).unwrap());
         let on = lighting.report.transport_dims;
         assert_eq!(
             on,
             match settings.transport_coarsening {
-                Some(2) => [16; 3],
+                2 => [16; 3],
                 _ if settings.diffuse == Diffuse::Transport => [32; 3],
                 _ => on,
             }
@@ -316,7 +317,7 @@ fn the_gpu_gather_equals_the_cpu_reference() {
         );
         for camera in [[0.0, 500.0, -2500.0], [-1800.0, 300.0, -1500.0]] {
             frame.camera.position_m = glam::DVec3::from_array(camera);
-            let cpu_image = cpu::gather(&tables, &frame, &settings, &lighting).unwrap();
+            let cpu_image = gather::gather(&tables, &frame, &settings, &lighting).unwrap();
             let (gpu_image, t) = renderer
                 .gather(&gpu, &tables, &uploaded, &frame, &settings, &lighting)
                 .unwrap();
@@ -352,31 +353,22 @@ fn the_gpu_lighting_equals_the_cpu_reference() {
     let (_tmp, dir) = bake(&fields());
     let tables = Tables::open(&dir).unwrap();
     let frame = lit_ball(&tables);
-    let sweeper = render::coupled::sweep_gpu::Sweeper::new(&gpu);
-    let sky = render::coupled::sky_gpu::SkySweeper::new(&gpu);
-    let beam = render::coupled::beam_gpu::BeamSweeper::new(&gpu);
-    let solver = render::diffusion_gpu::Solver::new(&gpu);
+    let pipelines = render::lighting::Pipelines::default();
     let settings = Settings {
         directions: 32,
-        transport_coarsening: Some(2),
+        transport_coarsening: 2,
         ..Settings::default()
     };
-    let cpu_light = cpu::light(&tables, &frame, &settings).unwrap();
-    let on = cpu::OnGpu {
-        gpu: &gpu,
-        sweeper: &sweeper,
-        sky: &sky,
-        beam: &beam,
-        solver: &solver,
-    };
-    let gpu_light = cpu::light_on(&tables, &frame, &settings, &(), Some(on)).unwrap();
+    let cpu_light = light::light(&tables, &frame, &settings).unwrap();
+    let on = pipelines.on(&gpu);
+    let gpu_light = light::light_on(&tables, &frame, &settings, &(), Some(on)).unwrap();
     assert_eq!(
         cpu_light.report.transport_iterations,
         gpu_light.report.transport_iterations
     );
     // The worst difference per channel, as a share of that channel's largest mean radiance:
     // the diffusion's I_0 and I_1 (of I_0), the transport's moments (of φ_00).
-    let h = render::coupled::transport::HARMONICS;
+    let h = render::lighting::transport::HARMONICS;
     let (mut diffusion, mut transport): (f64, f64) = (0.0, 0.0);
     for c in 0..3 {
         let scale = cpu_light.i0.iter().fold(0.0f64, |a, v| a.max(v[c].abs()));
@@ -459,7 +451,7 @@ fn wobble(i: usize, k: usize) -> f64 {
     0.5 + 0.5 * ((i * 7 + k * 13) as f64 * 0.61).sin()
 }
 
-/// The beam's sweep on the GPU (`coupled::beam_gpu`) gives `coupled::cpu::beam_sweep`'s beam,
+/// The beam's sweep on the GPU (`lighting::beam_gpu`) gives `lighting::beam::beam_sweep`'s beam,
 /// peak depth and losses in f32: a lumpy medium on an uneven grid, τ per voxel from 10⁻⁶ to
 /// 40, the split's f, g and the peak's share varying per voxel, the sun travelling most along
 /// each axis in turn, both ways.
@@ -468,11 +460,11 @@ fn the_gpu_beam_equals_the_cpu_sweep() {
     let Some(gpu) = common::gpu() else { return };
     let grid = uneven_grid();
     let n = grid.data.len();
-    let medium: Vec<cpu::BeamMedium> = (0..n)
+    let medium: Vec<render::lighting::beam::BeamMedium> = (0..n)
         .map(|i| {
             let ext: [f64; 3] = std::array::from_fn(|c| 10f64.powf(-7.6 + 7.6 * wobble(i, c)));
             let f: [f64; 3] = std::array::from_fn(|c| 0.3 + 0.4 * wobble(i, c + 3));
-            cpu::BeamMedium {
+            render::lighting::beam::BeamMedium {
                 ext,
                 sca: std::array::from_fn(|c| ext[c] * (0.9 + 0.1 * wobble(i, c + 6))),
                 f,
@@ -481,8 +473,7 @@ fn the_gpu_beam_equals_the_cpu_sweep() {
             }
         })
         .collect();
-    let sweeper = render::coupled::beam_gpu::BeamSweeper::new(&gpu);
-    let settings = Settings::default();
+    let sweeper = render::lighting::beam_gpu::BeamSweeper::new(&gpu);
     let mut worst: [f64; 3] = [0.0; 3];
     for l in [
         glam::DVec3::new(0.8, -0.5, 0.3),
@@ -490,25 +481,23 @@ fn the_gpu_beam_equals_the_cpu_sweep() {
         glam::DVec3::new(0.4, -0.3, -0.85),
     ] {
         let l = l.normalize();
-        let want = cpu::beam_sweep(&[], &grid, &medium, l, &settings);
+        let want = beam_sweep(&[], &grid, &medium, l, (PeakFrom::Medium, Depth::Peak));
         let got = sweeper.sweep(&gpu, &grid, &medium, l).unwrap();
         // Each quantity against its largest value: the beam (of the sunlight, 1), the peak
         // depth D, and the losses per metre.
-        let scale = |k: std::ops::Range<usize>| {
-            want.iter()
-                .flat_map(|w| w[k.clone()].to_vec())
-                .fold(0.0f64, |a, v| a.max(v.abs()))
-        };
-        let parts = [
-            (0..3, scale(0..3)),
-            (3..4, scale(3..4)),
-            (10..19, scale(10..19)),
-        ];
-        for (p, (range, top)) in parts.iter().enumerate() {
-            assert!(*top > 0.0, "part {p} is zero everywhere");
+        let beam = |s: &BeamState| s.intensity.to_vec();
+        let depth = |s: &BeamState| vec![s.depth];
+        let losses = |s: &BeamState| [s.dropped, s.forward, s.loss].concat();
+        let parts: [&dyn Fn(&BeamState) -> Vec<f64>; 3] = [&beam, &depth, &losses];
+        for (p, part) in parts.iter().enumerate() {
+            let top = want
+                .iter()
+                .flat_map(|w| part(w))
+                .fold(0.0f64, |a, v| a.max(v.abs()));
+            assert!(top > 0.0, "part {p} is zero everywhere");
             for (w, g) in want.iter().zip(&got) {
-                for k in range.clone() {
-                    worst[p] = worst[p].max((g[k] - w[k]).abs() / top);
+                for (a, b) in part(w).iter().zip(part(g)) {
+                    worst[p] = worst[p].max((b - a).abs() / top);
                 }
             }
         }
@@ -537,13 +526,13 @@ fn the_gpu_skylight_equals_the_cpu_sweeps() {
     let ext: Vec<[f64; 3]> = (0..n)
         .map(|i| std::array::from_fn(|c| 10f64.powf(-7.6 + 7.6 * wobble(i, c))))
         .collect();
-    let lit: Vec<(glam::DVec3, [f64; 3])> = render::lattice::sky_directions()
+    let lit: Vec<(glam::DVec3, [f64; 3])> = render::lighting::sky::sky_directions()
         .into_iter()
         .enumerate()
         .map(|(d, s)| (s, std::array::from_fn(|c| 1.0 + wobble(d, c))))
         .collect();
-    let want = render::lattice::sky_sweeps(&grid, &ext, &lit);
-    let got = render::coupled::sky_gpu::SkySweeper::new(&gpu)
+    let want = render::lighting::sky::sky_sweeps(&grid, &ext, &lit);
+    let got = render::lighting::sky_gpu::SkySweeper::new(&gpu)
         .sweep(&gpu, &grid, &ext, &lit)
         .unwrap();
     let scale = want.mean.iter().flatten().fold(0.0f64, |a, v| a.max(*v));
@@ -593,7 +582,7 @@ fn the_gpu_diffusion_solve_equals_the_cpu_reference() {
             q1[i] = [0.2 * k * u[2], 0.1, -0.3];
         }
     }
-    let problem = render::diffusion::Problem {
+    let problem = render::lighting::diffusion::Problem {
         dims,
         h: [1.0, 1.2, 0.9],
         kappa_tr,
@@ -601,9 +590,9 @@ fn the_gpu_diffusion_solve_equals_the_cpu_reference() {
         q0,
         q1,
     };
-    let solver = render::diffusion_gpu::Solver::new(&gpu);
-    let cpu_s = render::diffusion::solve(&problem, 1e-6, 500).unwrap();
-    let gpu_s = render::diffusion::solve_on(&problem, (1e-6, 500), &gpu, &solver).unwrap();
+    let solver = render::lighting::diffusion_gpu::Solver::new(&gpu);
+    let cpu_s = render::lighting::diffusion::solve(&problem, 1e-6, 500).unwrap();
+    let gpu_s = solver.solve_problem(&gpu, &problem, (1e-6, 500)).unwrap();
     let worst = worst_share(&cpu_s.i0, &gpu_s.i0);
     eprintln!(
         "diffusion: {} unknowns, {} levels; CPU {} iterations to {:.1e} in {:.3} s, GPU {} to \
@@ -621,7 +610,7 @@ fn the_gpu_diffusion_solve_equals_the_cpu_reference() {
     assert!(worst < GPU_DIFFUSION_TOLERANCE, "{worst}");
     // The extremes: a grid one voxel thick (a single level, the coarsest's smoothing alone)
     // and one without unknowns.
-    let line = render::diffusion::Problem {
+    let line = render::lighting::diffusion::Problem {
         dims: [1, 1, 9],
         h: [1.0; 3],
         kappa_tr: vec![2.0; 9],
@@ -629,16 +618,16 @@ fn the_gpu_diffusion_solve_equals_the_cpu_reference() {
         q0: vec![1.0; 9],
         q1: vec![[0.0, 0.0, 0.5]; 9],
     };
-    let cpu_s = render::diffusion::solve(&line, 1e-6, 500).unwrap();
-    let gpu_s = render::diffusion::solve_on(&line, (1e-6, 500), &gpu, &solver).unwrap();
+    let cpu_s = render::lighting::diffusion::solve(&line, 1e-6, 500).unwrap();
+    let gpu_s = solver.solve_problem(&gpu, &line, (1e-6, 500)).unwrap();
     let worst = worst_share(&cpu_s.i0, &gpu_s.i0);
     eprintln!("a line of voxels: worst |GPU − CPU| {worst:.2e} of the largest I_0");
     assert!(worst < GPU_DIFFUSION_TOLERANCE, "a line of voxels: {worst}");
-    let empty = render::diffusion::Problem {
+    let empty = render::lighting::diffusion::Problem {
         kappa_tr: vec![0.0; 9],
         ..line
     };
-    let s = render::diffusion::solve_on(&empty, (1e-6, 500), &gpu, &solver).unwrap();
+    let s = solver.solve_problem(&gpu, &empty, (1e-6, 500)).unwrap();
     assert!(s.i0.iter().all(|&v| v == 0.0) && s.iterations == 0 && s.unknowns == 0);
 }
 
@@ -660,10 +649,10 @@ const GPU_DIFFUSION_TOLERANCE: f64 = 2.2e-7;
 /// source on, from moments that are not a solution.
 #[test]
 fn one_round_of_gpu_sweeps_equals_the_cpu_round_on_thin_grids() {
-    use render::coupled::transport::{DEGREE, Medium, PER_VOXEL, sweep_once};
+    use render::lighting::transport::{DEGREE, Medium, PER_VOXEL, sweep_once};
     let Some(gpu) = common::gpu() else { return };
-    let sweeper = render::coupled::sweep_gpu::Sweeper::new(&gpu);
-    let dirs = render::lattice::fibonacci_directions(48);
+    let sweeper = render::lighting::transport_gpu::Sweeper::new(&gpu);
+    let dirs = render::lighting::lattice::fibonacci_directions(48);
     let mut worst: f64 = 0.0;
     for dims in [[1usize, 5, 7], [6, 1, 4], [3, 5, 1], [2, 2, 40]] {
         let n: usize = dims.iter().product();
@@ -776,7 +765,7 @@ fn a_dense_ball_agrees_with_its_stored_truth() {
         ..Settings::default()
     };
     let coarse = Settings {
-        transport_coarsening: Some(2),
+        transport_coarsening: 2,
         ..Settings::default()
     };
     for (settings, (bias, median)) in [
@@ -784,8 +773,8 @@ fn a_dense_ball_agrees_with_its_stored_truth() {
         (coarse, COARSE_DENSE),
         (diffusion, DIFFUSION_DENSE),
     ] {
-        let lighting = cpu::light(&tables, &frame, &settings).unwrap();
-        let image = cpu::gather(&tables, &frame, &settings, &lighting).unwrap();
+        let lighting = light::light(&tables, &frame, &settings).unwrap();
+        let image = gather::gather(&tables, &frame, &settings, &lighting).unwrap();
         let model = render::error_map::Frame {
             image,
             std_error: None,
@@ -793,7 +782,7 @@ fn a_dense_ball_agrees_with_its_stored_truth() {
         let (report, _) =
             render::error_map::compare(&truth, &model, render::error_map::Pixels::Volume).unwrap();
         eprintln!(
-            "{:?} (coarsening {:?}): dense ball against its stored truth: bias {:+.1} %, median \
+            "{:?} (coarsening {}): dense ball against its stored truth: bias {:+.1} %, median \
              {:.1} %, p95 {:.1} %, truth noise {:.1} % ({} transport iterations on {:?}, last \
              change {:.1e})",
             settings.diffuse,
@@ -891,7 +880,7 @@ fn bad_settings_and_a_solve_over_its_cap_are_refused() {
         ),
         (
             Settings {
-                transport_coarsening: Some(3),
+                transport_coarsening: 3,
                 ..Settings::default()
             },
             "transport_coarsening = 3 is not one of 1, 2, 4",
@@ -906,7 +895,7 @@ fn bad_settings_and_a_solve_over_its_cap_are_refused() {
             "the transport did not converge",
         ),
     ] {
-        let e = cpu::light(&tables, &frame, &settings).unwrap_err().0;
+        let e = light::light(&tables, &frame, &settings).unwrap_err().0;
         assert!(e.contains(want), "{e}");
     }
 }
@@ -942,7 +931,7 @@ fn per_view_gpu_refuses_a_lighting_past_the_adapters_limit_before_any_work() {
     (scene.width, scene.height, scene.grid_resolution) = (8, 8, side);
     let frame = scene.frame(&tables).unwrap();
     let settings = render::ModelSettings::Coupled(Settings {
-        per_view: render::coupled::Place::Gpu,
+        per_view: render::lighting::Place::Gpu,
         ..Settings::default()
     });
     let prepared = settings.prepare(&gpu, &tables).unwrap();

@@ -313,6 +313,62 @@ fn the_gpu_gather_equals_the_cpu_reference() {
     }
 }
 
+/// Max's per-sun passes on the GPU (`per_sun = "gpu"`: the reduced sunlight as the beam's sweep
+/// through a medium that only absorbs, the skylight's sweeps and every diffusion solve, f32,
+/// lavapipe in CI) light a τ 30 soft ball as the CPU reference does (f64): T_sun, the skylight's
+/// mean and the diffusion's I_0, each against its largest value.
+#[test]
+fn the_gpu_lighting_equals_the_cpu_reference() {
+    let Some(gpu) = common::gpu() else { return };
+    let (_tmp, dir) = bake(&fields());
+    let tables = Tables::open(&dir).unwrap();
+    let frame = ball(&tables, 30.0);
+    let settings = Settings {
+        per_sun: render::lighting::Place::Gpu,
+        ..Settings::default()
+    };
+    let cpu_light = cpu::light(&tables, &frame, &settings).unwrap();
+    let pipelines = render::lighting::Pipelines::default();
+    let gpu_light =
+        cpu::light_on(&tables, &frame, &settings, &(), Some(pipelines.on(&gpu))).unwrap();
+    assert!(
+        gpu_light
+            .report
+            .on
+            .iter()
+            .all(|o| !o.starts_with("the CPU")),
+        "{:?}",
+        gpu_light.report.on
+    );
+    let worst = |a: &[[f64; 3]], b: &[[f64; 3]]| {
+        let top = b.iter().flatten().fold(0.0f64, |m, v| m.max(v.abs()));
+        assert!(top > 0.0);
+        a.iter()
+            .flatten()
+            .zip(b.iter().flatten())
+            .map(|(x, y)| (x - y).abs() / top)
+            .fold(0.0f64, f64::max)
+    };
+    let t_sun = worst(&gpu_light.t_sun, &cpu_light.t_sun);
+    let sky = worst(&gpu_light.sky_mean, &cpu_light.sky_mean);
+    let i0 = worst(&gpu_light.i0, &cpu_light.i0);
+    eprintln!(
+        "max lighting on the GPU: worst T_sun {t_sun:.2e}, skylight {sky:.2e}, I_0 {i0:.2e} of \
+         their largest; on {:?}",
+        gpu_light.report.on
+    );
+    assert!(
+        t_sun < GPU_LIGHTING_TOLERANCE.0
+            && sky < GPU_LIGHTING_TOLERANCE.1
+            && i0 < GPU_LIGHTING_TOLERANCE.2,
+        "T_sun {t_sun:e}, sky {sky:e}, I_0 {i0:e}"
+    );
+}
+
+/// The GPU lighting's worst differences from the CPU's (T_sun, skylight, I_0), of each one's
+/// largest value: f32 sweeps and an f32 solve inside an f64 refinement.
+const GPU_LIGHTING_TOLERANCE: (f64, f64, f64) = (1e-5, 1e-5, 1e-4);
+
 /// The shadow map below the grid (the ground's and the air's light) against the march to the
 /// sun it replaces, at points on the ground and in the air below a ball lifted 400 m: equal
 /// within the bilinear interpolation between cells of a voxel's size, and 1 outside the shadow.
@@ -325,9 +381,10 @@ fn the_shadow_map_is_the_march_to_the_sun() {
     frame.grid.max_m.y += 400.0;
     let fields: Vec<_> = tables.fields.iter().collect();
     let sun = frame.sun.direction();
-    let march =
-        |p: glam::DVec3| render::lattice::transmittance_to_sun(&fields, &frame.grid, p, sun, None);
-    let map = render::lattice::ShadowMap::new(&frame.grid, sun, march);
+    let march = |p: glam::DVec3| {
+        render::lighting::sun::transmittance_to_sun(&fields, &frame.grid, p, sun, None)
+    };
+    let map = render::lighting::sun::ShadowMap::new(&frame.grid, sun, march);
     let (mut worst, mut mean, mut n, mut shadowed) = (0.0f64, 0.0, 0, 0);
     for i in 0..40 {
         for j in 0..40 {

@@ -18,7 +18,7 @@ use std::time::{Duration, Instant};
 use proptest::prelude::*;
 use proptest::test_runner::TestRunner;
 use render::RenderScene;
-use render::model::MODEL_NAMES;
+use render::registry::MODEL_NAMES;
 
 #[path = "../../../tests/common/fuzz.rs"]
 mod fuzz;

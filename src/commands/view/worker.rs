@@ -10,10 +10,11 @@ use std::time::Instant;
 use anyhow::{Context, Result};
 use render::camera::{Camera, Sun};
 use render::error_map;
-use render::model::{Prepared, Progress};
+use render::model::Progress;
+use render::registry::Prepared;
 use render::relight::LightingCache;
-use render::truth::TruthImage;
-use render::{Frame, Job, ModelSettings, On, RenderScene, Rendered};
+
+use render::{Frame, Image, Job, ModelSettings, On, RenderScene, Rendered};
 use runtime::Tables;
 use runtime::gpu::Gpu;
 
@@ -230,14 +231,14 @@ impl Progress for Sink {
         true
     }
 
-    fn running(&self, t: &TruthImage) {
+    fn running(&self, image: &Image, std_error: &[[f32; 3]], spp: usize, noise: f64) {
         self.send(TruthNews::Running {
             frame: error_map::Frame {
-                image: t.image.clone(),
-                std_error: Some(t.std_error.clone()),
+                image: image.clone(),
+                std_error: Some(std_error.to_vec()),
             },
-            spp: t.spp,
-            noise: t.noise,
+            spp,
+            noise,
         });
     }
 

@@ -1,4 +1,5 @@
-//! Exact bin integrals of P_l and the bins ↔ χ_l transforms built on them.
+//! The bins ↔ χ_l transforms, built on the exact bin integrals of P_l ([`BinIntegrals`], in
+//! `photometeor-grid`, which the renderers' moments use too).
 //!
 //! # Method
 //! With G_l(μ) = ∫_μ^1 P_l(μ') dμ' the bin integral is W_lk = G_l(μ_edge(k+1)) − G_l(μ_edge(k)).
@@ -33,125 +34,7 @@
 
 use super::LegendreError;
 use grid::ThetaGrid;
-
-/// Streams W_lk = ∫_bin k P_l(μ) dμ for l = 0, 1, 2, … over all K bins of a grid, one degree
-/// at a time, in O(K) memory.
-///
-/// ```
-/// use tables::legendre::{BinIntegrals, ThetaGrid};
-/// let grid = ThetaGrid::new(1.0).unwrap();
-/// let mut w = BinIntegrals::new(&grid);
-/// assert_eq!(w.degree(), 0);
-/// let total: f64 = w.values().iter().sum(); // ∫_{-1}^{1} P_0 dμ = 2
-/// assert!((total - 2.0).abs() < 1e-14);
-/// w.advance(); // l = 1
-/// assert!(w.values().iter().sum::<f64>().abs() < 1e-14);
-/// ```
-#[derive(Debug, Clone)]
-pub struct BinIntegrals {
-    l: usize,
-    /// Number of bins K.
-    n_bins: usize,
-    /// v_e = 1 − cos θ_e = 2 sin²(θ_e/2) at the forward-half edges θ_e ≤ π/2.
-    v: Vec<f64>,
-    /// sin²θ_e = v_e (2 − v_e) at the forward-half edges.
-    sin2: Vec<f64>,
-    /// P_l(μ_e), forward half.
-    p_l: Vec<f64>,
-    /// D_l = P_l − P_{l−1} (Reinsch's difference), forward half.
-    d_l: Vec<f64>,
-    /// P'_l(μ_e), forward half.
-    dp_l: Vec<f64>,
-    /// G_l(μ_e) = ∫_{μ_e}^1 P_l at all K + 1 edges.
-    g_l: Vec<f64>,
-    /// W_lk, k = 0..K.
-    w_l: Vec<f64>,
-}
-
-impl BinIntegrals {
-    /// Starts at l = 0 (W_0k = Δμ_k).
-    pub fn new(grid: &ThetaGrid) -> Self {
-        let theta = grid.edge_theta_rad();
-        // Edges e and K − e are mirror images; the first ⌈(K + 1)/2⌉ have θ ≤ π/2.
-        let n_half = theta.len().div_ceil(2);
-        let v: Vec<f64> = theta[..n_half]
-            .iter()
-            .map(|t| 2.0 * (0.5 * t).sin().powi(2))
-            .collect();
-        let sin2 = v.iter().map(|v| v * (2.0 - v)).collect();
-        Self {
-            l: 0,
-            n_bins: grid.len(),
-            p_l: vec![1.0; n_half],
-            d_l: vec![1.0; n_half],
-            dp_l: vec![0.0; n_half],
-            g_l: vec![0.0; theta.len()],
-            w_l: grid.bin_mu_widths(),
-            v,
-            sin2,
-        }
-    }
-
-    /// The current degree l.
-    pub fn degree(&self) -> usize {
-        self.l
-    }
-
-    /// W_lk = ∫_bin k P_l(μ) dμ for the current l, k = 0..K (forward bin first).
-    pub fn values(&self) -> &[f64] {
-        &self.w_l
-    }
-
-    /// Moves to degree l + 1.
-    pub fn advance(&mut self) {
-        let l = self.l as f64;
-        // Bonnet's recurrence in Reinsch's difference form (μ = 1 − v, D_l = P_l − P_{l−1}):
-        //   D_{l+1} = (l D_l − (2l + 1) v P_l) / (l + 1),  P_{l+1} = P_l + D_{l+1};
-        // derivative P'_{l+1} = (l + 1) P_l + μ P'_l = (l + 1) P_l + P'_l − v P'_l.
-        let a = (2.0 * l + 1.0) / (l + 1.0);
-        let b = l / (l + 1.0);
-        for e in 0..self.v.len() {
-            let v = self.v[e];
-            let p_l = self.p_l[e];
-            let dp_l = self.dp_l[e];
-            let d_next = b * self.d_l[e] - a * v * p_l;
-            self.d_l[e] = d_next;
-            self.p_l[e] = p_l + d_next;
-            self.dp_l[e] = (l + 1.0) * p_l + (dp_l - v * dp_l);
-        }
-        self.l += 1;
-        // G_l = sin²θ P'_l / (l(l + 1)) on the forward half; on the mirror edge
-        // P'_l(−μ) = (−1)^{l+1} P'_l(μ), so G_l(−μ) = (−1)^{l+1} G_l(μ).
-        let l_new = self.l as f64;
-        let inv = 1.0 / (l_new * (l_new + 1.0));
-        let sign = if self.l % 2 == 1 { 1.0 } else { -1.0 };
-        let n_edges = self.g_l.len();
-        for e in 0..self.v.len() {
-            let g = self.sin2[e] * self.dp_l[e] * inv;
-            self.g_l[n_edges - 1 - e] = sign * g;
-            self.g_l[e] = g;
-        }
-        for k in 0..self.n_bins {
-            self.w_l[k] = self.g_l[k + 1] - self.g_l[k];
-        }
-    }
-}
-
-/// All W_lk for l = 0..=l_max, stored as `w[l][k]`.
-///
-/// Memory is (l_max + 1)·K·8 bytes (160 MB at K = 1001, l_max = 20 000); prefer
-/// [`BinIntegrals`] or the transforms below, which stream, unless the table is reused many times.
-pub fn bin_integrals(grid: &ThetaGrid, l_max: usize) -> Vec<Vec<f64>> {
-    let mut w = BinIntegrals::new(grid);
-    let mut out = Vec::with_capacity(l_max + 1);
-    for l in 0..=l_max {
-        if l > 0 {
-            w.advance();
-        }
-        out.push(w.values().to_vec());
-    }
-    out
-}
+pub use grid::legendre::{BinIntegrals, bin_integrals};
 
 /// χ_l, l = 0..=l_max, of the function that equals `bins[k]` on bin k (piecewise constant in
 /// μ): χ_l = 2π Σ_k bins[k] W_lk, exact up to rounding. χ_0 = Σ_k bins[k] Ω_k is 1 for a

@@ -8,7 +8,7 @@
 //! - [`bin_integrals_by_quadrature`]: ∫_bin P_l dμ = ∫ P_l(cos θ) sin θ dθ by Gauss–Legendre in
 //!   θ over the bin, converged to rounding with ~l/2 + 2 nodes on bins of lΔθ ≲ 10.
 
-pub use mie::quadrature::gauss_legendre;
+pub use grid::quadrature::gauss_legendre;
 
 /// P_0(μ) … P_{l_max}(μ) by Bonnet's recurrence (l + 1) P_{l+1} = (2l + 1) μ P_l − l P_{l−1}.
 pub fn legendre_p_all(l_max: usize, mu: f64) -> Vec<f64> {

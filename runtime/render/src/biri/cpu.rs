@@ -14,7 +14,7 @@ use super::{Kernel, Settings};
 use crate::camera::pixel_ray;
 use crate::geometry::{ShadowPlane, Sphere, nappe_roots};
 use crate::objects::{Light, Medium, Occluder, OccluderShape, Region};
-use crate::{Frame, FrameError, Image};
+use crate::{checks::FrameError, frame::Frame, image::Image};
 
 /// The light's distance h from a ray is taken as at least this (m): Eq. 2's 1/h is singular
 /// for a ray through the light, whose radiance is the light's own.

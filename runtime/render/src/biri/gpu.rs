@@ -14,7 +14,7 @@ use runtime::gpu::{Gpu, GpuTables, WGSL};
 use crate::geometry::Sphere;
 use crate::gpu::{RenderError, Timings, a4, check_sizes, entry, filled, v4};
 use crate::objects::{OccluderShape, Region};
-use crate::{Frame, FrameError, Image};
+use crate::{checks::FrameError, frame::Frame, image::Image};
 
 /// The model's WGSL (after [`WGSL`]).
 pub const BIRI_WGSL: &str = include_str!("biri.wgsl");

@@ -40,7 +40,7 @@ use runtime::gpu::{Gpu, GpuTables, TexelFormat};
 use crate::gpu::RenderError;
 use crate::model::{Job, Model, Need, Pass, Rendered, image_need};
 use crate::objects;
-use crate::{Frame, FrameError};
+use crate::{checks::FrameError, frame::Frame};
 
 /// Which form of the kernel's integral Γ uses.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
@@ -170,7 +170,7 @@ impl Model for Biri {
             job.frame.lights.len(),
             t.describe()
         );
-        Ok(Rendered::plain(image, t.passes(), summary))
+        Ok(Rendered::plain(image, Pass::of_gpu(&t), summary))
     }
 
     /// Stage 2 alone (the surfaces, shaded and attenuated, no medium): the paper's Table 1
@@ -195,7 +195,7 @@ impl Model for Biri {
 /// that do not overlap, no light inside an occluder.
 pub fn check_scene(frame: &Frame) -> Result<(), FrameError> {
     let bad = |s: String| Err(FrameError(s));
-    if frame.grid != crate::DensityGrid::empty() {
+    if frame.grid != crate::volume::DensityGrid::empty() {
         return bad(
             "the scene has [[volume]] tables; --model biri draws homogeneous [[medium]] tables \
              only (render volumes with riley, miyazaki, max, coupled or truth)"

@@ -1,5 +1,5 @@
 // The coupled model's gather (step 4 of render::coupled's docs) on the GPU: one invocation per
-// pixel does what render::coupled::cpu::gather does per ray, in f32, from the per-voxel
+// pixel does what render::coupled::gather::gather does per ray, in f32, from the per-voxel
 // lighting the CPU computed (the beam, the diffusion's I_0 and I_1, the reduced skylight),
 // then composes the pixel with the air, the sun disk and the ground. Included after
 // tables.wgsl (bind group 0: Ams_n by `ams_mix`), slicing.wgsl (grid sampling, camera rays,
@@ -127,7 +127,7 @@ fn harmonics(w: vec3<f32>) -> array<f32, 25> {
 }
 
 // A per-field quantity `values` of the mixture, weighted by ρ σ_sca
-// (render::coupled::cpu::mixed).
+// (render::coupled::light::mixed).
 fn mixed(rho: vec4<f32>, values: array<vec4<f32>, 4>) -> vec3<f32> {
     var num = vec3<f32>(0.0);
     var den = vec3<f32>(0.0);

@@ -1,5 +1,5 @@
 //! The `coupled` model's gather on wgpu (`gather.wgsl`): one compute invocation per pixel
-//! marches the ray through the grid as [`super::cpu::gather`] does, in f32, reading the
+//! marches the ray through the grid as [`super::gather::gather`] does, in f32, reading the
 //! per-voxel [`Lighting`] the CPU computed (the beam, the diffusion's I_0 and I_1, the reduced
 //! skylight). That lighting depends on the sun, the sky and the cloud, not on the camera: a
 //! camera that moves needs only this gather again (`photometeor bench render --model coupled`
@@ -25,12 +25,12 @@ use runtime::Tables;
 use runtime::gpu::{Gpu, GpuTables};
 
 use super::Settings;
-use super::cpu::{Lighting, check, delta_scaled};
+use super::light::{Lighting, check, delta_scaled};
 use crate::gpu::{
     FieldsAndSky, GatherView, RenderError, Timings, bind, build, fields_and_sky, filled,
     gather_source, gather_view, sky_light_buffer, storage, timed_frame, v4,
 };
-use crate::{Frame, Image, MAX_FIELDS};
+use crate::{frame::Frame, image::Image, volume::MAX_FIELDS};
 
 runtime::uniform! {
     /// `CoupledParams` of `gather.wgsl` (its comments say what each w holds).
@@ -74,7 +74,7 @@ runtime::uniform! {
 }
 
 /// Rows of four the transport's 75 moments take per voxel of its grid.
-const SH_ROWS: usize = super::transport::PER_VOXEL.div_ceil(4);
+const SH_ROWS: usize = crate::lighting::transport::PER_VOXEL.div_ceil(4);
 
 /// Rows of four f32 per voxel of the frame's grid the gather reads of a lighting.
 const ROWS_PER_VOXEL: usize = 5;
@@ -117,17 +117,8 @@ pub fn source() -> String {
 pub struct Renderer {
     layout: wgpu::BindGroupLayout,
     pipeline: wgpu::ComputePipeline,
-    /// The per-sun passes' pipelines (the transport's sweeps, [`super::sweep_gpu`], the
-    /// skylight's, [`super::sky_gpu`], the beam's, [`super::beam_gpu`], and the diffusion
-    /// solves, [`crate::diffusion_gpu`]),
-    /// compiled on first use: a renderer whose
-    /// per-sun passes stay on the CPU (`per_sun = "auto"` on lavapipe) never compiles them.
-    per_sun: std::sync::OnceLock<(
-        super::sweep_gpu::Sweeper,
-        super::sky_gpu::SkySweeper,
-        super::beam_gpu::BeamSweeper,
-        crate::diffusion_gpu::Solver,
-    )>,
+    /// The per-sun passes' pipelines, compiled on first use.
+    per_sun: crate::lighting::Pipelines,
     /// The last lighting's buffers: a view of the same lighting uploads only its own.
     resident: Mutex<Option<Resident>>,
 }
@@ -171,33 +162,19 @@ impl Renderer {
         Self {
             layout,
             pipeline,
-            per_sun: std::sync::OnceLock::new(),
+            per_sun: crate::lighting::Pipelines::default(),
             resident: Mutex::new(None),
         }
     }
 
-    /// The per-sun passes on `gpu` (the adapter this renderer was built for), compiled on the
-    /// first call.
-    pub fn per_sun<'a>(&'a self, gpu: &'a Gpu) -> super::cpu::OnGpu<'a> {
-        let (sweeper, sky, beam, solver) = self.per_sun.get_or_init(|| {
-            (
-                super::sweep_gpu::Sweeper::new(gpu),
-                super::sky_gpu::SkySweeper::new(gpu),
-                super::beam_gpu::BeamSweeper::new(gpu),
-                crate::diffusion_gpu::Solver::new(gpu),
-            )
-        });
-        super::cpu::OnGpu {
-            gpu,
-            sweeper,
-            sky,
-            beam,
-            solver,
-        }
+    /// The per-sun passes on `gpu` (the adapter this renderer was built for), each compiled
+    /// on its first use.
+    pub fn per_sun<'a>(&'a self, gpu: &'a Gpu) -> crate::lighting::OnGpu<'a> {
+        self.per_sun.on(gpu)
     }
 
-    /// Step 4 of the model for `frame` from `lighting` ([`super::cpu::light`] of a frame with
-    /// the same grid and sun), as [`super::cpu::gather`]. The lighting's buffers stay on the
+    /// Step 4 of the model for `frame` from `lighting` ([`super::light::light`] of a frame with
+    /// the same grid and sun), as [`super::gather::gather`]. The lighting's buffers stay on the
     /// GPU until a view of another lighting: the next view of this one uploads only its own
     /// parameters, densities and image.
     pub fn gather(
@@ -305,7 +282,11 @@ impl Renderer {
                 &held.blurred,
                 &held.moments,
             ],
-            Some(&sky_light_buffer(device, frame, Some(&lighting.shadow))),
+            Some(&sky_light_buffer(
+                device,
+                frame,
+                Some(lighting.shadow.gpu_rows()),
+            )),
         );
         timed_frame(
             gpu,

@@ -1,15 +1,17 @@
 //! `--model coupled`: the sunlight's forward peak kept in a beam, the rest of what the beam
-//! loses carried by a δ-scaled diffusion solve, both gathered along the eye's rays — the light
-//! Riley's buffer drops, no longer lost.
+//! loses carried by δ-M-scaled discrete-ordinates transport (accelerated by a diffusion solve),
+//! both gathered along the eye's rays — the light Riley's buffer drops, no longer lost. A
+//! recipe over the grid lighting layer ([`crate::lighting`]): this module says which passes run
+//! in which order with which sources; the passes themselves are shared.
 //!
 //! # Why
 //! Riley et al. 2004 §4.3 keep in the light buffer only the forward-scattered share αF of what
-//! a slab removes (the continuum update, [`crate::LightUpdate`]); the rest of the scattered
+//! a slab removes (the continuum update of the light buffer); the rest of the scattered
 //! light is gone, which is why `riley` is −17 … −88 % dark at optical depths 8–64
 //! (`docs/truth/sweep`). Max et al. 2004 have that light in a diffusion solve but feed it the
 //! first-scattered sunlight with its forward peak spread by g alone and show it isotropic.
 //!
-//! # The model, per sun ([`cpu::light`]) and per view ([`cpu::gather`])
+//! # The model, per sun ([`light::light`]) and per view ([`gather::gather`])
 //! The phase function is split into a forward peak and the rest, p = f δ(forward) + (1 − f) p′.
 //! With the transport (the default, step 3b) the split is δ-M's (Wiscombe 1977) at the degree L
 //! = 4 the transport keeps: f = χ_5, p′'s Legendre moments χ′_l = (χ_l − f)/(1 − f), the χ_l
@@ -18,7 +20,7 @@
 //! 1 − αg), p′ of asymmetry g′ = (g − f)/(1 − f). The transfer equation with p is the one
 //! with p′ in a medium of extinction β_ext(1 − αf) and albedo α(1 − f)/(1 − αf).
 //! 1. **The beam** at every voxel centre, by an upwind sweep along the light's direction of
-//!    travel l ([`crate::lattice::sweep`]): intensity I per channel (the fraction of the
+//!    travel l ([`crate::lighting::beam`]): intensity I per channel (the fraction of the
 //!    sunlight), each step of optical depth τ (trapezoid of β_ext) keeping e^{−τ(1 − αf)}.
 //!    This is Riley's continuum update (Eqs. 21–22) with the forward share f in place of F_n,
 //!    on the grid instead of half-angle slices, so the lighting does not depend on the view.
@@ -26,13 +28,13 @@
 //!    times S_atm, Riley Eq. 12); of that loss β_ext(1 − αf) the share α(1 − f)/(1 − αf) is
 //!    scattered (the rest absorbed) — the light Riley's buffer drops. It is the first-scattered
 //!    source of the δ-scaled medium: Q_0 = (that)/4π and Q_1 = g′ Q_0 l. The skylight adds
-//!    β_sca S and g β_sca F_sky as in `max` ([`crate::lattice::reduced_sky`]).
-//! 3. **Diffusion** ([`crate::diffusion`], Max Eqs. 4, 7; Marshak's boundary) per channel with
+//!    β_sca S and g β_sca F_sky as in `max` ([`crate::lighting::sky::reduced_sky`]).
+//! 3. **Diffusion** ([`crate::lighting::diffusion`], Max Eqs. 4, 7; Marshak's boundary) per channel with
 //!    κ_tr = β_ext(1 − αg), which is also the δ-scaled medium's σ′_t(1 − α′g′): the scaling
 //!    changes the sources, not the operator. Then the flux J = Q_1/κ_tr − D∇I_0 per voxel
-//!    ([`crate::diffusion::flux`]) and the P1 radiance I_0 + I_1·ω, I_1 = 3J.
+//!    ([`crate::lighting::diffusion::flux`]) and the P1 radiance I_0 + I_1·ω, I_1 = 3J.
 //!
-//!    3b. **Transport** ([`transport`], `diffuse = "transport"`, the default): the δ-M-scaled
+//!    3b. **Transport** ([`crate::lighting::transport`], `diffuse = "transport"`, the default): the δ-M-scaled
 //!    transfer equation of the diffuse light solved by discrete ordinates on the same grid —
 //!    `directions` directions of equal solid angle (a Fibonacci set), each swept upwind
 //!    (short characteristics: bilinear in the layer behind, the emission linear over the
@@ -83,11 +85,12 @@
 //! The CPU reference (`--cpu`) runs everything on the CPU in f64 (rayon). A GPU render runs,
 //! with `per_view = "auto"` on a real GPU or `"gpu"` anywhere, the gather on the GPU ([`gpu`],
 //! the lighting's buffers kept there between views) and, with `per_sun = "auto"` on a real
-//! GPU or `"gpu"` anywhere, the per-sun passes: the transport's sweeps ([`sweep_gpu`]: one
-//! dispatch per layer of each sweep order, a workgroup per voxel of the layer, an invocation
-//! per direction, in f32), the skylight's sweeps ([`sky_gpu`]), the beam's ([`beam_gpu`]; but
-//! for the hemisphere split) and every diffusion solve — the three channels' and the
-//! transport's acceleration — ([`crate::diffusion_gpu`]: the same conjugate gradients and
+//! GPU or `"gpu"` anywhere, the per-sun passes: the transport's sweeps
+//! ([`crate::lighting::transport_gpu`]: one dispatch per layer of each sweep order, a workgroup
+//! per voxel of the layer, an invocation per direction, in f32), the skylight's sweeps
+//! ([`crate::lighting::sky_gpu`]), the beam's ([`crate::lighting::beam_gpu`]; but for the
+//! hemisphere split) and every diffusion solve — the three channels' and the
+//! transport's acceleration — ([`crate::lighting::diffusion_gpu`]: the same conjugate gradients and
 //! V-cycle in f32 inside an f64 refinement). The source iteration's control (acceleration
 //! sources, the convergence test), the medium per voxel, the sources, the flux and the budget
 //! stay on the CPU. On lavapipe (a CPU
@@ -96,13 +99,11 @@
 //!
 //! Units: radiance per unit solar irradiance outside the atmosphere (1/sr) per channel.
 
-pub mod beam_gpu;
-pub mod cpu;
+pub mod gather;
 pub mod gpu;
+pub mod light;
+pub mod moments;
 pub mod peak;
-pub mod sky_gpu;
-pub mod sweep_gpu;
-pub mod transport;
 
 use std::time::Instant;
 
@@ -110,9 +111,12 @@ use serde::{Deserialize, Serialize};
 
 use runtime::gpu::{Gpu, GpuTables, TexelFormat};
 
+use crate::checks::FrameError;
+use crate::frame::Frame;
 use crate::gpu::RenderError;
+use crate::lighting::Place;
+use crate::lighting::transport;
 use crate::model::{Job, Model, Need, Pass, Rendered, image_need};
-use crate::{Frame, FrameError};
 
 /// `--model coupled`.
 pub struct Coupled;
@@ -134,16 +138,17 @@ pub const TRANSPORT_MEMORY_PER_VOXEL: u64 = 1800;
 pub const AUTO_TRANSPORT_VOXELS: usize = 64;
 
 impl Settings {
-    /// The transport's coarsening on `dims`: the setting, or the largest of 4, 2 that leaves
-    /// [`AUTO_TRANSPORT_VOXELS`] along the longest side, else 1.
+    /// The transport's coarsening on `dims`: the setting, or (0, automatic) the largest of 4,
+    /// 2 that leaves [`AUTO_TRANSPORT_VOXELS`] along the longest side, else 1.
     pub fn coarsening(&self, dims: [usize; 3]) -> usize {
         let longest = dims.into_iter().max().unwrap_or(0);
-        self.transport_coarsening.unwrap_or_else(|| {
-            [4, 2]
+        match self.transport_coarsening {
+            0 => [4, 2]
                 .into_iter()
                 .find(|f| longest / f >= AUTO_TRANSPORT_VOXELS)
-                .unwrap_or(1)
-        })
+                .unwrap_or(1),
+            set => set,
+        }
     }
 }
 
@@ -162,9 +167,12 @@ pub enum Source {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
 #[serde(rename_all = "kebab-case")]
 pub enum Split {
-    /// f = g², the δ-Eddington truncation (Joseph, Wiscombe & Weinman 1976): the forward
-    /// peak the diffusion cannot carry stays in the beam; the rest, with asymmetry
-    /// g/(1 + g), is the diffusion's source; the gather sees through β_ext(1 − αf).
+    /// The δ-split: the forward peak the diffuse light cannot carry stays in the beam; the
+    /// rest is the diffuse light's source; the gather sees through β_ext(1 − αf). Its f is
+    /// δ-M's, χ_{L+1} of the tables' Ams_1 (Wiscombe 1977; L = 4, the transport's degree),
+    /// under `diffuse = "transport"` (the default), and δ-Eddington's, f = g² (Joseph,
+    /// Wiscombe & Weinman 1976; the rest of asymmetry g/(1 + g)), under `diffuse =
+    /// "diffusion"`. The scene name `delta-eddington` is kept for both.
     #[default]
     DeltaEddington,
     /// f = F_{n+1}, the tables' forward-hemisphere fraction (Riley's continuum update): all
@@ -198,42 +206,14 @@ pub enum Diffuse {
     Diffusion,
 }
 
-/// Where a GPU render runs a pass: the per-sun passes (`per_sun`: the transport's sweeps,
-/// [`sweep_gpu`], the skylight's, [`sky_gpu`], the beam's, [`beam_gpu`], and the diffusion
-/// solves, [`crate::diffusion_gpu`]) or the per-view gather (`per_view`, [`gpu`]); a CPU render runs
-/// them on the CPU.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
-#[serde(rename_all = "kebab-case")]
-pub enum Place {
-    /// On the GPU when the adapter is one, on the CPU when it emulates one on the CPU
-    /// (lavapipe, where the per-sun passes took 6–7× and the gather 3× the CPU reference's
-    /// time, docs/rendering.md).
-    #[default]
-    Auto,
-    /// On the GPU, whatever the adapter.
-    Gpu,
-    /// On the CPU.
-    Cpu,
-}
-
-impl Place {
-    /// Whether a GPU render runs the pass on `gpu`.
-    pub fn on_gpu(self, gpu: &Gpu) -> bool {
-        match self {
-            Place::Auto => gpu.adapter.get_info().device_type != wgpu::DeviceType::Cpu,
-            Place::Gpu => true,
-            Place::Cpu => false,
-        }
-    }
-}
-
 /// The model's settings, `[render.coupled]`.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct Settings {
     /// What feeds the diffusion (default "buffer").
     pub source: Source,
-    /// The share the buffer keeps (default "delta-eddington").
+    /// The share the beam keeps (default "delta-eddington": δ-M's f under the transport,
+    /// f = g² under the diffusion alone).
     pub split: Split,
     /// The diffusion's light towards the eye (default "p1").
     pub emergent: Emergent,
@@ -254,10 +234,10 @@ pub struct Settings {
     /// The transport's voxels span this many of the grid's along each axis: 1, 2 or 4 (the
     /// medium and the sources averaged over each block, the radiance's moments kept on the
     /// blocks and looked up there by the gathers; at 2
-    /// the sweeps cost an eighth, docs/rendering.md gives the error). Default: the largest
-    /// that leaves the transport at least [`AUTO_TRANSPORT_VOXELS`] voxels along the grid's
-    /// longest side.
-    pub transport_coarsening: Option<usize>,
+    /// the sweeps cost an eighth, docs/rendering.md gives the error), or 0 (the default):
+    /// the largest that leaves the transport at least [`AUTO_TRANSPORT_VOXELS`] voxels along
+    /// the grid's longest side.
+    pub transport_coarsening: usize,
     /// Where a GPU render's per-sun passes (the beam's, the skylight's and the transport's
     /// sweeps, the diffusion solves) run: "auto" (the default: on the GPU unless the adapter is a CPU emulation such as
     /// lavapipe), "gpu" or "cpu".
@@ -280,7 +260,7 @@ impl Default for Settings {
             directions: 96,
             transport_tolerance: 0.01,
             max_transport_iterations: 40,
-            transport_coarsening: None,
+            transport_coarsening: 0,
             per_sun: Place::Auto,
             per_view: Place::Auto,
         }
@@ -290,7 +270,10 @@ impl Default for Settings {
 impl Settings {
     /// Checks the settings, naming the key, its value and the allowed range.
     pub fn check(&self) -> Result<(), FrameError> {
-        crate::diffusion::check_settings(self.diffusion_tolerance, self.max_diffusion_iterations)?;
+        crate::lighting::diffusion::check_settings(
+            self.diffusion_tolerance,
+            self.max_diffusion_iterations,
+        )?;
         if !(16..=1024).contains(&self.directions) {
             return Err(FrameError(format!(
                 "[render.coupled] directions = {} is outside the allowed range [16, 1024]",
@@ -301,7 +284,7 @@ impl Settings {
             return Err(FrameError(format!(
                 "[render.coupled] transport_tolerance = {} is outside the allowed range \
                  [1e-6, 0.5] (relative change of the mean radiance per iteration)",
-                crate::Shown(self.transport_tolerance)
+                crate::checks::Shown(self.transport_tolerance)
             )));
         }
         if !(1..=1000).contains(&self.max_transport_iterations) {
@@ -311,13 +294,14 @@ impl Settings {
                 self.max_transport_iterations
             )));
         }
-        if let Some(c) = self.transport_coarsening.filter(|c| ![1, 2, 4].contains(c)) {
+        let c = self.transport_coarsening;
+        if ![0, 1, 2, 4].contains(&c) {
             return Err(FrameError(format!(
                 "[render.coupled] transport_coarsening = {c} is not one of 1, 2, 4 (the \
-                 grid's voxels per transport voxel along each axis)"
+                 grid's voxels per transport voxel along each axis) or 0 (automatic)"
             )));
         }
-        if self.diffuse == Diffuse::Transport && !cpu::delta_scaled(self) {
+        if self.diffuse == Diffuse::Transport && !light::delta_scaled(self) {
             return Err(FrameError(
                 "[render.coupled] diffuse = \"transport\" needs the default source (\"buffer\") \
                  and split (\"delta-eddington\"); set diffuse = \"diffusion\" for the others"
@@ -330,9 +314,9 @@ impl Settings {
 
 impl Model for Coupled {
     const NAME: &'static str = "coupled";
-    const ABOUT: &'static str = "the sunlight's forward peak kept in a beam (δ-Eddington), \
-        the light it loses carried by a δ-scaled diffusion solve, both gathered with the exact \
-        phase function and the diffusion's P1 flux; lighting per sun, the gather per view";
+    const ABOUT: &'static str = "the sunlight's forward peak kept in a beam (δ-M), the light it \
+        loses carried by discrete-ordinates transport accelerated by diffusion, both gathered \
+        with the exact phase function; lighting per sun, the gather per view";
     const TEXELS: TexelFormat = TexelFormat::F32;
     const GPU: bool = true;
     type Settings = Settings;
@@ -373,9 +357,9 @@ impl Model for Coupled {
     }
 
     fn render_cpu(s: &Settings, job: &Job) -> Result<Rendered, RenderError> {
-        let lighting = cpu::light_with(job.tables, job.frame, s, job.progress)?;
+        let lighting = light::light_with(job.tables, job.frame, s, job.progress)?;
         let start = Instant::now();
-        let image = cpu::gather(job.tables, job.frame, s, &lighting)?;
+        let image = gather::gather(job.tables, job.frame, s, &lighting)?;
         let gather = start.elapsed().as_secs_f64();
         Ok(rendered(
             image,
@@ -436,11 +420,11 @@ impl Model for Coupled {
         };
         let (lighting, reused) = crate::relight::lit(job.lighting, job.frame, s, || {
             let on = s.per_sun.on_gpu(gpu).then(|| renderer.per_sun(gpu));
-            cpu::light_on(job.tables, job.frame, s, job.progress, on)
+            light::light_on(job.tables, job.frame, s, job.progress, on)
         })?;
         let (image, gather, on) = if let Some(why) = on_cpu {
             let start = Instant::now();
-            let image = cpu::gather(job.tables, job.frame, s, &lighting)?;
+            let image = gather::gather(job.tables, job.frame, s, &lighting)?;
             (
                 image,
                 start.elapsed().as_secs_f64(),
@@ -464,8 +448,8 @@ impl Model for Coupled {
 
 /// The frame with its passes (the lighting's steps, then the gather) and summary.
 fn rendered(
-    image: crate::Image,
-    report: &cpu::CoupledReport,
+    image: crate::image::Image,
+    report: &light::CoupledReport,
     gather_s: f64,
     on: &str,
     (frame, settings): (&Frame, &Settings),

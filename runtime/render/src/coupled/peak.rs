@@ -168,6 +168,24 @@ impl PeakBlur {
         std::array::from_fn(|c| if den[c] > 0.0 { num[c] / den[c] } else { 0.0 })
     }
 
+    /// Per field of `fields` whose peak is blurred (green): its name, the peak's half width
+    /// (degrees), its share of the scattering and the cone's.
+    pub fn report(&self, fields: &[&FieldTable]) -> Vec<(String, f64, f64, f64)> {
+        fields
+            .iter()
+            .zip(&self.fields)
+            .filter(|(_, b)| b.share[1] > 0.0)
+            .map(|(f, b)| {
+                (
+                    f.name.clone(),
+                    b.half_width_deg[1],
+                    b.share[1],
+                    b.cone_share[1],
+                )
+            })
+            .collect()
+    }
+
     /// The tables as the GPU gather reads them, `[((f · DEPTHS + j) · 3 + c) · K + k]`.
     pub fn rows(&self) -> Vec<f32> {
         self.fields
@@ -175,6 +193,90 @@ impl PeakBlur {
             .flat_map(|b| b.table.iter().map(|&v| v as f32))
             .collect()
     }
+}
+
+/// δ-M's forward cone past the peak: per channel, the samples from three half widths out to
+/// where the samples from θ = 0 hold the share `cap` of the scattering, their share of it and
+/// their kernel's Legendre moments π^c_l to `degree` (channels without a peak blur, `share`
+/// 0, have none); `step` is the samples' spacing in θ (radians).
+fn cone(
+    p: &[Vec<f64>; 3],
+    weight: &[f64],
+    mu: &[f64],
+    (share, total, half_width): (&[f64; 3], &[f64; 3], &[Option<f64>; 3]),
+    (cap, step): ([f64; 3], f64),
+    degree: usize,
+) -> ([f64; 3], Vec<[f64; 3]>) {
+    let k_len = mu.len();
+    let mut cone_share = [0.0; 3];
+    let mut cone_moments = vec![[0.0; 3]; degree + 1];
+    for c in 0..3 {
+        if share[c] <= 0.0 {
+            continue;
+        }
+        let first = (3.0 * half_width[c].unwrap_or(0.0) / step).ceil() as usize;
+        let mut held = 0.0;
+        let mut window = Vec::new();
+        for k in 0..k_len {
+            let w = 2.0 * PI * weight[k] * p[c][k];
+            if held >= cap[c] * total[c] {
+                break;
+            }
+            held += w;
+            if k >= first {
+                window.push((k, w));
+            }
+        }
+        let mass: f64 = window.iter().map(|&(_, w)| w).sum();
+        if mass <= 0.0 {
+            continue;
+        }
+        cone_share[c] = mass / total[c];
+        for &(k, w) in &window {
+            legendre(mu[k], degree, |l, pl| cone_moments[l][c] += w / mass * pl);
+        }
+    }
+    (cone_share, cone_moments)
+}
+
+/// The moments c_l = 2π ∫ p P_l sin θ dθ to `degree` of p's forward part (1 − w) p and backward
+/// part w p (w the `ramp`), per channel, by the trapezoid `weight`s in θ at the samples' `mu`.
+fn part_moments(
+    p: &[Vec<f64>; 3],
+    weight: &[f64],
+    mu: &[f64],
+    ramp: &[f64],
+    degree: usize,
+) -> Vec<[[f64; 3]; 2]> {
+    let k_len = mu.len();
+    (0..k_len)
+        .into_par_iter()
+        .fold(
+            || vec![[[0.0; 3]; 2]; degree + 1],
+            |mut acc, k| {
+                legendre(mu[k], degree, |l, pl| {
+                    for c in 0..3 {
+                        let v = 2.0 * PI * weight[k] * p[c][k] * pl;
+                        acc[l][0][c] += (1.0 - ramp[k]) * v;
+                        acc[l][1][c] += ramp[k] * v;
+                    }
+                });
+                acc
+            },
+        )
+        .reduce(
+            || vec![[[0.0; 3]; 2]; degree + 1],
+            |mut a, b| {
+                for (x, y) in a.iter_mut().zip(b) {
+                    for (xs, ys) in x.iter_mut().zip(y) {
+                        for c in 0..3 {
+                            xs[c] += ys[c];
+                        }
+                    }
+                }
+                a
+            },
+        )
 }
 
 impl FieldBlur {
@@ -210,34 +312,18 @@ impl FieldBlur {
         // The cone: the samples from three half widths out to where the samples from θ = 0
         // hold the split's f, its share of the scattering and its kernel's moments π^c_l.
         let (from, to) = (ramp_deg.0.to_radians(), ramp_deg.1.to_radians());
-        let mut cone_share = [0.0; 3];
-        let mut cone_moments = vec![[0.0; 3]; if blurred { degree + 1 } else { 0 }];
-        for c in 0..3 {
-            if share[c] <= 0.0 {
-                continue;
-            }
-            let first = (3.0 * half_width[c].unwrap_or(0.0) / step).ceil() as usize;
-            let mut held = 0.0;
-            let mut window = Vec::new();
-            for k in 0..k_len {
-                let w = 2.0 * PI * weight[k] * p[c][k];
-                if held >= cap[c] * total[c] {
-                    break;
-                }
-                held += w;
-                if k >= first {
-                    window.push((k, w));
-                }
-            }
-            let mass: f64 = window.iter().map(|&(_, w)| w).sum();
-            if mass <= 0.0 {
-                continue;
-            }
-            cone_share[c] = mass / total[c];
-            for &(k, w) in &window {
-                legendre(mu[k], degree, |l, pl| cone_moments[l][c] += w / mass * pl);
-            }
-        }
+        let (cone_share, cone_moments) = if blurred {
+            cone(
+                &p,
+                &weight,
+                &mu,
+                (&share, &total, &half_width),
+                (cap, step),
+                degree,
+            )
+        } else {
+            ([0.0; 3], Vec::new())
+        };
         // p's forward part (1 − w) p and backward part w p, w the ramp from `from` to `to`:
         // only the backward part is blurred by the cone (the module docs say why).
         let ramp: Vec<f64> = (0..k_len)
@@ -248,36 +334,8 @@ impl FieldBlur {
             })
             .collect();
         // The moments c_l = 2π ∫ p P_l sin θ dθ of each part, per channel ([forward, backward]).
-        type Parts = [[f64; 3]; 2];
-        let moments: Vec<Parts> = if blurred {
-            (0..k_len)
-                .into_par_iter()
-                .fold(
-                    || vec![[[0.0; 3]; 2]; degree + 1],
-                    |mut acc, k| {
-                        legendre(mu[k], degree, |l, pl| {
-                            for c in 0..3 {
-                                let v = 2.0 * PI * weight[k] * p[c][k] * pl;
-                                acc[l][0][c] += (1.0 - ramp[k]) * v;
-                                acc[l][1][c] += ramp[k] * v;
-                            }
-                        });
-                        acc
-                    },
-                )
-                .reduce(
-                    || vec![[[0.0; 3]; 2]; degree + 1],
-                    |mut a, b| {
-                        for (x, y) in a.iter_mut().zip(b) {
-                            for (xs, ys) in x.iter_mut().zip(y) {
-                                for c in 0..3 {
-                                    xs[c] += ys[c];
-                                }
-                            }
-                        }
-                        a
-                    },
-                )
+        let moments = if blurred {
+            part_moments(&p, &weight, &mu, &ramp, degree)
         } else {
             Vec::new()
         };

@@ -10,15 +10,22 @@ use rayon::prelude::*;
 use runtime::{FieldTable, Tables, sample};
 
 use super::Settings;
-use crate::diffusion::{self, Problem};
 use crate::geometry::box_span;
-use crate::lattice::{
-    MIN_DIFFUSION_VOXEL_DEPTH, ShadowMap, Sky, Voxels, reduced_sky, reduced_sun, sky_directions,
-    sun_depths, sweep, transmittance_to_sun, trilinear, voxel_length, voxel_size, voxels,
+use crate::gpu::RenderError;
+use crate::lighting::beam::BeamMedium;
+use crate::lighting::diffusion::{self, Problem};
+use crate::lighting::lattice::{
+    MIN_DIFFUSION_VOXEL_DEPTH, Voxels, sun_depths, sweep, trilinear, voxel_length, voxel_size,
+    voxels,
 };
+use crate::lighting::sky::{Sky, sky_directions, sky_light, sky_sweeps};
+use crate::lighting::sun::{ShadowMap, reduced_sun, transmittance_to_sun};
+use crate::lighting::{OnGpu, run};
 use crate::shading::{check_fields, coefficients, compose};
 use crate::skylight::SkyLight;
-use crate::{DensityGrid, Frame, FrameError, Image, MAX_FIELDS};
+use crate::{
+    checks::FrameError, frame::Frame, image::Image, volume::DensityGrid, volume::MAX_FIELDS,
+};
 
 /// What a `max` render spent and found.
 #[derive(Debug, Clone, Default, serde::Serialize)]
@@ -44,6 +51,9 @@ pub struct MaxReport {
     pub levels: usize,
     /// The largest optical depth an edge segment reached (any channel).
     pub largest_edge_depth: f64,
+    /// Where the per-sun passes ran: the reduced sunlight's sweep, the skylight's sweeps and
+    /// the diffusion solves ("the CPU", or the adapter; "the CPU (why)" where the GPU refused).
+    pub on: [String; 3],
 }
 
 /// Clear air shorter than this many sweep steps does not separate two parts of a cloud: the
@@ -196,6 +206,18 @@ pub fn light_with(
     settings: &Settings,
     progress: &dyn crate::model::Progress,
 ) -> Result<Lighting, FrameError> {
+    light_on(tables, frame, settings, progress, None)
+}
+
+/// [`light_with`], the per-sun passes on `on` when given (where `settings.per_sun` lets the
+/// adapter run them; [`crate::lighting::run`]).
+pub fn light_on(
+    tables: &Tables,
+    frame: &Frame,
+    settings: &Settings,
+    progress: &dyn crate::model::Progress,
+    on: Option<OnGpu>,
+) -> Result<Lighting, FrameError> {
     check(tables, frame, settings)?;
     let fields: Vec<&FieldTable> = tables.fields.iter().collect();
     let grid = &frame.grid;
@@ -208,11 +230,24 @@ pub fn light_with(
     progress.update(0, steps, "reduced sunlight and skylight");
     let start = Instant::now();
     let v = voxels(&fields, grid);
-    let tau_sun = sun_depths(grid, &v.ext, -sun_dir);
+    let (tau_sun, sun_on) = run(
+        on,
+        settings.per_sun,
+        "the reduced sunlight",
+        |on| Ok(sun_depths_on(on, grid, &v.ext, -sun_dir)?),
+        || Ok(sun_depths(grid, &v.ext, -sun_dir)),
+    )?;
     let reduced = reduced_sun(frame, &tau_sun);
-    let mut sky = reduced_sky(frame, &v.ext, |g| {
+    let lit = sky_light(frame, |g| {
         transmittance_to_sun(&fields, grid, g, sun_dir, None)
     });
+    let (mut sky, sky_on) = run(
+        on,
+        settings.per_sun,
+        "the skylight",
+        |on| Ok(on.sky().sweep(on.gpu, grid, &v.ext, &lit)?),
+        || Ok(sky_sweeps(grid, &v.ext, &lit)),
+    )?;
     report.propagation_s = start.elapsed().as_secs_f64();
 
     // 3: diffusion per channel.
@@ -236,7 +271,7 @@ pub fn light_with(
         h,
         settings,
     };
-    let mut i0 = sources.solve(&sky, &mut report)?;
+    let mut i0 = sources.solve(&sky, on, &mut report)?;
     report.diffusion_s = start.elapsed().as_secs_f64();
 
     // §3: the clouds' own light carried across clear air into other parts, then solved again.
@@ -251,9 +286,10 @@ pub fn light_with(
             }
         }
         report.clear_air_mean = mean;
-        i0 = sources.solve(&sky, &mut report)?;
+        i0 = sources.solve(&sky, on, &mut report)?;
     }
     report.clear_air_s = start.elapsed().as_secs_f64();
+    (report.on[0], report.on[1]) = (sun_on, sky_on);
     progress.update(steps, steps, "lighting done");
     Ok(Lighting {
         t_sun: tau_sun.iter().map(|t| t.map(|x| (-x).exp())).collect(),
@@ -265,6 +301,28 @@ pub fn light_with(
         shadow: ShadowMap::of(&fields, frame, None),
         report,
     })
+}
+
+/// [`sun_depths`] on the GPU: the beam's sweep ([`crate::lighting::beam_gpu`]) through a
+/// medium that only absorbs, whose beam is the transmittance e^{−τ} (f32), τ = −ln of it.
+fn sun_depths_on(
+    on: OnGpu,
+    grid: &DensityGrid,
+    ext: &[[f64; 3]],
+    l: DVec3,
+) -> Result<Vec<[f64; 3]>, RenderError> {
+    let medium: Vec<BeamMedium> = ext
+        .iter()
+        .map(|&ext| BeamMedium {
+            ext,
+            sca: [0.0; 3],
+            f: [0.0; 3],
+            g: [0.0; 3],
+            share: 0.0,
+        })
+        .collect();
+    let beam = on.beam().sweep(on.gpu, grid, &medium, l)?;
+    Ok(beam.iter().map(|b| b.intensity.map(|t| -t.ln())).collect())
 }
 
 /// What the diffusion solves read: the voxels' optics, which take part, the reduced sun.
@@ -282,7 +340,12 @@ struct Sources<'a> {
 impl Sources<'_> {
     /// Step 3: one solve per channel with the reduced sun and the incident light `sky`
     /// (skylight, and after §3's propagation the clouds' light across clear air).
-    fn solve(&self, sky: &Sky, report: &mut MaxReport) -> Result<Vec<[f64; 3]>, FrameError> {
+    fn solve(
+        &self,
+        sky: &Sky,
+        on: Option<OnGpu>,
+        report: &mut MaxReport,
+    ) -> Result<Vec<[f64; 3]>, FrameError> {
         let v = self.v;
         let mut i0 = vec![[0.0f64; 3]; v.ext.len()];
         for c in 0..3 {
@@ -311,9 +374,19 @@ impl Sources<'_> {
                     })
                     .collect(),
             };
-            let settings = self.settings;
-            let s = diffusion::solve(&problem, settings.tolerance, settings.max_iterations)
-                .map_err(|e| FrameError(format!("channel {}: {e}", ["R", "G", "B"][c])))?;
+            let limits = (self.settings.tolerance, self.settings.max_iterations);
+            let channel = ["R", "G", "B"][c];
+            let (s, solved_on) = run(
+                on,
+                self.settings.per_sun,
+                &format!("channel {channel}"),
+                |on| Ok(on.solver().solve_problem(on.gpu, &problem, limits)?),
+                || {
+                    diffusion::solve(&problem, limits.0, limits.1)
+                        .map_err(|e| FrameError(format!("channel {channel}: {e}")))
+                },
+            )?;
+            report.on[2] = solved_on;
             report.iterations[c] += s.iterations;
             report.residual[c] = s.residual;
             report.unknowns = s.unknowns;

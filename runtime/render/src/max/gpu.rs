@@ -21,8 +21,8 @@ use crate::gpu::{
     FieldsAndSky, GatherView, RenderError, Timings, bind, build, fields_and_sky, filled,
     gather_source, gather_view, sky_light_buffer, storage, timed_frame, v4,
 };
-use crate::lattice::voxel_length;
-use crate::{Frame, FrameError, Image, MAX_FIELDS};
+use crate::lighting::lattice::voxel_length;
+use crate::{checks::FrameError, frame::Frame, image::Image, volume::MAX_FIELDS};
 
 runtime::uniform! {
     /// `MaxParams` of `gather.wgsl` (its comments say what each w holds).
@@ -61,6 +61,8 @@ pub const GATHER_WGSL: &str = include_str!("gather.wgsl");
 pub struct Renderer {
     layout: wgpu::BindGroupLayout,
     pipeline: wgpu::ComputePipeline,
+    /// The per-sun passes' pipelines, compiled on first use.
+    per_sun: crate::lighting::Pipelines,
 }
 
 /// The model's whole shader module, as the renderer compiles it.
@@ -83,7 +85,17 @@ impl Renderer {
             &["gather"],
         );
         let [pipeline] = <[_; 1]>::try_from(pipelines).expect("one pipeline");
-        Self { layout, pipeline }
+        Self {
+            layout,
+            pipeline,
+            per_sun: crate::lighting::Pipelines::default(),
+        }
+    }
+
+    /// The per-sun passes on `gpu` (the adapter this renderer was built for), each compiled
+    /// on its first use.
+    pub fn per_sun<'a>(&'a self, gpu: &'a Gpu) -> crate::lighting::OnGpu<'a> {
+        self.per_sun.on(gpu)
     }
 
     /// Steps 5–6 of the model for `frame` from `lighting` ([`super::cpu::light`] of a frame
@@ -174,7 +186,11 @@ impl Renderer {
             &self.layout,
             "photometeor max gather bindings",
             &[&params, &density, &lighting_buffer, &image, &largest],
-            Some(&sky_light_buffer(device, frame, Some(&lighting.shadow))),
+            Some(&sky_light_buffer(
+                device,
+                frame,
+                Some(lighting.shadow.gpu_rows()),
+            )),
         );
         let (image, timings) = timed_frame(
             gpu,

@@ -22,11 +22,11 @@
 //!    Q_1 = g β_sca E T_sun l/(4π), with E the sun's irradiance and l its direction of travel
 //!    (a collimated sun is one direction bin of the paper's 96), plus the skylight: the sky
 //!    model's radiance (Eqs. 11–15, seen from the box's mid-height) from
-//!    [`crate::lattice::SKY_DIRECTIONS`] equal-solid-angle directions (the paper's 96 cube bins), each
+//!    [`crate::lighting::sky::SKY_DIRECTIONS`] equal-solid-angle directions (the paper's 96 cube bins), each
 //!    reduced through the grid by its own sweep, adds β_sca S and g β_sca F_sky, S its mean
 //!    over the sphere and F_sky its flux over 4π.
 //! 3. **Diffusion** (Eqs. 4, 7) per channel on the voxels of optical depth β_ext h ≥
-//!    [`crate::lattice::MIN_DIFFUSION_VOXEL_DEPTH`] ([`crate::diffusion`]; the thinner fringe a grid's
+//!    [`crate::lighting::lattice::MIN_DIFFUSION_VOXEL_DEPTH`] ([`crate::lighting::diffusion`]; the thinner fringe a grid's
 //!    interpolation leaves, down to 10⁻¹⁹ of the core, would stall the solver), with
 //!    κ_tr = β_ext (σ_tr/σ_t), the bake's `transport_factor` mixed over the fields by their
 //!    extinction, solved to [`Settings::tolerance`] by multigrid-preconditioned CG.
@@ -81,9 +81,11 @@ use serde::{Deserialize, Serialize};
 
 use runtime::gpu::{Gpu, GpuTables, TexelFormat};
 
+use crate::checks::FrameError;
+use crate::frame::Frame;
 use crate::gpu::RenderError;
+use crate::lighting::Place;
 use crate::model::{Job, Model, Need, Pass, Rendered, image_need};
-use crate::{Frame, FrameError};
 
 /// `--model max`.
 pub struct Max;
@@ -143,7 +145,8 @@ impl Model for Max {
         tables: &GpuTables,
     ) -> Result<Rendered, RenderError> {
         let (lighting, reused) = crate::relight::lit(job.lighting, job.frame, s, || {
-            cpu::light_with(job.tables, job.frame, s, job.progress)
+            let on = s.per_sun.on_gpu(gpu).then(|| renderer.per_sun(gpu));
+            cpu::light_on(job.tables, job.frame, s, job.progress, on)
         })?;
         let (image, t, largest) =
             renderer.gather(gpu, job.tables, tables, job.frame, s, &lighting)?;
@@ -163,19 +166,26 @@ impl Model for Max {
 
 /// The frame with its passes (the lighting's steps, then the gather on `on`) and summary.
 fn rendered(
-    image: crate::Image,
+    image: crate::image::Image,
     report: &cpu::MaxReport,
     gather_s: f64,
     on: &str,
     frame: &Frame,
 ) -> Rendered {
+    let lighting_on = if report.on.iter().all(|o| o == "the CPU") {
+        format!("the CPU, {} threads", rayon::current_num_threads())
+    } else {
+        format!(
+            "the reduced sunlight on {}, the skylight on {}, the diffusion on {}",
+            report.on[0], report.on[1], report.on[2]
+        )
+    };
     let summary = format!(
-        "diffusion + Poisson edges (lighting on the CPU, {} threads; gather on {on}): {}×{}, \
+        "diffusion + Poisson edges (lighting on {lighting_on}; gather on {on}): {}×{}, \
          grid {:?}: reduced sunlight {:.2} s, diffusion {:.2} s ({} unknowns, {} levels, {:?} \
          CG iterations to residuals {:.1e}/{:.1e}/{:.1e}), clear-air propagation and second \
          solve {:.2} s (mean light across clear air {:.2e}), final gather {gather_s:.2} s; \
          largest edge depth {:.2}",
-        rayon::current_num_threads(),
         image.width,
         image.height,
         frame.grid.dims,
@@ -226,6 +236,11 @@ pub struct Settings {
     /// Iterations of §3's clear-air propagation (the clouds' light carried across empty voxels
     /// into other parts, then the diffusion solved again), [0, 4]. Default 1, as the paper.
     pub clear_air_iterations: usize,
+    /// Where a GPU render runs the per-sun passes (the reduced sunlight's sweep, the skylight's
+    /// sweeps and the diffusion solves; §3's clear-air propagation stays on the CPU): "auto"
+    /// (the default: the GPU on a real adapter, the CPU on one that emulates a GPU on the
+    /// CPU), "gpu" or "cpu". A CPU render runs them on the CPU.
+    pub per_sun: Place,
 }
 
 impl Default for Settings {
@@ -235,6 +250,7 @@ impl Default for Settings {
             tolerance: 1e-6,
             max_iterations: 500,
             clear_air_iterations: 1,
+            per_sun: Place::Auto,
         }
     }
 }
@@ -246,10 +262,10 @@ impl Settings {
             return Err(FrameError(format!(
                 "threshold = {} is outside the allowed range (0, ∞) (a voxel's \
                  optical depth)",
-                crate::Shown(self.threshold)
+                crate::checks::Shown(self.threshold)
             )));
         }
-        crate::diffusion::check_settings(self.tolerance, self.max_iterations)?;
+        crate::lighting::diffusion::check_settings(self.tolerance, self.max_iterations)?;
         if self.clear_air_iterations > 4 {
             return Err(FrameError(format!(
                 "clear_air_iterations = {} is outside the allowed range [0, 4]",

@@ -12,7 +12,9 @@ use runtime::{FieldTable, Tables, sample};
 use super::{Settings, SvsPhase, SvsSetup};
 use crate::shading::{bilinear_taps, check_fields, coefficients, over_footprint};
 use crate::sky::rayleigh_phase;
-use crate::{Frame, FrameError, Image, MAX_FIELDS, SUN_DIAMETER_DEG};
+use crate::{
+    camera::SUN_DIAMETER_DEG, checks::FrameError, frame::Frame, image::Image, volume::MAX_FIELDS,
+};
 
 /// Quadrature points for the shadowed air outside the slices (module docs of [`super`]).
 const SHADOWED_AIR_POINTS: usize = 64;
@@ -94,7 +96,7 @@ fn prism_span(s: &SvsSetup, res: usize, origin: DVec3, d: DVec3, t0: f64, t1: f6
 /// height, for the extinction, the sunlight reaching a height (Eq. 12 for each) and the
 /// transmittance along a ray.
 struct Air<'a> {
-    atm: &'a crate::Atmosphere,
+    atm: &'a crate::sky::Atmosphere,
     /// N_0 σ_ext per channel (1/m at y = 0) and 1/H of the haze; zero without one.
     haze_ext: [f64; 3],
     haze_gamma: f64,
@@ -172,7 +174,7 @@ struct Svs<'a> {
     air: Air<'a>,
     air_on: bool,
     /// The haze layer's field and layer, if any, and its asymmetry.
-    haze: Option<(FieldTable, &'a crate::Haze)>,
+    haze: Option<(FieldTable, &'a crate::frame::Haze)>,
     haze_g: Option<[f64; 3]>,
     /// n·eye: the eye's plane value.
     n_dot_e: f64,

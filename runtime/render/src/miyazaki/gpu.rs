@@ -15,7 +15,7 @@ use crate::gpu::{
     Dispatch, RenderError, Timings, a4, bind, build, check_sizes, filled, run_slices,
     slice_uniforms, slicing_source, storage, v4,
 };
-use crate::{Frame, Image, MAX_FIELDS, SUN_DIAMETER_DEG};
+use crate::{camera::SUN_DIAMETER_DEG, frame::Frame, image::Image, volume::MAX_FIELDS};
 
 runtime::uniform! {
     /// `SvsParams` of `svs.wgsl` (its comments say what each w holds).

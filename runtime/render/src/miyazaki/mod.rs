@@ -25,10 +25,10 @@
 //!   (C = I_sun ΔI_SVS). As printed, a slice's own light is not attenuated by the slice, and C
 //!   is the Riemann term Δt·β, not Riley's α(1 − e^{−τ}).
 //! - **Atmosphere (§4.4)**: the atmospheric particles are the Rayleigh air, β_sl e^{−h/H}
-//!   with its phase function (Riley Eq. 1), and the aerosol layer `[haze]` ([`crate::Haze`]):
+//!   with its phase function (Riley Eq. 1), and the aerosol layer `[haze]` ([`crate::frame::Haze`]):
 //!   N_0 e^{−h/H_h} particles of a baked field (kind `haze`) with its own Ams_1 (or
 //!   Cornette–Shanks), σ_sca and σ_ext. g_sun_atm(h), the sunlight reaching height h, is the
-//!   sky model's Eq. 12 ([`crate::Atmosphere::sunlight`]) times its analogue for the haze,
+//!   sky model's Eq. 12 ([`crate::sky::Atmosphere::sunlight`]) times its analogue for the haze,
 //!   e^{−N_0 σ_ext H_h e^{−h/H_h}/sin e}; the paper tabulates the same in its atmosphere
 //!   texture. k_multi does not apply to the haze (Eq. 1).
 //!
@@ -49,7 +49,7 @@
 //!   64-point midpoint rule over the shadow's prism; with haze, both species by the midpoint
 //!   rule at 0.02 of an optical depth (at most 2 km) per step, until the transmittance from
 //!   the eye is below 10⁻⁷.
-//! - The ground is a Lambertian plane at y = 0 of albedo [`crate::Frame::ground_albedo`], lit
+//! - The ground is a Lambertian plane at y = 0 of albedo [`crate::frame::Frame::ground_albedo`], lit
 //!   by the sun through the air (Eq. 12) and the final shadow surface; the paper draws shadows
 //!   on its terrain but gives no reflectance model. No skylight reaches the ground.
 //! - The shadow surface covers the box's footprint as seen from the sun; outside it there is
@@ -66,9 +66,9 @@ use serde::{Deserialize, Serialize};
 use runtime::gpu::{Gpu, GpuTables, TexelFormat};
 
 use crate::gpu::RenderError;
-use crate::model::{Job, Model, Need, Rendered, image_need};
+use crate::model::{Job, Model, Need, Pass, Rendered, image_need};
 use crate::shading::{MAX_PHASE_TERM, check_slicing};
-use crate::{Frame, FrameError, basis};
+use crate::{checks::FrameError, frame::Frame, geometry::basis};
 
 /// `--model miyazaki`.
 pub struct Miyazaki;
@@ -141,7 +141,7 @@ impl Model for Miyazaki {
             s.light_resolution,
             t.describe()
         );
-        Ok(Rendered::plain(image, t.passes(), summary))
+        Ok(Rendered::plain(image, Pass::of_gpu(&t), summary))
     }
 }
 
@@ -249,7 +249,7 @@ pub fn check(settings: &Settings) -> Result<(), FrameError> {
     if !(settings.a.is_finite() && settings.a > A_RANGE.0 && settings.a <= A_RANGE.1) {
         return bad(format!(
             "a = {} is outside the allowed range ({}, {}] (the paper uses 1.0–2.0)",
-            crate::Shown(settings.a),
+            crate::checks::Shown(settings.a),
             A_RANGE.0,
             A_RANGE.1
         ));
@@ -257,7 +257,7 @@ pub fn check(settings: &Settings) -> Result<(), FrameError> {
     if !(settings.k_multi.is_finite() && (0.0..=MAX_PHASE_TERM).contains(&settings.k_multi)) {
         return bad(format!(
             "k_multi = {} is outside the allowed range [0, {:e}] (1/sr)",
-            crate::Shown(settings.k_multi),
+            crate::checks::Shown(settings.k_multi),
             MAX_PHASE_TERM
         ));
     }

@@ -11,7 +11,9 @@ use runtime::{FieldTable, Tables};
 use super::{Settings, Setup};
 use crate::shading::{bilinear_taps, check_fields, coefficients, compose, over_footprint};
 use crate::skylight::SkyLight;
-use crate::{Frame, FrameError, Image, LightUpdate, MAX_FIELDS};
+use crate::{
+    checks::FrameError, frame::Frame, image::Image, riley::LightUpdate, volume::MAX_FIELDS,
+};
 
 /// Light-buffer texel: intensity per channel (fraction of the sunlight at that height) and the
 /// expected scatter count n.

@@ -15,7 +15,7 @@ use crate::gpu::{
     fields_and_sky, filled, run_slices, sky_light_buffer, slice_uniforms, slicing_source, storage,
     v4,
 };
-use crate::{Frame, Image, MAX_FIELDS};
+use crate::{frame::Frame, image::Image, volume::MAX_FIELDS};
 
 /// The renderer's WGSL (after [`runtime::gpu::WGSL`], [`crate::gpu::SLICING_WGSL`] and
 /// [`COMPOSE_WGSL`]).
@@ -130,8 +130,8 @@ impl Renderer {
             irradiance,
         } = fields_and_sky(tables, frame);
         let continuum = match settings.light_update {
-            crate::LightUpdate::Continuum => 1.0,
-            crate::LightUpdate::Riley2004 => 0.0,
+            super::LightUpdate::Continuum => 1.0,
+            super::LightUpdate::Riley2004 => 0.0,
         };
         let params = RenderParams {
             eye: v4(setup.eye, if setup.front_to_back { 1.0 } else { 0.0 }),

@@ -18,7 +18,7 @@
 //!    τ = β_ext Δ_l, Δ_l = Δ/(h·l): I ← I · keep(τ), n ← n + α τ (the expected scatter count,
 //!    Eq. 21/22; green channel, as Riley's single alpha), F = F_{n+1+τ} the fields' mix weighted
 //!    like Eq. 6 and linear in fractional n (Riley floored it because his hardware could not
-//!    interpolate float textures). keep is [`crate::LightUpdate`]:
+//!    interpolate float textures). keep is [`LightUpdate`]:
 //!    - `continuum` (default): keep = e^{−τ(1 − αF)}, the forward-scattered share αF of what
 //!      the slab removes stays in the beam. It is first order in τ, so the buffer converges as
 //!      slices are added, and the eye pass reads the light at the slab's middle (the buffer
@@ -47,12 +47,13 @@ use serde::{Deserialize, Serialize};
 
 use runtime::gpu::{Gpu, GpuTables, TexelFormat};
 
+use crate::checks::FrameError;
+use crate::frame::Frame;
 use crate::gpu::RenderError;
-use crate::model::{Job, Model, Need, Rendered, image_need};
+use crate::model::{Job, Model, Need, Pass, Rendered, image_need};
 use crate::shading::{MAX_PHASE_TERM, check_slicing};
-use crate::{Frame, FrameError, LightUpdate};
 
-pub use crate::basis;
+use crate::geometry::basis;
 
 /// `--model riley`.
 pub struct Riley;
@@ -97,7 +98,7 @@ impl Model for Riley {
         if !(s.xi.is_finite() && (0.0..=MAX_PHASE_TERM).contains(&s.xi)) {
             return Err(FrameError(format!(
                 "xi = {} is outside the allowed range [0, {MAX_PHASE_TERM:e}] (1/sr)",
-                crate::Shown(s.xi)
+                crate::checks::Shown(s.xi)
             )));
         }
         Ok(())
@@ -155,7 +156,7 @@ impl Model for Riley {
             s.light_resolution,
             t.describe()
         );
-        Ok(Rendered::plain(image, t.passes(), summary))
+        Ok(Rendered::plain(image, Pass::of_gpu(&t), summary))
     }
 }
 
@@ -250,5 +251,44 @@ impl Setup {
             (i, j),
             (width, height),
         )
+    }
+}
+
+/// The light buffer's update across a slab of optical depth τ = β_ext Δ_l, with albedo α and
+/// forward fraction F (Riley et al. 2004 Eq. 25 and what this project uses instead).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum LightUpdate {
+    /// I ← I e^{−τ(1 − αF)}: of the light a slab removes from the beam, the forward-scattered
+    /// share αF stays in it. First order in τ, and the same for any slicing (a product of
+    /// exponentials), so the buffer converges as slices are added.
+    #[default]
+    Continuum,
+    /// Eq. 25 as printed, I ← I e^{−τ} + I (1 − e^{−τ}) (αF)^τ: its loss is second order in τ,
+    /// so thin slabs lose almost nothing and the buffer brightens without limit as slices are
+    /// added (docs/truth.md).
+    Riley2004,
+}
+
+impl LightUpdate {
+    /// The scene/CLI name: `continuum` or `riley2004`.
+    pub fn parse(name: &str) -> Option<Self> {
+        match name {
+            "continuum" => Some(Self::Continuum),
+            "riley2004" => Some(Self::Riley2004),
+            _ => None,
+        }
+    }
+
+    /// The fraction of the intensity kept across a slab of optical depth `tau` with albedo
+    /// `albedo` and forward fraction `f`.
+    pub fn keep(self, tau: f64, albedo: f64, f: f64) -> f64 {
+        match self {
+            Self::Continuum => (-tau * (1.0 - albedo * f)).exp(),
+            Self::Riley2004 => {
+                let through = (-tau).exp();
+                through + (1.0 - through) * (albedo * f).powf(tau)
+            }
+        }
     }
 }

@@ -44,9 +44,11 @@ use runtime::Tables;
 use runtime::gpu::{Gpu, read_back};
 
 use super::{Passes, Settings, Tracer, TruthImage};
+use crate::checks::FrameError;
+use crate::frame::Frame;
 use crate::gpu::{RenderError, SLICING_WGSL, a4, check_sizes, entry, filled, storage, v4};
 use crate::model::Progress;
-use crate::{Frame, FrameError, MAX_FIELDS};
+use crate::volume::{DensityGrid, MAX_FIELDS};
 
 /// The estimator's WGSL (after [`SLICING_WGSL`]).
 pub const TRUTH_WGSL: &str = include_str!("truth.wgsl");
@@ -355,39 +357,17 @@ pub fn photon_fluxes(
     }))
 }
 
-/// The passes: camera paths through `frame`'s pixels, or with `photon` = (origin, direction)
-/// photons walking forward, one stream per pixel.
-fn trace(
-    renderer: &Renderer,
-    gpu: &Gpu,
+/// The uniform of the passes: the camera (or with `photon` = (origin, direction) the photons'
+/// source), the grid, the sun, the sky and the counts of `tracer`, the optics' sizes `o`.
+fn params(
     tracer: &Tracer,
     frame: &Frame,
     settings: &Settings,
-    progress: &dyn Progress,
+    o: &Optics,
     photon: Option<(DVec3, DVec3)>,
-) -> Result<TruthImage, RenderError> {
-    if let Some(what) = unsupported(frame) {
-        return Err(FrameError(format!(
-            "the GPU truth does not trace {what} yet: render with --cpu"
-        ))
-        .into());
-    }
-    let device = &gpu.device;
+) -> Result<TruthParams, RenderError> {
     let (w, h) = (frame.width, frame.height);
-    let pixels = (w * h) as u64;
     let grid = &frame.grid;
-    check_sizes(
-        device,
-        &[
-            ("density grid bytes", 16 * grid.data.len() as u64),
-            ("per-pixel sums bytes", 32 * pixels),
-            (
-                "path state bytes",
-                (16 * F_ROWS * TILE_PIXELS.min(pixels as usize)) as u64,
-            ),
-        ],
-    )?;
-    let o = optics(tracer);
     let (forward, right, up) = frame
         .camera
         .axes()
@@ -445,7 +425,13 @@ fn trace(
         params.eye = v4(origin, 0.0);
         params.forward = v4(beam, params.forward[3] as f64);
     }
-    let light_rows: Vec<[f32; 4]> = tracer
+    Ok(params)
+}
+
+/// Three rows per light: (position, 1 for a spot), (intensity, 0), (the spot's axis, the cosine
+/// of its half angle; −2 for a point light).
+fn light_rows(tracer: &Tracer) -> Vec<[f32; 4]> {
+    tracer
         .lights
         .iter()
         .flat_map(|l| {
@@ -458,8 +444,35 @@ fn trace(
                 v4(axis, cos),
             ]
         })
-        .collect();
+        .collect()
+}
 
+/// The passes' buffers, bound.
+struct Bound {
+    /// The uniform ([`TruthParams`]), rewritten per tile.
+    params: wgpu::Buffer,
+    /// Per pixel the sums of the samples and of their squares.
+    sums: wgpu::Buffer,
+    /// Per pixel T_vol.
+    transparency: wgpu::Buffer,
+    /// The paths cut short and the paths still under way.
+    counters: wgpu::Buffer,
+    bind_group: wgpu::BindGroup,
+    /// The bytes between the four [`StepParams`] (the dispatches' dynamic offsets).
+    step_stride: usize,
+}
+
+/// The passes' buffers for `params`, the `tracer`'s optics `o`, the `grid` and `pixels`
+/// pixels, bound to the renderer's layout.
+fn bind(
+    renderer: &Renderer,
+    device: &wgpu::Device,
+    params: &TruthParams,
+    (tracer, o): (&Tracer, &Optics),
+    grid: &DensityGrid,
+    pixels: u64,
+) -> Bound {
+    let light_rows = light_rows(tracer);
     let usage = wgpu::BufferUsages::STORAGE;
     let nonempty = |b: &[u8]| -> Vec<u8> {
         if b.is_empty() {
@@ -471,7 +484,7 @@ fn trace(
     let params_buffer = filled(
         device,
         "truth params",
-        bytemuck::bytes_of(&params),
+        bytemuck::bytes_of(params),
         wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
     );
     let density = filled(
@@ -561,34 +574,51 @@ fn trace(
             })
             .collect::<Vec<_>>(),
     });
-    // The transparency pass: one dispatch over the image.
-    let transparency_pass = || {
-        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
-            label: Some("photometeor truth transparency"),
-        });
+    Bound {
+        params: params_buffer,
+        sums,
+        transparency,
+        counters,
+        bind_group,
+        step_stride,
+    }
+}
+
+impl Bound {
+    /// The transparency pass: one dispatch over the image of `w` × `h` pixels.
+    fn transparency_pass(&self, gpu: &Gpu, renderer: &Renderer, (w, h): (usize, usize)) {
+        let mut encoder = gpu
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("photometeor truth transparency"),
+            });
         {
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some("photometeor truth transparency"),
                 timestamp_writes: None,
             });
             pass.set_pipeline(&renderer.transparency);
-            pass.set_bind_group(0, &bind_group, &[0]);
+            pass.set_bind_group(0, &self.bind_group, &[0]);
             pass.dispatch_workgroups(w.div_ceil(8) as u32, h.div_ceil(8) as u32, 1);
         }
         gpu.queue.submit([encoder.finish()]);
-    };
-    // DISPATCHES_PER_SUBMIT steps of the paths of a tile of `len` pixels, the first beginning
-    // a sample if `begin`, the last counting the paths still under way.
-    let steps_of = |len: usize, begin: bool| {
-        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
-            label: Some("photometeor truth steps"),
-        });
+    }
+
+    /// DISPATCHES_PER_SUBMIT steps of the paths (the photons' with `photon`) of a tile of
+    /// `len` pixels, the first beginning a sample if `begin`, the last counting the paths
+    /// still under way.
+    fn steps(&self, gpu: &Gpu, renderer: &Renderer, photon: bool, (len, begin): (usize, bool)) {
+        let mut encoder = gpu
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("photometeor truth steps"),
+            });
         {
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some("photometeor truth steps"),
                 timestamp_writes: None,
             });
-            pass.set_pipeline(if photon.is_some() {
+            pass.set_pipeline(if photon {
                 &renderer.photon
             } else {
                 &renderer.step
@@ -601,15 +631,51 @@ fn trace(
                     (false, true) => 2,
                     (true, true) => 3,
                 };
-                pass.set_bind_group(0, &bind_group, &[(kind * step_stride) as u32]);
+                pass.set_bind_group(0, &self.bind_group, &[(kind * self.step_stride) as u32]);
                 pass.dispatch_workgroups(len.div_ceil(64) as u32, 1, 1);
             }
         }
         gpu.queue.submit([encoder.finish()]);
-    };
+    }
+}
 
-    transparency_pass();
-    let t_vol: Vec<f64> = read_back(gpu, &transparency, 4 * pixels.max(4))?
+/// The passes: camera paths through `frame`'s pixels, or with `photon` = (origin, direction)
+/// photons walking forward, one stream per pixel.
+fn trace(
+    renderer: &Renderer,
+    gpu: &Gpu,
+    tracer: &Tracer,
+    frame: &Frame,
+    settings: &Settings,
+    progress: &dyn Progress,
+    photon: Option<(DVec3, DVec3)>,
+) -> Result<TruthImage, RenderError> {
+    if let Some(what) = unsupported(frame) {
+        return Err(FrameError(format!(
+            "the GPU truth does not trace {what} yet: render with --cpu"
+        ))
+        .into());
+    }
+    let device = &gpu.device;
+    let (w, h) = (frame.width, frame.height);
+    let pixels = (w * h) as u64;
+    let grid = &frame.grid;
+    check_sizes(
+        device,
+        &[
+            ("density grid bytes", 16 * grid.data.len() as u64),
+            ("per-pixel sums bytes", 32 * pixels),
+            (
+                "path state bytes",
+                (16 * F_ROWS * TILE_PIXELS.min(pixels as usize)) as u64,
+            ),
+        ],
+    )?;
+    let o = optics(tracer);
+    let mut params = params(tracer, frame, settings, &o, photon)?;
+    let bound = bind(renderer, device, &params, (tracer, &o), grid, pixels);
+    bound.transparency_pass(gpu, renderer, (w, h));
+    let t_vol: Vec<f64> = read_back(gpu, &bound.transparency, 4 * pixels.max(4))?
         .into_iter()
         .flatten()
         .take(pixels as usize)
@@ -628,13 +694,13 @@ fn trace(
             params.sizes[2] = done as u32;
             params.sizes[3] = batch as u32;
             gpu.queue
-                .write_buffer(&params_buffer, 0, bytemuck::bytes_of(&params));
+                .write_buffer(&bound.params, 0, bytemuck::bytes_of(&params));
             let mut begin = true;
             loop {
-                gpu.queue.write_buffer(&counters, 4, &[0; 4]);
-                steps_of(len, begin);
+                gpu.queue.write_buffer(&bound.counters, 4, &[0; 4]);
+                bound.steps(gpu, renderer, photon.is_some(), (len, begin));
                 begin = false;
-                let c = read_back(gpu, &counters, 16)?[0];
+                let c = read_back(gpu, &bound.counters, 16)?[0];
                 let cut_paths = c[0].to_bits();
                 if cut_paths > 0 {
                     return Err(FrameError(format!(
@@ -650,7 +716,7 @@ fn trace(
                 }
             }
         }
-        let rows = read_back(gpu, &sums, 32 * pixels)?;
+        let rows = read_back(gpu, &bound.sums, 32 * pixels)?;
         last = (batch, pass_start.elapsed().as_secs_f64());
         for (p, a) in passes.acc.iter_mut().enumerate() {
             let (s, q) = (rows[2 * p], rows[2 * p + 1]);

@@ -151,7 +151,7 @@ pub fn sample_rayleigh(u: f64) -> f64 {
 
 /// The direction at angle θ (given as 1 − cos θ and sin θ) from `d`, at azimuth 2π·`u`.
 pub fn rotate(d: DVec3, one_minus_mu: f64, sin: f64, u: f64) -> DVec3 {
-    let (e1, e2) = crate::basis(d);
+    let (e1, e2) = crate::geometry::basis(d);
     let phi = 2.0 * PI * u;
     ((1.0 - one_minus_mu) * d + sin * (phi.cos() * e1 + phi.sin() * e2)).normalize()
 }

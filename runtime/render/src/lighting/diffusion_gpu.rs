@@ -1,7 +1,7 @@
-//! The diffusion solve of [`crate::diffusion`] on wgpu (`diffusion.wgsl`): the same operator
+//! The diffusion solve of [`super::diffusion`] on wgpu (`diffusion.wgsl`): the same operator
 //! and multigrid hierarchy (assembled and coarsened on the CPU, uploaded once), conjugate
 //! gradients preconditioned by the same V-cycle (red-black Gauss–Seidel, the Galerkin coarse
-//! levels, the coarsest smoothed [`crate::diffusion::COARSEST_SWEEPS`] times), every vector
+//! levels, the coarsest smoothed [`super::diffusion::COARSEST_SWEEPS`] times), every vector
 //! operation a dispatch.
 //!
 //! f32 cannot take a relative residual much below 10⁻⁵, and the models ask for 10⁻⁶: the
@@ -17,7 +17,9 @@ use std::time::Instant;
 
 use runtime::gpu::{Gpu, GpuError, Readback};
 
-use crate::diffusion::{COARSEST_SWEEPS, NotConverged, Operator, Solution, Stencil};
+use super::diffusion::{
+    COARSEST_SWEEPS, NotConverged, Operator, Problem, Solution, Stencil, assemble,
+};
 use crate::gpu::entry;
 
 /// The inner solve's relative residual on the GPU (f32) per refinement.
@@ -74,6 +76,49 @@ pub struct Solver {
 }
 
 impl Solver {
+    /// The bind group of one upload: the dispatches' parameters (bound 64 bytes at a time at
+    /// a dynamic offset), the operators' rows, the vectors, the partial sums and α, β.
+    fn bind(&self, device: &wgpu::Device, buffers: [&wgpu::Buffer; 5]) -> wgpu::BindGroup {
+        device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("photometeor diffusion bindings"),
+            layout: &self.layout,
+            entries: &buffers
+                .iter()
+                .enumerate()
+                .map(|(i, b)| wgpu::BindGroupEntry {
+                    binding: i as u32,
+                    resource: if i == 0 {
+                        wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                            buffer: b,
+                            offset: 0,
+                            size: wgpu::BufferSize::new(64),
+                        })
+                    } else {
+                        b.as_entire_binding()
+                    },
+                })
+                .collect::<Vec<_>>(),
+        })
+    }
+
+    /// [`super::diffusion::solve`] on the GPU: the same operator, hierarchy and right-hand
+    /// side, the conjugate gradients in f32 inside an f64 refinement (module docs).
+    pub fn solve_problem(
+        &self,
+        gpu: &Gpu,
+        p: &Problem,
+        (tolerance, max_iterations): (f64, usize),
+    ) -> Result<Solution, SolveError> {
+        let start = Instant::now();
+        let (a, b) = assemble(p);
+        let op = Operator::new(a);
+        let mut s = self
+            .upload(gpu, &op)?
+            .solve(&b, tolerance, max_iterations)?;
+        s.seconds = start.elapsed().as_secs_f64();
+        Ok(s)
+    }
+
     /// Compiles `diffusion.wgsl`.
     pub fn new(gpu: &Gpu) -> Self {
         use wgpu::BufferBindingType::{Storage, Uniform};
@@ -170,21 +215,118 @@ pub struct Uploaded<'a> {
     update_d: Vec<Call>,
 }
 
+/// The hierarchy's levels (each one's dims, size and first row) and the operators' rows, every
+/// level's after the finer one's: (diagonal, the three couplings) per voxel (one row of zeros
+/// for a problem without unknowns, so that a buffer can be bound).
+fn levels(stencils: &[Stencil]) -> (Vec<Level>, Vec<[f32; 4]>) {
+    let mut levels = Vec::new();
+    let mut rows: Vec<[f32; 4]> = Vec::new();
+    for s in stencils {
+        levels.push(Level {
+            dims: s.dims.map(|d| d as u32),
+            n: s.diag.len() as u32,
+            o: rows.len() as u32,
+        });
+        for i in 0..s.diag.len() {
+            rows.push([s.diag[i], s.w[0][i], s.w[1][i], s.w[2][i]].map(|v| v as f32));
+        }
+    }
+    if rows.is_empty() {
+        rows.push([0.0; 4]);
+    }
+    (levels, rows)
+}
+
+/// A dispatch's parameters (`diffusion.wgsl`'s `Params`): level `l`'s dims, the sweep's colour,
+/// the coarser level `c`'s dims and size (`l`'s own without one), both levels' first rows, `l`'s
+/// size, and the four vector offsets `sel` the kernel reads and writes.
+fn words(l: &Level, c: Option<&Level>, colour: u32, sel: [usize; 4]) -> [u32; 16] {
+    let c = c.copied().unwrap_or(*l);
+    let u = |v: usize| v as u32;
+    [
+        l.dims[0],
+        l.dims[1],
+        l.dims[2],
+        colour,
+        c.dims[0],
+        c.dims[1],
+        c.dims[2],
+        c.n,
+        l.o,
+        c.o,
+        l.n,
+        0,
+        u(sel[0]),
+        u(sel[1]),
+        u(sel[2]),
+        u(sel[3]),
+    ]
+}
+
+/// The V-cycle from level 0 down and back up (diffusion::Hierarchy::vcycle), z_l from r_l,
+/// the vectors z, r and the residual at offsets `(z, r, res)` plus each level's first row.
+fn vcycle(plan: &mut Plan, levels: &[Level], (z, r, res): (usize, usize, usize)) -> Vec<Call> {
+    let mut vcycle = Vec::new();
+    for (k, l) in levels.iter().enumerate() {
+        let at = |base: usize, l: &Level| base + l.o as usize;
+        let n = l.n as usize;
+        vcycle.push(plan.call(Kernel::Zero, words(l, None, 0, [0, 0, at(z, l), 0]), n));
+        let gs = |plan: &mut Plan, colour: u32| {
+            plan.call(
+                Kernel::GaussSeidel,
+                words(l, None, colour, [at(r, l), 0, at(z, l), 0]),
+                n,
+            )
+        };
+        if k + 1 == levels.len() {
+            for _ in 0..COARSEST_SWEEPS {
+                for colour in [0, 1, 1, 0] {
+                    vcycle.push(gs(plan, colour));
+                }
+            }
+            break;
+        }
+        vcycle.push(gs(plan, 0));
+        vcycle.push(gs(plan, 1));
+        let c = &levels[k + 1];
+        vcycle.push(plan.call(
+            Kernel::Residual,
+            words(l, None, 0, [at(r, l), at(z, l), at(res, l), 0]),
+            n,
+        ));
+        vcycle.push(plan.call(
+            Kernel::Restriction,
+            words(l, Some(c), 0, [at(res, l), 0, at(r, c), 0]),
+            c.n as usize,
+        ));
+    }
+    // Back up: prolong and post-smooth each level from the second-coarsest to the finest.
+    for k in (0..levels.len().saturating_sub(1)).rev() {
+        let (l, c) = (&levels[k], &levels[k + 1]);
+        let at = |base: usize, l: &Level| base + l.o as usize;
+        let n = l.n as usize;
+        vcycle.push(plan.call(
+            Kernel::Prolong,
+            words(l, Some(c), 0, [0, 0, at(z, l), at(z, c)]),
+            n,
+        ));
+        for colour in [1, 0] {
+            vcycle.push(plan.call(
+                Kernel::GaussSeidel,
+                words(l, None, colour, [at(r, l), 0, at(z, l), 0]),
+                n,
+            ));
+        }
+    }
+    vcycle
+}
+
 impl<'a> Uploaded<'a> {
     fn new(solver: &'a Solver, gpu: &'a Gpu, op: &'a Operator) -> Result<Self, GpuError> {
         let device = &gpu.device;
         let stencils: &[Stencil] = op.levels();
-        let mut levels = Vec::new();
-        let mut o = 0usize;
-        for s in stencils {
-            levels.push(Level {
-                dims: s.dims.map(|d| d as u32),
-                n: s.diag.len() as u32,
-                o: o as u32,
-            });
-            o += s.diag.len();
-        }
-        let total = o.max(1);
+        let (levels, rows) = levels(stencils);
+        let total = rows.len();
         let n0 = stencils.first().map_or(0, |s| s.diag.len());
         // Vector offsets: z, r, res per level; x, d, Ad of level 0.
         let (z, r, res) = (0usize, total, 2 * total);
@@ -199,91 +341,8 @@ impl<'a> Uploaded<'a> {
                 limit,
             });
         }
-        let mut rows: Vec<[f32; 4]> = Vec::with_capacity(total);
-        for s in stencils {
-            for i in 0..s.diag.len() {
-                rows.push([s.diag[i], s.w[0][i], s.w[1][i], s.w[2][i]].map(|v| v as f32));
-            }
-        }
-        if rows.is_empty() {
-            rows.push([0.0; 4]);
-        }
         let mut plan = Plan::default();
-        let u = |v: usize| v as u32;
-        let words = |l: &Level, c: Option<&Level>, colour: u32, sel: [usize; 4]| -> [u32; 16] {
-            let c = c.copied().unwrap_or(*l);
-            [
-                l.dims[0],
-                l.dims[1],
-                l.dims[2],
-                colour,
-                c.dims[0],
-                c.dims[1],
-                c.dims[2],
-                c.n,
-                l.o,
-                c.o,
-                l.n,
-                0,
-                u(sel[0]),
-                u(sel[1]),
-                u(sel[2]),
-                u(sel[3]),
-            ]
-        };
-        // The V-cycle from level 0 (diffusion::Hierarchy::vcycle), z_l from r_l.
-        let mut vcycle = Vec::new();
-        for (k, l) in levels.iter().enumerate() {
-            let at = |base: usize, l: &Level| base + l.o as usize;
-            let n = l.n as usize;
-            vcycle.push(plan.call(Kernel::Zero, words(l, None, 0, [0, 0, at(z, l), 0]), n));
-            let gs = |plan: &mut Plan, colour: u32| {
-                plan.call(
-                    Kernel::GaussSeidel,
-                    words(l, None, colour, [at(r, l), 0, at(z, l), 0]),
-                    n,
-                )
-            };
-            if k + 1 == levels.len() {
-                for _ in 0..COARSEST_SWEEPS {
-                    for colour in [0, 1, 1, 0] {
-                        vcycle.push(gs(&mut plan, colour));
-                    }
-                }
-                break;
-            }
-            vcycle.push(gs(&mut plan, 0));
-            vcycle.push(gs(&mut plan, 1));
-            let c = &levels[k + 1];
-            vcycle.push(plan.call(
-                Kernel::Residual,
-                words(l, None, 0, [at(r, l), at(z, l), at(res, l), 0]),
-                n,
-            ));
-            vcycle.push(plan.call(
-                Kernel::Restriction,
-                words(l, Some(c), 0, [at(res, l), 0, at(r, c), 0]),
-                c.n as usize,
-            ));
-        }
-        // Back up: prolong and post-smooth each level from the second-coarsest to the finest.
-        for k in (0..levels.len().saturating_sub(1)).rev() {
-            let (l, c) = (&levels[k], &levels[k + 1]);
-            let at = |base: usize, l: &Level| base + l.o as usize;
-            let n = l.n as usize;
-            vcycle.push(plan.call(
-                Kernel::Prolong,
-                words(l, Some(c), 0, [0, 0, at(z, l), at(z, c)]),
-                n,
-            ));
-            for colour in [1, 0] {
-                vcycle.push(plan.call(
-                    Kernel::GaussSeidel,
-                    words(l, None, colour, [at(r, l), 0, at(z, l), 0]),
-                    n,
-                ));
-            }
-        }
+        let vcycle = vcycle(&mut plan, &levels, (z, r, res));
         let (mut first, mut apply, mut update_xr, mut after_vcycle, mut update_d) =
             (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
         if let Some(l0) = levels.first() {
@@ -352,36 +411,7 @@ impl<'a> Uploaded<'a> {
             usage: U::STORAGE | U::COPY_DST,
             mapped_at_creation: false,
         });
-        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("photometeor diffusion bindings"),
-            layout: &solver.layout,
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                        buffer: &params,
-                        offset: 0,
-                        size: wgpu::BufferSize::new(64),
-                    }),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: stencil.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: v.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 3,
-                    resource: partial.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 4,
-                    resource: coef.as_entire_binding(),
-                },
-            ],
-        });
+        let bind_group = solver.bind(device, [&params, &stencil, &v, &partial, &coef]);
         Ok(Self {
             gpu,
             solver,

@@ -1,7 +1,7 @@
-//! The beam's sweep ([`super::cpu::beam_sweep`]: step 1 of the model and the loss of step 2)
-//! on wgpu (`beam.wgsl`), one of the per-sun passes a GPU render runs there with `per_sun =
-//! "auto"` on a real adapter or `"gpu"`: one dispatch per layer along the sun's direction of
-//! travel, one invocation per voxel of the layer, in f32. The medium per voxel (β_ext, β_sca,
+//! The beam's sweep ([`super::beam::beam_sweep`] with the peak from the medium and the peak's
+//! depth D, [`super::beam::PeakFrom::Medium`] and [`super::beam::Depth::Peak`]) on wgpu
+//! (`beam.wgsl`): one dispatch per layer along the sun's direction of travel, one invocation
+//! per voxel of the layer, in f32. The medium per voxel (β_ext, β_sca,
 //! the split's f, g and the peak's share) comes from the CPU, the beam and its losses go back
 //! to it in the CPU sweep's layout.
 
@@ -9,13 +9,13 @@ use glam::DVec3;
 
 use runtime::gpu::{Gpu, read_back};
 
-use super::cpu::{BEAM_STATE, BeamMedium};
-use super::sweep_gpu::{
+use super::beam::{BeamMedium, BeamState};
+use super::transport_gpu::{
     bind_with_steps, buffers_fit, dispatch_steps, layer_fits, push_step, sweep_pipeline,
     with_upwind,
 };
-use crate::DensityGrid;
 use crate::gpu::{RenderError, filled, storage};
+use crate::volume::DensityGrid;
 
 /// The sweep's WGSL, without the shared upwind lookup ([`source`] puts it before).
 pub const BEAM_WGSL: &str = include_str!("beam.wgsl");
@@ -58,7 +58,7 @@ impl BeamSweeper {
     }
 
     /// The beam travelling along `l` through `medium` on `grid`, as
-    /// [`super::cpu::beam_sweep`] gives it (in f32). Refused, naming the value, where a layer
+    /// [`super::beam::beam_sweep`] gives it (in f32). Refused, naming the value, where a layer
     /// exceeds the adapter's workgroups or a buffer its storage-binding limit.
     pub fn sweep(
         &self,
@@ -66,11 +66,11 @@ impl BeamSweeper {
         grid: &DensityGrid,
         medium: &[BeamMedium],
         l: DVec3,
-    ) -> Result<Vec<[f64; BEAM_STATE]>, RenderError> {
+    ) -> Result<Vec<BeamState>, RenderError> {
         let (device, queue) = (&gpu.device, &gpu.queue);
         let dims = grid.dims;
         let voxels = medium.len();
-        let way = crate::lattice::Way::along(grid, l);
+        let way = super::lattice::Way::along(grid, l);
         let (a, b, c) = (way.axis, (way.axis + 1) % 3, (way.axis + 2) % 3);
         let groups = (dims[b] * dims[c]).div_ceil(WG);
         layer_fits(gpu, "the beam's GPU sweep", groups, dims)?;
@@ -87,7 +87,7 @@ impl BeamSweeper {
             "lower [render] grid_resolution",
         )?;
         let mut steps: Vec<u8> = Vec::new();
-        let run = crate::lattice::layer_order(dims[a], way.forward);
+        let run = super::lattice::layer_order(dims[a], way.forward);
         for (s, &k) in run.iter().enumerate() {
             let words = [a, b, c, k, usize::from(s == 0), 0, 1, s % 2];
             push_step(&mut steps, words.map(|w| w as u32));
@@ -140,17 +140,16 @@ impl BeamSweeper {
             .chunks_exact(4)
             .zip(medium)
             .map(|(v, m)| {
-                let mut out = [0.0; BEAM_STATE];
-                for ch in 0..3 {
-                    out[ch] = f64::from(v[0][ch]);
-                    out[4 + ch] = m.ext[ch];
-                    out[7 + ch] = m.sca[ch];
-                    out[10 + ch] = f64::from(v[1][ch]);
-                    out[13 + ch] = f64::from(v[2][ch]);
-                    out[16 + ch] = f64::from(v[3][ch]);
+                let row = |k: usize| std::array::from_fn(|ch| f64::from(v[k][ch]));
+                BeamState {
+                    intensity: row(0),
+                    depth: f64::from(v[0][3]),
+                    ext: m.ext,
+                    sca: m.sca,
+                    dropped: row(1),
+                    forward: row(2),
+                    loss: row(3),
                 }
-                out[3] = f64::from(v[0][3]);
-                out
             })
             .collect())
     }

@@ -1,5 +1,5 @@
 //! The diffuse light by discrete ordinates: the δ-M-scaled transfer equation solved on the voxel
-//! grid along a set of directions, by upwind sweeps ([`crate::lattice::sweep`]) and source
+//! grid along a set of directions, by upwind sweeps ([`crate::lighting::lattice::sweep`]) and source
 //! iteration from the diffusion's P1 radiance (the module docs of [`super`] say where it sits).
 //!
 //! Per voxel and channel the radiance over the sphere is kept as its real spherical-harmonic
@@ -12,7 +12,7 @@ use std::f64::consts::PI;
 use glam::DVec3;
 use rayon::prelude::*;
 
-use crate::DensityGrid;
+use crate::volume::DensityGrid;
 
 /// The highest spherical-harmonic degree kept.
 pub const DEGREE: usize = 4;
@@ -157,7 +157,7 @@ pub(crate) fn layer_axes(axis: usize) -> (usize, usize) {
 
 /// `dirs` grouped by the axis they travel along most and its sign (the six sweep orders).
 pub(crate) fn groups(grid: &DensityGrid, dirs: &[DVec3]) -> Vec<Group> {
-    let h = crate::lattice::voxel_size(grid);
+    let h = crate::lighting::lattice::voxel_size(grid);
     let mut groups: Vec<Group> = Vec::new();
     for &w in dirs {
         let a = (0..3)
@@ -331,7 +331,7 @@ fn add_layers(
 /// returning the new moments (equal weights `weight`). The directions of a group share the
 /// layer order, so each voxel's emission harmonics are formed once per group, and only two
 /// layers of each direction's state are kept. Per direction the state one layer back is
-/// [`crate::lattice::upwind`]'s (clear air outside: zero), and the step is [`advance`]'s.
+/// [`crate::lighting::lattice::upwind`]'s (clear air outside: zero), and the step is [`advance`]'s.
 fn sweep_round(
     grid: &DensityGrid,
     medium: &Medium,
@@ -354,11 +354,11 @@ fn sweep_round(
         // The moments of the last layers, not yet added to `next`.
         let mut block = vec![[0.0f64; PER_VOXEL]; nb * nc * LAYER_BLOCK];
         let mut held: Vec<usize> = Vec::with_capacity(LAYER_BLOCK);
-        let layers = crate::lattice::layer_order(dims[a], group.forward);
+        let layers = crate::lighting::lattice::layer_order(dims[a], group.forward);
         for (step, &k) in layers.iter().enumerate() {
             let back_of = |d: usize, u: f64, v: f64| -> [f64; 9] {
                 let at = |ub: usize, vc: usize| &prev[(ub + vc * nb) * count + d];
-                crate::lattice::upwind(at, (nb, nc), (u, v), [0.0; 9])
+                crate::lighting::lattice::upwind(at, (nb, nc), (u, v), [0.0; 9])
             };
             let slot = held.len() * nb * nc;
             cur.par_chunks_mut(count)
@@ -489,7 +489,7 @@ pub fn solve(
 }
 
 /// [`solve`]'s iteration with the sweeps of a round done by `round` (the CPU's
-/// [`sweep_round`], or the GPU's [`super::sweep_gpu::Sweeps::round`]), which may fail.
+/// [`sweep_round`], or the GPU's [`super::transport_gpu::Sweeps::round`]), which may fail.
 pub fn solve_with<E>(
     start: Vec<[f64; PER_VOXEL]>,
     (tolerance, max_iterations): (f64, usize),
@@ -530,14 +530,14 @@ impl Coarse {
     /// The blocks of `factor`³ voxels of `fine`.
     pub fn new(fine: &DensityGrid, factor: usize) -> Self {
         let dims = Self::dims(fine.dims, factor);
-        let h = crate::lattice::voxel_size(fine);
+        let h = crate::lighting::lattice::voxel_size(fine);
         let extent = DVec3::from_array(std::array::from_fn(|a| (dims[a] * factor) as f64 * h[a]));
         Self {
             grid: DensityGrid {
                 min_m: fine.min_m,
                 max_m: fine.min_m + extent,
                 dims,
-                data: vec![[0.0; crate::MAX_FIELDS]; dims[0] * dims[1] * dims[2]],
+                data: vec![[0.0; crate::volume::MAX_FIELDS]; dims[0] * dims[1] * dims[2]],
             },
             factor,
             fine: fine.dims,
@@ -707,7 +707,7 @@ mod tests {
         p
     }
 
-    /// One round as a sweep per direction (`crate::lattice::sweep`), the emission summed in
+    /// One round as a sweep per direction (`crate::lighting::lattice::sweep`), the emission summed in
     /// its own terms: what [`sweep_round`] must equal.
     fn round_by_direction(
         grid: &DensityGrid,
@@ -720,7 +720,7 @@ mod tests {
         for &w in dirs {
             let y = harmonics(w);
             let p_sun = legendre(w.dot(medium.l));
-            let state = crate::lattice::sweep::<9>(grid, w, [0.0; 9], |i, back, ds| {
+            let state = crate::lighting::lattice::sweep::<9>(grid, w, [0.0; 9], |i, back, ds| {
                 let mut out = [0.0; 9];
                 for c in 0..3 {
                     let ext = medium.ext[i][c];
@@ -755,9 +755,9 @@ mod tests {
     fn a_round_of_grouped_sweeps_equals_a_sweep_per_direction() {
         // A lumpy medium on an uneven grid (every axis leads some directions), lit by the sun
         // and the sky, with moments that are not those of any one radiance.
-        let grid = crate::lattice::fixture::uneven_grid();
+        let grid = crate::lighting::lattice::fixture::uneven_grid();
         let n = grid.data.len();
-        let wobble = crate::lattice::fixture::wobble;
+        let wobble = crate::lighting::lattice::fixture::wobble;
         let medium = Medium {
             ext: (0..n)
                 .map(|i| std::array::from_fn(|c| 3.0 * wobble(i, c) + 0.2))
@@ -793,7 +793,7 @@ mod tests {
                 std::array::from_fn(|k| wobble(i, k + 20) / (1 + DEGREES[k % HARMONICS]) as f64)
             })
             .collect();
-        let dirs = crate::lattice::fibonacci_directions(40);
+        let dirs = crate::lighting::lattice::fibonacci_directions(40);
         let want = round_by_direction(&grid, &medium, &m, &dirs);
         let got = sweep_round(&grid, &medium, &m, &groups(&grid, &dirs), 4.0 * PI / 40.0);
         let scale = want.iter().flatten().fold(0.0f64, |a, v| a.max(v.abs()));
@@ -816,7 +816,7 @@ mod tests {
             min_m: DVec3::new(-1.0, 0.0, 2.0),
             max_m: DVec3::new(0.4, 1.2, 3.0),
             dims: [7, 6, 5],
-            data: vec![[0.0; crate::MAX_FIELDS]; 210],
+            data: vec![[0.0; crate::volume::MAX_FIELDS]; 210],
         };
         let coarse = Coarse::new(&fine, 2);
         assert_eq!(coarse.grid.dims, [4, 3, 3]);
@@ -852,7 +852,7 @@ mod tests {
             let (x, y, z) = (i % 7, (i / 7) % 6, i / 42);
             let centre = |k: usize| (k as f64 + 0.5) * h;
             let p = fine.min_m + DVec3::new(centre(x), centre(y), centre(z));
-            let v = crate::lattice::trilinear(&coarse.grid, &at_coarse, None, p);
+            let v = crate::lighting::lattice::trilinear(&coarse.grid, &at_coarse, None, p);
             let u = |k: usize, n: usize| {
                 (k as f64 + 0.5) / 2.0 - 0.5 >= 0.0
                     && (k as f64 + 0.5) / 2.0 - 0.5 <= (n - 1) as f64
@@ -893,7 +893,7 @@ mod tests {
 
     #[test]
     fn the_harmonics_are_orthonormal() {
-        let dirs = crate::lattice::fibonacci_directions(20_000);
+        let dirs = crate::lighting::lattice::fibonacci_directions(20_000);
         let w = 4.0 * PI / dirs.len() as f64;
         let mut gram = [[0.0; HARMONICS]; HARMONICS];
         for d in &dirs {

@@ -1,21 +1,21 @@
-//! The reduced skylight's sweeps ([`crate::lattice::sky_sweeps`]) on wgpu (`sky.wgsl`), one of
+//! The reduced skylight's sweeps ([`super::sky::sky_sweeps`]) on wgpu (`sky.wgsl`), one of
 //! the per-sun passes a GPU render runs there with `per_sun = "auto"` on a real adapter or
 //! `"gpu"`: one dispatch per layer of each sweep order (the directions that travel most along
 //! one axis and sign), one invocation per voxel of the layer looping over the order's
-//! directions, in f32; the lit directions ([`crate::lattice::sky_light`]) come from the CPU and
+//! directions, in f32; the lit directions ([`super::sky::sky_light`]) come from the CPU and
 //! the mean skylight and its flux per voxel go back to it.
 
 use glam::DVec3;
 
 use runtime::gpu::{Gpu, read_back};
 
-use super::sweep_gpu::{
+use super::sky::{Sky, sky_orders};
+use super::transport_gpu::{
     bind_with_steps, buffers_fit, dispatch_steps, layer_fits, push_step, sweep_pipeline,
     with_upwind,
 };
-use crate::DensityGrid;
 use crate::gpu::{RenderError, filled, storage};
-use crate::lattice::{Sky, sky_orders};
+use crate::volume::DensityGrid;
 
 /// The sweeps' WGSL, without the shared upwind lookup ([`source`] puts it before).
 pub const SKY_WGSL: &str = include_str!("sky.wgsl");
@@ -55,7 +55,7 @@ impl SkySweeper {
     }
 
     /// The skylight of `lit` (towards the sky, radiance per channel beyond the box) through
-    /// the grid of β_ext `ext`, as [`crate::lattice::sky_sweeps`] gives it (in f32). Refused,
+    /// the grid of β_ext `ext`, as [`super::sky::sky_sweeps`] gives it (in f32). Refused,
     /// naming the value, where a layer exceeds the adapter's workgroups or a buffer its
     /// storage-binding limit.
     pub fn sweep(
@@ -83,7 +83,7 @@ impl SkySweeper {
             let (b, c) = ((a + 1) % 3, (a + 2) % 3);
             let count = order.len();
             largest_state = largest_state.max(2 * dims[b] * dims[c] * count * 2);
-            let run = crate::lattice::layer_order(dims[a], forward);
+            let run = super::lattice::layer_order(dims[a], forward);
             for (s, &k) in run.iter().enumerate() {
                 let words = [a, b, c, k, usize::from(s == 0), first, count, s % 2];
                 push_step(&mut steps, words.map(|w| w as u32));

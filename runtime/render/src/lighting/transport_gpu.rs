@@ -10,9 +10,9 @@ use glam::DVec3;
 
 use runtime::gpu::{Gpu, read_back};
 
-use super::transport::{HARMONICS, Medium, PER_VOXEL, groups, harmonics, layer_axes};
-use crate::DensityGrid;
+use super::transport::{Group, HARMONICS, Medium, PER_VOXEL, groups, harmonics, layer_axes};
 use crate::gpu::{RenderError, entry, filled, storage};
+use crate::volume::DensityGrid;
 
 /// The sweeps' WGSL, without the shared [`UPWIND_WGSL`] ([`source`] puts it before).
 pub const SWEEP_WGSL: &str = include_str!("sweep.wgsl");
@@ -189,6 +189,63 @@ runtime::uniform! {
     }
 }
 
+/// The medium's rows per voxel (sweep.wgsl's MEDIUM_ROWS): σ′_t, σ′_s, p′'s moments χ′_0…3 per
+/// channel, χ′_4 per channel, the sunlit source, and the skylit source per channel.
+fn medium_rows(medium: &Medium) -> Vec<[f32; 4]> {
+    let voxels = medium.ext.len();
+    let mut rows: Vec<[f32; 4]> = Vec::with_capacity(MEDIUM_ROWS * voxels);
+    let f = |v: [f64; 3]| [v[0] as f32, v[1] as f32, v[2] as f32, 0.0];
+    for i in 0..voxels {
+        rows.push(f(medium.ext[i]));
+        rows.push(f(medium.sca[i]));
+        for c in 0..3 {
+            let chi = &medium.chi[i][c];
+            rows.push([chi[0], chi[1], chi[2], chi[3]].map(|v| v as f32));
+        }
+        rows.push(f(std::array::from_fn(|c| medium.chi[i][c][4])));
+        rows.push(f(medium.sun[i]));
+        for c in 0..3 {
+            rows.push(medium.sky[i][c].map(|v| v as f32));
+        }
+    }
+    rows
+}
+
+/// The ordinates' rows, group after group (sweep.wgsl's ORD_ROWS: Y_lm of the direction, then
+/// the point one layer back and the step), one step per layer of each group, the layers'
+/// sizes, and the largest layer state (16-byte rows) a group needs.
+fn ordinate_rows(
+    groups: &[Group],
+    dims: [usize; 3],
+) -> (Vec<[f32; 4]>, Vec<u8>, Vec<(usize, usize)>, usize) {
+    let mut ordinates: Vec<[f32; 4]> = Vec::new();
+    let mut steps: Vec<u8> = Vec::new();
+    let mut layers: Vec<(usize, usize)> = Vec::new();
+    let mut largest_state = 0usize;
+    for g in groups {
+        let first = ordinates.len() / ORD_ROWS;
+        for o in &g.ordinates {
+            ordinates.extend((0..7).map(|r| {
+                std::array::from_fn(|j| {
+                    let k = 4 * r + j;
+                    if k < HARMONICS { o.y[k] as f32 } else { 0.0 }
+                })
+            }));
+            ordinates.push([o.shift.0 as f32, o.shift.1 as f32, o.ds as f32, 0.0]);
+        }
+        let (b, c) = layer_axes(g.axis);
+        let count = g.ordinates.len();
+        largest_state = largest_state.max(2 * dims[b] * dims[c] * count * 3);
+        let order = super::lattice::layer_order(dims[g.axis], g.forward);
+        for (s, &k) in order.iter().enumerate() {
+            let words = [g.axis, b, c, k, usize::from(s == 0), first, count, s % 2];
+            push_step(&mut steps, words.map(|w| w as u32));
+            layers.push((dims[b], dims[c]));
+        }
+    }
+    (ordinates, steps, layers, largest_state)
+}
+
 /// The sweeps' pipeline, built once per adapter.
 pub struct Sweeper {
     layout: wgpu::BindGroupLayout,
@@ -242,48 +299,8 @@ impl Sweeper {
                 limits.max_compute_workgroups_per_dimension
             )));
         }
-        // The medium's rows (sweep.wgsl's MEDIUM_ROWS).
-        let mut rows: Vec<[f32; 4]> = Vec::with_capacity(MEDIUM_ROWS * voxels);
-        let f = |v: [f64; 3]| [v[0] as f32, v[1] as f32, v[2] as f32, 0.0];
-        for i in 0..voxels {
-            rows.push(f(medium.ext[i]));
-            rows.push(f(medium.sca[i]));
-            for c in 0..3 {
-                let chi = &medium.chi[i][c];
-                rows.push([chi[0], chi[1], chi[2], chi[3]].map(|v| v as f32));
-            }
-            rows.push(f(std::array::from_fn(|c| medium.chi[i][c][4])));
-            rows.push(f(medium.sun[i]));
-            for c in 0..3 {
-                rows.push(medium.sky[i][c].map(|v| v as f32));
-            }
-        }
-        // The ordinates, group after group, and one step per layer of each group.
-        let mut ordinates: Vec<[f32; 4]> = Vec::with_capacity(ORD_ROWS * dirs.len());
-        let mut steps: Vec<u8> = Vec::new();
-        let mut layers: Vec<(usize, usize)> = Vec::new();
-        let mut largest_state = 0usize;
-        for g in &groups {
-            let first = ordinates.len() / ORD_ROWS;
-            for o in &g.ordinates {
-                ordinates.extend((0..7).map(|r| {
-                    std::array::from_fn(|j| {
-                        let k = 4 * r + j;
-                        if k < HARMONICS { o.y[k] as f32 } else { 0.0 }
-                    })
-                }));
-                ordinates.push([o.shift.0 as f32, o.shift.1 as f32, o.ds as f32, 0.0]);
-            }
-            let (b, c) = layer_axes(g.axis);
-            let count = g.ordinates.len();
-            largest_state = largest_state.max(2 * dims[b] * dims[c] * count * 3);
-            let order = crate::lattice::layer_order(dims[g.axis], g.forward);
-            for (s, &k) in order.iter().enumerate() {
-                let words = [g.axis, b, c, k, usize::from(s == 0), first, count, s % 2];
-                push_step(&mut steps, words.map(|w| w as u32));
-                layers.push((dims[b], dims[c]));
-            }
-        }
+        let rows = medium_rows(medium);
+        let (ordinates, steps, layers, largest_state) = ordinate_rows(&groups, dims);
         let moments_bytes = (4 * STRIDE * voxels) as u64;
         let state_bytes = (16 * largest_state.max(1)) as u64;
         let medium_bytes = (16 * rows.len()) as u64;
@@ -371,7 +388,7 @@ impl Sweeper {
 
 /// A refusal of the GPU sweeps, naming the value.
 fn gpu_refusal(message: String) -> RenderError {
-    RenderError::Frame(crate::FrameError(message))
+    RenderError::Frame(crate::checks::FrameError(message))
 }
 
 /// One transport solve's buffers on the GPU ([`Sweeper::prepare`]).

@@ -1,4 +1,6 @@
-//! Gauss–Legendre quadrature on [−1, 1], used for bins, size integrals and test integrals.
+//! Gauss–Legendre quadrature on [−1, 1] and on any interval: the bins' and the size
+//! distributions' integrals (`photometeor-mie`, `photometeor-tables`) and the skylight's
+//! directions (`photometeor-render`).
 
 /// Nodes and weights of the n-point Gauss–Legendre rule on [−1, 1], nodes ascending.
 ///

@@ -225,7 +225,7 @@ impl Stencil {
 }
 
 /// The operator and right-hand side of `p` (module docs, "The discretization").
-fn assemble(p: &Problem) -> (Stencil, Vec<f64>) {
+pub(crate) fn assemble(p: &Problem) -> (Stencil, Vec<f64>) {
     let [nx, ny, nz] = p.dims;
     let n = nx * ny * nz;
     let h = p.h;
@@ -290,16 +290,19 @@ fn assemble(p: &Problem) -> (Stencil, Vec<f64>) {
 
 /// Checks a model's solver settings `[render.<model>] diffusion_tolerance` and
 /// `max_diffusion_iterations`, naming the key, its value and the allowed range.
-pub fn check_settings(tolerance: f64, max_iterations: usize) -> Result<(), crate::FrameError> {
+pub fn check_settings(
+    tolerance: f64,
+    max_iterations: usize,
+) -> Result<(), crate::checks::FrameError> {
     if !(1e-12..=0.1).contains(&tolerance) {
-        return Err(crate::FrameError(format!(
+        return Err(crate::checks::FrameError(format!(
             "diffusion_tolerance = {} is outside the allowed range [1e-12, 0.1] (relative \
              residual; f64 arithmetic cannot reach less)",
-            crate::Shown(tolerance)
+            crate::checks::Shown(tolerance)
         )));
     }
     if !(1..=100_000).contains(&max_iterations) {
-        return Err(crate::FrameError(format!(
+        return Err(crate::checks::FrameError(format!(
             "max_diffusion_iterations = {max_iterations} is outside the allowed range [1, 100000]"
         )));
     }
@@ -490,24 +493,6 @@ pub fn solve(p: &Problem, tolerance: f64, max_iterations: usize) -> Result<Solut
     Ok(s)
 }
 
-/// [`solve`] on the GPU ([`crate::diffusion_gpu`]): the same operator, hierarchy and
-/// right-hand side, the conjugate gradients in f32 inside an f64 refinement.
-pub fn solve_on(
-    p: &Problem,
-    (tolerance, max_iterations): (f64, usize),
-    gpu: &runtime::gpu::Gpu,
-    solver: &crate::diffusion_gpu::Solver,
-) -> Result<Solution, crate::diffusion_gpu::SolveError> {
-    let start = Instant::now();
-    let (a, b) = assemble(p);
-    let op = Operator::new(a);
-    let mut s = solver
-        .upload(gpu, &op)?
-        .solve(&b, tolerance, max_iterations)?;
-    s.seconds = start.elapsed().as_secs_f64();
-    Ok(s)
-}
-
 /// A problem's operator and its multigrid hierarchy, assembled once for several sources
 /// (the transport's acceleration solves the same operator every round).
 pub struct Operator {
@@ -524,7 +509,7 @@ impl Operator {
         op
     }
 
-    fn new(a: Stencil) -> Self {
+    pub(crate) fn new(a: Stencil) -> Self {
         let unknowns = a.diag.iter().filter(|&&d| d > 0.0).count();
         let diag = a.diag.clone();
         Self {

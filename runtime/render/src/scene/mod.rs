@@ -7,7 +7,7 @@
 //! grid_resolution = 128     # voxels along the volumes' box's longest side
 //! exposure = 0.0            # PNG exposure; 0 or absent: automatic
 //!
-//! [render.riley]            # each model's settings in its own table (crate::model); a key
+//! [render.riley]            # each model's settings in its own table (crate::registry); a key
 //! slices = 256              # another model owns, or none does, is refused naming both
 //! light_resolution = 512    # light-buffer texels per side
 //! xi = 0.0                  # Riley's ξ (1/sr), back-scattered light in the eye pass
@@ -25,13 +25,21 @@
 //! diffusion_tolerance = 1e-6       # relative residual of the solve, (0, 0.1]
 //! max_diffusion_iterations = 500   # CG iteration cap, [1, 100000]
 //! clear_air_iterations = 1  # §3's propagation across clear air, [0, 4]
+//! per_sun = "auto"          # the per-sun passes of a GPU render: "auto", "gpu" or "cpu"
 //!
 //! [render.coupled]
+//! diffuse = "transport"     # discrete-ordinates transport, or "diffusion" (the P1 solve alone)
+//! directions = 96           # the transport's directions, [16, 1024]
+//! transport_tolerance = 0.01       # a round's relative change that ends it, [1e-6, 0.5]
+//! max_transport_iterations = 40    # source iterations, [1, 1000]
+//! transport_coarsening = 0  # grid voxels per transport voxel: 1, 2, 4; 0 automatic
 //! source = "buffer"         # "buffer" (the beam's loss) or "first-scatter" (f = 0, as max)
-//! split = "delta-eddington" # f = g², or "hemisphere" (Riley's F_n, forward hemisphere)
+//! split = "delta-eddington" # δ-M's f (f = g² with the diffusion), or "hemisphere" (Riley's F_n)
 //! emergent = "p1"           # the diffusion's light with its flux, or "isotropic"
 //! diffusion_tolerance = 1e-6       # relative residual of the solve, [1e-12, 0.1]
 //! max_diffusion_iterations = 500   # CG iteration cap, [1, 100000]
+//! per_sun = "auto"          # the per-sun passes of a GPU render: "auto", "gpu" or "cpu"
+//! per_view = "auto"         # the gather of a GPU render: "auto", "gpu" or "cpu"
 //!
 //! [render.biri]
 //! kernel = "exact"          # "exact" (the kernel's primitive) or "polynomial" (Eq. 2)
@@ -42,6 +50,7 @@
 //! noise = 0.0               # stop at this median relative standard error; 0: run every sample
 //! max_scatterings = 0       # 1: single scattering only; 0: unbounded
 //! wavelengths_per_path = 0  # hero wavelengths per path, 1–4; 0: all of rgb3, 4 of a spectrum
+//! max_seconds = 0           # stop after the pass that passes this many seconds; 0: no bound
 //!
 //! [ground]
 //! albedo = 0.1              # Lambertian ground at y = 0, [0, 1] (default 0.1); 0: black
@@ -115,11 +124,26 @@ use serde::Deserialize;
 
 use glam::DVec3;
 
-use crate::model::{MODEL_NAMES, Model, ModelError, ModelSettings, Need, model_keys};
+use crate::model::{Model, Need};
+
 use crate::objects::{Light, Medium, Occluder};
+use crate::registry::{MODEL_NAMES, ModelError, ModelSettings, model_keys};
 use crate::volume::{Shape, Volume, VolumeError, grid_dims, joint_bounds, rasterize};
-use crate::{Atmosphere, Camera, Frame, FrameError, Haze, Sun};
+use crate::{
+    camera::Camera, camera::Sun, checks::FrameError, frame::Frame, frame::Haze, sky::Atmosphere,
+};
 use runtime::Tables;
+
+mod objects;
+mod view;
+mod volumes;
+
+use objects::*;
+use view::*;
+use volumes::*;
+
+pub use objects::MAX_SOURCE;
+pub use view::{DEFAULT_GROUND_ALBEDO, HazeKeysChecked, SCALE_HEIGHT_RANGE_M};
 
 #[derive(Debug, Default, Deserialize)]
 struct File {
@@ -143,165 +167,6 @@ struct File {
     media: Vec<MediumKeys>,
     #[serde(default, rename = "occluder")]
     occluders: Vec<OccluderKeys>,
-}
-
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct MediumKeys {
-    field: String,
-    number_density_per_m3: f64,
-    min_m: Option<[f64; 3]>,
-    max_m: Option<[f64; 3]>,
-    ambient: Option<[f64; 3]>,
-}
-
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct OccluderKeys {
-    shape: String,
-    min_m: Option<[f64; 3]>,
-    max_m: Option<[f64; 3]>,
-    center_m: Option<[f64; 3]>,
-    radius_m: Option<f64>,
-    file: Option<String>,
-    offset_m: Option<[f64; 3]>,
-    scale: Option<f64>,
-    albedo: Option<f64>,
-}
-
-/// The ground's albedo when a scene has no `[ground] albedo`: a grey ground, the same for
-/// every model.
-pub const DEFAULT_GROUND_ALBEDO: f64 = 0.1;
-
-/// The largest sun irradiance and light intensity per channel a scene may give (the image's
-/// unit): a pixel is an f32, and the sun's disk alone multiplies the irradiance by 1/Ω_disk
-/// ≈ 1.7·10⁴ and a light's intensity is divided by down to 10⁻⁶ m², so 10³⁰ stays finite.
-pub const MAX_SOURCE: f64 = 1e30;
-
-/// The allowed range of a scale height (the sky's and the haze's), metres.
-pub const SCALE_HEIGHT_RANGE_M: (f64, f64) = (1.0, 1e6);
-
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct HazeKeys {
-    field: String,
-    number_density_per_m3: f64,
-    scale_height_m: f64,
-}
-
-/// `[haze]`: an aerosol layer of a `[[field]]` (of kind haze) with an exponential height
-/// profile N(y) = N_0 e^{−y/H} over the whole scene.
-#[derive(Debug, Clone, PartialEq)]
-pub struct HazeKeysChecked {
-    /// The field's name.
-    pub field: String,
-    /// N_0 at y = 0 (1/m³), > 0.
-    pub number_density_per_m3: f64,
-    /// H (m), > 0.
-    pub scale_height_m: f64,
-}
-
-#[derive(Debug, Default, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct GroundKeys {
-    albedo: Option<f64>,
-}
-
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct LightKeys {
-    position_m: [f64; 3],
-    intensity: [f64; 3],
-    spot_direction: Option<[f64; 3]>,
-    spot_half_angle_deg: Option<f64>,
-}
-
-/// `[render]`: the keys every model shares, and one table per model (`[render.<model>]`).
-#[derive(Debug, Default, Deserialize)]
-struct RenderKeys {
-    width: Option<usize>,
-    height: Option<usize>,
-    grid_resolution: Option<usize>,
-    exposure: Option<f64>,
-    #[serde(flatten)]
-    rest: BTreeMap<String, toml::Value>,
-}
-
-/// Keys `[render]` held before each model had its own table: (old key, model, key there).
-const MOVED_KEYS: &[(&str, &str, &str)] = &[
-    ("slices", "riley, miyazaki", "slices"),
-    ("light_resolution", "riley, miyazaki", "light_resolution"),
-    ("xi", "riley", "xi"),
-    ("light_update", "riley", "light_update"),
-    ("spp", "truth", "spp"),
-    ("seed", "truth", "seed"),
-    ("svs_a", "miyazaki", "a"),
-    ("k_multi", "miyazaki", "k_multi"),
-    ("svs_phase", "miyazaki", "phase"),
-    ("max_threshold", "max", "threshold"),
-    ("diffusion_tolerance", "max", "diffusion_tolerance"),
-    (
-        "max_diffusion_iterations",
-        "max",
-        "max_diffusion_iterations",
-    ),
-    ("clear_air_iterations", "max", "clear_air_iterations"),
-    ("biri_kernel", "biri", "kernel"),
-];
-
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct CameraKeys {
-    position_m: [f64; 3],
-    look_at_m: [f64; 3],
-    fov_deg: Option<f64>,
-}
-
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct SunKeys {
-    elevation_deg: f64,
-    azimuth_deg: f64,
-    irradiance: Option<[f64; 3]>,
-}
-
-#[derive(Debug, Default, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct SkyKeys {
-    enabled: Option<bool>,
-    beta_sea_level_per_m: Option<[f64; 3]>,
-    scale_height_m: Option<f64>,
-}
-
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct VolumeKeys {
-    field: String,
-    shape: String,
-    number_density_per_m3: f64,
-    center_m: Option<[f64; 3]>,
-    radius_m: Option<f64>,
-    height_m: Option<f64>,
-    bottom_m: Option<f64>,
-    top_m: Option<f64>,
-    size_m: Option<f64>,
-    thickness_m: Option<f64>,
-    file: Option<String>,
-    dims: Option<[usize; 3]>,
-    min_m: Option<[f64; 3]>,
-    max_m: Option<[f64; 3]>,
-    seed: Option<u64>,
-    r_eff_um: Option<ProfileKeys>,
-    median_radius_um: Option<ProfileKeys>,
-    radius_um: Option<ProfileKeys>,
-}
-
-/// A size profile `{ base, top }` (crate::volume::SizeProfile).
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct ProfileKeys {
-    base: f64,
-    top: f64,
 }
 
 /// What a render needs from a scene file: the parts every model shares, and each model's own
@@ -380,168 +245,6 @@ fn positive(what: &str, v: f64) -> Result<f64, String> {
     }
 }
 
-/// A scale height in [`SCALE_HEIGHT_RANGE_M`].
-fn scale_height(what: &str, h: f64) -> Result<f64, String> {
-    let (lo, hi) = SCALE_HEIGHT_RANGE_M;
-    if h.is_finite() && (lo..=hi).contains(&h) {
-        Ok(h)
-    } else {
-        Err(format!(
-            "{what} = {} is outside the allowed range [{lo}, {hi:e}] (m)",
-            crate::Shown(h)
-        ))
-    }
-}
-
-/// `[camera]`: finite positions and field of view.
-fn camera_keys(camera: CameraKeys) -> Result<Camera, String> {
-    for (key, v) in [
-        ("position_m", camera.position_m),
-        ("look_at_m", camera.look_at_m),
-    ] {
-        if v.iter().any(|x| !x.is_finite()) {
-            return Err(format!("[camera] {key} = {v:?} must be finite (m)"));
-        }
-    }
-    Ok(Camera {
-        position_m: DVec3::from_array(camera.position_m),
-        look_at_m: DVec3::from_array(camera.look_at_m),
-        fov_deg: camera.fov_deg.unwrap_or(60.0),
-    })
-}
-
-/// `[render]`'s shared keys and the model tables, checked.
-struct RenderChecked {
-    width: usize,
-    height: usize,
-    grid_resolution: usize,
-    exposure: Option<f64>,
-    models: BTreeMap<String, toml::Table>,
-}
-
-fn render_keys(render: RenderKeys) -> Result<RenderChecked, String> {
-    let mut models = BTreeMap::new();
-    for (key, value) in render.rest {
-        if let Some(&(_, model, new_key)) = MOVED_KEYS.iter().find(|m| m.0 == key) {
-            return Err(format!(
-                "[render] {key}: each model's settings live in its own table: write \
-                 {new_key} = {value} under [render.{}] (models: {model})",
-                model.split(", ").next().unwrap_or(model)
-            ));
-        }
-        let table = match (MODEL_NAMES.contains(&key.as_str()), value) {
-            (true, toml::Value::Table(t)) => t,
-            (true, _) => return Err(format!("[render] {key} must be a table, [render.{key}]")),
-            (false, _) => {
-                return Err(format!(
-                    "[render] {key} is not a key of [render] (width, height, grid_resolution, \
-                     exposure) nor a model's table ({})",
-                    MODEL_NAMES
-                        .iter()
-                        .map(|m| format!("[render.{m}]"))
-                        .collect::<Vec<_>>()
-                        .join(", ")
-                ));
-            }
-        };
-        ModelSettings::parse(&key, &table).map_err(|e| e.0)?;
-        models.insert(key, table);
-    }
-    let grid_resolution = render.grid_resolution.unwrap_or(128);
-    if !(2..=512).contains(&grid_resolution) {
-        return Err(format!(
-            "[render] grid_resolution = {grid_resolution} is outside the allowed range [2, 512]"
-        ));
-    }
-    let exposure = match render.exposure {
-        None | Some(0.0) => None,
-        Some(e) => Some(positive("[render] exposure", e)?),
-    };
-    Ok(RenderChecked {
-        width: render.width.unwrap_or(512),
-        height: render.height.unwrap_or(512),
-        grid_resolution,
-        exposure,
-        models,
-    })
-}
-
-fn sky_keys(sky: SkyKeys) -> Result<Atmosphere, String> {
-    let mut atmosphere = Atmosphere::default();
-    if let Some(b) = sky.beta_sea_level_per_m {
-        if b.iter()
-            .any(|v| !(v.is_finite() && (0.0..=1.0).contains(v)))
-        {
-            return Err(format!(
-                "[sky] beta_sea_level_per_m = {b:?} is outside the allowed range [0, 1] per \
-                 channel (1/m; clear air is ~10⁻⁵)"
-            ));
-        }
-        atmosphere.beta_sea_level_per_m = b;
-    }
-    if let Some(h) = sky.scale_height_m {
-        atmosphere.scale_height_m = scale_height("[sky] scale_height_m", h)?;
-    }
-    if sky.enabled == Some(false) {
-        atmosphere.beta_sea_level_per_m = [0.0; 3];
-    }
-    Ok(atmosphere)
-}
-
-/// `[sun]`; a scene of homogeneous media lit by lamps (`--model biri`) may have none: then
-/// it is dark, straight overhead.
-fn sun_keys(sun: Option<SunKeys>, lamps_only: bool) -> Result<Sun, String> {
-    let sun = match sun {
-        Some(s) => s,
-        None if lamps_only => SunKeys {
-            elevation_deg: 90.0,
-            azimuth_deg: 0.0,
-            irradiance: Some([0.0; 3]),
-        },
-        None => return Err("no [sun] table (elevation_deg, azimuth_deg)".into()),
-    };
-    for (key, v) in [
-        ("elevation_deg", sun.elevation_deg),
-        ("azimuth_deg", sun.azimuth_deg),
-    ] {
-        if !v.is_finite() {
-            return Err(format!(
-                "[sun] {key} = {v} must be a finite angle (degrees)"
-            ));
-        }
-    }
-    let irradiance = sun.irradiance.unwrap_or([1.0; 3]);
-    if irradiance
-        .iter()
-        .any(|v| !(v.is_finite() && (0.0..=MAX_SOURCE).contains(v)))
-    {
-        return Err(format!(
-            "[sun] irradiance = {irradiance:?} is outside the allowed range [0, {MAX_SOURCE:e}] \
-             per channel"
-        ));
-    }
-    Ok(Sun {
-        elevation_deg: sun.elevation_deg,
-        azimuth_deg: sun.azimuth_deg,
-        irradiance,
-    })
-}
-
-fn haze_keys(h: HazeKeys) -> Result<HazeKeysChecked, String> {
-    if !(h.number_density_per_m3.is_finite() && h.number_density_per_m3 > 0.0) {
-        return Err(format!(
-            "[haze] number_density_per_m3 = {} must be finite and > 0 (particles per m³ at y = 0)",
-            h.number_density_per_m3
-        ));
-    }
-    scale_height("[haze] scale_height_m", h.scale_height_m)?;
-    Ok(HazeKeysChecked {
-        field: h.field,
-        number_density_per_m3: h.number_density_per_m3,
-        scale_height_m: h.scale_height_m,
-    })
-}
-
 /// Each entry of an array of tables through `f`, its errors prefixed `[[name]] i`.
 fn each<K, T>(
     items: &[K],
@@ -609,7 +312,7 @@ impl RenderScene {
         if !(0.0..=1.0).contains(&ground_albedo) {
             return Err(err(format!(
                 "[ground] albedo = {} is outside the allowed range [0, 1]",
-                crate::Shown(ground_albedo)
+                crate::checks::Shown(ground_albedo)
             )));
         }
         let haze = file.haze.map(haze_keys).transpose().map_err(err)?;
@@ -667,7 +370,7 @@ impl RenderScene {
     /// Model `M`'s settings from the scene's `[render.<name>]` (defaults where it has none).
     pub fn settings<M: Model>(&self) -> Result<M::Settings, ModelError> {
         let table = self.models.get(M::NAME).cloned().unwrap_or_default();
-        crate::model::parse_settings::<M>(&table)
+        crate::registry::parse_settings::<M>(&table)
     }
 
     /// Model `name` with the scene's settings, checked against the scene ([`Self::check`]).
@@ -748,14 +451,14 @@ impl RenderScene {
     /// on a frame over the volumes' bounds without particles.
     pub fn check(&self, model: &ModelSettings) -> Result<(), FrameError> {
         let grid = if self.volumes.is_empty() {
-            super::DensityGrid::empty()
+            crate::volume::DensityGrid::empty()
         } else {
             let (lo, hi) = joint_bounds(&self.volumes);
-            super::DensityGrid {
+            crate::volume::DensityGrid {
                 min_m: lo,
                 max_m: hi,
                 dims: [1, 1, 1],
-                data: vec![[0.0; super::MAX_FIELDS]],
+                data: vec![[0.0; crate::volume::MAX_FIELDS]],
             }
         };
         let mut frame = self.frame_with(grid);
@@ -764,7 +467,7 @@ impl RenderScene {
         model.check_frame(&frame)
     }
 
-    fn frame_with(&self, grid: super::DensityGrid) -> Frame {
+    fn frame_with(&self, grid: crate::volume::DensityGrid) -> Frame {
         Frame {
             camera: self.camera,
             sun: self.sun,
@@ -823,7 +526,7 @@ impl RenderScene {
     /// Chooses, for every volume with a size profile, the members of its swept field that the
     /// renderer mixes ([`crate::volume::choose_members`]): `sweeps` are the scene's swept
     /// fields. The fields other volumes, the haze and the media use take their channels first;
-    /// the rest of the [`MAX_FIELDS`](crate::MAX_FIELDS) go to the one swept field sampled
+    /// the rest of the [`MAX_FIELDS`](crate::volume::MAX_FIELDS) go to the one swept field sampled
     /// per voxel. Refuses, naming the volume and key: a profile on a field that is not swept or
     /// sweeps another key, a profile outside the sweep's values, a swept field used without
     /// a profile, two swept fields sampled per voxel, too few channels left.
@@ -840,8 +543,8 @@ impl RenderScene {
                          top), or one of its members, {:?} … {:?}",
                         s.name,
                         s.key,
-                        crate::Shown(s.values[0]),
-                        crate::Shown(s.values[s.values.len() - 1]),
+                        crate::checks::Shown(s.values[0]),
+                        crate::checks::Shown(s.values[s.values.len() - 1]),
                         s.key,
                         s.fields[0],
                         s.fields[s.fields.len() - 1]
@@ -868,10 +571,10 @@ impl RenderScene {
                             "{at}: {} = {{ base = {}, top = {} }} lies outside the sweep's \
                              values [{}, {}]",
                             p.key,
-                            crate::Shown(p.base),
-                            crate::Shown(p.top),
-                            crate::Shown(first),
-                            crate::Shown(last)
+                            crate::checks::Shown(p.base),
+                            crate::checks::Shown(p.top),
+                            crate::checks::Shown(first),
+                            crate::checks::Shown(last)
                         ));
                     }
                     sized = match sized {
@@ -893,12 +596,12 @@ impl RenderScene {
             return Ok(());
         };
         let others = self.fields().iter().filter(|f| **f != sweep.name).count();
-        let budget = crate::MAX_FIELDS.saturating_sub(others);
+        let budget = crate::volume::MAX_FIELDS.saturating_sub(others);
         let members = crate::volume::choose_members(sweep, lo, hi, budget).ok_or_else(|| {
             format!(
                 "a render holds {} fields and the other volumes, the haze and the media use \
                  {others}: the swept field {:?} needs 2 for a size per voxel",
-                crate::MAX_FIELDS,
+                crate::volume::MAX_FIELDS,
                 sweep.name
             )
         })?;
@@ -929,7 +632,7 @@ impl RenderScene {
             (i, tables.fields[i].sigma_ext_m2[1])
         };
         let grid = if self.volumes.is_empty() {
-            super::DensityGrid::empty() // a scene of [[medium]] tables only
+            crate::volume::DensityGrid::empty() // a scene of [[medium]] tables only
         } else {
             rasterize(&self.volumes, self.grid_resolution, field)?
         };
@@ -937,260 +640,6 @@ impl RenderScene {
         frame.haze = self.haze(index);
         Ok(frame)
     }
-}
-
-fn light(l: &LightKeys) -> Result<Light, String> {
-    let p = DVec3::from_array(l.position_m);
-    if !p.is_finite() || p.y <= 0.0 {
-        return Err(format!(
-            "position_m = {:?} must be finite and above the ground (y > 0): a light at or \
-             below y = 0 is inside the ground, an occluder",
-            l.position_m
-        ));
-    }
-    if l.intensity
-        .iter()
-        .any(|v| !(v.is_finite() && (0.0..=MAX_SOURCE).contains(v)))
-    {
-        return Err(format!(
-            "intensity = {:?} is outside the allowed range [0, {MAX_SOURCE:e}] per channel",
-            l.intensity
-        ));
-    }
-    let spot = match (l.spot_direction, l.spot_half_angle_deg) {
-        (None, None) => None,
-        (Some(d), Some(a)) => {
-            let d = DVec3::from_array(d);
-            if !d.is_finite() || d.length() == 0.0 {
-                return Err(format!(
-                    "spot_direction = {:?} must be a non-zero vector",
-                    d
-                ));
-            }
-            if !(a > 0.0 && a < 180.0) {
-                return Err(format!(
-                    "spot_half_angle_deg = {a} is outside the allowed range (0, 180) degrees \
-                     (a light shining everywhere is a point light: leave out the spot keys)"
-                ));
-            }
-            Some((d.normalize(), a))
-        }
-        _ => {
-            return Err("a spot needs both spot_direction and spot_half_angle_deg".into());
-        }
-    };
-    Ok(Light {
-        position_m: p,
-        intensity: l.intensity,
-        spot,
-    })
-}
-
-fn medium(m: &MediumKeys) -> Result<Medium, String> {
-    let n = m.number_density_per_m3;
-    if !(n.is_finite() && n > 0.0) {
-        return Err(format!(
-            "number_density_per_m3 = {n} must be finite and > 0 (particles per m³)"
-        ));
-    }
-    let region = match (m.min_m, m.max_m) {
-        (None, None) => crate::objects::Region::Everywhere,
-        (Some(lo), Some(hi)) => {
-            if (0..3).any(|a| !(lo[a].is_finite() && hi[a].is_finite() && lo[a] < hi[a])) {
-                return Err(format!(
-                    "min_m = {lo:?} must lie below max_m = {hi:?} on every axis (a medium is \
-                     a convex, axis-aligned box)"
-                ));
-            }
-            crate::objects::Region::Box {
-                min_m: DVec3::from_array(lo),
-                max_m: DVec3::from_array(hi),
-            }
-        }
-        _ => {
-            return Err(
-                "a medium box needs both min_m and max_m (neither: the whole scene)".into(),
-            );
-        }
-    };
-    let ambient = m.ambient.unwrap_or([0.0; 3]);
-    if ambient.iter().any(|v| !(v.is_finite() && *v >= 0.0)) {
-        return Err(format!(
-            "ambient = {ambient:?} must be ≥ 0 (radiance per channel)"
-        ));
-    }
-    Ok(crate::objects::Medium {
-        field: m.field.clone(),
-        number_density_per_m3: n,
-        region,
-        ambient,
-    })
-}
-
-fn occluder(o: &OccluderKeys, base: &Path) -> Result<Occluder, String> {
-    use crate::geometry::{Mesh, Sphere, read_obj};
-    let albedo = o.albedo.unwrap_or(0.5);
-    if !(0.0..=1.0).contains(&albedo) {
-        return Err(format!(
-            "albedo = {} is outside the allowed range [0, 1]",
-            crate::Shown(albedo)
-        ));
-    }
-    let finite = |v: Option<[f64; 3]>, what: &str| {
-        v.filter(|v| v.iter().all(|x| x.is_finite()))
-            .map(DVec3::from_array)
-            .ok_or_else(|| format!("shape {:?} needs a finite {what} = [x, y, z]", o.shape))
-    };
-    let shape = match o.shape.as_str() {
-        "box" => {
-            let (lo, hi) = (finite(o.min_m, "min_m")?, finite(o.max_m, "max_m")?);
-            if !lo.cmplt(hi).all() {
-                return Err(format!(
-                    "min_m = {:?} must lie below max_m = {:?} on every axis",
-                    lo.to_array(),
-                    hi.to_array()
-                ));
-            }
-            crate::objects::OccluderShape::Mesh(Mesh::cuboid(lo, hi))
-        }
-        "sphere" => {
-            let center = finite(o.center_m, "center_m")?;
-            let radius = o.radius_m.ok_or("shape \"sphere\" needs radius_m")?;
-            positive("radius_m", radius)?;
-            crate::objects::OccluderShape::Sphere(Sphere { center, radius })
-        }
-        "mesh" => {
-            let file = o
-                .file
-                .as_ref()
-                .ok_or("shape \"mesh\" needs file (a Wavefront OBJ)")?;
-            let scale = o.scale.unwrap_or(1.0);
-            positive("scale", scale)?;
-            let offset = match o.offset_m {
-                None => DVec3::ZERO,
-                Some(v) => finite(Some(v), "offset_m")?,
-            };
-            let mut mesh = read_obj(&base.join(file))?;
-            let vertices = mesh.vertices.iter().map(|v| *v * scale + offset).collect();
-            mesh = Mesh::new(vertices, std::mem::take(&mut mesh.triangles));
-            crate::objects::OccluderShape::Mesh(mesh)
-        }
-        other => {
-            return Err(format!("shape = {other:?} is not one of box, sphere, mesh"));
-        }
-    };
-    Ok(crate::objects::Occluder { shape, albedo })
-}
-
-fn volume(v: &VolumeKeys, base: &Path) -> Result<Volume, String> {
-    let need = |what: &str, x: Option<f64>| -> Result<f64, String> {
-        let x = x.ok_or_else(|| format!("shape {:?} needs {what}", v.shape))?;
-        positive(what, x)
-    };
-    let center = |c: Option<[f64; 3]>| {
-        c.filter(|c| c.iter().all(|x| x.is_finite()))
-            .map(DVec3::from_array)
-            .ok_or_else(|| format!("shape {:?} needs a finite center_m = [x, y, z]", v.shape))
-    };
-    let density = v.number_density_per_m3;
-    if !(density.is_finite() && density > 0.0) {
-        return Err(format!(
-            "number_density_per_m3 = {density} must be finite and > 0 (particles per m³)"
-        ));
-    }
-    let shape = match v.shape.as_str() {
-        "cumulus" => Shape::Cumulus {
-            center_m: center(v.center_m)?,
-            radius_m: need("radius_m", v.radius_m)?,
-            height_m: need("height_m", v.height_m)?,
-        },
-        "cirrus" => Shape::Cirrus {
-            center_m: center(v.center_m)?,
-            size_m: need("size_m", v.size_m)?,
-            thickness_m: need("thickness_m", v.thickness_m)?,
-        },
-        "rain_shaft" => {
-            let bottom = v.bottom_m.unwrap_or(0.0);
-            let top = need("top_m", v.top_m)?;
-            if !(bottom.is_finite() && bottom < top) {
-                return Err(format!("bottom_m = {bottom} must be below top_m = {top}"));
-            }
-            Shape::RainShaft {
-                center_m: center(v.center_m)?,
-                radius_m: need("radius_m", v.radius_m)?,
-                bottom_m: bottom,
-                top_m: top,
-            }
-        }
-        "grid" => {
-            let file = v.file.as_ref().ok_or("shape \"grid\" needs file")?;
-            let dims = v.dims.ok_or("shape \"grid\" needs dims = [nx, ny, nz]")?;
-            let (lo, hi) = (
-                v.min_m.ok_or("shape \"grid\" needs min_m")?,
-                v.max_m.ok_or("shape \"grid\" needs max_m")?,
-            );
-            if (0..3).any(|a| !(lo[a].is_finite() && hi[a].is_finite() && lo[a] < hi[a])) {
-                return Err(format!(
-                    "min_m = {lo:?} must lie below max_m = {hi:?} on every axis"
-                ));
-            }
-            let (file, min_m, max_m) = (
-                base.join(file),
-                DVec3::from_array(lo),
-                DVec3::from_array(hi),
-            );
-            let values = crate::volume::read_grid(&file, dims, min_m, max_m)?;
-            Shape::Grid {
-                file,
-                dims,
-                min_m,
-                max_m,
-                values,
-            }
-        }
-        other => {
-            return Err(format!(
-                "shape = {other:?} is not one of cumulus, cirrus, rain_shaft, grid"
-            ));
-        }
-    };
-    let profiles = [
-        ("r_eff_um", &v.r_eff_um),
-        ("median_radius_um", &v.median_radius_um),
-        ("radius_um", &v.radius_um),
-    ];
-    let mut size = None;
-    for (key, p) in profiles {
-        let Some(p) = p else { continue };
-        if size.is_some() {
-            return Err(format!(
-                "{key} = {{ base, top }}: a volume has one size profile, of one of {}",
-                crate::volume::PROFILE_KEYS.join(", ")
-            ));
-        }
-        for (end, x) in [("base", p.base), ("top", p.top)] {
-            if !(x.is_finite() && x > 0.0) {
-                return Err(format!(
-                    "{key} = {{ base = {}, top = {} }}: {end} must be finite and > 0 (µm)",
-                    crate::Shown(p.base),
-                    crate::Shown(p.top)
-                ));
-            }
-        }
-        size = Some(crate::volume::SizeProfile {
-            key: key.to_string(),
-            base: p.base,
-            top: p.top,
-            members: None,
-        });
-    }
-    Ok(Volume {
-        field: v.field.clone(),
-        number_density_per_m3: density,
-        shape,
-        seed: v.seed.unwrap_or(1),
-        size,
-    })
 }
 
 #[cfg(test)]

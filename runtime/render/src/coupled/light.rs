@@ -1,0 +1,835 @@
+//! The `coupled` model's per-sun recipe ([module docs](super) steps 1–3b) over the grid
+//! lighting layer ([`crate::lighting`]): the beam's medium from the fields' peaks, then the
+//! beam, the skylight, the diffusion per channel and the transport, each pass where
+//! `per_sun` lets it run ([`crate::lighting::run`]), and the energy budget of the result.
+
+use std::f64::consts::PI;
+use std::time::Instant;
+
+use glam::DVec3;
+use rayon::prelude::*;
+
+use runtime::{FieldTable, Tables};
+
+use super::peak::PeakBlur;
+use super::{Diffuse, Settings, Source, Split};
+use crate::lighting::beam::{BeamMedium, BeamState, Depth, PeakFrom, beam_sweep};
+use crate::lighting::diffusion::{self, Problem};
+use crate::lighting::lattice::{MIN_DIFFUSION_VOXEL_DEPTH, Voxels, voxel_size, voxels};
+use crate::lighting::sky::{Sky, sky_light, sky_sweeps};
+use crate::lighting::sun::{ShadowMap, reduced_sun, transmittance_to_sun};
+use crate::lighting::{OnGpu, Place, run, transport};
+use crate::shading::check_fields;
+use crate::{checks::FrameError, frame::Frame, volume::DensityGrid, volume::MAX_FIELDS};
+
+use super::moments::*;
+
+/// What the lighting of a `coupled` frame spent and found.
+#[derive(Debug, Clone, Default, serde::Serialize)]
+pub struct CoupledReport {
+    /// Seconds for the buffer sweep, the sources and the reduced skylight (steps 1, 2).
+    pub buffer_s: f64,
+    /// Seconds for the three diffusion solves and the flux (step 3).
+    pub diffusion_s: f64,
+    /// Where the three diffusion solves ran.
+    pub diffusion_on: String,
+    /// Where the reduced skylight's sweeps ran.
+    pub sky_on: String,
+    /// Where the beam's sweep ran.
+    pub beam_on: String,
+    /// Seconds for the discrete-ordinates transport (0 with `diffuse = "diffusion"`).
+    pub transport_s: f64,
+    /// Its source iterations.
+    pub transport_iterations: usize,
+    /// Where its sweeps ran.
+    pub transport_on: String,
+    /// The transport's grid (the render's, or coarser by `transport_coarsening`).
+    pub transport_dims: [usize; 3],
+    /// The relative change of the mean radiance in its last iteration.
+    pub transport_change: f64,
+    /// The transport's energy balance per channel (its sources, what leaves the box, what
+    /// is absorbed; [`transport::balance`]).
+    #[serde(skip)]
+    pub transport_balance: [transport::Balance; 3],
+    /// Conjugate-gradient iterations per channel.
+    pub iterations: [usize; 3],
+    /// Relative residual reached per channel.
+    pub residual: [f64; 3],
+    /// Unknowns of the diffusion system.
+    pub unknowns: usize,
+    /// Multigrid levels.
+    pub levels: usize,
+    /// The forward peak's fit per field that the beam's single scattering is blurred by
+    /// ([`super::peak`]; green): its name, half width (degrees), share of the scattering, and
+    /// the share of the cone beyond it that blurs the backward half.
+    pub peaks: Vec<(String, f64, f64, f64)>,
+    /// Where the sunlight went, per channel, as fractions of what entered the box: kept in
+    /// the buffer to its exit, absorbed from it, and handed to the diffusion as its source.
+    pub budget: Budget,
+}
+
+/// The sunlight's budget over the box, per channel: the power entering the box from the sun
+/// (per unit irradiance: the box's cross-section towards the sun, m², times S_atm) and, as
+/// fractions of it, where the buffer put it and what the diffusion did with its source.
+#[derive(Debug, Clone, Default, serde::Serialize)]
+pub struct Budget {
+    /// Power entering through the faces the sun sees.
+    pub incident: [f64; 3],
+    /// The buffer's light leaving through the other faces (read at the voxel centres next to
+    /// them, so exact for a sun along a grid axis, within half a voxel's loss otherwise).
+    pub buffer_out: [f64; 3],
+    /// Absorbed from the buffer.
+    pub buffer_absorbed: [f64; 3],
+    /// Scattered out of the buffer into the diffusion (its sunlit source).
+    pub dropped: [f64; 3],
+    /// The diffusion's whole source (the dropped sunlight and the skylight), 4π∫Q_0 dV.
+    pub diffusion_source: [f64; 3],
+    /// Out of the diffusion through its boundary faces, 4π∮J·n dA.
+    pub diffusion_out: [f64; 3],
+    /// Absorbed in the diffusion, 4π∫κ_a I_0 dV.
+    pub diffusion_absorbed: [f64; 3],
+}
+
+/// Everything of a frame that depends on the sun, the sky, the grid and the tables but not on
+/// the camera (steps 1–3 of the [module docs](super)); [`gather`] renders a view from it.
+#[derive(Debug, Clone)]
+pub struct Lighting {
+    /// The buffer per voxel: I per channel and, with the hemisphere split, Riley's n, with the
+    /// δ-split the forward peak's optical depth D from the box's face ([`super::peak`]).
+    pub buffer: Vec<[f64; 4]>,
+    /// I_0 per voxel and channel.
+    pub i0: Vec<[f64; 3]>,
+    /// I_1 = 3J per voxel (x, y, z per channel): the P1 radiance's first moment, so the
+    /// diffusion's radiance towards ω is I_0 + I_1·ω.
+    pub p1: Vec<[f64; 9]>,
+    /// The diffuse radiance's spherical-harmonic moments per voxel of `sh_grid` when the
+    /// discrete-ordinates transport computed them ([`transport`]); empty otherwise.
+    pub sh: Vec<[f64; transport::PER_VOXEL]>,
+    /// The grid the transport ran on, whose voxel centres the moments are at: the frame's, or
+    /// its blocks with `transport_coarsening` (only its box and dims; its data is empty). The
+    /// gathers interpolate the moments there, so a lighting at 128³ on 64³ blocks holds them
+    /// for 64³ voxels (150 MiB in f64; 600 MiB at every voxel of the 128³ grid).
+    pub sh_grid: DensityGrid,
+    /// Each field's Legendre moments χ_0 … χ_{L+1} per channel.
+    pub chis: Vec<[[f64; 3]; transport::DEGREE + 2]>,
+    /// Whether a voxel took part in the solve.
+    pub active: Vec<bool>,
+    /// Each field's asymmetry parameter g per channel.
+    pub g: Vec<[f64; 3]>,
+    /// Each field's forward peak f per channel (the δ-split's unscattered share).
+    pub peak: Vec<[f64; 3]>,
+    /// The blur of the beam's single scattering by the forward peak, with δ-M's split (the
+    /// transport's).
+    pub blur: Option<PeakBlur>,
+    /// The reduced skylight's mean radiance per voxel and channel.
+    pub sky_mean: Vec<[f64; 3]>,
+    /// The grid's dimensions this lighting was computed for.
+    pub dims: [usize; 3],
+    /// Unit vector towards the sun it was computed for.
+    pub sun_dir: DVec3,
+    /// The sunlight left below the grid (the ground's and the air's light), through the
+    /// δ-scaled extinction as the beam is: what the forward peak scatters still reaches them;
+    /// the GPU gather reads it too.
+    pub shadow: ShadowMap,
+    /// Times, iterations, residuals and the energy budget.
+    pub report: CoupledReport,
+}
+
+impl Lighting {
+    /// Checks that `frame` has the grid and sun this lighting was computed for.
+    pub fn check_frame(&self, frame: &Frame) -> Result<(), FrameError> {
+        if frame.grid.dims != self.dims || frame.sun.direction() != self.sun_dir {
+            return Err(FrameError(format!(
+                "the coupled lighting was computed for a {:?} grid and the sun towards {:?}; \
+                 this frame has {:?} and {:?}: light it again",
+                self.dims,
+                self.sun_dir,
+                frame.grid.dims,
+                frame.sun.direction()
+            )));
+        }
+        Ok(())
+    }
+}
+
+/// Checks what a `coupled` frame needs of `tables` and `frame`.
+pub(crate) fn check(tables: &Tables, frame: &Frame, settings: &Settings) -> Result<(), FrameError> {
+    frame.check_view()?;
+    settings.check()?;
+    check_fields(tables, frame)?;
+    if frame.haze.is_some() {
+        return Err(FrameError(
+            "--model coupled does not model the [haze] layer; use --model miyazaki or truth".into(),
+        ));
+    }
+    if let Some(f) = tables.fields.iter().find(|f| f.transport_factor.is_none()) {
+        return Err(FrameError(format!(
+            "field {:?}'s bake has no transport factor (written before it existed): bake it \
+             again",
+            f.name
+        )));
+    }
+    Ok(())
+}
+
+/// Steps 1–3 of the [module docs](super).
+pub fn light(tables: &Tables, frame: &Frame, settings: &Settings) -> Result<Lighting, FrameError> {
+    light_with(tables, frame, settings, &())
+}
+
+/// Each voxel's [`BeamMedium`].
+pub(super) fn beam_medium(
+    fields: &[&FieldTable],
+    grid: &DensityGrid,
+    v: &Voxels,
+    settings: &Settings,
+    (peaks, blur): (&[[f64; 3]], Option<&PeakBlur>),
+) -> Vec<BeamMedium> {
+    (0..grid.data.len())
+        .into_par_iter()
+        .map(|i| {
+            let (ext, sca) = (v.ext[i], v.sca[i]);
+            let rho: [f64; MAX_FIELDS] = std::array::from_fn(|f| f64::from(grid.data[i][f]));
+            let g = std::array::from_fn(|c| {
+                if sca[c] > 0.0 {
+                    v.g_sca[i][c] / sca[c]
+                } else {
+                    0.0
+                }
+            });
+            let f = match (settings.source, settings.split) {
+                (Source::Buffer, Split::DeltaEddington) => mixed(fields, &rho, |f| peaks[f]),
+                _ => [0.0; 3],
+            };
+            // In the δ-split the beam's light is Ams_1's, blurred by the peak's scatterings,
+            // whose optical depth D the sweep counts (the peak's share of the scattering).
+            let share = match blur {
+                Some(blur) if settings.split != Split::Hemisphere && sca[1] > 0.0 => {
+                    blur.coefficient(fields, &rho) / sca[1]
+                }
+                _ => 0.0,
+            };
+            BeamMedium {
+                ext,
+                sca,
+                f,
+                g,
+                share,
+            }
+        })
+        .collect()
+}
+
+/// [`light`], telling `progress` as each step starts.
+pub fn light_with(
+    tables: &Tables,
+    frame: &Frame,
+    settings: &Settings,
+    progress: &dyn crate::model::Progress,
+) -> Result<Lighting, FrameError> {
+    light_on(tables, frame, settings, progress, None)
+}
+
+/// [`light_with`], the transport's sweeps and the diffusion solves on `on` when given.
+pub fn light_on(
+    tables: &Tables,
+    frame: &Frame,
+    settings: &Settings,
+    progress: &dyn crate::model::Progress,
+    on: Option<OnGpu>,
+) -> Result<Lighting, FrameError> {
+    check(tables, frame, settings)?;
+    let fields: Vec<&FieldTable> = tables.fields.iter().collect();
+    let grid = &frame.grid;
+    let h = voxel_size(grid);
+    let sun_dir = frame.sun.direction();
+    let l = -sun_dir;
+    let mut report = CoupledReport::default();
+
+    progress.update(0, 3, "light buffer and skylight");
+    let start = Instant::now();
+    let v = voxels(&fields, grid);
+    let chis: Vec<Moments> = fields
+        .iter()
+        .map(|f| legendre_moments(f, tables.theta_step_deg))
+        .collect();
+    let peak = peaks(&fields, &chis, settings);
+    // The peak's blur with δ-M's split (the transport's), whose gather it was measured with;
+    // the diffusion alone keeps the exact Ams_1.
+    let blurred = delta_scaled(settings) && settings.diffuse == Diffuse::Transport;
+    // None where no field's peak is blurred (rain, ice): Ams_1 as it is, without the tables.
+    let blur = blurred
+        .then(|| PeakBlur::of(&fields, tables.theta_step_deg, &peak))
+        .filter(PeakBlur::blurs);
+    let (state, beam_on) = beam(&fields, grid, &v, (&peak, blur.as_ref()), l, (settings, on))?;
+    report.beam_on = beam_on;
+    if let Some(blur) = &blur {
+        report.peaks = blur.report(&fields);
+    }
+    // E S_atm per voxel: the sun's irradiance at each voxel's height, before the volume.
+    let sunlight = reduced_sun(frame, &vec![[0.0; 3]; v.ext.len()]);
+    // The ground lit as the composite lights it (through the δ-scaled extinction).
+    let scaled = delta_scaled(settings).then_some(peak.as_slice());
+    let lit = sky_light(frame, |g| {
+        transmittance_to_sun(&fields, grid, g, sun_dir, scaled)
+    });
+    let (sky, sky_on) = run(
+        on,
+        settings.per_sun,
+        "the skylight",
+        |on| Ok(on.sky().sweep(on.gpu, grid, &v.ext, &lit)?),
+        || Ok(sky_sweeps(grid, &v.ext, &lit)),
+    )?;
+    report.sky_on = sky_on;
+    report.buffer_s = start.elapsed().as_secs_f64();
+
+    progress.update(1, 3, "diffusion solve");
+    let start = Instant::now();
+    let h_voxel = (h[0] * h[1] * h[2]).cbrt();
+    let active: Vec<bool> = v
+        .ext
+        .iter()
+        .map(|e| e[1] * h_voxel >= MIN_DIFFUSION_VOXEL_DEPTH)
+        .collect();
+    let buffer = BufferLight {
+        state: &state,
+        sunlight: &sunlight,
+    };
+    let (i0, p1) = diffuse(
+        grid,
+        (&v, &active),
+        (&buffer, &sky),
+        l,
+        (settings, on),
+        &mut report,
+    )?;
+    report.diffusion_s = start.elapsed().as_secs_f64();
+    let (sh, sh_grid) = if settings.diffuse == Diffuse::Transport {
+        progress.update(2, 3, "discrete-ordinates transport");
+        let sources = Sources {
+            sunlight: &sunlight,
+            state: &state,
+            sky: &sky,
+            active: &active,
+        };
+        let diffusion = (i0.as_slice(), p1.as_slice());
+        let optics = (fields.as_slice(), &v, (chis.as_slice(), peak.as_slice()));
+        transport_step(
+            grid,
+            optics,
+            &sources,
+            l,
+            diffusion,
+            (settings, on),
+            &mut report,
+        )?
+    } else {
+        (Vec::new(), box_of(grid))
+    };
+    progress.update(3, 3, "lighting done");
+    let shadow = ShadowMap::of(&fields, frame, delta_scaled(settings).then_some(&peak));
+    Ok(Lighting {
+        buffer: state
+            .iter()
+            .map(|s| [s.intensity[0], s.intensity[1], s.intensity[2], s.depth])
+            .collect(),
+        i0,
+        p1,
+        sh,
+        sh_grid,
+        chis,
+        active,
+        g: asymmetries(&fields),
+        peak,
+        blur,
+        sky_mean: sky.mean,
+        dims: grid.dims,
+        sun_dir,
+        shadow,
+        report,
+    })
+}
+
+/// Step 3b, the transport over `optics` (the fields, their voxels, moments and peaks) from
+/// `sources` and the diffusion's (I_0, I_1), timed into the report: the moments per voxel of
+/// the (possibly coarser) grid they are on, and that grid.
+pub(super) fn transport_step(
+    grid: &DensityGrid,
+    (fields, v, moments): (&[&FieldTable], &Voxels, (&[Moments], &[[f64; 3]])),
+    sources: &Sources,
+    l: DVec3,
+    diffusion: (&[[f64; 3]], &[[f64; 9]]),
+    (settings, on): (&Settings, Option<OnGpu>),
+    report: &mut CoupledReport,
+) -> Result<(Vec<[f64; transport::PER_VOXEL]>, DensityGrid), FrameError> {
+    let start = Instant::now();
+    let Transported {
+        on: swept_on,
+        moments,
+        report: t,
+        balance,
+        grid: on_grid,
+    } = transport_light(
+        fields,
+        grid,
+        v,
+        sources,
+        moments,
+        l,
+        diffusion,
+        (settings, on),
+    )?;
+    report.transport_on = swept_on;
+    report.transport_balance = balance;
+    report.transport_iterations = t.changes.len();
+    report.transport_dims = on_grid.dims;
+    report.transport_change = t.changes.last().copied().unwrap_or(0.0);
+    report.transport_s = start.elapsed().as_secs_f64();
+    Ok((moments, on_grid))
+}
+
+/// Step 1 and the loss of step 2: the beam through `v`'s medium with the forward `peak`s (and
+/// their `blur`) travelling along `l`, on the GPU when `on` is given and `settings.per_sun`
+/// lets it (but for the hemisphere split, whose F_n the sweep looks up as it goes); and where
+/// it ran.
+pub(super) fn beam(
+    fields: &[&FieldTable],
+    grid: &DensityGrid,
+    v: &Voxels,
+    (peak, blur): (&[[f64; 3]], Option<&PeakBlur>),
+    l: DVec3,
+    (settings, on): (&Settings, Option<OnGpu>),
+) -> Result<(Vec<BeamState>, String), FrameError> {
+    let medium = beam_medium(fields, grid, v, settings, (peak, blur));
+    let rule = (
+        if (settings.source, settings.split) == (Source::Buffer, Split::Hemisphere) {
+            PeakFrom::Tables
+        } else {
+            PeakFrom::Medium
+        },
+        if settings.split == Split::Hemisphere {
+            Depth::Scatterings
+        } else {
+            Depth::Peak
+        },
+    );
+    run(
+        on.filter(|_| settings.split != Split::Hemisphere),
+        settings.per_sun,
+        "the beam",
+        |on| Ok(on.beam().sweep(on.gpu, grid, &medium, l)?),
+        || Ok(beam_sweep(fields, grid, &medium, l, rule)),
+    )
+}
+
+/// Step 3: the diffusion per channel over the `active` voxels of `v`, its sources the beam's
+/// loss (`buffer`, light travelling along `l`) and the skylight `sky`, solved where
+/// `settings.per_sun` and `on` say; I_0 per channel and the P1 term I_1 = 3J per channel and
+/// axis. Fills the report's solve figures and energy budget.
+pub(super) fn diffuse(
+    grid: &DensityGrid,
+    (v, active): (&Voxels, &[bool]),
+    (buffer, sky): (&BufferLight, &Sky),
+    l: DVec3,
+    (settings, on): (&Settings, Option<OnGpu>),
+    report: &mut CoupledReport,
+) -> Result<(Vec<[f64; 3]>, Vec<[f64; 9]>), FrameError> {
+    let h = voxel_size(grid);
+    let (state, sunlight) = (buffer.state, buffer.sunlight);
+    let n = v.ext.len();
+    let mut i0 = vec![[0.0f64; 3]; n];
+    let mut p1 = vec![[0.0f64; 9]; n];
+    for c in 0..3 {
+        let problem = Problem {
+            dims: grid.dims,
+            h,
+            kappa_tr: (0..n)
+                .map(|i| if active[i] { v.transport[i][c] } else { 0.0 })
+                .collect(),
+            kappa_a: (0..n)
+                .map(|i| (v.ext[i][c] - v.sca[i][c]).max(0.0))
+                .collect(),
+            q0: (0..n)
+                .map(|i| {
+                    sunlight[i][c] * state[i].dropped[c] / (4.0 * PI) + v.sca[i][c] * sky.mean[i][c]
+                })
+                .collect(),
+            q1: (0..n)
+                .map(|i| {
+                    let sun = l * (sunlight[i][c] * state[i].forward[c] / (4.0 * PI));
+                    (sun + sky.flux[i][c] * v.g_sca[i][c]).to_array()
+                })
+                .collect(),
+        };
+        let limits = (
+            settings.diffusion_tolerance,
+            settings.max_diffusion_iterations,
+        );
+        let channel = ["R", "G", "B"][c];
+        // On the GPU when asked; `auto` falls back to the CPU where the adapter cannot hold
+        // the solve, `gpu` fails naming the limit.
+        let (s, solved_on) = run(
+            on,
+            settings.per_sun,
+            &format!("channel {channel}"),
+            |on| Ok(on.solver().solve_problem(on.gpu, &problem, limits)?),
+            || {
+                diffusion::solve(&problem, limits.0, limits.1)
+                    .map_err(|e| FrameError(format!("channel {channel}: {e}")))
+            },
+        )?;
+        report.diffusion_on = solved_on;
+        report.iterations[c] = s.iterations;
+        report.residual[c] = s.residual;
+        report.unknowns = s.unknowns;
+        report.levels = s.levels;
+        let flux = diffusion::flux(&problem, &s.i0);
+        for i in 0..n {
+            i0[i][c] = s.i0[i];
+            for a in 0..3 {
+                p1[i][3 * c + a] = 3.0 * flux[i][a];
+            }
+        }
+        report.budget.add(c, (&problem, &s.i0), buffer, l);
+    }
+    Ok((i0, p1))
+}
+
+impl Budget {
+    /// Channel `c`'s budget from its problem and solution, the buffer's `state` and the
+    /// `sunlight` E S_atm per voxel (light travelling along `l`).
+    fn add(&mut self, c: usize, (p, i0): (&Problem, &[f64]), light: &BufferLight, l: DVec3) {
+        let (h, dims) = (p.h, p.dims);
+        let volume = h[0] * h[1] * h[2];
+        let [nx, ny, _] = dims;
+        let (mut incident, mut out, mut dropped, mut lost) = (0.0, 0.0, 0.0, 0.0);
+        for (i, s) in light.state.iter().enumerate() {
+            let e = light.sunlight[i][c];
+            dropped += e * s.dropped[c] * volume;
+            lost += e * s.loss[c] * volume;
+            // The beam through the box's faces.
+            let cc = [i % nx, (i / nx) % ny, i / (nx * ny)];
+            for (a, ha) in h.iter().enumerate() {
+                for (sign, on_face) in [(-1.0, cc[a] == 0), (1.0, cc[a] + 1 == dims[a])] {
+                    let cos = sign * l[a];
+                    if !on_face {
+                        continue;
+                    } else if cos < 0.0 {
+                        incident += e * -cos * volume / ha;
+                    } else {
+                        out += e * s.intensity[c] * cos * volume / ha;
+                    }
+                }
+            }
+        }
+        let solve = diffusion::balance(p, i0);
+        let share = |x: f64| x / incident.max(f64::MIN_POSITIVE);
+        self.incident[c] = incident;
+        self.buffer_out[c] = share(out);
+        self.dropped[c] = share(dropped);
+        self.buffer_absorbed[c] = share(lost - dropped);
+        self.diffusion_source[c] = share(4.0 * PI * solve.source);
+        self.diffusion_out[c] = share(4.0 * PI * solve.out);
+        self.diffusion_absorbed[c] = share(4.0 * PI * solve.absorbed);
+    }
+}
+
+/// The buffer's state and the sunlight E S_atm per voxel, which [`Budget::add`] reads.
+pub(super) struct BufferLight<'a> {
+    state: &'a [BeamState],
+    sunlight: &'a [[f64; 3]],
+}
+
+/// Whether the gather treats a forward peak as unscattered (the δ-Eddington split).
+pub(crate) fn delta_scaled(settings: &Settings) -> bool {
+    (settings.source, settings.split) == (Source::Buffer, Split::DeltaEddington)
+}
+
+/// The relative residual of the transport's acceleration solves: the correction only needs to
+/// be roughly right, the next sweep corrects it (dense_cumulus at 128³: six rounds and the
+/// same image to four digits at 10⁻² as at 10⁻⁴, the acceleration 0.5 s a round instead of
+/// 0.95 s).
+pub(super) const ACCELERATION_TOLERANCE: f64 = 1e-2;
+
+/// What feeds the transport: E S_atm per voxel, the buffer's state, the reduced skylight, and
+/// the diffusion's active voxels.
+pub(super) struct Sources<'a> {
+    sunlight: &'a [[f64; 3]],
+    state: &'a [BeamState],
+    sky: &'a crate::lighting::sky::Sky,
+    active: &'a [bool],
+}
+
+/// The diffuse light by discrete ordinates ([`transport`]), from the diffusion's `(I_0, I_1)`:
+/// the δ-M-scaled medium (f = χ_{L+1} per field, `peaks`), the sunlit source Q(ω) = q p′(ω·l)
+/// with q the diffusion's Q_0 from the beam, the skylit source as the diffusion has it, and the
+/// source iteration accelerated by a diffusion solve of each round's change of the mean
+/// radiance (diffusion synthetic acceleration, Alcouffe 1977). Fails, naming the change, the
+/// tolerance and the cap, when it does not converge within `max_transport_iterations`.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn transport_light(
+    fields: &[&FieldTable],
+    grid: &crate::volume::DensityGrid,
+    v: &Voxels,
+    sources: &Sources,
+    (chis, peak): (&[Moments], &[[f64; 3]]),
+    l: DVec3,
+    (i0, p1): (&[[f64; 3]], &[[f64; 9]]),
+    (settings, on): (&Settings, Option<OnGpu>),
+) -> Result<Transported, FrameError> {
+    let n = v.ext.len();
+    let medium = transport_medium(fields, grid, v, sources, (chis, peak), l);
+    // φ_00 = √(4π) I_0 and φ_1m = Y_1 (4π/3) I_1 of the P1 radiance I_0 + I_1·ω.
+    let root = (4.0 * PI).sqrt();
+    let start = p1_moments(i0, p1);
+    // On a coarser grid when asked: the medium, the sources and the start averaged over
+    // blocks of voxels; the moments stay there (the gathers interpolate them).
+    let kappa_tr: Vec<[f64; 3]> = (0..n)
+        .map(|i| {
+            if sources.active[i] {
+                v.transport[i]
+            } else {
+                [0.0; 3]
+            }
+        })
+        .collect();
+    let kappa_a: Vec<[f64; 3]> = (0..n)
+        .map(|i| std::array::from_fn(|c| (v.ext[i][c] - v.sca[i][c]).max(0.0)))
+        .collect();
+    let factor = settings.coarsening(grid.dims);
+    let coarse = (factor > 1).then(|| transport::Coarse::new(grid, factor));
+    let (grid, medium, start, kappa_tr, kappa_a) = match &coarse {
+        None => (grid, medium, start, kappa_tr, kappa_a),
+        Some(c) => (
+            &c.grid,
+            c.medium(&medium),
+            c.average(&start),
+            c.average(&kappa_tr),
+            c.average(&kappa_a),
+        ),
+    };
+    let (n, h) = (medium.ext.len(), voxel_size(grid));
+    // The acceleration: the diffusion of each round's change of the mean radiance, scattered
+    // (the error's source), added to φ_00. (Correcting φ_1 by its flux as well diverged.)
+    let mut failed = None;
+    // The acceleration's operators and their multigrid hierarchies, one per channel, built
+    // once; only their sources change per round.
+    let operators: Vec<diffusion::Operator> = (0..3)
+        .map(|c| {
+            diffusion::Operator::of(&Problem {
+                dims: grid.dims,
+                h,
+                kappa_tr: kappa_tr.iter().map(|k| k[c]).collect(),
+                kappa_a: kappa_a.iter().map(|k| k[c]).collect(),
+                q0: vec![0.0; n],
+                q1: vec![[0.0; 3]; n],
+            })
+        })
+        .collect();
+    // On the GPU, each operator's hierarchy uploaded once (`auto` falls back to the CPU where
+    // the adapter cannot hold them).
+    let uploaded = match on.map(|on| {
+        operators
+            .iter()
+            .map(|op| on.solver().upload(on.gpu, op))
+            .collect::<Result<Vec<_>, _>>()
+    }) {
+        None => None,
+        Some(Ok(uploaded)) => Some(uploaded),
+        Some(Err(_)) if settings.per_sun == Place::Auto => None,
+        Some(Err(e)) => {
+            return Err(FrameError(format!(
+                "the transport's acceleration on the GPU: {e}"
+            )));
+        }
+    };
+    let mut q0 = vec![0.0; n];
+    let accelerate = |old: &[[f64; transport::PER_VOXEL]],
+                      new: &mut [[f64; transport::PER_VOXEL]]| {
+        for (c, operator) in operators.iter().enumerate() {
+            let o = c * transport::HARMONICS;
+            for (i, q) in q0.iter_mut().enumerate() {
+                *q = medium.sca[i][c] * (new[i][o] - old[i][o]) / root;
+            }
+            let (tolerance, cap) = (ACCELERATION_TOLERANCE, settings.max_diffusion_iterations);
+            let solved = match &uploaded {
+                Some(u) => u[c]
+                    .solve(&operator.isotropic(&q0), tolerance, cap)
+                    .map_err(|e| e.to_string()),
+                None => operator
+                    .solve_isotropic(&q0, tolerance, cap)
+                    .map_err(|e| e.to_string()),
+            };
+            match solved {
+                Ok(s) => new
+                    .par_iter_mut()
+                    .zip(&s.i0)
+                    .for_each(|(m, d)| m[o] += root * d),
+                Err(e) => failed = Some(e),
+            }
+        }
+    };
+    let cap = settings.max_transport_iterations;
+    let (on, (m, report)) = sweep_rounds(grid, &medium, start, accelerate, (settings, on))?;
+    if let Some(e) = failed {
+        return Err(FrameError(format!("the transport's acceleration: {e}")));
+    }
+    let budget = transport::balance(grid, &medium, &m);
+    let change = report.changes.last().copied().unwrap_or(0.0);
+    if change >= settings.transport_tolerance {
+        return Err(FrameError(format!(
+            "the transport did not converge: the mean radiance still changed by {change:.3e} \
+             (relative) in iteration {cap} (max_transport_iterations), transport_tolerance \
+             {}; raise max_transport_iterations or loosen transport_tolerance",
+            crate::checks::Shown(settings.transport_tolerance)
+        )));
+    }
+    Ok(Transported {
+        on,
+        moments: m,
+        report,
+        balance: budget,
+        grid: box_of(grid),
+    })
+}
+
+/// The transport's source iteration from `start` over `medium` on `grid`, each round's
+/// sweeps on the GPU when `on` is given and the adapter can hold them (`auto` falls back to
+/// the CPU and says why, `gpu` fails naming the limit), `accelerate`d after each round; where
+/// the sweeps ran, the moments and the rounds' report.
+pub(super) fn sweep_rounds(
+    grid: &DensityGrid,
+    medium: &transport::Medium,
+    start: Vec<[f64; transport::PER_VOXEL]>,
+    accelerate: impl FnMut(&[[f64; transport::PER_VOXEL]], &mut [[f64; transport::PER_VOXEL]]),
+    (settings, on): (&Settings, Option<OnGpu>),
+) -> Result<
+    (
+        String,
+        (Vec<[f64; transport::PER_VOXEL]>, transport::Report),
+    ),
+    FrameError,
+> {
+    let dirs = crate::lighting::lattice::fibonacci_directions(settings.directions);
+    let limits = (
+        settings.transport_tolerance,
+        settings.max_transport_iterations,
+    );
+    let sweeps = match on {
+        None => None,
+        Some(on) => match on.transport().prepare(on.gpu, grid, medium, &dirs) {
+            Ok(sweeps) => Some(Ok(sweeps)),
+            Err(e) if settings.per_sun == Place::Gpu => {
+                return Err(FrameError(e.to_string()));
+            }
+            Err(e) => Some(Err(e.to_string())),
+        },
+    };
+    Ok(match sweeps {
+        Some(Ok(sweeps)) => (
+            sweeps.describe(),
+            transport::solve_with(start, limits, |m| sweeps.round(m), accelerate)
+                .map_err(|e| FrameError(format!("the transport's sweeps on the GPU: {e}")))?,
+        ),
+        Some(Err(refused)) => (
+            format!("the CPU ({refused})"),
+            transport::solve(grid, medium, start, &dirs, limits, accelerate),
+        ),
+        None => (
+            "the CPU".into(),
+            transport::solve(grid, medium, start, &dirs, limits, accelerate),
+        ),
+    })
+}
+
+/// The δ-M-scaled medium the transport solves (docs/physics.md §7.10): per voxel σ′_t =
+/// β_ext − f β_sca and σ′_s = (1 − f) β_sca, p′'s moments, the sunlit source (the beam's
+/// dropped loss) and the skylit one, for light travelling along `l`.
+pub(super) fn transport_medium(
+    fields: &[&FieldTable],
+    grid: &crate::volume::DensityGrid,
+    v: &Voxels,
+    sources: &Sources,
+    (chis, peak): (&[Moments], &[[f64; 3]]),
+    l: DVec3,
+) -> transport::Medium {
+    let n = v.ext.len();
+    // Per voxel: σ′_t, σ′_s, p′'s moments, the sunlit and the skylit source.
+    type Optics = (
+        [f64; 3],
+        [f64; 3],
+        [[f64; transport::DEGREE + 1]; 3],
+        [f64; 3],
+        [[f64; 4]; 3],
+    );
+    let optics: Vec<Optics> = (0..n)
+        .into_par_iter()
+        .map(|i| {
+            let rho: [f64; MAX_FIELDS] = std::array::from_fn(|f| f64::from(grid.data[i][f]));
+            let f = mixed(fields, &rho, |k| peak[k]);
+            let (ext, sca) = (v.ext[i], v.sca[i]);
+            (
+                std::array::from_fn(|c| ext[c] - sca[c] * f[c]),
+                std::array::from_fn(|c| sca[c] * (1.0 - f[c])),
+                reduced_moments(fields, &rho, chis, peak),
+                std::array::from_fn(|c| {
+                    sources.sunlight[i][c] * sources.state[i].dropped[c] / (4.0 * PI)
+                }),
+                std::array::from_fn(|c| {
+                    let q1 = sources.sky.flux[i][c] * v.g_sca[i][c];
+                    [sca[c] * sources.sky.mean[i][c], q1.x, q1.y, q1.z]
+                }),
+            )
+        })
+        .collect();
+    transport::Medium {
+        ext: optics.iter().map(|o| o.0).collect(),
+        sca: optics.iter().map(|o| o.1).collect(),
+        chi: optics.iter().map(|o| o.2).collect(),
+        sun: optics.iter().map(|o| o.3).collect(),
+        l,
+        sky: optics.iter().map(|o| o.4).collect(),
+    }
+}
+
+/// The spherical-harmonic moments of the P1 radiance I_0 + I_1·ω per voxel, the transport's
+/// start: φ_00 = √(4π) I_0 and φ_1m = Y_1 (4π/3) I_1 (m = −1, 0, 1: y, z, x).
+pub(super) fn p1_moments(i0: &[[f64; 3]], p1: &[[f64; 9]]) -> Vec<[f64; transport::PER_VOXEL]> {
+    let root = (4.0 * PI).sqrt();
+    let c1 = 0.488_602_511_902_919_9 * 4.0 * PI / 3.0;
+    (0..i0.len())
+        .into_par_iter()
+        .map(|i| {
+            let mut m = [0.0; transport::PER_VOXEL];
+            for c in 0..3 {
+                let o = c * transport::HARMONICS;
+                m[o] = root * i0[i][c];
+                m[o + 1] = c1 * p1[i][3 * c + 1];
+                m[o + 2] = c1 * p1[i][3 * c + 2];
+                m[o + 3] = c1 * p1[i][3 * c];
+            }
+            m
+        })
+        .collect()
+}
+
+/// `grid`'s box and dims without its densities.
+pub(super) fn box_of(grid: &DensityGrid) -> DensityGrid {
+    DensityGrid {
+        min_m: grid.min_m,
+        max_m: grid.max_m,
+        dims: grid.dims,
+        data: Vec::new(),
+    }
+}
+
+/// What [`transport_light`] found: the moments per voxel of the grid it ran on, the
+/// iteration's report, the energy balance per channel and that grid (box and dims).
+pub(super) struct Transported {
+    /// Where the sweeps ran.
+    on: String,
+    moments: Vec<[f64; transport::PER_VOXEL]>,
+    report: transport::Report,
+    balance: [transport::Balance; 3],
+    grid: DensityGrid,
+}
