@@ -438,6 +438,21 @@ pub(crate) fn run_slices(
     )
 }
 
+/// Records `record` into one compute pass labelled `label` and submits it (without waiting).
+pub(crate) fn submit_pass(gpu: &Gpu, label: &str, record: impl FnOnce(&mut wgpu::ComputePass)) {
+    let mut encoder = gpu
+        .device
+        .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(label) });
+    {
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some(label),
+            timestamp_writes: None,
+        });
+        record(&mut pass);
+    }
+    gpu.queue.submit([encoder.finish()]);
+}
+
 /// A frame once its buffers are created (timed from `start`): waits for the uploads,
 /// records `record` into one compute pass, submits and waits (the frame time), and reads the
 /// (rgb, T) image of `size` back. Shared by every GPU model.

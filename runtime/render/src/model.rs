@@ -180,6 +180,28 @@ pub fn image_need(what: &'static str, pixels: u64, bytes_per_pixel: u64) -> Need
     }
 }
 
+/// A model's frame or why it could not be rendered.
+pub type RenderResult = Result<Rendered, RenderError>;
+
+/// The GPU side of a render: the adapter, the model's renderer built for it and the tables
+/// uploaded there.
+pub struct Device<'a, R> {
+    /// The model's GPU renderer.
+    pub renderer: &'a R,
+    /// The adapter.
+    pub gpu: &'a Gpu,
+    /// The tables as uploaded for the model.
+    pub tables: &'a GpuTables,
+}
+
+impl<R> Clone for Device<'_, R> {
+    fn clone(&self) -> Self {
+        *self
+    }
+}
+
+impl<R> Copy for Device<'_, R> {}
+
 /// What a render model provides (module docs).
 pub trait Model {
     /// The `--model` name and the scene table `[render.<NAME>]`.
@@ -190,6 +212,9 @@ pub trait Model {
     const TEXELS: TexelFormat;
     /// Whether it has a GPU renderer ([`Model::renderer`] gives one).
     const GPU: bool;
+    /// Whether it is the reference the others are measured against (the path tracer), which
+    /// the viewer shows beside a model rather than as one.
+    const REFERENCE: bool = false;
     /// Its settings: `[render.<NAME>]`, every key optional (defaults in `Default`).
     type Settings: Default + Clone + PartialEq + Debug + Serialize + DeserializeOwned + Send + Sync;
     /// Its GPU renderer: pipelines and layouts built once for a device and a table upload.
@@ -207,22 +232,15 @@ pub trait Model {
     fn renderer(gpu: &Gpu, tables: &GpuTables) -> Option<Self::Renderer>;
     /// The CPU reference.
     fn render_cpu(settings: &Self::Settings, job: &Job) -> Result<Rendered, RenderError>;
-    /// The frame on the GPU with `renderer` and the tables uploaded as [`Model::TEXELS`].
-    fn render_gpu(
-        renderer: &Self::Renderer,
-        settings: &Self::Settings,
-        job: &Job,
-        gpu: &Gpu,
-        tables: &GpuTables,
-    ) -> Result<Rendered, RenderError>;
+    /// The frame on the GPU `on` names: its renderer and the tables uploaded as
+    /// [`Model::TEXELS`].
+    fn render_gpu(s: &Self::Settings, job: &Job, on: Device<Self::Renderer>) -> RenderResult;
     /// Parts of a GPU frame a benchmark times on their own beside the frame (Biri's stage 2
     /// without the medium); none by default.
     fn bench_parts(
-        _renderer: &Self::Renderer,
-        _settings: &Self::Settings,
+        _s: &Self::Settings,
         _job: &Job,
-        _gpu: &Gpu,
-        _tables: &GpuTables,
+        _on: Device<Self::Renderer>,
     ) -> Result<Vec<Pass>, RenderError> {
         Ok(Vec::new())
     }

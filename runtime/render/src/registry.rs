@@ -10,7 +10,7 @@ use crate::frame::Frame;
 
 use crate::checks::FrameError;
 use crate::gpu::RenderError;
-use crate::model::{Job, Model, Need, Pass, Rendered};
+use crate::model::{Device, Job, Model, Need, Pass, Rendered};
 
 /// Where a frame is rendered.
 pub enum On<'a> {
@@ -87,6 +87,18 @@ macro_rules! models {
 
         /// Every model's name, in the order of `--help`.
         pub const MODEL_NAMES: &[&str] = &[$(<$model as Model>::NAME),*];
+
+        /// The models a viewer switches between: those with a GPU renderer, but the
+        /// reference (which it shows beside them), in the order of `--help`.
+        pub fn interactive_models() -> Vec<&'static str> {
+            let mut names = Vec::new();
+            $(
+                if <$model as Model>::GPU && !<$model as Model>::REFERENCE {
+                    names.push(<$model as Model>::NAME);
+                }
+            )*
+            names
+        }
 
         /// Each model's name and one-line description.
         pub fn model_descriptions() -> Vec<(&'static str, &'static str)> {
@@ -168,7 +180,7 @@ macro_rules! models {
                 match (self, on) {
                     $(
                         (Self::$variant(s), On::Gpu(gpu, Prepared::$variant(t, Some(r)))) => {
-                            <$model as Model>::render_gpu(r, s, job, gpu, t)
+                            <$model as Model>::render_gpu(s, job, Device { renderer: r, gpu, tables: t })
                         }
                         (Self::$variant(s), _) => <$model as Model>::render_cpu(s, job),
                     )*
@@ -192,7 +204,7 @@ macro_rules! models {
                 match (self, prepared) {
                     $(
                         (Self::$variant(s), Prepared::$variant(t, Some(r))) => {
-                            <$model as Model>::bench_parts(r, s, job, gpu, t)
+                            <$model as Model>::bench_parts(s, job, Device { renderer: r, gpu, tables: t })
                         }
                     )*
                     _ => Ok(Vec::new()),

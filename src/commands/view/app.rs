@@ -621,9 +621,9 @@ fn model_tables(
     scene: &RenderScene,
     first: Option<&ModelSettings>,
 ) -> BTreeMap<String, (toml::Table, ModelSettings)> {
-    super::MODELS
-        .iter()
-        .filter_map(|&name| {
+    super::models()
+        .into_iter()
+        .filter_map(|name| {
             let settings = match first {
                 Some(f) if f.name() == name => f.clone(),
                 _ => scene.model(name, &[]).ok()?,

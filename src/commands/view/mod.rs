@@ -29,8 +29,11 @@ use clap::Args as ClapArgs;
 
 use crate::commands::render::{gpu, parse_setting, prepare};
 
-/// The render models the window can switch between: those with a GPU renderer.
-pub const MODELS: [&str; 5] = ["riley", "miyazaki", "max", "coupled", "biri"];
+/// The render models the window can switch between: those with a GPU renderer but the
+/// reference (the registry's list).
+pub fn models() -> Vec<&'static str> {
+    render::registry::interactive_models()
+}
 
 #[derive(Debug, ClapArgs)]
 pub struct ViewArgs {
@@ -38,8 +41,8 @@ pub struct ViewArgs {
     /// and shown as an error, the last good scene kept, when it is not). Default: the embedded
     /// rainbow scene.
     scene: Option<PathBuf>,
-    /// The model shown first: riley, miyazaki, max, coupled or biri (switchable in the window).
-    #[arg(long, default_value = "riley", value_parser = MODELS)]
+    /// The model shown first (switchable in the window): one with a GPU renderer.
+    #[arg(long, default_value = "riley", value_parser = clap::builder::PossibleValuesParser::new(models()))]
     model: String,
     /// A setting of the first model, `KEY=VALUE` in TOML, over the scene's [render.<model>];
     /// repeatable.

@@ -140,11 +140,11 @@ impl Step {
             }
         }
         if let Some(model) = &self.model
-            && !super::MODELS.contains(&model.as_str())
+            && !super::models().contains(&model.as_str())
         {
             bail!(
                 "--script step: model = {model:?}; the window's models are {}",
-                super::MODELS.join(", ")
+                super::models().join(", ")
             );
         }
         if let Some(set) = &self.set {

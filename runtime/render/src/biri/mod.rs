@@ -38,7 +38,7 @@ use serde::{Deserialize, Serialize};
 use runtime::gpu::{Gpu, GpuTables, TexelFormat};
 
 use crate::gpu::RenderError;
-use crate::model::{Job, Model, Need, Pass, Rendered, image_need};
+use crate::model::{Device, Job, Model, Need, Pass, RenderResult, Rendered, image_need};
 use crate::objects;
 use crate::{checks::FrameError, frame::Frame};
 
@@ -152,13 +152,8 @@ impl Model for Biri {
         })
     }
 
-    fn render_gpu(
-        renderer: &gpu::Renderer,
-        s: &Settings,
-        job: &Job,
-        gpu: &Gpu,
-        tables: &GpuTables,
-    ) -> Result<Rendered, RenderError> {
+    fn render_gpu(s: &Settings, job: &Job, on: Device<gpu::Renderer>) -> RenderResult {
+        let (renderer, gpu, tables) = (on.renderer, on.gpu, on.tables);
         let (image, t) = renderer.render(gpu, job.tables, tables, job.frame, s)?;
         // Biri's upload includes the silhouettes, computed on the CPU.
         let summary = format!(
@@ -176,12 +171,11 @@ impl Model for Biri {
     /// Stage 2 alone (the surfaces, shaded and attenuated, no medium): the paper's Table 1
     /// splits the frame into stages this way.
     fn bench_parts(
-        renderer: &gpu::Renderer,
         s: &Settings,
         job: &Job,
-        gpu: &Gpu,
-        tables: &GpuTables,
+        on: Device<gpu::Renderer>,
     ) -> Result<Vec<Pass>, RenderError> {
+        let (renderer, gpu, tables) = (on.renderer, on.gpu, on.tables);
         let (_, t) = renderer.render_stages(gpu, job.tables, tables, job.frame, s, true)?;
         Ok(vec![Pass {
             name: "stage 2 alone",

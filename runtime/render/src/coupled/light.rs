@@ -138,17 +138,7 @@ pub struct Lighting {
 impl Lighting {
     /// Checks that `frame` has the grid and sun this lighting was computed for.
     pub fn check_frame(&self, frame: &Frame) -> Result<(), FrameError> {
-        if frame.grid.dims != self.dims || frame.sun.direction() != self.sun_dir {
-            return Err(FrameError(format!(
-                "the coupled lighting was computed for a {:?} grid and the sun towards {:?}; \
-                 this frame has {:?} and {:?}: light it again",
-                self.dims,
-                self.sun_dir,
-                frame.grid.dims,
-                frame.sun.direction()
-            )));
-        }
-        Ok(())
+        crate::lighting::check_lit_for("coupled", (self.dims, self.sun_dir), frame)
     }
 }
 

@@ -116,7 +116,7 @@ use crate::frame::Frame;
 use crate::gpu::RenderError;
 use crate::lighting::Place;
 use crate::lighting::transport;
-use crate::model::{Job, Model, Need, Pass, Rendered, image_need};
+use crate::model::{Device, Job, Model, Need, Pass, RenderResult, Rendered, image_need};
 
 /// `--model coupled`.
 pub struct Coupled;
@@ -370,13 +370,8 @@ impl Model for Coupled {
         ))
     }
 
-    fn render_gpu(
-        renderer: &gpu::Renderer,
-        s: &Settings,
-        job: &Job,
-        gpu: &Gpu,
-        tables: &GpuTables,
-    ) -> Result<Rendered, RenderError> {
+    fn render_gpu(s: &Settings, job: &Job, on: Device<gpu::Renderer>) -> RenderResult {
+        let (renderer, gpu, tables) = (on.renderer, on.gpu, on.tables);
         // The lighting takes 5 rows of 16 bytes a voxel, the transport's moments 19 a voxel of
         // its grid: past the adapter's storage-binding limit the view is gathered on the CPU
         // (same image, said so), or refused before any work with `per_view = "gpu"`; on a CPU

@@ -437,24 +437,13 @@ impl<'a> Uploaded<'a> {
 
     /// Records `calls` into one compute pass and submits it.
     fn submit(&self, calls: &[Call]) {
-        let mut encoder = self
-            .gpu
-            .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                label: Some("photometeor diffusion"),
-            });
-        {
-            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some("photometeor diffusion"),
-                timestamp_writes: None,
-            });
+        crate::gpu::submit_pass(self.gpu, "photometeor diffusion", |pass| {
             for c in calls {
                 pass.set_pipeline(&self.solver.pipelines[c.kernel as usize]);
                 pass.set_bind_group(0, &self.bind_group, &[(u64::from(c.slot) * ALIGN) as u32]);
                 pass.dispatch_workgroups(c.groups.0, c.groups.1, 1);
             }
-        }
-        self.gpu.queue.submit([encoder.finish()]);
+        });
     }
 
     /// The sums of the partial sums in slots 0 and 1 (f64).

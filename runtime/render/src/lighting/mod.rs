@@ -167,3 +167,21 @@ pub fn run<T>(
         Some((_, Err(Refused::Failed(e)))) => Err(FrameError(format!("{what} on the GPU: {e}"))),
     }
 }
+
+/// Refuses `frame` unless it has the grid dimensions and the sun a `model`'s lighting was
+/// computed for (`lit_for`): a view may reuse a lighting only then.
+pub fn check_lit_for(
+    model: &str,
+    (dims, sun_dir): ([usize; 3], glam::DVec3),
+    frame: &crate::frame::Frame,
+) -> Result<(), FrameError> {
+    if frame.grid.dims != dims || frame.sun.direction() != sun_dir {
+        return Err(FrameError(format!(
+            "the {model} lighting was computed for a {dims:?} grid and the sun towards \
+             {sun_dir:?}; this frame has {:?} and {:?}: light it again",
+            frame.grid.dims,
+            frame.sun.direction()
+        )));
+    }
+    Ok(())
+}

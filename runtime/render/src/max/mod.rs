@@ -85,7 +85,7 @@ use crate::checks::FrameError;
 use crate::frame::Frame;
 use crate::gpu::RenderError;
 use crate::lighting::Place;
-use crate::model::{Job, Model, Need, Pass, Rendered, image_need};
+use crate::model::{Device, Job, Model, Need, Pass, RenderResult, Rendered, image_need};
 
 /// `--model max`.
 pub struct Max;
@@ -137,13 +137,8 @@ impl Model for Max {
         Ok(rendered(image, &report, gather, "CPU", job.frame))
     }
 
-    fn render_gpu(
-        renderer: &gpu::Renderer,
-        s: &Settings,
-        job: &Job,
-        gpu: &Gpu,
-        tables: &GpuTables,
-    ) -> Result<Rendered, RenderError> {
+    fn render_gpu(s: &Settings, job: &Job, on: Device<gpu::Renderer>) -> RenderResult {
+        let (renderer, gpu, tables) = (on.renderer, on.gpu, on.tables);
         let (lighting, reused) = crate::relight::lit(job.lighting, job.frame, s, || {
             let on = s.per_sun.on_gpu(gpu).then(|| renderer.per_sun(gpu));
             cpu::light_on(job.tables, job.frame, s, job.progress, on)

@@ -66,7 +66,7 @@ use serde::{Deserialize, Serialize};
 use runtime::gpu::{Gpu, GpuTables, TexelFormat};
 
 use crate::gpu::RenderError;
-use crate::model::{Job, Model, Need, Pass, Rendered, image_need};
+use crate::model::{Device, Job, Model, Need, Pass, RenderResult, Rendered, image_need};
 use crate::shading::{MAX_PHASE_TERM, check_slicing};
 use crate::{checks::FrameError, frame::Frame, geometry::basis};
 
@@ -121,13 +121,8 @@ impl Model for Miyazaki {
         Ok(Rendered::cpu_frame(image, seconds, summary))
     }
 
-    fn render_gpu(
-        renderer: &gpu::Renderer,
-        s: &Settings,
-        job: &Job,
-        gpu: &Gpu,
-        tables: &GpuTables,
-    ) -> Result<Rendered, RenderError> {
+    fn render_gpu(s: &Settings, job: &Job, on: Device<gpu::Renderer>) -> RenderResult {
+        let (renderer, gpu, tables) = (on.renderer, on.gpu, on.tables);
         let (image, t) = renderer.render(gpu, job.tables, tables, job.frame, s)?;
         let summary = format!(
             "shadow-view slices ({}): {}×{}, {} slices, a = {}, k_multi = {} /sr, shadow surface \

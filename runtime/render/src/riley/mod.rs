@@ -50,7 +50,7 @@ use runtime::gpu::{Gpu, GpuTables, TexelFormat};
 use crate::checks::FrameError;
 use crate::frame::Frame;
 use crate::gpu::RenderError;
-use crate::model::{Job, Model, Need, Pass, Rendered, image_need};
+use crate::model::{Device, Job, Model, Need, Pass, RenderResult, Rendered, image_need};
 use crate::shading::{MAX_PHASE_TERM, check_slicing};
 
 use crate::geometry::basis;
@@ -139,13 +139,8 @@ impl Model for Riley {
         Ok(Rendered::cpu_frame(image, seconds, summary))
     }
 
-    fn render_gpu(
-        renderer: &gpu::Renderer,
-        s: &Settings,
-        job: &Job,
-        gpu: &Gpu,
-        tables: &GpuTables,
-    ) -> Result<Rendered, RenderError> {
+    fn render_gpu(s: &Settings, job: &Job, on: Device<gpu::Renderer>) -> RenderResult {
+        let (renderer, gpu, tables) = (on.renderer, on.gpu, on.tables);
         let (image, t) = renderer.render(gpu, job.tables, tables, job.frame, s)?;
         let summary = format!(
             "{}: {}×{}, {} slices, light buffer {}²: {}",

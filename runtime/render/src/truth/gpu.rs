@@ -46,7 +46,9 @@ use runtime::gpu::{Gpu, read_back};
 use super::{Passes, Settings, Tracer, TruthImage};
 use crate::checks::FrameError;
 use crate::frame::Frame;
-use crate::gpu::{RenderError, SLICING_WGSL, a4, check_sizes, entry, filled, storage, v4};
+use crate::gpu::{
+    RenderError, SLICING_WGSL, a4, check_sizes, entry, filled, storage, submit_pass, v4,
+};
 use crate::model::Progress;
 use crate::volume::{DensityGrid, MAX_FIELDS};
 
@@ -587,37 +589,18 @@ fn bind(
 impl Bound {
     /// The transparency pass: one dispatch over the image of `w` × `h` pixels.
     fn transparency_pass(&self, gpu: &Gpu, renderer: &Renderer, (w, h): (usize, usize)) {
-        let mut encoder = gpu
-            .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                label: Some("photometeor truth transparency"),
-            });
-        {
-            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some("photometeor truth transparency"),
-                timestamp_writes: None,
-            });
+        submit_pass(gpu, "photometeor truth transparency", |pass| {
             pass.set_pipeline(&renderer.transparency);
             pass.set_bind_group(0, &self.bind_group, &[0]);
             pass.dispatch_workgroups(w.div_ceil(8) as u32, h.div_ceil(8) as u32, 1);
-        }
-        gpu.queue.submit([encoder.finish()]);
+        });
     }
 
     /// DISPATCHES_PER_SUBMIT steps of the paths (the photons' with `photon`) of a tile of
     /// `len` pixels, the first beginning a sample if `begin`, the last counting the paths
     /// still under way.
     fn steps(&self, gpu: &Gpu, renderer: &Renderer, photon: bool, (len, begin): (usize, bool)) {
-        let mut encoder = gpu
-            .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                label: Some("photometeor truth steps"),
-            });
-        {
-            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some("photometeor truth steps"),
-                timestamp_writes: None,
-            });
+        submit_pass(gpu, "photometeor truth steps", |pass| {
             pass.set_pipeline(if photon {
                 &renderer.photon
             } else {
@@ -634,8 +617,7 @@ impl Bound {
                 pass.set_bind_group(0, &self.bind_group, &[(kind * self.step_stride) as u32]);
                 pass.dispatch_workgroups(len.div_ceil(64) as u32, 1, 1);
             }
-        }
-        gpu.queue.submit([encoder.finish()]);
+        });
     }
 }
 

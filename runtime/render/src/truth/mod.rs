@@ -111,7 +111,7 @@ use crate::camera::pixel_ray;
 use crate::geometry::basis;
 use crate::geometry::box_span;
 use crate::gpu::RenderError;
-use crate::model::{Job, Model, Need, Pass, Progress, Rendered, image_need};
+use crate::model::{Device, Job, Model, Need, Pass, Progress, RenderResult, Rendered, image_need};
 use crate::objects::Light;
 use crate::{
     camera::SUN_DIAMETER_DEG, checks::FrameError, frame::Frame, image::Image, volume::DensityGrid,
@@ -190,6 +190,7 @@ impl Model for Truth {
         measured against; its EXR adds stderr.R/G/B, each pixel's standard error";
     const TEXELS: TexelFormat = TexelFormat::F32;
     const GPU: bool = true;
+    const REFERENCE: bool = true;
     type Settings = Settings;
     type Renderer = gpu::Renderer;
 
@@ -220,13 +221,8 @@ impl Model for Truth {
         ))
     }
 
-    fn render_gpu(
-        renderer: &gpu::Renderer,
-        s: &Settings,
-        job: &Job,
-        g: &Gpu,
-        _: &GpuTables,
-    ) -> Result<Rendered, RenderError> {
+    fn render_gpu(s: &Settings, job: &Job, on: Device<gpu::Renderer>) -> RenderResult {
+        let (renderer, g) = (on.renderer, on.gpu);
         let on_cpu = |why: String| -> Result<Rendered, RenderError> {
             let truth = render(job.tables, job.frame, s, job.progress)?;
             Ok(rendered(
