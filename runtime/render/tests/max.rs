@@ -313,8 +313,8 @@ fn the_gpu_gather_equals_the_cpu_reference() {
     }
 }
 
-/// Max's per-sun passes on the GPU (`per_sun = "gpu"`: the reduced sunlight as the beam's sweep
-/// through a medium that only absorbs, the skylight's sweeps and every diffusion solve, f32,
+/// Max's per-sun passes on the GPU (`per_sun = "gpu"`: the reduced sunlight as one direction of
+/// the skylight's sweeps, the skylight's sweeps and every diffusion solve, f32,
 /// lavapipe in CI) light a τ 30 soft ball as the CPU reference does (f64): T_sun, the skylight's
 /// mean and the diffusion's I_0, each against its largest value.
 #[test]
@@ -366,8 +366,9 @@ fn the_gpu_lighting_equals_the_cpu_reference() {
 }
 
 /// The GPU lighting's worst differences from the CPU's (T_sun, skylight, I_0), of each one's
-/// largest value: f32 sweeps and an f32 solve inside an f64 refinement.
-const GPU_LIGHTING_TOLERANCE: (f64, f64, f64) = (1e-5, 1e-5, 1e-4);
+/// largest value, just above the measured (lavapipe; f32 sweeps, an f32 solve inside an f64
+/// refinement): 4.24·10⁻⁷, 2.09·10⁻⁷, 9.45·10⁻⁷.
+const GPU_LIGHTING_TOLERANCE: (f64, f64, f64) = (5e-7, 2.5e-7, 1.1e-6);
 
 /// The shadow map below the grid (the ground's and the air's light) against the march to the
 /// sun it replaces, at points on the ground and in the air below a ball lifted 400 m: equal

@@ -43,6 +43,23 @@ pub struct SkySweeper {
 }
 
 impl SkySweeper {
+    /// The GPU twin of [`super::lattice::sun_depths`]: the optical depth towards the light at
+    /// every voxel centre for light travelling along `l`, as one direction of the skylight's
+    /// sweeps (which attenuate each direction exactly as `sun_depths` does, interpolating τ
+    /// one layer back), its radiance chosen so that its mean is e^{−τ}; τ = −ln of that (f32:
+    /// past τ ≈ 87 the light is 0 and τ infinite).
+    pub fn depths(
+        &self,
+        gpu: &Gpu,
+        grid: &DensityGrid,
+        ext: &[[f64; 3]],
+        l: DVec3,
+    ) -> Result<Vec<[f64; 3]>, RenderError> {
+        let radiance = [super::sky::SKY_DIRECTIONS as f64; 3];
+        let sky = self.sweep(gpu, grid, ext, &[(-l, radiance)])?;
+        Ok(sky.mean.iter().map(|t| t.map(|t| -t.ln())).collect())
+    }
+
     /// Compiles `sky.wgsl`.
     pub fn new(gpu: &Gpu) -> Self {
         let (layout, pipeline) = sweep_pipeline(

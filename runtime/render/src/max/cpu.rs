@@ -11,8 +11,6 @@ use runtime::{FieldTable, Tables, sample};
 
 use super::Settings;
 use crate::geometry::box_span;
-use crate::gpu::RenderError;
-use crate::lighting::beam::BeamMedium;
 use crate::lighting::diffusion::{self, Problem};
 use crate::lighting::lattice::{
     MIN_DIFFUSION_VOXEL_DEPTH, Voxels, sun_depths, sweep, trilinear, voxel_length, voxel_size,
@@ -224,7 +222,7 @@ pub fn light_on(
         on,
         settings.per_sun,
         "the reduced sunlight",
-        |on| Ok(sun_depths_on(on, grid, &v.ext, -sun_dir)?),
+        |on| Ok(on.sky().depths(on.gpu, grid, &v.ext, -sun_dir)?),
         || Ok(sun_depths(grid, &v.ext, -sun_dir)),
     )?;
     let reduced = reduced_sun(frame, &tau_sun);
@@ -291,28 +289,6 @@ pub fn light_on(
         shadow: ShadowMap::of(&fields, frame, None),
         report,
     })
-}
-
-/// [`sun_depths`] on the GPU: the beam's sweep ([`crate::lighting::beam_gpu`]) through a
-/// medium that only absorbs, whose beam is the transmittance e^{−τ} (f32), τ = −ln of it.
-fn sun_depths_on(
-    on: OnGpu,
-    grid: &DensityGrid,
-    ext: &[[f64; 3]],
-    l: DVec3,
-) -> Result<Vec<[f64; 3]>, RenderError> {
-    let medium: Vec<BeamMedium> = ext
-        .iter()
-        .map(|&ext| BeamMedium {
-            ext,
-            sca: [0.0; 3],
-            f: [0.0; 3],
-            g: [0.0; 3],
-            share: 0.0,
-        })
-        .collect();
-    let beam = on.beam().sweep(on.gpu, grid, &medium, l)?;
-    Ok(beam.iter().map(|b| b.intensity.map(|t| -t.ln())).collect())
 }
 
 /// What the diffusion solves read: the voxels' optics, which take part, the reduced sun.
