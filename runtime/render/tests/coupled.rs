@@ -488,11 +488,11 @@ fn the_gpu_beam_equals_the_cpu_sweep() {
         let beam = |s: &BeamState| s.intensity.to_vec();
         let depth = |s: &BeamState| vec![s.depth];
         let losses = |s: &BeamState| [s.dropped, s.forward, s.loss].concat();
-        let parts: [&dyn Fn(&BeamState) -> Vec<f64>; 3] = [&beam, &depth, &losses];
+        let parts: [&Quantity; 3] = [&beam, &depth, &losses];
         for (p, part) in parts.iter().enumerate() {
             let top = want
                 .iter()
-                .flat_map(|w| part(w))
+                .flat_map(part)
                 .fold(0.0f64, |a, v| a.max(v.abs()));
             assert!(top > 0.0, "part {p} is zero everywhere");
             for (w, g) in want.iter().zip(&got) {
@@ -508,6 +508,9 @@ fn the_gpu_beam_equals_the_cpu_sweep() {
     );
     assert!(worst.iter().all(|&w| w < GPU_BEAM_TOLERANCE), "{worst:?}");
 }
+
+/// One quantity of the beam's state, as the numbers compared.
+type Quantity = dyn Fn(&BeamState) -> Vec<f64>;
 
 /// The GPU beam's worst difference from the CPU's, of the largest value of each quantity,
 /// just above the measured (lavapipe, f32): beam 8.44·10⁻⁷, peak depth 7.95·10⁻⁷, losses

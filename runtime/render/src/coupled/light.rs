@@ -340,12 +340,29 @@ pub fn light_on(
     })
 }
 
+/// The spherical-harmonic moments of the radiance at one voxel, per channel.
+type Harmonics = [f64; transport::PER_VOXEL];
+
+/// The transport's result: the moments per voxel and the rounds' report.
+type Swept = (Vec<Harmonics>, transport::Report);
+
+/// The diffusion's result: I_0 per channel and I_1 = 3J per channel and axis, per voxel.
+type Diffused = (Vec<[f64; 3]>, Vec<[f64; 9]>);
+
+/// What the transport's medium is formed from: the fields, their voxels' optics, and their
+/// Legendre moments and forward peaks.
+type Optics<'a> = (
+    &'a [&'a FieldTable],
+    &'a Voxels,
+    (&'a [Moments], &'a [[f64; 3]]),
+);
+
 /// Step 3b, the transport over `optics` (the fields, their voxels, moments and peaks) from
 /// `sources` and the diffusion's (I_0, I_1), timed into the report: the moments per voxel of
 /// the (possibly coarser) grid they are on, and that grid.
 pub(super) fn transport_step(
     grid: &DensityGrid,
-    (fields, v, moments): (&[&FieldTable], &Voxels, (&[Moments], &[[f64; 3]])),
+    (fields, v, moments): Optics,
     sources: &Sources,
     l: DVec3,
     diffusion: (&[[f64; 3]], &[[f64; 9]]),
@@ -423,7 +440,7 @@ pub(super) fn diffuse(
     l: DVec3,
     (settings, on): (&Settings, Option<OnGpu>),
     report: &mut CoupledReport,
-) -> Result<(Vec<[f64; 3]>, Vec<[f64; 9]>), FrameError> {
+) -> Result<Diffused, FrameError> {
     let h = voxel_size(grid);
     let (state, sunlight) = (buffer.state, buffer.sunlight);
     let n = v.ext.len();
@@ -691,15 +708,9 @@ pub(super) fn sweep_rounds(
     grid: &DensityGrid,
     medium: &transport::Medium,
     start: Vec<[f64; transport::PER_VOXEL]>,
-    accelerate: impl FnMut(&[[f64; transport::PER_VOXEL]], &mut [[f64; transport::PER_VOXEL]]),
+    accelerate: impl FnMut(&[Harmonics], &mut [Harmonics]),
     (settings, on): (&Settings, Option<OnGpu>),
-) -> Result<
-    (
-        String,
-        (Vec<[f64; transport::PER_VOXEL]>, transport::Report),
-    ),
-    FrameError,
-> {
+) -> Result<(String, Swept), FrameError> {
     let dirs = crate::lighting::lattice::fibonacci_directions(settings.directions);
     let limits = (
         settings.transport_tolerance,

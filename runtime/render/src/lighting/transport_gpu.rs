@@ -211,13 +211,14 @@ fn medium_rows(medium: &Medium) -> Vec<[f32; 4]> {
     rows
 }
 
+/// The ordinates' rows, the steps' words, the layers' sizes (workgroups along x, y) and the
+/// largest layer state ([`ordinate_rows`]).
+type OrdinateRows = (Vec<[f32; 4]>, Vec<u8>, Vec<(usize, usize)>, usize);
+
 /// The ordinates' rows, group after group (sweep.wgsl's ORD_ROWS: Y_lm of the direction, then
 /// the point one layer back and the step), one step per layer of each group, the layers'
 /// sizes, and the largest layer state (16-byte rows) a group needs.
-fn ordinate_rows(
-    groups: &[Group],
-    dims: [usize; 3],
-) -> (Vec<[f32; 4]>, Vec<u8>, Vec<(usize, usize)>, usize) {
+fn ordinate_rows(groups: &[Group], dims: [usize; 3]) -> OrdinateRows {
     let mut ordinates: Vec<[f32; 4]> = Vec::new();
     let mut steps: Vec<u8> = Vec::new();
     let mut layers: Vec<(usize, usize)> = Vec::new();
