@@ -15,8 +15,8 @@
 # (image sizes, slice counts and grid resolutions varied one at a time), miyazaki on the shafts,
 # biri on the lamp beams, and the path-traced truth (GPU and CPU; paths/s) on the dense cumulus.
 # Writes OUT/<scene>.json, OUT/machine.txt (adapter, CPU, date) and prints a summary. On an H200
-# machine of 16 threads the parts of this run were timed on 2026-12-04 (docs/rendering.md, "On a
-# real GPU"): max's and coupled's lighting (CPU) were most of it, about 5 minutes in all; on 2
+# machine of 16 threads the parts of this run were timed on 2026-12-04 (docs/log.md, "the render
+# models on a real GPU"): max's and coupled's lighting (CPU) were most of it, about 5 minutes in all; on 2
 # cores with lavapipe use QUICK=1 (347 s on 2026-12-05, the JSON as on a GPU). Since 2026-12-05 coupled's transport sweeps, skylight
 # sweeps and diffusion solves run on the GPU (`per_sun = "auto"` on a real adapter); its JSON's
 # passes say how long.
@@ -70,7 +70,7 @@ bench data/scenes/dense_cumulus.toml riley,miyazaki --sizes "$SIZES" --slice-cou
 # took 430 s of dense_cumulus alone).
 # coupled with `diffuse = "diffusion"` over the sizes and grids (the figures of the first runs);
 # its default, the discrete-ordinates transport, costs minutes per sun on 2 cores at grid 128
-# (docs/rendering.md), so it is timed once per grid at the base size.
+# (docs/models/coupled.md), so it is timed once per grid at the base size.
 DIFFUSION='diffuse="diffusion"'
 REPEAT=1 TAG=lighting bench data/scenes/dense_cumulus.toml max,coupled --sizes "$SIZES" \
     --grids "$GRIDS" --set "$DIFFUSION"

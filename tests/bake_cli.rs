@@ -15,6 +15,7 @@ use common::{photometeor, workdir};
 
 struct DefaultBake {
     out: PathBuf,
+    stdout: String,
     stderr: String,
     manifest: Manifest,
 }
@@ -31,6 +32,7 @@ fn default_bake() -> &'static DefaultBake {
         let manifest = read_manifest(&dir).unwrap();
         DefaultBake {
             out: dir,
+            stdout: String::from_utf8_lossy(&out.stdout).into_owned(),
             stderr,
             manifest,
         }
@@ -397,6 +399,38 @@ fn tradeoff_measures_each_knob_against_a_reference() {
     );
     assert!(plots.join("tradeoff_pareto.png").exists());
     assert!(plots.join("tradeoff_pareto.svg").exists());
+}
+
+/// The bake's summary is words, not a debug list: what it computed, where the tables are and
+/// the next command; an unchanged re-bake says its fields came from the cache.
+#[test]
+fn the_bake_says_in_words_what_it_did_and_what_to_run_next() {
+    let out = &default_bake().stdout;
+    for line in [
+        "baked default into photometeor-tables in ",
+        ": computed cloud, rain, ice and snow; peak memory ",
+        "The tables are in photometeor-tables: manifest.json and one <field>.exr per field",
+        "Next: photometeor validate photometeor-tables",
+        "  or: photometeor render --out rainbow.exr --png rainbow.png",
+    ] {
+        assert!(out.contains(line), "no {line:?} in:\n{out}");
+    }
+    assert!(
+        !out.contains('[') && !out.contains('"'),
+        "a debug list in:\n{out}"
+    );
+
+    let root = workdir("bake-in-words");
+    fs::write(root.join("scene.toml"), GOOD).unwrap();
+    let bake = || photometeor(&["bake", "scene.toml", "--out", "t"], &root);
+    assert!(bake().status.success());
+    let again = bake();
+    let again = String::from_utf8_lossy(&again.stdout);
+    assert!(again.contains("baked t into t in "), "{again}");
+    assert!(
+        again.contains(": rain from the cache; peak memory "),
+        "{again}"
+    );
 }
 
 const SPHERES: &str = "[scene]\nname = \"v\"\nspectral = \"rgb3\"\nn_max = 4\nquality = \"draft\"\n\n[[field]]\nname = \"cloud\"\nkind = \"cloud\"\ndistribution = { kind = \"gamma\", r_eff_um = 8, v_eff = 0.02 }\n\n[[field]]\nname = \"rain\"\nkind = \"rain\"\nMATERIAL\ndistribution = { kind = \"lognormal\", median_radius_um = 500, sigma_g = 1.4 }\n";

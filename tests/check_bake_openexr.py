@@ -5,7 +5,7 @@ Usage: python3 tests/check_bake_openexr.py BAKE_DIR
 
 Reads BAKE_DIR/manifest.json and every field's EXR through the `OpenEXR` Python package (the
 Academy Software Foundation's bindings of the reference C++ library), independently of
-photometeor's own reader, and checks the EXR contract of the README:
+photometeor's own reader, and checks the EXR contract of docs/engines.md:
   - one part, scanline, channels exactly R, G, B (more only as dotted layer names), each
     32-bit FLOAT, sampling 1x1;
   - width = manifest angle_count = 180/theta_step_deg + 1, height = the field's n_max;

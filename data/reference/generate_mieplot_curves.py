@@ -64,7 +64,7 @@ The nearly non-absorbing water (kappa ~ 1e-9..1e-8) has a dense forest of narrow
 morphology-dependent resonances in x (widths ~0.01 in x and below), so the size average
 converges only roughly like N^-1/2..N^-1: the drizzle needs ~32769 radii (~1 h) for 1e-3.
 
-Run:  python3 data/reference/generate_mieplot_curves.py   (see the README for the runtime)
+Run:  python3 data/reference/generate_mieplot_curves.py   (see data/reference/README.md for the runtime)
       --only NAME,... (trial, writes nothing unless --out), --max-radii drizzle=32769
 """
 

@@ -19,6 +19,7 @@ Run from the repository root after `cargo build --release`, with the test venv's
 (numpy, OpenEXR):
     .venv/bin/python docs/coupled/examples.py [--max-seconds 300]
     .venv/bin/python docs/coupled/examples.py --only glory --models coupled  # printed only
+    .venv/bin/python docs/coupled/examples.py --markdown-only  # examples.md from examples.json
 """
 import argparse, hashlib, json, os, subprocess, sys, time
 
@@ -26,7 +27,6 @@ import argparse, hashlib, json, os, subprocess, sys, time
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(os.path.dirname(HERE))
 sys.path.insert(0, os.path.join(ROOT, "docs", "renders"))
-from pair import read_exr, rings  # noqa: E402
 
 BIN = os.environ.get("PHOTOMETEOR", os.path.join(ROOT, "target", "release", "photometeor"))
 WORK = os.environ.get("EXAMPLES_WORK", "/tmp/photometeor-examples")
@@ -38,6 +38,11 @@ SCENES = [("cumulus_dawn", 160, 120, False), ("glory", 256, 256, True),
 MODELS = ["riley", "max", "coupled"]
 # The fogbow's view: the glory scene with this field of view (degrees), this image size.
 FOGBOW_FOV, FOGBOW_SIZE = 100.0, 192
+
+
+def file_stem(name):
+    """A case's name as it appears in file names: "glory (sky off)" → "glory-sky-off"."""
+    return name.replace(" (sky off)", "-sky-off").replace(" (fogbow)", "-fogbow")
 
 
 def run(args):
@@ -62,6 +67,7 @@ def lower_rings(rgb, fov_deg, step=1.0, top=50.0):
     """Mean luminance in rings of `step` degrees about the image centre over the pixels below
     it (in the glory scene, the rays that meet the deck at every angle up to `top`), relative to
     their mean, and the rings' centres; `fov_deg` the vertical field of view."""
+    from pair import rings  # numpy and OpenEXR: needed to measure, not to write examples.md
     theta, value = rings(rgb, fov_deg, step, top, lower=True)
     return theta, value / value.mean()
 
@@ -74,7 +80,13 @@ def main():
     p.add_argument("--only", help="comma-separated cases (e.g. 'glory,glory (sky off)'): "
                    "printed, not written")
     p.add_argument("--models", default=",".join(MODELS), help="the models to render")
+    p.add_argument("--markdown-only", action="store_true",
+                   help="rewrite examples.md from examples.json, rendering nothing")
     a = p.parse_args()
+    if a.markdown_only:
+        write_markdown(json.load(open(os.path.join(HERE, "examples.json"))))
+        return
+    from pair import read_exr, rings
     only = a.only.split(",") if a.only else None
     models = a.models.split(",")
     os.makedirs(WORK, exist_ok=True)
@@ -96,7 +108,7 @@ def main():
     for name, scene, w, h in cases:
         if only and name not in only:
             continue
-        file = name.replace(" (sky off)", "-sky-off").replace(" (fogbow)", "-fogbow")
+        file = file_stem(name)
         size = ["--width", str(w), "--height", str(h), "--quality", "draft"]
         args = ["render", scene, "--model", "truth", *size, "--cpu", "--spp", str(a.spp),
                 "--noise", "0.03", "--set", f"max_seconds={a.max_seconds}"]
@@ -153,6 +165,11 @@ def main():
     if only or models != MODELS:
         return
     json.dump(report, open(os.path.join(HERE, "examples.json"), "w"), indent=1)
+    write_markdown(report)
+
+
+def write_markdown(report):
+    """examples.md from the report that examples.json holds."""
     md = ["| scene | size | truth | " + " | ".join(
         f"{m}: bias / median / p95" for m in MODELS) + " | coupled error map |",
           "|" + "---|" * (4 + len(MODELS))]
@@ -162,7 +179,7 @@ def main():
         noise = row["models"]["coupled"]["truth_noise"]
         md.append(f"| {name} | {row['size'][0]}×{row['size'][1]} | noise {noise:.1%} | "
                   + " | ".join(cells)
-                  + f" | ![](examples-{name.replace(' (sky off)', '-sky-off')}-coupled.png) |")
+                  + f" | ![](examples-{file_stem(name)}-coupled.png) |")
     for glory in [n for n in report["scenes"] if n.startswith("glory")]:
         md += ["", f"Glory rings ({glory}: 0.25° rings about the antisolar point, over 10–12°; "
                "the darkest within 0.5–1°, the brightest within 1–2°):" if glory != "glory (fogbow)"

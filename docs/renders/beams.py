@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""The README's beams image: data/scenes/beams.toml from `--model biri --cpu` with the exact kernel
+"""The beams image of docs/models/biri.md: data/scenes/beams.toml from `--model biri --cpu` with the exact kernel
 (left) and the paper's quartic (right), side by side at one exposure (the exact one's
 automatic exposure: the 97th percentile of luminance maps to 1 − e^{−1.5}). Negative radiance,
 which the quartic's integral gives where it undershoots, shows as black.

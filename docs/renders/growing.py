@@ -1,4 +1,4 @@
-"""The README's growing-droplet cumulus (data/scenes/growing_cumulus.toml, issue #40): droplets
+"""The growing-droplet cumulus of docs/scenes.md (data/scenes/growing_cumulus.toml): droplets
 whose effective radius follows the adiabatic law from 6 µm at the base to 14 µm at the top,
 seen from above around the glory. Renders riley, coupled and max here, measures each against
 the path-traced truth with `photometeor compare-render`, and draws

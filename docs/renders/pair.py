@@ -1,4 +1,4 @@
-"""Shared by the README image scripts (shafts.py, beams.py, four.py, growing.py) and
+"""Shared by the image scripts (shafts.py, beams.py, four.py, growing.py) and
 docs/coupled/examples.py: run
 `photometeor render`, read its EXR, measure a frame against a truth, and write two frames side
 by side (or four, 2 × 2) at one exposure (the left one's automatic exposure, as

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""The README's shafts image: data/scenes/shafts.toml from `--model miyazaki` (left) and from
+"""The shafts image of docs/models/miyazaki.md: data/scenes/shafts.toml from `--model miyazaki` (left) and from
 `--model riley` (right), side by side at one exposure (miyazaki's automatic one: the 97th
 percentile of luminance maps to 1 − e^{−1.5}).
 

@@ -6,7 +6,7 @@
 # (max and coupled keep their per-sun lighting while the sun, grid and settings stay: the
 # table gives their median). biri draws [[medium]] tables only: it runs on data/scenes/beams.toml.
 # Writes docs/view/frames.json and frames.md; the window of the first model
-# is docs/view/window.png (the README's picture). Usage, from the repository root:
+# is docs/view/window.png (the picture of docs/viewer.md). Usage, from the repository root:
 #   docs/view/frames.sh [SCENE] [WIDTH] [HEIGHT] [FRAMES]
 # Builds `photometeor` with the viewer (cargo build --release --features view).
 set -euo pipefail

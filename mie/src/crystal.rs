@@ -158,7 +158,7 @@ fn encircled_energy(u: f64) -> f64 {
 /// hits, whose spread no sample of chunks shows before many have been seen, so at a preset's
 /// rays the chunks understate those bins' noise (two draft rgb3 bakes of snow: one bin at
 /// 179.64° 79 % apart, the reported rms 3.6 % where the pair's was 4.8 %). Their error is
-/// stated beside the presets' (README "Presets, measured"). Pristine crystals' spike is strong
+/// stated beside the presets' (docs/scenes.md, "Presets, measured"). Pristine crystals' spike is strong
 /// and well sampled.
 pub fn noise_skips_pole(roughness: f64) -> bool {
     roughness > 0.0

@@ -157,7 +157,7 @@ class Sweep:
 
     def shares(self, value: float) -> List[Tuple[int, float]]:
         """The two members around ``value`` and their number-density shares, as renderers mix
-        them (README "Swept fields"): t linear in ln value (log spacing) or value, clamped to
+        them (docs/scenes.md, "Swept fields"): t linear in ln value (log spacing) or value, clamped to
         the ends; extinction σ_k^(1−t)·σ_k+1^t (green channel)."""
         v = self.values
         value = float(np.clip(value, v[0], v[-1]))
@@ -331,12 +331,12 @@ def bake(
     scene : str, path, dict or None
         A scene TOML file's path, TOML text (anything with a newline or ``[scene]``), a dict of
         the same keys (``{"scene": {...}, "field": [{...}, ...]}``), or None for the embedded
-        default scene (cloud, rain, ice, snow). Keys: README "Scenes".
+        default scene (cloud, rain, ice, snow). Keys: docs/scenes.md.
     out : str or path, optional
         The bake directory (created if missing; its ``.cache`` makes an unchanged re-bake
         instant). None: a temporary directory, removed once the tables are loaded.
     quality : {"draft", "standard", "reference"} or None
-        Accuracy preset (node counts and rays; README "Presets, measured"). Default "draft"
+        Accuracy preset (node counts and rays; docs/scenes.md, "Presets, measured"). Default "draft"
         (seconds per field); None uses the scene's own ``quality``.
     jobs : int, optional
         Worker threads, [1, 256] (default: all cores).

@@ -16,7 +16,7 @@ import photometeor
 
 
 def solid_angles(step_deg: float, count: int) -> np.ndarray:
-    """Ω_k of bin k = [θ_k − Δθ/2, θ_k + Δθ/2] ∩ [0°, 180°] (README conventions)."""
+    """Ω_k of bin k = [θ_k − Δθ/2, θ_k + Δθ/2] ∩ [0°, 180°] (docs/commands.md, "Conventions")."""
     k = np.arange(count)
     lo = np.radians(np.clip((k - 0.5) * step_deg, 0.0, 180.0))
     hi = np.radians(np.clip((k + 0.5) * step_deg, 0.0, 180.0))
@@ -130,7 +130,7 @@ def test_ice_halos_sit_at_the_prism_minimum_deviation():
     bins = r["bins"][0]
     window = (theta > 18) & (theta < 26)
     peak = float(theta[window][np.argmax(bins[window])])
-    # Measured: the maximum in the bin centred 0.08° past D (README: 0.03–0.06° on 0.05° bins).
+    # Measured: the maximum in the bin centred 0.08° past D (docs/physics.md §12.2: 0.03–0.06° on 0.05° bins).
     assert d22 - 0.05 <= peak <= d22 + 0.3, f"22° halo at {peak}°, theory {d22:.3f}°"
     omega = solid_angles(0.1, len(theta))
     assert abs(float(bins @ omega) - 1) < 1e-12

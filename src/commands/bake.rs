@@ -17,8 +17,8 @@ pub struct BakeArgs {
     /// is ≤ 5 % at draft and ≤ 1 % at standard for every kind and spectral mode (drops sized
     /// until their estimated noise is 3.5 % or 0.8 %, ice and snow traced until theirs is 4 % or
     /// 0.9 %); rough crystals (snow) over 1°–179°, their backscatter spike within 1° of 180°
-    /// being carried by few rays; README "Presets, measured" has the table, that spike's
-    /// error and the times.
+    /// being carried by few rays; docs/scenes.md, "Presets, measured", has the table, that
+    /// spike's error and the times.
     #[arg(long, value_parser = ["draft", "standard", "reference"])]
     quality: Option<String>,
     /// Worker threads, [1, 256] (default: all cores).
@@ -87,12 +87,13 @@ pub fn run(a: BakeArgs) -> Result<()> {
         } else if !a.quiet {
             let names: Vec<&str> = record.fields.iter().map(|f| f.name.as_str()).collect();
             println!(
-                "shard {}/{} of {} into {} in {:.1} s: fields {names:?}",
+                "shard {}/{} of {} into {} in {:.1} s: {}",
                 shard.index,
                 shard.count,
                 plan.scene.name,
                 plan.out_dir.display(),
-                record.seconds
+                record.seconds,
+                fields_in_words(&names)
             );
         }
         return Ok(());
@@ -101,17 +102,71 @@ pub fn run(a: BakeArgs) -> Result<()> {
     if a.json {
         println!("{}", serde_json::to_string(&report)?);
     } else if !a.quiet {
+        let computed: Vec<&str> = report.computed.iter().map(String::as_str).collect();
+        let cached: Vec<&str> = report.cached.iter().map(String::as_str).collect();
+        let fields = match (computed.is_empty(), cached.is_empty()) {
+            (true, true) => "no field".to_string(),
+            (false, true) => format!("computed {}", list_in_words(&computed)),
+            (true, false) => format!("{} from the cache", list_in_words(&cached)),
+            (false, false) => format!(
+                "computed {}; {} from the cache",
+                list_in_words(&computed),
+                list_in_words(&cached)
+            ),
+        };
+        let out = plan.out_dir.display();
         println!(
-            "baked {} into {} in {:.1} s (computed: {:?}, from cache: {:?}); peak memory {}",
+            "baked {} into {out} in {:.1} s: {fields}; peak memory {}",
             plan.scene.name,
-            plan.out_dir.display(),
             report.seconds,
-            report.computed,
-            report.cached,
             report
                 .peak_rss_mib
-                .map_or("unknown".to_string(), |m| format!("{m:.0} MiB"))
+                .map_or("not known".to_string(), |m| format!("{m:.0} MiB"))
+        );
+        println!(
+            "The tables are in {out}: manifest.json and one <field>.exr per field (beside each, \
+             the .single, .poisson and .biri side tables the render models read)."
+        );
+        println!("Next: photometeor validate {out}   (checks each field against theory)");
+        println!(
+            "  or: photometeor render --out rainbow.exr --png rainbow.png   (the rainbow scene)"
         );
     }
     Ok(())
+}
+
+/// Names as words: `a`, `a and b`, `a, b and c`; `no field` for none.
+pub(crate) fn list_in_words(names: &[&str]) -> String {
+    match names {
+        [] => "no field".to_string(),
+        [one] => (*one).to_string(),
+        [rest @ .., last] => format!("{} and {last}", rest.join(", ")),
+    }
+}
+
+/// `field cloud`, `fields cloud and rain`, `no field`.
+pub(crate) fn fields_in_words(names: &[&str]) -> String {
+    match names.len() {
+        0 => "no field".to_string(),
+        1 => format!("field {}", names[0]),
+        _ => format!("fields {}", list_in_words(names)),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn names_read_as_words() {
+        assert_eq!(list_in_words(&[]), "no field");
+        assert_eq!(list_in_words(&["cloud"]), "cloud");
+        assert_eq!(list_in_words(&["cloud", "rain"]), "cloud and rain");
+        assert_eq!(
+            list_in_words(&["cloud", "rain", "ice", "snow"]),
+            "cloud, rain, ice and snow"
+        );
+        assert_eq!(fields_in_words(&["ice"]), "field ice");
+        assert_eq!(fields_in_words(&["ice", "snow"]), "fields ice and snow");
+    }
 }

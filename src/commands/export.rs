@@ -476,10 +476,15 @@ fn export_sweeps(
             )?;
             let _ = writeln!(
                 text,
-                "{}: sweep over {} ({} values) as one axis: {ams} {shape:?}, {values}",
+                "{}: sweep over {} ({} values) as one axis: {ams} ({}), {values}",
                 s.name,
                 s.key,
-                s.values.len()
+                s.values.len(),
+                shape
+                    .iter()
+                    .map(|n| n.to_string())
+                    .collect::<Vec<_>>()
+                    .join(" × ")
             );
             files = vec![ams, values];
         }

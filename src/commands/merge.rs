@@ -59,19 +59,26 @@ pub fn run(a: MergeArgs) -> Result<()> {
     let report = bake::run(&plan, &Bars::new(true))?;
     anyhow::ensure!(
         report.computed.is_empty(),
-        "the merge computed {:?} instead of taking the shards' records",
-        report.computed
+        "the merge computed {} instead of taking the shards' records",
+        super::bake::fields_in_words(
+            &report
+                .computed
+                .iter()
+                .map(String::as_str)
+                .collect::<Vec<_>>()
+        )
     );
     if a.json {
         println!("{}", serde_json::to_string(&report)?);
     } else if !a.quiet {
+        let fields: Vec<&str> = report.cached.iter().map(String::as_str).collect();
         println!(
-            "merged {} shards of {} into {} in {:.2} s (fields {:?})",
+            "merged {} shards of {} into {} in {:.2} s: {}",
             a.shards.len(),
             plan.scene.name,
             plan.out_dir.display(),
             report.seconds,
-            report.cached
+            super::bake::fields_in_words(&fields)
         );
     }
     Ok(())

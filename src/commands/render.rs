@@ -287,7 +287,8 @@ pub fn prepare(
         if !scene.fields.iter().any(|f| &f.name == name) {
             let have: Vec<&str> = scene.fields.iter().map(|f| f.name.as_str()).collect();
             bail!(
-                "{origin}: a [[volume]] uses field {name:?}; the scene's [[field]]s are {have:?}"
+                "{origin}: a [[volume]] uses field {name:?}; the scene's [[field]]s are {}",
+                super::bake::list_in_words(&have)
             );
         }
     }
@@ -426,8 +427,10 @@ pub fn run(a: RenderArgs) -> Result<()> {
     let frame: Frame = p.scene.frame(&p.tables)?;
     if !a.quiet && !p.scene.volumes.is_empty() {
         eprintln!(
-            "grid {:?} built in {:.2} s",
-            frame.grid.dims,
+            "grid {} × {} × {} built in {:.2} s",
+            frame.grid.dims[0],
+            frame.grid.dims[1],
+            frame.grid.dims[2],
             started.elapsed().as_secs_f64()
         );
     }

@@ -236,7 +236,7 @@ pub const PROFILE_KEYS: [&str; 3] = ["r_eff_um", "median_radius_um", "radius_um"
 /// rising parcel grows linearly with height at a constant droplet number, so r ∝ h^{1/3} above a
 /// base of zero size; docs/physics.md §11), from `base` at the bottom of the volume's box to
 /// `top` at its top. The renderers mix, per voxel, the two members of the swept field around
-/// that size with the shares of [`format::SweepEntry::shares`] (issue #40).
+/// that size with the shares of [`format::SweepEntry::shares`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct SizeProfile {
     /// The swept key, one of [`PROFILE_KEYS`]; the volume's field must sweep it.

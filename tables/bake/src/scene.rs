@@ -1008,7 +1008,7 @@ pub fn default_sweep_count(spacing: Spacing, from: f64, to: f64) -> usize {
 
 /// The ratio of neighbouring values of a default log sweep: the largest at which a cloud
 /// sweep's interpolation error at its midpoints stays within the `standard` preset's noise of
-/// Ams_1 (README "Swept fields", `docs/sweeps/interpolation.md`: median 0.60 % against 0.64 %
+/// Ams_1 (docs/scenes.md, "Swept fields", `docs/sweeps/interpolation.md`: median 0.60 % against 0.64 %
 /// at ×1.19, 0.78 % against 0.68 % at ×1.30); rain and ice stay within theirs up to ×1.5.
 pub const DEFAULT_SWEEP_RATIO: f64 = 1.2;
 

@@ -12,7 +12,7 @@ use format::FieldImage;
 /// without their noise targets:
 /// these tests check behaviour and stability, and an rgb3 scene at the scaled knobs would cost
 /// ten times as much (the presets' accuracy is measured by `photometeor tradeoff` and the
-/// README's table).
+/// table in docs/scenes.md, "Presets, measured").
 pub fn plan(text: &str, out: &std::path::Path) -> Result<BakePlan, BakeError> {
     let scene = Scene::parse(text, "test scene")?;
     let quality = scene.quality;
