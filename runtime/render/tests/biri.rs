@@ -245,7 +245,7 @@ fn the_exact_kernel_equals_quadrature_of_eq_1_and_the_polynomial_does_not() {
         // Measured worst: fog 1.3·10⁻⁴, haze 1.6·10⁻⁶ of the brightest pixel.
         assert!(exact < 2e-4, "{field}: exact kernel off by {exact:e}");
         // The quartic cannot follow the fog's forward lobe: measured 1.5 of the brightest
-        // pixel (haze: 1.8·10⁻²); reported in docs/rendering.md, and here at least as far
+        // pixel (haze: 1.8·10⁻²); reported in docs/models/biri.md, and here at least as far
         // from the quadrature as that, less a margin, so a polynomial path that silently
         // used the table would fail.
         assert!(poly > poly_floor, "{field}: polynomial {poly:e}");

@@ -341,8 +341,8 @@ fn the_gpu_gather_equals_the_cpu_reference() {
     }
 }
 
-/// The per-sun passes on the GPU (the transport's sweeps, `coupled::sweep_gpu`, the skylight's,
-/// `coupled::sky_gpu`, and the diffusion solves, `diffusion_gpu`; f32, lavapipe in CI) give the
+/// The per-sun passes on the GPU (the transport's sweeps, `lighting::transport_gpu`, the skylight's,
+/// `lighting::sky_gpu`, and the diffusion solves, `diffusion_gpu`; f32, lavapipe in CI) give the
 /// CPU reference's lighting:
 /// the τ 30 soft ball side-lit over a lit ground with the sky on, 32 directions on a 16³
 /// transport grid (to keep the test short on lavapipe), every source iteration's round swept
@@ -517,7 +517,7 @@ type Quantity = dyn Fn(&BeamState) -> Vec<f64>;
 /// 5.91·10⁻⁷ (8.66, 9.03 and 6.19·10⁻⁷ with the point one layer back as index + shift in f32).
 const GPU_BEAM_TOLERANCE: f64 = 9e-7;
 
-/// The skylight's sweeps on the GPU (`coupled::sky_gpu`) give `lattice::sky_sweeps`' mean
+/// The skylight's sweeps on the GPU (`lighting::sky_gpu`) give `lighting::sky::sky_sweeps`' mean
 /// skylight and flux in f32: a lumpy medium on an uneven grid (every axis leads some
 /// directions), τ per voxel from 10⁻⁶ to 40 (the light past the thick voxels e^{−40}), each
 /// of the 32 directions with its own radiance.

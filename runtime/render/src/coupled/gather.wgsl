@@ -101,7 +101,7 @@ fn lit(p: vec3<f32>, row: u32, masked: bool) -> vec4<f32> {
     return lighting_at(p, rp.sizes.z, row, 1u, masked);
 }
 
-// The real, orthonormal spherical harmonics to degree 4 (render::coupled::transport::harmonics).
+// The real, orthonormal spherical harmonics to degree 4 (render::lighting::transport::harmonics).
 fn harmonics(w: vec3<f32>) -> array<f32, 25> {
     let x = w.x;
     let y = w.y;
@@ -188,7 +188,7 @@ fn gather(@builtin(global_invocation_id) id: vec3<u32>) {
             let g = mixed(rho, rp.asymmetry);
             let f = select(vec3<f32>(0.0), mixed(rho, rp.peak), rp.up.w > 0.5);
             // The transport's diffuse light towards the eye, Σ_l χ′_l Σ_m Y_lm φ_lm per channel
-            // (render::coupled::transport::scattered), χ′_l = (χ_l − f)/(1 − f) of the mixture.
+            // (render::lighting::transport::scattered), χ′_l = (χ_l − f)/(1 − f) of the mixture.
             var toward = vec3<f32>(0.0);
             if (transport) {
                 var chi: array<vec3<f32>, 5>;

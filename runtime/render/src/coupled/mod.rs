@@ -202,7 +202,7 @@ pub enum Diffuse {
     #[default]
     Transport,
     /// The δ-scaled diffusion alone (P1), as Max et al.; ~20× cheaper per sun, 30–40 % dark
-    /// in dense clouds seen from the side or the sun's side (docs/rendering.md).
+    /// in dense clouds seen from the side or the sun's side (docs/models/coupled.md).
     Diffusion,
 }
 
@@ -234,7 +234,7 @@ pub struct Settings {
     /// The transport's voxels span this many of the grid's along each axis: 1, 2 or 4 (the
     /// medium and the sources averaged over each block, the radiance's moments kept on the
     /// blocks and looked up there by the gathers; at 2
-    /// the sweeps cost an eighth, docs/rendering.md gives the error), or 0 (the default):
+    /// the sweeps cost an eighth, docs/models/coupled.md gives the error), or 0 (the default):
     /// the largest that leaves the transport at least [`AUTO_TRANSPORT_VOXELS`] voxels along
     /// the grid's longest side.
     pub transport_coarsening: usize,

@@ -55,7 +55,7 @@
 //! all of p brightened the soft ball's forward views at τ 8 / 32 from +2.3 / +4.5 % to +7.8 /
 //! +20.4 % against the truth, the excess at the limb nearest the sun. Beyond 90° p is smooth
 //! on the cone's scale but for the bows and glories whose softening the blur is for, and the
-//! forward views do not see it. Measured (docs/rendering.md): the fogbow +32.9 % against the
+//! forward views do not see it. Measured (docs/models/coupled.md): the fogbow +32.9 % against the
 //! truth's +31.9 %, the glory's rings +6.6 % against +6.7 %, every soft-ball case within
 //! 0.4 point of the Gaussian's alone.
 //!

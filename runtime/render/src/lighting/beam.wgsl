@@ -1,4 +1,4 @@
-// One layer of the beam's sweep (coupled::cpu::beam_sweep, step 1 of the model and the loss of
+// One layer of the beam's sweep (lighting::beam::beam_sweep, step 1 of the coupled model and the loss of
 // step 2) on the GPU, in f32: one invocation per voxel of the layer. The state one layer back
 // along the sun's direction is interpolated (lattice::upwind; beyond the box the sunlight
 // unscattered in clear air: I = 1, D = 0), the step's trapezoid of β_ext and β_sca taken, the

@@ -45,7 +45,7 @@ use crate::gpu::RenderError;
 pub enum Place {
     /// On the GPU when the adapter is one, on the CPU when it emulates one on the CPU
     /// (lavapipe, where the per-sun passes took 6–7× and the gather 3× the CPU reference's
-    /// time, docs/rendering.md).
+    /// time, docs/log.md).
     #[default]
     Auto,
     /// On the GPU, whatever the adapter.

@@ -1,4 +1,4 @@
-// One layer of the discrete-ordinates transport's sweeps (render::coupled::transport::sweep_round)
+// One layer of the discrete-ordinates transport's sweeps (render::lighting::transport::sweep_round)
 // on the GPU, in f32: one workgroup per voxel of the layer, its invocations the directions of
 // one group (the directions that travel most along the same axis and sign). Each voxel's
 // emission harmonics are formed once in workgroup memory (transport::emission), each direction

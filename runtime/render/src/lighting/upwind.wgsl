@@ -1,12 +1,12 @@
 // What the GPU sweeps share — the transport's, the skylight's and the beam's (put before
-// sweep.wgsl, sky.wgsl and beam.wgsl by coupled::sweep_gpu::with_upwind): their per-dispatch
+// sweep.wgsl, sky.wgsl and beam.wgsl by lighting::transport_gpu::with_upwind): their per-dispatch
 // `Step`, and the lookup one layer
 // back (render::lattice::upwind): for the point `shift` (voxel units) from the centre (ub, vc)
 // of a layer of nb × nc voxel centres, the four centres around it and their bilinear
 // weights, and the share `kept` of the layer's state there — 1 between the centres, falling
 // linearly to 0 over the half voxel beyond the outermost ones (the rest is clear air's light:
 // zero); the weights are zero where nothing is kept.
-// Per dispatch of each sweep (a dynamic offset into its steps, sweep_gpu::push_step): the
+// Per dispatch of each sweep (a dynamic offset into its steps, transport_gpu::push_step): the
 // layer's axis a and across-axes b, c, its index k; whether it is the sweep order's first
 // layer, the order's first direction and its count, and which half of the state buffer holds
 // the layer behind.
