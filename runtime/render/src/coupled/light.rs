@@ -2,6 +2,9 @@
 //! lighting layer ([`crate::lighting`]): the beam's medium from the fields' peaks, then the
 //! beam, the skylight, the diffusion per channel and the transport, each pass where
 //! `per_sun` lets it run ([`crate::lighting::run`]), and the energy budget of the result.
+//! The split and its sources are docs/physics.md §7.9 (δ-scaling, Joseph, Wiscombe & Weinman
+//! 1976; δ-M, Wiscombe 1977), the diffusion §7.8 (Max et al. 2004 Eqs. 4–7), the transport
+//! §7.10.
 
 use std::f64::consts::PI;
 use std::time::Instant;

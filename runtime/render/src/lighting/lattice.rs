@@ -1,6 +1,9 @@
 //! The voxel grid every per-sun pass lights: the voxels' optics, upwind sweeps along a
 //! direction of travel (the layer order every sweep follows, on the CPU or the GPU), trilinear
-//! lookups of the results, and sets of directions of equal solid angle.
+//! lookups of the results, and sets of directions of equal solid angle. A sweep takes the
+//! state one layer back, bilinear in the layer behind (clear air beyond the box's faces), and
+//! the trapezoid of β_ext over the step: the short characteristics of docs/physics.md §7.8
+//! (Max et al. 2004's reduced light) and §7.10 (the transport's sweeps).
 
 use std::f64::consts::PI;
 

@@ -5,7 +5,9 @@
 //! Per voxel and channel the radiance over the sphere is kept as its real spherical-harmonic
 //! moments φ_lm = ∫ I Y_lm dω up to degree [`DEGREE`], which is all the scattering needs of it
 //! when p′ is expanded to that degree (the δ-M truncation, Wiscombe 1977): by the addition
-//! theorem, (1/4π)∫ p′(ω·ω′) I(ω′) dω′ = Σ_l χ′_l Σ_m Y_lm(ω) φ_lm.
+//! theorem, (1/4π)∫ p′(ω·ω′) I(ω′) dω′ = Σ_l χ′_l Σ_m Y_lm(ω) φ_lm. The equations, the
+//! acceleration (diffusion synthetic acceleration, Alcouffe 1977) and the conservation check
+//! are docs/physics.md §7.10's.
 
 use std::f64::consts::PI;
 

@@ -1,5 +1,7 @@
 //! The path-traced truth on wgpu: the estimator of [`super`] (its module docs give the
-//! transport, the equations and their sources) in `truth.wgsl`, in f32, progressive. Each pass
+//! transport, the equations and their sources: delta tracking, hero wavelengths with the
+//! balance heuristic, next-event estimation; docs/truth.md and docs/physics.md §9) in
+//! `truth.wgsl`, in f32, progressive. Each pass
 //! takes a batch of samples per pixel; the host adds the pass's Σ L and Σ L² into f64 sums, so
 //! the mean, the per-pixel standard error and the stopping rules (`spp`, `noise`,
 //! `max_seconds`) are the CPU truth's.
