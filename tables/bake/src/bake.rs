@@ -607,7 +607,8 @@ pub fn preflight(plan: &BakePlan, weights: &ChannelWeights) -> Result<(), BakeEr
                 let k = 2.0 * std::f64::consts::PI / (lambda / 1000.0);
                 for &r in [q.radius_um.first(), q.radius_um.last()].iter().flatten() {
                     mie::Sphere::new(m, k * r).map_err(mie_error(format!(
-                        " at {lambda} nm, radius {r} µm (the quadrature's range after truncating {:e} of the mass)",
+                        " at {lambda} nm, radius {} µm (the quadrature's range after truncating {:e} of the mass)",
+                        mie::error::Shown(*r),
                         plan.knobs.tail_mass
                     )))?;
                 }
