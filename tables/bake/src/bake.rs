@@ -590,6 +590,12 @@ fn mie_error(field: &Field, context: String) -> impl FnOnce(mie::MieError) -> Ba
     }
 }
 
+/// [`preflight`] with the scene's own channel weights: what [`run`] refuses before computing
+/// anything, for a caller that has only the plan.
+pub fn check_before_work(plan: &BakePlan) -> Result<(), BakeError> {
+    preflight(plan, &ChannelWeights::new(&plan.scene.spectral)?)
+}
+
 /// The checks [`run`] makes before computing anything (see there).
 pub fn preflight(plan: &BakePlan, weights: &ChannelWeights) -> Result<(), BakeError> {
     check_writable(&plan.out_dir)?;

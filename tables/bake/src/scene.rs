@@ -762,18 +762,34 @@ impl FieldFile {
             })
             .collect();
         // Values that round to one another (from and to too close for the count) would bake
-        // the same member twice; the manifest holds strictly increasing values only.
-        if let Some(k) = values.windows(2).position(|w| !(w[0] < w[1])) {
+        // the same member twice; the manifest holds strictly increasing values only. A log
+        // sweep is interpolated in ln value, so those must differ too.
+        let coordinate = |v: f64| match spacing {
+            Spacing::Log => v.ln(),
+            Spacing::Linear => v,
+        };
+        if let Some(k) = values
+            .windows(2)
+            .position(|w| !(w[0] < w[1] && coordinate(w[0]) < coordinate(w[1])))
+        {
+            let (a, b) = (
+                mie::error::Shown(values[k]),
+                mie::error::Shown(values[k + 1]),
+            );
+            let what = if values[k] == values[k + 1] {
+                format!("are both {a}")
+            } else {
+                format!("({a} and {b}) have the same logarithm")
+            };
             fail!(
                 at(),
-                "field {:?}: sweep from = {}, to = {}, count = {count}: values {k} and {} are \
-                 both {} (a {} sweep this narrow cannot hold {count} distinct values); widen it \
-                 or lower count",
+                "field {:?}: sweep from = {}, to = {}, count = {count}: values {k} and {} {what} \
+                 (a {} sweep this narrow cannot hold {count} distinct values); widen it or \
+                 lower count",
                 self.name,
                 mie::error::Shown(from),
                 mie::error::Shown(to),
                 k + 1,
-                mie::error::Shown(values[k]),
                 match spacing {
                     Spacing::Log => "log",
                     Spacing::Linear => "linear",
@@ -1146,13 +1162,17 @@ mod tests {
             (
                 "key = \"r_eff_um\", from = 10, to = 10.000000000000004, count = 64",
                 "line 7: field \"cloud\": sweep from = 10, to = 10.000000000000004, count = 64: \
-                 values 1 and 2 are both 10.000000000000002 (a log sweep this narrow cannot hold \
-                 64 distinct values)",
+                 values 0 and 1 (10 and 10.000000000000002) have the same logarithm (a log sweep \
+                 this narrow cannot hold 64 distinct values)",
             ),
             (
                 "key = \"r_eff_um\", from = 1, to = 1.000000000000001, count = 9, \
                  spacing = \"linear\"",
-                "cannot hold 9 distinct values",
+                "values 1 and 2 are both 1.0000000000000002 (a linear sweep this narrow cannot hold 9",
+            ),
+            (
+                "key = \"r_eff_um\", from = 1e-6, to = 1.000000000000001e-6, count = 2",
+                "values 0 and 1 (1e-6 and 1.000000000000001e-6) have the same logarithm",
             ),
             // Numbers far from 1 in exponent form, not hundreds of digits.
             (
