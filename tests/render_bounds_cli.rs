@@ -4,6 +4,8 @@
 //! is traced.
 
 mod common;
+#[path = "common/exr_planes.rs"]
+mod exr_planes;
 
 use std::fs;
 use std::os::unix::fs::FileTypeExt;
@@ -226,6 +228,48 @@ fn a_truth_of_one_sample_per_pixel_is_refused_before_the_bake() {
         (scene("[render.truth]\nspp = 1"), &["--model", "truth"][..]),
     ] {
         refused_before_the_bake(&dir, &text, args, "spp = 1: the standard error");
+    }
+}
+
+#[test]
+fn size_profiles_at_a_sweeps_last_value_render() {
+    // The profile at the last value of a log and of a linear sweep of 6 … 14 (it panicked in
+    // choose_members, index out of bounds); the frame is finite.
+    let dir = workdir("bounds-profile-ends");
+    for (spacing, count) in [("log", 4), ("linear", 5)] {
+        let text = scene("").replace(
+            "distribution = { kind = \"gamma\", r_eff_um = 8, v_eff = 0.1 }",
+            &format!(
+                "distribution = {{ kind = \"gamma\", r_eff_um = 8, v_eff = 0.1 }}\n\
+                 sweep = {{ key = \"r_eff_um\", from = 6, to = 14, count = {count}, \
+                 spacing = \"{spacing}\" }}"
+            ),
+        ) + "r_eff_um = { base = 14, top = 14 }\n";
+        fs::write(dir.join("scene.toml"), &text).unwrap();
+        let _ = fs::remove_file(dir.join("out.exr"));
+        let o = render(&dir, &["--cpu", "--quiet"]);
+        assert!(
+            o.status.success(),
+            "{spacing}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        let (_, _, [r, g, b, _]) = exr_planes::read_rgba(&dir.join("out.exr"));
+        assert!(r.iter().chain(&g).chain(&b).all(|v| v.is_finite()));
+        fs::remove_file(dir.join("out.exr")).unwrap();
+        // A volume naming a member past the sweep's end is refused naming that member.
+        let missing = text
+            .replace("field = \"cloud\"\nshape", "field = \"cloud@07\"\nshape")
+            .replace("r_eff_um = { base = 14, top = 14 }\n", "");
+        refused_before_the_bake(
+            &dir,
+            &missing,
+            &["--cpu"],
+            &format!(
+                "a [[volume]] uses field \"cloud@07\", which the sweep \"cloud\" does not \
+                 have: its members are cloud@00 … cloud@0{} ({count} values of r_eff_um)",
+                count - 1
+            ),
+        );
     }
 }
 
