@@ -42,6 +42,9 @@ fn write(path: &Path, rgb: [f32; 3], stderr: Option<f32>, edit: impl FnOnce(&mut
     image.write_exr_with(path, extra).unwrap();
 }
 
+/// What a case does, how it writes its frame, and the refusal it must give.
+type Case = (&'static str, Box<dyn Fn(&Path)>, &'static str);
+
 struct Frame {
     rgb: Vec<[f32; 3]>,
     a: Vec<f32>,
@@ -65,7 +68,7 @@ fn frames_with_non_finite_or_negative_values_are_refused_naming_the_first() {
         "{report}"
     );
 
-    let cases: Vec<(&str, Box<dyn Fn(&Path)>, &str)> = vec![
+    let cases: Vec<Case> = vec![
         (
             "a truth of 1 spp: stderr inf everywhere",
             Box::new(|p| write(p, [0.2; 3], Some(f32::INFINITY), |_| {})),
@@ -105,7 +108,7 @@ fn frames_with_non_finite_or_negative_values_are_refused_naming_the_first() {
         refused(&dir, what, needle);
     }
     write(&dir.join("truth.exr"), [0.2, 0.2, 0.2], Some(0.01), |_| {});
-    let model_cases: Vec<(&str, Box<dyn Fn(&Path)>, &str)> = vec![
+    let model_cases: Vec<Case> = vec![
         (
             "an infinite model pixel",
             Box::new(|p| write(p, [0.1; 3], None, |f| f.rgb[3][2] = f32::INFINITY)),

@@ -18,7 +18,9 @@ use std::path::Path;
 use proptest::prelude::*;
 use render::RenderScene;
 
+// The shared runner (its allocation counter is not used here).
 #[path = "../../../tests/common/fuzz.rs"]
+#[allow(dead_code)]
 mod fuzz;
 
 /// How one end of the profile is placed against the sweep's values.
@@ -121,7 +123,7 @@ fn at(p: Place, v: &[f64], c: &Case) -> f64 {
     match p {
         Place::On(k) => v[k % v.len()],
         Place::Beside(k, e) => {
-            let eps = [1e-15, 1e-12, 1e-9, 1e-6][(e.unsigned_abs() as usize).min(4).max(1) - 1];
+            let eps = [1e-15, 1e-12, 1e-9, 1e-6][(e.unsigned_abs() as usize).clamp(1, 4) - 1];
             v[k % v.len()] * (1.0 + eps * f64::from(e.signum()))
         }
         Place::Inside(t) => c.from + t * (c.to - c.from),
