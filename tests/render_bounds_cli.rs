@@ -4,6 +4,8 @@
 //! is traced.
 
 mod common;
+#[path = "common/exr_planes.rs"]
+mod exr_planes;
 
 use std::fs;
 use std::os::unix::fs::FileTypeExt;
@@ -216,6 +218,62 @@ fn scene_files_that_are_not_regular_files_are_refused() {
 }
 
 #[test]
+fn a_truth_of_one_sample_per_pixel_is_refused_before_the_bake() {
+    // One sample per pixel gives no spread to estimate the standard error from: the truth
+    // would carry stderr = inf in every pixel, and compare-render would count every
+    // difference as within its noise.
+    let dir = workdir("bounds-spp");
+    for (text, args) in [
+        (scene(""), &["--model", "truth", "--spp", "1"][..]),
+        (scene("[render.truth]\nspp = 1"), &["--model", "truth"][..]),
+    ] {
+        refused_before_the_bake(&dir, &text, args, "spp = 1: the standard error");
+    }
+}
+
+#[test]
+fn size_profiles_at_a_sweeps_last_value_render() {
+    // The profile at the last value of a log and of a linear sweep of 6 … 14 (it panicked in
+    // choose_members, index out of bounds); the frame is finite.
+    let dir = workdir("bounds-profile-ends");
+    for (spacing, count) in [("log", 4), ("linear", 5)] {
+        let text = scene("").replace(
+            "distribution = { kind = \"gamma\", r_eff_um = 8, v_eff = 0.1 }",
+            &format!(
+                "distribution = {{ kind = \"gamma\", r_eff_um = 8, v_eff = 0.1 }}\n\
+                 sweep = {{ key = \"r_eff_um\", from = 6, to = 14, count = {count}, \
+                 spacing = \"{spacing}\" }}"
+            ),
+        ) + "r_eff_um = { base = 14, top = 14 }\n";
+        fs::write(dir.join("scene.toml"), &text).unwrap();
+        let _ = fs::remove_file(dir.join("out.exr"));
+        let o = render(&dir, &["--cpu", "--quiet"]);
+        assert!(
+            o.status.success(),
+            "{spacing}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        let (_, _, [r, g, b, _]) = exr_planes::read_rgba(&dir.join("out.exr"));
+        assert!(r.iter().chain(&g).chain(&b).all(|v| v.is_finite()));
+        fs::remove_file(dir.join("out.exr")).unwrap();
+        // A volume naming a member past the sweep's end is refused naming that member.
+        let missing = text
+            .replace("field = \"cloud\"\nshape", "field = \"cloud@07\"\nshape")
+            .replace("r_eff_um = { base = 14, top = 14 }\n", "");
+        refused_before_the_bake(
+            &dir,
+            &missing,
+            &["--cpu"],
+            &format!(
+                "a [[volume]] uses field \"cloud@07\", which the sweep \"cloud\" does not \
+                 have: its members are cloud@00 … cloud@0{} ({count} values of r_eff_um)",
+                count - 1
+            ),
+        );
+    }
+}
+
+#[test]
 fn hopeless_optical_depths_are_refused_before_any_path() {
     let dir = workdir("bounds-depth");
     let dense = scene("").replace(
@@ -284,6 +342,73 @@ fn render_outputs_never_replace_a_device_a_directory_or_the_bake() {
     } else {
         eprintln!("mknod not permitted here: the device case is not run");
     }
+}
+
+#[test]
+fn render_outputs_never_replace_a_file_the_scene_reads() {
+    let dir = workdir("bounds-inputs");
+    // A grid volume and an OBJ occluder, each a file the scene names; links to each and a
+    // path through `..`. Every output onto one of them is refused before the bake, naming it.
+    let values: Vec<u8> = (0..64)
+        .flat_map(|i| (0.5 + i as f32 / 64.0).to_le_bytes())
+        .collect();
+    fs::write(dir.join("density.f32"), &values).unwrap();
+    let obj = "v -50 0 -50\nv 50 0 -50\nv 0 80 50\nv 0 0 60\nf 1 2 3\nf 1 2 4\nf 2 3 4\nf 1 3 4\n";
+    fs::write(dir.join("rock.obj"), obj).unwrap();
+    fs::create_dir_all(dir.join("sub")).unwrap();
+    for (link, target) in [
+        ("grid_link.exr", "density.f32"),
+        ("obj_link.png", "rock.obj"),
+    ] {
+        let _ = fs::remove_file(dir.join(link));
+        std::os::unix::fs::symlink(dir.join(target), dir.join(link)).unwrap();
+    }
+    let text = format!(
+        "{}\n[[light]]\nposition_m = [0, 500, -500]\nintensity = [1, 1, 1]\n\n[[occluder]]\n\
+         shape = \"mesh\"\nfile = \"rock.obj\"\noffset_m = [0, 0, 600]\n",
+        scene("").replace(
+            "shape = \"cumulus\"",
+            "shape = \"grid\"\nfile = \"density.f32\"\ndims = [4, 4, 4]\nmin_m = [-300, 200, \
+             -300]\nmax_m = [300, 800, 300]",
+        )
+    );
+    let truth = ["--model", "truth", "--spp", "2"];
+    for (out, png, needle) in [
+        ("density.f32", None, "is density.f32"),
+        ("out.exr", Some("density.f32"), "is density.f32"),
+        ("rock.obj", None, "is rock.obj"),
+        ("out.exr", Some("rock.obj"), "is rock.obj"),
+        ("grid_link.exr", None, "is density.f32"),
+        ("out.exr", Some("obj_link.png"), "is rock.obj"),
+        ("sub/../density.f32", None, "is density.f32"),
+    ] {
+        let mut args = vec!["--out", out];
+        if let Some(png) = png {
+            args.extend(["--png", png]);
+        }
+        args.extend(truth);
+        let _ = fs::remove_dir_all(dir.join("tables"));
+        fs::write(dir.join("scene.toml"), &text).unwrap();
+        let mut all = vec!["render", "scene.toml", "--tables", "tables", "--quiet"];
+        all.extend(&args);
+        let o = photometeor(&all, &dir);
+        let e = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {e}");
+        assert!(e.contains(needle), "{args:?}: {needle:?} not in {e}");
+        assert!(
+            !dir.join("tables").exists(),
+            "{args:?}: baked before refusing"
+        );
+        assert!(!dir.join("out.exr").exists(), "{args:?}: wrote an image");
+    }
+    assert_eq!(fs::read(dir.join("density.f32")).unwrap(), values);
+    assert_eq!(fs::read_to_string(dir.join("rock.obj")).unwrap(), obj);
+    assert!(
+        fs::symlink_metadata(dir.join("grid_link.exr"))
+            .unwrap()
+            .file_type()
+            .is_symlink()
+    );
 }
 
 #[test]

@@ -180,3 +180,56 @@ fn a_missing_repeated_or_foreign_shard_is_refused_by_name_and_nothing_is_written
         assert!(!cwd.join("x").exists());
     }
 }
+
+/// One small field: the array has more tasks than fields.
+const ONE: &str = "[scene]\nname = \"one\"\nspectral = \"rgb3\"\nn_max = 2\nquality = \"draft\"\n\n\
+    [[field]]\nname = \"cloud\"\nkind = \"cloud\"\n\
+    distribution = { kind = \"gamma\", r_eff_um = 8, v_eff = 0.1 }\n";
+
+#[test]
+fn shards_without_a_field_bake_into_fresh_directories_and_a_claim_past_n_is_refused() {
+    let cwd = workdir("shard-empty");
+    std::fs::write(cwd.join("one.toml"), ONE).unwrap();
+    ok(&["bake", "one.toml", "--quiet", "--out", "full"], &cwd);
+    // Three shards of one field, each into a directory that does not exist yet (two levels).
+    let dirs: Vec<String> = (1..=3).map(|k| format!("fresh/s{k}")).collect();
+    for (k, dir) in dirs.iter().enumerate() {
+        let shard = format!("{}/3", k + 1);
+        ok(
+            &[
+                "bake", "one.toml", "--quiet", "--shard", &shard, "--out", dir,
+            ],
+            &cwd,
+        );
+    }
+    let mut args = vec!["merge"];
+    args.extend(dirs.iter().map(String::as_str));
+    args.extend(["--out", "merged"]);
+    ok(&args, &cwd);
+    assert_eq!(published(&cwd.join("merged")), published(&cwd.join("full")));
+    // A shard record claiming 4/3 (written by hand, or by another tool) is refused by merge,
+    // naming it, whatever the others are.
+    let record = cwd.join(&dirs[2]).join("shard.json");
+    let text = std::fs::read_to_string(&record).unwrap();
+    let mut json: serde_json::Value = serde_json::from_str(&text).unwrap();
+    json["shard"]["index"] = serde_json::json!(4);
+    std::fs::create_dir_all(cwd.join("forged")).unwrap();
+    std::fs::write(
+        cwd.join("forged/shard.json"),
+        serde_json::to_vec_pretty(&json).unwrap(),
+    )
+    .unwrap();
+    let mut args = vec!["merge"];
+    args.extend(dirs.iter().map(String::as_str));
+    args.extend(["forged", "--out", "merged2"]);
+    let out = photometeor(&args, &cwd);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("forged claims shard 4/3"), "{stderr}");
+    assert!(!cwd.join("merged2").exists());
+    // And on the command line: K past N.
+    let out = photometeor(&["bake", "one.toml", "--shard", "5/4", "--out", "y"], &cwd);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("expected K/N with 1 ≤ K ≤ N"));
+    assert!(!cwd.join("y").exists());
+}

@@ -98,7 +98,35 @@ pub fn run(a: BakeArgs) -> Result<()> {
         }
         return Ok(());
     }
-    let report = pool.install(|| bake::run(&plan, &progress))?;
+    // Another bake publishing into the same directory: wait for it, saying so (its tables are
+    // then replaced by this scene's, which is said too).
+    let report = loop {
+        format::BakeLock::wait_until_free(&plan.out_dir, |holder| {
+            eprintln!(
+                "waiting for process {holder}, which is baking into {}",
+                plan.out_dir.display()
+            );
+        })?;
+        match pool.install(|| bake::run(&plan, &progress)) {
+            Err(bake::BakeError::Commit(format::CommitError::Locked { holder, .. })) => {
+                eprintln!(
+                    "{} was locked by process {holder} as this bake finished; waiting to \
+                     publish",
+                    plan.out_dir.display()
+                );
+            }
+            r => break r?,
+        }
+    };
+    if !report.replaced.is_empty() {
+        eprintln!(
+            "{}: this bake of {} replaced the tables it held of fields {:?} (another scene's, \
+             or fields this scene no longer has); they are removed",
+            plan.out_dir.display(),
+            plan.scene.name,
+            report.replaced
+        );
+    }
     if a.json {
         println!("{}", serde_json::to_string(&report)?);
     } else if !a.quiet {

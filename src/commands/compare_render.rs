@@ -2,9 +2,9 @@
 
 use std::path::PathBuf;
 
-use anyhow::Result;
+use anyhow::{Result, bail};
 use clap::Args as ClapArgs;
-use render::error_map::{Pixels, compare, error_map_rgb8, read_frame};
+use render::error_map::{Frame, Pixels, compare, error_map_rgb8, read_frame};
 
 #[derive(Debug, ClapArgs)]
 pub struct CompareRenderArgs {
@@ -33,6 +33,8 @@ pub fn run(a: CompareRenderArgs) -> Result<()> {
     }
     let truth = read_frame(&a.truth)?;
     let model = read_frame(&a.model)?;
+    check_frame(&a.truth, &truth)?;
+    check_frame(&a.model, &model)?;
     let pixels = if a.pixels == "all" {
         Pixels::All
     } else {
@@ -71,5 +73,48 @@ pub fn run(a: CompareRenderArgs) -> Result<()> {
         report.resolved * 100.0,
         report.truth_noise * 100.0
     );
+    Ok(())
+}
+
+/// Refuses a frame no comparison can be made from, naming its first bad pixel (x, y from the
+/// top left), channel and value: a non-finite or negative R, G or B; an A outside [0, 1]; a
+/// non-finite or negative stderr (a truth of one sample per pixel has none to give: its
+/// stderr is infinite, and every difference would count as within its noise).
+fn check_frame(path: &std::path::Path, frame: &Frame) -> Result<()> {
+    let w = frame.image.width.max(1);
+    let at = |i: usize| (i % w, i / w);
+    for (i, p) in frame.image.rgb.iter().enumerate() {
+        for (c, v) in ["R", "G", "B"].iter().zip(p) {
+            if !(v.is_finite() && *v >= 0.0) {
+                let (x, y) = at(i);
+                bail!(
+                    "{}: pixel ({x}, {y}) channel {c} = {v}: a radiance must be finite and ≥ 0",
+                    path.display()
+                );
+            }
+        }
+    }
+    for (i, v) in frame.image.transparency.iter().enumerate() {
+        if !(0.0..=1.0).contains(v) {
+            let (x, y) = at(i);
+            bail!(
+                "{}: pixel ({x}, {y}) channel A = {v}: a transparency lies in [0, 1]",
+                path.display()
+            );
+        }
+    }
+    for (i, e) in frame.std_error.iter().flatten().enumerate() {
+        for (c, v) in ["stderr.R", "stderr.G", "stderr.B"].iter().zip(e) {
+            if !(v.is_finite() && *v >= 0.0) {
+                let (x, y) = at(i);
+                bail!(
+                    "{}: pixel ({x}, {y}) channel {c} = {v}: a standard error must be finite and \
+                     ≥ 0 (a truth of 1 sample per pixel has none: render it with --spp 2 or \
+                     more)",
+                    path.display()
+                );
+            }
+        }
+    }
     Ok(())
 }

@@ -239,6 +239,17 @@ pub fn prepare(
     render
         .check(&settings)
         .map_err(|e| at_line(&origin, &text, &e.to_string()))?;
+    // The truth's standard error is estimated from the spread of its samples: one sample
+    // per pixel has none (it would be written as infinite), so at least 2 are asked for.
+    if let ModelSettings::Truth(t) = &settings
+        && t.spp < 2
+    {
+        bail!(
+            "{origin}: --model truth with spp = {}: the standard error each pixel carries needs \
+             at least 2 samples per pixel; set spp to 2 or more",
+            t.spp
+        );
+    }
     let limit = memory_limit(max_memory_gib)?;
     render
         .check_memory(&settings, limit)
@@ -265,6 +276,31 @@ pub fn prepare(
                 .collect::<Vec<_>>()
                 .join(", ")
         );
+    }
+    // A field no [[field]] makes is named first, before what the sweeps lack: a member past a
+    // sweep's end (`cloud@07` of four) is such a field.
+    for name in &used {
+        if !scene.fields.iter().any(|f| &f.name == name) {
+            let sweep = name
+                .split_once('@')
+                .and_then(|(base, _)| scene.sweeps.iter().find(|s| s.name == base));
+            if let Some(sweep) = sweep {
+                let members = sweep.members();
+                bail!(
+                    "{origin}: a [[volume]] uses field {name:?}, which the sweep {:?} does not \
+                     have: its members are {} … {} ({} values of {})",
+                    sweep.name,
+                    members[0],
+                    members[members.len() - 1],
+                    members.len(),
+                    sweep.key
+                );
+            }
+            let have: Vec<&str> = scene.fields.iter().map(|f| f.name.as_str()).collect();
+            bail!(
+                "{origin}: a [[volume]] uses field {name:?}; the scene's [[field]]s are {have:?}"
+            );
+        }
     }
     for sweep in &scene.sweeps {
         let members = sweep.members();
@@ -306,9 +342,13 @@ pub fn prepare(
         Some(d) => d,
         None => default_tables_dir(&scene.name)?,
     };
-    // The outputs may not replace a device, a directory, the scene or anything of the bake.
-    let protected: Vec<&std::path::Path> =
-        std::iter::once(dir.as_path()).chain(scene_path).collect();
+    // The outputs may not replace a device, a directory, the scene, a file it reads (a grid,
+    // an OBJ) or anything of the bake; links and `..` are resolved before comparing.
+    let inputs = scene_inputs(&text, &base, &render);
+    let protected: Vec<&std::path::Path> = std::iter::once(dir.as_path())
+        .chain(scene_path)
+        .chain(inputs.iter().map(PathBuf::as_path))
+        .collect();
     for out in outputs {
         format::check_output(out, &protected)?;
     }
@@ -326,7 +366,32 @@ pub fn prepare(
     })
 }
 
-/// A scene error found after parsing, placed on its key's line where one line sets that key.
+/// The files a render scene reads beside itself: each grid volume's `file` and each mesh
+/// occluder's OBJ `file`, resolved against `base` (the scene file's directory) as the scene's
+/// parser resolves them.
+pub fn scene_inputs(text: &str, base: &std::path::Path, scene: &RenderScene) -> Vec<PathBuf> {
+    let mut files: Vec<PathBuf> = scene
+        .volumes
+        .iter()
+        .filter_map(|v| match &v.shape {
+            render::volume::Shape::Grid { file, .. } => Some(file.clone()),
+            _ => None,
+        })
+        .collect();
+    // A mesh keeps its triangles, not its file's name: the names are read from the text.
+    if let Ok(table) = toml::from_str::<toml::Table>(text)
+        && let Some(toml::Value::Array(occluders)) = table.get("occluder")
+    {
+        files.extend(
+            occluders
+                .iter()
+                .filter_map(|o| o.get("file").and_then(toml::Value::as_str))
+                .map(|f| base.join(f)),
+        );
+    }
+    files
+}
+
 /// The 1-based line of `sweep =` in the `[[field]]` named `name`.
 fn sweep_line(text: &str, name: &str) -> Option<usize> {
     let lines: Vec<&str> = text.lines().collect();
@@ -347,6 +412,7 @@ fn sweep_line(text: &str, name: &str) -> Option<usize> {
         .map(|i| i + 1)
 }
 
+/// A scene error found after parsing, placed on its key's line where one line sets that key.
 pub fn at_line(origin: &str, text: &str, message: &str) -> anyhow::Error {
     match render::scene::key_line(text, message) {
         Some(line) => anyhow!("{origin}: line {line}: {message}"),
@@ -468,6 +534,18 @@ fn write_outputs(a: &RenderArgs, scene: &RenderScene, rendered: &Rendered) -> Re
     let image = &rendered.image;
     if image.rgb.iter().flatten().any(|v| !v.is_finite()) {
         bail!("the render produced a non-finite pixel; nothing written");
+    }
+    // A truth stopped (by max_seconds) before a pixel had 2 samples has no standard error there.
+    for (name, values) in &rendered.extra {
+        if let Some(i) = values.iter().position(|v| !v.is_finite()) {
+            bail!(
+                "the render's {name} is {} at pixel ({}, {}) (a truth stopped before every \
+                 pixel had 2 samples: raise max_seconds or lower the size); nothing written",
+                values[i],
+                i % image.width.max(1),
+                i / image.width.max(1)
+            );
+        }
     }
     image.write_exr_with(&a.out, rendered.extra.clone())?;
     if let Some(png) = &a.png {

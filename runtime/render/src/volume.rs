@@ -268,24 +268,27 @@ impl SizeProfile {
 /// The members of `sweep` a renderer holding `budget` fields mixes for sizes in [lo, hi]: the
 /// members from the last at or below `lo` to the first at or above `hi`, all of them if they
 /// fit, else `budget` of them spread evenly over that run of indices (both ends kept), so the
-/// interpolation spans a coarser step. `None` where `budget` < 2.
+/// interpolation spans a coarser step. `None` where `budget` < 2 or the sweep has fewer than 2
+/// members.
 pub fn choose_members(
     sweep: &format::SweepEntry,
     lo: f64,
     hi: f64,
     budget: usize,
 ) -> Option<format::SweepEntry> {
-    if budget < 2 {
+    let v = &sweep.values;
+    if budget < 2 || v.len() < 2 || sweep.fields.len() != v.len() {
         return None;
     }
-    let v = &sweep.values;
     let last = v.len() - 1;
-    let first = v.iter().rposition(|&x| x <= lo).unwrap_or(0);
+    // A size at (or, within rounding, above) the last value takes the last two members; one
+    // at or below the first, the first two.
+    let first = v.iter().rposition(|&x| x <= lo).unwrap_or(0).min(last - 1);
     let end = v
         .iter()
         .position(|&x| x >= hi)
         .unwrap_or(last)
-        .max(first + 1);
+        .clamp(first + 1, last);
     let run = end - first;
     let picks: Vec<usize> = if run < budget {
         (first..=end).collect()
@@ -816,6 +819,37 @@ mod tests {
         let one = choose_members(&s, values[3], values[3], 4).unwrap();
         assert_eq!(one.fields, ["cloud@03", "cloud@04"]);
         assert!(choose_members(&s, 6.0, 14.0, 1).is_none());
+    }
+
+    #[test]
+    fn a_profile_at_the_sweeps_ends_takes_the_two_members_there() {
+        // 6 … 14 in four members (log) and 6 … 14 in five (linear): a profile at the last value
+        // (or just above it, within the scene check's 1e-9), at the first, or spanning all.
+        for values in [vec![6.0, 7.9, 10.6, 14.0], vec![6.0, 8.0, 10.0, 12.0, 14.0]] {
+            let s = sweep(&values);
+            let n = values.len();
+            let top = values[n - 1];
+            for (lo, hi, want) in [
+                (top, top, [n - 2, n - 1]),
+                (top * (1.0 + 1e-9), top * (1.0 + 1e-9), [n - 2, n - 1]),
+                (values[0], values[0], [0, 1]),
+                (values[0] * (1.0 - 1e-9), values[0], [0, 1]),
+            ] {
+                for budget in [2, 3, 4] {
+                    let m = choose_members(&s, lo, hi, budget).unwrap();
+                    assert_eq!(m.values, [values[want[0]], values[want[1]]], "{lo} {hi}");
+                }
+            }
+            for budget in 2..=6 {
+                let m = choose_members(&s, values[0], top, budget).unwrap();
+                assert_eq!(m.values.len(), budget.min(n));
+                assert_eq!(
+                    (m.values[0], m.values[m.values.len() - 1]),
+                    (values[0], top)
+                );
+                assert!(m.values.windows(2).all(|w| w[0] < w[1]), "{:?}", m.values);
+            }
+        }
     }
 
     #[test]

@@ -965,3 +965,19 @@ fn per_view_gpu_refuses_a_lighting_past_the_adapters_limit_before_any_work() {
     );
     assert_eq!(told.0.load(std::sync::atomic::Ordering::Relaxed), 0);
 }
+
+/// A setting out of range is named once with its table: `[render.coupled] directions = 8 …`
+/// (the model's check and the parser each put the table's name before it, which read
+/// "[render.coupled] [render.coupled] directions").
+#[test]
+fn a_bad_setting_names_its_table_once() {
+    let table: toml::Table = toml::from_str("directions = 8").unwrap();
+    let e = render::ModelSettings::parse("coupled", &table)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.starts_with("[render.coupled] directions = 8 is outside the allowed range"),
+        "{e}"
+    );
+    assert_eq!(e.matches("[render.coupled]").count(), 1, "{e}");
+}

@@ -185,6 +185,9 @@ pub struct BakeReport {
     /// Leftovers of interrupted bakes finished or removed before this one (see
     /// `photometeor_format::commit`).
     pub cleaned: Vec<String>,
+    /// Fields of the bake the directory held before that this one replaced and removed (a
+    /// bake of another scene into the same directory, or of this scene without them).
+    pub replaced: Vec<String>,
     /// Wall-clock seconds.
     pub seconds: f64,
     /// Peak resident memory of this process (Linux `VmHWM`), MiB.
@@ -213,8 +216,9 @@ pub fn run(plan: &BakePlan, progress: &dyn Progress) -> Result<BakeReport, BakeE
     let lookups = look_up_cache(plan, &mut report.rejected_cache);
     let (computed, encoded) = compute_and_encode(plan, &lookups, &weights, &grid, progress)?;
     let done = take_results(lookups, computed, &mut report);
-    // Only now is the directory touched, under its lock: a pending commit of an interrupted
-    // bake is finished and dead writers' leftovers removed (format::commit).
+    // Only now are the tables touched (beyond the cache records each field wrote as it
+    // finished), under the directory's lock: a pending commit of an interrupted bake is
+    // finished and dead writers' leftovers removed (format::commit).
     let lock = BakeLock::acquire(&plan.out_dir)?;
     report.cleaned = lock.clean_stale()?;
     // The previous bake, and which of its fields this one keeps.
@@ -222,7 +226,6 @@ pub fn run(plan: &BakePlan, progress: &dyn Progress) -> Result<BakeReport, BakeE
     let channels = channel_definitions(&weights);
     let kept = kept_fields(plan, previous.as_ref(), &channels)?;
     let sweeps = sweep_entries(plan, previous.as_ref(), &kept);
-    write_cache_records(plan, &done)?;
     let manifest = publish(
         plan,
         &lock,
@@ -232,7 +235,7 @@ pub fn run(plan: &BakePlan, progress: &dyn Progress) -> Result<BakeReport, BakeE
         channels,
         grid.len(),
     )?;
-    remove_stale_tables(plan, previous, &manifest);
+    report.replaced = remove_stale_tables(plan, previous, &manifest);
     drop(lock);
     report.seconds = start.elapsed().as_secs_f64();
     report.peak_rss_mib = peak_rss_mib();
@@ -250,6 +253,7 @@ impl BakeReport {
             cached: Vec::new(),
             rejected_cache: Vec::new(),
             cleaned: Vec::new(),
+            replaced: Vec::new(),
             seconds: 0.0,
             peak_rss_mib: None,
         }
@@ -327,7 +331,16 @@ fn compute_and_encode(
         .map(|lookup| {
             let computed = match &lookup.cached {
                 Some(_) => None,
-                None => Some(compute_field(plan, lookup.field, weights, grid, progress)?),
+                None => {
+                    let result = compute_field(plan, lookup.field, weights, grid, progress)?;
+                    // The field's cache record at once (a checkpoint: a bake killed later
+                    // starts again from the fields it finished). Records are content-addressed
+                    // and written atomically, so no lock is needed (a shard writes its own the
+                    // same way); the tables are published under the lock below.
+                    create_cache_dir(plan)?;
+                    cache::write(&lookup.cache_file, &lookup.hash, &Record::of(&result))?;
+                    Some(result)
+                }
             };
             let result = computed.as_ref().or(lookup.cached.as_ref());
             let encoded = encode(result.expect("a field cached or computed"))?;
@@ -342,12 +355,11 @@ fn compute_and_encode(
         .unzip())
 }
 
-/// A field's bake, cached or computed, and where its new cache record goes (computed fields).
+/// A field's bake, cached or computed (its cache record written as it finished).
 struct Done<'a> {
     field: &'a Field,
     hash: String,
     result: BakedField,
-    new_record: Option<PathBuf>,
 }
 
 /// Each field's bake from the cache or from this run, in scene order, listing each field in
@@ -362,17 +374,17 @@ fn take_results<'a>(
         let CacheLookup {
             field,
             hash,
-            cache_file,
             cached,
+            ..
         } = lookup;
-        let (result, new_record) = match (cached, computed) {
+        let result = match (cached, computed) {
             (Some(r), _) => {
                 report.cached.push(field.name.clone());
-                (r, None)
+                r
             }
             (None, Some(r)) => {
                 report.computed.push(field.name.clone());
-                (r, Some(cache_file))
+                r
             }
             (None, None) => unreachable!("a field neither cached nor computed"),
         };
@@ -380,7 +392,6 @@ fn take_results<'a>(
             field,
             hash,
             result,
-            new_record,
         });
     }
     done
@@ -445,17 +456,6 @@ fn sweep_entries(
         }
     }
     sweeps
-}
-
-/// Writes the cache records of the fields computed in this run.
-fn write_cache_records(plan: &BakePlan, done: &[Done]) -> Result<(), BakeError> {
-    create_cache_dir(plan)?;
-    for d in done {
-        if let Some(cache_file) = &d.new_record {
-            cache::write(cache_file, &d.hash, &Record::of(&d.result))?;
-        }
-    }
-    Ok(())
 }
 
 /// Computes `field` (unless `plan.out_dir`'s cache holds it) and writes its cache record there,
@@ -563,13 +563,21 @@ fn file_ref(file: String, bytes: &[u8]) -> format::manifest::FileRef {
     }
 }
 
-/// Removes the tables of the `previous` bake's fields that `manifest` no longer has: they would
-/// be read as current.
-fn remove_stale_tables(plan: &BakePlan, previous: Option<Manifest>, manifest: &Manifest) {
+/// Removes the tables of the `previous` bake's fields that `manifest` no longer has (they would
+/// be read as current); returns the names of those fields.
+fn remove_stale_tables(
+    plan: &BakePlan,
+    previous: Option<Manifest>,
+    manifest: &Manifest,
+) -> Vec<String> {
+    let mut removed = Vec::new();
     if let Some(previous) = previous {
         for old in previous.fields {
             let stale = !manifest.fields.iter().any(|f| f.file == old.file);
             if stale {
+                if !manifest.fields.iter().any(|f| f.name == old.name) {
+                    removed.push(old.name.clone());
+                }
                 let _ = std::fs::remove_file(plan.out_dir.join(&old.file));
                 let extras = [&old.single_scattering, &old.poisson, &old.biri_kernel];
                 for extra in extras.into_iter().flatten() {
@@ -578,6 +586,7 @@ fn remove_stale_tables(plan: &BakePlan, previous: Option<Manifest>, manifest: &M
             }
         }
     }
+    removed
 }
 
 /// The solver's refusal of `field`'s inputs, with where it happened (`context`).
@@ -588,6 +597,12 @@ fn mie_error(field: &Field, context: String) -> impl FnOnce(mie::MieError) -> Ba
         context,
         source,
     }
+}
+
+/// [`preflight`] with the scene's own channel weights: what [`run`] refuses before computing
+/// anything, for a caller that has only the plan.
+pub fn check_before_work(plan: &BakePlan) -> Result<(), BakeError> {
+    preflight(plan, &ChannelWeights::new(&plan.scene.spectral)?)
 }
 
 /// The checks [`run`] makes before computing anything (see there).
@@ -607,7 +622,8 @@ pub fn preflight(plan: &BakePlan, weights: &ChannelWeights) -> Result<(), BakeEr
                 let k = 2.0 * std::f64::consts::PI / (lambda / 1000.0);
                 for &r in [q.radius_um.first(), q.radius_um.last()].iter().flatten() {
                     mie::Sphere::new(m, k * r).map_err(mie_error(format!(
-                        " at {lambda} nm, radius {r} µm (the quadrature's range after truncating {:e} of the mass)",
+                        " at {lambda} nm, radius {} µm (the quadrature's range after truncating {:e} of the mass)",
+                        mie::error::Shown(*r),
                         plan.knobs.tail_mass
                     )))?;
                 }

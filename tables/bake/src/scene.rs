@@ -466,8 +466,11 @@ impl Scene {
                         other => other.to_string(),
                     };
                     keys.at("sweep").error(format!(
-                        "field {:?}: sweep of {} at {} = {value}: {message}",
-                        field.name, sweep.key, sweep.key
+                        "field {:?}: sweep of {} at {} = {}: {message}",
+                        field.name,
+                        sweep.key,
+                        sweep.key,
+                        mie::error::Shown(value)
                     ))
                 })?;
                 validated.name = sweep.member(k);
@@ -723,15 +726,18 @@ impl FieldFile {
         if !(from.is_finite() && to.is_finite() && from < to) {
             fail!(
                 at(),
-                "field {:?}: sweep from = {from}, to = {to}: from must be less than to (both finite)",
-                self.name
+                "field {:?}: sweep from = {}, to = {}: from must be less than to (both finite)",
+                self.name,
+                mie::error::Shown(from),
+                mie::error::Shown(to)
             );
         }
         if spacing == Spacing::Log && from <= 0.0 {
             fail!(
                 at(),
-                "field {:?}: sweep from = {from}: a log sweep needs from > 0 (or spacing = \"linear\")",
-                self.name
+                "field {:?}: sweep from = {}: a log sweep needs from > 0 (or spacing = \"linear\")",
+                self.name,
+                mie::error::Shown(from)
             );
         }
         let count = s
@@ -744,7 +750,7 @@ impl FieldFile {
                 self.name
             );
         }
-        let values = (0..count)
+        let values: Vec<f64> = (0..count)
             .map(|k| {
                 let t = k as f64 / (count - 1) as f64;
                 match (k, spacing) {
@@ -755,6 +761,41 @@ impl FieldFile {
                 }
             })
             .collect();
+        // Values that round to one another (from and to too close for the count) would bake
+        // the same member twice; the manifest holds strictly increasing values only. A log
+        // sweep is interpolated in ln value, so those must differ too.
+        let coordinate = |v: f64| match spacing {
+            Spacing::Log => v.ln(),
+            Spacing::Linear => v,
+        };
+        if let Some(k) = values
+            .windows(2)
+            .position(|w| !(w[0] < w[1] && coordinate(w[0]) < coordinate(w[1])))
+        {
+            let (a, b) = (
+                mie::error::Shown(values[k]),
+                mie::error::Shown(values[k + 1]),
+            );
+            let what = if values[k] == values[k + 1] {
+                format!("are both {a}")
+            } else {
+                format!("({a} and {b}) have the same logarithm")
+            };
+            fail!(
+                at(),
+                "field {:?}: sweep from = {}, to = {}, count = {count}: values {k} and {} {what} \
+                 (a {} sweep this narrow cannot hold {count} distinct values); widen it or \
+                 lower count",
+                self.name,
+                mie::error::Shown(from),
+                mie::error::Shown(to),
+                k + 1,
+                match spacing {
+                    Spacing::Log => "log",
+                    Spacing::Linear => "linear",
+                }
+            );
+        }
         Ok(Sweep {
             name: self.name.clone(),
             key: s.key,
@@ -1117,6 +1158,27 @@ mod tests {
                 "a log sweep needs from > 0",
             ),
             ("key = \"r_eff_um\", from = 4, to = 32, step = 2", "line 7"),
+            // Values that round to one another: refused before any member is baked.
+            (
+                "key = \"r_eff_um\", from = 10, to = 10.000000000000004, count = 64",
+                "line 7: field \"cloud\": sweep from = 10, to = 10.000000000000004, count = 64: \
+                 values 0 and 1 (10 and 10.000000000000002) have the same logarithm (a log sweep \
+                 this narrow cannot hold 64 distinct values)",
+            ),
+            (
+                "key = \"r_eff_um\", from = 1, to = 1.000000000000001, count = 9, \
+                 spacing = \"linear\"",
+                "values 1 and 2 are both 1.0000000000000002 (a linear sweep this narrow cannot hold 9",
+            ),
+            (
+                "key = \"r_eff_um\", from = 1e-6, to = 1.000000000000001e-6, count = 2",
+                "values 0 and 1 (1e-6 and 1.000000000000001e-6) have the same logarithm",
+            ),
+            // Numbers far from 1 in exponent form, not hundreds of digits.
+            (
+                "key = \"r_eff_um\", from = 1e-300, to = 1e-301",
+                "sweep from = 1e-300, to = 1e-301: from must be less than to",
+            ),
         ] {
             let e = error_of(&sweep(body));
             assert!(e.contains(needle), "{body}: {e}");

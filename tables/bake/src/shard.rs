@@ -218,6 +218,13 @@ pub fn run_shard(
         fields,
         seconds: start.elapsed().as_secs_f64(),
     };
+    // A shard that was dealt no field has made no directory yet (its fields' records would
+    // have): a scheduler's array with more tasks than fields gives it a fresh --out.
+    std::fs::create_dir_all(&plan.out_dir).map_err(|source| BakeError::Io {
+        path: plan.out_dir.clone(),
+        op: "creating the shard directory",
+        source,
+    })?;
     let path = plan.out_dir.join(SHARD_FILE);
     let json = serde_json::to_vec_pretty(&record).expect("a shard record serializes");
     format::write_file_atomically(&path, &json).map_err(|(op, source)| BakeError::Io {
@@ -264,6 +271,16 @@ pub fn check_shards(dirs: &[PathBuf]) -> Result<Merge, BakeError> {
                 first_dir.display()
             ))
         };
+        if !(1..=MAX_SHARDS).contains(&s.shard.count)
+            || !(1..=s.shard.count).contains(&s.shard.index)
+        {
+            return Err(BakeError::Shards(format!(
+                "{} claims shard {}/{}: a shard is K/N with 1 ≤ K ≤ N ≤ {MAX_SHARDS}",
+                dir.display(),
+                s.shard.index,
+                s.shard.count
+            )));
+        }
         if s.program != program() {
             return Err(BakeError::Shards(format!(
                 "{} was made by {}, not by this {}: bake every shard with one version",

@@ -156,6 +156,9 @@ impl SweepEntry {
         let k = v.partition_point(|&x| x <= value).clamp(1, last) - 1;
         let t = ((self.at(value) - self.at(v[k])) / (self.at(v[k + 1]) - self.at(v[k])))
             .clamp(0.0, 1.0);
+        // Two members whose coordinates round to one value (a sweep narrower than the
+        // logarithm's resolution) give 0/0: take the lower one.
+        let t = if t.is_nan() { 0.0 } else { t };
         let (s0, s1) = (sigma_ext[k], sigma_ext[k + 1]);
         let sigma = s0.powf(1.0 - t) * s1.powf(t);
         [(k, (1.0 - t) * sigma / s0), (k + 1, t * sigma / s1)]

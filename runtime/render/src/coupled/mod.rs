@@ -276,20 +276,20 @@ impl Settings {
         )?;
         if !(16..=1024).contains(&self.directions) {
             return Err(FrameError(format!(
-                "[render.coupled] directions = {} is outside the allowed range [16, 1024]",
+                "directions = {} is outside the allowed range [16, 1024]",
                 self.directions
             )));
         }
         if !(1e-6..=0.5).contains(&self.transport_tolerance) {
             return Err(FrameError(format!(
-                "[render.coupled] transport_tolerance = {} is outside the allowed range \
+                "transport_tolerance = {} is outside the allowed range \
                  [1e-6, 0.5] (relative change of the mean radiance per iteration)",
                 crate::checks::Shown(self.transport_tolerance)
             )));
         }
         if !(1..=1000).contains(&self.max_transport_iterations) {
             return Err(FrameError(format!(
-                "[render.coupled] max_transport_iterations = {} is outside the allowed range \
+                "max_transport_iterations = {} is outside the allowed range \
                  [1, 1000]",
                 self.max_transport_iterations
             )));
@@ -297,13 +297,13 @@ impl Settings {
         let c = self.transport_coarsening;
         if ![0, 1, 2, 4].contains(&c) {
             return Err(FrameError(format!(
-                "[render.coupled] transport_coarsening = {c} is not one of 1, 2, 4 (the \
+                "transport_coarsening = {c} is not one of 1, 2, 4 (the \
                  grid's voxels per transport voxel along each axis) or 0 (automatic)"
             )));
         }
         if self.diffuse == Diffuse::Transport && !light::delta_scaled(self) {
             return Err(FrameError(
-                "[render.coupled] diffuse = \"transport\" needs the default source (\"buffer\") \
+                "diffuse = \"transport\" needs the default source (\"buffer\") \
                  and split (\"delta-eddington\"); set diffuse = \"diffusion\" for the others"
                     .into(),
             ));
