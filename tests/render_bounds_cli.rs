@@ -292,6 +292,44 @@ fn hopeless_optical_depths_are_refused_before_any_path() {
     assert!(!dir.join("out.exr").exists());
 }
 
+/// Media that overlap add up: two [[medium]] tables over one box, each 60 % of the bound through
+/// its shortest side (each was checked alone, and passed), are refused together.
+#[test]
+fn overlapping_media_are_refused_by_their_summed_optical_depth() {
+    let dir = workdir("bounds-media");
+    let medium = |n: f64, x0: f64| {
+        format!(
+            "[[medium]]\nfield = \"cloud\"\nnumber_density_per_m3 = {n:e}\n\
+             min_m = [{x0}, 400, -50]\nmax_m = [{}, 500, 50]\n",
+            x0 + 100.0
+        )
+    };
+    // One medium far past the bound tells its optical depth per particle: τ/n.
+    let probe = 1e20;
+    fs::write(dir.join("scene.toml"), scene(&medium(probe, -50.0))).unwrap();
+    let o = render(&dir, &["--model", "truth", "--quiet"]);
+    let e = String::from_utf8_lossy(&o.stderr).to_string();
+    assert_eq!(o.status.code(), Some(2), "{e}");
+    let tau: f64 = e
+        .split("has optical depth ")
+        .nth(1)
+        .and_then(|s| s.split(',').next())
+        .and_then(|s| s.trim().parse().ok())
+        .unwrap_or_else(|| panic!("{e}"));
+    let n = 600.0 / (tau / probe);
+    let two = scene(&format!("{}\n{}", medium(n, -50.0), medium(n, -50.0)));
+    fs::write(dir.join("scene.toml"), two).unwrap();
+    let o = render(&dir, &["--model", "truth", "--quiet", "--spp", "2"]);
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{e}");
+    assert!(
+        e.contains("with the 1 [[medium]] tables overlapping it has optical depth 1.")
+            && e.contains("more than the 1000"),
+        "{e}"
+    );
+    assert!(!dir.join("out.exr").exists());
+}
+
 #[test]
 fn render_outputs_never_replace_a_device_a_directory_or_the_bake() {
     let dir = workdir("bounds-outputs");

@@ -558,6 +558,25 @@ fn write_outputs(a: &RenderArgs, scene: &RenderScene, rendered: &Rendered) -> Re
     Ok(())
 }
 
+/// `path` as a person reads it without this machine's layout: relative to the working
+/// directory where it lies below it, else with the home directory as `~`, else as it is.
+pub fn shown_path(path: &std::path::Path) -> String {
+    if let Some(rest) = std::env::current_dir().ok().and_then(|cwd| {
+        path.strip_prefix(cwd)
+            .ok()
+            .map(std::path::Path::to_path_buf)
+    }) {
+        return rest.display().to_string();
+    }
+    if let Some(rest) = std::env::var_os("HOME")
+        .filter(|h| !h.is_empty())
+        .and_then(|h| path.strip_prefix(h).ok().map(std::path::Path::to_path_buf))
+    {
+        return format!("~/{}", rest.display());
+    }
+    path.display().to_string()
+}
+
 /// The bake directory of a scene when `--tables` is not given: under the user's cache directory
 /// (`$XDG_CACHE_HOME/photometeor/tables`, else `~/.cache/photometeor/tables`, else the system's
 /// temporary directory), named by the scene's name reduced to `[A-Za-z0-9_-]` plus a hash of the
@@ -593,4 +612,27 @@ pub fn default_tables_dir(scene_name: &str) -> Result<PathBuf> {
         .join(format!("{safe}-{:08x}", hash as u32));
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
     Ok(dir)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::shown_path;
+
+    #[test]
+    fn paths_are_shown_from_the_working_directory_or_home() {
+        let cwd = std::env::current_dir().unwrap();
+        assert_eq!(
+            shown_path(&cwd.join("tables").join("glory")),
+            "tables/glory"
+        );
+        // Neither below the working directory nor the home directory: as it is.
+        let elsewhere = std::path::Path::new("/photometeor-nowhere/tables");
+        assert_eq!(shown_path(elsewhere), "/photometeor-nowhere/tables");
+        if let Some(home) = std::env::var_os("HOME").filter(|h| !h.is_empty())
+            && !cwd.starts_with(&home)
+        {
+            let cache = std::path::Path::new(&home).join(".cache/photometeor/tables/x");
+            assert_eq!(shown_path(&cache), "~/.cache/photometeor/tables/x");
+        }
+    }
 }

@@ -30,10 +30,16 @@ impl DensityGrid {
     /// axis-parallel grid lines through it (a path escapes along the thinnest), the largest
     /// over the voxels. A thin wide layer is as thin as its thickness.
     pub fn deepest_point(&self, f: usize) -> f64 {
+        self.deepest_weighted(|rho| f64::from(rho[f]))
+    }
+
+    /// [`DensityGrid::deepest_point`] of the fields together, each voxel's density
+    /// `weight(ρ per field)` (with each field's σ_ext, the optical depth of them all).
+    pub fn deepest_weighted(&self, weight: impl Fn(&[f32; MAX_FIELDS]) -> f64) -> f64 {
         let [nx, ny, nz] = self.dims;
         let h: [f64; 3] =
             std::array::from_fn(|a| (self.max_m[a] - self.min_m[a]) / self.dims[a] as f64);
-        let at = |x: usize, y: usize, z: usize| f64::from(self.data[x + nx * (y + ny * z)][f]);
+        let at = |x: usize, y: usize, z: usize| weight(&self.data[x + nx * (y + ny * z)]);
         // The column sums along x (per y, z), y (per x, z) and z (per x, y).
         let mut along = [vec![0.0; ny * nz], vec![0.0; nx * nz], vec![0.0; nx * ny]];
         for z in 0..nz {

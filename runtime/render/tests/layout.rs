@@ -221,9 +221,12 @@ fn imports(from: &str, code: &str, names: &[String]) -> std::collections::BTreeS
                                 .split("::")
                                 .filter(|s| !s.is_empty())
                                 .collect();
-                            let mut p = full.clone();
-                            p.extend(branch);
-                            resolve(p);
+                            // A trailing comma leaves an empty last branch: no import.
+                            if !branch.is_empty() {
+                                let mut p = full.clone();
+                                p.extend(branch);
+                                resolve(p);
+                            }
                             start = i + 1;
                         }
                         _ => {}
@@ -296,6 +299,13 @@ fn the_modules_imports_form_no_circle() {
     assert!(edges("riley").contains("model"), "{:?}", edges("riley"));
     let back = imports("model", "use crate::riley::Riley;", &names);
     assert!(back.contains("riley"), "{back:?}");
+    // A group's trailing comma imports nothing more (rustfmt writes one in a long group).
+    let group = imports(
+        "gpu",
+        "use crate::{\n    camera::Sun, frame::Frame,\n};",
+        &names,
+    );
+    assert_eq!(group.into_iter().collect::<Vec<_>>(), ["camera", "frame"]);
 }
 
 #[test]

@@ -686,6 +686,14 @@ pub(super) fn transport_light(
     }
     let budget = transport::balance(grid, &medium, &m);
     let change = report.changes.last().copied().unwrap_or(0.0);
+    if !change.is_finite() {
+        return Err(FrameError(format!(
+            "the transport broke down: the mean radiance's change is {change} after {} \
+             iterations (the medium or its sources are not finite in floating point at these \
+             optical depths; more iterations would not help)",
+            report.changes.len()
+        )));
+    }
     if change >= settings.transport_tolerance {
         return Err(FrameError(format!(
             "the transport did not converge: the mean radiance still changed by {change:.3e} \

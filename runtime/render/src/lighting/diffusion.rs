@@ -87,20 +87,37 @@ impl Solution {
     }
 }
 
-/// A solve that did not reach its tolerance.
+/// A solve that did not reach its tolerance: within the iteration cap, or because its residual
+/// stopped being a number (then no cap would help, and the message says so).
 #[derive(Debug, thiserror::Error)]
-#[error(
-    "the diffusion solve did not converge: relative residual {residual:.3e} after {iterations} \
-     iterations (the cap), tolerance {tolerance:.1e}; raise max_diffusion_iterations or loosen \
-     diffusion_tolerance"
-)]
 pub struct NotConverged {
-    /// Residual reached.
+    /// Residual reached (NaN or infinite where the arithmetic broke down).
     pub residual: f64,
-    /// Iterations taken (the cap).
+    /// Iterations taken (the cap, or the iteration where the residual went non-finite).
     pub iterations: usize,
     /// The tolerance asked for.
     pub tolerance: f64,
+}
+
+impl std::fmt::Display for NotConverged {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let (residual, iterations, tolerance) = (self.residual, self.iterations, self.tolerance);
+        if residual.is_finite() {
+            write!(
+                f,
+                "the diffusion solve did not converge: relative residual {residual:.3e} after \
+                 {iterations} iterations (the cap), tolerance {tolerance:.1e}; raise \
+                 max_diffusion_iterations or loosen diffusion_tolerance"
+            )
+        } else {
+            write!(
+                f,
+                "the diffusion solve broke down: its relative residual is {residual} after \
+                 {iterations} iterations (the operator or its sources are not finite in \
+                 floating point at these optical depths; more iterations would not help)"
+            )
+        }
+    }
 }
 
 /// A 7-point symmetric operator: A_ii = diag, A_{i,i+e_a} = −w[a][i].
@@ -577,6 +594,13 @@ impl Operator {
                     *ri -= alpha * adi;
                 });
             residual = dot(&r, &r).sqrt() / b_norm;
+            if !residual.is_finite() {
+                return Err(NotConverged {
+                    residual,
+                    iterations: it,
+                    tolerance,
+                });
+            }
             if residual < tolerance {
                 return Ok(Solution {
                     i0: x,
@@ -731,6 +755,20 @@ mod tests {
             }
         }
         p
+    }
+
+    /// A source that is not a number breaks the solve down at once, and the error says so
+    /// rather than asking for more iterations.
+    #[test]
+    fn a_residual_that_is_not_a_number_is_a_breakdown_not_a_cap() {
+        let mut p = sphere(8, 30.0, 0.5, 1.0);
+        let i = p.kappa_tr.iter().position(|&k| k > 0.0).unwrap();
+        p.q0[i] = f64::NAN;
+        let e = solve(&p, 1e-6, 500).unwrap_err();
+        assert!(!e.residual.is_finite() && e.iterations < 500, "{e:?}");
+        let message = e.to_string();
+        assert!(message.contains("broke down"), "{message}");
+        assert!(!message.contains("raise"), "{message}");
     }
 
     #[test]

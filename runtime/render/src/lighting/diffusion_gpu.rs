@@ -539,7 +539,7 @@ impl<'a> Uploaded<'a> {
                     seconds: start.elapsed().as_secs_f64(),
                 });
             }
-            if iterations >= max_iterations {
+            if iterations >= max_iterations || !residual.is_finite() {
                 return Err(NotConverged {
                     residual,
                     iterations,

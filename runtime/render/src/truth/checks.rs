@@ -1,5 +1,5 @@
 //! What the truth refuses before it traces: settings out of range, and optical depths beyond
-//! [`super::MAX_OPTICAL_DEPTH`] through any medium of the scene.
+//! [`super::MAX_OPTICAL_DEPTH`] through any medium of the scene, overlapping ones together.
 
 use super::*;
 
@@ -26,13 +26,40 @@ pub(super) fn check_optical_depth(
             worst = (tau, what);
         }
     };
+    let mut in_grid = Vec::new();
     for (f, field) in tables.fields.iter().enumerate() {
+        let tau = frame.grid.deepest_point(f) * worst_sigma(f);
+        if tau > 0.0 || tau.is_nan() {
+            in_grid.push(field.name.as_str());
+        }
         consider(
-            frame.grid.deepest_point(f) * worst_sigma(f),
+            tau,
             format!("a point of the [[volume]] grid of field {:?}", field.name),
         );
     }
-    for (i, &(region, n, f)) in media.iter().enumerate() {
+    // Fields that share the grid's voxels add up.
+    if in_grid.len() > 1 {
+        let n = tables.fields.len();
+        consider(
+            frame
+                .grid
+                .deepest_weighted(|rho| (0..n).map(|f| f64::from(rho[f]) * worst_sigma(f)).sum()),
+            format!(
+                "a point of the [[volume]] grid, its fields {} together",
+                in_grid.join(" and ")
+            ),
+        );
+    }
+    for (i, &(region, _, _)) in media.iter().enumerate() {
+        // Media that overlap this one add up in the overlap (counted over this one's whole
+        // shortest side: an upper bound).
+        let overlapping: Vec<usize> = (0..media.len())
+            .filter(|&j| overlap(region, media[j].0))
+            .collect();
+        let beta: f64 = overlapping
+            .iter()
+            .map(|&j| media[j].1 * worst_sigma(media[j].2))
+            .sum();
         let length = match region {
             crate::objects::Region::Box { min_m, max_m } => (max_m - min_m).min_element(),
             // Everywhere: across the scene's contents, the camera and its lights.
@@ -51,10 +78,14 @@ pub(super) fn check_optical_depth(
                 (hi - lo).max_element().max(1.0)
             }
         };
+        let others = match overlapping.len() {
+            1 => String::new(),
+            k => format!(" with the {} [[medium]] tables overlapping it", k - 1),
+        };
         consider(
-            n * worst_sigma(f) * length,
+            beta * length,
             format!(
-                "[[medium]] {} across its shortest side, {length:e} m",
+                "[[medium]] {} across its shortest side, {length:e} m{others}",
                 i + 1
             ),
         );
@@ -74,6 +105,24 @@ pub(super) fn check_optical_depth(
         ));
     }
     Ok(())
+}
+
+/// Whether two media regions share any volume (everywhere shares with all).
+fn overlap(a: crate::objects::Region, b: crate::objects::Region) -> bool {
+    use crate::objects::Region::{Box, Everywhere};
+    match (a, b) {
+        (Everywhere, _) | (_, Everywhere) => true,
+        (
+            Box {
+                min_m: a0,
+                max_m: a1,
+            },
+            Box {
+                min_m: b0,
+                max_m: b1,
+            },
+        ) => (a0.cmplt(b1) & b0.cmplt(a1)).all(),
+    }
 }
 
 /// Checks what the truth needs of a frame and its settings, naming the value and its range.

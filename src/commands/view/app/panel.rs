@@ -16,7 +16,7 @@ impl App {
         ui.label(format!("adapter: {}", self.adapter));
         ui.label(format!(
             "tables: {} ({}), {}",
-            self.plan.out_dir.display(),
+            crate::commands::render::shown_path(&self.plan.out_dir),
             format!("{:?}", self.plan.quality).to_lowercase(),
             self.plan
                 .scene
