@@ -190,6 +190,55 @@ pub struct Prepared {
     pub plan: BakePlan,
 }
 
+/// Refuses a scene whose volumes use a field no [[field]] makes (naming a member past a sweep's
+/// end as such), or that sweeps a field no volume uses (`render` bakes only what it shows).
+fn check_used_fields(scene: &Scene, used: &[String], text: &str, origin: &str) -> Result<()> {
+    // A field no [[field]] makes is named first, before what the sweeps lack: a member past a
+    // sweep's end (`cloud@07` of four) is such a field.
+    for name in used {
+        if !scene.fields.iter().any(|f| &f.name == name) {
+            let sweep = name
+                .split_once('@')
+                .and_then(|(base, _)| scene.sweeps.iter().find(|s| s.name == base));
+            if let Some(sweep) = sweep {
+                let members = sweep.members();
+                bail!(
+                    "{origin}: a [[volume]] uses field {name:?}, which the sweep {:?} does not \
+                     have: its members are {} … {} ({} values of {})",
+                    sweep.name,
+                    members[0],
+                    members[members.len() - 1],
+                    members.len(),
+                    sweep.key
+                );
+            }
+            let have: Vec<&str> = scene.fields.iter().map(|f| f.name.as_str()).collect();
+            bail!(
+                "{origin}: a [[volume]] uses field {name:?}; the scene's [[field]]s are {}",
+                super::bake::list_in_words(&have)
+            );
+        }
+    }
+    for sweep in &scene.sweeps {
+        let members = sweep.members();
+        let (first, last) = (sweep.values[0], sweep.values[sweep.values.len() - 1]);
+        let origin = match sweep_line(text, &sweep.name) {
+            Some(line) => format!("{origin}: line {line}"),
+            None => origin.to_string(),
+        };
+        if !members.iter().any(|m| used.contains(m)) {
+            bail!(
+                "{origin}: [[field]] {:?} sweeps {} from {first} to {last} and no [[volume]] \
+                 uses it or one of its members: `render` bakes only what the scene shows; \
+                 bake the sweep with `photometeor bake`",
+                sweep.name,
+                sweep.key
+            );
+        }
+    }
+    Ok(())
+}
+
 /// Reads the scene, checks the model and its settings (`overrides`: flag, key, value) against
 /// it, bakes the fields its volumes use, loads and checks them. `adjust` overrides the scene's
 /// shared render settings; everything is checked before the bake.
@@ -277,57 +326,7 @@ pub fn prepare(
                 .join(", ")
         );
     }
-    // A field no [[field]] makes is named first, before what the sweeps lack: a member past a
-    // sweep's end (`cloud@07` of four) is such a field.
-    for name in &used {
-        if !scene.fields.iter().any(|f| &f.name == name) {
-            let sweep = name
-                .split_once('@')
-                .and_then(|(base, _)| scene.sweeps.iter().find(|s| s.name == base));
-            if let Some(sweep) = sweep {
-                let members = sweep.members();
-                bail!(
-                    "{origin}: a [[volume]] uses field {name:?}, which the sweep {:?} does not \
-                     have: its members are {} … {} ({} values of {})",
-                    sweep.name,
-                    members[0],
-                    members[members.len() - 1],
-                    members.len(),
-                    sweep.key
-                );
-            }
-            let have: Vec<&str> = scene.fields.iter().map(|f| f.name.as_str()).collect();
-            bail!(
-                "{origin}: a [[volume]] uses field {name:?}; the scene's [[field]]s are {have:?}"
-            );
-        }
-    }
-    for sweep in &scene.sweeps {
-        let members = sweep.members();
-        let (first, last) = (sweep.values[0], sweep.values[sweep.values.len() - 1]);
-        let origin = match sweep_line(&text, &sweep.name) {
-            Some(line) => format!("{origin}: line {line}"),
-            None => origin.clone(),
-        };
-        if !members.iter().any(|m| used.contains(m)) {
-            bail!(
-                "{origin}: [[field]] {:?} sweeps {} from {first} to {last} and no [[volume]] \
-                 uses it or one of its members: `render` bakes only what the scene shows; \
-                 bake the sweep with `photometeor bake`",
-                sweep.name,
-                sweep.key
-            );
-        }
-    }
-    for name in &used {
-        if !scene.fields.iter().any(|f| &f.name == name) {
-            let have: Vec<&str> = scene.fields.iter().map(|f| f.name.as_str()).collect();
-            bail!(
-                "{origin}: a [[volume]] uses field {name:?}; the scene's [[field]]s are {}",
-                super::bake::list_in_words(&have)
-            );
-        }
-    }
+    check_used_fields(&scene, &used, &text, &origin)?;
     // Model only what the scene requires.
     scene.fields.retain(|f| used.contains(&f.name));
     // A sweep of which the volumes use only some members is baked as those fields alone.

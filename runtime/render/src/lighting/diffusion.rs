@@ -571,6 +571,14 @@ impl Operator {
         let unknowns = self.diag.iter().filter(|&&d| d > 0.0).count();
         let n = self.diag.len();
         let b_norm = dot(b, b).sqrt();
+        // A source that is not a number would read as none below (NaN > 0 is false).
+        if !b_norm.is_finite() {
+            return Err(NotConverged {
+                residual: b_norm,
+                iterations: 0,
+                tolerance,
+            });
+        }
         let Some(mg) = self.mg.as_ref().filter(|_| b_norm > 0.0) else {
             return Ok(Solution::zero(n, unknowns, start));
         };

@@ -520,6 +520,14 @@ impl<'a> Uploaded<'a> {
             .first()
             .map_or(0, |s| s.diag.iter().filter(|&&d| d > 0.0).count());
         let b_norm = b.iter().map(|v| v * v).sum::<f64>().sqrt();
+        if !b_norm.is_finite() {
+            return Err(NotConverged {
+                residual: b_norm,
+                iterations: 0,
+                tolerance,
+            }
+            .into());
+        }
         let Some(a) = self.op.levels().first().filter(|_| b_norm > 0.0) else {
             return Ok(Solution::zero(b.len(), unknowns, start));
         };
