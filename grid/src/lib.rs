@@ -35,6 +35,23 @@ pub mod quadrature;
 
 use thiserror::Error;
 
+/// A number as an error message shows it: plainly between 1e-4 and 1e7 (and 0, ±inf, NaN),
+/// else in exponent form, so that 1e-300 reads as `1e-300` and not as 300 digits. Shared by
+/// every crate's range errors (the solver's, the bake's, the renderers').
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Shown(pub f64);
+
+impl std::fmt::Display for Shown {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let x = self.0;
+        if !x.is_finite() || x == 0.0 || (1e-4..1e7).contains(&x.abs()) {
+            write!(f, "{x}")
+        } else {
+            write!(f, "{x:e}")
+        }
+    }
+}
+
 /// A step that is not a valid grid step.
 #[derive(Debug, Error, Clone, PartialEq)]
 pub enum GridError {

@@ -2,21 +2,7 @@
 
 use thiserror::Error;
 
-/// A number as an error message shows it: plainly between 1e-4 and 1e7 (and 0, ±inf, NaN),
-/// else in exponent form, so that 1e-300 reads as `1e-300` and not as 300 digits.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Shown(pub f64);
-
-impl std::fmt::Display for Shown {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        let x = self.0;
-        if !x.is_finite() || x == 0.0 || (1e-4..1e7).contains(&x.abs()) {
-            write!(f, "{x}")
-        } else {
-            write!(f, "{x:e}")
-        }
-    }
-}
+pub use ::grid::Shown;
 
 /// Everything the single-particle layer can refuse.
 #[derive(Debug, Error, Clone, PartialEq)]
