@@ -225,9 +225,9 @@ pub trait Model {
     /// What the model needs of the frame and refuses in it, before anything is baked: the
     /// frame's grid may be a placeholder over the volumes' bounds without particles.
     fn check_frame(settings: &Self::Settings, frame: &Frame) -> Result<(), FrameError>;
-    /// The memory a frame of `pixels` pixels over a grid of `voxels` voxels takes beyond the
+    /// The memory a frame of `pixels` pixels over a grid of `dims` voxels takes beyond the
     /// grid itself, by part (the CPU reference's, which exceeds the GPU renderer's host side).
-    fn memory(settings: &Self::Settings, pixels: u64, voxels: u64) -> Vec<Need>;
+    fn memory(settings: &Self::Settings, pixels: u64, dims: [usize; 3]) -> Vec<Need>;
     /// The GPU renderer, or `None` when the model runs on the CPU only ([`Model::GPU`]).
     fn renderer(gpu: &Gpu, tables: &GpuTables) -> Option<Self::Renderer>;
     /// The CPU reference.
@@ -244,4 +244,9 @@ pub trait Model {
     ) -> Result<Vec<Pass>, RenderError> {
         Ok(Vec::new())
     }
+}
+
+/// The voxels of a grid of `dims`.
+pub fn voxels(dims: [usize; 3]) -> u64 {
+    dims.iter().map(|&d| d as u64).product()
 }

@@ -149,10 +149,11 @@ macro_rules! models {
                 }
             }
 
-            /// The memory a frame of `pixels` pixels over `voxels` voxels takes beyond the grid.
-            pub fn memory(&self, pixels: u64, voxels: u64) -> Vec<Need> {
+            /// The memory a frame of `pixels` pixels over a grid of `dims` voxels takes beyond
+            /// the grid.
+            pub fn memory(&self, pixels: u64, dims: [usize; 3]) -> Vec<Need> {
                 match self {
-                    $(Self::$variant(s) => <$model as Model>::memory(s, pixels, voxels),)*
+                    $(Self::$variant(s) => <$model as Model>::memory(s, pixels, dims),)*
                 }
             }
 

@@ -981,3 +981,29 @@ fn a_bad_setting_names_its_table_once() {
     );
     assert_eq!(e.matches("[render.coupled]").count(), 1, "{e}");
 }
+
+/// The memory estimate counts the transport on the grid it runs on: the automatic coarsening
+/// (blocks of 4 at 256 along the longest side) or the set one, not every voxel of the grid.
+#[test]
+fn the_memory_estimate_counts_the_transport_on_its_coarsened_grid() {
+    let dims = [256, 140, 256];
+    let transport = |coarsening: i64| {
+        let mut table = toml::Table::new();
+        table.insert(
+            "transport_coarsening".into(),
+            toml::Value::Integer(coarsening),
+        );
+        let model = render::ModelSettings::parse("coupled", &table).unwrap();
+        model
+            .memory(1, dims)
+            .into_iter()
+            .find(|n| n.what.contains("discrete-ordinates transport"))
+            .expect("the transport's part")
+            .bytes
+    };
+    let per_voxel = render::coupled::TRANSPORT_MEMORY_PER_VOXEL;
+    assert_eq!(transport(1), 256 * 140 * 256 * per_voxel);
+    assert_eq!(transport(2), 128 * 70 * 128 * per_voxel);
+    assert_eq!(transport(0), 64 * 35 * 64 * per_voxel);
+    assert_eq!(transport(4), transport(0));
+}

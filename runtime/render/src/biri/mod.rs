@@ -105,7 +105,7 @@ impl Model for Biri {
         view.check_view()
     }
 
-    fn memory(_: &Settings, pixels: u64, _voxels: u64) -> Vec<Need> {
+    fn memory(_: &Settings, pixels: u64, _dims: [usize; 3]) -> Vec<Need> {
         // Per pixel: the surface hit (32 B), the medium's light and crossings (40), the image:
         // measured 89 B.
         vec![image_need("the per-pixel stages and image", pixels, 96)]

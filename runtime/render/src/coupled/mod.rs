@@ -126,8 +126,8 @@ pub struct Coupled;
 /// and its flux 96, the skylight 96).
 pub const MEMORY_PER_VOXEL: u64 = 520;
 
-/// Bytes the discrete-ordinates transport adds per voxel at its peak, uncoarsened (an upper
-/// bound with `transport_coarsening`): two sets of 75 moments (1200), the scaled medium and
+/// Bytes the discrete-ordinates transport adds per transport voxel (the grid's, or its blocks
+/// with `transport_coarsening`) at its peak: two sets of 75 moments (1200), the scaled medium and
 /// its sources (288), the acceleration's operators and solver (≈ 240), the sweeps' layers
 /// (a few layers of the grid, ≈ 72 at 64 along an axis).
 pub const TRANSPORT_MEMORY_PER_VOXEL: u64 = 1800;
@@ -331,7 +331,11 @@ impl Model for Coupled {
         frame.check_view().and_then(|()| s.check())
     }
 
-    fn memory(s: &Settings, pixels: u64, voxels: u64) -> Vec<Need> {
+    fn memory(s: &Settings, pixels: u64, dims: [usize; 3]) -> Vec<Need> {
+        let voxels = crate::model::voxels(dims);
+        // The transport runs on the grid coarsened by `transport_coarsening` (its blocks).
+        let c = s.coarsening(dims);
+        let transport = crate::model::voxels(dims.map(|d| d.div_ceil(c)));
         let mut needs = vec![
             Need {
                 what: "the lighting (optics, buffer, sky, diffusion solve and flux)",
@@ -344,8 +348,9 @@ impl Model for Coupled {
             needs.push(Need {
                 what: "the discrete-ordinates transport (two sets of radiance moments, the \
                        scaled medium, one direction's sweep)",
-                bytes: voxels * TRANSPORT_MEMORY_PER_VOXEL,
-                setting: "[render] grid_resolution or [render.coupled] diffuse = \"diffusion\""
+                bytes: transport * TRANSPORT_MEMORY_PER_VOXEL,
+                setting: "[render] grid_resolution, or raise [render.coupled] \
+                          transport_coarsening (1, 2, 4), or diffuse = \"diffusion\""
                     .into(),
             });
         }

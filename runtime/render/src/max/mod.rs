@@ -114,7 +114,8 @@ impl Model for Max {
         frame.check_view().and_then(|()| s.check())
     }
 
-    fn memory(_: &Settings, pixels: u64, voxels: u64) -> Vec<Need> {
+    fn memory(_: &Settings, pixels: u64, dims: [usize; 3]) -> Vec<Need> {
+        let voxels = crate::model::voxels(dims);
         vec![
             Need {
                 what: "the lighting (optics, reduced light, sky, diffusion solve)",

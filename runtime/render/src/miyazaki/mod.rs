@@ -91,7 +91,7 @@ impl Model for Miyazaki {
         setup(frame, s).map(|_| ())
     }
 
-    fn memory(s: &Settings, pixels: u64, _voxels: u64) -> Vec<Need> {
+    fn memory(s: &Settings, pixels: u64, _dims: [usize; 3]) -> Vec<Need> {
         // Per pixel: its ray (24 B), the scattering texture (128), S, α*, T (72), the composed
         // pixel and the image (32): measured 259 B; per shadow texel, g_sun per channel (24).
         let res = s.light_resolution as u64;

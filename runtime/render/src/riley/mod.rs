@@ -109,7 +109,7 @@ impl Model for Riley {
         Setup::new(frame, s).map(|_| ())
     }
 
-    fn memory(s: &Settings, pixels: u64, _voxels: u64) -> Vec<Need> {
+    fn memory(s: &Settings, pixels: u64, _dims: [usize; 3]) -> Vec<Need> {
         // Per pixel: its ray (24 B), (L, T) per channel (48), the composed pixel and the
         // image (32): measured 107 B (RSS at 1024² less 256², CPU reference); per light texel
         // (I, n) (32).

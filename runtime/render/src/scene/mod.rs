@@ -383,14 +383,12 @@ impl RenderScene {
     /// The memory a frame of `model` takes, by part: the density grid, the grid files the
     /// scene read, and the model's own buffers ([`crate::model::Model::memory`]).
     pub fn memory(&self, model: &ModelSettings) -> Vec<Need> {
-        let voxels: u64 = if self.volumes.is_empty() {
-            1
+        let dims = if self.volumes.is_empty() {
+            [1, 1, 1]
         } else {
             grid_dims(&self.volumes, self.grid_resolution)
-                .iter()
-                .map(|&d| d as u64)
-                .product()
         };
+        let voxels = crate::model::voxels(dims);
         let files: u64 = self
             .volumes
             .iter()
@@ -411,7 +409,7 @@ impl RenderScene {
                 setting: "the [[volume]] grid files' dims".into(),
             });
         }
-        needs.extend(model.memory(self.width as u64 * self.height as u64, voxels));
+        needs.extend(model.memory(self.width as u64 * self.height as u64, dims));
         needs
     }
 

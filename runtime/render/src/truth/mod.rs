@@ -203,7 +203,7 @@ impl Model for Truth {
         crate::objects::check_lights(&frame.lights, &frame.occluders)
     }
 
-    fn memory(_: &Settings, pixels: u64, _voxels: u64) -> Vec<Need> {
+    fn memory(_: &Settings, pixels: u64, _dims: [usize; 3]) -> Vec<Need> {
         // Per pixel: its ray (24 B), Σx and Σx² per channel (48), T_vol (8), the mean and
         // standard error (24) and the image (16): measured 110 B.
         vec![image_need("the sums and image", pixels, 120)]
