@@ -54,7 +54,8 @@ height_m = 300
     .replace("#EXTRA", extra)
 }
 
-/// `render scene.toml --tables tables --out out.exr <args>` in `dir`.
+/// `render scene.toml --tables tables --out out.exr <args>` in `dir`, with `--model riley`
+/// where `args` name no model (these bounds are the scene's and the models', not auto's).
 fn render(dir: &Path, args: &[&str]) -> Output {
     let mut all = vec![
         "render",
@@ -64,6 +65,9 @@ fn render(dir: &Path, args: &[&str]) -> Output {
         "--out",
         "out.exr",
     ];
+    if !args.contains(&"--model") {
+        all.extend(["--model", "riley"]);
+    }
     all.extend_from_slice(args);
     photometeor(&all, dir)
 }
@@ -338,6 +342,8 @@ fn render_outputs_never_replace_a_device_a_directory_or_the_bake() {
         let mut all = vec![
             "render",
             "scene.toml",
+            "--model",
+            "riley",
             "--cpu",
             "--tables",
             "tables",
@@ -428,6 +434,9 @@ fn render_outputs_never_replace_a_file_the_scene_reads() {
         let _ = fs::remove_dir_all(dir.join("tables"));
         fs::write(dir.join("scene.toml"), &text).unwrap();
         let mut all = vec!["render", "scene.toml", "--tables", "tables", "--quiet"];
+        if !args.contains(&"--model") {
+            all.extend(["--model", "riley"]);
+        }
         all.extend(&args);
         let o = photometeor(&all, &dir);
         let e = String::from_utf8_lossy(&o.stderr);
@@ -458,6 +467,8 @@ fn a_render_that_finds_its_tables_being_baked_waits_and_uses_them() {
             .args([
                 "render",
                 "scene.toml",
+                "--model",
+                "riley",
                 "--tables",
                 "tables",
                 "--out",

@@ -32,6 +32,8 @@ fn rainbow_radius_in_the_render_matches_the_tables_primary_peak_red_outside() {
     let args = [
         "render",
         scene.to_str().unwrap(),
+        "--model",
+        "riley",
         "--quality",
         "draft",
         "--tables",
@@ -154,6 +156,8 @@ fn bad_render_scenes_name_the_value_and_its_range_and_write_nothing() {
     let args = [
         "render",
         "bad.toml",
+        "--model",
+        "riley",
         "--quality",
         "draft",
         "--tables",
@@ -270,6 +274,8 @@ fn a_size_profile_at_one_members_value_renders_as_that_member() {
         let args = [
             "render",
             &toml,
+            "--model",
+            "riley",
             "--quality",
             "draft",
             "--tables",
@@ -331,6 +337,8 @@ fn render_without_tables_bakes_under_the_cache_directory_with_a_safe_name() {
         .args([
             "render",
             "scene.toml",
+            "--model",
+            "riley",
             "--quality",
             "draft",
             "--out",
@@ -480,7 +488,8 @@ fn miyazaki_keys_out_of_range_are_refused_before_any_bake() {
     std::fs::write(cwd.join("bad.toml"), &base).unwrap();
     let out = photometeor(
         &[
-            "render", "bad.toml", "--cpu", "--tables", "tables", "--out", "bad.exr",
+            "render", "bad.toml", "--model", "riley", "--cpu", "--tables", "tables", "--out",
+            "bad.exr",
         ],
         &cwd,
     );
@@ -653,4 +662,90 @@ fn settings_of_another_model_are_refused_before_any_bake() {
         args.extend_from_slice(extra);
         assert_refused_before_any_work(&args, &cwd, named);
     }
+}
+
+/// `--model auto` (the default): riley for a thin cloud, coupled for a dense one (the sweep's
+/// measured errors at their optical depths), each said with the depth; lamps in a medium go
+/// to the one model that draws them; `--set` with auto is refused before any bake.
+#[test]
+fn auto_chooses_by_the_scenes_optical_depth_and_says_why() {
+    let cwd = workdir("render-auto");
+    let scene = |density: &str| {
+        format!(
+            "[scene]\nname = \"auto\"\nspectral = \"rgb3\"\nn_max = 4\nquality = \"draft\"\n\n\
+             [[field]]\nname = \"cloud\"\nkind = \"cloud\"\n\
+             distribution = {{ kind = \"gamma\", r_eff_um = 8, v_eff = 0.1 }}\n\n\
+             [render]\nwidth = 8\nheight = 6\ngrid_resolution = 12\n\n\
+             [camera]\nposition_m = [0, 500, -3000]\nlook_at_m = [0, 500, 0]\n\n\
+             [sun]\nelevation_deg = 30\nazimuth_deg = 40\n\n\
+             [[volume]]\nfield = \"cloud\"\nshape = \"cumulus\"\n\
+             number_density_per_m3 = {density}\ncenter_m = [0, 500, 0]\nradius_m = 300\n\
+             height_m = 300\n"
+        )
+    };
+    let run = |text: &str, extra: &[&str]| {
+        std::fs::write(cwd.join("auto.toml"), text).unwrap();
+        let mut args = vec![
+            "render",
+            "auto.toml",
+            "--cpu",
+            "--tables",
+            "tables",
+            "--out",
+            "auto.exr",
+        ];
+        args.extend_from_slice(extra);
+        let out = photometeor(&args, &cwd);
+        (
+            out.status.code(),
+            String::from_utf8_lossy(&out.stderr).to_string(),
+        )
+    };
+    for (density, chosen) in [("1e4", "riley"), ("1e8", "coupled")] {
+        let (code, e) = run(&scene(density), &[]);
+        assert_eq!(code, Some(0), "{e}");
+        let line = e
+            .lines()
+            .find(|l| l.starts_with("--model auto: "))
+            .unwrap_or_else(|| panic!("no choice said:\n{e}"));
+        assert!(
+            line.starts_with(&format!("--model auto: {chosen} — optical depth ")),
+            "density {density}: {line}"
+        );
+        assert!(line.contains("docs/coupled/sweep.md"), "{line}");
+    }
+    // Lamps in a medium: only biri draws them.
+    let beams = scene_path("beams.toml");
+    let out = photometeor(
+        &[
+            "render",
+            beams.to_str().unwrap(),
+            "--cpu",
+            "--tables",
+            "beams-tables",
+            "--out",
+            "beams.exr",
+            "--width",
+            "8",
+            "--height",
+            "6",
+            "--quality",
+            "draft",
+        ],
+        &cwd,
+    );
+    let e = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{e}");
+    assert!(
+        e.contains("--model auto: biri — the only kind of model"),
+        "{e}"
+    );
+    std::fs::remove_dir_all(cwd.join("tables")).unwrap();
+    let (code, e) = run(&scene("1e8"), &["--set", "slices=8"]);
+    assert_eq!(code, Some(2), "{e}");
+    assert!(
+        e.contains("--set slices=8: --model auto chooses its model after the bake"),
+        "{e}"
+    );
+    assert!(!cwd.join("tables").exists(), "baked before refusing");
 }

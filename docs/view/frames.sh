@@ -5,8 +5,8 @@
 # and coupled, lights the grid for the sun; the frames after it are what a camera move costs
 # (max and coupled keep their per-sun lighting while the sun, grid and settings stay: the
 # table gives their median). biri draws [[medium]] tables only: it runs on data/scenes/beams.toml.
-# Writes docs/view/frames.json and frames.md; the window of the first model
-# is docs/view/window.png (the picture of docs/viewer.md). Usage, from the repository root:
+# Writes docs/view/frames.json and frames.md; the window as it opens (the model --model auto
+# chooses) is docs/view/window.png (the picture of docs/viewer.md). Usage, from the repository root:
 #   docs/view/frames.sh [SCENE] [WIDTH] [HEIGHT] [FRAMES]
 # Builds `photometeor` with the viewer (cargo build --release --features view).
 set -euo pipefail
@@ -29,7 +29,10 @@ for model in riley miyazaki max coupled biri; do
         --height "$height" --frames "$frames" --screenshot "$out/$model.png" --quiet \
         || echo "{\"model\": \"$model\", \"failed\": true}" > "$out/$model.json"
 done
-cp "$out/riley.png" docs/view/window.png
+# The picture: the window as it opens on the scene, on the model `--model auto` chooses.
+"${run[@]}" target/release/photometeor view "$scene" --width "$width" --height "$height" \
+    --screenshot "$out/auto.png" --quiet
+cp "$out/auto.png" docs/view/window.png
 python3 - "$out" "$scene" "$width" "$height" "$frames" <<'PY'
 import json, statistics, sys, pathlib
 out, scene, w, h, frames = sys.argv[1:]

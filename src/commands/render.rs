@@ -35,8 +35,11 @@ pub struct RenderArgs {
     /// Image height in pixels, 1–8192 (overrides [render] height).
     #[arg(long)]
     height: Option<usize>,
-    /// The render model (each reads its settings from the scene's [render.<model>] table).
-    #[arg(long, default_value = "riley", value_parser = model_parser())]
+    /// The render model (each reads its settings from the scene's [render.<model>] table);
+    /// `auto` chooses, after the bake, the fastest model whose error against the truth,
+    /// measured on the optical-depth sweep up to the scene's optical depth, is within 10 %
+    /// (docs/coupled/sweep.md), and says which and why.
+    #[arg(long, default_value = AUTO, value_parser = model_parser())]
     model: String,
     /// A setting of the model, `KEY=VALUE` in TOML (e.g. `k_multi=0.3`, `phase="tables"`),
     /// over the scene's [render.<model>]; repeatable. A key the model does not have is refused.
@@ -107,9 +110,14 @@ pub struct RenderArgs {
 /// `--model`'s values, each with its model's one-line description for `--help`.
 pub fn model_parser() -> clap::builder::PossibleValuesParser {
     clap::builder::PossibleValuesParser::new(
-        render::registry::model_descriptions()
-            .into_iter()
-            .map(|(name, about)| clap::builder::PossibleValue::new(name).help(about)),
+        std::iter::once(clap::builder::PossibleValue::new(AUTO).help(
+            "the model the scene needs: the fastest within 10 % of the truth at its optical depth",
+        ))
+        .chain(
+            render::registry::model_descriptions()
+                .into_iter()
+                .map(|(name, about)| clap::builder::PossibleValue::new(name).help(about)),
+        ),
     )
 }
 
@@ -188,6 +196,11 @@ pub struct Prepared {
     /// preset): what the viewer re-bakes when a field's microphysics changes.
     #[cfg_attr(not(feature = "view"), allow(dead_code))]
     pub plan: BakePlan,
+    /// The frame, where it was built to choose the model (`--model auto`).
+    pub frame: Option<Frame>,
+    /// What `--model auto` chose and why.
+    #[cfg_attr(not(feature = "view"), allow(dead_code))]
+    pub choice: Option<render::auto::Choice>,
 }
 
 /// Refuses a scene whose volumes use a field no [[field]] makes (naming a member past a sweep's
@@ -268,41 +281,20 @@ pub fn prepare(
     let mut scene = Scene::parse(&text, &origin)?;
     let mut render = RenderScene::parse(&text, &origin, &base)?;
     adjust(&mut render);
-    for (flag, key, _) in overrides {
-        if !RenderScene::model_has(model, key) {
-            let keys = render::registry::model_keys()
-                .into_iter()
-                .find(|(m, _)| *m == model)
-                .map(|(_, k)| k.join(", "))
-                .unwrap_or_default();
-            bail!("{flag}: --model {model} has no setting {key} (its settings: {keys})");
-        }
-    }
-    let pairs: Vec<(String, toml::Value)> = overrides
-        .iter()
-        .map(|(_, k, v)| (k.clone(), v.clone()))
-        .collect();
-    let settings = render
-        .model(model, &pairs)
-        .map_err(|e| anyhow!("{origin}: {e}"))?;
-    render
-        .check(&settings)
-        .map_err(|e| at_line(&origin, &text, &e.to_string()))?;
-    // The truth's standard error is estimated from the spread of its samples: one sample
-    // per pixel has none (it would be written as infinite), so at least 2 are asked for.
-    if let ModelSettings::Truth(t) = &settings
-        && t.spp < 2
-    {
-        bail!(
-            "{origin}: --model truth with spp = {}: the standard error each pixel carries needs \
-             at least 2 samples per pixel; set spp to 2 or more",
-            t.spp
-        );
-    }
     let limit = memory_limit(max_memory_gib)?;
-    render
-        .check_memory(&settings, limit)
-        .map_err(|e| anyhow!("{origin}: {e}"))?;
+    let candidates = if model == AUTO {
+        if let Some((flag, _, _)) = overrides.first() {
+            bail!(
+                "{flag}: --model auto chooses its model after the bake; name the model                  (--model {}) to set its keys",
+                render::registry::interactive_models().join(" | ")
+            );
+        }
+        auto_candidates(&render, limit, &origin)?
+    } else {
+        vec![checked_model(
+            model, overrides, &render, limit, &origin, &text,
+        )?]
+    };
     let entries: Vec<format::SweepEntry> = scene.sweeps.iter().map(|s| s.entry()).collect();
     render
         .choose_members(&entries)
@@ -357,12 +349,108 @@ pub fn prepare(
     bake_waiting(&plan, &Bars::new(quiet), quiet)?;
     let names: Vec<&str> = used.iter().map(String::as_str).collect();
     let tables = Tables::open_fields(&dir, Some(&names))?;
+    let (model, frame, choice) = if model == AUTO {
+        let frame = render.frame(&tables)?;
+        let able: Vec<&'static str> = candidates.iter().map(ModelSettings::name).collect();
+        let tau = render::auto::optical_depth(&tables, &frame.grid);
+        let choice = render::auto::choose(&able, tau, &render::auto::measured())
+            .expect("auto_candidates is never empty");
+        if !quiet {
+            eprintln!("--model auto: {} — {}", choice.model, choice.why);
+        }
+        let chosen = candidates
+            .into_iter()
+            .find(|m| m.name() == choice.model)
+            .expect("chosen among the candidates");
+        (chosen, Some(frame), Some(choice))
+    } else {
+        (
+            candidates.into_iter().next().expect("one model"),
+            None,
+            None,
+        )
+    };
     Ok(Prepared {
         scene: render,
-        model: settings,
+        model,
         tables,
         plan,
+        frame,
+        choice,
     })
+}
+
+/// `--model`'s value that lets the scene choose ([`render::auto`]).
+pub const AUTO: &str = "auto";
+
+/// Model `model` with the scene's settings and `overrides` (flag, key, value), checked against
+/// the scene and the memory limit before anything is baked.
+fn checked_model(
+    model: &str,
+    overrides: &[(String, String, toml::Value)],
+    render: &RenderScene,
+    limit: u64,
+    origin: &str,
+    text: &str,
+) -> Result<ModelSettings> {
+    for (flag, key, _) in overrides {
+        if !RenderScene::model_has(model, key) {
+            let keys = render::registry::model_keys()
+                .into_iter()
+                .find(|(m, _)| *m == model)
+                .map(|(_, k)| k.join(", "))
+                .unwrap_or_default();
+            bail!("{flag}: --model {model} has no setting {key} (its settings: {keys})");
+        }
+    }
+    let pairs: Vec<(String, toml::Value)> = overrides
+        .iter()
+        .map(|(_, k, v)| (k.clone(), v.clone()))
+        .collect();
+    let settings = render
+        .model(model, &pairs)
+        .map_err(|e| anyhow!("{origin}: {e}"))?;
+    render
+        .check(&settings)
+        .map_err(|e| at_line(origin, text, &e.to_string()))?;
+    // The truth's standard error is estimated from the spread of its samples: one sample
+    // per pixel has none (it would be written as infinite), so at least 2 are asked for.
+    if let ModelSettings::Truth(t) = &settings
+        && t.spp < 2
+    {
+        bail!(
+            "{origin}: --model truth with spp = {}: the standard error each pixel carries needs \
+             at least 2 samples per pixel; set spp to 2 or more",
+            t.spp
+        );
+    }
+    render
+        .check_memory(&settings, limit)
+        .map_err(|e| anyhow!("{origin}: {e}"))?;
+    Ok(settings)
+}
+
+/// The interactive models that can render the scene within the memory limit (`--model
+/// auto` chooses among them after the bake); none is an error naming each one's reason.
+fn auto_candidates(render: &RenderScene, limit: u64, origin: &str) -> Result<Vec<ModelSettings>> {
+    let mut able = Vec::new();
+    let mut reasons = Vec::new();
+    for name in render::registry::interactive_models() {
+        let checked = render
+            .check_for(name)
+            .and_then(|m| render.check_memory(&m, limit).map(|()| m));
+        match checked {
+            Ok(m) => able.push(m),
+            Err(e) => reasons.push(format!("{name}: {e}")),
+        }
+    }
+    if able.is_empty() {
+        bail!(
+            "{origin}: --model auto: no model renders this scene —\n  {}",
+            reasons.join("\n  ")
+        );
+    }
+    Ok(able)
 }
 
 /// The files a render scene reads beside itself: each grid volume's `file` and each mesh
@@ -489,7 +577,10 @@ pub fn run(a: RenderArgs) -> Result<()> {
         },
     )?;
     let started = Instant::now();
-    let frame: Frame = p.scene.frame(&p.tables)?;
+    let frame: Frame = match p.frame {
+        Some(f) => f,
+        None => p.scene.frame(&p.tables)?,
+    };
     if !a.quiet && !p.scene.volumes.is_empty() {
         eprintln!(
             "grid {} × {} × {} built in {:.2} s",

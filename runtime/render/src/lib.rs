@@ -33,6 +33,8 @@
 //!   the same scene, the reference every fast model is measured against.
 //!
 //! # The shared parts
+//! - [`auto`]: `--model auto`, the model a scene needs, from its optical depth and the
+//!   models' measured errors on the optical-depth sweep.
 //! - [`scene`]: the scene file's render tables → [`RenderScene`] (shared keys, objects, one
 //!   checked settings table per model) → [`Frame`] ([`frame`]: the view, the density grid, the
 //!   objects) for a set of tables; [`checks`]: the error every check returns.
@@ -55,6 +57,7 @@
 
 #![warn(missing_docs)]
 
+pub mod auto;
 pub mod biri;
 pub mod camera;
 pub mod checks;

@@ -35,6 +35,8 @@ pub struct Options {
     pub steps: Vec<Step>,
     /// The render device, in words.
     pub adapter: String,
+    /// What `--model auto` chose and why (shown under the model's menu).
+    pub chosen: Option<String>,
     /// `--width`, `--height` (kept over an edited scene file's).
     pub size: (Option<usize>, Option<usize>),
 }
@@ -159,6 +161,8 @@ struct App {
     render_error: Option<String>,
     frame_times: Vec<(f64, f64)>,
     adapter: String,
+    /// What `--model auto` chose and why.
+    chosen: Option<String>,
     image_rect: egui::Rect,
     zoom: usize,
     /// Physical pixels per point, as of the last pass.
@@ -241,6 +245,7 @@ impl App {
             render_error: None,
             frame_times: Vec::new(),
             adapter: options.adapter,
+            chosen: options.chosen,
             image_rect: egui::Rect::NOTHING,
             zoom: 1,
             pixels_per_point: 1.0,

@@ -27,7 +27,7 @@ use std::path::PathBuf;
 use anyhow::{Context, Result, bail};
 use clap::Args as ClapArgs;
 
-use crate::commands::render::{gpu, parse_setting, prepare};
+use crate::commands::render::{AUTO, gpu, parse_setting, prepare};
 
 /// The render models the window can switch between: those with a GPU renderer but the
 /// reference (the registry's list).
@@ -41,8 +41,12 @@ pub struct ViewArgs {
     /// and shown as an error, the last good scene kept, when it is not). Default: the embedded
     /// rainbow scene.
     scene: Option<PathBuf>,
-    /// The model shown first (switchable in the window): one with a GPU renderer.
-    #[arg(long, default_value = "riley", value_parser = clap::builder::PossibleValuesParser::new(models()))]
+    /// The model shown first (switchable in the window): one with a GPU renderer, or `auto`
+    /// (as for `render`: the fastest within 10 % of the truth at the scene's optical depth,
+    /// docs/coupled/sweep.md).
+    #[arg(long, default_value = AUTO, value_parser = clap::builder::PossibleValuesParser::new(
+        std::iter::once(AUTO).chain(models())
+    ))]
     model: String,
     /// A setting of the first model, `KEY=VALUE` in TOML, over the scene's [render.<model>];
     /// repeatable.
@@ -168,6 +172,7 @@ pub fn run(a: ViewArgs) -> Result<()> {
         frames: a.frames,
         steps,
         adapter,
+        chosen: p.choice.map(|c| format!("{}, {}", c.model, c.why)),
         size: (a.width, a.height),
     };
     app::open(options, p.scene, p.plan, worker)

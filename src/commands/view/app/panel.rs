@@ -87,6 +87,9 @@ impl App {
                     ui.selectable_value(&mut self.model, name.clone(), name);
                 }
             });
+        if let Some(why) = &self.chosen {
+            ui.small(format!("auto: {why}"));
+        }
         if self.model != before {
             self.settings_error = None;
             self.dirty = true;
