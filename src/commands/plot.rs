@@ -543,10 +543,27 @@ fn axis(v: f64, log: bool) -> f64 {
     if log { v.log10() } else { v }
 }
 
+/// The plots' one font, carried in the binary: the same pictures on every machine, whatever
+/// fonts it has (or none).
+fn register_font() -> Result<()> {
+    static REGISTERED: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    let ok = *REGISTERED.get_or_init(|| {
+        plotters::style::register_font(
+            "sans-serif",
+            FontStyle::Normal,
+            epaint_default_fonts::UBUNTU_LIGHT,
+        )
+        .is_ok()
+    });
+    ok.then_some(())
+        .ok_or_else(|| anyhow!("the plots' font (Ubuntu Light) did not load"))
+}
+
 fn draw<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, plot: &LinePlot) -> Result<()>
 where
     DB::ErrorType: 'static,
 {
+    register_font()?;
     let err = |e: DrawingAreaErrorKind<DB::ErrorType>| anyhow!("{e:?}");
     root.fill(&WHITE).map_err(err)?;
     let (lx, ly) = (plot.log_x, plot.log_y);
