@@ -69,15 +69,22 @@ fn single_spheres_match_the_reference_bin_averages() {
 /// sides are size quadratures of a resonance-filled integrand: the generator's own convergence
 /// (rms between N and N/2 radii) is 0.03–0.07 % (cloud) and 0.5 % (drizzle), and the two
 /// truncations differ (±4 ln σ_g against 10⁻³ of the mass). Measured rms 0.15–0.17 % (cloud) and
-/// 0.71–0.83 % (drizzle), max 1.2 % and 4.5 %; the bounds are about twice that.
+/// 0.71–0.83 % (drizzle), max 1.2 % and 4.5 %; the bounds are about twice that. CI runs the
+/// 550 nm cases (17 s of the 52 on 2 cores); `MIEPLOT_ALL_WAVELENGTHS=1` runs all three.
 #[test]
 fn lognormal_distributions_match_the_reference_bin_averages() {
     let data: Value = serde_json::from_str(CURVES).unwrap();
     let grid = ThetaGrid::new(0.18).unwrap();
+    let all = std::env::var("MIEPLOT_ALL_WAVELENGTHS").is_ok_and(|v| v == "1");
+    let mut ran = 0;
     for c in data["cases"].as_array().unwrap() {
         if c["kind"] != "lognormal" {
             continue;
         }
+        if !all && c["wavelength_nm"].as_f64() != Some(550.0) {
+            continue;
+        }
+        ran += 1;
         let lambda = c["wavelength_nm"].as_f64().unwrap();
         let d = SizeDistribution::Lognormal {
             median_radius_um: c["median_radius_um"].as_f64().unwrap(),
@@ -107,4 +114,6 @@ fn lognormal_distributions_match_the_reference_bin_averages() {
             b.g
         );
     }
+    // Cloud and drizzle at least, whichever wavelengths ran.
+    assert!(ran >= 2, "{ran} lognormal cases ran");
 }
