@@ -344,7 +344,7 @@ fn tradeoff_measures_each_knob_against_a_reference() {
     let scene = root.join("scene.toml");
     fs::write(
         &scene,
-        "[scene]\nname = \"t\"\nspectral = \"rgb3\"\nn_max = 4\n\n[[field]]\nname = \"cloud\"\nkind = \"cloud\"\ndistribution = { kind = \"gamma\", r_eff_um = 8, v_eff = 0.02 }\n",
+        "[scene]\nname = \"t\"\nspectral = \"rgb3\"\nn_max = 4\n\n[[field]]\nname = \"cloud\"\nkind = \"cloud\"\ndistribution = { kind = \"gamma\", r_eff_um = 4, v_eff = 0.02 }\n",
     )
     .unwrap();
     let out_dir = root.join("work");

@@ -106,6 +106,19 @@ fn stage_next_generation(lock: &BakeLock) -> Staging<'_> {
     stage
 }
 
+/// A copy of the directory tree `from` at `to`.
+fn copy_tree(from: &Path, to: &Path) {
+    fs::create_dir_all(to).unwrap();
+    for entry in fs::read_dir(from).unwrap().flatten() {
+        let target = to.join(entry.file_name());
+        if entry.file_type().unwrap().is_dir() {
+            copy_tree(&entry.path(), &target);
+        } else {
+            fs::copy(entry.path(), target).unwrap();
+        }
+    }
+}
+
 #[test]
 fn a_writer_killed_at_any_step_of_its_commit_never_shows_a_mix() {
     let work = workdir("faults-kill");
@@ -132,10 +145,13 @@ fn a_writer_killed_at_any_step_of_its_commit_never_shows_a_mix() {
             .any(|e| e.file_name().to_string_lossy().starts_with(".stage-"))
     );
 
-    // Killed after the commit point, after k of the roll-forward's renames (manifest last).
+    // Killed after the commit point, after k of the roll-forward's renames (manifest last),
+    // each from a copy of a whole bake taken before the kill above.
+    let whole = work.join("tables-whole");
+    bake_into(&scene("a", &["cloud", "rain"]), &whole).unwrap();
     for k in 0..files {
         let dir = work.join(format!("tables-{k}"));
-        bake_into(&scene("a", &["cloud", "rain"]), &dir).unwrap();
+        copy_tree(&whole, &dir);
         let staged_manifest;
         {
             let lock = BakeLock::acquire(&dir).unwrap();

@@ -65,6 +65,10 @@ fn settings(spp: usize, seed: u64) -> Settings {
     }
 }
 
+/// The GPU and CPU truths of the soft ball agree pixel by pixel within their combined noise
+/// (z rms within 0.1 of 1, ~3σ of that statistic over ~440 pixels) and in their sums (3σ). The
+/// dense cases at 512 spp for CI time (1024 before): z rms 0.956 and 1.040, sums +2.10σ and
+/// −0.12σ (at 1024: 0.957 and 1.075, −0.49σ and +0.30σ).
 #[test]
 fn the_gpu_truth_agrees_with_the_cpu_truth_within_their_noise() {
     let Some(g) = common::gpu() else { return };
@@ -75,8 +79,8 @@ fn the_gpu_truth_agrees_with_the_cpu_truth_within_their_noise() {
     for (tau, azimuth, spp) in [
         (2.0, 90.0, 1024),
         (2.0, 180.0, 1024),
-        (32.0, 90.0, 1024),
-        (32.0, 180.0, 1024),
+        (32.0, 90.0, 512),
+        (32.0, 180.0, 512),
     ] {
         let frame = ball(&tables, tau, azimuth, 20);
         let s = settings(spp, 5);
