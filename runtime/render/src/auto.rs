@@ -166,9 +166,32 @@ pub fn optical_depth(tables: &Tables, grid: &DensityGrid) -> f64 {
     grid.deepest_weighted(|rho| sigma.iter().zip(rho).map(|(s, &r)| s * f64::from(r)).sum())
 }
 
+/// The deepest optical depth a model takes with its default settings, where it has a limit.
+pub fn depth_limit(model: &str) -> Option<f64> {
+    match model {
+        "coupled" => Some(crate::coupled::MAX_OPTICAL_DEPTH),
+        "truth" => Some(crate::truth::MAX_OPTICAL_DEPTH),
+        _ => None,
+    }
+}
+
 /// Chooses among `able` (the models that render the scene, in `--help` order) for a scene of
-/// optical depth `tau` by the module's rule, from `measured` (normally [`measured`]).
+/// optical depth `tau` by the module's rule, from `measured` (normally [`measured`]); a model
+/// whose [`depth_limit`] the scene exceeds does not take part.
 pub fn choose(able: &[&'static str], tau: f64, measured: &[Measured]) -> Option<Choice> {
+    let too_deep: Vec<String> = able
+        .iter()
+        .filter_map(|&name| {
+            depth_limit(name)
+                .filter(|&limit| tau > limit)
+                .map(|limit| format!("{name} takes τ ≤ {limit}"))
+        })
+        .collect();
+    let able: Vec<&'static str> = able
+        .iter()
+        .copied()
+        .filter(|&name| depth_limit(name).is_none_or(|limit| tau <= limit))
+        .collect();
     let mut judged: Vec<(&'static str, &Measured, (f64, usize))> = able
         .iter()
         .filter_map(|&name| {
@@ -219,6 +242,9 @@ pub fn choose(able: &[&'static str], tau: f64, measured: &[Measured]) -> Option<
             faster.join(", "),
             percent(ACCEPTED_BIAS)
         );
+    }
+    if !too_deep.is_empty() {
+        why += &format!("; {}", too_deep.join(", "));
     }
     why += &format!(" ({SOURCE})");
     Some(Choice { model, tau, why })
@@ -309,6 +335,9 @@ mod tests {
         let able = ["riley", "max", "coupled"];
         assert_eq!(choose(&able, 0.5, &m).unwrap().model, "riley");
         assert_eq!(choose(&able, 8.2, &m).unwrap().model, "coupled");
-        assert_eq!(choose(&able, 500.0, &m).unwrap().model, "coupled");
+        assert_eq!(choose(&able, 200.0, &m).unwrap().model, "coupled");
+        // Beyond the depth coupled converges at, the least wrong of the others.
+        let deeper = crate::coupled::MAX_OPTICAL_DEPTH * 1.5;
+        assert_ne!(choose(&able, deeper, &m).unwrap().model, "coupled");
     }
 }

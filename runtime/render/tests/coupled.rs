@@ -1007,3 +1007,28 @@ fn the_memory_estimate_counts_the_transport_on_its_coarsened_grid() {
     assert_eq!(transport(0), 64 * 35 * 64 * per_voxel);
     assert_eq!(transport(4), transport(0));
 }
+
+/// A scene deeper than the transport converges at within its default iteration cap is refused
+/// before the lighting, naming its optical depth and the limit; the diffusion alone still
+/// lights it.
+#[test]
+fn a_scene_deeper_than_the_transport_converges_at_is_refused_before_the_lighting() {
+    let (_tmp, dir) = bake(&fields());
+    let tables = Tables::open(&dir).unwrap();
+    let limit = render::coupled::MAX_OPTICAL_DEPTH;
+    let frame = ball(&tables, 1.5 * limit, 90.0);
+    let e = match light::light(&tables, &frame, &Settings::default()) {
+        Ok(_) => panic!("lit a ball of optical depth {}", 1.5 * limit),
+        Err(e) => e.to_string(),
+    };
+    assert!(
+        e.contains("the scene's optical depth is ")
+            && e.contains(&format!("more than the {limit}")),
+        "{e}"
+    );
+    let diffusion = Settings {
+        diffuse: Diffuse::Diffusion,
+        ..Settings::default()
+    };
+    assert!(light::light(&tables, &frame, &diffusion).is_ok());
+}

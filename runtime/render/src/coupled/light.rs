@@ -155,6 +155,7 @@ pub(crate) fn check(tables: &Tables, frame: &Frame, settings: &Settings) -> Resu
             "--model coupled does not model the [haze] layer; use --model miyazaki or truth".into(),
         ));
     }
+    check_depth(tables, frame, settings)?;
     if let Some(f) = tables.fields.iter().find(|f| f.transport_factor.is_none()) {
         return Err(FrameError(format!(
             "field {:?}'s bake has no transport factor (written before it existed): bake it \
@@ -163,6 +164,27 @@ pub(crate) fn check(tables: &Tables, frame: &Frame, settings: &Settings) -> Resu
         )));
     }
     Ok(())
+}
+
+/// Refuses a scene deeper than the transport converges on within the default iteration cap
+/// ([`super::MAX_OPTICAL_DEPTH`]), naming its depth and the limit; a raised cap or the
+/// diffusion alone takes it on.
+fn check_depth(tables: &Tables, frame: &Frame, settings: &Settings) -> Result<(), FrameError> {
+    let default_cap = Settings::default().max_transport_iterations;
+    if settings.diffuse != Diffuse::Transport || settings.max_transport_iterations > default_cap {
+        return Ok(());
+    }
+    let tau = crate::auto::optical_depth(tables, &frame.grid);
+    if tau <= super::MAX_OPTICAL_DEPTH {
+        return Ok(());
+    }
+    Err(FrameError(format!(
+        "the scene's optical depth is {tau:.0} at its deepest point (green, the least of its three \
+         axis lines), more than the {} the transport converges at within \
+         max_transport_iterations = {default_cap} (docs/models/coupled.md): use --model max or \
+         riley, raise max_transport_iterations, or set diffuse = \"diffusion\"",
+        super::MAX_OPTICAL_DEPTH
+    )))
 }
 
 /// Steps 1–3 of the [module docs](super).
