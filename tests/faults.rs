@@ -200,12 +200,13 @@ fn failures_before_any_work_or_while_computing_leave_the_previous_bake_as_it_was
     bake_into(&scene("a", &["cloud", "rain"]), &dir).unwrap();
     let before = snapshot(&dir);
 
-    // A field whose sizes leave the solver's range: refused before anything is computed.
-    let tiny = scene("a", &["cloud"]).replace(
+    // A field whose sizes leave the solver's range (x up to 2e5: 20 mm drops at 515 nm):
+    // refused before anything is computed.
+    let huge = scene("a", &["cloud"]).replace(
         "{ kind = \"gamma\", r_eff_um = 8, v_eff = 0.1 }",
-        "{ kind = \"monodisperse\", radius_um = 1e-60 }",
+        "{ kind = \"monodisperse\", radius_um = 20000 }",
     );
-    let e = bake_into(&tiny, &dir).unwrap_err().to_string();
+    let e = bake_into(&huge, &dir).unwrap_err().to_string();
     assert!(
         e.contains("field \"cloud\"") && e.contains("[1e-6, 2e5]"),
         "{e}"

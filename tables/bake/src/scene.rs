@@ -31,6 +31,11 @@
 
 use std::path::{Path, PathBuf};
 
+/// The smallest radius (µm) a sphere field's distribution may name (its median, effective or
+/// only radius): 1 nm. At 1 nm water's extinction cross-section is ~10⁻²⁷ m²; at 10⁻⁶ µm it is
+/// 1.1·10⁻³⁶ m², under the manifest's floor of 10⁻³⁰ m², which refused it only after the bake.
+pub const MIN_RADIUS_UM: f64 = 1e-3;
+
 use mie::{Material, SizeDistribution};
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
@@ -946,7 +951,8 @@ impl FieldFile {
         })
     }
 
-    /// A sphere field's validated size distribution (required); liquid water must lie in
+    /// A sphere field's validated size distribution (required), its size at least
+    /// [`MIN_RADIUS_UM`]; liquid water must lie in
     /// [−12, 99] °C, where its density is known.
     fn sphere_distribution(
         &self,
@@ -965,6 +971,24 @@ impl FieldFile {
             keys.at("distribution")
                 .error(format!("field {:?}: distribution: {e}", self.name))
         })?;
+        let size = match d {
+            SizeDistribution::Lognormal {
+                median_radius_um, ..
+            } => Some(("median_radius_um", median_radius_um)),
+            SizeDistribution::Gamma { r_eff_um, .. } => Some(("r_eff_um", r_eff_um)),
+            SizeDistribution::Monodisperse { radius_um } => Some(("radius_um", radius_um)),
+            SizeDistribution::MarshallPalmer { .. } => None,
+        };
+        if let Some((key, radius)) = size.filter(|&(_, r)| r < MIN_RADIUS_UM) {
+            fail!(
+                keys.at("distribution"),
+                "field {:?}: {key} = {} is below the smallest radius a field takes, \
+                 {MIN_RADIUS_UM} µm: a smaller particle's extinction cross-section falls under \
+                 the tables' 1e-30 m² (1e-6 µm water: 1.1e-36 m² at 650 nm)",
+                self.name,
+                grid::Shown(radius)
+            );
+        }
         if material == Material::Water
             && mie::refractive::water_density_kg_m3(temperature_c).is_err()
         {
@@ -1075,6 +1099,40 @@ mod tests {
 
     fn error_of(text: &str) -> String {
         Scene::parse(text, "s.toml").unwrap_err().to_string()
+    }
+
+    /// A sphere field smaller than 1 nm is refused at parse, naming its key and value (a
+    /// monodisperse 1e-6 µm cloud was baked and then refused by the manifest's cross-section
+    /// floor); 1 nm itself is accepted.
+    #[test]
+    fn particles_below_a_nanometre_are_refused_before_the_bake() {
+        let field = |d: &str| {
+            format!("{HEAD}[[field]]\nname = \"c\"\nkind = \"cloud\"\ndistribution = {d}\n")
+        };
+        for (d, needle) in [
+            (
+                "{ kind = \"monodisperse\", radius_um = 1e-6 }",
+                "field \"c\": radius_um = 1e-6 is below the smallest radius a field takes, 0.001 µm",
+            ),
+            (
+                "{ kind = \"gamma\", r_eff_um = 0.0005, v_eff = 0.1 }",
+                "field \"c\": r_eff_um = 0.0005 is below",
+            ),
+            (
+                "{ kind = \"lognormal\", median_radius_um = 1e-4, sigma_g = 1.5 }",
+                "field \"c\": median_radius_um = 0.0001 is below",
+            ),
+        ] {
+            let e = error_of(&field(d));
+            assert!(e.contains(needle), "{d}: {e}");
+        }
+        assert!(
+            Scene::parse(
+                &field("{ kind = \"monodisperse\", radius_um = 0.001 }"),
+                "s"
+            )
+            .is_ok()
+        );
     }
 
     const HEAD: &str = "[scene]\nname = \"t\"\n";
