@@ -166,23 +166,14 @@ pub fn optical_depth(tables: &Tables, grid: &DensityGrid) -> f64 {
     grid.deepest_weighted(|rho| sigma.iter().zip(rho).map(|(s, &r)| s * f64::from(r)).sum())
 }
 
-/// The deepest optical depth a model takes with its default settings, where it has a limit.
-pub fn depth_limit(model: &str) -> Option<f64> {
-    match model {
-        "coupled" => Some(crate::coupled::MAX_OPTICAL_DEPTH),
-        "truth" => Some(crate::truth::MAX_OPTICAL_DEPTH),
-        _ => None,
-    }
-}
-
 /// Chooses among `able` (the models that render the scene, in `--help` order) for a scene of
 /// optical depth `tau` by the module's rule, from `measured` (normally [`measured`]); a model
-/// whose [`depth_limit`] the scene exceeds does not take part.
+/// whose [`crate::registry::depth_limit`] the scene exceeds does not take part.
 pub fn choose(able: &[&'static str], tau: f64, measured: &[Measured]) -> Option<Choice> {
     let too_deep: Vec<String> = able
         .iter()
         .filter_map(|&name| {
-            depth_limit(name)
+            crate::registry::depth_limit(name)
                 .filter(|&limit| tau > limit)
                 .map(|limit| format!("{name} takes τ ≤ {limit}"))
         })
@@ -190,7 +181,7 @@ pub fn choose(able: &[&'static str], tau: f64, measured: &[Measured]) -> Option<
     let able: Vec<&'static str> = able
         .iter()
         .copied()
-        .filter(|&name| depth_limit(name).is_none_or(|limit| tau <= limit))
+        .filter(|&name| crate::registry::depth_limit(name).is_none_or(|limit| tau <= limit))
         .collect();
     let mut judged: Vec<(&'static str, &Measured, (f64, usize))> = able
         .iter()
@@ -337,7 +328,7 @@ mod tests {
         assert_eq!(choose(&able, 8.2, &m).unwrap().model, "coupled");
         assert_eq!(choose(&able, 200.0, &m).unwrap().model, "coupled");
         // Beyond the depth coupled converges at, the least wrong of the others.
-        let deeper = crate::coupled::MAX_OPTICAL_DEPTH * 1.5;
+        let deeper = crate::registry::depth_limit("coupled").unwrap() * 1.5;
         assert_ne!(choose(&able, deeper, &m).unwrap().model, "coupled");
     }
 }

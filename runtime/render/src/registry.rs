@@ -238,3 +238,13 @@ impl Default for ModelSettings {
         Self::Riley(Default::default())
     }
 }
+
+/// The deepest optical depth (a scene's deepest point, as [`crate::auto`] measures it) a model
+/// takes with its default settings, where it has a limit.
+pub fn depth_limit(model: &str) -> Option<f64> {
+    match model {
+        "coupled" => Some(crate::coupled::MAX_OPTICAL_DEPTH),
+        "truth" => Some(crate::truth::MAX_OPTICAL_DEPTH),
+        _ => None,
+    }
+}
