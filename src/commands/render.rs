@@ -36,8 +36,8 @@ pub struct RenderArgs {
     #[arg(long)]
     height: Option<usize>,
     /// The render model (each reads its settings from the scene's [render.<model>] table);
-    /// `auto` chooses, after the bake, the fastest model whose error against the truth,
-    /// measured on the optical-depth sweep up to the scene's optical depth, is within 10 %
+    /// `auto` chooses, after the bake, the fastest model whose median error against the truth,
+    /// measured on the optical-depth sweep at the scene's optical depth, is within 10 %
     /// (docs/coupled/sweep.md), and says which and why.
     #[arg(long, default_value = AUTO, value_parser = model_parser())]
     model: String,
@@ -285,7 +285,8 @@ pub fn prepare(
     let candidates = if model == AUTO {
         if let Some((flag, _, _)) = overrides.first() {
             bail!(
-                "{flag}: --model auto chooses its model after the bake; name the model                  (--model {}) to set its keys",
+                "{flag}: --model auto chooses its model after the bake; name the model \
+                 (--model {}) to set its keys",
                 render::registry::interactive_models().join(" | ")
             );
         }
