@@ -54,20 +54,22 @@ pub fn forward_fraction(field: &FieldTable, n: f64) -> [f64; 3] {
 }
 
 /// Σ_i ρ_i σ_sca,i v_i / Σ_i ρ_i σ_sca,i per channel over the fields present (ρ_i > 0), with
-/// v_i = `value(field i)`; `empty` where nothing scatters.
-fn weighted(
+/// v_i = `value(i)`; `empty` where nothing scatters. The one place a per-field quantity is mixed
+/// as the phase functions are (Riley et al. 2004 Eq. 6's weights): every model's mixture goes
+/// through it.
+pub fn scattering_weighted(
     fields: &[&FieldTable],
     densities: &[f64],
     empty: f64,
-    value: impl Fn(&FieldTable) -> [f64; 3],
+    value: impl Fn(usize) -> [f64; 3],
 ) -> [f64; 3] {
     let mut num = [0.0; 3];
     let mut den = [0.0; 3];
-    for (f, &rho) in fields.iter().zip(densities) {
+    for (i, (f, &rho)) in fields.iter().zip(densities).enumerate() {
         if rho <= 0.0 {
             continue;
         }
-        let v = value(f);
+        let v = value(i);
         for c in 0..3 {
             let w = rho * f.sigma_sca_m2[c];
             num[c] += w * v[c];
@@ -75,6 +77,16 @@ fn weighted(
         }
     }
     std::array::from_fn(|c| if den[c] > 0.0 { num[c] / den[c] } else { empty })
+}
+
+/// [`scattering_weighted`] with `value` given the field itself.
+fn weighted(
+    fields: &[&FieldTable],
+    densities: &[f64],
+    empty: f64,
+    value: impl Fn(&FieldTable) -> [f64; 3],
+) -> [f64; 3] {
+    scattering_weighted(fields, densities, empty, |i| value(fields[i]))
 }
 
 /// Phase function of a mixture of fields at one place: Σ_i ρ_i σ_sca,i P_i / Σ_i ρ_i σ_sca,i

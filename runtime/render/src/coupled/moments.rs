@@ -10,25 +10,14 @@ use crate::lighting::lattice::asymmetry;
 use crate::lighting::transport;
 
 /// A per-field quantity `value(f)` of the mixture at densities `rho`, per channel, weighted by
-/// scattering as the phase functions are ([`sample::mix`]).
+/// scattering as the phase functions are ([`runtime::sample::scattering_weighted`]; 0 where
+/// nothing scatters).
 pub(super) fn mixed(
     fields: &[&FieldTable],
     rho: &[f64],
     value: impl Fn(usize) -> [f64; 3],
 ) -> [f64; 3] {
-    let (mut num, mut den) = ([0.0; 3], [0.0; 3]);
-    for (f, (field, &r)) in fields.iter().zip(rho).enumerate() {
-        if r <= 0.0 {
-            continue;
-        }
-        let v = value(f);
-        for c in 0..3 {
-            let w = r * field.sigma_sca_m2[c];
-            num[c] += w * v[c];
-            den[c] += w;
-        }
-    }
-    std::array::from_fn(|c| if den[c] > 0.0 { num[c] / den[c] } else { 0.0 })
+    runtime::sample::scattering_weighted(fields, rho, 0.0, value)
 }
 
 /// Each field's asymmetry parameter g per channel.

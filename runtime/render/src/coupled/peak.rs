@@ -150,22 +150,16 @@ impl PeakBlur {
         let v = (depth.max(0.0) / DEPTH_STEP).min((DEPTHS - 1) as f64);
         let j0 = (v.floor() as usize).min(DEPTHS - 2);
         let s = v - j0 as f64;
-        let (mut num, mut den) = ([0.0; 3], [0.0; 3]);
-        for ((field, blur), &r) in fields.iter().zip(&self.fields).zip(rho) {
-            if r <= 0.0 {
-                continue;
-            }
-            for c in 0..3 {
+        runtime::sample::scattering_weighted(fields, rho, 0.0, |f| {
+            let blur = &self.fields[f];
+            std::array::from_fn(|c| {
                 let at = |j: usize| {
                     let row = &blur.table[(j * 3 + c) * k_len..];
                     row[k0] * (1.0 - t) + row[k0 + 1] * t
                 };
-                let w = r * field.sigma_sca_m2[c];
-                num[c] += w * (at(j0) * (1.0 - s) + at(j0 + 1) * s);
-                den[c] += w;
-            }
-        }
-        std::array::from_fn(|c| if den[c] > 0.0 { num[c] / den[c] } else { 0.0 })
+                at(j0) * (1.0 - s) + at(j0 + 1) * s
+            })
+        })
     }
 
     /// Per field of `fields` whose peak is blurred (green): its name, the peak's half width
