@@ -352,10 +352,21 @@ pub fn prepare(
     let tables = Tables::open_fields(&dir, Some(&names))?;
     let (model, frame, choice) = if model == AUTO {
         let frame = render.frame(&tables)?;
-        let able: Vec<&'static str> = candidates.iter().map(ModelSettings::name).collect();
         let tau = render::auto::optical_depth(&tables, &frame.grid);
-        let choice = render::auto::choose(&able, tau, &render::auto::measured())
+        // A model that refuses this grid's depths (coupled's transport on a coarse grid) does
+        // not take part; the line says why.
+        let (able, refused): (Vec<&'static str>, Vec<&'static str>) =
+            candidates.iter().map(ModelSettings::name).partition(|&m| {
+                tau > render::registry::depth_limit(m).unwrap_or(f64::INFINITY)
+                    || render::registry::depth_refusal(m, &tables, &frame).is_none()
+            });
+        let mut choice = render::auto::choose(&able, tau, &render::auto::measured())
             .expect("auto_candidates is never empty");
+        for m in refused {
+            let e = render::registry::depth_refusal(m, &tables, &frame).unwrap_or_default();
+            let e = e.split(" (docs/").next().unwrap_or(&e);
+            choice.why += &format!("; {m} not taken: {e}");
+        }
         if !quiet {
             eprintln!("--model auto: {} — {}", choice.model, choice.why);
         }

@@ -20,10 +20,6 @@
 
 use serde::Deserialize;
 
-use runtime::Tables;
-
-use crate::volume::DensityGrid;
-
 /// The median |bias| against the truth a model may have at a scene's depth to be chosen.
 pub const ACCEPTED_BIAS: f64 = 0.10;
 
@@ -159,12 +155,7 @@ pub struct Choice {
     pub why: String,
 }
 
-/// The scene's optical depth as the rule measures it (module docs): the deepest point's least
-/// axis-line optical depth, the fields' green extinction together.
-pub fn optical_depth(tables: &Tables, grid: &DensityGrid) -> f64 {
-    let sigma: Vec<f64> = tables.fields.iter().map(|f| f.sigma_ext_m2[1]).collect();
-    grid.deepest_weighted(|rho| sigma.iter().zip(rho).map(|(s, &r)| s * f64::from(r)).sum())
-}
+pub use crate::volume::optical_depth;
 
 /// Chooses among `able` (the models that render the scene, in `--help` order) for a scene of
 /// optical depth `tau` by the module's rule, from `measured` (normally [`measured`]); a model

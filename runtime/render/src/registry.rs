@@ -248,3 +248,14 @@ pub fn depth_limit(model: &str) -> Option<f64> {
         _ => None,
     }
 }
+
+/// Why a model with its default settings refuses the depths of `frame`'s grid beyond
+/// [`depth_limit`] (coupled's transport on a coarse grid), or None.
+pub fn depth_refusal(model: &str, tables: &Tables, frame: &Frame) -> Option<String> {
+    match model {
+        "coupled" => crate::coupled::light::check_depth(tables, frame, &Default::default())
+            .err()
+            .map(|e| e.to_string()),
+        _ => None,
+    }
+}

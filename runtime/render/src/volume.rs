@@ -169,6 +169,14 @@ impl DensityGrid {
     }
 }
 
+/// The scene's optical depth as `--model auto` and coupled's depth check measure it: the
+/// deepest point's least axis-line optical depth ([`DensityGrid::deepest_weighted`]), the
+/// fields' green extinction together.
+pub fn optical_depth(tables: &runtime::Tables, grid: &DensityGrid) -> f64 {
+    let sigma: Vec<f64> = tables.fields.iter().map(|f| f.sigma_ext_m2[1]).collect();
+    grid.deepest_weighted(|rho| sigma.iter().zip(rho).map(|(s, &r)| s * f64::from(r)).sum())
+}
+
 /// The shape of one volume, in metres (y up).
 #[derive(Debug, Clone, PartialEq)]
 pub enum Shape {

@@ -28,11 +28,16 @@ fn uniform_box(tables: &Tables, dir: &Path, tau: f64, elevation: f64) -> Frame {
 /// The soft-ball fixture of cloud, `tau` through its centre, the sun 20° up at `azimuth`,
 /// 32³ voxels, 24² pixels, no sky, a black ground (the sweep's case, smaller).
 fn ball(tables: &Tables, tau: f64, azimuth: f64) -> Frame {
+    ball_on(tables, tau, azimuth, 32)
+}
+
+/// [`ball`] on `grid`³ voxels.
+fn ball_on(tables: &Tables, tau: f64, azimuth: f64, grid: usize) -> Frame {
     let (text, base) = common::soft_ball(&fields());
     let mut scene = RenderScene::parse(&text, "ball", &base).unwrap();
     scene.volumes[0].number_density_per_m3 =
         tau / (0.666 * 1000.0 * tables.field("cloud").unwrap().sigma_ext_m2[1]);
-    (scene.width, scene.height, scene.grid_resolution) = (24, 24, 32);
+    (scene.width, scene.height, scene.grid_resolution) = (24, 24, grid);
     scene.sun.azimuth_deg = azimuth;
     scene.frame(tables).unwrap()
 }
@@ -1010,7 +1015,10 @@ fn the_memory_estimate_counts_the_transport_on_its_coarsened_grid() {
 
 /// A scene deeper than the transport converges at within its default iteration cap is refused
 /// before the lighting, naming its optical depth and the limit; the diffusion alone still
-/// lights it.
+/// lights it. On a coarse grid the limit is lower (the product of the scene's and the densest
+/// voxel's optical depths): the ball at τ 200 on 16³ voxels (product ≈ 3 750) is refused, and
+/// with the check lifted (the cap raised by one) its transport indeed diverges, while τ 160
+/// (≈ 2 400) is taken and converges.
 #[test]
 fn a_scene_deeper_than_the_transport_converges_at_is_refused_before_the_lighting() {
     let (_tmp, dir) = bake(&fields());
@@ -1031,4 +1039,26 @@ fn a_scene_deeper_than_the_transport_converges_at_is_refused_before_the_lighting
         ..Settings::default()
     };
     assert!(light::light(&tables, &frame, &diffusion).is_ok());
+
+    let coarse = ball_on(&tables, 200.0, 90.0, 16);
+    let e = match light::light(&tables, &coarse, &Settings::default()) {
+        Ok(_) => panic!("lit a ball of optical depth 200 on 16³ voxels"),
+        Err(e) => e.to_string(),
+    };
+    let product = render::coupled::MAX_DEPTH_PRODUCT;
+    assert!(
+        e.contains("across its densest transport voxel: their product")
+            && e.contains(&format!("more than the {product}")),
+        "{e}"
+    );
+    let lifted = Settings {
+        max_transport_iterations: Settings::default().max_transport_iterations + 1,
+        ..Settings::default()
+    };
+    match light::light(&tables, &coarse, &lifted) {
+        Ok(_) => panic!("the transport converged at a product the check refuses"),
+        Err(e) => assert!(e.to_string().contains("did not converge"), "{e}"),
+    }
+    let taken = ball_on(&tables, 160.0, 90.0, 16);
+    assert!(light::light(&tables, &taken, &Settings::default()).is_ok());
 }

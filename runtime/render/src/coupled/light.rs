@@ -166,25 +166,64 @@ pub(crate) fn check(tables: &Tables, frame: &Frame, settings: &Settings) -> Resu
     Ok(())
 }
 
-/// Refuses a scene deeper than the transport converges on within the default iteration cap
-/// ([`super::MAX_OPTICAL_DEPTH`]), naming its depth and the limit; a raised cap or the
-/// diffusion alone takes it on.
-fn check_depth(tables: &Tables, frame: &Frame, settings: &Settings) -> Result<(), FrameError> {
+/// Refuses a scene deeper than the transport converges on within the default iteration cap,
+/// naming its depths and the limit: deeper than [`super::MAX_OPTICAL_DEPTH`], or with a product
+/// of that depth and its densest transport voxel's optical depth above
+/// [`super::MAX_DEPTH_PRODUCT`] (the coarser the grid, the shallower the scene it converges on;
+/// docs/models/coupled.md, "Optical depth"). A raised cap or the diffusion alone takes it on.
+pub(crate) fn check_depth(
+    tables: &Tables,
+    frame: &Frame,
+    settings: &Settings,
+) -> Result<(), FrameError> {
     let default_cap = Settings::default().max_transport_iterations;
     if settings.diffuse != Diffuse::Transport || settings.max_transport_iterations > default_cap {
         return Ok(());
     }
-    let tau = crate::auto::optical_depth(tables, &frame.grid);
-    if tau <= super::MAX_OPTICAL_DEPTH {
-        return Ok(());
+    let tau = crate::volume::optical_depth(tables, &frame.grid);
+    let voxel = transport_voxel_depth(tables, &frame.grid, settings.coarsening(frame.grid.dims));
+    let advice = format!(
+        "(docs/models/coupled.md, \"Optical depth\"): use --model max or riley, raise \
+         max_transport_iterations above {default_cap}, or set diffuse = \"diffusion\""
+    );
+    if tau > super::MAX_OPTICAL_DEPTH {
+        return Err(FrameError(format!(
+            "the scene's optical depth is {tau:.0} at its deepest point (green, the least of its \
+             three axis lines), more than the {} the transport converges at {advice}",
+            super::MAX_OPTICAL_DEPTH
+        )));
     }
-    Err(FrameError(format!(
-        "the scene's optical depth is {tau:.0} at its deepest point (green, the least of its three \
-         axis lines), more than the {} the transport converges at within \
-         max_transport_iterations = {default_cap} (docs/models/coupled.md): use --model max or \
-         riley, raise max_transport_iterations, or set diffuse = \"diffusion\"",
-        super::MAX_OPTICAL_DEPTH
-    )))
+    if tau * voxel > super::MAX_DEPTH_PRODUCT {
+        return Err(FrameError(format!(
+            "the scene's optical depth is {tau:.0} at its deepest point (green, the least of its \
+             three axis lines) and {voxel:.1} across its densest transport voxel: their product \
+             {:.0} is more than the {} the transport converges at on this grid; a finer \
+             grid_resolution lowers the voxel's depth {advice}",
+            tau * voxel,
+            super::MAX_DEPTH_PRODUCT
+        )));
+    }
+    Ok(())
+}
+
+/// The optical depth (green) across the densest voxel of the transport's grid: the largest
+/// β_ext of `grid` times its longest voxel edge, `coarsening` voxels to a transport voxel (an
+/// upper bound where blocks average denser and thinner voxels).
+pub(crate) fn transport_voxel_depth(tables: &Tables, grid: &DensityGrid, coarsening: usize) -> f64 {
+    let sigma: Vec<f64> = tables.fields.iter().map(|f| f.sigma_ext_m2[1]).collect();
+    let densest = grid
+        .data
+        .iter()
+        .map(|rho| {
+            sigma
+                .iter()
+                .zip(rho)
+                .map(|(s, &r)| s * f64::from(r))
+                .sum::<f64>()
+        })
+        .fold(0.0, f64::max);
+    let edge = voxel_size(grid).into_iter().fold(0.0, f64::max);
+    densest * edge * coarsening.max(1) as f64
 }
 
 /// Steps 1–3 of the [module docs](super).
