@@ -568,20 +568,26 @@ impl FieldEntry {
         Ok(())
     }
 
-    /// F_i in [0.5, 1] and not rising with n; the forward peak's fraction in [0, 1], within
-    /// F_i and not rising with n.
+    /// F_i in [0, 1] with |F_i − ½| not rising with n (the forward hemisphere's excess, or a
+    /// backward-peaked field's deficit, fades toward isotropy with each scattering: F_n − ½ is
+    /// a sum of the odd Legendre moments' n-th powers, docs/physics.md §7; below ½ where the
+    /// phase function leans backward, as small strongly absorbing high-index spheres' do, and
+    /// alternating about ½ where g < 0); the forward peak's fraction in [0, 1], within F_i and
+    /// not rising with n.
     fn check_forward_fractions(&self) -> Result<(), String> {
         for (c, v) in ["R", "G", "B"].iter().zip(self.forward_fraction.as_array()) {
-            if let Some(i) = v.iter().position(|x| !(0.5 - 1e-9..=1.0).contains(x)) {
+            if let Some(i) = v.iter().position(|x| !(0.0..=1.0).contains(x)) {
                 return Err(self.at(format!(
-                    "forward_fraction.{c}: F_{} = {} is outside [0.5, 1]",
+                    "forward_fraction.{c}: F_{} = {} is outside [0, 1]",
                     i + 1,
                     v[i]
                 )));
             }
-            if let Some(i) = (1..v.len()).find(|&i| v[i] > v[i - 1] + 1e-12) {
+            let off = |i: usize| (v[i] - 0.5).abs();
+            if let Some(i) = (1..v.len()).find(|&i| off(i) > off(i - 1) + 1e-12) {
                 return Err(self.at(format!(
-                    "forward_fraction.{c}: F_{} = {} exceeds F_{} = {}: forward fractions cannot rise with n",
+                    "forward_fraction.{c}: F_{} = {} is further from ½ than F_{} = {}: forward \
+                     fractions tend to ½ with each scattering",
                     i + 1,
                     v[i],
                     i,

@@ -720,7 +720,7 @@ fn manifest_schema_and_consistency_are_checked() {
     assert!(write_manifest(dir.path(), &bad).is_err());
     // Physics and file names: each refused naming the value.
     type Edit = fn(&mut FieldEntry);
-    let cases: [(Edit, &str); 9] = [
+    let cases: [(Edit, &str); 10] = [
         (|f| f.albedo.g = 7.0, "albedo.G = 7"),
         (|f| f.g.r = -5.0, "g.R = -5"),
         (
@@ -728,7 +728,14 @@ fn manifest_schema_and_consistency_are_checked() {
             "sigma_ext_m2.B = -1e-6 is outside [1e-30, 1] m²",
         ),
         (|f| f.forward_fraction.r[0] = 1.5, "F_1 = 1.5"),
-        (|f| f.forward_fraction.r[2] = 0.95, "F_3 = 0.95 exceeds F_2"),
+        (
+            |f| f.forward_fraction.r[0] = -0.1,
+            "F_1 = -0.1 is outside [0, 1]",
+        ),
+        (
+            |f| f.forward_fraction.r[2] = 0.95,
+            "F_3 = 0.95 is further from ½ than F_2",
+        ),
         (
             |f| f.forward_peak_fraction.g[1] = 2.0,
             "forward_peak_fraction.G[1] = 2",
@@ -756,6 +763,17 @@ fn manifest_schema_and_consistency_are_checked() {
     }
     assert_eq!(fs::read(&path).unwrap(), written);
     assert_eq!(dir_entries(dir.path()), [MANIFEST_FILE]);
+    // Physical and accepted: a field leaning backward (small strongly absorbing high-index
+    // spheres: F_1 < ½, rising toward ½) and one with g < 0 (F_n − ½ alternating in sign).
+    for fractions in [[0.38, 0.45, 0.49], [0.3, 0.6, 0.45]] {
+        let mut backward = good.clone();
+        let f = &mut backward.fields[0];
+        f.forward_fraction = PerChannel::from_array([0, 1, 2].map(|_| fractions.to_vec()));
+        f.forward_peak_fraction = PerChannel::from_array([0, 1, 2].map(|_| vec![0.0; 3]));
+        write_manifest(dir.path(), &backward).unwrap();
+        assert_eq!(read_manifest(dir.path()).unwrap(), backward);
+    }
+    fs::write(&path, &written).unwrap();
 
     // A missing directory is an I/O error naming the path.
     let err = write_manifest(dir.path().join("nope"), &good).unwrap_err();
