@@ -1,7 +1,7 @@
-//! The crate's shape, checked on any machine (no GPU): every WGSL uniform has a Rust mirror
-//! of the same size and field offsets (naga's layout of the shader each renderer compiles), no
-//! model's module names another model, no shared module names a model but the registry, and
-//! the modules' imports form no circle.
+//! The crate's shape, checked on any machine (no GPU): every WGSL uniform and named per-voxel
+//! record has a Rust mirror of the same size and field offsets (naga's layout of the shader each
+//! renderer compiles), no model's module names another model, no shared module names a model
+//! but the registry, and the modules' imports form no circle.
 
 use runtime::uniform::{Uniform, check_uniform};
 
@@ -25,6 +25,8 @@ fn every_uniform_mirrors_its_wgsl_struct() {
     );
     check::<render::lighting::sky_gpu::SkyParams>(&render::lighting::sky_gpu::source());
     check::<render::lighting::beam_gpu::BeamParams>(&render::lighting::beam_gpu::source());
+    check::<render::lighting::beam_gpu::MediumVoxel>(&render::lighting::beam_gpu::source());
+    check::<render::lighting::beam_gpu::BeamVoxel>(&render::lighting::beam_gpu::source());
     check::<render::biri::gpu::BiriParams>(&render::biri::gpu::source());
     check::<render::truth::gpu::TruthParams>(&render::truth::gpu::source());
     check::<render::truth::gpu::StepParams>(&render::truth::gpu::source());

@@ -10,16 +10,29 @@ struct Params {
     way: vec4<f32>,          // shift u, shift v one layer back (voxel units), ds (metres), 0
 }
 
+// The medium at a voxel (lighting::beam::BeamMedium in f32; beam_gpu::MediumVoxel).
+struct MediumVoxel {
+    ext: vec4<f32>,          // β_ext rgb (1/m), 0
+    sca: vec4<f32>,          // β_sca rgb (1/m), 0
+    peak: vec4<f32>,         // the split's forward peak f rgb, the peak's share of β_sca (green)
+    g: vec4<f32>,            // the asymmetry parameter g rgb, 0
+}
+
+// The beam at a voxel and what it loses, each per metre of the step (beam_gpu::BeamVoxel).
+struct BeamVoxel {
+    beam: vec4<f32>,         // I rgb, the peak's depth D
+    isotropic: vec4<f32>,    // the diffuse light's isotropic source rgb, 0
+    forward: vec4<f32>,      // its first-moment (forward) source rgb, 0
+    loss: vec4<f32>,         // the beam's whole loss rgb, 0
+}
+
 @group(0) @binding(0) var<uniform> params: Params;
 // Binding 1: the dispatch's `Step` (upwind.wgsl).
-// Per voxel four rows: β_ext (rgb), β_sca (rgb), (f rgb, the peak's share of β_sca in green),
-// (g rgb).
-@group(0) @binding(2) var<storage, read> medium: array<vec4<f32>>;
-// Per (half, layer voxel) four rows: I (rgb), β_ext (rgb), β_sca (rgb), (D, 0, 0).
+@group(0) @binding(2) var<storage, read> medium: array<MediumVoxel>;
+// Per (half, layer voxel) four rows, read by upwind.wgsl's generic lookup: I (rgb), β_ext
+// (rgb), β_sca (rgb), (D, 0, 0).
 @group(0) @binding(3) var<storage, read_write> state: array<vec4<f32>>;
-// Per voxel four rows: (I rgb, D), the diffuse light's isotropic source (rgb), its forward
-// source (rgb), the beam's loss (rgb), each per metre of the step.
-@group(0) @binding(4) var<storage, read_write> beam: array<vec4<f32>>;
+@group(0) @binding(4) var<storage, read_write> beam: array<BeamVoxel>;
 
 // The state's rows per voxel (upwind.wgsl's state_index).
 const STATE_ROWS: u32 = 4u;
@@ -44,11 +57,12 @@ fn sweep(@builtin(global_invocation_id) id: vec3<u32>) {
     let vc = id.x / nb;
     let behind = stp.group.w;
     let i = voxel_at(ub, vc);
-    let ext_h = medium[4u * i].xyz;
-    let sca_h = medium[4u * i + 1u].xyz;
-    let f = medium[4u * i + 2u].xyz;
-    let share = medium[4u * i + 2u].w;
-    let g = medium[4u * i + 3u].xyz;
+    let here = medium[i];
+    let ext_h = here.ext.xyz;
+    let sca_h = here.sca.xyz;
+    let f = here.peak.xyz;
+    let share = here.peak.w;
+    let g = here.g.xyz;
     // One layer back: clear air's sunlight outside the box, blended over the last half voxel.
     var start = vec3<f32>(1.0);
     var back_ext = vec3<f32>(0.0);
@@ -92,8 +106,10 @@ fn sweep(@builtin(global_invocation_id) id: vec3<u32>) {
     state[at + 1u] = vec4<f32>(ext_h, 0.0);
     state[at + 2u] = vec4<f32>(sca_h, 0.0);
     state[at + 3u] = vec4<f32>(n, 0.0, 0.0, 0.0);
-    beam[4u * i] = vec4<f32>(kept, n);
-    beam[4u * i + 1u] = vec4<f32>(source, 0.0);
-    beam[4u * i + 2u] = vec4<f32>(forward, 0.0);
-    beam[4u * i + 3u] = vec4<f32>(loss, 0.0);
+    beam[i] = BeamVoxel(
+        vec4<f32>(kept, n),
+        vec4<f32>(source, 0.0),
+        vec4<f32>(forward, 0.0),
+        vec4<f32>(loss, 0.0),
+    );
 }

@@ -25,6 +25,35 @@ pub fn source() -> String {
     with_upwind(BEAM_WGSL)
 }
 
+runtime::uniform! {
+    /// `MediumVoxel` of `beam.wgsl`: a voxel's [`BeamMedium`] in f32.
+    pub struct MediumVoxel as "MediumVoxel" {
+        /// β_ext per channel (1/m), 0.
+        pub ext: [f32; 4],
+        /// β_sca per channel (1/m), 0.
+        pub sca: [f32; 4],
+        /// The split's forward peak f per channel, the peak's share of β_sca (green).
+        pub peak: [f32; 4],
+        /// The asymmetry parameter g per channel, 0.
+        pub g: [f32; 4],
+    }
+}
+
+runtime::uniform! {
+    /// `BeamVoxel` of `beam.wgsl`: the beam at a voxel and its losses per metre of the step,
+    /// the GPU's part of a [`BeamState`].
+    pub struct BeamVoxel as "BeamVoxel" {
+        /// I per channel, the peak's depth D.
+        pub beam: [f32; 4],
+        /// The diffuse light's isotropic source per channel ([`BeamState::dropped`]), 0.
+        pub isotropic: [f32; 4],
+        /// Its first-moment source per channel ([`BeamState::forward`]), 0.
+        pub forward: [f32; 4],
+        /// The whole loss per channel ([`BeamState::loss`]), 0.
+        pub loss: [f32; 4],
+    }
+}
+
 /// Invocations per workgroup (`beam.wgsl`).
 const WG: usize = 64;
 
@@ -74,7 +103,7 @@ impl BeamSweeper {
         let (a, b, c) = (way.axis, (way.axis + 1) % 3, (way.axis + 2) % 3);
         let groups = (dims[b] * dims[c]).div_ceil(WG);
         layer_fits(gpu, "the beam's GPU sweep", groups, dims)?;
-        let beam_bytes = (64 * voxels) as u64;
+        let beam_bytes = (std::mem::size_of::<BeamVoxel>() * voxels) as u64;
         let state_bytes = (2 * 64 * dims[b] * dims[c]) as u64;
         buffers_fit(
             gpu,
@@ -93,9 +122,14 @@ impl BeamSweeper {
             push_step(&mut steps, words.map(|w| w as u32));
         }
         let f = |v: [f64; 3], w: f64| [v[0] as f32, v[1] as f32, v[2] as f32, w as f32];
-        let rows: Vec<[f32; 4]> = medium
+        let rows: Vec<MediumVoxel> = medium
             .iter()
-            .flat_map(|m| [f(m.ext, 0.0), f(m.sca, 0.0), f(m.f, m.share), f(m.g, 0.0)])
+            .map(|m| MediumVoxel {
+                ext: f(m.ext, 0.0),
+                sca: f(m.sca, 0.0),
+                peak: f(m.f, m.share),
+                g: f(m.g, 0.0),
+            })
             .collect();
         let params = BeamParams {
             dims: [dims[0] as u32, dims[1] as u32, dims[2] as u32, 0],
@@ -136,19 +170,20 @@ impl BeamSweeper {
         );
         queue.submit([encoder.finish()]);
         let back = read_back(gpu, &beam, beam_bytes).map_err(RenderError::from)?;
-        Ok(back
-            .chunks_exact(4)
+        let voxels: &[BeamVoxel] = bytemuck::cast_slice(&back);
+        Ok(voxels
+            .iter()
             .zip(medium)
             .map(|(v, m)| {
-                let row = |k: usize| std::array::from_fn(|ch| f64::from(v[k][ch]));
+                let rgb = |row: [f32; 4]| std::array::from_fn(|ch| f64::from(row[ch]));
                 BeamState {
-                    intensity: row(0),
-                    depth: f64::from(v[0][3]),
+                    intensity: rgb(v.beam),
+                    depth: f64::from(v.beam[3]),
                     ext: m.ext,
                     sca: m.sca,
-                    dropped: row(1),
-                    forward: row(2),
-                    loss: row(3),
+                    dropped: rgb(v.isotropic),
+                    forward: rgb(v.forward),
+                    loss: rgb(v.loss),
                 }
             })
             .collect())
