@@ -353,8 +353,9 @@ pub fn prepare(
     let (model, frame, choice) = if model == AUTO {
         let frame = render.frame(&tables)?;
         let tau = render::auto::optical_depth(&tables, &frame.grid);
-        // A model that refuses this grid's depths (coupled's transport on a coarse grid) does
-        // not take part; the line says why.
+        // A model that refuses this grid's depths below its depth limit (coupled's transport
+        // on a coarse grid) does not take part, and the line says why; one beyond its limit
+        // stays for `choose`, which leaves it out and names the limit.
         let (able, refused): (Vec<&'static str>, Vec<&'static str>) =
             candidates.iter().map(ModelSettings::name).partition(|&m| {
                 tau > render::registry::depth_limit(m).unwrap_or(f64::INFINITY)
