@@ -356,15 +356,18 @@ pub fn prepare(
         // A model that refuses this grid's depths below its depth limit (coupled's transport
         // on a coarse grid) does not take part, and the line says why; one beyond its limit
         // stays for `choose`, which leaves it out and names the limit.
-        let (able, refused): (Vec<&'static str>, Vec<&'static str>) =
-            candidates.iter().map(ModelSettings::name).partition(|&m| {
-                tau > render::registry::depth_limit(m).unwrap_or(f64::INFINITY)
-                    || render::registry::depth_refusal(m, &tables, &frame).is_none()
-            });
+        let mut able = Vec::new();
+        let mut refused = Vec::new();
+        for m in candidates.iter().map(ModelSettings::name) {
+            let beyond = tau > render::registry::depth_limit(m).unwrap_or(f64::INFINITY);
+            match render::registry::depth_refusal(m, &tables, &frame).filter(|_| !beyond) {
+                Some(e) => refused.push((m, e)),
+                None => able.push(m),
+            }
+        }
         let mut choice = render::auto::choose(&able, tau, &render::auto::measured())
             .expect("auto_candidates is never empty");
-        for m in refused {
-            let e = render::registry::depth_refusal(m, &tables, &frame).unwrap_or_default();
+        for (m, e) in refused {
             let e = e.split(" (docs/").next().unwrap_or(&e);
             choice.why += &format!("; {m} not taken: {e}");
         }

@@ -173,8 +173,13 @@ impl DensityGrid {
 /// deepest point's least axis-line optical depth ([`DensityGrid::deepest_weighted`]), the
 /// fields' green extinction together.
 pub fn optical_depth(tables: &runtime::Tables, grid: &DensityGrid) -> f64 {
+    grid.deepest_weighted(green_extinction(tables))
+}
+
+/// β_ext (green, 1/m) at a voxel's densities, the fields of `tables` together.
+pub fn green_extinction(tables: &runtime::Tables) -> impl Fn(&[f32; MAX_FIELDS]) -> f64 {
     let sigma: Vec<f64> = tables.fields.iter().map(|f| f.sigma_ext_m2[1]).collect();
-    grid.deepest_weighted(|rho| sigma.iter().zip(rho).map(|(s, &r)| s * f64::from(r)).sum())
+    move |rho| sigma.iter().zip(rho).map(|(s, &r)| s * f64::from(r)).sum()
 }
 
 /// The shape of one volume, in metres (y up).

@@ -20,6 +20,11 @@ struct Worst {
 }
 
 fn bake_and_check(what: &str, text: &str) -> Worst {
+    bake_checked(what, text).0
+}
+
+/// [`bake_and_check`], keeping the bake's directory.
+fn bake_checked(what: &str, text: &str) -> (Worst, tempfile::TempDir) {
     let dir = tempfile::tempdir().unwrap();
     let plan = plan(text, dir.path()).unwrap();
     run(&plan).unwrap_or_else(|e| panic!("{what}: {e:#}"));
@@ -73,7 +78,7 @@ fn bake_and_check(what: &str, text: &str) -> Worst {
         "{what}: worst |∫ Ams_n dΩ − 1| = {:.2e}, worst negative/max = {:.2e}",
         worst.energy, worst.negative
     );
-    worst
+    (worst, dir)
 }
 
 fn scene(header: &str, fields: &str) -> String {
@@ -102,9 +107,7 @@ fn small_strongly_absorbing_high_index_spheres_lean_backward() {
     let fields = "[[field]]\nname = \"metal\"\nkind = \"cloud\"\nrefractive_index = [3.0, 10.0]\n\
                   distribution = { kind = \"gamma\", r_eff_um = 0.03, v_eff = 0.1 }\n";
     let text = scene("spectral = \"rgb3\"\nn_max = 8", fields);
-    bake_and_check("m = 3 + 10i, r_eff 0.03 µm", &text);
-    let dir = tempfile::tempdir().unwrap();
-    run(&plan(&text, dir.path()).unwrap()).unwrap();
+    let (_, dir) = bake_checked("m = 3 + 10i, r_eff 0.03 µm", &text);
     let image = read_field_exr(dir.path().join("metal.exr")).unwrap();
     for c in 0..3 {
         let f = forward_fractions(&image, c);

@@ -210,17 +210,10 @@ pub(crate) fn check_depth(
 /// β_ext of `grid` times its longest voxel edge, `coarsening` voxels to a transport voxel (an
 /// upper bound where blocks average denser and thinner voxels).
 pub(crate) fn transport_voxel_depth(tables: &Tables, grid: &DensityGrid, coarsening: usize) -> f64 {
-    let sigma: Vec<f64> = tables.fields.iter().map(|f| f.sigma_ext_m2[1]).collect();
     let densest = grid
         .data
         .iter()
-        .map(|rho| {
-            sigma
-                .iter()
-                .zip(rho)
-                .map(|(s, &r)| s * f64::from(r))
-                .sum::<f64>()
-        })
+        .map(crate::volume::green_extinction(tables))
         .fold(0.0, f64::max);
     let edge = voxel_size(grid).into_iter().fold(0.0, f64::max);
     densest * edge * coarsening.max(1) as f64
