@@ -4,7 +4,8 @@
 use std::collections::HashMap;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{Receiver, Sender, TryRecvError, channel};
-use std::sync::{Arc, OnceLock};
+use std::sync::{Arc, Mutex, OnceLock};
+use std::thread::JoinHandle;
 use std::time::Instant;
 
 use anyhow::{Context, Result};
@@ -53,9 +54,17 @@ pub struct Shown {
     pub seconds: f64,
 }
 
-/// The window's end of the render thread.
+/// The window's end of the render thread. Dropping it stops every truth run, closes the render
+/// thread's inbox and waits for it (and the truth threads it started) to end, so the device is
+/// released before the process exits: a thread still inside the Vulkan driver while the
+/// process's exit tears the driver down can crash it (seen on lavapipe).
 pub struct Worker {
-    to: Sender<Message>,
+    /// `None` only while dropping.
+    to: Option<Sender<Message>>,
+    /// The render thread (`None` only while dropping).
+    thread: Option<JoinHandle<()>>,
+    /// Every truth run's stop flag.
+    stops: Mutex<Vec<Arc<AtomicBool>>>,
     from: Receiver<Shown>,
     /// Told to repaint when a frame is done.
     repaint: Arc<OnceLock<eframe::egui::Context>>,
@@ -78,8 +87,9 @@ impl Worker {
             scaled: None,
             prepared: HashMap::new(),
             lighting: LightingCache::new(),
+            truths: Vec::new(),
         };
-        std::thread::Builder::new()
+        let thread = std::thread::Builder::new()
             .name("render".into())
             .spawn(move || {
                 while let Some(request) = next_request(&inbox, &mut state) {
@@ -97,9 +107,22 @@ impl Worker {
                         ctx.request_repaint();
                     }
                 }
+                state.end_truths();
             })
             .context("starting the render thread")?;
-        Ok(Self { to, from, repaint })
+        Ok(Self {
+            to: Some(to),
+            thread: Some(thread),
+            stops: Mutex::new(Vec::new()),
+            from,
+            repaint,
+        })
+    }
+
+    fn send(&self, message: Message) {
+        if let Some(to) = &self.to {
+            let _ = to.send(message);
+        }
     }
 
     /// The window's context, told to repaint when a frame is done.
@@ -109,12 +132,12 @@ impl Worker {
 
     /// Asks for a frame.
     pub fn render(&self, request: Request) {
-        let _ = self.to.send(Message::Render(Box::new(request)));
+        self.send(Message::Render(Box::new(request)));
     }
 
     /// Replaces the scene, and the tables when `tables` is given.
     pub fn set_scene(&self, scene: RenderScene, tables: Option<Tables>) {
-        let _ = self.to.send(Message::Scene(Box::new(scene), tables));
+        self.send(Message::Scene(Box::new(scene), tables));
     }
 
     /// The frames finished since the last call, oldest first.
@@ -127,6 +150,7 @@ impl Worker {
     pub fn trace(&self, request: Request) -> TruthRun {
         let (news, inbox) = channel();
         let stop = Arc::new(AtomicBool::new(false));
+        self.stops.lock().expect("not poisoned").push(stop.clone());
         let run = TruthRun {
             view: (request.camera, request.sun, request.density_scale),
             news: inbox,
@@ -138,8 +162,23 @@ impl Worker {
             stop,
             repaint: self.repaint.clone(),
         };
-        let _ = self.to.send(Message::Truth(Box::new(request), sink));
+        self.send(Message::Truth(Box::new(request), sink));
         run
+    }
+}
+
+impl Drop for Worker {
+    fn drop(&mut self) {
+        for stop in self.stops.lock().expect("not poisoned").iter() {
+            stop.store(true, Ordering::Relaxed);
+        }
+        // The inbox closed, the render thread ends after the frame under way.
+        self.to = None;
+        if let Some(thread) = self.thread.take()
+            && thread.join().is_err()
+        {
+            eprintln!("view: the render thread panicked (see above)");
+        }
     }
 }
 
@@ -283,6 +322,8 @@ struct State {
     prepared: HashMap<&'static str, Prepared>,
     /// max's and coupled's per-sun lighting, kept while only the camera moves.
     lighting: LightingCache,
+    /// The truth threads started, joined before the render thread ends.
+    truths: Vec<JoinHandle<()>>,
 }
 
 impl State {
@@ -329,8 +370,19 @@ impl State {
                     traced.map(|t| t.summary).map_err(|e| e.to_string()),
                 ));
             });
-        if let Err(e) = spawned {
-            eprintln!("view: starting the truth's thread: {e}");
+        match spawned {
+            Ok(thread) => self.truths.push(thread),
+            Err(e) => eprintln!("view: starting the truth's thread: {e}"),
+        }
+        self.truths.retain(|t| !t.is_finished());
+    }
+
+    /// Waits for the truth threads (their runs told to stop) to end.
+    fn end_truths(&mut self) {
+        for thread in self.truths.drain(..) {
+            if thread.join().is_err() {
+                eprintln!("view: a truth thread panicked (see above)");
+            }
         }
     }
 
