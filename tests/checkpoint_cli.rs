@@ -16,7 +16,7 @@ const HEAD: &str =
 const CLOUD: &str = "[[field]]\nname = \"cloud\"\nkind = \"cloud\"\n\
     distribution = { kind = \"gamma\", r_eff_um = 8, v_eff = 0.1 }\n\n";
 const RAIN: &str = "[[field]]\nname = \"rain\"\nkind = \"rain\"\n\
-    distribution = { kind = \"lognormal\", median_radius_um = 300, sigma_g = 1.4 }\n\n";
+    distribution = { kind = \"lognormal\", median_radius_um = 1000, sigma_g = 1.4 }\n\n";
 
 /// The cache records (not temporaries) in `dir/.cache`.
 fn records(dir: &Path) -> usize {
@@ -51,7 +51,7 @@ fn a_killed_bake_resumes_from_the_fields_it_finished() {
         .stderr(Stdio::null())
         .spawn()
         .unwrap();
-    // The cloud takes well under a second, the rain several: kill the bake as soon as the
+    // The cloud takes well under a second, the rain (1 mm drops) several: kill the bake as soon as the
     // cloud's record is there, while the rain is computing.
     let started = Instant::now();
     while records(&out) == 0 {
@@ -94,7 +94,7 @@ fn a_bake_of_another_scene_waits_for_the_first_and_says_it_replaces_its_tables()
         format!("{}{CLOUD}", HEAD.replace("NAME", "a")),
     )
     .unwrap();
-    let rain_b = RAIN.replace("median_radius_um = 300", "median_radius_um = 100");
+    let rain_b = RAIN.replace("median_radius_um = 1000", "median_radius_um = 100");
     std::fs::write(
         cwd.join("b.toml"),
         format!("{}{rain_b}", HEAD.replace("NAME", "b")),
