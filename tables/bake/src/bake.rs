@@ -708,6 +708,7 @@ fn field_entry(
             },
             name: field.name.clone(),
             refractive_index: field.refractive_index,
+            albedo: field.albedo,
             temperature_c: field.temperature_c,
         },
         quality: format::QualityRecord {
@@ -907,6 +908,15 @@ pub fn phase_functions(
                 "field {:?} has neither sizes nor crystals",
                 field.name
             )));
+        }
+    }
+    // A given albedo replaces the particles' own: σ_sca = α σ_ext at every wavelength, the
+    // phase function and σ_ext as computed (so the channels' mixing weights, their albedo and
+    // the side tables all follow from it).
+    if let Some(albedo) = field.albedo {
+        for p in &mut per_wavelength {
+            p.sigma_sca_m2 = albedo * p.sigma_ext_m2;
+            p.albedo = albedo;
         }
     }
     Ok(Phases {

@@ -18,6 +18,8 @@
 //! kind = "cloud"            # cloud | rain | haze (spheres), ice | snow (crystals)
 //! # haze: aerosol spheres, lognormal with median_radius_um in [0.05, 1] (default 0.1, σ_g 2);
 //! # refractive_index = [n, κ] (cloud, rain, haze) replaces the material's at every wavelength
+//! # albedo = 0.99 (any field): the single-scattering albedo, (0, 1], replacing the particles'
+//! #   own at every wavelength (the phase function and σ_ext stay)
 //! # crystals instead of a distribution: habit = "plate" | "column" | "aggregate",
 //! # aspect_ratio (L/2a), max_dimension_um (median), dimension_sigma_g, roughness (Macke δ)
 //! temperature_c = 10
@@ -178,6 +180,9 @@ struct FieldFile {
     /// A sphere field's own refractive index m = n + iκ, the same at every wavelength.
     #[serde(default)]
     refractive_index: Option<[f64; 2]>,
+    /// A given single-scattering albedo, the same at every wavelength.
+    #[serde(default)]
+    albedo: Option<f64>,
     /// Crystal habit (ice, snow): plate | column | aggregate; sets the default aspect ratio.
     #[serde(default)]
     habit: Option<String>,
@@ -314,6 +319,10 @@ pub struct Field {
     /// wavelength; n in (1, 3], κ in [0, 10].
     #[serde(skip_serializing_if = "Option::is_none")]
     pub refractive_index: Option<[f64; 2]>,
+    /// A given single-scattering albedo σ_sca/σ_ext in (0, 1], replacing the particles' own at
+    /// every wavelength (σ_ext and the phase function stay as computed); `None`: their own.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub albedo: Option<f64>,
     /// Size distribution of spheres (cloud, rain).
     pub distribution: Option<SizeDistribution>,
     /// Crystal population (ice, snow).
@@ -680,6 +689,7 @@ impl FieldFile {
         self.check_name(keys, earlier)?;
         let (material, temperature_c) = self.material_and_temperature(keys)?;
         self.check_refractive_index(keys)?;
+        self.check_albedo(keys)?;
         let distribution = self.haze_distribution(keys)?;
         let (distribution, crystal) = match self.kind {
             FieldKind::Cloud | FieldKind::Rain | FieldKind::Haze => {
@@ -694,6 +704,7 @@ impl FieldFile {
             temperature_c,
             material,
             refractive_index: self.refractive_index,
+            albedo: self.albedo,
             distribution,
             crystal,
         })
@@ -912,6 +923,20 @@ impl FieldFile {
                      range [0, 10]"
                 );
             }
+        }
+        Ok(())
+    }
+
+    /// A given albedo is in (0, 1].
+    fn check_albedo(&self, keys: &Keys) -> Result<(), SceneError> {
+        if let Some(a) = self.albedo
+            && !(a > 0.0 && a <= 1.0)
+        {
+            fail!(
+                keys.at("albedo"),
+                "albedo = {a} is outside the allowed range (0, 1] (the share of the extinguished \
+                 light that is scattered)"
+            );
         }
         Ok(())
     }

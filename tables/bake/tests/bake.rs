@@ -343,6 +343,78 @@ distribution = { kind = "lognormal", median_radius_um = 0.3, sigma_g = 1.8 }
 }
 
 #[test]
+fn a_given_albedo_replaces_the_particles_own_and_nothing_else() {
+    // The same cloud baked with water's albedo and with `albedo = 0.9`: the manifest, the
+    // transport factor and the side table carry 0.9 at every channel and wavelength; σ_ext and
+    // (rgb3: one wavelength per channel) every Ams_n and F_n are the same to the bit.
+    let cloud = r#"
+[scene]
+name = "albedo"
+spectral = "rgb3"
+n_max = 6
+quality = "draft"
+
+[[field]]
+name = "cloud"
+kind = "cloud"
+distribution = { kind = "gamma", r_eff_um = 6, v_eff = 0.1 }
+"#;
+    let given = format!("{cloud}albedo = 0.9\n");
+    let (own, grey) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+    bake(cloud, own.path());
+    bake(&given, grey.path());
+    let manifest = |dir: &Path| -> serde_json::Value {
+        serde_json::from_str(&fs::read_to_string(dir.join("manifest.json")).unwrap()).unwrap()
+    };
+    let (m_own, m_grey) = (manifest(own.path()), manifest(grey.path()));
+    let (f_own, f_grey) = (&m_own["fields"][0], &m_grey["fields"][0]);
+    assert_eq!(f_grey["microphysics"]["albedo"], serde_json::json!(0.9));
+    assert!(f_own["microphysics"].get("albedo").is_none(), "{f_own}");
+    for c in ["R", "G", "B"] {
+        let own_albedo = f_own["albedo"][c].as_f64().unwrap();
+        assert!(own_albedo > 0.999_99, "water's albedo at {c}: {own_albedo}");
+        // The channel's Σ w σ_sca / Σ w σ_ext: 0.9 to rounding.
+        let albedo = f_grey["albedo"][c].as_f64().unwrap();
+        assert!((albedo - 0.9).abs() < 1e-15, "{c}: {albedo}");
+        assert_eq!(f_grey["sigma_ext_m2"][c], f_own["sigma_ext_m2"][c], "{c}");
+        assert_eq!(f_grey["g"][c], f_own["g"][c], "{c}");
+        let g = f_grey["g"][c].as_f64().unwrap();
+        let factor = f_grey["transport_factor"][c].as_f64().unwrap();
+        assert!(
+            (factor - (1.0 - 0.9 * g)).abs() < 1e-12,
+            "{c}: {factor} vs 1 − 0.9 g"
+        );
+    }
+    let single = |dir: &Path| {
+        let path = dir.join(format::single_file_name("cloud"));
+        format::decode_single_exr(&fs::read(&path).unwrap(), &path).unwrap()
+    };
+    let (s_own, s_grey) = (single(own.path()), single(grey.path()));
+    assert!(
+        s_grey.albedo.iter().all(|&a| a == 0.9),
+        "{:?}",
+        s_grey.albedo
+    );
+    assert_eq!(s_grey.sigma_ext_m2, s_own.sigma_ext_m2);
+    assert_eq!(s_grey.bins, s_own.bins);
+    let image = |dir: &Path| read_field_exr(dir.join("cloud.exr")).unwrap();
+    let (i_own, i_grey) = (image(own.path()), image(grey.path()));
+    assert_eq!(i_grey.ams, i_own.ams, "the phase functions of every order");
+    assert_eq!(i_grey.forward_fraction, i_own.forward_fraction);
+    // Out of range: refused with the key, its line and the range, before any work.
+    for (bad, shown) in [("0", "0"), ("1.5", "1.5"), ("-0.2", "-0.2"), ("nan", "NaN")] {
+        let text = format!("{cloud}albedo = {bad}\n");
+        let e = plan(&text, grey.path()).unwrap_err().to_string();
+        assert!(
+            e.contains(&format!(
+                "line 12: albedo = {shown} is outside the allowed range (0, 1]"
+            )),
+            "{bad}: {e}"
+        );
+    }
+}
+
+#[test]
 fn the_poisson_table_and_transport_factor_are_written_and_read_back() {
     let dir = tempfile::tempdir().unwrap();
     bake(

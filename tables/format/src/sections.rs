@@ -279,6 +279,10 @@ pub struct Microphysics {
     /// A sphere field's given refractive index [n, κ], replacing the material's.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub refractive_index: Option<[f64; 2]>,
+    /// A given single-scattering albedo, in (0, 1], replacing the particles' own at every
+    /// wavelength.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub albedo: Option<f64>,
     /// Temperature, °C.
     pub temperature_c: f64,
 }
@@ -301,6 +305,13 @@ impl Microphysics {
         {
             return Err(format!(
                 "microphysics.refractive_index = [{n}, {kappa}], expected n in (1, 3] and κ in [0, 10]"
+            ));
+        }
+        if let Some(a) = self.albedo
+            && !(a > 0.0 && a <= 1.0)
+        {
+            return Err(format!(
+                "microphysics.albedo = {a} is outside the allowed range (0, 1]"
             ));
         }
         match (self.kind.is_drops(), &self.distribution, &self.crystal) {

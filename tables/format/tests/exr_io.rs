@@ -586,6 +586,7 @@ fn sample_manifest() -> Manifest {
             material: Material::Water,
             name: name.to_string(),
             refractive_index: None,
+            albedo: None,
             temperature_c: 10.0,
         },
         quality: QualityRecord {
