@@ -54,6 +54,15 @@ pub enum Origin {
     Mie(MieOrigin),
     /// Geometric-optics ray tracing plus Fraunhofer diffraction of hexagonal prisms.
     Crystal(CrystalOrigin),
+    /// A given lobe (`kind = "hg"`), in closed form.
+    Given(GivenOrigin),
+}
+
+/// The lobe behind a given [`PhaseFunction`].
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct GivenOrigin {
+    /// The Henyey–Greenstein lobe.
+    pub hg: crate::hg::HgLobe,
 }
 
 /// The quadrature behind a sphere population's [`PhaseFunction`].
@@ -100,7 +109,7 @@ impl PhaseFunction {
     pub fn mie(&self) -> Option<&MieOrigin> {
         match &self.origin {
             Origin::Mie(m) => Some(m),
-            Origin::Crystal(_) => None,
+            Origin::Crystal(_) | Origin::Given(_) => None,
         }
     }
 
@@ -108,7 +117,7 @@ impl PhaseFunction {
     pub fn crystal(&self) -> Option<&CrystalOrigin> {
         match &self.origin {
             Origin::Crystal(c) => Some(c),
-            Origin::Mie(_) => None,
+            Origin::Mie(_) | Origin::Given(_) => None,
         }
     }
 }

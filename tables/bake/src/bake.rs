@@ -709,6 +709,9 @@ fn field_entry(
             name: field.name.clone(),
             refractive_index: field.refractive_index,
             albedo: field.albedo,
+            hg: field
+                .hg
+                .map(|h| serde_json::to_value(h).expect("a lobe serializes")),
             temperature_c: field.temperature_c,
         },
         quality: format::QualityRecord {
@@ -903,12 +906,21 @@ pub fn phase_functions(
             }
             per_wavelength = phases;
         }
-        (None, None) => {
-            return Err(BakeError::Incompatible(format!(
-                "field {:?} has neither sizes nor crystals",
-                field.name
-            )));
-        }
+        (None, None) => match field.hg {
+            // A given lobe: its closed-form bins at every wavelength (mie::hg).
+            Some(hg) => {
+                for &lambda in lambdas {
+                    per_wavelength.push(hg.phase(lambda, grid, field.albedo.unwrap_or(1.0)));
+                    advance();
+                }
+            }
+            None => {
+                return Err(BakeError::Incompatible(format!(
+                    "field {:?} has neither sizes nor crystals nor a lobe",
+                    field.name
+                )));
+            }
+        },
     }
     // A given albedo replaces the particles' own: σ_sca = α σ_ext at every wavelength, the
     // phase function and σ_ext as computed (so the channels' mixing weights, their albedo and
@@ -1021,6 +1033,8 @@ pub fn compute_field(
     let bar = progress.field(&field.name, lambdas.len() as u64 + 3);
     bar.message(if field.crystal.is_some() {
         "ray tracing per wavelength"
+    } else if field.hg.is_some() {
+        "Henyey–Greenstein lobe per wavelength"
     } else {
         "Mie per wavelength"
     });

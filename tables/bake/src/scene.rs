@@ -20,6 +20,9 @@
 //! # refractive_index = [n, κ] (cloud, rain, haze) replaces the material's at every wavelength
 //! # albedo = 0.99 (any field): the single-scattering albedo, (0, 1], replacing the particles'
 //! #   own at every wavelength (the phase function and σ_ext stay)
+//! # kind = "hg": a given Henyey–Greenstein lobe instead of particles: g in (−1, 1), and for a
+//! #   two-term lobe g2 in (−1, 1) with weight (the first lobe's share, (0, 1)); extinction_m2,
+//! #   the cross-section per particle, [1e-30, 1] m²; albedo default 1
 //! # crystals instead of a distribution: habit = "plate" | "column" | "aggregate",
 //! # aspect_ratio (L/2a), max_dimension_um (median), dimension_sigma_g, roughness (Macke δ)
 //! temperature_c = 10
@@ -183,6 +186,18 @@ struct FieldFile {
     /// A given single-scattering albedo, the same at every wavelength.
     #[serde(default)]
     albedo: Option<f64>,
+    /// `hg` fields: the (first) lobe's asymmetry parameter.
+    #[serde(default)]
+    g: Option<f64>,
+    /// `hg` fields: the second lobe's asymmetry parameter.
+    #[serde(default)]
+    g2: Option<f64>,
+    /// `hg` fields: the first lobe's share of a two-term lobe.
+    #[serde(default)]
+    weight: Option<f64>,
+    /// `hg` fields: the extinction cross-section per particle (m²).
+    #[serde(default)]
+    extinction_m2: Option<f64>,
     /// Crystal habit (ice, snow): plate | column | aggregate; sets the default aspect ratio.
     #[serde(default)]
     habit: Option<String>,
@@ -323,6 +338,9 @@ pub struct Field {
     /// every wavelength (σ_ext and the phase function stay as computed); `None`: their own.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub albedo: Option<f64>,
+    /// A given lobe instead of particles (`kind = "hg"`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub hg: Option<mie::hg::HgField>,
     /// Size distribution of spheres (cloud, rain).
     pub distribution: Option<SizeDistribution>,
     /// Crystal population (ice, snow).
@@ -690,6 +708,7 @@ impl FieldFile {
         let (material, temperature_c) = self.material_and_temperature(keys)?;
         self.check_refractive_index(keys)?;
         self.check_albedo(keys)?;
+        let hg = self.hg(keys)?;
         let distribution = self.haze_distribution(keys)?;
         let (distribution, crystal) = match self.kind {
             FieldKind::Cloud | FieldKind::Rain | FieldKind::Haze => {
@@ -697,6 +716,7 @@ impl FieldFile {
                 (Some(d), None)
             }
             FieldKind::Ice | FieldKind::Snow => (None, Some(self.crystal(keys, distribution)?)),
+            FieldKind::Hg => (None, None),
         };
         Ok(Field {
             name: self.name,
@@ -705,6 +725,7 @@ impl FieldFile {
             material,
             refractive_index: self.refractive_index,
             albedo: self.albedo,
+            hg,
             distribution,
             crystal,
         })
@@ -870,7 +891,8 @@ impl FieldFile {
     /// (default 10 for water, −20 for ice; ice in [−100, 0]); crystals must be ice.
     fn material_and_temperature(&self, keys: &Keys) -> Result<(Material, f64), SceneError> {
         let material = self.material.unwrap_or(match self.kind {
-            FieldKind::Cloud | FieldKind::Rain | FieldKind::Haze => Material::Water,
+            // A lobe has no material; water's stands in (nothing reads it).
+            FieldKind::Cloud | FieldKind::Rain | FieldKind::Haze | FieldKind::Hg => Material::Water,
             FieldKind::Ice | FieldKind::Snow => Material::Ice,
         });
         // Liquid drops at 10 °C, ice (crystals or frozen drops) at −20 °C unless given.
@@ -939,6 +961,107 @@ impl FieldFile {
             );
         }
         Ok(())
+    }
+
+    /// An `hg` field's lobe and cross-section, checked (g, g2 in (−1, 1), weight in (0, 1) with
+    /// g2, extinction_m2 in [1e-30, 1] m²), and no key of particles on it; the lobe's keys on
+    /// any other kind are refused.
+    fn hg(&self, keys: &Keys) -> Result<Option<mie::hg::HgField>, SceneError> {
+        let lobe_keys = [
+            ("g", self.g.is_some()),
+            ("g2", self.g2.is_some()),
+            ("weight", self.weight.is_some()),
+            ("extinction_m2", self.extinction_m2.is_some()),
+        ];
+        if self.kind != FieldKind::Hg {
+            if let Some((key, _)) = lobe_keys.iter().find(|(_, given)| *given) {
+                fail!(
+                    keys.at(key),
+                    "field {:?} ({}): {key} is a key of kind = \"hg\" fields (a given lobe)",
+                    self.name,
+                    self.kind
+                );
+            }
+            return Ok(None);
+        }
+        let particle_keys = [
+            ("distribution", self.distribution.is_some()),
+            ("material", self.material.is_some()),
+            ("temperature_c", self.temperature_c.is_some()),
+            ("refractive_index", self.refractive_index.is_some()),
+            ("habit", self.habit.is_some()),
+            ("aspect_ratio", self.aspect_ratio.is_some()),
+            ("max_dimension_um", self.max_dimension_um.is_some()),
+            ("dimension_sigma_g", self.dimension_sigma_g.is_some()),
+            ("roughness", self.roughness.is_some()),
+            ("sweep", self.sweep.is_some()),
+        ];
+        if let Some((key, _)) = particle_keys.iter().find(|(_, given)| *given) {
+            fail!(
+                keys.at(key),
+                "field {:?} (hg): {key} is a key of particles; an hg field is a given lobe \
+                 (g, g2, weight, extinction_m2, albedo)",
+                self.name
+            );
+        }
+        let asymmetry = |key: &str, g: f64| {
+            if g.is_finite() && g > -1.0 && g < 1.0 {
+                Ok(g)
+            } else {
+                Err(keys
+                    .at(key)
+                    .error(format!("{key} = {g} is outside the allowed range (−1, 1)")))
+            }
+        };
+        let Some(g) = self.g else {
+            fail!(
+                keys.at("kind"),
+                "field {:?} (hg): g, the lobe's asymmetry parameter in (−1, 1), is missing",
+                self.name
+            );
+        };
+        let g = asymmetry("g", g)?;
+        let (g2, weight) = match (self.g2, self.weight) {
+            (None, None) => (0.0, 1.0),
+            (Some(g2), Some(w)) => {
+                let g2 = asymmetry("g2", g2)?;
+                if !(w > 0.0 && w < 1.0) {
+                    fail!(
+                        keys.at("weight"),
+                        "weight = {w} is outside the allowed range (0, 1) (the first lobe's share)"
+                    );
+                }
+                (g2, w)
+            }
+            (Some(_), None) => fail!(
+                keys.at("g2"),
+                "field {:?} (hg): g2 needs weight, the first lobe's share in (0, 1)",
+                self.name
+            ),
+            (None, Some(_)) => fail!(
+                keys.at("weight"),
+                "field {:?} (hg): weight needs g2, the second lobe's asymmetry parameter",
+                self.name
+            ),
+        };
+        let Some(extinction_m2) = self.extinction_m2 else {
+            fail!(
+                keys.at("kind"),
+                "field {:?} (hg): extinction_m2, the extinction cross-section per particle in \
+                 [1e-30, 1] m², is missing",
+                self.name
+            );
+        };
+        if !(extinction_m2.is_finite() && (1e-30..=1.0).contains(&extinction_m2)) {
+            fail!(
+                keys.at("extinction_m2"),
+                "extinction_m2 = {extinction_m2} is outside the allowed range [1e-30, 1] m²"
+            );
+        }
+        Ok(Some(mie::hg::HgField {
+            lobe: mie::hg::HgLobe { g, g2, weight },
+            extinction_m2,
+        }))
     }
 
     /// The size distribution as given; for haze the default (lognormal, median 0.1 µm,
@@ -1374,6 +1497,63 @@ mod tests {
         let ice = "[[field]]\nname = \"ice\"\nkind = \"ice\"\nrefractive_index = [1.31, 0]\n";
         let e = error_of(&format!("{HEAD}{ice}"));
         assert!(e.contains("refractive_index is for spheres"), "{e}");
+    }
+
+    #[test]
+    fn an_hg_field_takes_its_lobe_and_refuses_what_is_not_one() {
+        // HEAD is two lines, the field's [[field]] line 3, name 4, kind 5, then the keys.
+        let hg = "[[field]]\nname = \"lobe\"\nkind = \"hg\"\n";
+        let one = format!("{HEAD}{hg}g = 0.8\nextinction_m2 = 1e-12\n");
+        let f = Scene::parse(&one, "s").unwrap().fields[0].clone();
+        assert_eq!(f.kind, FieldKind::Hg);
+        let h = f.hg.unwrap();
+        assert_eq!(
+            (h.lobe.g, h.lobe.weight, h.extinction_m2),
+            (0.8, 1.0, 1e-12)
+        );
+        assert_eq!((f.distribution, f.crystal), (None, None));
+        let two = format!("{HEAD}{hg}g = 0.9\ng2 = -0.2\nweight = 0.7\nextinction_m2 = 1\n");
+        let h = Scene::parse(&two, "s").unwrap().fields[0].hg.unwrap();
+        assert_eq!((h.lobe.g, h.lobe.g2, h.lobe.weight), (0.9, -0.2, 0.7));
+        for (extra, needle) in [
+            (
+                "extinction_m2 = 1e-12\n",
+                "line 5: field \"lobe\" (hg): g, the lobe's asymmetry parameter in (−1, 1), is missing",
+            ),
+            ("g = 0.5\n", "line 5: field \"lobe\" (hg): extinction_m2"),
+            (
+                "g = 1\nextinction_m2 = 1e-12\n",
+                "line 6: g = 1 is outside the allowed range (−1, 1)",
+            ),
+            (
+                "g = 0.5\ng2 = 0.2\nextinction_m2 = 1e-12\n",
+                "line 7: field \"lobe\" (hg): g2 needs weight",
+            ),
+            (
+                "g = 0.5\ng2 = 0.2\nweight = 1.5\nextinction_m2 = 1e-12\n",
+                "line 8: weight = 1.5 is outside the allowed range (0, 1)",
+            ),
+            (
+                "g = 0.5\nextinction_m2 = 2\n",
+                "line 7: extinction_m2 = 2 is outside the allowed range [1e-30, 1] m²",
+            ),
+            (
+                "g = 0.5\nextinction_m2 = 1e-12\ndistribution = { kind = \"gamma\", r_eff_um = 10, v_eff = 0.1 }\n",
+                "line 8: field \"lobe\" (hg): distribution is a key of particles",
+            ),
+            (
+                "g = 0.5\nextinction_m2 = 1e-12\ntemperature_c = 5\n",
+                "line 8: field \"lobe\" (hg): temperature_c is a key of particles",
+            ),
+        ] {
+            let e = error_of(&format!("{HEAD}{hg}{extra}"));
+            assert!(e.contains(needle), "{extra}: {e}");
+        }
+        let e = error_of(&format!("{HEAD}{CLOUD}g = 0.8\n"));
+        assert!(
+            e.contains("line 7: field \"cloud\" (cloud): g is a key of kind = \"hg\" fields"),
+            "{e}"
+        );
     }
 
     #[test]

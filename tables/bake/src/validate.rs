@@ -214,7 +214,7 @@ pub fn validate(dir: &Path) -> Result<Report> {
                     ));
                 }
             }
-            FieldKind::Snow | FieldKind::Haze => featureless(&ctx, &mut checks),
+            FieldKind::Snow | FieldKind::Haze | FieldKind::Hg => featureless(&ctx, &mut checks),
         }
     }
     Ok(Report {

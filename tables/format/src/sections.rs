@@ -32,19 +32,24 @@ pub enum FieldKind {
     /// Haze: aerosol spheres (lognormal, 0.05–1 µm median radius), water by default or a
     /// given refractive index; its phase function makes light shafts visible.
     Haze,
+    /// A given Henyey–Greenstein lobe (one or two terms) with a given extinction
+    /// cross-section: what an engine's lobe renders like, beside the real particles.
+    Hg,
 }
 
 impl FieldKind {
     /// Every kind, in declaration order.
-    pub const ALL: [FieldKind; 5] = [
+    pub const ALL: [FieldKind; 6] = [
         FieldKind::Cloud,
         FieldKind::Rain,
         FieldKind::Ice,
         FieldKind::Snow,
         FieldKind::Haze,
+        FieldKind::Hg,
     ];
 
-    /// The kind's name as scenes and manifests write it: `cloud`, `rain`, `ice`, `snow`, `haze`.
+    /// The kind's name as scenes and manifests write it: `cloud`, `rain`, `ice`, `snow`,
+    /// `haze`, `hg`.
     pub fn name(self) -> &'static str {
         match self {
             FieldKind::Cloud => "cloud",
@@ -52,6 +57,7 @@ impl FieldKind {
             FieldKind::Ice => "ice",
             FieldKind::Snow => "snow",
             FieldKind::Haze => "haze",
+            FieldKind::Hg => "hg",
         }
     }
 
@@ -69,7 +75,7 @@ impl fmt::Display for FieldKind {
 
 /// A name that is not a [`FieldKind`].
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("field kind {0:?} is none of cloud, rain, ice, snow, haze")]
+#[error("field kind {0:?} is none of cloud, rain, ice, snow, haze, hg")]
 pub struct UnknownFieldKind(pub String);
 
 impl std::str::FromStr for FieldKind {
@@ -283,6 +289,9 @@ pub struct Microphysics {
     /// wavelength.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub albedo: Option<f64>,
+    /// A given lobe (`hg` fields), as the solver's `HgField` serializes it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub hg: Option<Value>,
     /// Temperature, °C.
     pub temperature_c: f64,
 }
@@ -314,15 +323,24 @@ impl Microphysics {
                 "microphysics.albedo = {a} is outside the allowed range (0, 1]"
             ));
         }
-        match (self.kind.is_drops(), &self.distribution, &self.crystal) {
-            (true, Some(_), None) | (false, None, Some(_)) => Ok(()),
+        let given = self.kind == FieldKind::Hg;
+        match (
+            self.kind.is_drops(),
+            &self.distribution,
+            &self.crystal,
+            &self.hg,
+        ) {
+            (true, Some(_), None, None) | (false, None, Some(_), None) if !given => Ok(()),
+            (false, None, None, Some(_)) if given => Ok(()),
             _ => Err(format!(
                 "microphysics of a {} field: expected {}",
                 self.kind,
-                if self.kind.is_drops() {
-                    "a distribution and no crystal"
+                if given {
+                    "a lobe (hg) and no distribution or crystal"
+                } else if self.kind.is_drops() {
+                    "a distribution and no crystal or lobe"
                 } else {
-                    "a crystal and no distribution"
+                    "a crystal and no distribution or lobe"
                 }
             )),
         }

@@ -587,6 +587,7 @@ fn sample_manifest() -> Manifest {
             name: name.to_string(),
             refractive_index: None,
             albedo: None,
+            hg: None,
             temperature_c: 10.0,
         },
         quality: QualityRecord {
