@@ -214,7 +214,13 @@ pub fn validate(dir: &Path) -> Result<Report> {
                     ));
                 }
             }
-            FieldKind::Snow | FieldKind::Haze | FieldKind::Hg => featureless(&ctx, &mut checks),
+            FieldKind::Snow | FieldKind::Haze => featureless(&ctx, &mut checks),
+            FieldKind::Hg => {
+                let hg: mie::hg::HgField =
+                    serde_json::from_value(micro.hg.clone().unwrap_or_default())
+                        .map_err(|e| manifest_error(format!("field {:?}: hg: {e}", entry.name)))?;
+                given_lobe(&ctx, &hg.lobe, &mut checks)?;
+            }
         }
     }
     Ok(Report {
@@ -631,6 +637,38 @@ fn halos(ctx: &FieldContext, n_of: &dyn Fn(f64) -> f64, checks: &mut Vec<Check>)
 /// Largest relative excess, between 10° and 60°, of a 5-bin mean over the 41-bin mean around
 /// it: a halo makes tens of percent, Monte Carlo noise on a smooth curve about a percent.
 pub const FEATURELESS_MAX_EXCESS: f64 = 0.05;
+
+/// The largest relative difference an `hg` field's Ams_1 may have from its lobe's exact bin
+/// averages: the EXR's 32-bit floats round to 6e-8.
+pub const GIVEN_LOBE_MAX_ERROR: f64 = 1e-7;
+
+/// An `hg` field's Ams_1 against its lobe's closed-form bin averages (`mie::hg`), per channel.
+fn given_lobe(ctx: &FieldContext, lobe: &mie::hg::HgLobe, checks: &mut Vec<Check>) -> Result<()> {
+    let grid = mie::ThetaGrid::new(ctx.step)
+        .map_err(|e| manifest_error(format!("theta_step_deg = {}: {e}", ctx.step)))?;
+    let want = lobe.bins(&grid);
+    for c in 0..3 {
+        let worst = ctx.rows[c]
+            .iter()
+            .zip(&want)
+            .map(|(got, want)| (got / want - 1.0).abs())
+            .fold(0.0, f64::max);
+        checks.push(ctx.judged(
+            c,
+            "Ams_1 is the given lobe",
+            Some(worst),
+            0.0,
+            GIVEN_LOBE_MAX_ERROR,
+            "rel",
+            format!(
+                "largest relative difference from the Henyey–Greenstein lobe's bin averages \
+                 (g {}, g2 {}, weight {})",
+                lobe.g, lobe.g2, lobe.weight
+            ),
+        ));
+    }
+    Ok(())
+}
 
 fn featureless(ctx: &FieldContext, checks: &mut Vec<Check>) {
     for c in 0..3 {

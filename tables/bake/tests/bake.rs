@@ -553,6 +553,36 @@ albedo = 0.95
         }
     }
     eprintln!("worst Ams_1 relative error {worst_ams1:.1e}, worst |χ_l − χ_l^n| {worst_chi:.1e}");
+    // `validate` judges each hg field's Ams_1 against its lobe: it passes here, and fails once
+    // the manifest names another lobe than the one baked.
+    let lobe_checks = |dir: &Path| -> Vec<bake::validate::Check> {
+        bake::validate::validate(dir)
+            .unwrap()
+            .checks
+            .into_iter()
+            .filter(|c| c.name == "Ams_1 is the given lobe")
+            .collect()
+    };
+    let checks = lobe_checks(dir.path());
+    assert_eq!(checks.len(), 6);
+    assert!(
+        checks
+            .iter()
+            .all(|c| c.status == bake::validate::Status::Pass),
+        "{checks:?}"
+    );
+    let path = dir.path().join("manifest.json");
+    let text = fs::read_to_string(&path).unwrap();
+    let mut edited: serde_json::Value = serde_json::from_str(&text).unwrap();
+    edited["fields"][0]["microphysics"]["hg"]["lobe"]["g"] = serde_json::json!(0.84);
+    fs::write(&path, serde_json::to_string_pretty(&edited).unwrap()).unwrap();
+    let checks = lobe_checks(dir.path());
+    let failed: Vec<&str> = checks
+        .iter()
+        .filter(|c| c.status == bake::validate::Status::Fail)
+        .map(|c| c.field.as_str())
+        .collect();
+    assert_eq!(failed, ["one"; 3], "{checks:?}");
 }
 
 #[test]
