@@ -4,7 +4,9 @@
 //!
 //! p_HG(μ; g) = (1 − g²) / (4π (1 + g² − 2gμ)^{3/2}) per sr (Henyey & Greenstein 1941, Eq. 4,
 //! normalized to 1 over the sphere); its Legendre coefficients are χ_l = g^l, so its n-fold
-//! self-convolution has χ_l = g^{ln}. A two-term lobe is w p_HG(g) + (1 − w) p_HG(g2).
+//! self-convolution has χ_l = g^{ln}. A two-term lobe is w p_HG(g) + (1 − w) p_HG(g2). Each
+//! value may be given per channel (R, G, B) where the scene samples one wavelength per channel
+//! (`rgb3`).
 //!
 //! The bins are exact: the average of p_HG over μ ∈ [μ_lo, μ_hi] is, from the antiderivative
 //! (1 − g²)/(4πg) (1 + g² − 2gμ)^{−1/2},
@@ -30,13 +32,14 @@ pub struct HgLobe {
     pub weight: f64,
 }
 
-/// A `kind = "hg"` field: its lobe and its optics, the same at every wavelength.
+/// A `kind = "hg"` field: its lobe and its optics per channel (R, G, B; the same three where
+/// the scene gave one value for all).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct HgField {
-    /// The phase function.
-    pub lobe: HgLobe,
-    /// Extinction cross-section per particle (m²).
-    pub extinction_m2: f64,
+    /// The phase function per channel.
+    pub lobes: [HgLobe; 3],
+    /// Extinction cross-section per particle (m²) per channel.
+    pub extinction_m2: [f64; 3],
 }
 
 impl HgLobe {
@@ -95,22 +98,30 @@ impl HgLobe {
 }
 
 impl HgField {
-    /// The field's optics at `wavelength_nm` on `grid`, with single-scattering `albedo`.
-    pub fn phase(&self, wavelength_nm: f64, grid: ThetaGrid, albedo: f64) -> PhaseFunction {
+    /// The field's optics of `channel` (0, 1, 2: R, G, B) at `wavelength_nm` on `grid`, with
+    /// single-scattering `albedo`.
+    pub fn phase(
+        &self,
+        channel: usize,
+        wavelength_nm: f64,
+        grid: ThetaGrid,
+        albedo: f64,
+    ) -> PhaseFunction {
+        let (lobe, extinction_m2) = (self.lobes[channel], self.extinction_m2[channel]);
         PhaseFunction {
             wavelength_nm,
             // A lobe has no refractive index: 1 + 0i.
             m_re: 1.0,
             m_im: 0.0,
-            sigma_ext_m2: self.extinction_m2,
-            sigma_sca_m2: albedo * self.extinction_m2,
+            sigma_ext_m2: extinction_m2,
+            sigma_sca_m2: albedo * extinction_m2,
             albedo,
-            g: self.lobe.asymmetry(),
-            bins: self.lobe.bins(&grid),
+            g: lobe.asymmetry(),
+            bins: lobe.bins(&grid),
             grid,
             forward_delta_fraction: 0.0,
             points: Vec::new(),
-            origin: Origin::Given(GivenOrigin { hg: self.lobe }),
+            origin: Origin::Given(GivenOrigin { hg: lobe }),
         }
     }
 }

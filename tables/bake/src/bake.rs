@@ -909,8 +909,13 @@ pub fn phase_functions(
         (None, None) => match field.hg {
             // A given lobe: its closed-form bins at every wavelength (mie::hg).
             Some(hg) => {
-                for &lambda in lambdas {
-                    per_wavelength.push(hg.phase(lambda, grid, field.albedo.unwrap_or(1.0)));
+                // Per-channel values come only with rgb3 (the scene's check): wavelength j is
+                // channel j there; otherwise the three channels' values are one.
+                let rgb3 = plan.scene.spectral == tables::spectral::SpectralMode::Rgb3;
+                for (j, &lambda) in lambdas.iter().enumerate() {
+                    let channel = if rgb3 { j } else { 0 };
+                    let albedo = field.albedo.unwrap_or(1.0);
+                    per_wavelength.push(hg.phase(channel, lambda, grid, albedo));
                     advance();
                 }
             }

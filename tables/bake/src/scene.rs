@@ -22,7 +22,8 @@
 //! #   own at every wavelength (the phase function and σ_ext stay)
 //! # kind = "hg": a given Henyey–Greenstein lobe instead of particles: g in (−1, 1), and for a
 //! #   two-term lobe g2 in (−1, 1) with weight (the first lobe's share, (0, 1)); extinction_m2,
-//! #   the cross-section per particle, [1e-30, 1] m²; albedo default 1
+//! #   the cross-section per particle, [1e-30, 1] m²; each one value or [R, G, B] (rgb3 only);
+//! #   albedo default 1
 //! # crystals instead of a distribution: habit = "plate" | "column" | "aggregate",
 //! # aspect_ratio (L/2a), max_dimension_um (median), dimension_sigma_g, roughness (Macke δ)
 //! temperature_c = 10
@@ -188,16 +189,16 @@ struct FieldFile {
     albedo: Option<f64>,
     /// `hg` fields: the (first) lobe's asymmetry parameter.
     #[serde(default)]
-    g: Option<f64>,
+    g: Option<PerChannelValue>,
     /// `hg` fields: the second lobe's asymmetry parameter.
     #[serde(default)]
-    g2: Option<f64>,
+    g2: Option<PerChannelValue>,
     /// `hg` fields: the first lobe's share of a two-term lobe.
     #[serde(default)]
-    weight: Option<f64>,
+    weight: Option<PerChannelValue>,
     /// `hg` fields: the extinction cross-section per particle (m²).
     #[serde(default)]
-    extinction_m2: Option<f64>,
+    extinction_m2: Option<PerChannelValue>,
     /// Crystal habit (ice, snow): plate | column | aggregate; sets the default aspect ratio.
     #[serde(default)]
     habit: Option<String>,
@@ -212,6 +213,14 @@ struct FieldFile {
     /// One microphysical key swept over a range: the field becomes one member per value.
     #[serde(default)]
     sweep: Option<SweepFile>,
+}
+
+/// One value for every wavelength, or one per channel `[R, G, B]` (rgb3 scenes).
+#[derive(Debug, Clone, Copy, Deserialize)]
+#[serde(untagged)]
+enum PerChannelValue {
+    One(f64),
+    Three([f64; 3]),
 }
 
 /// `sweep = { key = "r_eff_um", from = 4, to = 32, count = 16, spacing = "log" }`.
@@ -482,7 +491,7 @@ impl Scene {
                 fail!(keys.at("name"), "field name {:?} is used twice", field.name);
             }
             let Some(sweep) = field.sweep.take() else {
-                fields.push(field.validated(&keys, &fields)?);
+                fields.push(field.validated(&keys, &fields, &spectral)?);
                 continue;
             };
             let sweep = field.checked_sweep(&keys, sweep)?;
@@ -490,21 +499,23 @@ impl Scene {
             for (k, &value) in sweep.values.iter().enumerate() {
                 let mut member = field.clone();
                 member.set(&sweep.key, value);
-                let mut validated = member.validated(&keys, &fields[..before]).map_err(|e| {
-                    let message = match e {
-                        SceneError::At { message, .. } | SceneError::Scene { message, .. } => {
-                            message
-                        }
-                        other => other.to_string(),
-                    };
-                    keys.at("sweep").error(format!(
-                        "field {:?}: sweep of {} at {} = {}: {message}",
-                        field.name,
-                        sweep.key,
-                        sweep.key,
-                        mie::error::Shown(value)
-                    ))
-                })?;
+                let mut validated = member
+                    .validated(&keys, &fields[..before], &spectral)
+                    .map_err(|e| {
+                        let message = match e {
+                            SceneError::At { message, .. } | SceneError::Scene { message, .. } => {
+                                message
+                            }
+                            other => other.to_string(),
+                        };
+                        keys.at("sweep").error(format!(
+                            "field {:?}: sweep of {} at {} = {}: {message}",
+                            field.name,
+                            sweep.key,
+                            sweep.key,
+                            mie::error::Shown(value)
+                        ))
+                    })?;
                 validated.name = sweep.member(k);
                 fields.push(validated);
             }
@@ -703,12 +714,17 @@ impl Header {
 /// field is the one reported).
 impl FieldFile {
     /// The validated field; `earlier` are the scene's fields before it (names must differ).
-    fn validated(self, keys: &Keys, earlier: &[Field]) -> Result<Field, SceneError> {
+    fn validated(
+        self,
+        keys: &Keys,
+        earlier: &[Field],
+        spectral: &SpectralMode,
+    ) -> Result<Field, SceneError> {
         self.check_name(keys, earlier)?;
         let (material, temperature_c) = self.material_and_temperature(keys)?;
         self.check_refractive_index(keys)?;
         self.check_albedo(keys)?;
-        let hg = self.hg(keys)?;
+        let hg = self.hg(keys, spectral)?;
         let distribution = self.haze_distribution(keys)?;
         let (distribution, crystal) = match self.kind {
             FieldKind::Cloud | FieldKind::Rain | FieldKind::Haze => {
@@ -964,9 +980,13 @@ impl FieldFile {
     }
 
     /// An `hg` field's lobe and cross-section, checked (g, g2 in (−1, 1), weight in (0, 1) with
-    /// g2, extinction_m2 in [1e-30, 1] m²), and no key of particles on it; the lobe's keys on
-    /// any other kind are refused.
-    fn hg(&self, keys: &Keys) -> Result<Option<mie::hg::HgField>, SceneError> {
+    /// g2, extinction_m2 in [1e-30, 1] m²; each one value or [R, G, B], the latter with `rgb3`
+    /// only), and no key of particles on it; the lobe's keys on any other kind are refused.
+    fn hg(
+        &self,
+        keys: &Keys,
+        spectral: &SpectralMode,
+    ) -> Result<Option<mie::hg::HgField>, SceneError> {
         let lobe_keys = [
             ("g", self.g.is_some()),
             ("g2", self.g2.is_some()),
@@ -994,7 +1014,6 @@ impl FieldFile {
             ("max_dimension_um", self.max_dimension_um.is_some()),
             ("dimension_sigma_g", self.dimension_sigma_g.is_some()),
             ("roughness", self.roughness.is_some()),
-            ("sweep", self.sweep.is_some()),
         ];
         if let Some((key, _)) = particle_keys.iter().find(|(_, given)| *given) {
             fail!(
@@ -1004,15 +1023,43 @@ impl FieldFile {
                 self.name
             );
         }
-        let asymmetry = |key: &str, g: f64| {
-            if g.is_finite() && g > -1.0 && g < 1.0 {
-                Ok(g)
-            } else {
-                Err(keys
-                    .at(key)
-                    .error(format!("{key} = {g} is outside the allowed range (−1, 1)")))
+        // A key's three channel values, each within `ok` (`range` in words).
+        let channels = |key: &str,
+                        value: PerChannelValue,
+                        ok: &dyn Fn(f64) -> bool,
+                        range: &str|
+         -> Result<[f64; 3], SceneError> {
+            let values = match value {
+                PerChannelValue::One(v) => {
+                    if !ok(v) {
+                        fail!(
+                            keys.at(key),
+                            "{key} = {v} is outside the allowed range {range}"
+                        );
+                    }
+                    return Ok([v; 3]);
+                }
+                PerChannelValue::Three(v) => v,
+            };
+            if *spectral != SpectralMode::Rgb3 {
+                fail!(
+                    keys.at(key),
+                    "{key} = {values:?}: one value per channel needs spectral = \"rgb3\" (one \
+                     wavelength per channel); give one value for all wavelengths"
+                );
             }
+            for (c, v) in ["R", "G", "B"].iter().zip(values) {
+                if !ok(v) {
+                    fail!(
+                        keys.at(key),
+                        "{key} = {values:?}: the {c} value {v} is outside the allowed range \
+                         {range}"
+                    );
+                }
+            }
+            Ok(values)
         };
+        let asymmetry = |g: f64| g.is_finite() && g > -1.0 && g < 1.0;
         let Some(g) = self.g else {
             fail!(
                 keys.at("kind"),
@@ -1020,19 +1067,18 @@ impl FieldFile {
                 self.name
             );
         };
-        let g = asymmetry("g", g)?;
+        let g = channels("g", g, &asymmetry, "(−1, 1)")?;
         let (g2, weight) = match (self.g2, self.weight) {
-            (None, None) => (0.0, 1.0),
-            (Some(g2), Some(w)) => {
-                let g2 = asymmetry("g2", g2)?;
-                if !(w > 0.0 && w < 1.0) {
-                    fail!(
-                        keys.at("weight"),
-                        "weight = {w} is outside the allowed range (0, 1) (the first lobe's share)"
-                    );
-                }
-                (g2, w)
-            }
+            (None, None) => ([0.0; 3], [1.0; 3]),
+            (Some(g2), Some(w)) => (
+                channels("g2", g2, &asymmetry, "(−1, 1)")?,
+                channels(
+                    "weight",
+                    w,
+                    &|w| w > 0.0 && w < 1.0,
+                    "(0, 1) (the first lobe's share)",
+                )?,
+            ),
             (Some(_), None) => fail!(
                 keys.at("g2"),
                 "field {:?} (hg): g2 needs weight, the first lobe's share in (0, 1)",
@@ -1052,14 +1098,18 @@ impl FieldFile {
                 self.name
             );
         };
-        if !(extinction_m2.is_finite() && (1e-30..=1.0).contains(&extinction_m2)) {
-            fail!(
-                keys.at("extinction_m2"),
-                "extinction_m2 = {extinction_m2} is outside the allowed range [1e-30, 1] m²"
-            );
-        }
+        let extinction_m2 = channels(
+            "extinction_m2",
+            extinction_m2,
+            &|e| e.is_finite() && (1e-30..=1.0).contains(&e),
+            "[1e-30, 1] m²",
+        )?;
         Ok(Some(mie::hg::HgField {
-            lobe: mie::hg::HgLobe { g, g2, weight },
+            lobes: std::array::from_fn(|c| mie::hg::HgLobe {
+                g: g[c],
+                g2: g2[c],
+                weight: weight[c],
+            }),
             extinction_m2,
         }))
     }
@@ -1507,14 +1557,40 @@ mod tests {
         let f = Scene::parse(&one, "s").unwrap().fields[0].clone();
         assert_eq!(f.kind, FieldKind::Hg);
         let h = f.hg.unwrap();
-        assert_eq!(
-            (h.lobe.g, h.lobe.weight, h.extinction_m2),
-            (0.8, 1.0, 1e-12)
-        );
+        assert_eq!(h.lobes, [mie::hg::HgLobe::one(0.8); 3]);
+        assert_eq!(h.extinction_m2, [1e-12; 3]);
         assert_eq!((f.distribution, f.crystal), (None, None));
         let two = format!("{HEAD}{hg}g = 0.9\ng2 = -0.2\nweight = 0.7\nextinction_m2 = 1\n");
         let h = Scene::parse(&two, "s").unwrap().fields[0].hg.unwrap();
-        assert_eq!((h.lobe.g, h.lobe.g2, h.lobe.weight), (0.9, -0.2, 0.7));
+        let l = h.lobes[2];
+        assert_eq!((l.g, l.g2, l.weight), (0.9, -0.2, 0.7));
+        // One value per channel with rgb3; refused with the spectral default, and out of range
+        // naming the channel.
+        let rgb3 = "[scene]\nname = \"t\"\nspectral = \"rgb3\"\n";
+        let per = "g = [0.8, 0.85, 0.9]\nextinction_m2 = [1e-12, 2e-12, 3e-12]\n";
+        let h = Scene::parse(&format!("{rgb3}{hg}{per}"), "s")
+            .unwrap()
+            .fields[0]
+            .hg
+            .unwrap();
+        assert_eq!(h.lobes.map(|l| l.g), [0.8, 0.85, 0.9]);
+        assert_eq!(h.extinction_m2, [1e-12, 2e-12, 3e-12]);
+        let e = error_of(&format!("{HEAD}{hg}{per}"));
+        assert!(
+            e.contains(
+                "line 6: g = [0.8, 0.85, 0.9]: one value per channel needs spectral = \"rgb3\""
+            ),
+            "{e}"
+        );
+        let e = error_of(&format!(
+            "{rgb3}{hg}g = [0.8, 1.2, 0.9]\nextinction_m2 = 1\n"
+        ));
+        assert!(
+            e.contains(
+                "line 7: g = [0.8, 1.2, 0.9]: the G value 1.2 is outside the allowed range (−1, 1)"
+            ),
+            "{e}"
+        );
         for (extra, needle) in [
             (
                 "extinction_m2 = 1e-12\n",

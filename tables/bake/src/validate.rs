@@ -219,7 +219,7 @@ pub fn validate(dir: &Path) -> Result<Report> {
                 let hg: mie::hg::HgField =
                     serde_json::from_value(micro.hg.clone().unwrap_or_default())
                         .map_err(|e| manifest_error(format!("field {:?}: hg: {e}", entry.name)))?;
-                given_lobe(&ctx, &hg.lobe, &mut checks)?;
+                given_lobe(&ctx, &hg.lobes, &mut checks)?;
             }
         }
     }
@@ -643,11 +643,15 @@ pub const FEATURELESS_MAX_EXCESS: f64 = 0.05;
 pub const GIVEN_LOBE_MAX_ERROR: f64 = 1e-7;
 
 /// An `hg` field's Ams_1 against its lobe's closed-form bin averages (`mie::hg`), per channel.
-fn given_lobe(ctx: &FieldContext, lobe: &mie::hg::HgLobe, checks: &mut Vec<Check>) -> Result<()> {
+fn given_lobe(
+    ctx: &FieldContext,
+    lobes: &[mie::hg::HgLobe; 3],
+    checks: &mut Vec<Check>,
+) -> Result<()> {
     let grid = mie::ThetaGrid::new(ctx.step)
         .map_err(|e| manifest_error(format!("theta_step_deg = {}: {e}", ctx.step)))?;
-    let want = lobe.bins(&grid);
-    for c in 0..3 {
+    for (c, lobe) in lobes.iter().enumerate() {
+        let want = lobe.bins(&grid);
         let worst = ctx.rows[c]
             .iter()
             .zip(&want)
