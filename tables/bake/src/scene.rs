@@ -979,14 +979,9 @@ impl FieldFile {
         Ok(())
     }
 
-    /// An `hg` field's lobe and cross-section, checked (g, g2 in (−1, 1), weight in (0, 1) with
-    /// g2, extinction_m2 in [1e-30, 1] m²; each one value or [R, G, B], the latter with `rgb3`
-    /// only), and no key of particles on it; the lobe's keys on any other kind are refused.
-    fn hg(
-        &self,
-        keys: &Keys,
-        spectral: &SpectralMode,
-    ) -> Result<Option<mie::hg::HgField>, SceneError> {
+    /// Whether this is an `hg` field, its keys checked: no key of particles on it, and the
+    /// lobe's keys on no other kind.
+    fn lobe_keys_fit_the_kind(&self, keys: &Keys) -> Result<bool, SceneError> {
         let lobe_keys = [
             ("g", self.g.is_some()),
             ("g2", self.g2.is_some()),
@@ -1002,7 +997,7 @@ impl FieldFile {
                     self.kind
                 );
             }
-            return Ok(None);
+            return Ok(false);
         }
         let particle_keys = [
             ("distribution", self.distribution.is_some()),
@@ -1022,6 +1017,20 @@ impl FieldFile {
                  (g, g2, weight, extinction_m2, albedo)",
                 self.name
             );
+        }
+        Ok(true)
+    }
+
+    /// An `hg` field's lobe and cross-section, checked (g, g2 in (−1, 1), weight in (0, 1) with
+    /// g2, extinction_m2 in [1e-30, 1] m²; each one value or [R, G, B], the latter with `rgb3`
+    /// only), and no key of particles on it; the lobe's keys on any other kind are refused.
+    fn hg(
+        &self,
+        keys: &Keys,
+        spectral: &SpectralMode,
+    ) -> Result<Option<mie::hg::HgField>, SceneError> {
+        if !self.lobe_keys_fit_the_kind(keys)? {
+            return Ok(None);
         }
         // A key's three channel values, each within `ok` (`range` in words).
         let channels = |key: &str,

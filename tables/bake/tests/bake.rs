@@ -451,6 +451,40 @@ fn legendre_of_bins(row: &[f64], grid: &ThetaGrid, l_max: usize) -> Vec<f64> {
         .collect()
 }
 
+/// `validate` on the hg test's bake in `dir` (fields one, two, rgb): each lobe check passes,
+/// and the G channel of `rgb` alone fails once the manifest names another G lobe than the one
+/// baked.
+fn validate_judges_each_lobe(dir: &Path) {
+    let lobe_checks = |dir: &Path| -> Vec<bake::validate::Check> {
+        bake::validate::validate(dir)
+            .unwrap()
+            .checks
+            .into_iter()
+            .filter(|c| c.name == "Ams_1 is the given lobe")
+            .collect()
+    };
+    let checks = lobe_checks(dir);
+    assert_eq!(checks.len(), 9);
+    assert!(
+        checks
+            .iter()
+            .all(|c| c.status == bake::validate::Status::Pass),
+        "{checks:?}"
+    );
+    let path = dir.join("manifest.json");
+    let text = fs::read_to_string(&path).unwrap();
+    let mut edited: serde_json::Value = serde_json::from_str(&text).unwrap();
+    edited["fields"][2]["microphysics"]["hg"]["lobes"][1]["g"] = serde_json::json!(0.84);
+    fs::write(&path, serde_json::to_string_pretty(&edited).unwrap()).unwrap();
+    let checks = lobe_checks(dir);
+    let failed: Vec<(&str, &str)> = checks
+        .iter()
+        .filter(|c| c.status == bake::validate::Status::Fail)
+        .map(|c| (c.field.as_str(), c.channel.as_str()))
+        .collect();
+    assert_eq!(failed, [("rgb", "G")], "{checks:?}");
+}
+
 #[test]
 fn an_hg_field_is_its_closed_form_and_its_orders_are_its_powers() {
     // One- and two-term lobes as `kind = "hg"` fields: Ams_1 is the lobe's bin average (the
@@ -568,36 +602,7 @@ extinction_m2 = [1e-12, 2e-12, 3e-12]
         }
     }
     eprintln!("worst Ams_1 relative error {worst_ams1:.1e}, worst |χ_l − χ_l^n| {worst_chi:.1e}");
-    // `validate` judges each hg field's Ams_1 against its lobe: it passes here, and fails once
-    // the manifest names another lobe than the one baked.
-    let lobe_checks = |dir: &Path| -> Vec<bake::validate::Check> {
-        bake::validate::validate(dir)
-            .unwrap()
-            .checks
-            .into_iter()
-            .filter(|c| c.name == "Ams_1 is the given lobe")
-            .collect()
-    };
-    let checks = lobe_checks(dir.path());
-    assert_eq!(checks.len(), 9);
-    assert!(
-        checks
-            .iter()
-            .all(|c| c.status == bake::validate::Status::Pass),
-        "{checks:?}"
-    );
-    let path = dir.path().join("manifest.json");
-    let text = fs::read_to_string(&path).unwrap();
-    let mut edited: serde_json::Value = serde_json::from_str(&text).unwrap();
-    edited["fields"][2]["microphysics"]["hg"]["lobes"][1]["g"] = serde_json::json!(0.84);
-    fs::write(&path, serde_json::to_string_pretty(&edited).unwrap()).unwrap();
-    let checks = lobe_checks(dir.path());
-    let failed: Vec<(&str, &str)> = checks
-        .iter()
-        .filter(|c| c.status == bake::validate::Status::Fail)
-        .map(|c| (c.field.as_str(), c.channel.as_str()))
-        .collect();
-    assert_eq!(failed, [("rgb", "G")], "{checks:?}");
+    validate_judges_each_lobe(dir.path());
 }
 
 #[test]
