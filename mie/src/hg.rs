@@ -98,15 +98,9 @@ impl HgLobe {
 }
 
 impl HgField {
-    /// The field's optics of `channel` (0, 1, 2: R, G, B) at `wavelength_nm` on `grid`, with
-    /// single-scattering `albedo`.
-    pub fn phase(
-        &self,
-        channel: usize,
-        wavelength_nm: f64,
-        grid: ThetaGrid,
-        albedo: f64,
-    ) -> PhaseFunction {
+    /// The field's optics of `channel` (0, 1, 2: R, G, B) at `wavelength_nm` on `grid`; the lobe
+    /// scatters all it removes (albedo 1: a field's given albedo replaces it, as any field's).
+    pub fn phase(&self, channel: usize, wavelength_nm: f64, grid: ThetaGrid) -> PhaseFunction {
         let (lobe, extinction_m2) = (self.lobes[channel], self.extinction_m2[channel]);
         PhaseFunction {
             wavelength_nm,
@@ -114,8 +108,8 @@ impl HgField {
             m_re: 1.0,
             m_im: 0.0,
             sigma_ext_m2: extinction_m2,
-            sigma_sca_m2: albedo * extinction_m2,
-            albedo,
+            sigma_sca_m2: extinction_m2,
+            albedo: 1.0,
             g: lobe.asymmetry(),
             bins: lobe.bins(&grid),
             grid,

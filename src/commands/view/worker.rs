@@ -150,7 +150,11 @@ impl Worker {
     pub fn trace(&self, request: Request) -> TruthRun {
         let (news, inbox) = channel();
         let stop = Arc::new(AtomicBool::new(false));
-        self.stops.lock().expect("not poisoned").push(stop.clone());
+        let mut stops = self.stops.lock().expect("not poisoned");
+        // A flag only this list holds belongs to a run that has ended and been dropped.
+        stops.retain(|s| Arc::strong_count(s) > 1);
+        stops.push(stop.clone());
+        drop(stops);
         let run = TruthRun {
             view: (request.camera, request.sun, request.density_scale),
             news: inbox,

@@ -914,8 +914,7 @@ pub fn phase_functions(
                 let rgb3 = plan.scene.spectral == tables::spectral::SpectralMode::Rgb3;
                 for (j, &lambda) in lambdas.iter().enumerate() {
                     let channel = if rgb3 { j } else { 0 };
-                    let albedo = field.albedo.unwrap_or(1.0);
-                    per_wavelength.push(hg.phase(channel, lambda, grid, albedo));
+                    per_wavelength.push(hg.phase(channel, lambda, grid));
                     advance();
                 }
             }

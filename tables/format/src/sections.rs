@@ -323,26 +323,33 @@ impl Microphysics {
                 "microphysics.albedo = {a} is outside the allowed range (0, 1]"
             ));
         }
-        let given = self.kind == FieldKind::Hg;
-        match (
-            self.kind.is_drops(),
-            &self.distribution,
-            &self.crystal,
-            &self.hg,
-        ) {
-            (true, Some(_), None, None) | (false, None, Some(_), None) if !given => Ok(()),
-            (false, None, None, Some(_)) if given => Ok(()),
-            _ => Err(format!(
-                "microphysics of a {} field: expected {}",
-                self.kind,
-                if given {
-                    "a lobe (hg) and no distribution or crystal"
-                } else if self.kind.is_drops() {
-                    "a distribution and no crystal or lobe"
-                } else {
-                    "a crystal and no distribution or lobe"
-                }
-            )),
+        // What each kind holds (a distribution, a crystal, a lobe), and says it lacks.
+        let (wanted, expected) = match self.kind {
+            FieldKind::Hg => (
+                (false, false, true),
+                "a lobe (hg) and no distribution or crystal",
+            ),
+            k if k.is_drops() => (
+                (true, false, false),
+                "a distribution and no crystal or lobe",
+            ),
+            _ => (
+                (false, true, false),
+                "a crystal and no distribution or lobe",
+            ),
+        };
+        let held = (
+            self.distribution.is_some(),
+            self.crystal.is_some(),
+            self.hg.is_some(),
+        );
+        if held == wanted {
+            Ok(())
+        } else {
+            Err(format!(
+                "microphysics of a {} field: expected {expected}",
+                self.kind
+            ))
         }
     }
 }
