@@ -30,6 +30,7 @@ pub use ::grid::quadrature;
 pub mod reference;
 pub mod refractive;
 pub mod sphere;
+pub mod tabulated;
 pub mod theory;
 
 pub use amplitude::{FoldedAngles, SphereTerms, amplitudes, exact_cosine_deg};
@@ -37,7 +38,7 @@ pub use distribution::{DistributionOptions, SizeDistribution, SizeQuadrature};
 pub use ensemble::{BulkRequest, NodeCounts, bulk_phase};
 pub use error::MieError;
 pub use grid::{GridError, ThetaGrid};
-pub use phase::{CrystalOrigin, GivenOrigin, MieOrigin, Origin, PhaseFunction};
+pub use phase::{CrystalOrigin, GivenOrigin, MieOrigin, Origin, PhaseFunction, TableOrigin};
 pub use refractive::Material;
 pub use sphere::{Efficiencies, MieCoefficients, Sphere};
 pub use theory::size_parameter;

@@ -56,6 +56,8 @@ pub enum Origin {
     Crystal(CrystalOrigin),
     /// A given lobe (`kind = "hg"`), in closed form.
     Given(GivenOrigin),
+    /// A given table (`kind = "tabulated"`), linear in θ between its rows.
+    Table(TableOrigin),
 }
 
 /// The lobe behind a given [`PhaseFunction`].
@@ -63,6 +65,20 @@ pub enum Origin {
 pub struct GivenOrigin {
     /// The Henyey–Greenstein lobe.
     pub hg: crate::hg::HgLobe,
+}
+
+/// The table behind a given [`PhaseFunction`].
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct TableOrigin {
+    /// The file, as the scene names it.
+    pub file: String,
+    /// The column read (1-based, after θ).
+    pub column: usize,
+    /// The table's rows.
+    pub rows: usize,
+    /// The column's integral over the sphere as given (the normalization found; the bins are
+    /// divided by it).
+    pub sphere_integral: f64,
 }
 
 /// The quadrature behind a sphere population's [`PhaseFunction`].
@@ -109,7 +125,7 @@ impl PhaseFunction {
     pub fn mie(&self) -> Option<&MieOrigin> {
         match &self.origin {
             Origin::Mie(m) => Some(m),
-            Origin::Crystal(_) | Origin::Given(_) => None,
+            Origin::Crystal(_) | Origin::Given(_) | Origin::Table(_) => None,
         }
     }
 
@@ -117,7 +133,7 @@ impl PhaseFunction {
     pub fn crystal(&self) -> Option<&CrystalOrigin> {
         match &self.origin {
             Origin::Crystal(c) => Some(c),
-            Origin::Mie(_) | Origin::Given(_) => None,
+            Origin::Mie(_) | Origin::Given(_) | Origin::Table(_) => None,
         }
     }
 }

@@ -60,7 +60,16 @@ pub fn run(a: BakeArgs) -> Result<()> {
             "default scene".into(),
         ),
     };
-    let scene = Scene::parse(&text, &origin)?;
+    // A field's `file` is relative to the scene's folder, which a shard records (absolute)
+    // for the merge.
+    let scene_dir = match &a.scene {
+        Some(p) => Some(
+            std::path::absolute(p.parent().unwrap_or(std::path::Path::new("")))
+                .with_context(|| format!("the folder of scene {}", p.display()))?,
+        ),
+        None => None,
+    };
+    let scene = Scene::parse_in(&text, &origin, scene_dir.as_deref())?;
     let quality = match a.quality.as_deref() {
         Some(q) => Quality::parse(q).context("quality preset")?,
         None => scene.quality,
@@ -78,7 +87,9 @@ pub fn run(a: BakeArgs) -> Result<()> {
         .build()
         .context("building the thread pool")?;
     if let Some(shard) = a.shard {
-        let record = pool.install(|| bake::shard::run_shard(&plan, &text, shard, &progress))?;
+        let record = pool.install(|| {
+            bake::shard::run_shard(&plan, &text, scene_dir.as_deref(), shard, &progress)
+        })?;
         if a.json {
             // The record (shard.json's content) and the process's peak memory.
             let mut json = serde_json::to_value(&record)?;

@@ -887,7 +887,7 @@ fn features(kind: FieldKind) -> Vec<(&'static str, f64, f64)> {
             v.push(("22° halo", 21.0, 24.0));
             v.push(("46° halo", 44.5, 47.5));
         }
-        FieldKind::Haze | FieldKind::Hg => {}
+        FieldKind::Haze | FieldKind::Hg | FieldKind::Tabulated => {}
     }
     v
 }

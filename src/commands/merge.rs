@@ -32,7 +32,11 @@ pub fn run(a: MergeArgs) -> Result<()> {
     // The output may not be, hold or lie inside a shard directory (the shards are inputs).
     let protected: Vec<&std::path::Path> = a.shards.iter().map(PathBuf::as_path).collect();
     format::check_output_dir(&a.out, &protected)?;
-    let scene = Scene::parse(&merge.scene_text, "the shards' scene")?;
+    let scene = Scene::parse_in(
+        &merge.scene_text,
+        "the shards' scene",
+        merge.scene_dir.as_deref(),
+    )?;
     let mut plan = BakePlan::for_preset(scene, a.out.clone(), merge.quality);
     plan.knobs.seed = merge.seed;
     for (field, (_, hash)) in plan.scene.fields.iter().zip(&merge.records) {

@@ -278,7 +278,7 @@ pub fn prepare(
             PathBuf::from("."),
         ),
     };
-    let mut scene = Scene::parse(&text, &origin)?;
+    let mut scene = Scene::parse_in(&text, &origin, Some(&base))?;
     let mut render = RenderScene::parse(&text, &origin, &base)?;
     adjust(&mut render);
     let limit = memory_limit(max_memory_gib)?;

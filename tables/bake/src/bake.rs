@@ -708,10 +708,14 @@ fn field_entry(
             },
             name: field.name.clone(),
             refractive_index: field.refractive_index,
-            albedo: field.albedo,
+            albedo: field.albedo.map(format::ChannelValues::of),
             hg: field
                 .hg
                 .map(|h| serde_json::to_value(h).expect("a lobe serializes")),
+            tabulated: field
+                .tabulated
+                .as_ref()
+                .map(|t| serde_json::to_value(t).expect("a table serializes")),
             temperature_c: field.temperature_c,
         },
         quality: format::QualityRecord {
@@ -906,33 +910,18 @@ pub fn phase_functions(
             }
             per_wavelength = phases;
         }
-        (None, None) => match field.hg {
-            // A given lobe: its closed-form bins at every wavelength (mie::hg).
-            Some(hg) => {
-                // Per-channel values come only with rgb3 (the scene's check): wavelength j is
-                // channel j there; otherwise the three channels' values are one.
-                let rgb3 = plan.scene.spectral == tables::spectral::SpectralMode::Rgb3;
-                for (j, &lambda) in lambdas.iter().enumerate() {
-                    let channel = if rgb3 { j } else { 0 };
-                    per_wavelength.push(hg.phase(channel, lambda, grid));
-                    advance();
-                }
-            }
-            None => {
-                return Err(BakeError::Incompatible(format!(
-                    "field {:?} has neither sizes nor crystals nor a lobe",
-                    field.name
-                )));
-            }
-        },
+        (None, None) => per_wavelength = given_phases(plan, field, lambdas, grid, advance)?,
     }
     // A given albedo replaces the particles' own: σ_sca = α σ_ext at every wavelength, the
     // phase function and σ_ext as computed (so the channels' mixing weights, their albedo and
-    // the side tables all follow from it).
+    // the side tables all follow from it). Per-channel values come only with rgb3, where
+    // wavelength j is channel j.
     if let Some(albedo) = field.albedo {
-        for p in &mut per_wavelength {
-            p.sigma_sca_m2 = albedo * p.sigma_ext_m2;
-            p.albedo = albedo;
+        let rgb3 = plan.scene.spectral == tables::spectral::SpectralMode::Rgb3;
+        for (j, p) in per_wavelength.iter_mut().enumerate() {
+            let a = albedo[if rgb3 { j } else { 0 }];
+            p.sigma_sca_m2 = a * p.sigma_ext_m2;
+            p.albedo = a;
         }
     }
     Ok(Phases {
@@ -940,6 +929,38 @@ pub fn phase_functions(
         size_errors,
         sizes,
     })
+}
+
+/// A given phase function's optics at each of `lambdas`: an `hg` field's closed-form bins
+/// (`mie::hg`) or a `tabulated` field's exact bins of its linear interpolant
+/// (`mie::tabulated`). Per-channel values come only with rgb3 (the scene's check), where
+/// wavelength j is channel j; otherwise the three channels' values are one.
+fn given_phases(
+    plan: &BakePlan,
+    field: &Field,
+    lambdas: &[f64],
+    grid: ThetaGrid,
+    advance: &dyn Fn(),
+) -> Result<Vec<PhaseFunction>, BakeError> {
+    let rgb3 = plan.scene.spectral == tables::spectral::SpectralMode::Rgb3;
+    let channel = |j: usize| if rgb3 { j } else { 0 };
+    let phase = |j: usize, lambda: f64| match (&field.hg, &field.tabulated) {
+        (Some(hg), _) => Ok(hg.phase(channel(j), lambda, grid)),
+        (None, Some(table)) => Ok(table.phase(table.column_of(j), channel(j), lambda, grid)),
+        (None, None) => Err(BakeError::Incompatible(format!(
+            "field {:?} has neither sizes nor crystals nor a lobe nor a table",
+            field.name
+        ))),
+    };
+    lambdas
+        .iter()
+        .enumerate()
+        .map(|(j, &lambda)| {
+            let p = phase(j, lambda);
+            advance();
+            p
+        })
+        .collect()
 }
 
 /// Carries every wavelength's tracer on to `chunks(tracer, j)` chunks, the wavelengths side by
@@ -1039,6 +1060,8 @@ pub fn compute_field(
         "ray tracing per wavelength"
     } else if field.hg.is_some() {
         "Henyey–Greenstein lobe per wavelength"
+    } else if field.tabulated.is_some() {
+        "the table per wavelength"
     } else {
         "Mie per wavelength"
     });

@@ -2,7 +2,7 @@
 //!
 //! The flow: a TOML [`scene::Scene`] (validated, plain data) and a quality preset make a
 //! [`plan::BakePlan`]; [`bake::run`] computes each field's [`mie::PhaseFunction`] per
-//! wavelength (Mie spheres or the crystal tracer), turns them into Ams_n and F_n per RGB channel
+//! wavelength (Mie spheres, the crystal tracer, or a given lobe or table), turns them into Ams_n and F_n per RGB channel
 //! (`photometeor-tables`), and writes four EXRs per field (the tables and the side tables the
 //! render models read: single scattering per wavelength, Poisson mixtures, Biri's kernel) and
 //! `manifest.json` (`photometeor-format`). Unchanged fields come from the [`cache`]; [`shard`]
@@ -18,6 +18,7 @@ pub mod bake;
 pub mod cache;
 pub mod compare;
 pub mod error;
+pub mod phase_table;
 pub mod plan;
 pub mod progress;
 pub mod scene;

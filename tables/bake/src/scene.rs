@@ -23,7 +23,11 @@
 //! # kind = "hg": a given Henyey–Greenstein lobe instead of particles: g in (−1, 1), and for a
 //! #   two-term lobe g2 in (−1, 1) with weight (the first lobe's share, (0, 1)); extinction_m2,
 //! #   the cross-section per particle, [1e-30, 1] m²; each one value or [R, G, B] (rgb3 only);
-//! #   albedo default 1
+//! #   albedo default 1; albedo may be [R, G, B] (rgb3 only) on any field
+//! # kind = "tabulated": a given phase-function table instead of particles: file (CSV or .npy,
+//! #   relative to the scene's folder: θ in degrees from 0 to 180 increasing, then p in any
+//! #   unit, one column for every wavelength or one per wavelength of the scene, R, G, B in
+//! #   rgb3), linear in θ between rows and normalized by us; extinction_m2 as for hg
 //! # crystals instead of a distribution: habit = "plate" | "column" | "aggregate",
 //! # aspect_ratio (L/2a), max_dimension_um (median), dimension_sigma_g, roughness (Macke δ)
 //! temperature_c = 10
@@ -184,9 +188,9 @@ struct FieldFile {
     /// A sphere field's own refractive index m = n + iκ, the same at every wavelength.
     #[serde(default)]
     refractive_index: Option<[f64; 2]>,
-    /// A given single-scattering albedo, the same at every wavelength.
+    /// A given single-scattering albedo, one for all wavelengths or one per channel.
     #[serde(default)]
-    albedo: Option<f64>,
+    albedo: Option<PerChannelValue>,
     /// `hg` fields: the (first) lobe's asymmetry parameter.
     #[serde(default)]
     g: Option<PerChannelValue>,
@@ -196,9 +200,12 @@ struct FieldFile {
     /// `hg` fields: the first lobe's share of a two-term lobe.
     #[serde(default)]
     weight: Option<PerChannelValue>,
-    /// `hg` fields: the extinction cross-section per particle (m²).
+    /// `hg` and `tabulated` fields: the extinction cross-section per particle (m²).
     #[serde(default)]
     extinction_m2: Option<PerChannelValue>,
+    /// `tabulated` fields: the table's file (CSV or .npy), relative to the scene's folder.
+    #[serde(default)]
+    file: Option<String>,
     /// Crystal habit (ice, snow): plate | column | aggregate; sets the default aspect ratio.
     #[serde(default)]
     habit: Option<String>,
@@ -345,11 +352,16 @@ pub struct Field {
     pub refractive_index: Option<[f64; 2]>,
     /// A given single-scattering albedo σ_sca/σ_ext in (0, 1], replacing the particles' own at
     /// every wavelength (σ_ext and the phase function stay as computed); `None`: their own.
+    /// One per channel (R, G, B; the three equal where the scene gave one value).
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub albedo: Option<f64>,
+    pub albedo: Option<[f64; 3]>,
     /// A given lobe instead of particles (`kind = "hg"`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub hg: Option<mie::hg::HgField>,
+    /// A given table instead of particles (`kind = "tabulated"`), as read from its file (so
+    /// the cache key holds its values).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub tabulated: Option<mie::tabulated::TabulatedField>,
     /// Size distribution of spheres (cloud, rain).
     pub distribution: Option<SizeDistribution>,
     /// Crystal population (ice, snow).
@@ -454,11 +466,18 @@ impl Scene {
             path: path.to_path_buf(),
             source,
         })?;
-        Self::parse(&text, &path.display().to_string())
+        Self::parse_in(&text, &path.display().to_string(), path.parent())
     }
 
-    /// Parses and validates scene text; `origin` names it in errors.
+    /// Parses and validates scene text; `origin` names it in errors; a field's `file` is
+    /// relative to the working folder.
     pub fn parse(text: &str, origin: &str) -> Result<Self, SceneError> {
+        Self::parse_in(text, origin, None)
+    }
+
+    /// Parses and validates scene text; `origin` names it in errors; a field's `file` is
+    /// relative to `dir` (the working folder where None).
+    pub fn parse_in(text: &str, origin: &str, dir: Option<&Path>) -> Result<Self, SceneError> {
         let file: SceneFile = toml::from_str(text).map_err(|e| SceneError::At {
             origin: origin.to_string(),
             line: e.span().map(|s| line_of(text, s.start)).unwrap_or(0),
@@ -468,6 +487,7 @@ impl Scene {
             text,
             origin,
             span: file.scene.span(),
+            dir,
         };
         let header = file.scene.into_inner();
         header.check_name(&keys)?;
@@ -485,6 +505,7 @@ impl Scene {
                 text,
                 origin,
                 span: spanned.span(),
+                dir,
             };
             let mut field = spanned.into_inner();
             if sweeps.iter().any(|s| s.name == field.name) {
@@ -545,6 +566,8 @@ struct Keys<'a> {
     text: &'a str,
     origin: &'a str,
     span: std::ops::Range<usize>,
+    /// The folder a field's `file` is relative to (the scene file's; None: the working one).
+    dir: Option<&'a Path>,
 }
 
 impl Keys<'_> {
@@ -710,6 +733,46 @@ impl Header {
     }
 }
 
+/// A key's three channel values (R, G, B), each within `ok` (`range` in words): one value for
+/// all, or three where the scene samples one wavelength per channel (`rgb3`).
+fn per_channel(
+    keys: &Keys,
+    spectral: &SpectralMode,
+    key: &str,
+    value: PerChannelValue,
+    ok: &dyn Fn(f64) -> bool,
+    range: &str,
+) -> Result<[f64; 3], SceneError> {
+    let values = match value {
+        PerChannelValue::One(v) => {
+            if !ok(v) {
+                fail!(
+                    keys.at(key),
+                    "{key} = {v} is outside the allowed range {range}"
+                );
+            }
+            return Ok([v; 3]);
+        }
+        PerChannelValue::Three(v) => v,
+    };
+    if *spectral != SpectralMode::Rgb3 {
+        fail!(
+            keys.at(key),
+            "{key} = {values:?}: one value per channel needs spectral = \"rgb3\" (one \
+             wavelength per channel); give one value for all wavelengths"
+        );
+    }
+    for (c, v) in ["R", "G", "B"].iter().zip(values) {
+        if !ok(v) {
+            fail!(
+                keys.at(key),
+                "{key} = {values:?}: the {c} value {v} is outside the allowed range {range}"
+            );
+        }
+    }
+    Ok(values)
+}
+
 /// A `[[field]]` table's keys, each checked in turn (in this order, so the first bad key of a
 /// field is the one reported).
 impl FieldFile {
@@ -723,8 +786,10 @@ impl FieldFile {
         self.check_name(keys, earlier)?;
         let (material, temperature_c) = self.material_and_temperature(keys)?;
         self.check_refractive_index(keys)?;
-        self.check_albedo(keys)?;
+        let albedo = self.albedo(keys, spectral)?;
+        self.given_keys_fit_the_kind(keys)?;
         let hg = self.hg(keys, spectral)?;
+        let tabulated = self.tabulated(keys, spectral)?;
         let distribution = self.haze_distribution(keys)?;
         let (distribution, crystal) = match self.kind {
             FieldKind::Cloud | FieldKind::Rain | FieldKind::Haze => {
@@ -732,7 +797,7 @@ impl FieldFile {
                 (Some(d), None)
             }
             FieldKind::Ice | FieldKind::Snow => (None, Some(self.crystal(keys, distribution)?)),
-            FieldKind::Hg => (None, None),
+            FieldKind::Hg | FieldKind::Tabulated => (None, None),
         };
         Ok(Field {
             name: self.name,
@@ -740,8 +805,9 @@ impl FieldFile {
             temperature_c,
             material,
             refractive_index: self.refractive_index,
-            albedo: self.albedo,
+            albedo,
             hg,
+            tabulated,
             distribution,
             crystal,
         })
@@ -908,7 +974,8 @@ impl FieldFile {
     fn material_and_temperature(&self, keys: &Keys) -> Result<(Material, f64), SceneError> {
         let material = self.material.unwrap_or(match self.kind {
             // A lobe has no material; water's stands in (nothing reads it).
-            FieldKind::Cloud | FieldKind::Rain | FieldKind::Haze | FieldKind::Hg => Material::Water,
+            FieldKind::Cloud | FieldKind::Rain | FieldKind::Haze => Material::Water,
+            FieldKind::Hg | FieldKind::Tabulated => Material::Water,
             FieldKind::Ice | FieldKind::Snow => Material::Ice,
         });
         // Liquid drops at 10 °C, ice (crystals or frozen drops) at −20 °C unless given.
@@ -965,39 +1032,55 @@ impl FieldFile {
         Ok(())
     }
 
-    /// A given albedo is in (0, 1].
-    fn check_albedo(&self, keys: &Keys) -> Result<(), SceneError> {
-        if let Some(a) = self.albedo
-            && !(a > 0.0 && a <= 1.0)
-        {
-            fail!(
-                keys.at("albedo"),
-                "albedo = {a} is outside the allowed range (0, 1] (the share of the extinguished \
-                 light that is scattered)"
-            );
-        }
-        Ok(())
+    /// A given albedo, per channel, each in (0, 1].
+    fn albedo(&self, keys: &Keys, spectral: &SpectralMode) -> Result<Option<[f64; 3]>, SceneError> {
+        self.albedo
+            .map(|a| {
+                per_channel(
+                    keys,
+                    spectral,
+                    "albedo",
+                    a,
+                    &|a| a > 0.0 && a <= 1.0,
+                    "(0, 1] (the share of the extinguished light that is scattered)",
+                )
+            })
+            .transpose()
     }
 
-    /// Whether this is an `hg` field, its keys checked: no key of particles on it, and the
-    /// lobe's keys on no other kind.
-    fn lobe_keys_fit_the_kind(&self, keys: &Keys) -> Result<bool, SceneError> {
-        let lobe_keys = [
-            ("g", self.g.is_some()),
-            ("g2", self.g2.is_some()),
-            ("weight", self.weight.is_some()),
-            ("extinction_m2", self.extinction_m2.is_some()),
+    /// A given phase function's keys on its kind only (`g`, `g2`, `weight` on hg, `file` on
+    /// tabulated, `extinction_m2` on both), and no key of particles on either.
+    fn given_keys_fit_the_kind(&self, keys: &Keys) -> Result<(), SceneError> {
+        let given_keys = [
+            ("g", self.g.is_some(), FieldKind::Hg == self.kind),
+            ("g2", self.g2.is_some(), FieldKind::Hg == self.kind),
+            ("weight", self.weight.is_some(), FieldKind::Hg == self.kind),
+            (
+                "file",
+                self.file.is_some(),
+                FieldKind::Tabulated == self.kind,
+            ),
+            (
+                "extinction_m2",
+                self.extinction_m2.is_some(),
+                self.kind.is_given(),
+            ),
         ];
-        if self.kind != FieldKind::Hg {
-            if let Some((key, _)) = lobe_keys.iter().find(|(_, given)| *given) {
-                fail!(
-                    keys.at(key),
-                    "field {:?} ({}): {key} is a key of kind = \"hg\" fields (a given lobe)",
-                    self.name,
-                    self.kind
-                );
-            }
-            return Ok(false);
+        if let Some((key, _, _)) = given_keys.iter().find(|(_, given, fits)| *given && !fits) {
+            let owner = match *key {
+                "file" => "kind = \"tabulated\" fields (a given table)",
+                "extinction_m2" => "given phase functions (kind = \"hg\" or \"tabulated\")",
+                _ => "kind = \"hg\" fields (a given lobe)",
+            };
+            fail!(
+                keys.at(key),
+                "field {:?} ({}): {key} is a key of {owner}",
+                self.name,
+                self.kind
+            );
+        }
+        if !self.kind.is_given() {
+            return Ok(());
         }
         let particle_keys = [
             ("distribution", self.distribution.is_some()),
@@ -1011,62 +1094,103 @@ impl FieldFile {
             ("roughness", self.roughness.is_some()),
         ];
         if let Some((key, _)) = particle_keys.iter().find(|(_, given)| *given) {
+            let what = if self.kind == FieldKind::Hg {
+                "an hg field is a given lobe (g, g2, weight, extinction_m2, albedo)"
+            } else {
+                "a tabulated field is a given table (file, extinction_m2, albedo)"
+            };
             fail!(
                 keys.at(key),
-                "field {:?} (hg): {key} is a key of particles; an hg field is a given lobe \
-                 (g, g2, weight, extinction_m2, albedo)",
-                self.name
+                "field {:?} ({}): {key} is a key of particles; {what}",
+                self.name,
+                self.kind
             );
         }
-        Ok(true)
+        Ok(())
+    }
+
+    /// The cross-section of a given phase function: extinction_m2 in [1e-30, 1] m², one value
+    /// or [R, G, B] (rgb3).
+    fn extinction(&self, keys: &Keys, spectral: &SpectralMode) -> Result<[f64; 3], SceneError> {
+        let Some(extinction_m2) = self.extinction_m2 else {
+            fail!(
+                keys.at("kind"),
+                "field {:?} ({}): extinction_m2, the extinction cross-section per particle in \
+                 [1e-30, 1] m², is missing",
+                self.name,
+                self.kind
+            );
+        };
+        per_channel(
+            keys,
+            spectral,
+            "extinction_m2",
+            extinction_m2,
+            &|e| e.is_finite() && (1e-30..=1.0).contains(&e),
+            "[1e-30, 1] m²",
+        )
+    }
+
+    /// A `tabulated` field's table, read from `file` (relative to the scene's folder) and
+    /// checked, with its cross-section; its columns one for all wavelengths or one per
+    /// wavelength of the scene (R, G, B in rgb3).
+    fn tabulated(
+        &self,
+        keys: &Keys,
+        spectral: &SpectralMode,
+    ) -> Result<Option<mie::tabulated::TabulatedField>, SceneError> {
+        if self.kind != FieldKind::Tabulated {
+            return Ok(None);
+        }
+        let Some(file) = &self.file else {
+            fail!(
+                keys.at("kind"),
+                "field {:?} (tabulated): file, the table of p(θ) (CSV or .npy: θ in degrees, then \
+                 one column or one per wavelength), is missing",
+                self.name
+            );
+        };
+        let extinction_m2 = self.extinction(keys, spectral)?;
+        let path = match keys.dir {
+            Some(dir) => dir.join(file),
+            None => PathBuf::from(file),
+        };
+        let at = || keys.at("file");
+        let table = crate::phase_table::Table::read(&path, file)
+            .map_err(|e| at().error(format!("field {:?} (tabulated): {e}", self.name)))?;
+        let wavelengths = match spectral {
+            SpectralMode::Rgb3 => 3,
+            SpectralMode::Spectral { count, .. } => *count,
+        };
+        let columns = table.columns.len();
+        if columns != 1 && columns != wavelengths {
+            fail!(
+                at(),
+                "field {:?} (tabulated): file {file} has {columns} columns of p after θ; give one \
+                 (every wavelength) or one per wavelength of the scene ({wavelengths}{})",
+                self.name,
+                if wavelengths == 3 { ": R, G, B" } else { "" }
+            );
+        }
+        let field = table
+            .field(file, extinction_m2)
+            .map_err(|e| at().error(format!("field {:?} (tabulated): {e}", self.name)))?;
+        Ok(Some(field))
     }
 
     /// An `hg` field's lobe and cross-section, checked (g, g2 in (−1, 1), weight in (0, 1) with
     /// g2, extinction_m2 in [1e-30, 1] m²; each one value or [R, G, B], the latter with `rgb3`
-    /// only), and no key of particles on it; the lobe's keys on any other kind are refused.
+    /// only).
     fn hg(
         &self,
         keys: &Keys,
         spectral: &SpectralMode,
     ) -> Result<Option<mie::hg::HgField>, SceneError> {
-        if !self.lobe_keys_fit_the_kind(keys)? {
+        if self.kind != FieldKind::Hg {
             return Ok(None);
         }
-        // A key's three channel values, each within `ok` (`range` in words).
-        let channels = |key: &str,
-                        value: PerChannelValue,
-                        ok: &dyn Fn(f64) -> bool,
-                        range: &str|
-         -> Result<[f64; 3], SceneError> {
-            let values = match value {
-                PerChannelValue::One(v) => {
-                    if !ok(v) {
-                        fail!(
-                            keys.at(key),
-                            "{key} = {v} is outside the allowed range {range}"
-                        );
-                    }
-                    return Ok([v; 3]);
-                }
-                PerChannelValue::Three(v) => v,
-            };
-            if *spectral != SpectralMode::Rgb3 {
-                fail!(
-                    keys.at(key),
-                    "{key} = {values:?}: one value per channel needs spectral = \"rgb3\" (one \
-                     wavelength per channel); give one value for all wavelengths"
-                );
-            }
-            for (c, v) in ["R", "G", "B"].iter().zip(values) {
-                if !ok(v) {
-                    fail!(
-                        keys.at(key),
-                        "{key} = {values:?}: the {c} value {v} is outside the allowed range \
-                         {range}"
-                    );
-                }
-            }
-            Ok(values)
+        let channels = |key: &str, value: PerChannelValue, ok: &dyn Fn(f64) -> bool, range| {
+            per_channel(keys, spectral, key, value, ok, range)
         };
         let asymmetry = |g: f64| g.is_finite() && g > -1.0 && g < 1.0;
         let Some(g) = self.g else {
@@ -1099,20 +1223,7 @@ impl FieldFile {
                 self.name
             ),
         };
-        let Some(extinction_m2) = self.extinction_m2 else {
-            fail!(
-                keys.at("kind"),
-                "field {:?} (hg): extinction_m2, the extinction cross-section per particle in \
-                 [1e-30, 1] m², is missing",
-                self.name
-            );
-        };
-        let extinction_m2 = channels(
-            "extinction_m2",
-            extinction_m2,
-            &|e| e.is_finite() && (1e-30..=1.0).contains(&e),
-            "[1e-30, 1] m²",
-        )?;
+        let extinction_m2 = self.extinction(keys, spectral)?;
         Ok(Some(mie::hg::HgField {
             lobes: std::array::from_fn(|c| mie::hg::HgLobe {
                 g: g[c],
@@ -1639,6 +1750,101 @@ mod tests {
             e.contains("line 7: field \"cloud\" (cloud): g is a key of kind = \"hg\" fields"),
             "{e}"
         );
+    }
+
+    /// A tabulated field reads its file beside the scene, with one column or one per
+    /// channel, and refuses a missing key, a file it cannot read, a column count that fits no
+    /// wavelength list and a bad value, naming the scene's line, the file and its line.
+    #[test]
+    fn a_tabulated_field_reads_its_table_and_refuses_what_is_not_one() {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::write(dir.path().join("p.csv"), "theta,p\n0,2\n90,1\n180,1\n").unwrap();
+        std::fs::write(dir.path().join("rgb.csv"), "0,2,3,4\n180,1,1,1\n").unwrap();
+        std::fs::write(dir.path().join("neg.csv"), "0,1\n90,-1\n180,1\n").unwrap();
+        let parse = |text: &str| Scene::parse_in(text, "s.toml", Some(dir.path()));
+        let table = "[[field]]\nname = \"t\"\nkind = \"tabulated\"\n";
+        let f = parse(&format!(
+            "{HEAD}{table}file = \"p.csv\"\nextinction_m2 = 1e-12\n"
+        ))
+        .unwrap()
+        .fields
+        .remove(0);
+        let t = f.tabulated.unwrap();
+        assert_eq!((t.file.as_str(), t.theta_deg.len()), ("p.csv", 3));
+        assert_eq!(t.columns, [vec![2.0, 1.0, 1.0]]);
+        let rgb3 = "[scene]\nname = \"t\"\nspectral = \"rgb3\"\n";
+        let three = format!("{table}file = \"rgb.csv\"\nextinction_m2 = 1\n");
+        assert_eq!(
+            parse(&format!("{rgb3}{three}")).unwrap().fields[0]
+                .tabulated
+                .as_ref()
+                .unwrap()
+                .columns
+                .len(),
+            3
+        );
+        let error = |text: String| parse(&text).unwrap_err().to_string();
+        for (text, needle) in [
+            (
+                format!("{HEAD}{three}"),
+                "line 6: field \"t\" (tabulated): file rgb.csv has 3 columns of p after θ; give \
+                 one (every wavelength) or one per wavelength of the scene (31)",
+            ),
+            (
+                format!("{HEAD}{table}file = \"neg.csv\"\nextinction_m2 = 1\n"),
+                "line 6: field \"t\" (tabulated): file neg.csv line 2: p = -1",
+            ),
+            (
+                format!("{HEAD}{table}file = \"none.csv\"\nextinction_m2 = 1\n"),
+                "line 6: field \"t\" (tabulated): file none.csv: cannot be read",
+            ),
+            (
+                format!("{HEAD}{table}extinction_m2 = 1\n"),
+                "line 5: field \"t\" (tabulated): file, the table of p(θ)",
+            ),
+            (
+                format!("{HEAD}{table}file = \"p.csv\"\n"),
+                "line 5: field \"t\" (tabulated): extinction_m2",
+            ),
+            (
+                format!("{HEAD}{table}file = \"p.csv\"\nextinction_m2 = 1\ng = 0.5\n"),
+                "line 8: field \"t\" (tabulated): g is a key of kind = \"hg\" fields",
+            ),
+            (
+                format!("{HEAD}{CLOUD}file = \"p.csv\"\n"),
+                "line 7: field \"cloud\" (cloud): file is a key of kind = \"tabulated\" fields",
+            ),
+        ] {
+            let e = error(text.clone());
+            assert!(e.contains(needle), "{text}: {e}");
+        }
+    }
+
+    /// A given albedo is one value or one per channel (rgb3 only), each in (0, 1].
+    #[test]
+    fn a_given_albedo_is_one_value_or_one_per_channel() {
+        let f = Scene::parse(&format!("{HEAD}{CLOUD}albedo = 0.9\n"), "s").unwrap();
+        assert_eq!(f.fields[0].albedo, Some([0.9; 3]));
+        let rgb3 = "[scene]\nname = \"t\"\nspectral = \"rgb3\"\n";
+        let f = Scene::parse(&format!("{rgb3}{CLOUD}albedo = [0.9, 0.95, 1]\n"), "s").unwrap();
+        assert_eq!(f.fields[0].albedo, Some([0.9, 0.95, 1.0]));
+        for (text, needle) in [
+            (
+                format!("{HEAD}{CLOUD}albedo = [0.9, 0.95, 1]\n"),
+                "line 7: albedo = [0.9, 0.95, 1.0]: one value per channel needs spectral = \"rgb3\"",
+            ),
+            (
+                format!("{rgb3}{CLOUD}albedo = [0.9, 0, 1]\n"),
+                "line 8: albedo = [0.9, 0.0, 1.0]: the G value 0 is outside the allowed range (0, 1]",
+            ),
+            (
+                format!("{HEAD}{CLOUD}albedo = 1.5\n"),
+                "line 7: albedo = 1.5 is outside the allowed range (0, 1]",
+            ),
+        ] {
+            let e = error_of(&text);
+            assert!(e.contains(needle), "{text}: {e}");
+        }
     }
 
     #[test]

@@ -91,6 +91,10 @@ pub struct ShardRecord {
     pub scene_text: String,
     /// SHA-256 of `scene_text`, hex.
     pub scene_sha256: String,
+    /// The folder (absolute) a field's `file` is relative to: the scene file's; none for the
+    /// embedded scene.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scene_dir: Option<PathBuf>,
     /// The preset.
     pub quality: Quality,
     /// The seed of the size nodes and the crystal streams.
@@ -173,11 +177,12 @@ pub fn assign(plan: &BakePlan, shards: usize) -> Vec<usize> {
 }
 
 /// Computes shard `shard` of `plan` into `plan.out_dir` (its fields' cache records, then
-/// [`SHARD_FILE`]); `scene_text` is the scene as read. A shard with no field (more shards than
-/// fields) writes only its [`SHARD_FILE`].
+/// [`SHARD_FILE`]); `scene_text` is the scene as read, `scene_dir` the folder its files are
+/// relative to. A shard with no field (more shards than fields) writes only its [`SHARD_FILE`].
 pub fn run_shard(
     plan: &BakePlan,
     scene_text: &str,
+    scene_dir: Option<&Path>,
     shard: Shard,
     progress: &dyn Progress,
 ) -> Result<ShardRecord, BakeError> {
@@ -211,6 +216,7 @@ pub fn run_shard(
         scene_name: plan.scene.name.clone(),
         scene_text: scene_text.to_string(),
         scene_sha256: sha256_hex(scene_text),
+        scene_dir: scene_dir.map(Path::to_path_buf),
         quality: plan.quality,
         seed: plan.knobs.seed,
         shard,
@@ -241,6 +247,8 @@ pub fn run_shard(
 pub struct Merge {
     /// The scene's text.
     pub scene_text: String,
+    /// The folder its fields' files are relative to.
+    pub scene_dir: Option<PathBuf>,
     /// The preset.
     pub quality: Quality,
     /// The seed.
@@ -350,6 +358,7 @@ pub fn check_shards(dirs: &[PathBuf]) -> Result<Merge, BakeError> {
     }
     Ok(Merge {
         scene_text: first.scene_text.clone(),
+        scene_dir: first.scene_dir.clone(),
         quality: first.quality,
         seed: first.seed,
         records,

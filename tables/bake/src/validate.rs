@@ -221,6 +221,13 @@ pub fn validate(dir: &Path) -> Result<Report> {
                         .map_err(|e| manifest_error(format!("field {:?}: hg: {e}", entry.name)))?;
                 given_lobe(&ctx, &hg.lobes, &mut checks)?;
             }
+            FieldKind::Tabulated => {
+                let table: mie::tabulated::TabulatedField = serde_json::from_value(
+                    micro.tabulated.clone().unwrap_or_default(),
+                )
+                .map_err(|e| manifest_error(format!("field {:?}: tabulated: {e}", entry.name)))?;
+                given_table(&ctx, &table, &mut checks)?;
+            }
         }
     }
     Ok(Report {
@@ -672,6 +679,64 @@ fn given_lobe(
         ));
     }
     Ok(())
+}
+
+/// A `tabulated` field's Ams_1 against its table's exact bin averages (`mie::tabulated`), per
+/// channel, where a channel reads one column (a table with one column, or rgb3's one per
+/// channel); a spectral table's channels mix many columns and are noted, not judged.
+fn given_table(
+    ctx: &FieldContext,
+    table: &mie::tabulated::TabulatedField,
+    checks: &mut Vec<Check>,
+) -> Result<()> {
+    let grid = mie::ThetaGrid::new(ctx.step)
+        .map_err(|e| manifest_error(format!("theta_step_deg = {}: {e}", ctx.step)))?;
+    if table.columns.len() != 1 && table.columns.len() != 3 {
+        checks.push(ctx.info(
+            "RGB",
+            "Ams_1 is the given table",
+            format!(
+                "{} columns, one per wavelength: each channel mixes them by its spectral weights",
+                table.columns.len()
+            ),
+        ));
+        return Ok(());
+    }
+    for c in 0..3 {
+        let column = table.column_of(c);
+        let want = table.bins(column, &grid);
+        let worst = ctx.rows[c]
+            .iter()
+            .zip(&want)
+            .map(|(got, want)| relative_or_floor(*got, *want))
+            .fold(0.0, f64::max);
+        checks.push(ctx.judged(
+            c,
+            "Ams_1 is the given table",
+            Some(worst),
+            0.0,
+            GIVEN_LOBE_MAX_ERROR,
+            "rel",
+            format!(
+                "largest relative difference from the bin averages of {} column {} ({} rows, \
+                 linear in θ; its integral over the sphere {:.6} was normalized to 1)",
+                table.file,
+                column + 1,
+                table.theta_deg.len(),
+                table.sphere_integral(column)
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// |got/want − 1|; a bin the table sets to zero (it has no relative error) by |got| in 1/sr.
+fn relative_or_floor(got: f64, want: f64) -> f64 {
+    if want > 0.0 {
+        (got / want - 1.0).abs()
+    } else {
+        got.abs()
+    }
 }
 
 fn featureless(ctx: &FieldContext, checks: &mut Vec<Check>) {

@@ -41,5 +41,7 @@ pub use manifest::{
 };
 pub use output::{OutputError, check_output, check_output_dir, write_output};
 pub use poisson::{PoissonTable, decode_poisson_exr, poisson_exr_bytes, poisson_file_name};
-pub use sections::{Channels, FieldKind, Material, Microphysics, QualityRecord, SpectralSampling};
+pub use sections::{
+    ChannelValues, Channels, FieldKind, Material, Microphysics, QualityRecord, SpectralSampling,
+};
 pub use single::{SingleScatter, decode_single_exr, single_exr_bytes, single_file_name};

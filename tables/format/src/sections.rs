@@ -35,21 +35,25 @@ pub enum FieldKind {
     /// A given Henyey–Greenstein lobe (one or two terms) with a given extinction
     /// cross-section: what an engine's lobe renders like, beside the real particles.
     Hg,
+    /// A given phase-function table (from a file) with a given extinction cross-section: a
+    /// benchmark's or another code's phase function.
+    Tabulated,
 }
 
 impl FieldKind {
     /// Every kind, in declaration order.
-    pub const ALL: [FieldKind; 6] = [
+    pub const ALL: [FieldKind; 7] = [
         FieldKind::Cloud,
         FieldKind::Rain,
         FieldKind::Ice,
         FieldKind::Snow,
         FieldKind::Haze,
         FieldKind::Hg,
+        FieldKind::Tabulated,
     ];
 
     /// The kind's name as scenes and manifests write it: `cloud`, `rain`, `ice`, `snow`,
-    /// `haze`, `hg`.
+    /// `haze`, `hg`, `tabulated`.
     pub fn name(self) -> &'static str {
         match self {
             FieldKind::Cloud => "cloud",
@@ -58,7 +62,13 @@ impl FieldKind {
             FieldKind::Snow => "snow",
             FieldKind::Haze => "haze",
             FieldKind::Hg => "hg",
+            FieldKind::Tabulated => "tabulated",
         }
+    }
+
+    /// A phase function given by the scene (hg, tabulated) rather than computed from particles.
+    pub fn is_given(self) -> bool {
+        matches!(self, FieldKind::Hg | FieldKind::Tabulated)
     }
 
     /// Spheres (cloud, rain, haze) rather than crystals (ice, snow).
@@ -75,7 +85,7 @@ impl fmt::Display for FieldKind {
 
 /// A name that is not a [`FieldKind`].
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("field kind {0:?} is none of cloud, rain, ice, snow, haze, hg")]
+#[error("field kind {0:?} is none of cloud, rain, ice, snow, haze, hg, tabulated")]
 pub struct UnknownFieldKind(pub String);
 
 impl std::str::FromStr for FieldKind {
@@ -286,14 +296,48 @@ pub struct Microphysics {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub refractive_index: Option<[f64; 2]>,
     /// A given single-scattering albedo, in (0, 1], replacing the particles' own at every
-    /// wavelength.
+    /// wavelength: one value, or one per channel.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub albedo: Option<f64>,
+    pub albedo: Option<ChannelValues>,
     /// A given lobe (`hg` fields), as the solver's `HgField` serializes it.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub hg: Option<Value>,
+    /// A given table (`tabulated` fields), as the solver's `TabulatedField` serializes it
+    /// (the file's name, its angles and columns as read, the cross-section).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tabulated: Option<Value>,
     /// Temperature, °C.
     pub temperature_c: f64,
+}
+
+/// One value for every channel, or one per channel (R, G, B): how a scene gives a field's
+/// optics and how the manifest records them.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum ChannelValues {
+    /// The same value on every channel.
+    One(f64),
+    /// R, G, B.
+    Three([f64; 3]),
+}
+
+impl ChannelValues {
+    /// `One` where the three are equal, else `Three`.
+    pub fn of(values: [f64; 3]) -> Self {
+        if values[1] == values[0] && values[2] == values[0] {
+            Self::One(values[0])
+        } else {
+            Self::Three(values)
+        }
+    }
+
+    /// The three channels' values.
+    pub fn channels(self) -> [f64; 3] {
+        match self {
+            Self::One(v) => [v; 3],
+            Self::Three(v) => v,
+        }
+    }
 }
 
 impl Microphysics {
@@ -317,31 +361,36 @@ impl Microphysics {
             ));
         }
         if let Some(a) = self.albedo
-            && !(a > 0.0 && a <= 1.0)
+            && let Some(v) = a.channels().into_iter().find(|a| !(*a > 0.0 && *a <= 1.0))
         {
             return Err(format!(
-                "microphysics.albedo = {a} is outside the allowed range (0, 1]"
+                "microphysics.albedo = {v} is outside the allowed range (0, 1]"
             ));
         }
         // What each kind holds (a distribution, a crystal, a lobe), and says it lacks.
         let (wanted, expected) = match self.kind {
             FieldKind::Hg => (
-                (false, false, true),
-                "a lobe (hg) and no distribution or crystal",
+                (false, false, true, false),
+                "a lobe (hg) and no distribution, crystal or table",
+            ),
+            FieldKind::Tabulated => (
+                (false, false, false, true),
+                "a table (tabulated) and no distribution, crystal or lobe",
             ),
             k if k.is_drops() => (
-                (true, false, false),
-                "a distribution and no crystal or lobe",
+                (true, false, false, false),
+                "a distribution and no crystal, lobe or table",
             ),
             _ => (
-                (false, true, false),
-                "a crystal and no distribution or lobe",
+                (false, true, false, false),
+                "a crystal and no distribution, lobe or table",
             ),
         };
         let held = (
             self.distribution.is_some(),
             self.crystal.is_some(),
             self.hg.is_some(),
+            self.tabulated.is_some(),
         );
         if held == wanted {
             Ok(())

@@ -588,6 +588,7 @@ fn sample_manifest() -> Manifest {
             refractive_index: None,
             albedo: None,
             hg: None,
+            tabulated: None,
             temperature_c: 10.0,
         },
         quality: QualityRecord {

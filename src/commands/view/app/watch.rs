@@ -50,7 +50,7 @@ impl App {
             .with_context(|| format!("reading scene {}", path.display()))?;
         let origin = path.display().to_string();
         let base = path.parent().unwrap_or(Path::new("."));
-        let mut fields = Scene::parse(&text, &origin)?;
+        let mut fields = Scene::parse_in(&text, &origin, Some(base))?;
         let mut scene = RenderScene::parse(&text, &origin, base)?;
         scene.width = self.size.0.unwrap_or(scene.width);
         scene.height = self.size.1.unwrap_or(scene.height);
