@@ -665,7 +665,9 @@ fn write_outputs(a: &RenderArgs, scene: &RenderScene, rendered: &Rendered) -> Re
 }
 
 /// `path` as a person reads it without this machine's layout: relative to the working
-/// directory where it lies below it, else with the home directory as `~`, else as it is.
+/// directory where it lies below it, else with the home directory as `~`, else as it is (the
+/// viewer's panel shows the tables' folder so).
+#[cfg_attr(not(feature = "view"), allow(dead_code))]
 pub fn shown_path(path: &std::path::Path) -> String {
     if let Some(rest) = std::env::current_dir().ok().and_then(|cwd| {
         path.strip_prefix(cwd)

@@ -241,28 +241,42 @@ pub fn single_scatter_slab(omega_p: f64, mu0: f64, mu: f64, tau: f64, up: bool) 
     }
 }
 
-/// The DISORT slabs of `data/reference/truth/slab_disort.json`, each case with the bins of its
-/// phase function (`hg085`: HG g = 0.85; else the 550 nm cloud), on 0.18° bins.
-pub fn disort_cases() -> Vec<(serde_json::Value, Vec<f64>)> {
+/// Every DISORT slab of `data/reference/truth/slab_disort.json` (ω 1, 0.9 and 0.99).
+fn disort_reference() -> Vec<serde_json::Value> {
     let text = std::fs::read_to_string(concat!(
         env!("CARGO_MANIFEST_DIR"),
         "/../../data/reference/truth/slab_disort.json"
     ))
     .unwrap();
     let reference: serde_json::Value = serde_json::from_str(&text).unwrap();
+    reference["cases"].as_array().unwrap().clone()
+}
+
+/// The DISORT slabs the slab tests hold the truth to (ω 1 and 0.9; the ω 0.99 slabs are the
+/// baked hg field's, [`disort_case`]), each case with the bins of its phase function
+/// (`hg085`: HG g = 0.85; else the 550 nm cloud), on 0.18° bins.
+pub fn disort_cases() -> Vec<(serde_json::Value, Vec<f64>)> {
     let hg = hg_bins(&ThetaGrid::new(0.18).unwrap(), 0.85);
     let cloud = cloud550_bins();
-    reference["cases"]
-        .as_array()
-        .unwrap()
-        .iter()
+    disort_reference()
+        .into_iter()
+        .filter(|case| case["omega"] != 0.99)
         .map(|case| {
             let bins = if case["phase"] == "hg085" {
                 &hg
             } else {
                 &cloud
             };
-            (case.clone(), bins.clone())
+            (case, bins.clone())
         })
         .collect()
+}
+
+/// The DISORT slab of `phase` (`hg085`, `cloud550`) at optical depth `tau` and albedo
+/// `omega`.
+pub fn disort_case(phase: &str, tau: f64, omega: f64) -> serde_json::Value {
+    disort_reference()
+        .into_iter()
+        .find(|c| c["phase"] == phase && c["tau"] == tau && c["omega"] == omega)
+        .unwrap_or_else(|| panic!("no DISORT slab {phase} at τ {tau}, ω {omega}"))
 }
