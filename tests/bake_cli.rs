@@ -564,6 +564,14 @@ fn malformed_scenes_name_key_and_line_and_leave_the_output_untouched() {
             ),
             vec!["line 5", "theta_step_deg = 0.7", "divide 180"],
         ),
+        (
+            // A table beside the scene (not in the working folder) with a negative value.
+            format!(
+                "{GOOD}\n[[field]]\nname = \"t\"\nkind = \"tabulated\"\nfile = \"bad.csv\"\n\
+                 extinction_m2 = 1e-12\n"
+            ),
+            vec!["line 14", "file bad.csv line 3: p = -1", "finite and ≥ 0"],
+        ),
     ];
     for (scene, words) in cases {
         let tmp = tempfile::tempdir().unwrap();
@@ -572,8 +580,14 @@ fn malformed_scenes_name_key_and_line_and_leave_the_output_untouched() {
         fs::write(out_dir.join("manifest.json"), b"{\"previous\": true}").unwrap();
         fs::write(out_dir.join("rain.exr"), b"previous table").unwrap();
         let before = listing(&out_dir);
-        let scene_path = tmp.path().join("scene.toml");
+        fs::create_dir(tmp.path().join("scenes")).unwrap();
+        let scene_path = tmp.path().join("scenes").join("scene.toml");
         fs::write(&scene_path, &scene).unwrap();
+        fs::write(
+            tmp.path().join("scenes").join("bad.csv"),
+            "theta_deg,p\n0,1\n90,-1\n180,1\n",
+        )
+        .unwrap();
         let out = photometeor(
             &[
                 "bake",
