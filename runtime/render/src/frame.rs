@@ -59,7 +59,9 @@ impl Frame {
             ));
         }
         let fov = self.camera.fov_deg;
-        if !(fov > 0.0 && fov < 170.0) {
+        if self.camera.projection == crate::camera::Projection::Perspective
+            && !(fov > 0.0 && fov < 170.0)
+        {
             return bad(format!(
                 "camera fov_deg = {} is outside the allowed range (0, 170) degrees",
                 Shown(fov)
@@ -88,6 +90,17 @@ impl Frame {
             ));
         }
         Ok(())
+    }
+
+    /// Refuses an orthographic camera, which only the truth draws, naming `model`.
+    pub fn perspective_only(&self, model: &str) -> Result<(), FrameError> {
+        match self.camera.projection {
+            crate::camera::Projection::Perspective => Ok(()),
+            crate::camera::Projection::Orthographic { .. } => Err(FrameError(format!(
+                "[camera] projection = \"orthographic\": --model {model} draws a perspective \
+                 camera only (its rays all leave the eye); render it with --model truth"
+            ))),
+        }
     }
 
     /// Refuses what a sunlit slicing model cannot draw: media and occluders, lights, and

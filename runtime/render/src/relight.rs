@@ -105,6 +105,7 @@ mod tests {
                 position_m: DVec3::new(0.0, 1.0, -10.0),
                 look_at_m: DVec3::ZERO,
                 fov_deg: 40.0,
+                projection: Default::default(),
             },
             sun: Sun {
                 elevation_deg: 30.0,

@@ -276,6 +276,7 @@ mod tests {
                 position_m: DVec3::new(0.0, 100.0, 0.0),
                 look_at_m: DVec3::new(0.0, 100.0, 1.0),
                 fov_deg: 40.0,
+                projection: Default::default(),
             },
             sun: Sun {
                 elevation_deg: 40.0,

@@ -83,6 +83,9 @@
 //! position_m = [0, 2, 0]    # metres, y up, sea level y = 0
 //! look_at_m = [0, 600, 5000]
 //! fov_deg = 60              # vertical
+//! # projection = "orthographic" with width_m = 2000 instead of fov_deg: every pixel looks
+//! #   along the view direction from its own point (the image is width_m wide, its height
+//! #   follows the aspect); truth only
 //!
 //! [sun]
 //! elevation_deg = 20        # (0, 90]
@@ -130,7 +133,8 @@ use crate::objects::{Light, Medium, Occluder};
 use crate::registry::{MODEL_NAMES, ModelError, ModelSettings, model_keys};
 use crate::volume::{Shape, Volume, VolumeError, grid_dims, joint_bounds, rasterize};
 use crate::{
-    camera::Camera, camera::Sun, checks::FrameError, frame::Frame, frame::Haze, sky::Atmosphere,
+    camera::Camera, camera::Projection, camera::Sun, checks::FrameError, frame::Frame, frame::Haze,
+    sky::Atmosphere,
 };
 use runtime::Tables;
 

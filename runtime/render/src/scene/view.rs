@@ -75,6 +75,8 @@ pub(super) struct CameraKeys {
     pub(super) position_m: [f64; 3],
     pub(super) look_at_m: [f64; 3],
     pub(super) fov_deg: Option<f64>,
+    pub(super) projection: Option<String>,
+    pub(super) width_m: Option<f64>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -106,7 +108,8 @@ pub(super) fn scale_height(what: &str, h: f64) -> Result<f64, String> {
     }
 }
 
-/// `[camera]`: finite positions and field of view.
+/// `[camera]`: finite positions, and the field of view of a perspective camera or the width
+/// (m, (0, 1e7]) of an orthographic one.
 pub(super) fn camera_keys(camera: CameraKeys) -> Result<Camera, String> {
     for (key, v) in [
         ("position_m", camera.position_m),
@@ -116,10 +119,46 @@ pub(super) fn camera_keys(camera: CameraKeys) -> Result<Camera, String> {
             return Err(format!("[camera] {key} = {v:?} must be finite (m)"));
         }
     }
+    let projection = match (camera.projection.as_deref(), camera.width_m) {
+        (None | Some("perspective"), None) => Projection::Perspective,
+        (None | Some("perspective"), Some(w)) => {
+            return Err(format!(
+                "[camera] width_m = {w} is a key of projection = \"orthographic\" (a \
+                 perspective camera has fov_deg)"
+            ));
+        }
+        (Some("orthographic"), None) => {
+            return Err(
+                "[camera] projection = \"orthographic\" needs width_m, the image's width in \
+                 metres, (0, 1e7]"
+                    .into(),
+            );
+        }
+        (Some("orthographic"), Some(w)) => {
+            if camera.fov_deg.is_some() {
+                return Err("[camera] fov_deg is a key of perspective cameras; an \
+                     orthographic camera has width_m"
+                    .into());
+            }
+            if !(w.is_finite() && w > 0.0 && w <= 1e7) {
+                return Err(format!(
+                    "[camera] width_m = {} is outside the allowed range (0, 1e7] (m)",
+                    crate::checks::Shown(w)
+                ));
+            }
+            Projection::Orthographic { width_m: w }
+        }
+        (Some(other), _) => {
+            return Err(format!(
+                "[camera] projection = {other:?} is neither \"perspective\" nor \"orthographic\""
+            ));
+        }
+    };
     Ok(Camera {
         position_m: DVec3::from_array(camera.position_m),
         look_at_m: DVec3::from_array(camera.look_at_m),
         fov_deg: camera.fov_deg.unwrap_or(60.0),
+        projection,
     })
 }
 

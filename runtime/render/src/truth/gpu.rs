@@ -97,7 +97,7 @@ runtime::uniform! {
         pub forward: [f32; 4],
         /// Right axis; w = aspect.
         pub right: [f32; 4],
-        /// Up axis.
+        /// Up axis; w = an orthographic camera's half image height (m), 0 for a perspective one.
         pub up: [f32; 4],
         /// Width, height, first sample of the pass, samples in the pass.
         pub sizes: [u32; 4],
@@ -382,7 +382,7 @@ fn params(
     let mut params = TruthParams {
         forward: v4(forward, frame.camera.tan_half_fov()),
         right: v4(right, w as f64 / h as f64),
-        up: v4(up, 0.0),
+        up: v4(up, frame.camera.ortho_half_height_m((w, h)).unwrap_or(0.0)),
         sizes: [w as u32, h as u32, 0, 0],
         eye: v4(frame.camera.position_m, 0.0),
         grid_min: v4(grid.min_m, 0.0),

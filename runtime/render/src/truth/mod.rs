@@ -107,7 +107,6 @@ use serde::{Deserialize, Serialize};
 
 use runtime::gpu::{Gpu, GpuTables, TexelFormat};
 
-use crate::camera::pixel_ray;
 use crate::geometry::basis;
 use crate::geometry::box_span;
 use crate::gpu::RenderError;
@@ -327,14 +326,13 @@ pub fn render(
     let tracer = Tracer::new(tables, frame, settings)?;
     let (w, h) = (frame.width, frame.height);
     let axes = frame.camera.axes().expect("checked");
-    let tan = frame.camera.tan_half_fov();
-    let rays: Vec<DVec3> = (0..w * h)
-        .map(|p| pixel_ray(axes, tan, (p % w, p / w), (w, h)))
+    // Each pixel's origin and direction: the eye's, or an orthographic camera's point.
+    let rays: Vec<(DVec3, DVec3)> = (0..w * h)
+        .map(|p| frame.camera.pixel(axes, (p % w, p / w), (w, h)))
         .collect();
-    let eye = frame.camera.position_m;
     let transparency: Vec<f64> = rays
         .par_iter()
-        .map(|&d| tracer.transparency(eye, d))
+        .map(|&(o, d)| tracer.transparency(o, d))
         .collect();
     let mut passes = Passes::new(settings, w, transparency, progress);
     while let Some(batch) = passes.next_batch(None) {
@@ -342,7 +340,7 @@ pub fn render(
         passes.acc.par_iter_mut().enumerate().for_each(|(p, a)| {
             for s in done..done + batch {
                 let mut rng = Rng::stream(settings.seed, p as u64, s as u64);
-                let l = tracer.radiance(eye, rays[p], &mut rng);
+                let l = tracer.radiance(rays[p].0, rays[p].1, &mut rng);
                 for c in 0..3 {
                     a.0[c] += l[c];
                     a.1[c] += l[c] * l[c];

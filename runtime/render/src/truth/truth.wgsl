@@ -6,7 +6,7 @@
 struct Params {
     forward: vec4<f32>,      // w = tan(fov_y / 2)
     right: vec4<f32>,        // w = aspect
-    up: vec4<f32>,
+    up: vec4<f32>,           // w = an orthographic camera's half image height (m); 0: perspective
     sizes: vec4<u32>,        // width, height, first sample of this pass, samples in this pass
     eye: vec4<f32>,
     grid_min: vec4<f32>,
@@ -737,6 +737,24 @@ struct Path {
     k: u32,
 }
 
+// Pixel (i, j)'s camera ray (Camera::pixel): from the eye through the pixel, or for an
+// orthographic camera (up.w > 0) along `forward` from the pixel's point of the image plane.
+fn camera_origin(i: u32, j: u32) -> vec3<f32> {
+    if (rp.up.w == 0.0) {
+        return rp.eye.xyz;
+    }
+    let sx = (2.0 * (f32(i) + 0.5) / f32(rp.sizes.x) - 1.0) * rp.up.w * rp.right.w;
+    let sy = (1.0 - 2.0 * (f32(j) + 0.5) / f32(rp.sizes.y)) * rp.up.w;
+    return rp.eye.xyz + sx * rp.right.xyz + sy * rp.up.xyz;
+}
+
+fn camera_direction(i: u32, j: u32) -> vec3<f32> {
+    if (rp.up.w == 0.0) {
+        return pixel_ray(i, j);
+    }
+    return rp.forward.xyz;
+}
+
 // Sample k of the pass at `pixel`: its random stream and its camera ray (in photon mode, a
 // photon of one wavelength from the eye along `forward`).
 fn begin_sample(pixel: u32, k: u32) -> Path {
@@ -748,7 +766,8 @@ fn begin_sample(pixel: u32, k: u32) -> Path {
         path.d = rp.forward.xyz;
     } else {
         path.c = carry(rp.counts.y);
-        path.d = pixel_ray(pixel % rp.sizes.x, pixel / rp.sizes.x);
+        path.p = camera_origin(pixel % rp.sizes.x, pixel / rp.sizes.x);
+        path.d = camera_direction(pixel % rp.sizes.x, pixel / rp.sizes.x);
     }
     path.bounce = 0u;
     path.top = 0u;
@@ -993,8 +1012,9 @@ fn transparency(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     let pixel = id.x + rp.sizes.x * id.y;
-    let d = pixel_ray(id.x, id.y);
-    let span = box_span(rp.eye.xyz, d);
+    let o = camera_origin(id.x, id.y);
+    let d = camera_direction(id.x, id.y);
+    let span = box_span(o, d);
     if (span.y < 0.0) {
         transparency_out[pixel] = 1.0;
         return;
@@ -1003,7 +1023,7 @@ fn transparency(@builtin(global_invocation_id) id: vec3<u32>) {
     let dt = (span.y - span.x) / f32(steps);
     var tau = 0.0;
     for (var i = 0u; i < steps; i = i + 1u) {
-        let rho = densities(rp.eye.xyz + (span.x + (f32(i) + 0.5) * dt) * d);
+        let rho = densities(o + (span.x + (f32(i) + 0.5) * dt) * d);
         for (var f = 0u; f < rp.grid_dims.w; f = f + 1u) {
             tau = tau + rho[f] * rp.sigma_ext[f].g * dt;
         }

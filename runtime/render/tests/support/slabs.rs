@@ -111,6 +111,7 @@ pub fn slab_frame(tau: f64) -> Frame {
             position_m: DVec3::new(0.0, 3.0, 0.0),
             look_at_m: DVec3::new(0.0, 0.0, 0.0),
             fov_deg: 10.0,
+            projection: Default::default(),
         },
         sun: Sun {
             elevation_deg: 30.0,
@@ -135,6 +136,26 @@ pub fn slab_frame(tau: f64) -> Frame {
         media: Vec::new(),
         occluders: Vec::new(),
     }
+}
+
+/// The slab of `case` seen by an orthographic camera of `w` × `h` pixels, 0.5 m wide, looking
+/// against outgoing direction `out` from 0.5 m beyond the slab's face (a point of the image
+/// plane per pixel, one direction for all; every point between the slab and the ground).
+pub fn orthographic_slab(tau: f64, out: DVec3, (w, h): (usize, usize)) -> Frame {
+    let mut frame = slab_frame(tau);
+    let face = if out.y > 0.0 {
+        DVec3::new(0.0, 2.0, 0.0)
+    } else {
+        DVec3::new(0.0, 1.0, 0.0)
+    };
+    frame.camera = Camera {
+        position_m: face + 0.5 * out,
+        look_at_m: face,
+        fov_deg: 60.0,
+        projection: render::camera::Projection::Orthographic { width_m: 0.5 },
+    };
+    (frame.width, frame.height) = (w, h);
+    frame
 }
 
 /// Per channel: mean and standard error of `n` of the truth's radiance samples along `dir`
