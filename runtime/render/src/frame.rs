@@ -103,6 +103,17 @@ impl Frame {
         }
     }
 
+    /// Refuses a periodic volume, which only the truth draws, naming `model`.
+    pub fn bounded_only(&self, model: &str) -> Result<(), FrameError> {
+        if self.grid.periodic {
+            return Err(FrameError(format!(
+                "[[volume]] periodic = true: --model {model} draws bounded volumes only (its \
+                 grid ends at the box); render it with --model truth"
+            )));
+        }
+        Ok(())
+    }
+
     /// Refuses what a sunlit slicing model cannot draw: media and occluders, lights, and
     /// (unless `haze_ok`) a haze layer, naming the tables and the models that draw them.
     pub fn sunlight_only(&self, model: &str, haze_ok: bool) -> Result<(), FrameError> {

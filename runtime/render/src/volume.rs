@@ -22,6 +22,10 @@ pub struct DensityGrid {
     pub dims: [usize; 3],
     /// x fastest, then y, then z.
     pub data: Vec<[f32; MAX_FIELDS]>,
+    /// The box repeats without end in x and z (a `periodic = true` volume): a point outside
+    /// it in x or z samples the box at its remainder, and the voxels at opposite faces are
+    /// neighbours.
+    pub periodic: bool,
 }
 
 impl DensityGrid {
@@ -76,6 +80,7 @@ impl DensityGrid {
             max_m: DVec3::splat(1e-3),
             dims: [1, 1, 1],
             data: vec![[0.0; MAX_FIELDS]],
+            periodic: false,
         }
     }
 
@@ -112,12 +117,44 @@ impl DensityGrid {
             })
     }
 
-    /// Whether `p` lies in the closed box [min_m, max_m].
+    /// Whether `p` lies in the closed box [min_m, max_m] (for a periodic grid, between its
+    /// bottom and top).
     pub fn contains(&self, p: DVec3) -> bool {
-        (0..3).all(|a| p[a] >= self.min_m[a] && p[a] <= self.max_m[a])
+        (0..3).all(|a| self.wraps(a) || (p[a] >= self.min_m[a] && p[a] <= self.max_m[a]))
     }
 
-    /// Trilinear density at `p` (voxel centres, clamped to the edge voxels inside the box).
+    /// The region the grid's particles fill: its box, unbounded in x and z when periodic.
+    pub fn bounds(&self) -> (DVec3, DVec3) {
+        if self.periodic {
+            let inf = f64::INFINITY;
+            (
+                DVec3::new(-inf, self.min_m.y, -inf),
+                DVec3::new(inf, self.max_m.y, inf),
+            )
+        } else {
+            (self.min_m, self.max_m)
+        }
+    }
+
+    /// The longest path the tracers follow through the grid: a periodic layer's 1000 periods
+    /// (a path along it crosses that many copies of the box before it is ended), else without
+    /// bound.
+    pub fn longest_path_m(&self) -> f64 {
+        if self.periodic {
+            let period = (self.max_m - self.min_m).x.max((self.max_m - self.min_m).z);
+            1000.0 * period
+        } else {
+            f64::INFINITY
+        }
+    }
+
+    /// Whether axis `a` repeats (x and z of a periodic grid).
+    pub fn wraps(&self, a: usize) -> bool {
+        self.periodic && a != 1
+    }
+
+    /// Trilinear density at `p` (voxel centres, clamped to the edge voxels inside the box;
+    /// wrapped across the faces of a periodic grid's axes).
     pub fn sample(&self, p: DVec3) -> [f64; MAX_FIELDS] {
         let mut out = [0.0; MAX_FIELDS];
         for (i, w) in self.taps(p).into_iter().flatten().flatten() {
@@ -129,30 +166,38 @@ impl DensityGrid {
     }
 
     /// The voxels (indices into `data`, x fastest) and weights of a trilinear lookup at `p`
-    /// (voxel centres, clamped to the edge voxels inside the box), or `None` outside the box.
-    /// Zero-weight corners are left out (`None` entries).
+    /// (voxel centres, clamped to the edge voxels inside the box; on a periodic grid's x and z
+    /// the voxel centres repeat, so the last voxel's upper neighbour is the first), or `None`
+    /// outside the box. Zero-weight corners are left out (`None` entries).
     pub fn taps(&self, p: DVec3) -> Option<[Option<(usize, f64)>; 8]> {
         if !self.contains(p) {
             return None;
         }
-        let mut i0 = [0usize; 3];
+        // Per axis: the lower voxel, the upper one and the upper one's weight.
+        let mut corner_voxels = [[0usize; 2]; 3];
         let mut t = [0f64; 3];
         for a in 0..3 {
             let n = self.dims[a];
             let u = (p[a] - self.min_m[a]) / (self.max_m[a] - self.min_m[a]) * n as f64 - 0.5;
-            let u = u.clamp(0.0, (n - 1) as f64);
-            let lo = (u.floor() as usize).min(n.saturating_sub(2));
-            i0[a] = lo;
-            t[a] = if n > 1 { u - lo as f64 } else { 0.0 };
+            if self.wraps(a) {
+                let u = u.rem_euclid(n as f64);
+                let lo = (u.floor() as usize).min(n - 1);
+                corner_voxels[a] = [lo, (lo + 1) % n];
+                t[a] = u - lo as f64;
+            } else {
+                let u = u.clamp(0.0, (n - 1) as f64);
+                let lo = (u.floor() as usize).min(n.saturating_sub(2));
+                corner_voxels[a] = [lo, lo + usize::from(n > 1)];
+                t[a] = if n > 1 { u - lo as f64 } else { 0.0 };
+            }
         }
         let [nx, ny, _] = self.dims;
-        let step = |a: usize| usize::from(self.dims[a] > 1);
         Some(std::array::from_fn(|corner| {
             let d = [corner & 1, (corner >> 1) & 1, (corner >> 2) & 1];
             let w: f64 = (0..3)
                 .map(|a| if d[a] == 1 { t[a] } else { 1.0 - t[a] })
                 .product();
-            let at = |a: usize| i0[a] + d[a] * step(a);
+            let at = |a: usize| corner_voxels[a][d[a]];
             (w != 0.0).then(|| (at(0) + nx * (at(1) + ny * at(2)), w))
         }))
     }
@@ -598,6 +643,7 @@ pub fn read_grid(
         max_m,
         dims,
         data,
+        periodic: false,
     })
 }
 
@@ -737,12 +783,47 @@ pub fn rasterize(
         max_m: hi,
         dims,
         data,
+        periodic: false,
     })
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A periodic grid repeats in x and z: the same density a period away, the faces' voxels
+    /// neighbours (halfway between the last voxel's centre and the next period's first, their
+    /// mean), and y bounded as before.
+    #[test]
+    fn a_periodic_grid_wraps_in_x_and_z_only() {
+        let mut data = vec![[0f32; MAX_FIELDS]; 4 * 2 * 3];
+        for (i, v) in data.iter_mut().enumerate() {
+            v[0] = i as f32;
+        }
+        let grid = DensityGrid {
+            min_m: DVec3::new(0.0, 0.0, 0.0),
+            max_m: DVec3::new(4.0, 2.0, 3.0),
+            dims: [4, 2, 3],
+            data,
+            periodic: true,
+        };
+        let p = DVec3::new(1.3, 0.7, 2.2);
+        for shift in [DVec3::new(4.0, 0.0, 0.0), DVec3::new(-8.0, 0.0, 3.0)] {
+            let (a, b) = (grid.sample(p)[0], grid.sample(p + shift)[0]);
+            assert!((a - b).abs() < 1e-12, "{a} vs {b} a period away");
+        }
+        // x = 4 (the face) lies halfway between voxel 3's centre (3.5) and voxel 0's next one
+        // (4.5); at y = 0.5, z = 0.5 (voxel centres) the mean of voxels 3 and 0 of that row.
+        let face = grid.sample(DVec3::new(4.0, 0.5, 0.5))[0];
+        assert!((face - 1.5).abs() < 1e-12, "{face}");
+        assert_eq!(
+            grid.sample(DVec3::new(1.0, 2.5, 1.0))[0],
+            0.0,
+            "above the layer"
+        );
+        assert!(grid.contains(DVec3::new(-100.0, 1.0, 1e6)));
+        assert_eq!(grid.bounds().0.x, f64::NEG_INFINITY);
+    }
 
     fn shaft(seed: u64) -> Volume {
         Volume {

@@ -448,6 +448,7 @@ fn uneven_grid() -> render::DensityGrid {
         max_m: glam::DVec3::new(260.0, 100.0, 330.0),
         dims,
         data: vec![[0.0; render::MAX_FIELDS]; dims[0] * dims[1] * dims[2]],
+        periodic: false,
     }
 }
 
@@ -669,6 +670,7 @@ fn one_round_of_gpu_sweeps_equals_the_cpu_round_on_thin_grids() {
             max_m: glam::DVec3::new(1.0, 1.3, 0.8) * 10.0,
             dims,
             data: vec![[0.0; render::MAX_FIELDS]; n],
+            periodic: false,
         };
         // A deterministic spread of values per voxel.
         let v = |i: usize, k: usize| ((i * 7 + k * 13) % 17) as f64 / 17.0;

@@ -338,6 +338,7 @@ fn white_furnace_returns_exactly_the_background() {
         max_m: DVec3::new(100.0, 110.0, 100.0),
         dims: [3, 3, 3],
         data,
+        periodic: false,
     };
     frame.sun.irradiance = [0.0; 3];
     frame.atmosphere = Atmosphere::default();
@@ -649,15 +650,22 @@ fn an_orthographic_camera_sees_disorts_radiance_in_every_pixel() {
     // each looking from its own point along the one direction, is the slab's radiance in that
     // direction (reflected at μ 1, φ 0 and μ 0.8, φ 90; transmitted at μ 0.8, φ 90), within
     // 4.5σ per pixel and for the mean of the six; 2 048 paths per pixel (worst pixel 2.7σ; at
-    // 32 768 paths the means were within 1.1 % and 2.3σ of DISORT's).
+    // 32 768 paths the means were within 1.1 % and 2.3σ of DISORT's). The slab is 20 km wide,
+    // and again a periodic box 2 m wide (the image 0.5 m): the infinite slab either way.
     let grid = ThetaGrid::new(0.18).unwrap();
     let bins = slabs::hg_bins(&grid, 0.85);
     let mut worst: f64 = 0.0;
     for omega in [1.0, 0.99] {
         let case = slabs::disort_case("hg085", 4.0, omega);
         let tables = tables_of(&bins, 0.18, omega);
-        for r in slabs::disort_radiances(&case) {
-            let frame = slabs::orthographic_slab(4.0, outgoing(r.mu, r.phi, r.up), (3, 2));
+        for (r, periodic) in slabs::disort_radiances(&case)
+            .into_iter()
+            .flat_map(|r| [(r.clone(), false), (r, true)])
+        {
+            let mut frame = slabs::orthographic_slab(4.0, outgoing(r.mu, r.phi, r.up), (3, 2));
+            if periodic {
+                slabs::periodic_slab(&mut frame, 2.0);
+            }
             let settings = Settings {
                 spp: 2048,
                 seed: 3,
@@ -683,8 +691,9 @@ fn an_orthographic_camera_sees_disorts_radiance_in_every_pixel() {
             let (mean, se) = (sum / n, var.sqrt() / n);
             let z = (mean - r.want) / se;
             eprintln!(
-                "orthographic ω {omega} {} μ {} φ {}: {mean:.5} ± {se:.1e} vs DISORT {:.5} \
+                "orthographic{} ω {omega} {} μ {} φ {}: {mean:.5} ± {se:.1e} vs DISORT {:.5} \
                  ({:+.2} %, {z:+.2}σ)",
+                if periodic { ", periodic 2 m" } else { "" },
                 r.list,
                 r.mu,
                 r.phi,
@@ -852,6 +861,37 @@ fn an_orthographic_camera_is_parsed_checked_and_refused_by_the_models_that_canno
         let e = scene(camera).unwrap_err().to_string();
         assert!(e.contains(words), "{camera}: {e}");
     }
+}
+
+#[test]
+fn a_periodic_volume_is_the_scenes_only_one_and_only_the_truth_draws_it() {
+    let volume = "[[volume]]\nfield = \"cloud\"\nshape = \"cirrus\"\nnumber_density_per_m3 = 1e8\n\
+                  center_m = [0, 1000, 0]\nsize_m = 2000\nthickness_m = 200\n";
+    let scene = |volumes: &str| {
+        let text = format!(
+            "[camera]\nposition_m = [0, 3000, 0]\nlook_at_m = [0, 0, 1]\n[sun]\n\
+             elevation_deg = 60\nazimuth_deg = 0\n{volumes}"
+        );
+        RenderScene::parse(&text, "t", Path::new("."))
+    };
+    let s = scene(&format!("{volume}periodic = true\n")).unwrap();
+    assert!(s.periodic);
+    s.check_for("truth").unwrap();
+    for model in ["riley", "miyazaki", "max", "coupled", "biri"] {
+        let e = s.check_for(model).unwrap_err().to_string();
+        assert!(
+            e.contains("periodic = true") && e.contains(&format!("--model {model}")),
+            "{model}: {e}"
+        );
+    }
+    let e = scene(&format!("{volume}periodic = true\n{volume}"))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("must be the scene's only [[volume]] (the scene has 2)"),
+        "{e}"
+    );
+    assert!(!scene(volume).unwrap().periodic);
 }
 
 #[test]

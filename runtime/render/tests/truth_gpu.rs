@@ -129,6 +129,7 @@ fn the_gpu_truth_returns_exactly_the_background_in_a_white_furnace() {
         max_m: DVec3::new(100.0, 110.0, 100.0),
         dims: [3, 3, 3],
         data,
+        periodic: false,
     };
     frame.camera.position_m = DVec3::new(0.0, 5.0, -300.0);
     frame.camera.look_at_m = DVec3::new(0.0, 60.0, 0.0);
@@ -312,8 +313,9 @@ fn exact_single_scattering_from_a_slab_on_the_gpu() {
 #[test]
 fn an_orthographic_camera_sees_disorts_radiance_on_the_gpu() {
     // The GPU truth's orthographic camera (each pixel its own origin, one direction) on
-    // DISORT's g = 0.85 slab at τ 4: every pixel of a 3 × 2 image within 4.5σ of the slab's
-    // radiance in that direction, 512 paths per pixel (lavapipe time for CI).
+    // DISORT's g = 0.85 slab at τ 4 made of a periodic box 2 m wide (x and z wrap): every pixel
+    // of a 3 × 2 image within 4.5σ of the slab's radiance in that direction, 512 paths per
+    // pixel (lavapipe time for CI).
     let Some(g) = common::gpu() else { return };
     let renderer = gpu::Renderer::new(&g);
     let grid = grid::ThetaGrid::new(0.18).unwrap();
@@ -321,7 +323,8 @@ fn an_orthographic_camera_sees_disorts_radiance_on_the_gpu() {
     let case = slabs::disort_case("hg085", 4.0, 1.0);
     let mut worst: f64 = 0.0;
     for r in slabs::disort_radiances(&case) {
-        let frame = slabs::orthographic_slab(4.0, slabs::outgoing(r.mu, r.phi, r.up), (3, 2));
+        let mut frame = slabs::orthographic_slab(4.0, slabs::outgoing(r.mu, r.phi, r.up), (3, 2));
+        slabs::periodic_slab(&mut frame, 2.0);
         let image = gpu::render(&renderer, &g, &tables, &frame, &settings(512, 7), &()).unwrap();
         for (l, se) in image.image.rgb.iter().zip(&image.std_error) {
             let z = (f64::from(l[1]) - r.want) / f64::from(se[1]);

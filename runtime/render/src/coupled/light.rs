@@ -886,6 +886,7 @@ pub(super) fn box_of(grid: &DensityGrid) -> DensityGrid {
         max_m: grid.max_m,
         dims: grid.dims,
         data: Vec::new(),
+        periodic: false,
     }
 }
 

@@ -279,6 +279,7 @@ pub(crate) mod fixture {
             max_m: DVec3::new(1.4, 0.7, 1.1),
             dims,
             data: vec![[0.0; crate::volume::MAX_FIELDS]; dims.iter().product()],
+            periodic: false,
         }
     }
 

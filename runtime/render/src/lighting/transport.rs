@@ -540,6 +540,7 @@ impl Coarse {
                 max_m: fine.min_m + extent,
                 dims,
                 data: vec![[0.0; crate::volume::MAX_FIELDS]; dims[0] * dims[1] * dims[2]],
+                periodic: false,
             },
             factor,
             fine: fine.dims,
@@ -819,6 +820,7 @@ mod tests {
             max_m: DVec3::new(0.4, 1.2, 3.0),
             dims: [7, 6, 5],
             data: vec![[0.0; crate::volume::MAX_FIELDS]; 210],
+            periodic: false,
         };
         let coarse = Coarse::new(&fine, 2);
         assert_eq!(coarse.grid.dims, [4, 3, 3]);

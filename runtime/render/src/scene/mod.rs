@@ -83,6 +83,8 @@
 //! position_m = [0, 2, 0]    # metres, y up, sea level y = 0
 //! look_at_m = [0, 600, 5000]
 //! fov_deg = 60              # vertical
+//! # periodic = true on the scene's only [[volume]]: its box repeats in x and z without end
+//! #   (the benchmarks' cyclic boundaries); truth only
 //! # projection = "orthographic" with width_m = 2000 instead of fov_deg: every pixel looks
 //! #   along the view direction from its own point (the image is width_m wide, its height
 //! #   follows the aspect); truth only
@@ -193,6 +195,9 @@ pub struct RenderScene {
     pub atmosphere: Atmosphere,
     /// The `[[volume]]` tables.
     pub volumes: Vec<Volume>,
+    /// The one volume repeats without end in x and z (`periodic = true`): its box is the
+    /// period ([`crate::volume::DensityGrid::periodic`]).
+    pub periodic: bool,
     /// `[ground] albedo`: a Lambertian ground at y = 0, [0, 1] (default
     /// [`DEFAULT_GROUND_ALBEDO`]; 0 is black).
     pub ground_albedo: f64,
@@ -329,6 +334,14 @@ impl RenderScene {
         let media = each(&file.media, "medium", medium).map_err(err)?;
         let occluders = each(&file.occluders, "occluder", |o| occluder(o, base)).map_err(err)?;
         let volumes = each(&file.volumes, "volume", |v| volume(v, base)).map_err(err)?;
+        let periodic = file.volumes.iter().any(|v| v.periodic == Some(true));
+        if periodic && file.volumes.len() > 1 {
+            return Err(err(format!(
+                "[[volume]] periodic = true: a periodic volume repeats its box in x and z and \
+                 must be the scene's only [[volume]] (the scene has {})",
+                file.volumes.len()
+            )));
+        }
         if !volumes.is_empty() {
             let (lo, hi) = joint_bounds(&volumes);
             if !(hi - lo).is_finite() {
@@ -348,6 +361,7 @@ impl RenderScene {
             sun,
             atmosphere,
             volumes,
+            periodic,
             ground_albedo,
             lights,
             media,
@@ -461,6 +475,7 @@ impl RenderScene {
                 max_m: hi,
                 dims: [1, 1, 1],
                 data: vec![[0.0; crate::volume::MAX_FIELDS]],
+                periodic: self.periodic,
             }
         };
         let mut frame = self.frame_with(grid);
@@ -636,7 +651,9 @@ impl RenderScene {
         let grid = if self.volumes.is_empty() {
             crate::volume::DensityGrid::empty() // a scene of [[medium]] tables only
         } else {
-            rasterize(&self.volumes, self.grid_resolution, field)?
+            let mut grid = rasterize(&self.volumes, self.grid_resolution, field)?;
+            grid.periodic = self.periodic;
+            grid
         };
         let mut frame = self.frame_with(grid);
         frame.haze = self.haze(index);

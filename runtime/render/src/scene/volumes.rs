@@ -24,6 +24,7 @@ pub(super) struct VolumeKeys {
     pub(super) r_eff_um: Option<ProfileKeys>,
     pub(super) median_radius_um: Option<ProfileKeys>,
     pub(super) radius_um: Option<ProfileKeys>,
+    pub(super) periodic: Option<bool>,
 }
 
 /// A size profile `{ base, top }` (crate::volume::SizeProfile).

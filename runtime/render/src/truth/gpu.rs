@@ -103,7 +103,7 @@ runtime::uniform! {
         pub sizes: [u32; 4],
         /// Eye (m).
         pub eye: [f32; 4],
-        /// The grid's box (m).
+        /// The grid's box (m); w = 1 where it repeats in x and z (a periodic volume).
         pub grid_min: [f32; 4],
         /// The grid's box (m).
         pub grid_max: [f32; 4],
@@ -385,7 +385,7 @@ fn params(
         up: v4(up, frame.camera.ortho_half_height_m((w, h)).unwrap_or(0.0)),
         sizes: [w as u32, h as u32, 0, 0],
         eye: v4(frame.camera.position_m, 0.0),
-        grid_min: v4(grid.min_m, 0.0),
+        grid_min: v4(grid.min_m, if grid.periodic { 1.0 } else { 0.0 }),
         grid_max: v4(grid.max_m, 0.0),
         grid_dims: [
             grid.dims[0] as u32,

@@ -403,6 +403,13 @@ impl<'a> Tracer<'a> {
         }
     }
 
+    /// Where p + t d crosses the tracked box, t ≥ 0; in a periodic layer at most
+    /// [`DensityGrid::longest_path_m`] of it (a path along the layer).
+    fn tracked_span(&self, p: DVec3, d: DVec3) -> Option<(f64, f64)> {
+        let (t0, t1) = box_span(self.track_min, self.track_max, p, d)?;
+        Some((t0, t1.min(t0 + self.grid.longest_path_m())))
+    }
+
     /// Delta tracking through the grid up to distance `limit` with the common majorant,
     /// decided by the hero: the distance and densities of the first real collision, if any.
     /// At each null collision every other wavelength's density changes by its share of null
@@ -415,7 +422,7 @@ impl<'a> Tracer<'a> {
         limit: f64,
         rng: &mut Rng,
     ) -> Option<(f64, [f64; MAX_FIELDS])> {
-        let (t0, t1) = box_span(self.track_min, self.track_max, p, d)?;
+        let (t0, t1) = self.tracked_span(p, d)?;
         let end = t1.min(limit);
         let mu = self.majorant;
         let mut t = t0;
@@ -447,7 +454,7 @@ impl<'a> Tracer<'a> {
         rng: &mut Rng,
     ) -> [f64; MAX_CARRIED] {
         let mut tr = [1.0; MAX_CARRIED];
-        let Some((t0, t1)) = box_span(self.track_min, self.track_max, p, d) else {
+        let Some((t0, t1)) = self.tracked_span(p, d) else {
             return tr;
         };
         let end = t1.min(limit);
@@ -877,9 +884,11 @@ impl<'a> Tracer<'a> {
     /// The volumes' transparency along a ray by a fine ray march of the green channel's β_ext
     /// (quarter-voxel midpoint steps), as the fast models' A channel.
     pub fn transparency(&self, origin: DVec3, dir: DVec3) -> f64 {
-        let Some((t0, t1)) = box_span(self.grid.min_m, self.grid.max_m, origin, dir) else {
+        let (lo, hi) = self.grid.bounds();
+        let Some((t0, t1)) = box_span(lo, hi, origin, dir) else {
             return 1.0;
         };
+        let t1 = t1.min(t0 + self.grid.longest_path_m());
         let voxel = (0..3)
             .map(|a| (self.grid.max_m[a] - self.grid.min_m[a]) / self.grid.dims[a] as f64)
             .fold(f64::INFINITY, f64::min);
@@ -1016,7 +1025,8 @@ pub(super) fn tracked_box(
     media: &[(crate::objects::Region, f64, usize)],
     bands: &[Band],
 ) -> (DVec3, DVec3) {
-    let mut track = (frame.grid.min_m, frame.grid.max_m);
+    // A periodic grid is unbounded in x and z.
+    let mut track = frame.grid.bounds();
     let grow = |t: &mut (DVec3, DVec3), a: DVec3, b: DVec3| {
         t.0 = t.0.min(a);
         t.1 = t.1.max(b);

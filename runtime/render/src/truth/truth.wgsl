@@ -9,7 +9,7 @@ struct Params {
     up: vec4<f32>,           // w = an orthographic camera's half image height (m); 0: perspective
     sizes: vec4<u32>,        // width, height, first sample of this pass, samples in this pass
     eye: vec4<f32>,
-    grid_min: vec4<f32>,
+    grid_min: vec4<f32>,     // w = 1: the grid repeats in x and z (DensityGrid::periodic)
     grid_max: vec4<f32>,
     grid_dims: vec4<u32>,    // w = field count
     sigma_ext: array<vec4<f32>, 4>, // per field, m² per channel (the transparency uses green)
@@ -373,11 +373,64 @@ struct Hit {
     rho: vec4<f32>,
 }
 
+// Where o + t d crosses the grid, t ≥ 0, or (−1, −1) (box_span); a periodic grid
+// (grid_min.w = 1) between its bottom and top only, at most 1000 periods of it
+// (DensityGrid::bounds, DensityGrid::longest_path_m).
+fn grid_span(o: vec3<f32>, d: vec3<f32>) -> vec2<f32> {
+    if (rp.grid_min.w != 1.0) {
+        return box_span(o, d);
+    }
+    var t0 = 0.0;
+    var t1 = 3.0e38;
+    if (d.y == 0.0) {
+        if (o.y < rp.grid_min.y || o.y > rp.grid_max.y) {
+            return vec2<f32>(-1.0);
+        }
+    } else {
+        let lo = (rp.grid_min.y - o.y) / d.y;
+        let hi = (rp.grid_max.y - o.y) / d.y;
+        t0 = max(0.0, min(lo, hi));
+        t1 = max(lo, hi);
+    }
+    let size = rp.grid_max.xyz - rp.grid_min.xyz;
+    t1 = min(t1, t0 + 1000.0 * max(size.x, size.z));
+    return select(vec2<f32>(-1.0), vec2<f32>(t0, t1), t0 < t1);
+}
+
+// Trilinear densities at p (densities); on a periodic grid x and z wrap, the last voxel's
+// upper neighbour being the first (DensityGrid::taps).
+fn grid_densities(p: vec3<f32>) -> vec4<f32> {
+    if (rp.grid_min.w != 1.0) {
+        return densities(p);
+    }
+    if (p.y < rp.grid_min.y || p.y > rp.grid_max.y) {
+        return vec4<f32>(0.0);
+    }
+    let n = rp.grid_dims.xyz;
+    let nf = vec3<f32>(n);
+    let u = (p - rp.grid_min.xyz) / (rp.grid_max.xyz - rp.grid_min.xyz) * nf - 0.5;
+    let ux = u.x - floor(u.x / nf.x) * nf.x;
+    let uz = u.z - floor(u.z / nf.z) * nf.z;
+    let uy = clamp(u.y, 0.0, nf.y - 1.0);
+    let x0 = min(u32(floor(ux)), n.x - 1u);
+    let z0 = min(u32(floor(uz)), n.z - 1u);
+    let y0 = u32(min(i32(floor(uy)), max(i32(n.y) - 2, 0)));
+    let x1 = (x0 + 1u) % n.x;
+    let z1 = (z0 + 1u) % n.z;
+    let y1 = y0 + u32(n.y > 1u);
+    let t = vec3<f32>(ux - f32(x0), select(0.0, uy - f32(y0), n.y > 1u), uz - f32(z0));
+    let c00 = mix(voxel(x0, y0, z0), voxel(x1, y0, z0), t.x);
+    let c10 = mix(voxel(x0, y1, z0), voxel(x1, y1, z0), t.x);
+    let c01 = mix(voxel(x0, y0, z1), voxel(x1, y0, z1), t.x);
+    let c11 = mix(voxel(x0, y1, z1), voxel(x1, y1, z1), t.x);
+    return mix(mix(c00, c10, t.y), mix(c01, c11, t.y), t.z);
+}
+
 // Delta tracking up to limit, decided by the hero (Tracer::track).
 fn track(c: ptr<function, Carried>, p: vec3<f32>, d: vec3<f32>, limit: f32) -> Hit {
     var out: Hit;
     out.hit = false;
-    let span = box_span(p, d);
+    let span = grid_span(p, d);
     if (span.y < 0.0) {
         return out;
     }
@@ -391,7 +444,7 @@ fn track(c: ptr<function, Carried>, p: vec3<f32>, d: vec3<f32>, limit: f32) -> H
         if (t >= end) {
             return out;
         }
-        let rho = densities(p + t * d);
+        let rho = grid_densities(p + t * d);
         let e = sig * rho;
         if (rand() * mu < e[0]) {
             out.hit = true;
@@ -411,7 +464,7 @@ fn track(c: ptr<function, Carried>, p: vec3<f32>, d: vec3<f32>, limit: f32) -> H
 // Ratio tracking with Russian roulette below 1/20 (Tracer::volume_transmittance).
 fn volume_transmittance(c: Carried, p: vec3<f32>, d: vec3<f32>, limit: f32) -> vec4<f32> {
     var tr = vec4<f32>(1.0);
-    let span = box_span(p, d);
+    let span = grid_span(p, d);
     if (span.y < 0.0) {
         return tr;
     }
@@ -425,7 +478,7 @@ fn volume_transmittance(c: Carried, p: vec3<f32>, d: vec3<f32>, limit: f32) -> v
         if (t >= end) {
             return tr;
         }
-        let e = sig * densities(p + t * d);
+        let e = sig * grid_densities(p + t * d);
         tr = tr * (1.0 - e / mu);
         let tm = tr * mask(c);
         if (max(max(tm.x, tm.y), max(tm.z, tm.w)) < 0.05) {
@@ -1014,7 +1067,7 @@ fn transparency(@builtin(global_invocation_id) id: vec3<u32>) {
     let pixel = id.x + rp.sizes.x * id.y;
     let o = camera_origin(id.x, id.y);
     let d = camera_direction(id.x, id.y);
-    let span = box_span(o, d);
+    let span = grid_span(o, d);
     if (span.y < 0.0) {
         transparency_out[pixel] = 1.0;
         return;
@@ -1023,7 +1076,7 @@ fn transparency(@builtin(global_invocation_id) id: vec3<u32>) {
     let dt = (span.y - span.x) / f32(steps);
     var tau = 0.0;
     for (var i = 0u; i < steps; i = i + 1u) {
-        let rho = densities(o + (span.x + (f32(i) + 0.5) * dt) * d);
+        let rho = grid_densities(o + (span.x + (f32(i) + 0.5) * dt) * d);
         for (var f = 0u; f < rp.grid_dims.w; f = f + 1u) {
             tau = tau + rho[f] * rp.sigma_ext[f].g * dt;
         }

@@ -129,6 +129,7 @@ pub fn slab_frame(tau: f64) -> Frame {
             max_m: DVec3::new(1e4, 2.0, 1e4),
             dims: [2, 2, 2],
             data,
+            periodic: false,
         },
         haze: None,
         ground_albedo: 0.0,
@@ -156,6 +157,16 @@ pub fn orthographic_slab(tau: f64, out: DVec3, (w, h): (usize, usize)) -> Frame 
     };
     (frame.width, frame.height) = (w, h);
     frame
+}
+
+/// [`slab_frame`] narrowed to a box `width_m` wide in x and z that repeats without end
+/// (`periodic = true`): the same infinite slab.
+pub fn periodic_slab(frame: &mut Frame, width_m: f64) {
+    frame.grid.min_m.x = -0.5 * width_m;
+    frame.grid.min_m.z = -0.5 * width_m;
+    frame.grid.max_m.x = 0.5 * width_m;
+    frame.grid.max_m.z = 0.5 * width_m;
+    frame.grid.periodic = true;
 }
 
 /// Per channel: mean and standard error of `n` of the truth's radiance samples along `dir`
@@ -194,6 +205,7 @@ pub fn outgoing(mu: f64, phi_deg: f64, up: bool) -> DVec3 {
 }
 
 /// One DISORT radiance the camera-side estimator is checked against.
+#[derive(Clone)]
 pub struct DisortRadiance {
     /// The case's list it is from (`I_up_reflected_top` or `I_down_transmitted_bottom`).
     pub list: &'static str,
