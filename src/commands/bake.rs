@@ -63,10 +63,17 @@ pub fn run(a: BakeArgs) -> Result<()> {
     // A field's `file` is relative to the scene's folder, which a shard records (absolute)
     // for the merge.
     let scene_dir = match &a.scene {
-        Some(p) => Some(
-            std::path::absolute(p.parent().unwrap_or(std::path::Path::new("")))
-                .with_context(|| format!("the folder of scene {}", p.display()))?,
-        ),
+        Some(p) => {
+            // A bare file name's parent is "": the working folder.
+            let dir = p
+                .parent()
+                .filter(|d| !d.as_os_str().is_empty())
+                .unwrap_or(std::path::Path::new("."));
+            Some(
+                std::path::absolute(dir)
+                    .with_context(|| format!("the folder of scene {}", p.display()))?,
+            )
+        }
         None => None,
     };
     let scene = Scene::parse_in(&text, &origin, scene_dir.as_deref())?;
