@@ -103,7 +103,7 @@ runtime::uniform! {
         pub sizes: [u32; 4],
         /// Eye (m).
         pub eye: [f32; 4],
-        /// The grid's box (m); w = 1 where it repeats in x and z (a periodic volume).
+        /// The grid's box (m).
         pub grid_min: [f32; 4],
         /// The grid's box (m).
         pub grid_max: [f32; 4],
@@ -148,12 +148,53 @@ runtime::uniform! {
     }
 }
 
-/// The pipelines, built once.
+/// The pipelines, built once: those of bounded grids at once, those of periodic ones
+/// (`periodic` true in the shader, a constant so that a bounded grid's loops carry no trace
+/// of it: as a uniform's branch it made them 5× slower on lavapipe) when first needed.
 pub struct Renderer {
     layout: wgpu::BindGroupLayout,
+    module: wgpu::ShaderModule,
+    pipeline_layout: wgpu::PipelineLayout,
+    bounded: Pipelines,
+    periodic: std::sync::OnceLock<Pipelines>,
+}
+
+/// The passes' pipelines for one value of the shader's `periodic`.
+struct Pipelines {
     step: wgpu::ComputePipeline,
     photon: wgpu::ComputePipeline,
     transparency: wgpu::ComputePipeline,
+}
+
+impl Pipelines {
+    fn new(
+        device: &wgpu::Device,
+        module: &wgpu::ShaderModule,
+        layout: &wgpu::PipelineLayout,
+        periodic: bool,
+    ) -> Self {
+        let pipeline = |name: &str, photon: bool| {
+            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some(name),
+                layout: Some(layout),
+                module,
+                entry_point: Some(name),
+                compilation_options: wgpu::PipelineCompilationOptions {
+                    constants: &[
+                        ("photon_mode", f64::from(u8::from(photon))),
+                        ("periodic", f64::from(u8::from(periodic))),
+                    ],
+                    ..Default::default()
+                },
+                cache: None,
+            })
+        };
+        Self {
+            step: pipeline("step", false),
+            photon: pipeline("step", true),
+            transparency: pipeline("transparency", false),
+        }
+    }
 }
 
 impl Renderer {
@@ -182,24 +223,23 @@ impl Renderer {
             bind_group_layouts: &[Some(&layout)],
             immediate_size: 0,
         });
-        let pipeline = |name: &str, photon: bool| {
-            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some(name),
-                layout: Some(&pipeline_layout),
-                module: &module,
-                entry_point: Some(name),
-                compilation_options: wgpu::PipelineCompilationOptions {
-                    constants: &[("photon_mode", f64::from(u8::from(photon)))],
-                    ..Default::default()
-                },
-                cache: None,
-            })
-        };
         Self {
-            step: pipeline("step", false),
-            photon: pipeline("step", true),
-            transparency: pipeline("transparency", false),
+            bounded: Pipelines::new(device, &module, &pipeline_layout, false),
+            periodic: std::sync::OnceLock::new(),
             layout,
+            module,
+            pipeline_layout,
+        }
+    }
+
+    /// The pipelines for a grid that repeats (`periodic`) or not.
+    fn pipelines(&self, gpu: &Gpu, periodic: bool) -> &Pipelines {
+        if periodic {
+            self.periodic.get_or_init(|| {
+                Pipelines::new(&gpu.device, &self.module, &self.pipeline_layout, true)
+            })
+        } else {
+            &self.bounded
         }
     }
 }
@@ -385,7 +425,7 @@ fn params(
         up: v4(up, frame.camera.ortho_half_height_m((w, h)).unwrap_or(0.0)),
         sizes: [w as u32, h as u32, 0, 0],
         eye: v4(frame.camera.position_m, 0.0),
-        grid_min: v4(grid.min_m, if grid.periodic { 1.0 } else { 0.0 }),
+        grid_min: v4(grid.min_m, 0.0),
         grid_max: v4(grid.max_m, 0.0),
         grid_dims: [
             grid.dims[0] as u32,
@@ -464,6 +504,8 @@ struct Bound {
     bind_group: wgpu::BindGroup,
     /// The bytes between the four [`StepParams`] (the dispatches' dynamic offsets).
     step_stride: usize,
+    /// The grid repeats in x and z: the periodic pipelines.
+    periodic: bool,
 }
 
 /// The passes' buffers for `params`, the `tracer`'s optics `o`, the `grid` and `pixels`
@@ -585,6 +627,7 @@ fn bind(
         counters,
         bind_group,
         step_stride,
+        periodic: grid.periodic,
     }
 }
 
@@ -592,7 +635,7 @@ impl Bound {
     /// The transparency pass: one dispatch over the image of `w` × `h` pixels.
     fn transparency_pass(&self, gpu: &Gpu, renderer: &Renderer, (w, h): (usize, usize)) {
         submit_pass(gpu, "photometeor truth transparency", |pass| {
-            pass.set_pipeline(&renderer.transparency);
+            pass.set_pipeline(&renderer.pipelines(gpu, self.periodic).transparency);
             pass.set_bind_group(0, &self.bind_group, &[0]);
             pass.dispatch_workgroups(w.div_ceil(8) as u32, h.div_ceil(8) as u32, 1);
         });
@@ -603,10 +646,11 @@ impl Bound {
     /// still under way.
     fn steps(&self, gpu: &Gpu, renderer: &Renderer, photon: bool, (len, begin): (usize, bool)) {
         submit_pass(gpu, "photometeor truth steps", |pass| {
+            let pipelines = renderer.pipelines(gpu, self.periodic);
             pass.set_pipeline(if photon {
-                &renderer.photon
+                &pipelines.photon
             } else {
-                &renderer.step
+                &pipelines.step
             });
             for i in 0..DISPATCHES_PER_SUBMIT {
                 let last = i + 1 == DISPATCHES_PER_SUBMIT;

@@ -9,7 +9,7 @@ struct Params {
     up: vec4<f32>,           // w = an orthographic camera's half image height (m); 0: perspective
     sizes: vec4<u32>,        // width, height, first sample of this pass, samples in this pass
     eye: vec4<f32>,
-    grid_min: vec4<f32>,     // w = 1: the grid repeats in x and z (DensityGrid::periodic)
+    grid_min: vec4<f32>,
     grid_max: vec4<f32>,
     grid_dims: vec4<u32>,    // w = field count
     sigma_ext: array<vec4<f32>, 4>, // per field, m² per channel (the transparency uses green)
@@ -59,6 +59,9 @@ struct Step {
 // constant, so that each pipeline holds only its own code (a run-time flag made lavapipe's
 // camera paths 10× slower).
 override photon_mode: bool = false;
+// The grid repeats in x and z (DensityGrid::periodic): a constant of the pipeline, so that a
+// bounded grid's loops are those they were.
+override periodic: bool = false;
 
 const BAND_ROWS: u32 = 6u;
 const BLOCK: u32 = 32u;
@@ -374,10 +377,10 @@ struct Hit {
 }
 
 // Where o + t d crosses the grid, t ≥ 0, or (−1, −1) (box_span); a periodic grid
-// (grid_min.w = 1) between its bottom and top only, at most 1000 periods of it
+// between its bottom and top only, at most 1000 periods of it
 // (DensityGrid::bounds, DensityGrid::longest_path_m).
 fn grid_span(o: vec3<f32>, d: vec3<f32>) -> vec2<f32> {
-    if (rp.grid_min.w != 1.0) {
+    if (!periodic) {
         return box_span(o, d);
     }
     var t0 = 0.0;
@@ -400,7 +403,7 @@ fn grid_span(o: vec3<f32>, d: vec3<f32>) -> vec2<f32> {
 // Trilinear densities at p (densities); on a periodic grid x and z wrap, the last voxel's
 // upper neighbour being the first (DensityGrid::taps).
 fn grid_densities(p: vec3<f32>) -> vec4<f32> {
-    if (rp.grid_min.w != 1.0) {
+    if (!periodic) {
         return densities(p);
     }
     if (p.y < rp.grid_min.y || p.y > rp.grid_max.y) {
@@ -791,21 +794,17 @@ struct Path {
 }
 
 // Pixel (i, j)'s camera ray (Camera::pixel): from the eye through the pixel, or for an
-// orthographic camera (up.w > 0) along `forward` from the pixel's point of the image plane.
+// orthographic camera (up.w > 0: half the image's height, m) along `forward` from the pixel's
+// point of the image plane. Without branches: a branch on the camera in begin_sample made
+// lavapipe's paths 5–10× slower.
 fn camera_origin(i: u32, j: u32) -> vec3<f32> {
-    if (rp.up.w == 0.0) {
-        return rp.eye.xyz;
-    }
-    let sx = (2.0 * (f32(i) + 0.5) / f32(rp.sizes.x) - 1.0) * rp.up.w * rp.right.w;
-    let sy = (1.0 - 2.0 * (f32(j) + 0.5) / f32(rp.sizes.y)) * rp.up.w;
-    return rp.eye.xyz + sx * rp.right.xyz + sy * rp.up.xyz;
+    let sx = (2.0 * (f32(i) + 0.5) / f32(rp.sizes.x) - 1.0) * rp.right.w;
+    let sy = 1.0 - 2.0 * (f32(j) + 0.5) / f32(rp.sizes.y);
+    return rp.eye.xyz + rp.up.w * (sx * rp.right.xyz + sy * rp.up.xyz);
 }
 
 fn camera_direction(i: u32, j: u32) -> vec3<f32> {
-    if (rp.up.w == 0.0) {
-        return pixel_ray(i, j);
-    }
-    return rp.forward.xyz;
+    return select(pixel_ray(i, j), rp.forward.xyz, rp.up.w > 0.0);
 }
 
 // Sample k of the pass at `pixel`: its random stream and its camera ray (in photon mode, a
