@@ -62,20 +62,7 @@ pub fn run(a: BakeArgs) -> Result<()> {
     };
     // A field's `file` is relative to the scene's folder, which a shard records (absolute)
     // for the merge.
-    let scene_dir = match &a.scene {
-        Some(p) => {
-            // A bare file name's parent is "": the working folder.
-            let dir = p
-                .parent()
-                .filter(|d| !d.as_os_str().is_empty())
-                .unwrap_or(std::path::Path::new("."));
-            Some(
-                std::path::absolute(dir)
-                    .with_context(|| format!("the folder of scene {}", p.display()))?,
-            )
-        }
-        None => None,
-    };
+    let scene_dir = a.scene.as_deref().map(scene_folder).transpose()?;
     let scene = Scene::parse_in(&text, &origin, scene_dir.as_deref())?;
     let quality = match a.quality.as_deref() {
         Some(q) => Quality::parse(q).context("quality preset")?,
@@ -179,6 +166,15 @@ pub fn run(a: BakeArgs) -> Result<()> {
         );
     }
     Ok(())
+}
+
+/// The folder (absolute) of the scene file at `path`; a bare file name's is the working one.
+fn scene_folder(path: &std::path::Path) -> Result<std::path::PathBuf> {
+    let dir = path
+        .parent()
+        .filter(|d| !d.as_os_str().is_empty())
+        .unwrap_or(std::path::Path::new("."));
+    std::path::absolute(dir).with_context(|| format!("the folder of scene {}", path.display()))
 }
 
 /// Names as words: `a`, `a and b`, `a, b and c`; `no field` for none.
