@@ -747,6 +747,20 @@ fn auto_chooses_by_the_scenes_optical_depth_and_says_why() {
         e.contains("--model auto: biri — the only kind of model"),
         "{e}"
     );
+    // An orthographic camera: only the truth draws it, and the line says why.
+    let ortho = scene("1e8").replace(
+        "look_at_m = [0, 500, 0]\n",
+        "look_at_m = [0, 500, 0]\nprojection = \"orthographic\"\nwidth_m = 1000\n",
+    );
+    let (code, e) = run(&ortho, &[]);
+    assert_eq!(code, Some(0), "{e}");
+    assert!(
+        e.contains(
+            "--model auto: truth — the only model that draws this scene (riley: [camera] \
+             projection = \"orthographic\""
+        ),
+        "{e}"
+    );
     std::fs::remove_dir_all(cwd.join("tables")).unwrap();
     let (code, e) = run(&scene("1e8"), &["--set", "slices=8"]);
     assert_eq!(code, Some(2), "{e}");

@@ -351,34 +351,8 @@ pub fn prepare(
     let names: Vec<&str> = used.iter().map(String::as_str).collect();
     let tables = Tables::open_fields(&dir, Some(&names))?;
     let (model, frame, choice) = if model == AUTO {
-        let frame = render.frame(&tables)?;
-        let tau = render::auto::optical_depth(&tables, &frame.grid);
-        // A model that refuses this grid's depths below its depth limit (coupled's transport
-        // on a coarse grid) does not take part, and the line says why; one beyond its limit
-        // stays for `choose`, which leaves it out and names the limit.
-        let mut able = Vec::new();
-        let mut refused = Vec::new();
-        for m in candidates.iter().map(ModelSettings::name) {
-            let beyond = tau > render::registry::depth_limit(m).unwrap_or(f64::INFINITY);
-            match render::registry::depth_refusal(m, &tables, &frame).filter(|_| !beyond) {
-                Some(e) => refused.push((m, e)),
-                None => able.push(m),
-            }
-        }
-        let mut choice = render::auto::choose(&able, tau, &render::auto::measured())
-            .expect("auto_candidates is never empty");
-        for (m, e) in refused {
-            let e = e.split(" (docs/").next().unwrap_or(&e);
-            choice.why += &format!("; {m} not taken: {e}");
-        }
-        if !quiet {
-            eprintln!("--model auto: {} — {}", choice.model, choice.why);
-        }
-        let chosen = candidates
-            .into_iter()
-            .find(|m| m.name() == choice.model)
-            .expect("chosen among the candidates");
-        (chosen, Some(frame), Some(choice))
+        let (model, frame, choice) = auto_choice(candidates, &render, &tables, quiet)?;
+        (model, Some(frame), Some(choice))
     } else {
         (
             candidates.into_iter().next().expect("one model"),
@@ -394,6 +368,67 @@ pub fn prepare(
         frame,
         choice,
     })
+}
+
+/// `--model auto`'s model among `candidates` ([`auto_candidates`]) for the scene's frame on
+/// `tables`: the truth where it is the only one, else by [`render::auto::choose`]; says which
+/// and why unless `quiet`.
+fn auto_choice(
+    candidates: Vec<ModelSettings>,
+    render: &RenderScene,
+    tables: &Tables,
+    quiet: bool,
+) -> Result<(ModelSettings, Frame, render::auto::Choice)> {
+    let frame = render.frame(tables)?;
+    let tau = render::auto::optical_depth(tables, &frame.grid);
+    if candidates.len() == 1 && candidates[0].name() == TRUTH {
+        // The first interactive model's refusal says what only the truth draws.
+        let refusal = render::registry::interactive_models()
+            .iter()
+            .find_map(|m| render.check_for(m).err().map(|e| format!("{m}: {e}")));
+        let why = format!(
+            "the only model that draws this scene ({})",
+            refusal
+                .as_deref()
+                .unwrap_or("the others do not fit in memory")
+        );
+        if !quiet {
+            eprintln!("--model auto: {TRUTH} — {why}");
+        }
+        let choice = render::auto::Choice {
+            model: TRUTH,
+            tau,
+            why,
+        };
+        let model = candidates.into_iter().next().expect("the truth");
+        return Ok((model, frame, choice));
+    }
+    // A model that refuses this grid's depths below its depth limit (coupled's transport
+    // on a coarse grid) does not take part, and the line says why; one beyond its limit
+    // stays for `choose`, which leaves it out and names the limit.
+    let mut able = Vec::new();
+    let mut refused = Vec::new();
+    for m in candidates.iter().map(ModelSettings::name) {
+        let beyond = tau > render::registry::depth_limit(m).unwrap_or(f64::INFINITY);
+        match render::registry::depth_refusal(m, tables, &frame).filter(|_| !beyond) {
+            Some(e) => refused.push((m, e)),
+            None => able.push(m),
+        }
+    }
+    let mut choice = render::auto::choose(&able, tau, &render::auto::measured())
+        .expect("auto_candidates is never empty");
+    for (m, e) in refused {
+        let e = e.split(" (docs/").next().unwrap_or(&e);
+        choice.why += &format!("; {m} not taken: {e}");
+    }
+    if !quiet {
+        eprintln!("--model auto: {} — {}", choice.model, choice.why);
+    }
+    let chosen = candidates
+        .into_iter()
+        .find(|m| m.name() == choice.model)
+        .expect("chosen among the candidates");
+    Ok((chosen, frame, choice))
 }
 
 /// `--model`'s value that lets the scene choose ([`render::auto`]).
@@ -461,6 +496,14 @@ fn auto_candidates(render: &RenderScene, limit: u64, origin: &str) -> Result<Vec
         }
     }
     if able.is_empty() {
+        // What only the reference draws (an orthographic camera, a periodic volume): the truth.
+        let truth = render
+            .check_for(TRUTH)
+            .and_then(|m| render.check_memory(&m, limit).map(|()| m));
+        match truth {
+            Ok(m) => return Ok(vec![m]),
+            Err(e) => reasons.push(format!("{TRUTH}: {e}")),
+        }
         bail!(
             "{origin}: --model auto: no model renders this scene —\n  {}",
             reasons.join("\n  ")
@@ -468,6 +511,9 @@ fn auto_candidates(render: &RenderScene, limit: u64, origin: &str) -> Result<Vec
     }
     Ok(able)
 }
+
+/// The reference model, which `--model auto` takes where no interactive model draws the scene.
+const TRUTH: &str = "truth";
 
 /// The files a render scene reads beside itself: each grid volume's `file` and each mesh
 /// occluder's OBJ `file`, resolved against `base` (the scene file's directory) as the scene's
