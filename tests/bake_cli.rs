@@ -399,6 +399,32 @@ fn tradeoff_measures_each_knob_against_a_reference() {
     );
     assert!(plots.join("tradeoff_pareto.png").exists());
     assert!(plots.join("tradeoff_pareto.svg").exists());
+
+    // A scene of given phase functions only has nothing to trade: refused before any work.
+    let lobe = root.join("lobe.toml");
+    fs::write(
+        &lobe,
+        "[scene]\nname = \"lobe\"\nspectral = \"rgb3\"\n\n[[field]]\nname = \"l\"\nkind = \"hg\"\n\
+         g = 0.8\nextinction_m2 = 1e-12\n",
+    )
+    .unwrap();
+    let lobe_out = root.join("lobe-work");
+    let run = photometeor(
+        &[
+            "tradeoff",
+            lobe.to_str().unwrap(),
+            "--out",
+            lobe_out.to_str().unwrap(),
+        ],
+        Path::new("."),
+    );
+    let e = String::from_utf8_lossy(&run.stderr);
+    assert!(!run.status.success());
+    assert!(
+        e.contains("nothing to trade: its fields are given phase functions"),
+        "{e}"
+    );
+    assert!(!lobe_out.exists(), "wrote before refusing");
 }
 
 /// The bake's summary is words, not a debug list: what it computed, where the tables are and

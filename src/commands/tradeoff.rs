@@ -60,6 +60,13 @@ struct Variant {
 /// Runs `photometeor tradeoff`.
 pub fn run(a: TradeoffArgs) -> Result<()> {
     let scene = Scene::from_file_or_default(a.scene.as_deref())?;
+    if scene.fields.iter().all(|f| group(f.kind).is_none()) {
+        anyhow::bail!(
+            "scene {}: nothing to trade: its fields are given phase functions (hg, tabulated), \
+             which no knob of the bake changes",
+            scene.name
+        );
+    }
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
     let reference = reference_bake(&a, &scene)?;
     let reference_checks = validate(&reference)?;
@@ -101,9 +108,14 @@ fn reference_bake(a: &TradeoffArgs, scene: &Scene) -> Result<PathBuf> {
     })
 }
 
-/// Whether a field of this kind is drops (spheres), not crystals.
-fn is_drop(kind: FieldKind) -> bool {
-    matches!(kind, FieldKind::Cloud | FieldKind::Rain | FieldKind::Haze)
+/// The group a field of this kind is traded in: drops (spheres, `Some(true)`) or crystals
+/// (`Some(false)`); none for a given phase function (hg, tabulated), which no knob changes.
+fn group(kind: FieldKind) -> Option<bool> {
+    match kind {
+        FieldKind::Cloud | FieldKind::Rain | FieldKind::Haze => Some(true),
+        FieldKind::Ice | FieldKind::Snow => Some(false),
+        FieldKind::Hg | FieldKind::Tabulated => None,
+    }
 }
 
 /// "drops" or "crystals".
@@ -124,7 +136,7 @@ fn standard_knobs(scene: &Scene) -> Knobs {
 /// `standard`, on the drops and on the crystals (each where the scene has such fields); fewer
 /// values with `quick`.
 fn variants(scene: &Scene, standard: Knobs, quick: bool) -> Vec<Variant> {
-    let has = |drops: bool| scene.fields.iter().any(|f| is_drop(f.kind) == drops);
+    let has = |drops: bool| scene.fields.iter().any(|f| group(f.kind) == Some(drops));
     let mut variants = Vec::new();
     for drops in [true, false] {
         if !has(drops) {
@@ -269,7 +281,7 @@ fn measure(
     reference_checks: &ValidationReport,
 ) -> Result<Row> {
     let mut s = scene.clone();
-    s.fields.retain(|f| is_drop(f.kind) == v.drops);
+    s.fields.retain(|f| group(f.kind) == Some(v.drops));
     if let (Some(w), Spectral::Spectral { min_nm, max_nm, .. }) = (v.wavelengths, s.spectral) {
         s.spectral = Spectral::Spectral {
             count: w,
