@@ -160,12 +160,32 @@ pub fn run(a: BakeArgs) -> Result<()> {
             "The tables are in {out}: manifest.json and one <field>.exr per field (beside each, \
              the .single, .poisson and .biri side tables the render models read)."
         );
+        say_normalizations(&plan.scene);
         println!("Next: photometeor validate {out}   (checks each field against theory)");
         println!(
             "  or: photometeor render --out rainbow.exr --png rainbow.png   (the rainbow scene)"
         );
     }
     Ok(())
+}
+
+/// One line per `tabulated` field: its table's integral over the sphere as read (per column),
+/// the normalization the bake divided out.
+fn say_normalizations(scene: &Scene) {
+    for f in &scene.fields {
+        let Some(t) = &f.tabulated else { continue };
+        let found: Vec<String> = (0..t.columns.len())
+            .map(|c| format!("{:.6}", t.sphere_integral(c)))
+            .collect();
+        println!(
+            "Field {}: the table {} integrates to {} over the sphere ({} column(s) as read); \
+             divided by that, it is normalized to 1.",
+            f.name,
+            t.file,
+            found.join(", "),
+            t.columns.len()
+        );
+    }
 }
 
 /// The folder (absolute) of the scene file at `path`; a bare file name's is the working one.

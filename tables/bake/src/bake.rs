@@ -712,10 +712,16 @@ fn field_entry(
             hg: field
                 .hg
                 .map(|h| serde_json::to_value(h).expect("a lobe serializes")),
-            tabulated: field
-                .tabulated
-                .as_ref()
-                .map(|t| serde_json::to_value(t).expect("a table serializes")),
+            // The table as read, and the normalization found per column (its integral over
+            // the sphere, which the bins are divided by).
+            tabulated: field.tabulated.as_ref().map(|t| {
+                let mut v = serde_json::to_value(t).expect("a table serializes");
+                v["sphere_integral"] = (0..t.columns.len())
+                    .map(|c| t.sphere_integral(c))
+                    .collect::<Vec<f64>>()
+                    .into();
+                v
+            }),
             temperature_c: field.temperature_c,
         },
         quality: format::QualityRecord {

@@ -650,7 +650,15 @@ fn a_tabulated_field_reproduces_the_mie_table_it_was_written_from() {
     let (mut worst_norm, mut worst_g, mut worst_p) = (0.0f64, 0.0f64, 0.0f64);
     for (c, ch) in ["R", "G", "B"].into_iter().enumerate() {
         let q_sca = channels[c]["q_sca"].as_f64().unwrap();
-        let norm = table.sphere_integral(c) / q_sca - 1.0;
+        let found = entry["microphysics"]["tabulated"]["sphere_integral"][c]
+            .as_f64()
+            .unwrap();
+        assert_eq!(
+            found,
+            table.sphere_integral(c),
+            "{ch}: the manifest's normalization"
+        );
+        let norm = found / q_sca - 1.0;
         worst_norm = worst_norm.max(norm.abs());
         // Measured 6.0e-5 (a trapezoid rule on the same rows: 6.0e-5 too): the 0.05° rows'
         // resolution of the forward lobes of the largest droplets.

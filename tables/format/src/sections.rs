@@ -303,7 +303,9 @@ pub struct Microphysics {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub hg: Option<Value>,
     /// A given table (`tabulated` fields), as the solver's `TabulatedField` serializes it
-    /// (the file's name, its angles and columns as read, the cross-section).
+    /// (the file's name, its angles and columns as read, the cross-section), and
+    /// `sphere_integral`: each column's integral over the sphere as read (the normalization
+    /// found, divided out).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub tabulated: Option<Value>,
     /// Temperature, °C.
