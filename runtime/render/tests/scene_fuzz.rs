@@ -1,5 +1,5 @@
 //! Property tests of the scene parsers — the render scene (`RenderScene::parse`, then each
-//! model's `check_for` and `memory`) and the bake scene (`bake::Scene::parse`) — on mutated
+//! model's `check_for` and `memory`) and the bake scene (`bake::Scene::parse_in`) — on mutated
 //! copies of every example scene in `data/scenes/` and the soft-ball fixture: a value set to an
 //! extreme, a wrong type or a path of a device, a line removed, duplicated or swapped with
 //! another, bytes flipped, the text truncated. Each case must end in `Ok` or an error naming
@@ -291,7 +291,8 @@ fn the_render_scene_parser_survives_mutated_scenes() {
 #[test]
 fn the_bake_scene_parser_survives_mutated_scenes() {
     let case = |text: &str, seed: &Seed| {
-        let Ok(scene) = bake::Scene::parse(text, &seed.name) else {
+        // A field's `file` (a tabulated field's table) is read beside the scene.
+        let Ok(scene) = bake::Scene::parse_in(text, &seed.name, Some(&seed.base)) else {
             return (false, false);
         };
         // A plan of every preset: knobs for the scene's spectral mode.
@@ -304,7 +305,10 @@ fn the_bake_scene_parser_survives_mutated_scenes() {
         }
         (true, false)
     };
-    let tally = fuzz(case, |len, _| 64 * len + (1 << 20));
+    // The text, and a table file read and parsed (its bytes, then a few floats a byte).
+    let tally = fuzz(case, |len, seed| {
+        64 * len + 8 * seed.largest_file as usize + (1 << 20)
+    });
     tally.print("bake scenes");
     if tally.cases >= 256 {
         assert!(tally.parsed > 0);

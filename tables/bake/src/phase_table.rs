@@ -14,6 +14,10 @@ use mie::tabulated::TabulatedField;
 /// The most rows a table may have (a 0.001° table from 0 to 180° has 180 001).
 pub const MAX_ROWS: usize = 200_001;
 
+/// The largest table file read (bytes): a FIFO, a device such as `/dev/zero` or a larger file
+/// is refused before it is read.
+pub const MAX_FILE_BYTES: u64 = 256 << 20;
+
 /// A table read from its file: the angles, the columns after θ, and where each row sits in
 /// the file ("line 7", "row 7") for messages.
 #[derive(Debug, Clone, PartialEq)]
@@ -27,15 +31,18 @@ pub struct Table {
 }
 
 impl Table {
-    /// Reads `path` (named `shown` in messages): `.npy` by its extension, CSV otherwise.
+    /// Reads `path` (named `shown` in messages): `.npy` by its extension, CSV otherwise; only
+    /// a regular file of at most [`MAX_FILE_BYTES`].
     pub fn read(path: &Path, shown: &str) -> Result<Self, String> {
         let is_npy = path
             .extension()
             .is_some_and(|e| e.eq_ignore_ascii_case("npy"));
+        let bytes = format::read_regular_file(path, MAX_FILE_BYTES)
+            .map_err(|(op, e)| format!("file {shown}: cannot be read ({op}: {e})"))?;
         let table = if is_npy {
-            Self::npy(path, shown)?
+            Self::npy(&bytes, shown)?
         } else {
-            let text = std::fs::read_to_string(path)
+            let text = String::from_utf8(bytes)
                 .map_err(|e| format!("file {shown}: cannot be read as text: {e}"))?;
             Self::csv(&text, shown)?
         };
@@ -117,15 +124,12 @@ impl Table {
         Ok(table)
     }
 
-    /// Reads a `.npy` array of float64 or float32, one row per angle.
-    fn npy(path: &Path, shown: &str) -> Result<Self, String> {
+    /// Parses a `.npy` array of float64 or float32, one row per angle.
+    fn npy(bytes: &[u8], shown: &str) -> Result<Self, String> {
         use ndarray_npy::ReadNpyExt;
-        let open = || {
-            std::fs::File::open(path).map_err(|e| format!("file {shown}: cannot be opened: {e}"))
-        };
-        let array = match ndarray::Array2::<f64>::read_npy(open()?) {
+        let array = match ndarray::Array2::<f64>::read_npy(bytes) {
             Ok(a) => a,
-            Err(first) => match ndarray::Array2::<f32>::read_npy(open()?) {
+            Err(first) => match ndarray::Array2::<f32>::read_npy(bytes) {
                 Ok(a) => a.mapv(f64::from),
                 Err(_) => {
                     return Err(format!(
@@ -219,6 +223,15 @@ mod tests {
             .field("t.csv", [1.0; 3])
             .unwrap_err();
         assert!(e.starts_with("file t.csv line 2: p = inf"), "{e}");
+    }
+
+    /// A device or a FIFO is refused before a byte is read (`/dev/zero` would never end).
+    #[test]
+    fn only_regular_files_are_read() {
+        for path in ["/dev/zero", "/"] {
+            let e = Table::read(Path::new(path), path).unwrap_err();
+            assert!(e.contains("not a regular file"), "{path}: {e}");
+        }
     }
 
     #[test]
