@@ -101,22 +101,13 @@ impl HgField {
     /// The field's optics of `channel` (0, 1, 2: R, G, B) at `wavelength_nm` on `grid`; the lobe
     /// scatters all it removes (albedo 1: a field's given albedo replaces it, as any field's).
     pub fn phase(&self, channel: usize, wavelength_nm: f64, grid: ThetaGrid) -> PhaseFunction {
-        let (lobe, extinction_m2) = (self.lobes[channel], self.extinction_m2[channel]);
-        PhaseFunction {
+        let lobe = self.lobes[channel];
+        PhaseFunction::given(
             wavelength_nm,
-            // A lobe has no refractive index: 1 + 0i.
-            m_re: 1.0,
-            m_im: 0.0,
-            sigma_ext_m2: extinction_m2,
-            sigma_sca_m2: extinction_m2,
-            albedo: 1.0,
-            g: lobe.asymmetry(),
-            bins: lobe.bins(&grid),
-            grid,
-            forward_delta_fraction: 0.0,
-            points: Vec::new(),
-            origin: Origin::Given(GivenOrigin { hg: lobe }),
-        }
+            self.extinction_m2[channel],
+            (lobe.asymmetry(), lobe.bins(&grid), grid),
+            Origin::Given(GivenOrigin { hg: lobe }),
+        )
     }
 }
 

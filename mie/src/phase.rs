@@ -121,6 +121,31 @@ impl PhaseFunction {
             .sum()
     }
 
+    /// A given phase function's optics (a lobe's or a table's, `origin`): `bins` and `g` on
+    /// `grid` at `wavelength_nm`, no refractive index (1 + 0i), σ_ext = σ_sca = `extinction_m2`
+    /// (albedo 1: a field's given albedo replaces it, as any field's).
+    pub fn given(
+        wavelength_nm: f64,
+        extinction_m2: f64,
+        (g, bins, grid): (f64, Vec<f64>, ThetaGrid),
+        origin: Origin,
+    ) -> Self {
+        Self {
+            wavelength_nm,
+            m_re: 1.0,
+            m_im: 0.0,
+            sigma_ext_m2: extinction_m2,
+            sigma_sca_m2: extinction_m2,
+            albedo: 1.0,
+            g,
+            bins,
+            grid,
+            forward_delta_fraction: 0.0,
+            points: Vec::new(),
+            origin,
+        }
+    }
+
     /// The sphere quadrature's details, if this came from Mie theory.
     pub fn mie(&self) -> Option<&MieOrigin> {
         match &self.origin {

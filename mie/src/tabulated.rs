@@ -163,27 +163,17 @@ impl TabulatedField {
         wavelength_nm: f64,
         grid: ThetaGrid,
     ) -> PhaseFunction {
-        let extinction_m2 = self.extinction_m2[channel];
-        PhaseFunction {
+        PhaseFunction::given(
             wavelength_nm,
-            // A table has no refractive index: 1 + 0i.
-            m_re: 1.0,
-            m_im: 0.0,
-            sigma_ext_m2: extinction_m2,
-            sigma_sca_m2: extinction_m2,
-            albedo: 1.0,
-            g: self.asymmetry(column),
-            bins: self.bins(column, &grid),
-            grid,
-            forward_delta_fraction: 0.0,
-            points: Vec::new(),
-            origin: Origin::Table(TableOrigin {
+            self.extinction_m2[channel],
+            (self.asymmetry(column), self.bins(column, &grid), grid),
+            Origin::Table(TableOrigin {
                 file: self.file.clone(),
                 column: column + 1,
                 rows: self.theta_deg.len(),
                 sphere_integral: self.sphere_integral(column),
             }),
-        }
+        )
     }
 
     /// ∫_{ka}^{kb} p(φ/k) sin φ dφ for the linear interpolant p of column `column`, over

@@ -157,10 +157,18 @@ macro_rules! models {
                 }
             }
 
-            /// What the model needs of `frame` and refuses in it (before anything is baked).
+            /// What the model needs of `frame` and refuses in it (before anything is baked):
+            /// an orthographic camera and a periodic volume unless it draws them, then its own
+            /// checks.
             pub fn check_frame(&self, frame: &Frame) -> Result<(), FrameError> {
                 match self {
-                    $(Self::$variant(s) => <$model as Model>::check_frame(s, frame),)*
+                    $(Self::$variant(s) => {
+                        if !<$model as Model>::BENCHMARK_VIEWS {
+                            frame.perspective_only(<$model as Model>::NAME)?;
+                            frame.bounded_only(<$model as Model>::NAME)?;
+                        }
+                        <$model as Model>::check_frame(s, frame)
+                    })*
                 }
             }
 

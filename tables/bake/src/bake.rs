@@ -920,12 +920,10 @@ pub fn phase_functions(
     }
     // A given albedo replaces the particles' own: σ_sca = α σ_ext at every wavelength, the
     // phase function and σ_ext as computed (so the channels' mixing weights, their albedo and
-    // the side tables all follow from it). Per-channel values come only with rgb3, where
-    // wavelength j is channel j.
+    // the side tables all follow from it).
     if let Some(albedo) = field.albedo {
-        let rgb3 = plan.scene.spectral == tables::spectral::SpectralMode::Rgb3;
         for (j, p) in per_wavelength.iter_mut().enumerate() {
-            let a = albedo[if rgb3 { j } else { 0 }];
+            let a = albedo[given_channel(plan, j)];
             p.sigma_sca_m2 = a * p.sigma_ext_m2;
             p.albedo = a;
         }
@@ -937,10 +935,20 @@ pub fn phase_functions(
     })
 }
 
+/// The channel whose given values (a field's [R, G, B] albedo, lobe or cross-section) the
+/// scene's wavelength `j` takes: per-channel values come only with rgb3 (the scene's check),
+/// where wavelength j is channel j; otherwise the three channels' values are one.
+fn given_channel(plan: &BakePlan, j: usize) -> usize {
+    if plan.scene.spectral == tables::spectral::SpectralMode::Rgb3 {
+        j
+    } else {
+        0
+    }
+}
+
 /// A given phase function's optics at each of `lambdas`: an `hg` field's closed-form bins
 /// (`mie::hg`) or a `tabulated` field's exact bins of its linear interpolant
-/// (`mie::tabulated`). Per-channel values come only with rgb3 (the scene's check), where
-/// wavelength j is channel j; otherwise the three channels' values are one.
+/// (`mie::tabulated`), with the values of [`given_channel`].
 fn given_phases(
     plan: &BakePlan,
     field: &Field,
@@ -948,8 +956,7 @@ fn given_phases(
     grid: ThetaGrid,
     advance: &dyn Fn(),
 ) -> Result<Vec<PhaseFunction>, BakeError> {
-    let rgb3 = plan.scene.spectral == tables::spectral::SpectralMode::Rgb3;
-    let channel = |j: usize| if rgb3 { j } else { 0 };
+    let channel = |j: usize| given_channel(plan, j);
     let phase = |j: usize, lambda: f64| match (&field.hg, &field.tabulated) {
         (Some(hg), _) => Ok(hg.phase(channel(j), lambda, grid)),
         (None, Some(table)) => Ok(table.phase(table.column_of(j), channel(j), lambda, grid)),

@@ -46,6 +46,7 @@ use std::path::{Path, PathBuf};
 /// 1.1·10⁻³⁶ m², under the manifest's floor of 10⁻³⁰ m², which refused it only after the bake.
 pub const MIN_RADIUS_UM: f64 = 1e-3;
 
+use format::ChannelValues;
 use mie::{Material, SizeDistribution};
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
@@ -190,19 +191,19 @@ struct FieldFile {
     refractive_index: Option<[f64; 2]>,
     /// A given single-scattering albedo, one for all wavelengths or one per channel.
     #[serde(default)]
-    albedo: Option<PerChannelValue>,
+    albedo: Option<ChannelValues>,
     /// `hg` fields: the (first) lobe's asymmetry parameter.
     #[serde(default)]
-    g: Option<PerChannelValue>,
+    g: Option<ChannelValues>,
     /// `hg` fields: the second lobe's asymmetry parameter.
     #[serde(default)]
-    g2: Option<PerChannelValue>,
+    g2: Option<ChannelValues>,
     /// `hg` fields: the first lobe's share of a two-term lobe.
     #[serde(default)]
-    weight: Option<PerChannelValue>,
+    weight: Option<ChannelValues>,
     /// `hg` and `tabulated` fields: the extinction cross-section per particle (m²).
     #[serde(default)]
-    extinction_m2: Option<PerChannelValue>,
+    extinction_m2: Option<ChannelValues>,
     /// `tabulated` fields: the table's file (CSV or .npy), relative to the scene's folder.
     #[serde(default)]
     file: Option<String>,
@@ -220,14 +221,6 @@ struct FieldFile {
     /// One microphysical key swept over a range: the field becomes one member per value.
     #[serde(default)]
     sweep: Option<SweepFile>,
-}
-
-/// One value for every wavelength, or one per channel `[R, G, B]` (rgb3 scenes).
-#[derive(Debug, Clone, Copy, Deserialize)]
-#[serde(untagged)]
-enum PerChannelValue {
-    One(f64),
-    Three([f64; 3]),
 }
 
 /// `sweep = { key = "r_eff_um", from = 4, to = 32, count = 16, spacing = "log" }`.
@@ -739,12 +732,12 @@ fn per_channel(
     keys: &Keys,
     spectral: &SpectralMode,
     key: &str,
-    value: PerChannelValue,
+    value: ChannelValues,
     ok: &dyn Fn(f64) -> bool,
     range: &str,
 ) -> Result<[f64; 3], SceneError> {
     let values = match value {
-        PerChannelValue::One(v) => {
+        ChannelValues::One(v) => {
             if !ok(v) {
                 fail!(
                     keys.at(key),
@@ -753,7 +746,7 @@ fn per_channel(
             }
             return Ok([v; 3]);
         }
-        PerChannelValue::Three(v) => v,
+        ChannelValues::Three(v) => v,
     };
     if *spectral != SpectralMode::Rgb3 {
         fail!(
@@ -1189,7 +1182,7 @@ impl FieldFile {
         if self.kind != FieldKind::Hg {
             return Ok(None);
         }
-        let channels = |key: &str, value: PerChannelValue, ok: &dyn Fn(f64) -> bool, range| {
+        let channels = |key: &str, value: ChannelValues, ok: &dyn Fn(f64) -> bool, range| {
             per_channel(keys, spectral, key, value, ok, range)
         };
         let asymmetry = |g: f64| g.is_finite() && g > -1.0 && g < 1.0;

@@ -658,24 +658,17 @@ fn given_lobe(
     let grid = mie::ThetaGrid::new(ctx.step)
         .map_err(|e| manifest_error(format!("theta_step_deg = {}: {e}", ctx.step)))?;
     for (c, lobe) in lobes.iter().enumerate() {
-        let want = lobe.bins(&grid);
-        let worst = ctx.rows[c]
-            .iter()
-            .zip(&want)
-            .map(|(got, want)| (got / want - 1.0).abs())
-            .fold(0.0, f64::max);
-        checks.push(ctx.judged(
+        let note = format!(
+            "largest relative difference from the Henyey–Greenstein lobe's bin averages (g {}, \
+             g2 {}, weight {})",
+            lobe.g, lobe.g2, lobe.weight
+        );
+        checks.push(given_check(
+            ctx,
             c,
             "Ams_1 is the given lobe",
-            Some(worst),
-            0.0,
-            GIVEN_LOBE_MAX_ERROR,
-            "rel",
-            format!(
-                "largest relative difference from the Henyey–Greenstein lobe's bin averages \
-                 (g {}, g2 {}, weight {})",
-                lobe.g, lobe.g2, lobe.weight
-            ),
+            &lobe.bins(&grid),
+            note,
         ));
     }
     Ok(())
@@ -704,39 +697,36 @@ fn given_table(
     }
     for c in 0..3 {
         let column = table.column_of(c);
+        let note = format!(
+            "largest relative difference from the bin averages of {} column {} ({} rows, linear \
+             in θ; its integral over the sphere {:.6} was normalized to 1)",
+            table.file,
+            column + 1,
+            table.theta_deg.len(),
+            table.sphere_integral(column)
+        );
         let want = table.bins(column, &grid);
-        let worst = ctx.rows[c]
-            .iter()
-            .zip(&want)
-            .map(|(got, want)| relative_or_floor(*got, *want))
-            .fold(0.0, f64::max);
-        checks.push(ctx.judged(
-            c,
-            "Ams_1 is the given table",
-            Some(worst),
-            0.0,
-            GIVEN_LOBE_MAX_ERROR,
-            "rel",
-            format!(
-                "largest relative difference from the bin averages of {} column {} ({} rows, \
-                 linear in θ; its integral over the sphere {:.6} was normalized to 1)",
-                table.file,
-                column + 1,
-                table.theta_deg.len(),
-                table.sphere_integral(column)
-            ),
-        ));
+        checks.push(given_check(ctx, c, "Ams_1 is the given table", &want, note));
     }
     Ok(())
 }
 
-/// |got/want − 1|; a bin the table sets to zero (it has no relative error) by |got| in 1/sr.
-fn relative_or_floor(got: f64, want: f64) -> f64 {
-    if want > 0.0 {
-        (got / want - 1.0).abs()
-    } else {
-        got.abs()
-    }
+/// Channel `c`'s Ams_1 against a given phase function's exact bin averages `want`, judged to
+/// [`GIVEN_LOBE_MAX_ERROR`]: the largest |got/want − 1| (a bin a table sets to zero, which has
+/// no relative error, by |got| in 1/sr).
+fn given_check(ctx: &FieldContext, c: usize, name: &str, want: &[f64], note: String) -> Check {
+    let worst = ctx.rows[c]
+        .iter()
+        .zip(want)
+        .map(|(got, want)| {
+            if *want > 0.0 {
+                (got / want - 1.0).abs()
+            } else {
+                got.abs()
+            }
+        })
+        .fold(0.0, f64::max);
+    ctx.judged(c, name, Some(worst), 0.0, GIVEN_LOBE_MAX_ERROR, "rel", note)
 }
 
 fn featureless(ctx: &FieldContext, checks: &mut Vec<Check>) {

@@ -99,8 +99,6 @@ impl Model for Biri {
     }
 
     fn check_frame(_: &Settings, frame: &Frame) -> Result<(), FrameError> {
-        frame.perspective_only(Self::NAME)?;
-        frame.bounded_only(Self::NAME)?;
         check_scene(frame)?;
         let mut view = frame.clone();
         view.sun.elevation_deg = 90.0; // biri has no sun

@@ -110,8 +110,6 @@ impl Model for Max {
     }
 
     fn check_frame(s: &Settings, frame: &Frame) -> Result<(), FrameError> {
-        frame.perspective_only(Self::NAME)?;
-        frame.bounded_only(Self::NAME)?;
         frame.sunlight_only(Self::NAME, false)?;
         frame.check_view().and_then(|()| s.check())
     }

@@ -87,8 +87,6 @@ impl Model for Miyazaki {
     }
 
     fn check_frame(s: &Settings, frame: &Frame) -> Result<(), FrameError> {
-        frame.perspective_only(Self::NAME)?;
-        frame.bounded_only(Self::NAME)?;
         frame.sunlight_only(Self::NAME, true)?;
         setup(frame, s).map(|_| ())
     }

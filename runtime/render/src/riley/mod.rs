@@ -105,8 +105,6 @@ impl Model for Riley {
     }
 
     fn check_frame(s: &Settings, frame: &Frame) -> Result<(), FrameError> {
-        frame.perspective_only(Self::NAME)?;
-        frame.bounded_only(Self::NAME)?;
         frame.sunlight_only(Self::NAME, false)?;
         Setup::new(frame, s).map(|_| ())
     }
