@@ -105,6 +105,16 @@ sparse.transform = vdb.createLinearTransform(voxelSize=10.0)
 record("sparse", sparse)
 record("sparse_zip", sparse, file=rewrite("sparse_zip", "sparse.vdb", "zip"), codec="zip")
 
+# Small and sparse, for the fuzz run as much as for itself: level-4 tiles, a blob, an inactive
+# voxel holding a value, and a background that is not zero.
+tiles = vdb.FloatGrid(0.25)
+tiles.name = "density"
+tiles.fill((0, 0, 0), (15, 15, 7), 0.5, active=True)
+tiles.copyFromArray(blob((12, 12, 12), (6, 6, 6), (5, 5, 5)) + 0.5, ijk=(20, 0, 0), tolerance=0.0)
+tiles.getAccessor().setValueOff((22, 1, 1), 2.0)
+tiles.transform = vdb.createLinearTransform(voxelSize=10.0)
+record("tiles", tiles)
+
 # A scaled and translated transform (a ScaleTranslateMap).
 moved = dense.deepCopy()
 moved.transform = vdb.createLinearTransform(
