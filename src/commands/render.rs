@@ -282,6 +282,9 @@ pub fn prepare(
     let mut render = RenderScene::parse(&text, &origin, &base)?;
     adjust(&mut render);
     let limit = memory_limit(max_memory_gib)?;
+    if model == TRUTH {
+        at_file_resolution(&mut render, limit, quiet);
+    }
     let candidates = if model == AUTO {
         if let Some((flag, _, _)) = overrides.first() {
             bail!(
@@ -296,6 +299,9 @@ pub fn prepare(
             model, overrides, &render, limit, &origin, &text,
         )?]
     };
+    if !quiet {
+        describe_vdb_volumes(&render, &candidates);
+    }
     let entries: Vec<format::SweepEntry> = scene.sweeps.iter().map(|s| s.entry()).collect();
     render
         .choose_members(&entries)
@@ -368,6 +374,109 @@ pub fn prepare(
         frame,
         choice,
     })
+}
+
+/// The truth samples grid files at their own resolution: `[render] grid_resolution` raised to
+/// [`render::volume::file_resolution`] (at most [`render::scene::MAX_GRID_RESOLUTION`]) where the frame still
+/// fits in `limit` bytes; where it does not, the scene's resolution stays and a line says so.
+fn at_file_resolution(render: &mut RenderScene, limit: u64, quiet: bool) {
+    let Some(own) = render::volume::file_resolution(&render.volumes) else {
+        return;
+    };
+    let wanted = own.min(render::scene::MAX_GRID_RESOLUTION);
+    if wanted <= render.grid_resolution {
+        return;
+    }
+    let mut raised = render.clone();
+    raised.grid_resolution = wanted;
+    let fits = raised
+        .check_for(TRUTH)
+        .and_then(|m| raised.check_memory(&m, limit));
+    let from = render.grid_resolution;
+    match fits {
+        Ok(()) => {
+            render.grid_resolution = wanted;
+            if !quiet {
+                eprintln!(
+                    "truth: grid_resolution {from} → {wanted}, the grid files' own voxels{}",
+                    if wanted < own {
+                        format!(
+                            " (they need {own}; {} is the most)",
+                            render::scene::MAX_GRID_RESOLUTION
+                        )
+                    } else {
+                        String::new()
+                    }
+                );
+            }
+        }
+        Err(e) if !quiet => eprintln!(
+            "truth: grid_resolution stays {from}, coarser than the grid files' own {wanted}: {e}"
+        ),
+        Err(_) => {}
+    }
+}
+
+/// Prints, before work, what each `shape = "vdb"` volume holds (active voxels, boxes, dense
+/// size) and the frame's memory estimate for each of `models`.
+fn describe_vdb_volumes(render: &RenderScene, models: &[ModelSettings]) {
+    let size = |b: u64| match b {
+        0..0x10_0000 => format!("{:.1} KiB", b as f64 / 1024.0),
+        0x10_0000..0x4000_0000 => format!("{:.1} MiB", b as f64 / f64::from(1u32 << 20)),
+        _ => format!("{:.2} GiB", b as f64 / f64::from(1u32 << 30)),
+    };
+    let mut any = false;
+    for v in &render.volumes {
+        let render::volume::Shape::Vdb {
+            file,
+            grid,
+            summary: s,
+            values,
+        } = &v.shape
+        else {
+            continue;
+        };
+        any = true;
+        let [nx, ny, nz] = values.dims;
+        let corner = |p: glam::DVec3| format!("[{:.1}, {:.1}, {:.1}]", p.x, p.y, p.z);
+        eprintln!(
+            "vdb {} grid {grid:?}: {} active voxels ({} leaves, {} tiles; {}{}), index box {:?}–{:?}; \
+             dense {nx} × {ny} × {nz} voxels of {:.3} × {:.3} × {:.3} m over {}–{} m, {}",
+            file.display(),
+            s.active_voxels,
+            s.leaves,
+            s.tiles,
+            s.compression,
+            if s.half { ", half floats" } else { "" },
+            s.index_min,
+            s.index_max,
+            s.voxel_m[0],
+            s.voxel_m[1],
+            s.voxel_m[2],
+            corner(values.min_m),
+            corner(values.max_m),
+            size(16 * values.data.len() as u64),
+        );
+        if s.background != 0.0 {
+            eprintln!(
+                "vdb {}: background {} fills the box where the tree stores nothing; outside the \
+                 box the density is 0",
+                file.display(),
+                s.background
+            );
+        }
+    }
+    if any {
+        for m in models {
+            let total: u64 = render.memory(m).iter().map(|n| n.bytes).sum();
+            eprintln!(
+                "--model {}: about {} for this frame (grid_resolution {})",
+                m.name(),
+                size(total),
+                render.grid_resolution
+            );
+        }
+    }
 }
 
 /// `--model auto`'s model among `candidates` ([`auto_candidates`]) for the scene's frame on
@@ -523,7 +632,9 @@ pub fn scene_inputs(text: &str, base: &std::path::Path, scene: &RenderScene) -> 
         .volumes
         .iter()
         .filter_map(|v| match &v.shape {
-            render::volume::Shape::Grid { file, .. } => Some(file.clone()),
+            render::volume::Shape::Grid { file, .. } | render::volume::Shape::Vdb { file, .. } => {
+                Some(file.clone())
+            }
             _ => None,
         })
         .collect();

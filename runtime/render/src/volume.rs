@@ -274,6 +274,44 @@ pub enum Shape {
         /// before anything is baked): channel 0 of a grid over [min_m, max_m].
         values: DensityGrid,
     },
+    /// A scalar grid of an OpenVDB file (`shape = "vdb"`): the box of its active voxels, each
+    /// voxel the file's value (the background where the tree holds none), placed by the file's
+    /// own transform, then `scale_m` and `offset_m`; multiplied by the volume's number density.
+    Vdb {
+        /// The `.vdb` file (resolved against the scene file's directory).
+        file: PathBuf,
+        /// The grid's name in the file (`density` unless the scene names another).
+        grid: String,
+        /// What the file holds, as the OpenVDB library reports it, for the lines printed
+        /// before work.
+        summary: VdbSummary,
+        /// The grid's values over its active voxels' box (channel 0), read when the scene is
+        /// parsed.
+        values: DensityGrid,
+    },
+}
+
+/// An OpenVDB grid as the library describes it: what `render` and `view` print before work.
+#[derive(Debug, Clone, PartialEq)]
+pub struct VdbSummary {
+    /// Voxels the tree marks active (tiles count each voxel they cover).
+    pub active_voxels: u64,
+    /// The active voxels' bounding box in index space, inclusive.
+    pub index_min: [i32; 3],
+    /// Upper corner of the index box, inclusive.
+    pub index_max: [i32; 3],
+    /// One voxel's size in the scene (m): the file's voxel size times `scale_m`.
+    pub voxel_m: [f64; 3],
+    /// The value the tree holds where it stores none.
+    pub background: f32,
+    /// Stored as 16-bit floats.
+    pub half: bool,
+    /// The codec of the file's grid ("blosc + active mask", "zip", "none", …).
+    pub compression: String,
+    /// Leaf nodes and tiles in the tree.
+    pub leaves: usize,
+    /// Tiles that are active or differ from the background.
+    pub tiles: usize,
 }
 
 /// One volume of one field.
@@ -400,6 +438,7 @@ impl Volume {
                 DVec3::new(c[0] + r, *t, c[2] + r),
             ),
             Shape::Grid { min_m, max_m, .. } => (*min_m, *max_m),
+            Shape::Vdb { values, .. } => (values.min_m, values.max_m),
         }
     }
 }
@@ -526,7 +565,7 @@ impl Density {
                 top: top_m,
                 seed: v.seed,
             },
-            Shape::Grid { values, .. } => Density::Grid(values.clone()),
+            Shape::Grid { values, .. } | Shape::Vdb { values, .. } => Density::Grid(values.clone()),
         })
     }
 
@@ -647,6 +686,67 @@ pub fn read_grid(
     })
 }
 
+/// The largest `.vdb` file a scene may read (4 GiB): a grid of [`MAX_GRID_VALUES`] floats
+/// stored uncompressed, with its tree.
+pub const MAX_VDB_BYTES: u64 = 4 << 30;
+
+/// Reads grid `grid` of OpenVDB file `file` (crate `vdb`): its values over the box of its
+/// active voxels, finite and ≥ 0, not all zero, at most [`MAX_GRID_VALUES`] of them; the box
+/// placed at `offset_m + scale_m · (the file's world box)`. Every error names the file.
+pub fn read_vdb(
+    file: &Path,
+    grid: &str,
+    scale_m: f64,
+    offset_m: DVec3,
+) -> Result<(VdbSummary, DensityGrid), String> {
+    let at = |e: String| format!("vdb {}: {e}", file.display());
+    let bytes = format::read_regular_file(file, MAX_VDB_BYTES)
+        .map_err(|(op, e)| at(format!("{op}: {e}")))?;
+    let g = vdb::Archive::parse(&bytes)
+        .and_then(|a| a.read(grid, MAX_GRID_VALUES as u64))
+        .map_err(|e| at(e.to_string()))?;
+    let [nx, ny, _] = g.dims;
+    let mut data = Vec::with_capacity(g.values.len());
+    for (i, &v) in g.values.iter().enumerate() {
+        if !(v.is_finite() && v >= 0.0) {
+            let ijk = [i % nx, i / nx % ny, i / (nx * ny)];
+            return Err(at(format!(
+                "grid {grid:?}: value {v} at voxel ({}, {}, {}) is not a finite density ≥ 0",
+                i64::from(g.index_min[0]) + ijk[0] as i64,
+                i64::from(g.index_min[1]) + ijk[1] as i64,
+                i64::from(g.index_min[2]) + ijk[2] as i64,
+            )));
+        }
+        data.push([v, 0.0, 0.0, 0.0]);
+    }
+    if data.iter().all(|v| v[0] == 0.0) {
+        return Err(at(format!(
+            "grid {grid:?}: every one of its {} values is 0: the volume holds no particles",
+            data.len()
+        )));
+    }
+    let place = |x: [f64; 3]| offset_m + scale_m * DVec3::from_array(x);
+    let summary = VdbSummary {
+        active_voxels: g.active_voxels,
+        index_min: g.index_min,
+        index_max: g.index_max,
+        voxel_m: g.transform.scale.map(|s| s * scale_m),
+        background: g.background,
+        half: g.half,
+        compression: g.compression.clone(),
+        leaves: g.leaves,
+        tiles: g.tiles,
+    };
+    let values = DensityGrid {
+        min_m: place(g.world_min()),
+        max_m: place(g.world_max()),
+        dims: g.dims,
+        data,
+        periodic: false,
+    };
+    Ok((summary, values))
+}
+
 /// A volume that cannot be rasterized: the grid file and what is wrong with it.
 #[derive(Debug, thiserror::Error)]
 #[error("{0}")]
@@ -664,6 +764,25 @@ pub fn grid_dims(volumes: &[Volume], resolution: usize) -> [usize; 3] {
     // The ratio first: resolution × e alone can overflow to ∞ for a huge box.
     extent
         .map(|e| ((resolution as f64 * (e / longest)).round() as usize).clamp(2, resolution.max(2)))
+}
+
+/// The `resolution` of [`grid_dims`] at which the render grid's voxels are no larger than the
+/// smallest voxel of any file the volumes read (`grid` and `vdb` shapes): the resolution at
+/// which a grid made of one file alone is that file's own voxels, sampled at their centres.
+/// `None` where no volume reads a file.
+pub fn file_resolution(volumes: &[Volume]) -> Option<usize> {
+    let smallest = volumes
+        .iter()
+        .filter_map(|v| match &v.shape {
+            Shape::Grid { values, .. } | Shape::Vdb { values, .. } => Some(values),
+            _ => None,
+        })
+        .flat_map(|g| (0..3).map(|a| (g.max_m[a] - g.min_m[a]) / g.dims[a] as f64))
+        .reduce(f64::min)?;
+    let (lo, hi) = joint_bounds(volumes);
+    let longest = (hi - lo).max_element();
+    // A hair below the ratio, so a file's own box and dims give its own count back.
+    Some((longest / smallest * (1.0 - 1e-9)).ceil().max(2.0) as usize)
 }
 
 /// The box holding every volume.

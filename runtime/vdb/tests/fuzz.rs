@@ -52,7 +52,17 @@ impl Rng {
 
 /// One to four mutations of `bytes`.
 fn mutate(bytes: &mut Vec<u8>, rng: &mut Rng) {
-    const WORDS: [u64; 9] = [0, 1, 2, 7, 0x7FFF_FFFF, 0xFFFF_FFFF, 1 << 40, u64::MAX, 1 << 63];
+    const WORDS: [u64; 9] = [
+        0,
+        1,
+        2,
+        7,
+        0x7FFF_FFFF,
+        0xFFFF_FFFF,
+        1 << 40,
+        u64::MAX,
+        1 << 63,
+    ];
     for _ in 0..1 + rng.below(4) {
         let at = rng.below(bytes.len());
         match rng.below(6) {
@@ -93,7 +103,11 @@ fn mutated_files_are_refused_or_read_within_the_bound() {
         .arg(dir.path())
         .output()
         .expect("running /usr/bin/python3 (scripts/test installs python3-openvdb)");
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let seeds: Vec<Vec<u8>> = [
         "dense.vdb",
         "dense_zip.vdb",
@@ -141,6 +155,9 @@ fn mutated_files_are_refused_or_read_within_the_bound() {
         "{cases} mutated files: {read} read, {refused} refused, no panic; the most memory one \
          took {worst} bytes (bound {bound})"
     );
-    assert!(worst <= bound, "a case took {worst} bytes, over the bound {bound}");
+    assert!(
+        worst <= bound,
+        "a case took {worst} bytes, over the bound {bound}"
+    );
     assert!(read > 0 && refused > 0);
 }

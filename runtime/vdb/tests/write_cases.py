@@ -11,7 +11,8 @@ count, the background, the transform, and the values over the bounding box as th
 accessor reads them (copyToArray), written as raw little-endian f32, x fastest.
 
 Bad files (a vector grid, a level set, a frustum transform, negative and non-finite
-densities, several grids) are written too; the test mutates good files for the rest.
+densities, several grids, a box too large to hold dense) are written too; the tests mutate
+good files for the rest.
 """
 
 import json
@@ -144,6 +145,12 @@ vdb.write(os.path.join(OUT, "negative.vdb"), grids=[neg])
 nan = dense.deepCopy()
 nan.getAccessor().setValueOn((10, 2, 15), float("nan"))
 vdb.write(os.path.join(OUT, "nan.vdb"), grids=[nan])
+# Two voxels 4000 apart: a tiny file whose dense box (4001³ voxels) no memory holds.
+far = vdb.FloatGrid()
+far.name = "density"
+far.getAccessor().setValueOn((0, 0, 0), 1.0)
+far.getAccessor().setValueOn((4000, 4000, 4000), 1.0)
+vdb.write(os.path.join(OUT, "far.vdb"), grids=[far])
 
 with open(os.path.join(OUT, "cases.json"), "w") as f:
     json.dump({"library": list(vdb.LIBRARY_VERSION), "cases": CASES}, f, indent=1)

@@ -106,7 +106,7 @@
 //!
 //! [[volume]]
 //! field = "rain"            # a [[field]] of the scene
-//! shape = "rain_shaft"      # cumulus | cirrus | rain_shaft | grid
+//! shape = "rain_shaft"      # cumulus | cirrus | rain_shaft | grid | vdb
 //! number_density_per_m3 = 1000   # peak; β_ext = density · σ_ext (Riley Eq. 2)
 //! center_m = [0, 0, 6000]
 //! radius_m = 2500           # cumulus, rain_shaft
@@ -119,6 +119,8 @@
 //! dims = [64, 32, 64]       # grid
 //! min_m = [0, 0, 0]         # grid box
 //! max_m = [1000, 500, 1000]
+//! # vdb: file = "cloud.vdb"; grid = "density" (default); the file's own transform, then
+//! # scale_m = 1 (multiplies it) and offset_m = [0, 0, 0] (added, m); y is up
 //! seed = 1
 //! ```
 
@@ -149,7 +151,7 @@ use view::*;
 use volumes::*;
 
 pub use objects::MAX_SOURCE;
-pub use view::{DEFAULT_GROUND_ALBEDO, HazeKeysChecked, SCALE_HEIGHT_RANGE_M};
+pub use view::{DEFAULT_GROUND_ALBEDO, HazeKeysChecked, MAX_GRID_RESOLUTION, SCALE_HEIGHT_RANGE_M};
 
 #[derive(Debug, Default, Deserialize)]
 struct File {
@@ -411,7 +413,9 @@ impl RenderScene {
             .volumes
             .iter()
             .map(|v| match &v.shape {
-                Shape::Grid { values, .. } => 16 * values.data.len() as u64,
+                Shape::Grid { values, .. } | Shape::Vdb { values, .. } => {
+                    16 * values.data.len() as u64
+                }
                 _ => 0,
             })
             .sum();
@@ -424,7 +428,7 @@ impl RenderScene {
             needs.push(Need {
                 what: "the grid files",
                 bytes: files,
-                setting: "the [[volume]] grid files' dims".into(),
+                setting: "the [[volume]] grid files' dims (a vdb's active box)".into(),
             });
         }
         needs.extend(model.memory(self.width as u64 * self.height as u64, dims));

@@ -3,6 +3,9 @@
 
 use super::*;
 
+/// The largest `[render] grid_resolution` (voxels along the volumes' longest side).
+pub const MAX_GRID_RESOLUTION: usize = 512;
+
 /// The ground's albedo when a scene has no `[ground] albedo`: a grey ground, the same for
 /// every model.
 pub const DEFAULT_GROUND_ALBEDO: f64 = 0.1;
@@ -200,9 +203,10 @@ pub(super) fn render_keys(render: RenderKeys) -> Result<RenderChecked, String> {
         models.insert(key, table);
     }
     let grid_resolution = render.grid_resolution.unwrap_or(128);
-    if !(2..=512).contains(&grid_resolution) {
+    if !(2..=MAX_GRID_RESOLUTION).contains(&grid_resolution) {
         return Err(format!(
-            "[render] grid_resolution = {grid_resolution} is outside the allowed range [2, 512]"
+            "[render] grid_resolution = {grid_resolution} is outside the allowed range [2, \
+             {MAX_GRID_RESOLUTION}]"
         ));
     }
     let exposure = match render.exposure {

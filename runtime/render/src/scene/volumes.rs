@@ -25,6 +25,9 @@ pub(super) struct VolumeKeys {
     pub(super) median_radius_um: Option<ProfileKeys>,
     pub(super) radius_um: Option<ProfileKeys>,
     pub(super) periodic: Option<bool>,
+    pub(super) grid: Option<String>,
+    pub(super) scale_m: Option<f64>,
+    pub(super) offset_m: Option<[f64; 3]>,
 }
 
 /// A size profile `{ base, top }` (crate::volume::SizeProfile).
@@ -51,6 +54,19 @@ pub(super) fn volume(v: &VolumeKeys, base: &Path) -> Result<Volume, String> {
             "number_density_per_m3 = {density} must be finite and > 0 (particles per m³)"
         ));
     }
+    let vdb_keys = [
+        ("grid", v.grid.is_some()),
+        ("scale_m", v.scale_m.is_some()),
+        ("offset_m", v.offset_m.is_some()),
+    ];
+    if v.shape != "vdb"
+        && let Some((key, _)) = vdb_keys.iter().find(|(_, set)| *set)
+    {
+        return Err(format!(
+            "{key} is a key of shape \"vdb\" only (this volume's shape is {:?})",
+            v.shape
+        ));
+    }
     let shape = match v.shape.as_str() {
         "cumulus" => Shape::Cumulus {
             center_m: center(v.center_m)?,
@@ -75,35 +91,11 @@ pub(super) fn volume(v: &VolumeKeys, base: &Path) -> Result<Volume, String> {
                 top_m: top,
             }
         }
-        "grid" => {
-            let file = v.file.as_ref().ok_or("shape \"grid\" needs file")?;
-            let dims = v.dims.ok_or("shape \"grid\" needs dims = [nx, ny, nz]")?;
-            let (lo, hi) = (
-                v.min_m.ok_or("shape \"grid\" needs min_m")?,
-                v.max_m.ok_or("shape \"grid\" needs max_m")?,
-            );
-            if (0..3).any(|a| !(lo[a].is_finite() && hi[a].is_finite() && lo[a] < hi[a])) {
-                return Err(format!(
-                    "min_m = {lo:?} must lie below max_m = {hi:?} on every axis"
-                ));
-            }
-            let (file, min_m, max_m) = (
-                base.join(file),
-                DVec3::from_array(lo),
-                DVec3::from_array(hi),
-            );
-            let values = crate::volume::read_grid(&file, dims, min_m, max_m)?;
-            Shape::Grid {
-                file,
-                dims,
-                min_m,
-                max_m,
-                values,
-            }
-        }
+        "grid" => grid(v, base)?,
+        "vdb" => vdb(v, base)?,
         other => {
             return Err(format!(
-                "shape = {other:?} is not one of cumulus, cirrus, rain_shaft, grid"
+                "shape = {other:?} is not one of cumulus, cirrus, rain_shaft, grid, vdb"
             ));
         }
     };
@@ -143,5 +135,75 @@ pub(super) fn volume(v: &VolumeKeys, base: &Path) -> Result<Volume, String> {
         shape,
         seed: v.seed.unwrap_or(1),
         size,
+    })
+}
+
+/// A `shape = "vdb"` volume: its file read now (crate::volume::read_vdb), so a bad file is
+/// refused before anything is baked. Its box is the file's, not given by hand.
+fn vdb(v: &VolumeKeys, base: &Path) -> Result<Shape, String> {
+    let file = v
+        .file
+        .as_ref()
+        .ok_or("shape \"vdb\" needs file (an OpenVDB .vdb file)")?;
+    for (key, set) in [
+        ("dims", v.dims.is_some()),
+        ("min_m", v.min_m.is_some()),
+        ("max_m", v.max_m.is_some()),
+    ] {
+        if set {
+            return Err(format!(
+                "{key} is not a key of shape \"vdb\": its box is the file's own (the active \
+                 voxels' box through the file's transform); place it with scale_m and offset_m"
+            ));
+        }
+    }
+    let scale = v.scale_m.unwrap_or(1.0);
+    if !(scale.is_finite() && scale > 0.0) {
+        return Err(format!(
+            "scale_m = {} must be finite and > 0 (metres per unit of the file's world space)",
+            crate::checks::Shown(scale)
+        ));
+    }
+    let offset = v.offset_m.unwrap_or([0.0; 3]);
+    if offset.iter().any(|x| !x.is_finite()) {
+        return Err(format!("offset_m = {offset:?} must be finite (m)"));
+    }
+    let grid = v.grid.clone().unwrap_or_else(|| "density".into());
+    let file = base.join(file);
+    let (summary, values) =
+        crate::volume::read_vdb(&file, &grid, scale, DVec3::from_array(offset))?;
+    Ok(Shape::Vdb {
+        file,
+        grid,
+        summary,
+        values,
+    })
+}
+
+/// A `shape = "grid"` volume: its raw f32 file read now (crate::volume::read_grid).
+fn grid(v: &VolumeKeys, base: &Path) -> Result<Shape, String> {
+    let file = v.file.as_ref().ok_or("shape \"grid\" needs file")?;
+    let dims = v.dims.ok_or("shape \"grid\" needs dims = [nx, ny, nz]")?;
+    let (lo, hi) = (
+        v.min_m.ok_or("shape \"grid\" needs min_m")?,
+        v.max_m.ok_or("shape \"grid\" needs max_m")?,
+    );
+    if (0..3).any(|a| !(lo[a].is_finite() && hi[a].is_finite() && lo[a] < hi[a])) {
+        return Err(format!(
+            "min_m = {lo:?} must lie below max_m = {hi:?} on every axis"
+        ));
+    }
+    let (file, min_m, max_m) = (
+        base.join(file),
+        DVec3::from_array(lo),
+        DVec3::from_array(hi),
+    );
+    let values = crate::volume::read_grid(&file, dims, min_m, max_m)?;
+    Ok(Shape::Grid {
+        file,
+        dims,
+        min_m,
+        max_m,
+        values,
     })
 }
