@@ -5,7 +5,8 @@
 //! another, bytes flipped, the text truncated. Each case must end in `Ok` or an error naming
 //! what is wrong — no panic, no abort — and no single allocation may exceed the stated bound:
 //! 64 bytes per byte of scene text plus 4 per byte of the largest file beside it (a grid file is
-//! read as f32 and kept as f64 values) plus 1 MiB.
+//! read as f32 and kept as f64 values), plus the dense copy of the seed's own OpenVDB grids (16
+//! bytes a voxel), plus 1 MiB.
 //!
 //! CI runs `PHOTOMETEOR_FUZZ_CASES` cases per parser (default 256, about a second); the long
 //! run and its result are in docs/accuracy.md ("Scenes under mutation"). Failing cases proptest
@@ -35,6 +36,9 @@ struct Seed {
     base: PathBuf,
     /// The largest file in `base` and its subdirectories one deep (bytes).
     largest_file: u64,
+    /// The dense copy of the OpenVDB grids the unmutated scene reads (16 B a voxel of each
+    /// one's active box): a compressed file holds far more voxels than bytes.
+    vdb_dense: u64,
 }
 
 fn seeds() -> Vec<Seed> {
@@ -50,10 +54,27 @@ fn seeds() -> Vec<Seed> {
         .into_iter()
         .map(|p| {
             let base = p.parent().unwrap().to_path_buf();
+            let text = std::fs::read_to_string(&p).unwrap();
+            let name = p.file_name().unwrap().to_string_lossy().into_owned();
+            let vdb_dense = RenderScene::parse(&text, &name, &base)
+                .map(|scene| {
+                    scene
+                        .volumes
+                        .iter()
+                        .map(|v| match &v.shape {
+                            render::volume::Shape::Vdb { values, .. } => {
+                                16 * values.data.len() as u64
+                            }
+                            _ => 0,
+                        })
+                        .sum()
+                })
+                .unwrap_or(0);
             Seed {
-                name: p.file_name().unwrap().to_string_lossy().into_owned(),
-                text: std::fs::read_to_string(&p).unwrap(),
+                name,
+                text,
                 largest_file: largest_file(&base),
+                vdb_dense,
                 base,
             }
         })
@@ -279,7 +300,7 @@ fn fuzz(
 #[test]
 fn the_render_scene_parser_survives_mutated_scenes() {
     let tally = fuzz(render_case, |len, seed| {
-        64 * len + 4 * seed.largest_file as usize + (1 << 20)
+        64 * len + 4 * seed.largest_file as usize + seed.vdb_dense as usize + (1 << 20)
     });
     tally.print("render scenes");
     // The mutations are not all fatal: some scenes still parse and render.

@@ -4,7 +4,7 @@
 //! The seeds are the files the OpenVDB library writes for `openvdb.rs` (`write_cases.py`);
 //! each case flips, overwrites (with the values lengths and counts are most often corrupted
 //! to), deletes, duplicates or truncates bytes of one: 10⁵ cases (6 s), or
-//! `VDB_FUZZ_CASES=N cargo test -p photometeor-vdb --test fuzz -- --nocapture`.
+//! `PHOTOMETEOR_FUZZ_CASES=N cargo test -p photometeor-vdb --test fuzz -- --nocapture`.
 
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -116,13 +116,14 @@ fn mutated_files_are_refused_or_read_within_the_bound() {
         "half.vdb",
         "half_zip.vdb",
         "tiles.vdb",
+        "tiles_zip.vdb",
         "transformed.vdb",
         "two_grids.vdb",
     ]
     .iter()
     .map(|f| std::fs::read(dir.path().join(f)).unwrap())
     .collect();
-    let cases: usize = std::env::var("VDB_FUZZ_CASES")
+    let cases: usize = std::env::var("PHOTOMETEOR_FUZZ_CASES")
         .ok()
         .and_then(|v| v.parse().ok())
         .unwrap_or(100_000);

@@ -115,12 +115,15 @@ tiles.copyFromArray(blob((12, 12, 12), (6, 6, 6), (5, 5, 5)) + 0.5, ijk=(20, 0, 
 tiles.getAccessor().setValueOff((22, 1, 1), 2.0)
 tiles.transform = vdb.createLinearTransform(voxelSize=10.0)
 record("tiles", tiles)
+record("tiles_zip", tiles, file=rewrite("tiles_zip", "tiles.vdb", "zip"), codec="zip")
 
 # A scaled and translated transform (a ScaleTranslateMap).
 moved = dense.deepCopy()
 moved.transform = vdb.createLinearTransform(
     [[10.0, 0, 0, 0], [0, 20.0, 0, 0], [0, 0, 30.0, 0], [100.0, -50.0, 7.0, 1]])
 record("transformed", moved)
+record("transformed_zip", moved, file=rewrite("transformed_zip", "transformed.vdb", "zip"),
+       codec="zip")
 
 # Several grids in one file; the test asks for one that is not there.
 other = dense.deepCopy()
