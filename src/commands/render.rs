@@ -438,7 +438,7 @@ fn describe_vdb_volumes(render: &RenderScene, models: &[ModelSettings]) {
         };
         any = true;
         let [nx, ny, nz] = values.dims;
-        let corner = |p: glam::DVec3| format!("[{:.1}, {:.1}, {:.1}]", p.x, p.y, p.z);
+        let corner = |[x, y, z]: [f64; 3]| format!("[{x:.1}, {y:.1}, {z:.1}]");
         eprintln!(
             "vdb {} grid {grid:?}: {} active voxels ({} leaves, {} tiles; {}{}), index box {:?}–{:?}; \
              dense {nx} × {ny} × {nz} voxels of {:.3} × {:.3} × {:.3} m over {}–{} m, {}",
@@ -453,8 +453,8 @@ fn describe_vdb_volumes(render: &RenderScene, models: &[ModelSettings]) {
             s.voxel_m[0],
             s.voxel_m[1],
             s.voxel_m[2],
-            corner(values.min_m),
-            corner(values.max_m),
+            corner(values.min_m.to_array()),
+            corner(values.max_m.to_array()),
             size(16 * values.data.len() as u64),
         );
         if s.background != 0.0 {
