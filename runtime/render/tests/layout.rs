@@ -27,6 +27,17 @@ fn every_uniform_mirrors_its_wgsl_struct() {
     check::<render::lighting::beam_gpu::BeamParams>(&render::lighting::beam_gpu::source());
     check::<render::lighting::beam_gpu::MediumVoxel>(&render::lighting::beam_gpu::source());
     check::<render::lighting::beam_gpu::BeamVoxel>(&render::lighting::beam_gpu::source());
+    check::<render::lighting::beam_gpu::BeamLayerState>(&render::lighting::beam_gpu::source());
+    check::<render::lighting::sky_gpu::SkyWay>(&render::lighting::sky_gpu::source());
+    check::<render::lighting::sky_gpu::SkyVoxel>(&render::lighting::sky_gpu::source());
+    check::<render::lighting::sky_gpu::SkyLayerState>(&render::lighting::sky_gpu::source());
+    check::<render::lighting::transport_gpu::TransportVoxel>(
+        &render::lighting::transport_gpu::source(),
+    );
+    check::<render::lighting::transport_gpu::Ordinate>(&render::lighting::transport_gpu::source());
+    check::<render::lighting::transport_gpu::TransportLayerState>(
+        &render::lighting::transport_gpu::source(),
+    );
     check::<render::biri::gpu::BiriParams>(&render::biri::gpu::source());
     check::<render::truth::gpu::TruthParams>(&render::truth::gpu::source());
     check::<render::truth::gpu::StepParams>(&render::truth::gpu::source());

@@ -29,13 +29,23 @@ struct BeamVoxel {
 @group(0) @binding(0) var<uniform> params: Params;
 // Binding 1: the dispatch's `Step` (upwind.wgsl).
 @group(0) @binding(2) var<storage, read> medium: array<MediumVoxel>;
-// Per (half, layer voxel) four rows, read by upwind.wgsl's generic lookup: I (rgb), β_ext
-// (rgb), β_sca (rgb), (D, 0, 0).
-@group(0) @binding(3) var<storage, read_write> state: array<vec4<f32>>;
+// One per (half, layer voxel), read one layer on by upwind.wgsl's upwind_state.
+@group(0) @binding(3) var<storage, read_write> state: array<LayerState>;
 @group(0) @binding(4) var<storage, read_write> beam: array<BeamVoxel>;
 
-// The state's rows per voxel (upwind.wgsl's state_index).
-const STATE_ROWS: u32 = 4u;
+// The beam at a voxel of the layer just swept, what the next layer reads of it.
+struct LayerState {
+    intensity: vec4<f32>,    // the beam I rgb, 0
+    ext: vec4<f32>,          // the voxel's β_ext rgb, 0
+    sca: vec4<f32>,          // the voxel's β_sca rgb, 0
+    depth: vec4<f32>,        // the peak's depth D, 0, 0, 0
+}
+
+// sum + w · s, field by field (upwind.wgsl's bilinear sum).
+fn weighted_add(sum: LayerState, w: f32, s: LayerState) -> LayerState {
+    return LayerState(sum.intensity + w * s.intensity, sum.ext + w * s.ext,
+                      sum.sca + w * s.sca, sum.depth + w * s.depth);
+}
 
 // 1 − e^{−x} without the cancellation of small x.
 fn one_minus_exp(x: f32) -> f32 {
@@ -70,10 +80,11 @@ fn sweep(@builtin(global_invocation_id) id: vec3<u32>) {
     var n0 = 0.0;
     if (stp.group.x == 0u) {
         let up = upwind(ub, vc, params.way.xy, nb, nc);
-        start = up.kept * upwind_row(up, behind, 0u, nb, nc, 1u, 0u) + vec3<f32>(1.0 - up.kept);
-        back_ext = up.kept * upwind_row(up, behind, 0u, nb, nc, 1u, 1u);
-        back_sca = up.kept * upwind_row(up, behind, 0u, nb, nc, 1u, 2u);
-        n0 = up.kept * upwind_row(up, behind, 0u, nb, nc, 1u, 3u).x;
+        let back = upwind_state(up, behind, 0u, nb, nc, 1u);
+        start = up.kept * back.intensity.xyz + vec3<f32>(1.0 - up.kept);
+        back_ext = up.kept * back.ext.xyz;
+        back_sca = up.kept * back.sca.xyz;
+        n0 = up.kept * back.depth.x;
     }
     let ds = params.way.z;
     let ext = 0.5 * (back_ext + ext_h);
@@ -101,11 +112,12 @@ fn sweep(@builtin(global_invocation_id) id: vec3<u32>) {
             forward[ch] = loss[ch] * albedo * (g[ch] - f[ch]) / lost;
         }
     }
-    let at = state_index(1u - behind, ub, vc, 0u, nb, nc, 1u);
-    state[at] = vec4<f32>(kept, 0.0);
-    state[at + 1u] = vec4<f32>(ext_h, 0.0);
-    state[at + 2u] = vec4<f32>(sca_h, 0.0);
-    state[at + 3u] = vec4<f32>(n, 0.0, 0.0, 0.0);
+    state[state_slot(1u - behind, ub, vc, 0u, nb, nc, 1u)] = LayerState(
+        vec4<f32>(kept, 0.0),
+        vec4<f32>(ext_h, 0.0),
+        vec4<f32>(sca_h, 0.0),
+        vec4<f32>(n, 0.0, 0.0, 0.0),
+    );
     beam[i] = BeamVoxel(
         vec4<f32>(kept, n),
         vec4<f32>(source, 0.0),

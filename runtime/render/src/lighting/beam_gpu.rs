@@ -54,6 +54,21 @@ runtime::uniform! {
     }
 }
 
+runtime::uniform! {
+    /// `LayerState` of `beam.wgsl`: the beam at a voxel of the layer just swept, what the
+    /// next layer reads (GPU memory only; its size sizes the buffer).
+    pub struct BeamLayerState as "LayerState" {
+        /// The beam I per channel, 0.
+        pub intensity: [f32; 4],
+        /// The voxel's β_ext per channel, 0.
+        pub ext: [f32; 4],
+        /// The voxel's β_sca per channel, 0.
+        pub sca: [f32; 4],
+        /// The peak's depth D, 0, 0, 0.
+        pub depth: [f32; 4],
+    }
+}
+
 /// Invocations per workgroup (`beam.wgsl`).
 const WG: usize = 64;
 
@@ -104,7 +119,7 @@ impl BeamSweeper {
         let groups = (dims[b] * dims[c]).div_ceil(WG);
         layer_fits(gpu, "the beam's GPU sweep", groups, dims)?;
         let beam_bytes = (std::mem::size_of::<BeamVoxel>() * voxels) as u64;
-        let state_bytes = (2 * 64 * dims[b] * dims[c]) as u64;
+        let state_bytes = (2 * std::mem::size_of::<BeamLayerState>() * dims[b] * dims[c]) as u64;
         buffers_fit(
             gpu,
             "the beam's",

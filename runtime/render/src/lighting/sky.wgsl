@@ -13,16 +13,35 @@ struct Params {
 // Binding 1: the dispatch's `Step` (upwind.wgsl).
 // β_ext per voxel (rgb).
 @group(0) @binding(2) var<storage, read> ext: array<vec4<f32>>;
-// Per direction three rows: (shift u, shift v, ds, 0), (radiance × 1/SKY_DIRECTIONS rgb, 0),
-// (s, the direction towards the sky, 0).
-@group(0) @binding(3) var<storage, read> ways: array<vec4<f32>>;
-// Per (half, layer voxel, direction of the order) two rows: τ (rgb), β_ext (rgb).
-@group(0) @binding(4) var<storage, read_write> state: array<vec4<f32>>;
-// Per voxel four rows: the mean skylight (rgb), its flux per channel (R, G, B: xyz).
-@group(0) @binding(5) var<storage, read_write> sky: array<vec4<f32>>;
+@group(0) @binding(3) var<storage, read> ways: array<SkyWay>;
+// One per (half, layer voxel, direction of the order), read one layer on by upwind.wgsl's
+// upwind_state.
+@group(0) @binding(4) var<storage, read_write> state: array<LayerState>;
+@group(0) @binding(5) var<storage, read_write> sky: array<SkyVoxel>;
 
-// The state's rows per direction (upwind.wgsl's state_index).
-const STATE_ROWS: u32 = 2u;
+// One direction of the sky (lattice::sky_sweeps' order).
+struct SkyWay {
+    way: vec4<f32>,          // the point one layer back (shift u, shift v), the step ds (m), 0
+    radiance: vec4<f32>,     // the sky's radiance × 1/SKY_DIRECTIONS rgb, 0
+    towards: vec4<f32>,      // s, the unit direction towards the sky, 0
+}
+
+// A voxel's skylight (lattice::Sky), summed over the sweeps.
+struct SkyVoxel {
+    mean: vec4<f32>,         // the mean skylight rgb, 0
+    flux: array<vec4<f32>, 3>, // its flux vector (x, y, z, 0), one per channel
+}
+
+// One direction's optical depth at a voxel of the layer just swept.
+struct LayerState {
+    tau: vec4<f32>,          // the optical depth back to the sky rgb, 0
+    ext: vec4<f32>,          // the voxel's β_ext rgb, 0
+}
+
+// sum + w · s, field by field (upwind.wgsl's bilinear sum).
+fn weighted_add(sum: LayerState, w: f32, s: LayerState) -> LayerState {
+    return LayerState(sum.tau + w * s.tau, sum.ext + w * s.ext);
+}
 
 @compute @workgroup_size(64)
 fn sweep(@builtin(global_invocation_id) id: vec3<u32>) {
@@ -44,29 +63,29 @@ fn sweep(@builtin(global_invocation_id) id: vec3<u32>) {
     var flux = array<vec3<f32>, 3>(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0));
     for (var j = 0u; j < count; j = j + 1u) {
         let d = first + j;
-        let o = ways[3u * d];
+        let o = ways[d].way;
         var back_tau = vec3<f32>(0.0);
         var back_ext = vec3<f32>(0.0);
         if (!first_layer) {
             let up = upwind(ub, vc, o.xy, nb, nc);
             if (up.kept > 0.0) {
-                back_tau = up.kept * upwind_row(up, behind, j, nb, nc, count, 0u);
-                back_ext = up.kept * upwind_row(up, behind, j, nb, nc, count, 1u);
+                let back = upwind_state(up, behind, j, nb, nc, count);
+                back_tau = up.kept * back.tau.xyz;
+                back_ext = up.kept * back.ext.xyz;
             }
         }
         let tau = back_tau + 0.5 * o.z * (here + back_ext);
-        let at = state_index(1u - behind, ub, vc, j, nb, nc, count);
-        state[at] = vec4<f32>(tau, 0.0);
-        state[at + 1u] = vec4<f32>(here, 0.0);
-        let light = ways[3u * d + 1u].xyz * exp(-min(tau, vec3<f32>(700.0)));
-        let towards = ways[3u * d + 2u].xyz;
+        state[state_slot(1u - behind, ub, vc, j, nb, nc, count)] =
+            LayerState(vec4<f32>(tau, 0.0), vec4<f32>(here, 0.0));
+        let light = ways[d].radiance.xyz * exp(-min(tau, vec3<f32>(700.0)));
+        let towards = ways[d].towards.xyz;
         mean = mean + light;
         for (var ch = 0u; ch < 3u; ch = ch + 1u) {
             flux[ch] = flux[ch] - light[ch] * towards;
         }
     }
-    sky[4u * i] = sky[4u * i] + vec4<f32>(mean, 0.0);
+    sky[i].mean = sky[i].mean + vec4<f32>(mean, 0.0);
     for (var ch = 0u; ch < 3u; ch = ch + 1u) {
-        sky[4u * i + 1u + ch] = sky[4u * i + 1u + ch] + vec4<f32>(flux[ch], 0.0);
+        sky[i].flux[ch] = sky[i].flux[ch] + vec4<f32>(flux[ch], 0.0);
     }
 }

@@ -36,6 +36,39 @@ runtime::uniform! {
     }
 }
 
+runtime::uniform! {
+    /// `SkyWay` of `sky.wgsl`: one direction of a sweep order.
+    pub struct SkyWay as "SkyWay" {
+        /// The point one layer back (shift u, shift v, voxel units), the step ds (m), 0.
+        pub way: [f32; 4],
+        /// The sky's radiance × 1/SKY_DIRECTIONS per channel, 0.
+        pub radiance: [f32; 4],
+        /// s, the unit direction towards the sky, 0.
+        pub towards: [f32; 4],
+    }
+}
+
+runtime::uniform! {
+    /// `SkyVoxel` of `sky.wgsl`: a voxel's [`Sky`], summed over the sweeps.
+    pub struct SkyVoxel as "SkyVoxel" {
+        /// The mean skylight per channel, 0.
+        pub mean: [f32; 4],
+        /// Its flux vector (x, y, z, 0), one per channel.
+        pub flux: [[f32; 4]; 3],
+    }
+}
+
+runtime::uniform! {
+    /// `LayerState` of `sky.wgsl`: one direction's optical depth at a voxel of the layer just
+    /// swept, what the next layer reads (GPU memory only; its size sizes the buffer).
+    pub struct SkyLayerState as "LayerState" {
+        /// The optical depth back to the sky per channel, 0.
+        pub tau: [f32; 4],
+        /// The voxel's β_ext per channel, 0.
+        pub ext: [f32; 4],
+    }
+}
+
 /// The skylight sweeps' pipeline, built once per adapter.
 pub struct SkySweeper {
     layout: wgpu::BindGroupLayout,
@@ -86,20 +119,20 @@ impl SkySweeper {
         let dims = grid.dims;
         let voxels = ext.len();
         let f = |v: [f64; 3]| [v[0] as f32, v[1] as f32, v[2] as f32, 0.0];
-        let mut ways: Vec<[f32; 4]> = Vec::with_capacity(3 * lit.len());
+        let mut ways: Vec<SkyWay> = Vec::with_capacity(lit.len());
         let mut steps: Vec<u8> = Vec::new();
         let mut layers: Vec<(usize, usize)> = Vec::new();
         let mut largest_state = 0usize;
         for ((a, forward), order) in sky_orders(grid, lit) {
-            let first = ways.len() / 3;
-            for w in &order {
-                ways.push([w.shift.0 as f32, w.shift.1 as f32, w.ds as f32, 0.0]);
-                ways.push(f(w.weight));
-                ways.push(f(w.s.to_array()));
-            }
+            let first = ways.len();
+            ways.extend(order.iter().map(|w| SkyWay {
+                way: [w.shift.0 as f32, w.shift.1 as f32, w.ds as f32, 0.0],
+                radiance: f(w.weight),
+                towards: f(w.s.to_array()),
+            }));
             let (b, c) = ((a + 1) % 3, (a + 2) % 3);
             let count = order.len();
-            largest_state = largest_state.max(2 * dims[b] * dims[c] * count * 2);
+            largest_state = largest_state.max(2 * dims[b] * dims[c] * count);
             let run = super::lattice::layer_order(dims[a], forward);
             for (s, &k) in run.iter().enumerate() {
                 let words = [a, b, c, k, usize::from(s == 0), first, count, s % 2];
@@ -114,8 +147,8 @@ impl SkySweeper {
         for &(n, _) in &layers {
             layer_fits(gpu, "the skylight's GPU sweeps", n, dims)?;
         }
-        let sky_bytes = (64 * voxels) as u64;
-        let state_bytes = (16 * largest_state) as u64;
+        let sky_bytes = (std::mem::size_of::<SkyVoxel>() * voxels) as u64;
+        let state_bytes = (std::mem::size_of::<SkyLayerState>() * largest_state) as u64;
         buffers_fit(
             gpu,
             "the skylight's",
@@ -174,14 +207,12 @@ impl SkySweeper {
         );
         queue.submit([encoder.finish()]);
         let back = read_back(gpu, &light, sky_bytes).map_err(RenderError::from)?;
-        for (i, v) in back.chunks_exact(4).enumerate() {
-            sky.mean[i] = std::array::from_fn(|c| f64::from(v[0][c]));
+        let voxels: &[SkyVoxel] = bytemuck::cast_slice(&back);
+        for (i, v) in voxels.iter().enumerate() {
+            sky.mean[i] = std::array::from_fn(|c| f64::from(v.mean[c]));
             sky.flux[i] = std::array::from_fn(|c| {
-                DVec3::new(
-                    f64::from(v[1 + c][0]),
-                    f64::from(v[1 + c][1]),
-                    f64::from(v[1 + c][2]),
-                )
+                let [x, y, z, _] = v.flux[c].map(f64::from);
+                DVec3::new(x, y, z)
             });
         }
         Ok(sky)

@@ -13,20 +13,29 @@ struct Params {
 
 @group(0) @binding(0) var<uniform> params: Params;
 // Binding 1: the dispatch's `Step` (upwind.wgsl).
-// Per voxel MEDIUM_ROWS rows: σ′_t (rgb), σ′_s (rgb), p′'s χ′_0..3 per channel (three rows),
-// χ′_4 per channel, the sunlit source q (rgb), the skylit source (q0, q1 x, y, z) per channel.
-@group(0) @binding(2) var<storage, read> medium: array<vec4<f32>>;
+@group(0) @binding(2) var<storage, read> medium: array<TransportVoxel>;
 @group(0) @binding(3) var<storage, read> moments: array<f32>;
 @group(0) @binding(4) var<storage, read_write> next: array<f32>;
-// Per ordinate ORD_ROWS rows: Y_k(ω) (seven rows, zero past k = 24), then (shift u, shift v,
-// ds, 0).
-@group(0) @binding(5) var<storage, read> ordinates: array<vec4<f32>>;
-// Per (layer voxel, direction of the group) three rows, in two halves (the layer behind, this
-// one): I (rgb), σ′_t (rgb), S (rgb) — lattice's upwind state of sweep_round.
-@group(0) @binding(6) var<storage, read_write> state: array<vec4<f32>>;
+@group(0) @binding(5) var<storage, read> ordinates: array<Ordinate>;
+// One per (layer voxel, direction of the group), in two halves (the layer behind, this one):
+// lattice's upwind state of sweep_round.
+@group(0) @binding(6) var<storage, read_write> state: array<LayerState>;
 
-const MEDIUM_ROWS: u32 = 10u;
-const ORD_ROWS: u32 = 8u;
+// A voxel's medium for the transport (transport::Medium, in f32).
+struct TransportVoxel {
+    ext: vec4<f32>,          // σ′_t rgb, 0
+    sca: vec4<f32>,          // σ′_s rgb, 0
+    chi: array<vec4<f32>, 3>, // p′'s moments χ′_0…3, one vector per channel
+    chi4: vec4<f32>,         // χ′_4 per channel (rgb), 0
+    sun: vec4<f32>,          // the sunlit source q rgb, 0
+    sky: array<vec4<f32>, 3>, // the skylit source (q0, q1 x, y, z), one vector per channel
+}
+
+// One direction of the quadrature.
+struct Ordinate {
+    y: array<vec4<f32>, 7>,  // Y_k(ω), k < 25, zero past k = 24
+    way: vec4<f32>,          // the point one layer back (shift u, shift v), the step ds (m), 0
+}
 const HARMONICS: u32 = 25u;
 // Invocations per workgroup: 96 directions make about 16 per sweep order (on lavapipe a round
 // at 32 directions took 1.84 s with 16, 2.73 s with 64, most of them idle).
@@ -49,17 +58,27 @@ fn degree(k: u32) -> u32 {
 
 fn chi(i: u32, c: u32, l: u32) -> f32 {
     if (l < 4u) {
-        return medium[i * MEDIUM_ROWS + 2u + c][l];
+        return medium[i].chi[c][l];
     }
-    return medium[i * MEDIUM_ROWS + 5u][c];
+    return medium[i].chi4[c];
 }
 
 fn y_of(d: u32, k: u32) -> f32 {
-    return ordinates[d * ORD_ROWS + k / 4u][k % 4u];
+    return ordinates[d].y[k / 4u][k % 4u];
 }
 
-// The state per direction: 9 floats as three rows (upwind.wgsl's state_index).
-const STATE_ROWS: u32 = 3u;
+// One direction's radiance at a voxel of the layer just swept, what the next layer reads.
+struct LayerState {
+    radiance: vec4<f32>,     // I rgb, 0
+    ext: vec4<f32>,          // the voxel's σ′_t rgb, 0
+    source: vec4<f32>,       // the voxel's source S in this direction rgb, 0
+}
+
+// sum + w · s, field by field (upwind.wgsl's bilinear sum).
+fn weighted_add(sum: LayerState, w: f32, s: LayerState) -> LayerState {
+    return LayerState(sum.radiance + w * s.radiance, sum.ext + w * s.ext,
+                      sum.source + w * s.source);
+}
 
 // transport::advance. In f32, 1 − q and q − e lose their digits for a thin step (1 − q ≈ τ/2
 // against an ulp of 6·10⁻⁸, times A = S/σ′, large where σ′ is small): below τ = 0.1 the step
@@ -94,18 +113,17 @@ fn sweep(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) 
     let count = stp.group.z;
     let behind = stp.group.w;
     let i = voxel_at(ub, vc);
-    let base = i * MEDIUM_ROWS;
-    var ext = medium[base].xyz;
+    var ext = medium[i].ext.xyz;
     let stride_m = params.dims.w;
     // The emission harmonics, one per invocation (transport::emission).
     for (var n = t; n < 75u; n = n + WG) {
         let ch = n / HARMONICS;
         let kk = n % HARMONICS;
-        let sca = medium[base + 1u][ch];
-        let sun = medium[base + 6u][ch];
+        let sca = medium[i].sca[ch];
+        let sun = medium[i].sun[ch];
         let y_sun = params.y_sun[kk / 4u][kk % 4u];
         var s = chi(i, ch, degree(kk)) * (sca * moments[i * stride_m + n] + 4.0 * PI * sun * y_sun);
-        let sky = medium[base + 7u + ch];
+        let sky = medium[i].sky[ch];
         let y1 = 0.4886025119029199;
         if (kk == 0u) {
             s = s + sqrt(4.0 * PI) * sky.x;
@@ -128,7 +146,7 @@ fn sweep(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) 
             s_here = s_here + y * vec3<f32>(emission[kk], emission[HARMONICS + kk],
                                             emission[2u * HARMONICS + kk]);
         }
-        let o = ordinates[d * ORD_ROWS + 7u];
+        let o = ordinates[d].way;
         let ds = o.z;
         // The state one layer back (lattice::upwind; clear air outside: zero).
         var back_i = vec3<f32>(0.0);
@@ -137,9 +155,10 @@ fn sweep(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) 
         if (!first_layer) {
             let up = upwind(ub, vc, o.xy, nb, nc);
             if (up.kept > 0.0) {
-                back_i = up.kept * upwind_row(up, behind, j, nb, nc, count, 0u);
-                back_ext = up.kept * upwind_row(up, behind, j, nb, nc, count, 1u);
-                back_s = up.kept * upwind_row(up, behind, j, nb, nc, count, 2u);
+                let back = upwind_state(up, behind, j, nb, nc, count);
+                back_i = up.kept * back.radiance.xyz;
+                back_ext = up.kept * back.ext.xyz;
+                back_s = up.kept * back.source.xyz;
             }
         }
         var radiance = vec3<f32>(0.0);
@@ -149,10 +168,11 @@ fn sweep(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) 
             let e = exp(-min(tau, 700.0));
             radiance[ch] = advance(back_i[ch], ds, tau, e, s_here[ch], ext[ch], back_s[ch]);
         }
-        let at = state_index(1u - behind, ub, vc, j, nb, nc, count);
-        state[at] = vec4<f32>(radiance, 0.0);
-        state[at + 1u] = vec4<f32>(ext, 0.0);
-        state[at + 2u] = vec4<f32>(s_here, 0.0);
+        state[state_slot(1u - behind, ub, vc, j, nb, nc, count)] = LayerState(
+            vec4<f32>(radiance, 0.0),
+            vec4<f32>(ext, 0.0),
+            vec4<f32>(s_here, 0.0),
+        );
         for (var ch = 0u; ch < 3u; ch = ch + 1u) {
             weighted[ch * MAX_GROUP + j] = weight * radiance[ch];
         }

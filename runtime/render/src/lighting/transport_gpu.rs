@@ -167,10 +167,6 @@ pub(crate) fn buffers_fit(
 
 /// Floats per voxel of the moments on the GPU (75, padded to whole rows of four).
 const STRIDE: usize = PER_VOXEL.div_ceil(4) * 4;
-/// Rows of four per voxel of the medium (`sweep.wgsl`'s MEDIUM_ROWS).
-const MEDIUM_ROWS: usize = 10;
-/// Rows of four per ordinate (`sweep.wgsl`'s ORD_ROWS).
-const ORD_ROWS: usize = 8;
 /// The most directions one group may hold (`sweep.wgsl`'s MAX_GROUP, its workgroup memory).
 pub const MAX_GROUP: usize = 512;
 /// Bytes between two dispatches' [`Step`]s in their uniform buffer (wgpu's largest required
@@ -189,54 +185,91 @@ runtime::uniform! {
     }
 }
 
-/// The medium's rows per voxel (sweep.wgsl's MEDIUM_ROWS): σ′_t, σ′_s, p′'s moments χ′_0…3 per
-/// channel, χ′_4 per channel, the sunlit source, and the skylit source per channel.
-fn medium_rows(medium: &Medium) -> Vec<[f32; 4]> {
-    let voxels = medium.ext.len();
-    let mut rows: Vec<[f32; 4]> = Vec::with_capacity(MEDIUM_ROWS * voxels);
-    let f = |v: [f64; 3]| [v[0] as f32, v[1] as f32, v[2] as f32, 0.0];
-    for i in 0..voxels {
-        rows.push(f(medium.ext[i]));
-        rows.push(f(medium.sca[i]));
-        for c in 0..3 {
-            let chi = &medium.chi[i][c];
-            rows.push([chi[0], chi[1], chi[2], chi[3]].map(|v| v as f32));
-        }
-        rows.push(f(std::array::from_fn(|c| medium.chi[i][c][4])));
-        rows.push(f(medium.sun[i]));
-        for c in 0..3 {
-            rows.push(medium.sky[i][c].map(|v| v as f32));
-        }
+runtime::uniform! {
+    /// `TransportVoxel` of `sweep.wgsl`: a voxel's [`Medium`] in f32.
+    pub struct TransportVoxel as "TransportVoxel" {
+        /// σ′_t per channel (1/m), 0.
+        pub ext: [f32; 4],
+        /// σ′_s per channel (1/m), 0.
+        pub sca: [f32; 4],
+        /// p′'s moments χ′_0…3, one vector per channel.
+        pub chi: [[f32; 4]; 3],
+        /// χ′_4 per channel, 0.
+        pub chi4: [f32; 4],
+        /// The sunlit source q per channel, 0.
+        pub sun: [f32; 4],
+        /// The skylit source (q0, q1 x, y, z), one vector per channel.
+        pub sky: [[f32; 4]; 3],
     }
-    rows
 }
 
-/// The ordinates' rows, the steps' words, the layers' sizes (workgroups along x, y) and the
-/// largest layer state ([`ordinate_rows`]).
-type OrdinateRows = (Vec<[f32; 4]>, Vec<u8>, Vec<(usize, usize)>, usize);
+runtime::uniform! {
+    /// `Ordinate` of `sweep.wgsl`: one direction of the quadrature.
+    pub struct Ordinate as "Ordinate" {
+        /// Y_k(ω), k < 25, zero past k = 24.
+        pub y: [[f32; 4]; 7],
+        /// The point one layer back (shift u, shift v, voxel units), the step ds (m), 0.
+        pub way: [f32; 4],
+    }
+}
 
-/// The ordinates' rows, group after group (sweep.wgsl's ORD_ROWS: Y_lm of the direction, then
-/// the point one layer back and the step), one step per layer of each group, the layers'
-/// sizes, and the largest layer state (16-byte rows) a group needs.
+runtime::uniform! {
+    /// `LayerState` of `sweep.wgsl`: one direction's radiance at a voxel of the layer just
+    /// swept, what the next layer reads (GPU memory only; its size sizes the buffer).
+    pub struct TransportLayerState as "LayerState" {
+        /// I per channel, 0.
+        pub radiance: [f32; 4],
+        /// The voxel's σ′_t per channel, 0.
+        pub ext: [f32; 4],
+        /// The voxel's source S in this direction per channel, 0.
+        pub source: [f32; 4],
+    }
+}
+
+/// The medium per voxel in f32 (sweep.wgsl's `medium`).
+fn medium_voxels(medium: &Medium) -> Vec<TransportVoxel> {
+    let f = |v: [f64; 3]| [v[0] as f32, v[1] as f32, v[2] as f32, 0.0];
+    (0..medium.ext.len())
+        .map(|i| TransportVoxel {
+            ext: f(medium.ext[i]),
+            sca: f(medium.sca[i]),
+            chi: std::array::from_fn(|c| {
+                let chi = &medium.chi[i][c];
+                [chi[0], chi[1], chi[2], chi[3]].map(|v| v as f32)
+            }),
+            chi4: f(std::array::from_fn(|c| medium.chi[i][c][4])),
+            sun: f(medium.sun[i]),
+            sky: std::array::from_fn(|c| medium.sky[i][c].map(|v| v as f32)),
+        })
+        .collect()
+}
+
+/// The ordinates, the steps' words, the layers' sizes (workgroups along x, y) and the
+/// largest layer state ([`ordinate_rows`]).
+type OrdinateRows = (Vec<Ordinate>, Vec<u8>, Vec<(usize, usize)>, usize);
+
+/// The ordinates, group after group (Y_lm of the direction, then the point one layer back
+/// and the step), one step per layer of each group, the layers' sizes, and the largest layer
+/// state (in [`TransportLayerState`]s) a group needs.
 fn ordinate_rows(groups: &[Group], dims: [usize; 3]) -> OrdinateRows {
-    let mut ordinates: Vec<[f32; 4]> = Vec::new();
+    let mut ordinates: Vec<Ordinate> = Vec::new();
     let mut steps: Vec<u8> = Vec::new();
     let mut layers: Vec<(usize, usize)> = Vec::new();
     let mut largest_state = 0usize;
     for g in groups {
-        let first = ordinates.len() / ORD_ROWS;
-        for o in &g.ordinates {
-            ordinates.extend((0..7).map(|r| {
+        let first = ordinates.len();
+        ordinates.extend(g.ordinates.iter().map(|o| Ordinate {
+            y: std::array::from_fn(|r| {
                 std::array::from_fn(|j| {
                     let k = 4 * r + j;
                     if k < HARMONICS { o.y[k] as f32 } else { 0.0 }
                 })
-            }));
-            ordinates.push([o.shift.0 as f32, o.shift.1 as f32, o.ds as f32, 0.0]);
-        }
+            }),
+            way: [o.shift.0 as f32, o.shift.1 as f32, o.ds as f32, 0.0],
+        }));
         let (b, c) = layer_axes(g.axis);
         let count = g.ordinates.len();
-        largest_state = largest_state.max(2 * dims[b] * dims[c] * count * 3);
+        largest_state = largest_state.max(2 * dims[b] * dims[c] * count);
         let order = super::lattice::layer_order(dims[g.axis], g.forward);
         for (s, &k) in order.iter().enumerate() {
             let words = [g.axis, b, c, k, usize::from(s == 0), first, count, s % 2];
@@ -300,11 +333,12 @@ impl Sweeper {
                 limits.max_compute_workgroups_per_dimension
             )));
         }
-        let rows = medium_rows(medium);
+        let rows = medium_voxels(medium);
         let (ordinates, steps, layers, largest_state) = ordinate_rows(&groups, dims);
         let moments_bytes = (4 * STRIDE * voxels) as u64;
-        let state_bytes = (16 * largest_state.max(1)) as u64;
-        let medium_bytes = (16 * rows.len()) as u64;
+        let state_bytes =
+            (std::mem::size_of::<TransportLayerState>() * largest_state.max(1)) as u64;
+        let medium_bytes = std::mem::size_of_val(rows.as_slice()) as u64;
         buffers_fit(
             gpu,
             "the transport's",

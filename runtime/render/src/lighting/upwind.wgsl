@@ -78,19 +78,20 @@ fn corner(index: i32, shift: f32, n: u32) -> vec2<f32> {
     return vec2<f32>(f32(at), shift - whole);
 }
 
-// The first row of the state of direction slot `j` (of `count`) at layer voxel (u, v) in half
-// `h` of the including shader's `state` array, `STATE_ROWS` rows (its constant) each.
-fn state_index(h: u32, u: u32, v: u32, j: u32, nb: u32, nc: u32, count: u32) -> u32 {
-    return ((h * nb * nc + u + v * nb) * count + j) * STATE_ROWS;
+// The slot of direction `j` (of `count`) at layer voxel (u, v) in half `h` of the including
+// shader's `state` array of its `LayerState` records.
+fn state_slot(h: u32, u: u32, v: u32, j: u32, nb: u32, nc: u32, count: u32) -> u32 {
+    return (h * nb * nc + u + v * nb) * count + j;
 }
 
-// Row `row` of the state one layer back at `up`, for direction slot `j` of the layer in half
-// `h`: the bilinear sum over the four centres, not yet scaled by `up.kept`.
-fn upwind_row(up: Upwind, h: u32, j: u32, nb: u32, nc: u32, count: u32, row: u32) -> vec3<f32> {
+// The state one layer back at `up`, for direction slot `j` of the layer in half `h`: the
+// bilinear sum over the four centres (each field by the including shader's `weighted_add`),
+// not yet scaled by `up.kept`.
+fn upwind_state(up: Upwind, h: u32, j: u32, nb: u32, nc: u32, count: u32) -> LayerState {
     var at = up;
-    var sum = vec3<f32>(0.0);
+    var sum = LayerState();
     for (var q = 0u; q < 4u; q = q + 1u) {
-        sum = sum + at.w[q] * state[state_index(h, at.u[q], at.v[q], j, nb, nc, count) + row].xyz;
+        sum = weighted_add(sum, at.w[q], state[state_slot(h, at.u[q], at.v[q], j, nb, nc, count)]);
     }
     return sum;
 }
