@@ -41,6 +41,9 @@ fn every_uniform_mirrors_its_wgsl_struct() {
     check::<render::biri::gpu::BiriParams>(&render::biri::gpu::source());
     check::<render::truth::gpu::TruthParams>(&render::truth::gpu::source());
     check::<render::truth::gpu::StepParams>(&render::truth::gpu::source());
+    check::<render::truth::gpu::Band>(&render::truth::gpu::source());
+    check::<render::truth::gpu::SavedBranch>(&render::truth::gpu::source());
+    check::<render::truth::gpu::SavedPath>(&render::truth::gpu::source());
 }
 
 #[test]

@@ -63,14 +63,62 @@ pub const STACK: usize = 8;
 /// θ bins per block of the two-level phase sampling; `BLOCK` in `truth.wgsl`.
 const BLOCK: usize = 32;
 
-/// Rows of vec4<f32> per wavelength band; `BAND_ROWS` in `truth.wgsl`.
-const BAND_ROWS: usize = 2 + MAX_FIELDS;
+runtime::uniform! {
+    /// `Band` of `truth.wgsl`: one wavelength band's optics.
+    pub struct Band as "Band" {
+        /// β_air at sea level (1/m), the haze's N₀σ_ext and N₀σ_sca (1/m), the band's CDF of q.
+        pub air: [f32; 4],
+        /// The band's w_c/q per channel, 0.
+        pub to_rgb: [f32; 4],
+        /// Per field: σ_ext (m²), the albedo, the forward δ's weight, 0.
+        pub fields: [[f32; 4]; MAX_FIELDS],
+    }
+}
 
-/// Path state rows per tile slot; `F_ROWS` and `U_ROWS` in `truth.wgsl`.
-const F_ROWS: usize = 5 + 4 * STACK;
-const U_ROWS: usize = 3 + 2 * STACK;
+runtime::uniform! {
+    /// `SavedBranch` of `truth.wgsl`: a branch a split left waiting on a path's stack.
+    pub struct SavedBranch as "SavedBranch" {
+        /// The carried wavelengths' f_m.
+        pub f: [f32; 4],
+        /// Their r_m.
+        pub r: [f32; 4],
+        /// The position (m), 0.
+        pub position: [f32; 4],
+        /// The direction, 0.
+        pub direction: [f32; 4],
+        /// The carried wavelengths' bands.
+        pub band: [u32; 4],
+        /// Wavelengths carried, the bounce, 0, 0.
+        pub counts: [u32; 4],
+    }
+}
 
-/// Pixels whose paths are under way at once (their state: 896 bytes each).
+runtime::uniform! {
+    /// `SavedPath` of `truth.wgsl`: a tile slot's path between dispatches (GPU memory only;
+    /// its size sizes the buffer).
+    pub struct SavedPath as "SavedPath" {
+        /// The carried wavelengths' f_m.
+        pub f: [f32; 4],
+        /// Their r_m.
+        pub r: [f32; 4],
+        /// The position (m), 0.
+        pub position: [f32; 4],
+        /// The direction, 0.
+        pub direction: [f32; 4],
+        /// The radiance gathered so far per channel, 0.
+        pub sum: [f32; 4],
+        /// The carried wavelengths' bands.
+        pub band: [u32; 4],
+        /// Wavelengths carried, the bounce, the stack's top, alive.
+        pub counts: [u32; 4],
+        /// The random stream's two keys and counter, the sample within the pass.
+        pub stream: [u32; 4],
+        /// The branches waiting.
+        pub stack: [SavedBranch; STACK],
+    }
+}
+
+/// Pixels whose paths are under way at once (their state: a [`SavedPath`], 896 bytes each).
 const TILE_PIXELS: usize = 1 << 16;
 
 /// Loop steps one invocation takes per dispatch before it saves its path for the next: each
@@ -202,11 +250,11 @@ impl Renderer {
     pub fn new(gpu: &Gpu) -> Self {
         let device = &gpu.device;
         use wgpu::BufferBindingType::{Storage, Uniform};
-        let entries: Vec<_> = (0..12)
+        let entries: Vec<_> = (0..11)
             .map(|b| match b {
                 0 => entry(0, Uniform, false),
                 8 => entry(8, Uniform, true),
-                6 | 7 | 9 | 10 | 11 => entry(b, Storage { read_only: false }, false),
+                6 | 7 | 9 | 10 => entry(b, Storage { read_only: false }, false),
                 b => entry(b, Storage { read_only: true }, false),
             })
             .collect();
@@ -255,10 +303,10 @@ pub fn unsupported(frame: &Frame) -> Option<&'static str> {
     }
 }
 
-/// The tracer's optics as the shader's buffers: per band its rows, per (band, field) the
+/// The tracer's optics as the shader's buffers: per band its [`Band`], per (band, field) the
 /// phase function's values and two-level CDF, per bin its (1 − cos θ, width).
 struct Optics {
-    bands: Vec<[f32; 4]>,
+    bands: Vec<Band>,
     phase: Vec<f32>,
     bin_mu: Vec<[f32; 2]>,
     bins: usize,
@@ -275,28 +323,27 @@ fn optics(tracer: &Tracer) -> Optics {
             [lo as f32, width as f32]
         })
         .collect();
-    let mut rows = Vec::new();
+    let mut bands = Vec::with_capacity(tracer.bands.len());
     let stride = 2 * bins + blocks;
     let mut phase = vec![0f32; tracer.bands.len() * MAX_FIELDS * stride];
     for (j, b) in tracer.bands.iter().enumerate() {
-        rows.push([
-            b.beta_air_sl as f32,
-            b.haze_ext_sl as f32,
-            b.haze_sca_sl as f32,
-            tracer.band_cdf[j] as f32,
-        ]);
-        rows.push(a4(b.to_rgb, 0.0));
-        for f in 0..MAX_FIELDS {
-            let Some(o) = b.fields.get(f) else {
-                rows.push([0.0; 4]);
-                continue;
-            };
-            rows.push([
+        let mut band = Band {
+            air: [
+                b.beta_air_sl as f32,
+                b.haze_ext_sl as f32,
+                b.haze_sca_sl as f32,
+                tracer.band_cdf[j] as f32,
+            ],
+            to_rgb: a4(b.to_rgb, 0.0),
+            fields: [[0.0; 4]; MAX_FIELDS],
+        };
+        for (f, o) in b.fields.iter().enumerate().take(MAX_FIELDS) {
+            band.fields[f] = [
                 o.sigma_ext as f32,
                 o.albedo as f32,
                 o.phase.delta() as f32,
                 0.0,
-            ]);
+            ];
             let out = &mut phase[(j * MAX_FIELDS + f) * stride..][..stride];
             // Each bin's probability in the smooth part, p_k Ω_k.
             let prob: Vec<f64> = (0..bins).map(|k| o.phase.probability(k)).collect();
@@ -327,10 +374,10 @@ fn optics(tracer: &Tracer) -> Optics {
                 *v = o.phase.value(k) as f32;
             }
         }
+        bands.push(band);
     }
-    debug_assert_eq!(rows.len(), BAND_ROWS * tracer.bands.len());
     Optics {
-        bands: rows,
+        bands,
         phase,
         bin_mu,
         bins,
@@ -574,16 +621,10 @@ fn bind(
         usage | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
     );
     let tile = TILE_PIXELS.min(pixels as usize);
-    let state_f = storage(
+    let saved = storage(
         device,
         "truth path state",
-        (16 * F_ROWS * tile) as u64,
-        false,
-    );
-    let state_u = storage(
-        device,
-        "truth path state (u32)",
-        (16 * U_ROWS * tile) as u64,
+        (std::mem::size_of::<SavedPath>() * tile) as u64,
         false,
     );
     let buffers = [
@@ -597,8 +638,7 @@ fn bind(
         &transparency,
         &steps,
         &counters,
-        &state_f,
-        &state_u,
+        &saved,
     ];
     let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
         label: Some("photometeor truth bindings"),
@@ -695,7 +735,7 @@ fn trace(
             ("per-pixel sums bytes", 32 * pixels),
             (
                 "path state bytes",
-                (16 * F_ROWS * TILE_PIXELS.min(pixels as usize)) as u64,
+                (std::mem::size_of::<SavedPath>() * TILE_PIXELS.min(pixels as usize)) as u64,
             ),
         ],
     )?;
@@ -768,14 +808,13 @@ mod tests {
     /// The sizes the host lays buffers out by are the shader's.
     #[test]
     fn the_host_and_the_shader_agree_on_the_layout() {
-        for (name, value) in [("STACK", STACK), ("BLOCK", BLOCK), ("BAND_ROWS", BAND_ROWS)] {
+        for (name, value) in [
+            ("STACK", STACK),
+            ("BLOCK", BLOCK),
+            ("MAX_FIELDS", MAX_FIELDS),
+        ] {
             let line = format!("const {name}: u32 = {value}u;");
             assert!(TRUTH_WGSL.contains(&line), "truth.wgsl lacks {line:?}");
         }
-        for (name, rows) in [("F_ROWS", "5u + 4u * STACK"), ("U_ROWS", "3u + 2u * STACK")] {
-            let line = format!("const {name}: u32 = {rows};");
-            assert!(TRUTH_WGSL.contains(&line), "truth.wgsl lacks {line:?}");
-        }
-        assert_eq!((F_ROWS, U_ROWS), (5 + 4 * STACK, 3 + 2 * STACK));
     }
 }

@@ -27,9 +27,7 @@ struct Params {
 
 @group(0) @binding(0) var<uniform> rp: Params;
 @group(0) @binding(1) var<storage, read> density: array<vec4<f32>>;
-// Per band BAND_ROWS rows: (β_air,sl, haze N₀σ_ext, haze N₀σ_sca, CDF of q), (w_c/q per channel),
-// then per field (σ_ext, albedo, forward δ, 0).
-@group(0) @binding(2) var<storage, read> bands: array<vec4<f32>>;
+@group(0) @binding(2) var<storage, read> bands: array<Band>;
 // Per (band, field), PHASE_STRIDE floats: the bins' p_k (1/sr), each bin's CDF within its block
 // (the block's last is 1), each block's CDF over the smooth part (the last is 1).
 @group(0) @binding(3) var<storage, read> phase: array<f32>;
@@ -51,9 +49,38 @@ struct Step {
 @group(0) @binding(8) var<uniform> stp: Step;
 // Paths cut short by the adapter (see `step`), and paths still under way.
 @group(0) @binding(9) var<storage, read_write> counters: array<atomic<u32>, 2>;
-// Each tile slot's path between dispatches: F_ROWS float rows and U_ROWS u32 rows (`save`).
-@group(0) @binding(10) var<storage, read_write> state_f: array<vec4<f32>>;
-@group(0) @binding(11) var<storage, read_write> state_u: array<vec4<u32>>;
+// Each tile slot's path between dispatches (`save`, `load`).
+@group(0) @binding(10) var<storage, read_write> saved: array<SavedPath>;
+
+// One wavelength band's optics (Tracer's bands).
+struct Band {
+    air: vec4<f32>,          // β_air at sea level, haze N₀σ_ext, haze N₀σ_sca, the CDF of q
+    to_rgb: vec4<f32>,       // w_c/q per channel, 0
+    fields: array<vec4<f32>, MAX_FIELDS>, // per field: σ_ext, albedo, forward δ, 0
+}
+
+// A branch a split left waiting on a path's stack (`push`, `pop`).
+struct SavedBranch {
+    f: vec4<f32>,            // the carried wavelengths' f_m (Carried)
+    r: vec4<f32>,            // their r_m
+    position: vec4<f32>,     // p xyz, 0
+    direction: vec4<f32>,    // d xyz, 0
+    band: vec4<u32>,         // the carried wavelengths' bands
+    counts: vec4<u32>,       // wavelengths carried, bounce, 0, 0
+}
+
+// A tile slot's path between dispatches.
+struct SavedPath {
+    f: vec4<f32>,            // the carried wavelengths' f_m (Carried)
+    r: vec4<f32>,            // their r_m
+    position: vec4<f32>,     // p xyz, 0
+    direction: vec4<f32>,    // d xyz, 0
+    sum: vec4<f32>,          // the radiance gathered so far rgb, 0
+    band: vec4<u32>,         // the carried wavelengths' bands
+    counts: vec4<u32>,       // wavelengths carried, bounce, the stack's top, alive
+    stream: vec4<u32>,       // the random stream: key0, key1, counter; the sample k
+    stack: array<SavedBranch, STACK>,
+}
 
 // The photon pipeline (photons walking forward, `photon_event`) or the camera's: a pipeline
 // constant, so that each pipeline holds only its own code (a run-time flag made lavapipe's
@@ -63,8 +90,8 @@ override photon_mode: bool = false;
 // bounded grid's loops are those they were.
 override periodic: bool = false;
 
-const BAND_ROWS: u32 = 6u;
 const BLOCK: u32 = 32u;
+const MAX_FIELDS: u32 = 4u;
 const PI: f32 = 3.14159265358979;
 const INF: f32 = 3.0e38;
 const ROULETTE_WEIGHT: f32 = 1e-3;
@@ -72,8 +99,6 @@ const SPLIT_WEIGHT: f32 = 2.0;
 const MAX_SPLIT: u32 = 16u;
 const STACK: u32 = 8u;
 const EVENT_STEPS: u32 = 64u;
-const F_ROWS: u32 = 5u + 4u * STACK;
-const U_ROWS: u32 = 3u + 2u * STACK;
 
 // ---- random numbers: counter-based, two 32-bit keys per (seed, pixel, sample) ----
 
@@ -152,12 +177,8 @@ fn renormalize(c: ptr<function, Carried>) {
     }
 }
 
-fn band_row(b: u32, row: u32) -> vec4<f32> {
-    return bands[b * BAND_ROWS + row];
-}
-
 fn field_optics(b: u32, field: u32) -> vec4<f32> {
-    return bands[b * BAND_ROWS + 2u + field];
+    return bands[b].fields[field];
 }
 
 // The wavelengths of one path (Tracer::carry): the m-th at u + m/n (mod 1) in the bands' CDF.
@@ -173,7 +194,7 @@ fn carry(n: u32) -> Carried {
             um = um - 1.0;
         }
         var j = 0u;
-        while (j + 1u < rp.counts.x && band_row(j, 0u).w <= um) {
+        while (j + 1u < rp.counts.x && bands[j].air.w <= um) {
             j = j + 1u;
         }
         c.band[m] = j;
@@ -309,9 +330,9 @@ fn air_ratios(c: ptr<function, Carried>, p: vec3<f32>, d: vec3<f32>, s: f32, col
         return;
     }
     let path = air_path(p, d, s);
-    let b0 = band_row((*c).band[0], 0u).x;
+    let b0 = bands[(*c).band[0]].air.x;
     for (var m = 1u; m < (*c).n; m = m + 1u) {
-        let bm = band_row((*c).band[m], 0u).x;
+        let bm = bands[(*c).band[m]].air.x;
         var k = exp(-(bm - b0) * path);
         if (collided) {
             k = k * bm / b0;
@@ -327,9 +348,9 @@ fn haze_ratios(c: ptr<function, Carried>, p: vec3<f32>, d: vec3<f32>, s: f32, co
         return;
     }
     let path = haze_path(p, d, s);
-    let b0 = band_row((*c).band[0], 0u).y;
+    let b0 = bands[(*c).band[0]].air.y;
     for (var m = 0u; m < (*c).n; m = m + 1u) {
-        let row = band_row((*c).band[m], 0u);
+        let row = bands[(*c).band[m]].air;
         let k = exp(-(row.y - b0) * path);
         if (collided) {
             (*c).f[m] = (*c).f[m] * k * row.z / b0;
@@ -534,9 +555,9 @@ fn add_source(c: Carried, v: Vertex, p: vec3<f32>, dir: vec3<f32>, limit: f32, s
     let hz = haze_path(p, dir, limit);
     var sum = vec3<f32>(0.0);
     for (var m = 0u; m < c.n; m = m + 1u) {
-        let row = band_row(c.band[m], 0u);
+        let row = bands[c.band[m]].air;
         let t = w[m] * tv[m] * exp(-row.x * air - row.y * hz);
-        sum = sum + coef_w[m] * band_row(c.band[m], 1u).xyz * t * source;
+        sum = sum + coef_w[m] * bands[c.band[m]].to_rgb.xyz * t * source;
     }
     return sum;
 }
@@ -579,7 +600,7 @@ fn next_event(c: ptr<function, Carried>, p0: vec3<f32>, d: vec3<f32>) -> Event {
     ev.p = p0;
     ev.field = 0u;
     let t_ground = select(INF, max(p0.y / -d.y, 0.0), d.y < 0.0);
-    let hero = band_row((*c).band[0], 0u);
+    let hero = bands[(*c).band[0]].air;
     let t_air = select(INF, sample_exponential(hero.x, rp.sky_beta.w, p0, d), rp.counts2.z != 0u);
     let t_haze = select(INF, sample_exponential(hero.y, rp.track.z, p0, d),
         rp.counts2.y != 0xffffffffu);
@@ -830,59 +851,47 @@ fn begin_sample(pixel: u32, k: u32) -> Path {
 }
 
 fn push(slot: u32, e: u32, c: Carried, p: vec3<f32>, d: vec3<f32>, bounce: u32) {
-    let f = slot * F_ROWS + 5u + 4u * e;
-    state_f[f] = c.f;
-    state_f[f + 1u] = c.r;
-    state_f[f + 2u] = vec4<f32>(p, 0.0);
-    state_f[f + 3u] = vec4<f32>(d, 0.0);
-    let u = slot * U_ROWS + 3u + 2u * e;
-    state_u[u] = c.band;
-    state_u[u + 1u] = vec4<u32>(c.n, bounce, 0u, 0u);
+    saved[slot].stack[e] = SavedBranch(c.f, c.r, vec4<f32>(p, 0.0), vec4<f32>(d, 0.0), c.band,
+                                       vec4<u32>(c.n, bounce, 0u, 0u));
 }
 
 fn pop(slot: u32, path: ptr<function, Path>) {
     (*path).top = (*path).top - 1u;
-    let e = (*path).top;
-    let f = slot * F_ROWS + 5u + 4u * e;
-    (*path).c.f = state_f[f];
-    (*path).c.r = state_f[f + 1u];
-    (*path).p = state_f[f + 2u].xyz;
-    (*path).d = state_f[f + 3u].xyz;
-    let u = slot * U_ROWS + 3u + 2u * e;
-    (*path).c.band = state_u[u];
-    (*path).c.n = state_u[u + 1u].x;
-    (*path).bounce = state_u[u + 1u].y;
+    let b = saved[slot].stack[(*path).top];
+    (*path).c.f = b.f;
+    (*path).c.r = b.r;
+    (*path).p = b.position.xyz;
+    (*path).d = b.direction.xyz;
+    (*path).c.band = b.band;
+    (*path).c.n = b.counts.x;
+    (*path).bounce = b.counts.y;
 }
 
 fn save(slot: u32, path: Path) {
-    let f = slot * F_ROWS;
-    state_f[f] = path.c.f;
-    state_f[f + 1u] = path.c.r;
-    state_f[f + 2u] = vec4<f32>(path.p, 0.0);
-    state_f[f + 3u] = vec4<f32>(path.d, 0.0);
-    state_f[f + 4u] = vec4<f32>(path.sum, 0.0);
-    let u = slot * U_ROWS;
-    state_u[u] = path.c.band;
-    state_u[u + 1u] = vec4<u32>(path.c.n, path.bounce, path.top, path.alive);
-    state_u[u + 2u] = vec4<u32>(key0, key1, counter, path.k);
+    saved[slot].f = path.c.f;
+    saved[slot].r = path.c.r;
+    saved[slot].position = vec4<f32>(path.p, 0.0);
+    saved[slot].direction = vec4<f32>(path.d, 0.0);
+    saved[slot].sum = vec4<f32>(path.sum, 0.0);
+    saved[slot].band = path.c.band;
+    saved[slot].counts = vec4<u32>(path.c.n, path.bounce, path.top, path.alive);
+    saved[slot].stream = vec4<u32>(key0, key1, counter, path.k);
 }
 
 fn load(slot: u32) -> Path {
     var path: Path;
-    let f = slot * F_ROWS;
-    path.c.f = state_f[f];
-    path.c.r = state_f[f + 1u];
-    path.p = state_f[f + 2u].xyz;
-    path.d = state_f[f + 3u].xyz;
-    path.sum = state_f[f + 4u].xyz;
-    let u = slot * U_ROWS;
-    path.c.band = state_u[u];
-    let a = state_u[u + 1u];
+    path.c.f = saved[slot].f;
+    path.c.r = saved[slot].r;
+    path.p = saved[slot].position.xyz;
+    path.d = saved[slot].direction.xyz;
+    path.sum = saved[slot].sum.xyz;
+    path.c.band = saved[slot].band;
+    let a = saved[slot].counts;
     path.c.n = a.x;
     path.bounce = a.y;
     path.top = a.z;
     path.alive = a.w;
-    let k = state_u[u + 2u];
+    let k = saved[slot].stream;
     key0 = k.x;
     key1 = k.y;
     counter = k.z;
@@ -951,7 +960,7 @@ fn event(slot: u32, path: ptr<function, Path>) -> bool {
         let l = rp.background.xyz + select(vec3<f32>(0.0), rp.irradiance.xyz / rp.irradiance.w, disk);
         var add = vec3<f32>(0.0);
         for (var m = 0u; m < c.n; m = m + 1u) {
-            add = add + w[m] * band_row(c.band[m], 1u).xyz * l;
+            add = add + w[m] * bands[c.band[m]].to_rgb.xyz * l;
         }
         (*path).sum = (*path).sum + add;
         return true;
