@@ -42,6 +42,7 @@ fn every_uniform_mirrors_its_wgsl_struct() {
     check::<render::truth::gpu::TruthParams>(&render::truth::gpu::source());
     check::<render::truth::gpu::StepParams>(&render::truth::gpu::source());
     check::<render::truth::gpu::Band>(&render::truth::gpu::source());
+    check::<render::truth::gpu::Light>(&render::truth::gpu::source());
     check::<render::truth::gpu::SavedBranch>(&render::truth::gpu::source());
     check::<render::truth::gpu::SavedPath>(&render::truth::gpu::source());
 }

@@ -64,6 +64,18 @@ pub const STACK: usize = 8;
 const BLOCK: usize = 32;
 
 runtime::uniform! {
+    /// `Light` of `truth.wgsl`: a point or spot light.
+    pub struct Light as "Light" {
+        /// Its position (m); w: 1 for a spot, 0 for a point light.
+        pub position: [f32; 4],
+        /// Its intensity per channel, 0.
+        pub intensity: [f32; 4],
+        /// A spot's axis; w: the cosine of its half-angle (−2 for a point light).
+        pub axis: [f32; 4],
+    }
+}
+
+runtime::uniform! {
     /// `Band` of `truth.wgsl`: one wavelength band's optics.
     pub struct Band as "Band" {
         /// β_air at sea level (1/m), the haze's N₀σ_ext and N₀σ_sca (1/m), the band's CDF of q.
@@ -519,21 +531,20 @@ fn params(
     Ok(params)
 }
 
-/// Three rows per light: (position, 1 for a spot), (intensity, 0), (the spot's axis, the cosine
-/// of its half angle; −2 for a point light).
-fn light_rows(tracer: &Tracer) -> Vec<[f32; 4]> {
+/// The tracer's lights as the shader's [`Light`]s.
+fn lights(tracer: &Tracer) -> Vec<Light> {
     tracer
         .lights
         .iter()
-        .flat_map(|l| {
+        .map(|l| {
             let (axis, cos) = l
                 .spot
                 .map_or((DVec3::Y, -2.0), |(a, half)| (a, half.to_radians().cos()));
-            [
-                v4(l.position_m, if l.spot.is_some() { 1.0 } else { 0.0 }),
-                a4(l.intensity, 0.0),
-                v4(axis, cos),
-            ]
+            Light {
+                position: v4(l.position_m, if l.spot.is_some() { 1.0 } else { 0.0 }),
+                intensity: a4(l.intensity, 0.0),
+                axis: v4(axis, cos),
+            }
         })
         .collect()
 }
@@ -565,15 +576,13 @@ fn bind(
     grid: &DensityGrid,
     pixels: u64,
 ) -> Bound {
-    let light_rows = light_rows(tracer);
+    // A binding holds at least one record: a scene without lights binds one zero light (the
+    // shader reads rp.counts.w of them, none).
+    let mut lights = lights(tracer);
+    if lights.is_empty() {
+        lights.push(Light::default());
+    }
     let usage = wgpu::BufferUsages::STORAGE;
-    let nonempty = |b: &[u8]| -> Vec<u8> {
-        if b.is_empty() {
-            vec![0; 16]
-        } else {
-            b.to_vec()
-        }
-    };
     let params_buffer = filled(
         device,
         "truth params",
@@ -589,12 +598,7 @@ fn bind(
     let bands = filled(device, "truth bands", bytemuck::cast_slice(&o.bands), usage);
     let phase = filled(device, "truth phase", bytemuck::cast_slice(&o.phase), usage);
     let bin_mu = filled(device, "truth bins", bytemuck::cast_slice(&o.bin_mu), usage);
-    let lights = filled(
-        device,
-        "truth lights",
-        &nonempty(bytemuck::cast_slice(&light_rows)),
-        usage,
-    );
+    let lights = filled(device, "truth lights", bytemuck::cast_slice(&lights), usage);
     let sums = storage(device, "truth sums", 32 * pixels, true);
     let transparency = storage(device, "truth transparency", 4 * pixels.max(4), true);
     // The four kinds of dispatch (begin or continue, count or not), read at a dynamic offset.

@@ -33,8 +33,7 @@ struct Params {
 @group(0) @binding(3) var<storage, read> phase: array<f32>;
 // Per bin: 1 − cos θ at its forward edge, its width in cos θ.
 @group(0) @binding(4) var<storage, read> bin_mu: array<vec2<f32>>;
-// Per light three rows: position (w: spot 1/0), intensity, spot axis (w: cos of half-angle).
-@group(0) @binding(5) var<storage, read> lights: array<vec4<f32>>;
+@group(0) @binding(5) var<storage, read> lights: array<Light>;
 // Per pixel two rows: Σ L and Σ L² over this pass's samples (rgb).
 @group(0) @binding(6) var<storage, read_write> sums: array<vec4<f32>>;
 @group(0) @binding(7) var<storage, read_write> transparency_out: array<f32>;
@@ -51,6 +50,13 @@ struct Step {
 @group(0) @binding(9) var<storage, read_write> counters: array<atomic<u32>, 2>;
 // Each tile slot's path between dispatches (`save`, `load`).
 @group(0) @binding(10) var<storage, read_write> saved: array<SavedPath>;
+
+// A point or spot light (Tracer's lights).
+struct Light {
+    position: vec4<f32>,     // its position (m); w: 1 for a spot, 0 for a point light
+    intensity: vec4<f32>,    // its intensity per channel, 0
+    axis: vec4<f32>,         // a spot's axis; w: the cosine of its half-angle (−2 for a point)
+}
 
 // One wavelength band's optics (Tracer's bands).
 struct Band {
@@ -565,19 +571,18 @@ fn add_source(c: Carried, v: Vertex, p: vec3<f32>, dir: vec3<f32>, limit: f32, s
 fn direct(c: Carried, v: Vertex, p: vec3<f32>, coef_w: vec4<f32>) -> vec3<f32> {
     var sum = add_source(c, v, p, rp.sun.xyz, INF, rp.irradiance.xyz, coef_w);
     for (var i = 0u; i < rp.counts.w; i = i + 1u) {
-        let pos = lights[3u * i];
-        let to = pos.xyz - p;
+        let light = lights[i];
+        let to = light.position.xyz - p;
         let r2 = dot(to, to);
         if (r2 == 0.0) {
             continue;
         }
         let r = sqrt(r2);
         let dir = to / r;
-        let axis = lights[3u * i + 2u];
-        if (pos.w > 0.5 && dot(-dir, axis.xyz) < axis.w) {
+        if (light.position.w > 0.5 && dot(-dir, light.axis.xyz) < light.axis.w) {
             continue;
         }
-        sum = sum + add_source(c, v, p, dir, r, lights[3u * i + 1u].xyz / r2, coef_w);
+        sum = sum + add_source(c, v, p, dir, r, light.intensity.xyz / r2, coef_w);
     }
     return sum;
 }
