@@ -196,6 +196,35 @@ fn the_gpu_truth_agrees_with_the_cpu_truth_on_the_example_scenes() {
     }
 }
 
+/// A point light and a spot light in a cloud: the GPU's next-event estimate towards each light
+/// (its spot's cone included) agrees with the CPU truth's pixel by pixel within their noise.
+/// Measured: z rms 1.010, the image sums 1.56σ apart; the GPU without the lights against the
+/// CPU with them: 4.9σ apart (so a GPU that dropped the lights fails here).
+#[test]
+fn the_gpu_truth_agrees_with_the_cpu_truth_with_point_and_spot_lights() {
+    let Some(g) = common::gpu() else { return };
+    let renderer = gpu::Renderer::new(&g);
+    let (_tmp, tables, mut frame) = example("cumulus_dawn", 32, 24);
+    let c = frame.camera.look_at_m;
+    frame.lights.push(render::objects::Light {
+        position_m: c + DVec3::new(0.0, 300.0, -200.0),
+        intensity: [3e6, 2e6, 1e6],
+        spot: None,
+    });
+    frame.lights.push(render::objects::Light {
+        position_m: c + DVec3::new(200.0, 100.0, -300.0),
+        intensity: [1e6, 2e6, 3e6],
+        spot: Some((DVec3::new(-0.5, 0.0, 1.0).normalize(), 30.0)),
+    });
+    let s = settings(256, 17);
+    let cpu = render::truth::render(&tables, &frame, &s, &()).unwrap();
+    let gpu_image = gpu::render(&renderer, &g, &tables, &frame, &s, &()).unwrap();
+    let (rms, sum_z, n) = agreement(&gpu_image, &cpu);
+    eprintln!("lights 32×24, 256 spp: z rms {rms:.3} over {n}, image sums {sum_z:+.2}σ apart");
+    assert!((rms - 1.0).abs() < 0.1, "z rms {rms}");
+    assert!(sum_z.abs() < 3.0, "image sums {sum_z}σ apart");
+}
+
 /// Green radiance along −`w` (mean, standard error) seen from just outside the slab of `frame`
 /// (y ∈ [1, 2] m), from `paths` camera paths: a 16 × 16 image whose rays all run along −w
 /// (field of view 10⁻⁴°), averaged.
