@@ -1,8 +1,9 @@
 //! `photometeor view` in a real window under Xvfb (lavapipe's Vulkan surface): a script moves
 //! the sun, switches the model and orbits the camera, and the screenshots are checked; the
 //! still view equals `photometeor render` of the same view; an edit of the watched scene into
-//! an invalid state is reported with its key and line while the last good scene stays; no
-//! display and a bad script are one line and exit 2.
+//! an invalid state is reported with its key and line while the last good scene stays, and so
+//! is a bad rewrite of an OpenVDB file the scene reads; no display and a bad script are one
+//! line and exit 2.
 
 // Table-driven end-to-end tests read best whole: the 120-line bound on functions
 // (clippy.toml) holds for library and binary code.
@@ -370,6 +371,97 @@ fn a_scene_edited_into_an_invalid_state_is_reported_with_its_line_and_the_last_g
     let (_, _, before) = read_rgba(&cwd.join("before.exr"));
     let (_, _, after) = read_rgba(&cwd.join("after.exr"));
     assert_eq!(before, after, "the window did not keep the last good scene");
+}
+
+/// The viewer opens an OpenVDB cloud (a file the OpenVDB library wrote) and watches the file:
+/// rewritten with a negative density, it is refused by name and the last good cloud kept.
+#[test]
+fn a_vdb_cloud_opens_and_a_bad_rewrite_of_its_file_is_refused_with_the_last_good_kept() {
+    let cwd = workdir("view-vdb");
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("runtime/vdb/tests/write_cases.py");
+    let written = Command::new("/usr/bin/python3")
+        .arg(&script)
+        .arg(cwd.join("library"))
+        .output()
+        .expect("running /usr/bin/python3 (scripts/test installs python3-openvdb)");
+    assert!(
+        written.status.success(),
+        "{}",
+        String::from_utf8_lossy(&written.stderr)
+    );
+    std::fs::copy(cwd.join("library/dense.vdb"), cwd.join("cloud.vdb")).unwrap();
+    let scene = "[scene]\nname = \"vdb\"\nspectral = \"rgb3\"\nn_max = 4\nquality = \"draft\"\n\n\
+                 [[field]]\nname = \"cloud\"\nkind = \"cloud\"\n\
+                 distribution = { kind = \"gamma\", r_eff_um = 8, v_eff = 0.1 }\n\n\
+                 [render]\ngrid_resolution = 24\n\n\
+                 [camera]\nposition_m = [400, 150, -1500]\nlook_at_m = [400, 150, 400]\n\n\
+                 [sun]\nelevation_deg = 30\nazimuth_deg = 40\n\n\
+                 [[volume]]\nfield = \"cloud\"\nshape = \"vdb\"\nfile = \"cloud.vdb\"\n\
+                 number_density_per_m3 = 1e7\n";
+    std::fs::write(cwd.join("scene.toml"), scene).unwrap();
+    std::fs::write(
+        cwd.join("script.toml"),
+        "[[step]]\nscreenshot = \"before.png\"\nwait_s = 4\n\n[[step]]\nscreenshot = \"after.png\"\n",
+    )
+    .unwrap();
+    let args = [
+        "scene.toml",
+        "--model",
+        "riley",
+        "--width",
+        "48",
+        "--height",
+        "36",
+        "--tables",
+        "tables",
+        "--script",
+        "script.toml",
+        "--screenshot",
+        "end.png",
+    ];
+    let Some(mut view) = view_command(&args, &cwd) else {
+        return;
+    };
+    let mut child = view
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let started = Instant::now();
+    while !cwd.join("before.json").exists() {
+        if let Some(status) = child.try_wait().unwrap() {
+            let out = child.wait_with_output().unwrap();
+            if skipped_without_adapter(&out) {
+                return;
+            }
+            panic!(
+                "view ended ({status}) before its first shot:\n{}",
+                String::from_utf8_lossy(&out.stderr)
+            );
+        }
+        assert!(
+            started.elapsed() < Duration::from_secs(300),
+            "no first shot in 300 s"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    std::fs::copy(cwd.join("library/negative.vdb"), cwd.join("cloud.vdb")).unwrap();
+    let out = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "view failed:\n{stderr}");
+    assert!(
+        stderr.contains("1983 active voxels"),
+        "the cloud's voxels not printed:\n{stderr}"
+    );
+    assert!(
+        stderr.contains("cloud.vdb: grid \"density\": value -1 at voxel (10, 2, 15)")
+            && stderr.contains("keeps the last good scene"),
+        "the bad rewrite is not refused by name:\n{stderr}"
+    );
+    let (_, _, before) = read_rgba(&cwd.join("before.exr"));
+    let (_, _, after) = read_rgba(&cwd.join("after.exr"));
+    assert!(before[0].iter().any(|&v| v > 0.0), "a black first view");
+    assert_eq!(before, after, "the window did not keep the last good cloud");
 }
 
 #[test]

@@ -132,7 +132,11 @@ struct App {
     scene: RenderScene,
     plan: BakePlan,
     scene_path: Option<PathBuf>,
-    modified: Option<SystemTime>,
+    /// The files the scene reads beside itself (grids, OpenVDB files, OBJ meshes), watched
+    /// with it: a cloud re-exported from Houdini is reloaded as an edit of the scene.
+    inputs: Vec<PathBuf>,
+    /// When the scene file and each of `inputs` was last modified.
+    modified: Vec<Option<SystemTime>>,
     checked: Instant,
     size: (Option<usize>, Option<usize>),
     scene_error: Option<String>,
@@ -212,7 +216,12 @@ impl App {
             actions.push_back(Action::Shot(path));
             actions.push_back(Action::Exit);
         }
-        let modified = options.scene_path.as_deref().and_then(modified);
+        let inputs = options
+            .scene_path
+            .as_deref()
+            .map(|path| scene_files(path, &scene))
+            .unwrap_or_default();
+        let modified = stamps(options.scene_path.as_deref(), &inputs);
         Self {
             worker,
             camera: scene.camera,
@@ -224,6 +233,7 @@ impl App {
             scene,
             plan,
             scene_path: options.scene_path,
+            inputs,
             modified,
             checked: Instant::now(),
             size: options.size,
@@ -641,6 +651,23 @@ fn model_tables(
 /// The file's modification time.
 fn modified(path: &Path) -> Option<SystemTime> {
     std::fs::metadata(path).and_then(|m| m.modified()).ok()
+}
+
+/// When the scene file `scene` and each of `inputs` was last modified.
+fn stamps(scene: Option<&Path>, inputs: &[PathBuf]) -> Vec<Option<SystemTime>> {
+    scene
+        .into_iter()
+        .chain(inputs.iter().map(PathBuf::as_path))
+        .map(modified)
+        .collect()
+}
+
+/// The files the scene file at `path` (parsed as `scene`) reads beside itself.
+fn scene_files(path: &Path, scene: &RenderScene) -> Vec<PathBuf> {
+    let base = path.parent().unwrap_or(Path::new("."));
+    std::fs::read_to_string(path)
+        .map(|text| crate::commands::render::scene_inputs(&text, base, scene))
+        .unwrap_or_default()
 }
 
 /// Rotates the camera about its look-at point: `yaw` degrees about +y, `pitch` degrees up,

@@ -1,5 +1,6 @@
-//! Changes of the scene that need more than a frame: the watched scene file edited, and a
-//! field's microphysics changed in the window, both re-baked in the background.
+//! Changes of the scene that need more than a frame: the watched scene file (or a file it
+//! reads: a grid, an OpenVDB cloud, a mesh) edited, and a field's microphysics changed in the
+//! window, both re-baked in the background.
 
 use std::ops::RangeInclusive;
 use std::path::Path;
@@ -11,15 +12,16 @@ use eframe::egui;
 use mie::SizeDistribution;
 use render::RenderScene;
 
-use super::{App, model_tables, modified};
+use super::{App, model_tables, scene_files, stamps};
 use crate::commands::render::at_line;
 
 /// How often the scene file's modification time is looked at.
 const WATCH_PERIOD: Duration = Duration::from_millis(500);
 
 impl App {
-    /// Applies an edit of the scene file once it is valid; an invalid one is shown (in the
-    /// window and on stderr, with its key and line) and the last good scene kept.
+    /// Applies an edit of the scene file or of a file it reads once it is valid; an invalid one
+    /// is shown (in the window and on stderr, with its key and line) and the last good scene
+    /// kept.
     pub(super) fn watch_scene(&mut self, ctx: &egui::Context) {
         let Some(path) = self.scene_path.clone() else {
             return;
@@ -28,13 +30,18 @@ impl App {
             return;
         }
         self.checked = Instant::now();
-        let now = modified(&path);
+        let now = stamps(Some(&path), &self.inputs);
         if now == self.modified {
             return;
         }
         self.modified = now;
         match self.reload(&path, ctx) {
-            Ok(()) => self.scene_error = None,
+            Ok(()) => {
+                self.scene_error = None;
+                // The edited scene may read other files: watch those from now on.
+                self.inputs = scene_files(&path, &self.scene);
+                self.modified = stamps(Some(&path), &self.inputs);
+            }
             Err(e) => {
                 let e = format!("{e:#}");
                 eprintln!("view: {e} (the window keeps the last good scene)");
