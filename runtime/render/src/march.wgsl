@@ -1,17 +1,23 @@
 // The grid gathers' shared steps (`max` and `coupled`), after slicing.wgsl and compose.wgsl;
 // their params give the march's step in eye.w and the unit vector towards the sun in sun.xyz,
-// and each binds its per-voxel rows as `lighting`.
+// and each binds its per-voxel `LightVoxel` records as `lighting`.
 
-// Row `row` of the per-voxel lighting (`stride` rows a voxel) trilinear at p (voxel centres,
-// clamped to the edge voxels, as DensityGrid::taps), over the voxels in the diffusion solve only
-// when `masked` (row `mask_row`'s w nonzero; renormalized over them); zero outside the box or
-// where no such voxel contributes.
-fn lighting_at(p: vec3<f32>, stride: u32, row: u32, mask_row: u32, masked: bool) -> vec4<f32> {
+// The per-voxel lighting at p, trilinear (voxel centres, clamped to the edge voxels, as
+// DensityGrid::taps): `all` over the eight voxels around p, `solved` over those in the
+// diffusion solve only (the gather's `in_solve`), renormalized over them; zero outside the box
+// or where no such voxel contributes. Each gather binds its `LightVoxel` records as `lighting`
+// and gives their `weighted_add`, `divided` and `in_solve`.
+struct Lit {
+    all: LightVoxel,
+    solved: LightVoxel,
+}
+
+fn lighting_at(p: vec3<f32>) -> Lit {
+    var out = Lit(LightVoxel(), LightVoxel());
     if (!inside_box(p)) {
-        return vec4<f32>(0.0);
+        return out;
     }
     let tap = taps(p);
-    var sum = vec4<f32>(0.0);
     var total = 0.0;
     for (var corner = 0u; corner < 8u; corner = corner + 1u) {
         let d = vec3<u32>(corner & 1u, (corner >> 1u) & 1u, (corner >> 2u) & 1u);
@@ -21,17 +27,19 @@ fn lighting_at(p: vec3<f32>, stride: u32, row: u32, mask_row: u32, masked: bool)
             continue;
         }
         let at = tap.lo + d * tap.s;
-        let i = at.x + rp.grid_dims.x * (at.y + rp.grid_dims.y * at.z);
-        if (masked && lighting[stride * i + mask_row].w == 0.0) {
-            continue;
+        let v = lighting[at.x + rp.grid_dims.x * (at.y + rp.grid_dims.y * at.z)];
+        out.all = weighted_add(out.all, w, v);
+        if (in_solve(v)) {
+            total = total + w;
+            out.solved = weighted_add(out.solved, w, v);
         }
-        total = total + w;
-        sum = sum + w * lighting[stride * i + row];
     }
-    if (masked) {
-        return select(vec4<f32>(0.0), sum / total, total > 0.0);
+    if (total > 0.0) {
+        out.solved = divided(out.solved, total);
+    } else {
+        out.solved = LightVoxel();
     }
-    return sum;
+    return out;
 }
 
 fn scattering_of(rho: vec4<f32>) -> vec3<f32> {

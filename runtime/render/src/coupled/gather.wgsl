@@ -13,8 +13,8 @@ struct CoupledParams {
     grid_min: vec4<f32>,     // xyz; w = ground albedo
     grid_max: vec4<f32>,     // xyz; w = 1 for the P1 radiance, 0 for I_0 alone
     grid_dims: vec4<u32>,    // nx, ny, nz, field count
-    sizes: vec4<u32>,        // width, height, rows per voxel (5), 1 where the sun's single
-                             // scattering is blurred (coupled::peak)
+    sizes: vec4<u32>,        // width, height, 0, 1 where the sun's single scattering is
+                             // blurred (coupled::peak)
     sh_max: vec4<f32>,       // the transport grid's upper corner (its lower is grid_min's)
     sh_dims: vec4<u32>,      // its voxels along x, y, z; w = 1 with the transport's moments
     sigma_ext: array<vec4<f32>, 4>,  // per field, m² per channel
@@ -29,9 +29,7 @@ struct CoupledParams {
 
 @group(1) @binding(0) var<uniform> rp: CoupledParams;
 @group(1) @binding(1) var<storage, read> density: array<vec4<f32>>;
-// Per voxel five rows: (beam I rgb, n), (I_0 rgb, 1 if in the diffusion solve),
-// (I_1 of R xyz, sky R), (I_1 of G xyz, sky G), (I_1 of B xyz, sky B).
-@group(1) @binding(2) var<storage, read> lighting: array<vec4<f32>>;
+@group(1) @binding(2) var<storage, read> lighting: array<LightVoxel>;
 @group(1) @binding(3) var<storage, read_write> image: array<vec4<f32>>;  // rgb, T_vol (green)
 // With the δ-split, the phase functions blurred by the forward peak (render::coupled::peak):
 // p^(D_j)(θ_k) at ((field · PEAK_DEPTHS + j) · 3 + channel) · K + k, D_j = j · PEAK_DEPTH_STEP
@@ -96,9 +94,28 @@ fn peak_coefficient(rho: vec4<f32>) -> f32 {
     return sum;
 }
 
-// Row `row` of the lighting at p (march.wgsl's `lighting_at`; the solve's mask in row 1's w).
-fn lit(p: vec3<f32>, row: u32, masked: bool) -> vec4<f32> {
-    return lighting_at(p, rp.sizes.z, row, 1u, masked);
+// A voxel's lighting (render::coupled's Lighting, in f32), read by march.wgsl's lighting_at.
+struct LightVoxel {
+    beam: vec4<f32>,         // the beam I rgb; w = the peak's depth n
+    i0: vec4<f32>,           // the diffusion's I_0 rgb; w = 1 if in the diffusion solve
+    i1: array<vec4<f32>, 3>, // per channel the diffusion's I_1 (xyz); w = the skylight's mean
+}
+
+// sum + w · v, field by field.
+fn weighted_add(sum: LightVoxel, w: f32, v: LightVoxel) -> LightVoxel {
+    return LightVoxel(sum.beam + w * v.beam, sum.i0 + w * v.i0, array<vec4<f32>, 3>(
+        sum.i1[0] + w * v.i1[0], sum.i1[1] + w * v.i1[1], sum.i1[2] + w * v.i1[2]));
+}
+
+// v / t, field by field.
+fn divided(v: LightVoxel, t: f32) -> LightVoxel {
+    return LightVoxel(v.beam / t, v.i0 / t, array<vec4<f32>, 3>(v.i1[0] / t, v.i1[1] / t,
+        v.i1[2] / t));
+}
+
+// Whether the voxel is in the diffusion solve.
+fn in_solve(v: LightVoxel) -> bool {
+    return v.i0.w != 0.0;
 }
 
 // The real, orthonormal spherical harmonics to degree 4 (render::lighting::transport::harmonics).
@@ -169,10 +186,11 @@ fn gather(@builtin(global_invocation_id) id: vec3<u32>) {
                 continue;
             }
             let sca = scattering_of(rho);
-            let beam = lit(p, 0u, false);
-            let i0 = lit(p, 1u, true).rgb;
-            let i1 = array<vec4<f32>, 3>(lit(p, 2u, true), lit(p, 3u, true), lit(p, 4u, true));
-            let sky = vec3<f32>(lit(p, 2u, false).w, lit(p, 3u, false).w, lit(p, 4u, false).w);
+            let light = lighting_at(p);
+            let beam = light.all.beam;
+            let i0 = light.solved.i0.rgb;
+            let i1 = light.solved.i1;
+            let sky = vec3<f32>(light.all.i1[0].w, light.all.i1[1].w, light.all.i1[2].w);
             let sun = rp.irradiance.rgb * sunlight(p.y, rp.sun.y) * beam.rgb;
             // The beam scattered by Ams_1 blurred by the peak's scatterings in (beam.w) and
             // out to the middle of this step (δ-M's split), or by Ams_{n+1} (beam.w = n; 0

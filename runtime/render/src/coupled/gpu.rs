@@ -6,7 +6,7 @@
 //! times both).
 //!
 //! Bind group 0: the tables ([`GpuTables`]: `ams_mix`). Bind group 1: the params uniform, the
-//! densities, the lighting (five rows per voxel), the image (rgb, T_vol), the phase functions
+//! densities, the lighting (a [`LightVoxel`] per voxel), the image (rgb, T_vol), the phase functions
 //! blurred by the forward peak ([`super::peak`]), the transport's moments (19 rows per voxel of
 //! its grid, the frame's or its blocks').
 //!
@@ -49,8 +49,8 @@ runtime::uniform! {
         pub grid_max: [f32; 4],
         /// nx, ny, nz, field count.
         pub grid_dims: [u32; 4],
-        /// Width, height, rows per voxel (5), 1 where the sun's single scattering is blurred by
-        /// the forward peak.
+        /// Width, height, 0, 1 where the sun's single scattering is blurred by the forward
+        /// peak (coupled::peak).
         pub sizes: [u32; 4],
         /// The transport grid's upper corner (its lower is the frame grid's).
         pub sh_max: [f32; 4],
@@ -76,15 +76,27 @@ runtime::uniform! {
 /// Rows of four the transport's 75 moments take per voxel of its grid.
 const SH_ROWS: usize = crate::lighting::transport::PER_VOXEL.div_ceil(4);
 
-/// Rows of four f32 per voxel of the frame's grid the gather reads of a lighting.
-const ROWS_PER_VOXEL: usize = 5;
+runtime::uniform! {
+    /// `LightVoxel` of `gather.wgsl`: a voxel's [`Lighting`] in f32.
+    pub struct LightVoxel as "LightVoxel" {
+        /// The beam I per channel; w: the peak's depth n.
+        pub beam: [f32; 4],
+        /// The diffusion's I_0 per channel; w: 1 if in the diffusion solve.
+        pub i0: [f32; 4],
+        /// Per channel the diffusion's I_1 (x, y, z); w: the skylight's mean.
+        pub i1: [[f32; 4]; 3],
+    }
+}
 
 /// The bytes of the two large buffers the gather binds for a lighting of `voxels` voxels
 /// whose transport's moments are at `moments` voxels (0 without the transport): its rows per
 /// voxel, and the moments. Each must be within the adapter's storage-binding limit.
 pub fn binding_sizes(voxels: usize, moments: usize) -> [(&'static str, u64); 2] {
     [
-        ("the lighting", (16 * ROWS_PER_VOXEL * voxels) as u64),
+        (
+            "the lighting",
+            (std::mem::size_of::<LightVoxel>() * voxels) as u64,
+        ),
         ("the transport's moments", (16 * SH_ROWS * moments) as u64),
     ]
 }
@@ -197,7 +209,7 @@ impl Renderer {
         let GatherView {
             axes: (forward, right, up),
             step,
-        } = gather_view(device, frame, (16 * ROWS_PER_VOXEL) as u64)?;
+        } = gather_view(device, frame, std::mem::size_of::<LightVoxel>() as u64)?;
         let FieldsAndSky {
             sigma_ext,
             sky_beta,
@@ -218,12 +230,7 @@ impl Renderer {
                 grid.dims[2] as u32,
                 tables.fields.len() as u32,
             ],
-            sizes: [
-                w as u32,
-                h as u32,
-                ROWS_PER_VOXEL as u32,
-                u32::from(lighting.blur.is_some()),
-            ],
+            sizes: [w as u32, h as u32, 0, u32::from(lighting.blur.is_some())],
             sh_max: v4(lighting.sh_grid.max_m, 0.0),
             sh_dims: [
                 lighting.sh_grid.dims[0] as u32,
@@ -304,25 +311,27 @@ impl Renderer {
     }
 }
 
-/// `lighting`'s buffers for the gather (`voxels` of the frame's grid): its rows per voxel, the
+/// `lighting`'s buffers for the gather (`voxels` of the frame's grid): its [`LightVoxel`]s, the
 /// blurred phase functions (one unread value without the δ-split) and the transport's moments
 /// (one unread row without the transport).
 fn upload(device: &wgpu::Device, lighting: &Arc<Lighting>, voxels: usize) -> Resident {
     // Converted on every thread (dense_cumulus, 1.1 M voxels, a first view at 64 × 48 on 2
     // cores and lavapipe: 0.45 s with the conversion on one thread, 0.38 s).
-    let mut rows = vec![[0.0f32; 4]; ROWS_PER_VOXEL * voxels];
-    rows.par_chunks_mut(ROWS_PER_VOXEL)
-        .enumerate()
-        .for_each(|(i, out)| {
-            out[0] = lighting.buffer[i].map(|v| v as f32);
+    let rows: Vec<LightVoxel> = (0..voxels)
+        .into_par_iter()
+        .map(|i| {
             let i0 = lighting.i0[i];
             let active = f64::from(u8::from(lighting.active[i]));
-            out[1] = [i0[0], i0[1], i0[2], active].map(|v| v as f32);
-            for c in 0..3 {
-                let i1 = &lighting.p1[i][3 * c..3 * c + 3];
-                out[2 + c] = [i1[0], i1[1], i1[2], lighting.sky_mean[i][c]].map(|v| v as f32);
+            LightVoxel {
+                beam: lighting.buffer[i].map(|v| v as f32),
+                i0: [i0[0], i0[1], i0[2], active].map(|v| v as f32),
+                i1: std::array::from_fn(|c| {
+                    let i1 = &lighting.p1[i][3 * c..3 * c + 3];
+                    [i1[0], i1[1], i1[2], lighting.sky_mean[i][c]].map(|v| v as f32)
+                }),
             }
-        });
+        })
+        .collect();
     let mut moments = vec![[0.0f32; 4]; SH_ROWS * lighting.sh.len()];
     moments
         .par_chunks_mut(SH_ROWS)

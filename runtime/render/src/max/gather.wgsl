@@ -22,16 +22,32 @@ struct MaxParams {
 
 @group(1) @binding(0) var<uniform> rp: MaxParams;
 @group(1) @binding(1) var<storage, read> density: array<vec4<f32>>;
-// Per voxel three rows: (T_sun rgb, 1 if in the diffusion solve), (I_0 rgb, 0), (sky rgb, 0).
-@group(1) @binding(2) var<storage, read> lighting: array<vec4<f32>>;
+@group(1) @binding(2) var<storage, read> lighting: array<LightVoxel>;
 @group(1) @binding(3) var<storage, read_write> image: array<vec4<f32>>;  // rgb, T_vol (green)
 // The largest optical depth an edge segment reached, as the bits of a non-negative f32 (whose
 // order is the u32 order).
 @group(1) @binding(4) var<storage, read_write> largest_edge: atomic<u32>;
 
-// Row `row` of the lighting at p (march.wgsl's `lighting_at`; the solve's mask in row 0's w).
-fn lit(p: vec3<f32>, row: u32, masked: bool) -> vec3<f32> {
-    return lighting_at(p, 3u, row, 0u, masked).rgb;
+// A voxel's lighting (render::max's Lighting, in f32), read by march.wgsl's lighting_at.
+struct LightVoxel {
+    sun: vec4<f32>,          // the reduced sunlight T_sun rgb; w = 1 if in the diffusion solve
+    i0: vec4<f32>,           // the diffusion's I_0 rgb, 0
+    sky: vec4<f32>,          // the skylight's mean rgb, 0
+}
+
+// sum + w · v, field by field.
+fn weighted_add(sum: LightVoxel, w: f32, v: LightVoxel) -> LightVoxel {
+    return LightVoxel(sum.sun + w * v.sun, sum.i0 + w * v.i0, sum.sky + w * v.sky);
+}
+
+// v / t, field by field.
+fn divided(v: LightVoxel, t: f32) -> LightVoxel {
+    return LightVoxel(v.sun / t, v.i0 / t, v.sky / t);
+}
+
+// Whether the voxel is in the diffusion solve.
+fn in_solve(v: LightVoxel) -> bool {
+    return v.sun.w != 0.0;
 }
 
 // M(D, θ) of the mixture, weighted by ρ σ_sca like Eq. 6 (runtime::sample::poisson_mix).
@@ -87,9 +103,10 @@ fn gather(@builtin(global_invocation_id) id: vec3<u32>) {
             }
             let sca = scattering_of(rho);
             let w_edge = edge_share(ext.g * rp.up.w);
-            let sun = rp.irradiance.rgb * sunlight(p.y, l_y) * lit(p, 0u, false);
+            let light = lighting_at(p);
+            let sun = rp.irradiance.rgb * sunlight(p.y, l_y) * light.all.sun.rgb;
             // Diffuse light: the diffusion solution (never below zero) and the skylight.
-            let diffuse = max(lit(p, 1u, true), vec3<f32>(0.0)) + lit(p, 2u, false);
+            let diffuse = max(light.solved.i0.rgb, vec3<f32>(0.0)) + light.all.sky.rgb;
             let p1 = ams_mix(rho, 1.0, cos_theta);
             let before = edge * w_edge;
             let after = before + w_edge * ext * dt;

@@ -6,9 +6,9 @@
 //! pays (module docs of [`super`]; `photometeor bench render --model max` times both).
 //!
 //! Bind group 0: the tables ([`GpuTables`]: `ams_mix` for Ams_1, `poisson` for the Poisson
-//! mixtures). Bind group 1: the params uniform, the densities, the lighting (three rows per
-//! voxel: T_sun and the solve mask, I_0, the skylight), the image (rgb, T_vol) and the largest
-//! edge depth (an atomic).
+//! mixtures). Bind group 1: the params uniform, the densities, the lighting (a
+//! [`LightVoxel`] per voxel: T_sun and the solve mask, I_0, the skylight), the image (rgb,
+//! T_vol) and the largest edge depth (an atomic).
 
 use std::time::Instant;
 
@@ -23,6 +23,18 @@ use crate::gpu::{
 };
 use crate::lighting::lattice::voxel_length;
 use crate::{checks::FrameError, frame::Frame, image::Image, volume::MAX_FIELDS};
+
+runtime::uniform! {
+    /// `LightVoxel` of `gather.wgsl`: a voxel's [`Lighting`] in f32.
+    pub struct LightVoxel as "LightVoxel" {
+        /// The reduced sunlight T_sun per channel; w: 1 if in the diffusion solve.
+        pub sun: [f32; 4],
+        /// The diffusion's I_0 per channel, 0.
+        pub i0: [f32; 4],
+        /// The skylight's mean per channel, 0.
+        pub sky: [f32; 4],
+    }
+}
 
 runtime::uniform! {
     /// `MaxParams` of `gather.wgsl` (its comments say what each w holds).
@@ -120,7 +132,7 @@ impl Renderer {
         let GatherView {
             axes: (forward, right, up),
             step,
-        } = gather_view(device, frame, 48)?;
+        } = gather_view(device, frame, std::mem::size_of::<LightVoxel>() as u64)?;
         let FieldsAndSky {
             sigma_ext,
             sky_beta,
@@ -147,15 +159,13 @@ impl Renderer {
             irradiance,
         };
         let rgb = |v: &[f64; 3], w: f32| [v[0] as f32, v[1] as f32, v[2] as f32, w];
-        let mut rows: Vec<[f32; 4]> = Vec::with_capacity(3 * voxels);
-        for i in 0..voxels {
-            rows.push(rgb(
-                &lighting.t_sun[i],
-                f32::from(u8::from(lighting.active[i])),
-            ));
-            rows.push(rgb(&lighting.i0[i], 0.0));
-            rows.push(rgb(&lighting.sky_mean[i], 0.0));
-        }
+        let rows: Vec<LightVoxel> = (0..voxels)
+            .map(|i| LightVoxel {
+                sun: rgb(&lighting.t_sun[i], f32::from(u8::from(lighting.active[i]))),
+                i0: rgb(&lighting.i0[i], 0.0),
+                sky: rgb(&lighting.sky_mean[i], 0.0),
+            })
+            .collect();
         let params = filled(
             device,
             "photometeor max params",
