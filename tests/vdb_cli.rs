@@ -9,27 +9,14 @@
 mod common;
 #[path = "common/exr_planes.rs"]
 mod exr_planes;
+#[path = "common/openvdb.rs"]
+mod openvdb;
 
 use std::fs;
 use std::path::Path;
 
 use common::{photometeor, workdir};
-
-/// The library's files and answers (cases.json), written into `dir`.
-fn write_cases(dir: &Path) -> serde_json::Value {
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("runtime/vdb/tests/write_cases.py");
-    let out = std::process::Command::new("/usr/bin/python3")
-        .arg(&script)
-        .arg(dir)
-        .output()
-        .expect("running /usr/bin/python3 (scripts/test installs python3-openvdb)");
-    assert!(
-        out.status.success(),
-        "write_cases.py failed (scripts/test installs python3-openvdb and libopenvdb-tools):\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    serde_json::from_slice(&fs::read(dir.join("cases.json")).unwrap()).unwrap()
-}
+use openvdb::write_cases;
 
 /// A small scene of one cloud volume; `volume` is the `[[volume]]` table's shape keys.
 fn scene(volume: &str) -> String {
@@ -49,6 +36,10 @@ distribution = {{ kind = "gamma", r_eff_um = 8, v_eff = 0.1 }}
 width = 12
 height = 8
 grid_resolution = 24
+
+[render.riley]
+slices = 32
+light_resolution = 64
 
 [camera]
 position_m = [300, 300, -4000]

@@ -17,6 +17,8 @@ use std::time::{Duration, Instant};
 mod common;
 #[path = "common/exr_planes.rs"]
 mod exr_planes;
+#[path = "common/openvdb.rs"]
+mod openvdb;
 
 use common::{photometeor, workdir};
 use exr_planes::read_rgba;
@@ -66,6 +68,38 @@ fn skipped_without_adapter(out: &Output) -> bool {
         return true;
     }
     false
+}
+
+/// Waits for `view`'s first shot (`shot` written), for at most 300 s; `false` where it ended
+/// skipped for want of an adapter, a panic where it ended otherwise.
+fn first_shot(child: &mut std::process::Child, shot: &Path) -> bool {
+    let started = Instant::now();
+    while !shot.exists() {
+        if let Some(status) = child.try_wait().unwrap() {
+            let mut stderr = Vec::new();
+            if let Some(mut pipe) = child.stderr.take() {
+                std::io::Read::read_to_end(&mut pipe, &mut stderr).unwrap();
+            }
+            let out = Output {
+                status,
+                stdout: Vec::new(),
+                stderr,
+            };
+            if skipped_without_adapter(&out) {
+                return false;
+            }
+            panic!(
+                "view ended ({status}) before its first shot:\n{}",
+                String::from_utf8_lossy(&out.stderr)
+            );
+        }
+        assert!(
+            started.elapsed() < Duration::from_secs(300),
+            "no first shot in 300 s"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    true
 }
 
 /// An 8-bit RGB PNG: width, height, pixels.
@@ -330,23 +364,8 @@ fn a_scene_edited_into_an_invalid_state_is_reported_with_its_line_and_the_last_g
         .spawn()
         .unwrap();
     // Once the first shot is written, break the scene: the sun below its range.
-    let started = Instant::now();
-    while !cwd.join("before.json").exists() {
-        if let Some(status) = child.try_wait().unwrap() {
-            let out = child.wait_with_output().unwrap();
-            if skipped_without_adapter(&out) {
-                return;
-            }
-            panic!(
-                "view ended ({status}) before its first shot:\n{}",
-                String::from_utf8_lossy(&out.stderr)
-            );
-        }
-        assert!(
-            started.elapsed() < Duration::from_secs(300),
-            "no first shot in 300 s"
-        );
-        std::thread::sleep(Duration::from_millis(50));
+    if !first_shot(&mut child, &cwd.join("before.json")) {
+        return;
     }
     let (line, _) = good
         .lines()
@@ -378,17 +397,7 @@ fn a_scene_edited_into_an_invalid_state_is_reported_with_its_line_and_the_last_g
 #[test]
 fn a_vdb_cloud_opens_and_a_bad_rewrite_of_its_file_is_refused_with_the_last_good_kept() {
     let cwd = workdir("view-vdb");
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("runtime/vdb/tests/write_cases.py");
-    let written = Command::new("/usr/bin/python3")
-        .arg(&script)
-        .arg(cwd.join("library"))
-        .output()
-        .expect("running /usr/bin/python3 (scripts/test installs python3-openvdb)");
-    assert!(
-        written.status.success(),
-        "{}",
-        String::from_utf8_lossy(&written.stderr)
-    );
+    openvdb::write_cases(&cwd.join("library"));
     std::fs::copy(cwd.join("library/dense.vdb"), cwd.join("cloud.vdb")).unwrap();
     let scene = "[scene]\nname = \"vdb\"\nspectral = \"rgb3\"\nn_max = 4\nquality = \"draft\"\n\n\
                  [[field]]\nname = \"cloud\"\nkind = \"cloud\"\n\
@@ -427,23 +436,8 @@ fn a_vdb_cloud_opens_and_a_bad_rewrite_of_its_file_is_refused_with_the_last_good
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
-    let started = Instant::now();
-    while !cwd.join("before.json").exists() {
-        if let Some(status) = child.try_wait().unwrap() {
-            let out = child.wait_with_output().unwrap();
-            if skipped_without_adapter(&out) {
-                return;
-            }
-            panic!(
-                "view ended ({status}) before its first shot:\n{}",
-                String::from_utf8_lossy(&out.stderr)
-            );
-        }
-        assert!(
-            started.elapsed() < Duration::from_secs(300),
-            "no first shot in 300 s"
-        );
-        std::thread::sleep(Duration::from_millis(50));
+    if !first_shot(&mut child, &cwd.join("before.json")) {
+        return;
     }
     std::fs::copy(cwd.join("library/negative.vdb"), cwd.join("cloud.vdb")).unwrap();
     let out = child.wait_with_output().unwrap();
