@@ -9,14 +9,17 @@ struct CoupledParams {
     eye: vec4<f32>,          // xyz; w = the march's step (m)
     forward: vec4<f32>,      // xyz; w = tan(fov_y / 2)
     right: vec4<f32>,        // xyz; w = aspect
-    up: vec4<f32>,           // xyz; w = 1 for the δ-split (f = g², δ-scaled gather), else 0
+    up: vec4<f32>,           // xyz, 0
     grid_min: vec4<f32>,     // xyz; w = ground albedo
-    grid_max: vec4<f32>,     // xyz; w = 1 for the P1 radiance, 0 for I_0 alone
+    grid_max: vec4<f32>,     // xyz, 0
     grid_dims: vec4<u32>,    // nx, ny, nz, field count
-    sizes: vec4<u32>,        // width, height, 0, 1 where the sun's single scattering is
-                             // blurred (coupled::peak)
+    sizes: vec4<u32>,        // width, height, 0, 0
     sh_max: vec4<f32>,       // the transport grid's upper corner (its lower is grid_min's)
-    sh_dims: vec4<u32>,      // its voxels along x, y, z; w = 1 with the transport's moments
+    sh_dims: vec4<u32>,      // its voxels along x, y, z, 0
+    // 1 where on, else 0: x the δ-split (f = g², δ-scaled gather), y the P1 radiance (else I_0
+    // alone), z the transport's moments, w the sun's single scattering blurred by the forward
+    // peak (coupled::peak)
+    switches: vec4<u32>,
     sigma_ext: array<vec4<f32>, 4>,  // per field, m² per channel
     asymmetry: array<vec4<f32>, 4>,  // per field, g per channel
     peak: array<vec4<f32>, 4>,       // per field, the forward peak f per channel; w = the
@@ -167,7 +170,7 @@ fn gather(@builtin(global_invocation_id) id: vec3<u32>) {
     let eye = rp.eye.xyz;
     let cos_theta = dot(rp.sun.xyz, d);
     let toward_eye = -d;
-    let transport = rp.sh_dims.w == 1u;
+    let transport = rp.switches.z == 1u;
     let y = harmonics(toward_eye);
     var l_vol = vec3<f32>(0.0);
     var tr = vec3<f32>(1.0);
@@ -196,7 +199,7 @@ fn gather(@builtin(global_invocation_id) id: vec3<u32>) {
             // out to the middle of this step (δ-M's split), or by Ams_{n+1} (beam.w = n; 0
             // with δ-Eddington's).
             var phase: vec3<f32>;
-            if (rp.sizes.w == 1u) {
+            if (rp.switches.w == 1u) {
                 let peak = peak_coefficient(rho) * dt;
                 phase = peak_blurred(rho, beam.w + depth_out + 0.5 * peak, cos_theta);
                 depth_out = depth_out + peak;
@@ -204,7 +207,7 @@ fn gather(@builtin(global_invocation_id) id: vec3<u32>) {
                 phase = ams_mix(rho, beam.w + 1.0, cos_theta);
             }
             let g = mixed(rho, rp.asymmetry);
-            let f = select(vec3<f32>(0.0), mixed(rho, rp.peak), rp.up.w > 0.5);
+            let f = select(vec3<f32>(0.0), mixed(rho, rp.peak), rp.switches.x == 1u);
             // The transport's diffuse light towards the eye, Σ_l χ′_l Σ_m Y_lm φ_lm per channel
             // (render::lighting::transport::scattered), χ′_l = (χ_l − f)/(1 − f) of the mixture.
             var toward = vec3<f32>(0.0);
@@ -239,7 +242,7 @@ fn gather(@builtin(global_invocation_id) id: vec3<u32>) {
                 if (len > limit) {
                     flux = flux * (limit / len);
                 }
-                let along = select(0.0, (g[c] - f[c]) * dot(flux, toward_eye), rp.grid_max.w > 0.5);
+                let along = select(0.0, (g[c] - f[c]) * dot(flux, toward_eye), rp.switches.y == 1u);
                 let diffuse = select(max((1.0 - f[c]) * i0[c] + along, 0.0),
                     max((1.0 - f[c]) * toward[c], 0.0), transport);
                 let light = albedo * (phase[c] * sun[c] + diffuse + (1.0 - f[c]) * sky[c]);

@@ -41,21 +41,24 @@ runtime::uniform! {
         pub forward: [f32; 4],
         /// Right axis; w = aspect.
         pub right: [f32; 4],
-        /// Up axis; w = 1 for the δ-split, else 0.
+        /// Up axis, 0.
         pub up: [f32; 4],
         /// Grid box's lower corner; w = ground albedo.
         pub grid_min: [f32; 4],
-        /// Grid box's upper corner; w = 1 for the P1 radiance, 0 for I_0 alone.
+        /// Grid box's upper corner, 0.
         pub grid_max: [f32; 4],
         /// nx, ny, nz, field count.
         pub grid_dims: [u32; 4],
-        /// Width, height, 0, 1 where the sun's single scattering is blurred by the forward
-        /// peak (coupled::peak).
+        /// Width, height, 0, 0.
         pub sizes: [u32; 4],
         /// The transport grid's upper corner (its lower is the frame grid's).
         pub sh_max: [f32; 4],
-        /// The transport grid's voxels along x, y, z; w = 1 with the transport's moments.
+        /// The transport grid's voxels along x, y, z, 0.
         pub sh_dims: [u32; 4],
+        /// 1 where on, else 0: the δ-split (f = g², δ-scaled gather), the P1 radiance (else
+        /// I_0 alone), the transport's moments, the sun's single scattering blurred by the
+        /// forward peak (coupled::peak).
+        pub switches: [u32; 4],
         /// Per field, σ_ext per channel (m²).
         pub sigma_ext: [[f32; 4]; MAX_FIELDS],
         /// Per field, g per channel.
@@ -216,28 +219,34 @@ impl Renderer {
             sun,
             irradiance,
         } = fields_and_sky(tables, frame);
-        let flag = |on: bool| f64::from(u8::from(on));
         let params = CoupledParams {
             eye: v4(frame.camera.position_m, step),
             forward: v4(forward, frame.camera.tan_half_fov()),
             right: v4(right, w as f64 / h as f64),
-            up: v4(up, flag(delta_scaled(settings))),
+            up: v4(up, 0.0),
             grid_min: v4(grid.min_m, frame.ground_albedo),
-            grid_max: v4(grid.max_m, flag(settings.emergent == super::Emergent::P1)),
+            grid_max: v4(grid.max_m, 0.0),
             grid_dims: [
                 grid.dims[0] as u32,
                 grid.dims[1] as u32,
                 grid.dims[2] as u32,
                 tables.fields.len() as u32,
             ],
-            sizes: [w as u32, h as u32, 0, u32::from(lighting.blur.is_some())],
+            sizes: [w as u32, h as u32, 0, 0],
             sh_max: v4(lighting.sh_grid.max_m, 0.0),
             sh_dims: [
                 lighting.sh_grid.dims[0] as u32,
                 lighting.sh_grid.dims[1] as u32,
                 lighting.sh_grid.dims[2] as u32,
-                u32::from(transport),
+                0,
             ],
+            switches: [
+                delta_scaled(settings),
+                settings.emergent == super::Emergent::P1,
+                transport,
+                lighting.blur.is_some(),
+            ]
+            .map(u32::from),
             sigma_ext,
             asymmetry: per_field(&lighting.g),
             peak: peaks(lighting),
