@@ -9,11 +9,14 @@ struct MaxParams {
     eye: vec4<f32>,          // xyz; w = the march's step (m)
     forward: vec4<f32>,      // xyz; w = tan(fov_y / 2)
     right: vec4<f32>,        // xyz; w = aspect
-    up: vec4<f32>,           // xyz; w = the voxel length (h_x h_y h_z)^{1/3} (m)
+    up: vec4<f32>,           // xyz, 0
     grid_min: vec4<f32>,     // xyz; w = ground albedo
-    grid_max: vec4<f32>,     // xyz; w = the threshold T (voxel optical depth)
+    grid_max: vec4<f32>,     // xyz, 0
     grid_dims: vec4<u32>,    // nx, ny, nz, field count
     sizes: vec4<u32>,        // width, height, 0, 0
+    // The edge treatment (MaxSettings::edge_share): x the voxel length (h_x h_y h_z)^{1/3} (m),
+    // y the threshold T (a voxel's optical depth), 0, 0
+    edges: vec4<f32>,
     sigma_ext: array<vec4<f32>, 4>,  // per field, m² per channel
     sky_beta: vec4<f32>,     // β at sea level per channel (1/m); w = γ (1/m)
     sun: vec4<f32>,          // unit vector towards the sun; w = cos(disk radius)
@@ -74,7 +77,7 @@ fn scattered(d: f32, albedo: f32) -> f32 {
 
 // The share of a voxel of optical depth τ the edge treatment takes (MaxSettings::edge_share).
 fn edge_share(tau_voxel: f32) -> f32 {
-    return clamp(1.5 - tau_voxel / rp.grid_max.w, 0.0, 1.0);
+    return clamp(1.5 - tau_voxel / rp.edges.y, 0.0, 1.0);
 }
 
 @compute @workgroup_size(8, 8)
@@ -102,7 +105,7 @@ fn gather(@builtin(global_invocation_id) id: vec3<u32>) {
                 continue;
             }
             let sca = scattering_of(rho);
-            let w_edge = edge_share(ext.g * rp.up.w);
+            let w_edge = edge_share(ext.g * rp.edges.x);
             let light = lighting_at(p);
             let sun = rp.irradiance.rgb * sunlight(p.y, l_y) * light.all.sun.rgb;
             // Diffuse light: the diffusion solution (never below zero) and the skylight.

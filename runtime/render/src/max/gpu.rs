@@ -45,16 +45,19 @@ runtime::uniform! {
         pub forward: [f32; 4],
         /// Right axis; w = aspect.
         pub right: [f32; 4],
-        /// Up axis; w = the voxel length (h_x h_y h_z)^{1/3} (m).
+        /// Up axis, 0.
         pub up: [f32; 4],
         /// Grid box's lower corner; w = ground albedo.
         pub grid_min: [f32; 4],
-        /// Grid box's upper corner; w = the threshold T.
+        /// Grid box's upper corner, 0.
         pub grid_max: [f32; 4],
         /// nx, ny, nz, field count.
         pub grid_dims: [u32; 4],
         /// Width, height, 0, 0.
         pub sizes: [u32; 4],
+        /// The edge treatment: the voxel length (h_x h_y h_z)^{1/3} (m), the threshold T (a
+        /// voxel's optical depth), 0, 0.
+        pub edges: [f32; 4],
         /// Per field, σ_ext per channel (m²).
         pub sigma_ext: [[f32; 4]; MAX_FIELDS],
         /// β at sea level per channel (1/m); w = γ (1/m).
@@ -143,9 +146,9 @@ impl Renderer {
             eye: v4(frame.camera.position_m, step),
             forward: v4(forward, frame.camera.tan_half_fov()),
             right: v4(right, w as f64 / h as f64),
-            up: v4(up, voxel_length(grid)),
+            up: v4(up, 0.0),
             grid_min: v4(grid.min_m, frame.ground_albedo),
-            grid_max: v4(grid.max_m, settings.threshold),
+            grid_max: v4(grid.max_m, 0.0),
             grid_dims: [
                 grid.dims[0] as u32,
                 grid.dims[1] as u32,
@@ -153,6 +156,12 @@ impl Renderer {
                 tables.fields.len() as u32,
             ],
             sizes: [w as u32, h as u32, 0, 0],
+            edges: [
+                voxel_length(grid) as f32,
+                settings.threshold as f32,
+                0.0,
+                0.0,
+            ],
             sigma_ext,
             sky_beta,
             sun,
