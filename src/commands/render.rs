@@ -201,6 +201,9 @@ pub struct Prepared {
     /// What `--model auto` chose and why.
     #[cfg_attr(not(feature = "view"), allow(dead_code))]
     pub choice: Option<render::auto::Choice>,
+    /// The files the scene reads beside itself ([`scene_inputs`]): what the viewer watches.
+    #[cfg_attr(not(feature = "view"), allow(dead_code))]
+    pub inputs: Vec<PathBuf>,
 }
 
 /// Refuses a scene whose volumes use a field no [[field]] makes (naming a member past a sweep's
@@ -373,6 +376,7 @@ pub fn prepare(
         plan,
         frame,
         choice,
+        inputs,
     })
 }
 
@@ -439,9 +443,10 @@ fn describe_vdb_volumes(render: &RenderScene, models: &[ModelSettings]) {
         any = true;
         let [nx, ny, nz] = values.dims;
         let corner = |[x, y, z]: [f64; 3]| format!("[{x:.1}, {y:.1}, {z:.1}]");
+        let [hx, hy, hz] = render::lighting::lattice::voxel_size(values);
         eprintln!(
             "vdb {} grid {grid:?}: {} active voxels ({} leaves, {} tiles; {}{}), index box {:?}–{:?}; \
-             dense {nx} × {ny} × {nz} voxels of {:.3} × {:.3} × {:.3} m over {}–{} m, {}",
+             dense {nx} × {ny} × {nz} voxels of {hx:.3} × {hy:.3} × {hz:.3} m over {}–{} m, {}",
             file.display(),
             s.active_voxels,
             s.leaves,
@@ -450,12 +455,9 @@ fn describe_vdb_volumes(render: &RenderScene, models: &[ModelSettings]) {
             if s.half { ", half floats" } else { "" },
             s.index_min,
             s.index_max,
-            s.voxel_m[0],
-            s.voxel_m[1],
-            s.voxel_m[2],
             corner(values.min_m.to_array()),
             corner(values.max_m.to_array()),
-            size(16 * values.data.len() as u64),
+            size(values.bytes()),
         );
         if s.background != 0.0 {
             eprintln!(
@@ -468,7 +470,7 @@ fn describe_vdb_volumes(render: &RenderScene, models: &[ModelSettings]) {
     }
     if any {
         for m in models {
-            let total: u64 = render.memory(m).iter().map(|n| n.bytes).sum();
+            let total = render::model::Need::total(&render.memory(m));
             eprintln!(
                 "--model {}: about {} for this frame (grid_resolution {})",
                 m.name(),

@@ -171,6 +171,13 @@ pub struct Need {
     pub setting: String,
 }
 
+impl Need {
+    /// The bytes of `needs` together.
+    pub fn total(needs: &[Need]) -> u64 {
+        needs.iter().map(|n| n.bytes).sum()
+    }
+}
+
 /// The per-pixel buffers of a frame: `bytes_per_pixel` times the pixels.
 pub fn image_need(what: &'static str, pixels: u64, bytes_per_pixel: u64) -> Need {
     Need {

@@ -29,6 +29,11 @@ pub struct DensityGrid {
 }
 
 impl DensityGrid {
+    /// The bytes its voxels take (16 a voxel: one f32 per field).
+    pub fn bytes(&self) -> u64 {
+        std::mem::size_of_val(self.data.as_slice()) as u64
+    }
+
     /// How deep inside field `f` a point of the grid can lie (particles/m²; with σ_ext, an
     /// optical depth): at each voxel with particles, the least ∫ ρ dl over the three
     /// axis-parallel grid lines through it (a path escapes along the thinnest), the largest
@@ -300,8 +305,6 @@ pub struct VdbSummary {
     pub index_min: [i32; 3],
     /// Upper corner of the index box, inclusive.
     pub index_max: [i32; 3],
-    /// One voxel's size in the scene (m): the file's voxel size times `scale_m`.
-    pub voxel_m: [f64; 3],
     /// The value the tree holds where it stores none.
     pub background: f32,
     /// Stored as 16-bit floats.
@@ -657,26 +660,16 @@ pub fn read_grid(
             4 * count
         ));
     }
-    let mut data = Vec::with_capacity(count);
-    for (i, c) in bytes.chunks_exact(4).enumerate() {
-        let v = f32::from_le_bytes([c[0], c[1], c[2], c[3]]);
-        if !(v.is_finite() && v >= 0.0) {
-            return Err(format!(
-                "grid {}: value {v} at index {i} (x {}, y {}, z {}) is not a finite density ≥ 0",
-                file.display(),
-                i % dims[0],
-                i / dims[0] % dims[1],
-                i / (dims[0] * dims[1])
-            ));
-        }
-        data.push([v, 0.0, 0.0, 0.0]);
-    }
-    if data.iter().all(|v| v[0] == 0.0) {
-        return Err(format!(
-            "grid {}: every one of its {count} values is 0: the volume holds no particles",
-            file.display()
-        ));
-    }
+    let values = bytes
+        .chunks_exact(4)
+        .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]));
+    let data = densities(values, dims, |[x, y, z]| {
+        format!(
+            "index {} (x {x}, y {y}, z {z})",
+            x + dims[0] * (y + dims[1] * z)
+        )
+    })
+    .map_err(|e| format!("grid {}: {e}", file.display()))?;
     Ok(DensityGrid {
         min_m,
         max_m,
@@ -689,6 +682,34 @@ pub fn read_grid(
 /// The largest `.vdb` file a scene may read (4 GiB): a grid of [`MAX_GRID_VALUES`] floats
 /// stored uncompressed, with its tree.
 pub const MAX_VDB_BYTES: u64 = 4 << 30;
+
+/// The densities of a grid file's `values` (x fastest over `dims`) as channel 0 of a
+/// [`DensityGrid`]'s voxels: each finite and ≥ 0 (else the first that is not, placed by
+/// `place` of its (x, y, z)), not all zero (a grid without particles renders nothing).
+fn densities(
+    values: impl ExactSizeIterator<Item = f32>,
+    dims: [usize; 3],
+    place: impl Fn([usize; 3]) -> String,
+) -> Result<Vec<[f32; MAX_FIELDS]>, String> {
+    let mut data = Vec::with_capacity(values.len());
+    for (i, v) in values.enumerate() {
+        if !(v.is_finite() && v >= 0.0) {
+            let xyz = [i % dims[0], i / dims[0] % dims[1], i / (dims[0] * dims[1])];
+            return Err(format!(
+                "value {v} at {} is not a finite density ≥ 0",
+                place(xyz)
+            ));
+        }
+        data.push([v, 0.0, 0.0, 0.0]);
+    }
+    if data.iter().all(|v| v[0] == 0.0) {
+        return Err(format!(
+            "every one of its {} values is 0: the volume holds no particles",
+            data.len()
+        ));
+    }
+    Ok(data)
+}
 
 /// Reads grid `grid` of OpenVDB file `file` (crate `vdb`): its values over the box of its
 /// active voxels, finite and ≥ 0, not all zero, at most [`MAX_GRID_VALUES`] of them; the box
@@ -705,32 +726,16 @@ pub fn read_vdb(
     let g = vdb::Archive::parse(&bytes)
         .and_then(|a| a.read(grid, MAX_GRID_VALUES as u64))
         .map_err(|e| at(e.to_string()))?;
-    let [nx, ny, _] = g.dims;
-    let mut data = Vec::with_capacity(g.values.len());
-    for (i, &v) in g.values.iter().enumerate() {
-        if !(v.is_finite() && v >= 0.0) {
-            let ijk = [i % nx, i / nx % ny, i / (nx * ny)];
-            return Err(at(format!(
-                "grid {grid:?}: value {v} at voxel ({}, {}, {}) is not a finite density ≥ 0",
-                i64::from(g.index_min[0]) + ijk[0] as i64,
-                i64::from(g.index_min[1]) + ijk[1] as i64,
-                i64::from(g.index_min[2]) + ijk[2] as i64,
-            )));
-        }
-        data.push([v, 0.0, 0.0, 0.0]);
-    }
-    if data.iter().all(|v| v[0] == 0.0) {
-        return Err(at(format!(
-            "grid {grid:?}: every one of its {} values is 0: the volume holds no particles",
-            data.len()
-        )));
-    }
+    let data = densities(g.values.iter().copied(), g.dims, |xyz| {
+        let [i, j, k] = std::array::from_fn(|a| i64::from(g.index_min[a]) + xyz[a] as i64);
+        format!("voxel ({i}, {j}, {k})")
+    })
+    .map_err(|e| at(format!("grid {grid:?}: {e}")))?;
     let place = |x: [f64; 3]| offset_m + scale_m * DVec3::from_array(x);
     let summary = VdbSummary {
         active_voxels: g.active_voxels,
         index_min: g.index_min,
         index_max: g.index_max,
-        voxel_m: g.transform.scale.map(|s| s * scale_m),
         background: g.background,
         half: g.half,
         compression: g.compression.clone(),

@@ -62,9 +62,7 @@ fn seeds() -> Vec<Seed> {
                         .volumes
                         .iter()
                         .map(|v| match &v.shape {
-                            render::volume::Shape::Vdb { values, .. } => {
-                                16 * values.data.len() as u64
-                            }
+                            render::volume::Shape::Vdb { values, .. } => values.bytes(),
                             _ => 0,
                         })
                         .sum()

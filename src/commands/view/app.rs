@@ -39,6 +39,8 @@ pub struct Options {
     pub chosen: Option<String>,
     /// `--width`, `--height` (kept over an edited scene file's).
     pub size: (Option<usize>, Option<usize>),
+    /// The files the scene reads beside itself, watched with it.
+    pub inputs: Vec<PathBuf>,
 }
 
 /// The three files a screenshot writes: the window (PNG), the view's radiance (EXR) and what
@@ -216,12 +218,7 @@ impl App {
             actions.push_back(Action::Shot(path));
             actions.push_back(Action::Exit);
         }
-        let inputs = options
-            .scene_path
-            .as_deref()
-            .map(|path| scene_files(path, &scene))
-            .unwrap_or_default();
-        let modified = stamps(options.scene_path.as_deref(), &inputs);
+        let modified = stamps(options.scene_path.as_deref(), &options.inputs);
         Self {
             worker,
             camera: scene.camera,
@@ -233,7 +230,7 @@ impl App {
             scene,
             plan,
             scene_path: options.scene_path,
-            inputs,
+            inputs: options.inputs,
             modified,
             checked: Instant::now(),
             size: options.size,
@@ -660,14 +657,6 @@ fn stamps(scene: Option<&Path>, inputs: &[PathBuf]) -> Vec<Option<SystemTime>> {
         .chain(inputs.iter().map(PathBuf::as_path))
         .map(modified)
         .collect()
-}
-
-/// The files the scene file at `path` (parsed as `scene`) reads beside itself.
-fn scene_files(path: &Path, scene: &RenderScene) -> Vec<PathBuf> {
-    let base = path.parent().unwrap_or(Path::new("."));
-    std::fs::read_to_string(path)
-        .map(|text| crate::commands::render::scene_inputs(&text, base, scene))
-        .unwrap_or_default()
 }
 
 /// Rotates the camera about its look-at point: `yaw` degrees about +y, `pitch` degrees up,

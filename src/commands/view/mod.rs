@@ -174,6 +174,7 @@ pub fn run(a: ViewArgs) -> Result<()> {
         adapter,
         chosen: p.choice.map(|c| format!("{}, {}", c.model, c.why)),
         size: (a.width, a.height),
+        inputs: p.inputs,
     };
     app::open(options, p.scene, p.plan, worker)
 }

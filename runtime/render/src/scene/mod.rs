@@ -413,9 +413,7 @@ impl RenderScene {
             .volumes
             .iter()
             .map(|v| match &v.shape {
-                Shape::Grid { values, .. } | Shape::Vdb { values, .. } => {
-                    16 * values.data.len() as u64
-                }
+                Shape::Grid { values, .. } | Shape::Vdb { values, .. } => values.bytes(),
                 _ => 0,
             })
             .sum();
@@ -439,7 +437,7 @@ impl RenderScene {
     /// naming the total, its largest part and the setting that sets that part.
     pub fn check_memory(&self, model: &ModelSettings, limit: u64) -> Result<(), FrameError> {
         let needs = self.memory(model);
-        let total: u64 = needs.iter().map(|n| n.bytes).sum();
+        let total = Need::total(&needs);
         if total <= limit {
             return Ok(());
         }

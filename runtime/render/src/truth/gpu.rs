@@ -88,7 +88,8 @@ runtime::uniform! {
 }
 
 runtime::uniform! {
-    /// `SavedBranch` of `truth.wgsl`: a branch a split left waiting on a path's stack.
+    /// `SavedBranch` of `truth.wgsl`: a path's point, direction and carried wavelengths (the
+    /// one under way, or a branch a split left waiting on its stack).
     pub struct SavedBranch as "SavedBranch" {
         /// The carried wavelengths' f_m.
         pub f: [f32; 4],
@@ -100,7 +101,8 @@ runtime::uniform! {
         pub direction: [f32; 4],
         /// The carried wavelengths' bands.
         pub band: [u32; 4],
-        /// Wavelengths carried, the bounce, 0, 0.
+        /// Wavelengths carried, the bounce; the path under way's stack top and whether it is
+        /// alive (a waiting branch's 0, 0).
         pub counts: [u32; 4],
     }
 }
@@ -109,20 +111,10 @@ runtime::uniform! {
     /// `SavedPath` of `truth.wgsl`: a tile slot's path between dispatches (GPU memory only;
     /// its size sizes the buffer).
     pub struct SavedPath as "SavedPath" {
-        /// The carried wavelengths' f_m.
-        pub f: [f32; 4],
-        /// Their r_m.
-        pub r: [f32; 4],
-        /// The position (m), 0.
-        pub position: [f32; 4],
-        /// The direction, 0.
-        pub direction: [f32; 4],
+        /// The path under way.
+        pub head: SavedBranch,
         /// The radiance gathered so far per channel, 0.
         pub sum: [f32; 4],
-        /// The carried wavelengths' bands.
-        pub band: [u32; 4],
-        /// Wavelengths carried, the bounce, the stack's top, alive.
-        pub counts: [u32; 4],
         /// The random stream's two keys and counter, the sample within the pass.
         pub stream: [u32; 4],
         /// The branches waiting.

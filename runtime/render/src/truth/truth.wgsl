@@ -65,25 +65,21 @@ struct Band {
     fields: array<vec4<f32>, MAX_FIELDS>, // per field: σ_ext, albedo, forward δ, 0
 }
 
-// A branch a split left waiting on a path's stack (`push`, `pop`).
+// A path's point, direction and carried wavelengths: the one under way (SavedPath's head) or
+// a branch a split left waiting on its stack (`push`, `pop`).
 struct SavedBranch {
     f: vec4<f32>,            // the carried wavelengths' f_m (Carried)
     r: vec4<f32>,            // their r_m
     position: vec4<f32>,     // p xyz, 0
     direction: vec4<f32>,    // d xyz, 0
     band: vec4<u32>,         // the carried wavelengths' bands
-    counts: vec4<u32>,       // wavelengths carried, bounce, 0, 0
+    counts: vec4<u32>,       // wavelengths carried, bounce; the head's stack top and alive
 }
 
-// A tile slot's path between dispatches.
+// A tile slot's path between dispatches (`save`, `load`).
 struct SavedPath {
-    f: vec4<f32>,            // the carried wavelengths' f_m (Carried)
-    r: vec4<f32>,            // their r_m
-    position: vec4<f32>,     // p xyz, 0
-    direction: vec4<f32>,    // d xyz, 0
+    head: SavedBranch,
     sum: vec4<f32>,          // the radiance gathered so far rgb, 0
-    band: vec4<u32>,         // the carried wavelengths' bands
-    counts: vec4<u32>,       // wavelengths carried, bounce, the stack's top, alive
     stream: vec4<u32>,       // the random stream: key0, key1, counter; the sample k
     stack: array<SavedBranch, STACK>,
 }
@@ -855,14 +851,16 @@ fn begin_sample(pixel: u32, k: u32) -> Path {
     return path;
 }
 
-fn push(slot: u32, e: u32, c: Carried, p: vec3<f32>, d: vec3<f32>, bounce: u32) {
-    saved[slot].stack[e] = SavedBranch(c.f, c.r, vec4<f32>(p, 0.0), vec4<f32>(d, 0.0), c.band,
-                                       vec4<u32>(c.n, bounce, 0u, 0u));
+// A path's carried wavelengths `c`, point `p`, direction `d` and `bounce` as a saved branch,
+// `top` and `alive` in its counts' last two lanes.
+fn branch_of(c: Carried, p: vec3<f32>, d: vec3<f32>, bounce: u32, top: u32, alive: u32)
+    -> SavedBranch {
+    return SavedBranch(c.f, c.r, vec4<f32>(p, 0.0), vec4<f32>(d, 0.0), c.band,
+                       vec4<u32>(c.n, bounce, top, alive));
 }
 
-fn pop(slot: u32, path: ptr<function, Path>) {
-    (*path).top = (*path).top - 1u;
-    let b = saved[slot].stack[(*path).top];
+// `b` back into `path` (its `c`, `p`, `d`, `bounce`).
+fn restore(b: SavedBranch, path: ptr<function, Path>) {
     (*path).c.f = b.f;
     (*path).c.r = b.r;
     (*path).p = b.position.xyz;
@@ -872,30 +870,28 @@ fn pop(slot: u32, path: ptr<function, Path>) {
     (*path).bounce = b.counts.y;
 }
 
+fn push(slot: u32, e: u32, c: Carried, p: vec3<f32>, d: vec3<f32>, bounce: u32) {
+    saved[slot].stack[e] = branch_of(c, p, d, bounce, 0u, 0u);
+}
+
+fn pop(slot: u32, path: ptr<function, Path>) {
+    (*path).top = (*path).top - 1u;
+    restore(saved[slot].stack[(*path).top], path);
+}
+
 fn save(slot: u32, path: Path) {
-    saved[slot].f = path.c.f;
-    saved[slot].r = path.c.r;
-    saved[slot].position = vec4<f32>(path.p, 0.0);
-    saved[slot].direction = vec4<f32>(path.d, 0.0);
+    saved[slot].head = branch_of(path.c, path.p, path.d, path.bounce, path.top, path.alive);
     saved[slot].sum = vec4<f32>(path.sum, 0.0);
-    saved[slot].band = path.c.band;
-    saved[slot].counts = vec4<u32>(path.c.n, path.bounce, path.top, path.alive);
     saved[slot].stream = vec4<u32>(key0, key1, counter, path.k);
 }
 
 fn load(slot: u32) -> Path {
     var path: Path;
-    path.c.f = saved[slot].f;
-    path.c.r = saved[slot].r;
-    path.p = saved[slot].position.xyz;
-    path.d = saved[slot].direction.xyz;
+    let head = saved[slot].head;
+    restore(head, &path);
+    path.top = head.counts.z;
+    path.alive = head.counts.w;
     path.sum = saved[slot].sum.xyz;
-    path.c.band = saved[slot].band;
-    let a = saved[slot].counts;
-    path.c.n = a.x;
-    path.bounce = a.y;
-    path.top = a.z;
-    path.alive = a.w;
     let k = saved[slot].stream;
     key0 = k.x;
     key1 = k.y;

@@ -12,7 +12,7 @@ use eframe::egui;
 use mie::SizeDistribution;
 use render::RenderScene;
 
-use super::{App, model_tables, scene_files, stamps};
+use super::{App, model_tables, stamps};
 use crate::commands::render::at_line;
 
 /// How often the scene file's modification time is looked at.
@@ -39,7 +39,6 @@ impl App {
             Ok(()) => {
                 self.scene_error = None;
                 // The edited scene may read other files: watch those from now on.
-                self.inputs = scene_files(&path, &self.scene);
                 self.modified = stamps(Some(&path), &self.inputs);
             }
             Err(e) => {
@@ -59,6 +58,7 @@ impl App {
         let base = path.parent().unwrap_or(Path::new("."));
         let mut fields = Scene::parse_in(&text, &origin, Some(base))?;
         let mut scene = RenderScene::parse(&text, &origin, base)?;
+        let inputs = crate::commands::render::scene_inputs(&text, base, &scene);
         scene.width = self.size.0.unwrap_or(scene.width);
         scene.height = self.size.1.unwrap_or(scene.height);
         scene
@@ -88,6 +88,7 @@ impl App {
             self.worker.set_scene(scene.clone(), None);
         }
         self.scene = scene;
+        self.inputs = inputs;
         self.dirty = true;
         Ok(())
     }
