@@ -747,17 +747,22 @@ fn auto_chooses_by_the_scenes_optical_depth_and_says_why() {
         e.contains("--model auto: biri — the only kind of model"),
         "{e}"
     );
-    // An orthographic camera: only the truth draws it, and the line says why.
+    // An orthographic camera: the fastest model within 10 % that draws it (coupled at this
+    // depth; riley, miyazaki and biri refuse it).
     let ortho = scene("1e8").replace(
         "look_at_m = [0, 500, 0]\n",
         "look_at_m = [0, 500, 0]\nprojection = \"orthographic\"\nwidth_m = 1000\n",
     );
     let (code, e) = run(&ortho, &[]);
     assert_eq!(code, Some(0), "{e}");
+    assert!(e.contains("--model auto: coupled — optical depth"), "{e}");
+    // A periodic volume: only the truth draws it, and the line says why.
+    let (code, e) = run(&format!("{}periodic = true\n", scene("1e8")), &[]);
+    assert_eq!(code, Some(0), "{e}");
     assert!(
         e.contains(
-            "--model auto: truth — the only model that draws this scene (riley: [camera] \
-             projection = \"orthographic\""
+            "--model auto: truth — the only model that draws this scene (riley: [[volume]] \
+             periodic = true"
         ),
         "{e}"
     );

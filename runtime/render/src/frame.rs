@@ -98,7 +98,7 @@ impl Frame {
             crate::camera::Projection::Perspective => Ok(()),
             crate::camera::Projection::Orthographic { .. } => Err(FrameError(format!(
                 "[camera] projection = \"orthographic\": --model {model} draws a perspective \
-                 camera only (its rays all leave the eye); render it with --model truth"
+                 camera only; render it with --model coupled, max or truth"
             ))),
         }
     }

@@ -16,7 +16,14 @@ use crate::{
 };
 
 /// The pieces the slicing renderers' shaders share (grid sampling, camera rays, the sky).
-pub const SLICING_WGSL: &str = include_str!("slicing.wgsl");
+pub const SLICING_WGSL: &str = concat!(
+    include_str!("view.wgsl"),
+    "\n",
+    include_str!("slicing.wgsl")
+);
+
+/// The camera every renderer's uniform holds ([`View`]), included in [`SLICING_WGSL`].
+pub const VIEW_WGSL: &str = include_str!("view.wgsl");
 
 /// The pixel around a volume's light (the air, the sun disk, the ground), shared by this
 /// renderer's composite and `max`'s gather (after [`SLICING_WGSL`]).
@@ -29,8 +36,8 @@ pub const MARCH_WGSL: &str = include_str!("march.wgsl");
 /// A grid gather's view of `frame`: the camera's axes and the march's step, half the smallest
 /// voxel side (m).
 pub(crate) struct GatherView {
-    /// The camera's forward, right and up axes.
-    pub axes: (glam::DVec3, glam::DVec3, glam::DVec3),
+    /// The camera.
+    pub view: View,
     /// The march's step (m).
     pub step: f64,
 }
@@ -58,8 +65,17 @@ pub(crate) fn gather_view(
         .ok_or_else(|| FrameError("camera look_at_m equals position_m".into()))?;
     let size: [f64; 3] =
         std::array::from_fn(|a| (grid.max_m[a] - grid.min_m[a]) / grid.dims[a] as f64);
+    let size_px = (frame.width, frame.height);
     Ok(GatherView {
-        axes,
+        view: View::new(
+            frame.camera.position_m,
+            axes,
+            (
+                frame.camera.tan_half_fov(),
+                frame.width as f64 / frame.height as f64,
+            ),
+            frame.camera.ortho_half_height_m(size_px),
+        ),
         step: 0.5 * size.iter().copied().fold(f64::INFINITY, f64::min),
     })
 }
@@ -127,25 +143,30 @@ pub(crate) fn a4(v: [f64; 3], w: f64) -> [f32; 4] {
     [v[0] as f32, v[1] as f32, v[2] as f32, w as f32]
 }
 
+/// Three channels as a vec3<f32> uniform field.
+pub(crate) fn a3(v: [f64; 3]) -> [f32; 3] {
+    v.map(|x| x as f32)
+}
+
+/// A vector as a vec3<f32> uniform field.
+pub(crate) fn v3(v: glam::DVec3) -> [f32; 3] {
+    [v[0] as f32, v[1] as f32, v[2] as f32]
+}
+
 /// A vector and a scalar as one vec4<f32> uniform row.
 pub(crate) fn v4(v: glam::DVec3, w: f64) -> [f32; 4] {
     [v[0] as f32, v[1] as f32, v[2] as f32, w as f32]
 }
 
-/// What riley's and max's params uniforms end with (their WGSL structs' order): each field's
-/// σ_ext (m², [`MAX_FIELDS`] rows, zero past the last field), the air's β at sea level and
-/// 1/H, the sun's direction and the cosine of its disk's radius, its irradiance and the disk's
-/// solid angle.
+/// What the grid models' uniforms hold of the fields and the sky: each field's σ_ext (m²,
+/// [`MAX_FIELDS`] rows, zero past the last field), and the sun and the air ([`Sky`]).
 pub(crate) struct FieldsAndSky {
     pub sigma_ext: [[f32; 4]; MAX_FIELDS],
-    pub sky_beta: [f32; 4],
-    pub sun: [f32; 4],
-    pub irradiance: [f32; 4],
+    pub sky: Sky,
 }
 
 /// [`FieldsAndSky`] of `tables` and `frame`.
 pub(crate) fn fields_and_sky(tables: &Tables, frame: &Frame) -> FieldsAndSky {
-    let cos_disk = (SUN_DIAMETER_DEG / 2.0).to_radians().cos();
     FieldsAndSky {
         sigma_ext: std::array::from_fn(|i| {
             tables
@@ -153,15 +174,117 @@ pub(crate) fn fields_and_sky(tables: &Tables, frame: &Frame) -> FieldsAndSky {
                 .get(i)
                 .map_or([0.0; 4], |f| v4(f.sigma_ext_m2.into(), 0.0))
         }),
-        sky_beta: v4(
-            frame.atmosphere.beta_sea_level_per_m.into(),
-            1.0 / frame.atmosphere.scale_height_m,
-        ),
-        sun: v4(frame.sun.direction(), cos_disk),
-        irradiance: v4(
-            frame.sun.irradiance.into(),
-            std::f64::consts::TAU * (1.0 - cos_disk),
-        ),
+        sky: Sky::of(frame),
+    }
+}
+
+runtime::uniform! {
+    /// The volumes' grid and the ground below it (`Grid` in `view.wgsl`).
+    pub struct Grid as "Grid" {
+        /// The box's lower corner (m).
+        pub min: [f32; 3],
+        /// The ground's albedo (Lambertian; 0: black).
+        pub ground_albedo: f32,
+        /// The box's upper corner (m).
+        pub max: [f32; 3],
+        /// Padding.
+        pub pad: f32,
+        /// Voxels along x, y, z.
+        pub dims: [u32; 3],
+        /// The field count.
+        pub fields: u32,
+    }
+}
+
+impl Grid {
+    /// `frame`'s grid with `fields` fields, and its ground.
+    pub(crate) fn of(frame: &Frame, fields: usize) -> Self {
+        Self {
+            min: v3(frame.grid.min_m),
+            ground_albedo: frame.ground_albedo as f32,
+            max: v3(frame.grid.max_m),
+            pad: 0.0,
+            dims: frame.grid.dims.map(|n| n as u32),
+            fields: fields as u32,
+        }
+    }
+}
+
+runtime::uniform! {
+    /// The sun and the air (`Sky` in `view.wgsl`).
+    pub struct Sky as "Sky" {
+        /// The air's β at sea level per channel (1/m).
+        pub beta: [f32; 3],
+        /// γ, its 1/H (1/m).
+        pub inv_scale_height: f32,
+        /// The unit vector towards the sun.
+        pub sun: [f32; 3],
+        /// cos of the disk's radius.
+        pub cos_disk: f32,
+        /// The sun's irradiance per channel.
+        pub irradiance: [f32; 3],
+        /// The disk's solid angle (sr).
+        pub disk_sr: f32,
+    }
+}
+
+impl Sky {
+    /// `frame`'s sun and air.
+    pub(crate) fn of(frame: &Frame) -> Self {
+        let cos_disk = (SUN_DIAMETER_DEG / 2.0).to_radians().cos();
+        Self {
+            beta: a3(frame.atmosphere.beta_sea_level_per_m),
+            inv_scale_height: (1.0 / frame.atmosphere.scale_height_m) as f32,
+            sun: v3(frame.sun.direction()),
+            cos_disk: cos_disk as f32,
+            irradiance: a3(frame.sun.irradiance),
+            disk_sr: (std::f64::consts::TAU * (1.0 - cos_disk)) as f32,
+        }
+    }
+}
+
+runtime::uniform! {
+    /// The camera of a view (`View` in `slicing.wgsl`; [`crate::camera::Camera`]).
+    pub struct View as "View" {
+        /// The eye, or an orthographic image's centre (m).
+        pub eye: [f32; 3],
+        /// tan(fov_y / 2) of a perspective camera.
+        pub tan_half_fov: f32,
+        /// The unit view direction.
+        pub forward: [f32; 3],
+        /// The image's width / height.
+        pub aspect: f32,
+        /// The unit right axis.
+        pub right: [f32; 3],
+        /// An orthographic image's half height (m); 0 for a perspective camera.
+        pub ortho_half_height: f32,
+        /// The unit up axis.
+        pub up: [f32; 3],
+        /// Padding.
+        pub pad: f32,
+    }
+}
+
+impl View {
+    /// The view of a camera at `eye` with `axes` (forward, right, up), tan(fov_y / 2)
+    /// `tan_half_fov`, the image's `aspect` and, for an orthographic camera, its half height
+    /// (m; [`crate::camera::Camera::ortho_half_height_m`]).
+    pub(crate) fn new(
+        eye: glam::DVec3,
+        (forward, right, up): (glam::DVec3, glam::DVec3, glam::DVec3),
+        (tan_half_fov, aspect): (f64, f64),
+        ortho_half_height: Option<f64>,
+    ) -> Self {
+        Self {
+            eye: v3(eye),
+            tan_half_fov: tan_half_fov as f32,
+            forward: v3(forward),
+            aspect: aspect as f32,
+            right: v3(right),
+            ortho_half_height: ortho_half_height.unwrap_or(0.0) as f32,
+            up: v3(up),
+            pad: 0.0,
+        }
     }
 }
 

@@ -1,6 +1,6 @@
 // The grid gathers' shared steps (`max` and `coupled`), after slicing.wgsl and compose.wgsl;
-// their params give the march's step in eye.w and the unit vector towards the sun in sun.xyz,
-// and each binds its per-voxel `LightVoxel` records as `lighting`.
+// their params give the march's step (march_step) and the sun (sky.sun), and each binds its
+// per-voxel `LightVoxel` records as `lighting`.
 
 // The per-voxel lighting at p, trilinear (voxel centres, clamped to the edge voxels, as
 // DensityGrid::taps): `all` over the eight voxels around p, `solved` over those in the
@@ -27,7 +27,7 @@ fn lighting_at(p: vec3<f32>) -> Lit {
             continue;
         }
         let at = tap.lo + d * tap.s;
-        let v = lighting[at.x + rp.grid_dims.x * (at.y + rp.grid_dims.y * at.z)];
+        let v = lighting[at.x + rp.grid.dims.x * (at.y + rp.grid.dims.y * at.z)];
         out.all = weighted_add(out.all, w, v);
         if (in_solve(v)) {
             total = total + w;
@@ -44,7 +44,7 @@ fn lighting_at(p: vec3<f32>) -> Lit {
 
 fn scattering_of(rho: vec4<f32>) -> vec3<f32> {
     var s = vec3<f32>(0.0);
-    for (var i = 0u; i < rp.grid_dims.w; i = i + 1u) {
+    for (var i = 0u; i < rp.grid.fields; i = i + 1u) {
         s = s + rho[i] * ams_field_info[i].yzw;
     }
     return s;

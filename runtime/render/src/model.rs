@@ -222,9 +222,11 @@ pub trait Model {
     /// Whether it is the reference the others are measured against (the path tracer), which
     /// the viewer shows beside a model rather than as one.
     const REFERENCE: bool = false;
-    /// Whether it draws an orthographic camera and a periodic volume (the registry refuses
-    /// both by name, before anything is baked, for a model that does not).
-    const BENCHMARK_VIEWS: bool = false;
+    /// Whether it draws an orthographic camera (the registry refuses one by name, before
+    /// anything is baked, for a model that does not).
+    const ORTHOGRAPHIC: bool = false;
+    /// Whether it draws a periodic volume (refused likewise).
+    const PERIODIC: bool = false;
     /// Its settings: `[render.<NAME>]`, every key optional (defaults in `Default`).
     type Settings: Default + Clone + PartialEq + Debug + Serialize + DeserializeOwned + Send + Sync;
     /// Its GPU renderer: pipelines and layouts built once for a device and a table upload.

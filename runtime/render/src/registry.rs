@@ -163,8 +163,10 @@ macro_rules! models {
             pub fn check_frame(&self, frame: &Frame) -> Result<(), FrameError> {
                 match self {
                     $(Self::$variant(s) => {
-                        if !<$model as Model>::BENCHMARK_VIEWS {
+                        if !<$model as Model>::ORTHOGRAPHIC {
                             frame.perspective_only(<$model as Model>::NAME)?;
+                        }
+                        if !<$model as Model>::PERIODIC {
                             frame.bounded_only(<$model as Model>::NAME)?;
                         }
                         <$model as Model>::check_frame(s, frame)

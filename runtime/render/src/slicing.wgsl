@@ -1,16 +1,15 @@
-// Pieces the slicing renderers' shaders use (render::riley, render::miyazaki and render::max's
-// gather), included after tables.wgsl and before each. The including shader declares `rp` with at least:
-// forward (w = tan(fov_y / 2)), right (w = aspect), up, sizes (x = width, y = height),
-// eye (xyz), grid_min, grid_max (xyz: the box), grid_dims (xyz voxels, w = field count), sigma_ext
-// (array<vec4<f32>, 4>, m² per channel per field) and sky_beta (rgb = β_sl, w = γ), and the
-// density buffer `density` (array<vec4<f32>>, one channel per field).
+// Pieces the grid models' shaders use (render::riley, render::miyazaki, the gathers of
+// render::max and render::coupled, and the truth), included after tables.wgsl and before each.
+// The including shader declares `rp` with at least: view (a View, view.wgsl), sizes (x =
+// width, y = height), grid (a Grid), sigma_ext (array<vec4<f32>, 4>, m² per channel per field)
+// and sky (a Sky), and the density buffer `density` (array<vec4<f32>>, one channel per field).
 
 fn inside_box(p: vec3<f32>) -> bool {
-    return all(p >= rp.grid_min.xyz) && all(p <= rp.grid_max.xyz);
+    return all(p >= rp.grid.min) && all(p <= rp.grid.max);
 }
 
 fn voxel(x: u32, y: u32, z: u32) -> vec4<f32> {
-    return density[x + rp.grid_dims.x * (y + rp.grid_dims.y * z)];
+    return density[x + rp.grid.dims.x * (y + rp.grid.dims.y * z)];
 }
 
 // The trilinear taps at p inside the box, voxel centres, clamped to the edge voxels: the lower
@@ -23,7 +22,7 @@ struct Taps {
 }
 
 fn taps(p: vec3<f32>) -> Taps {
-    return taps_in(p, rp.grid_min.xyz, rp.grid_max.xyz, rp.grid_dims.xyz);
+    return taps_in(p, rp.grid.min, rp.grid.max, rp.grid.dims);
 }
 
 // `taps` on a grid of `n` voxels over the box from `lo` to `hi`.
@@ -55,26 +54,42 @@ fn densities(p: vec3<f32>) -> vec4<f32> {
 
 fn extinction(rho: vec4<f32>) -> vec3<f32> {
     var e = vec3<f32>(0.0);
-    for (var i = 0u; i < rp.grid_dims.w; i = i + 1u) {
+    for (var i = 0u; i < rp.grid.fields; i = i + 1u) {
         e = e + rho[i] * rp.sigma_ext[i].rgb;
     }
     return e;
 }
 
-// The distance K along d from the eye to the ground; K < 0 stands for ∞ (the ray leaves the
-// atmosphere without meeting the ground); 0 from an eye at or below the ground.
-fn ground_distance(d: vec3<f32>) -> f32 {
+// The distance K along d from the ray's origin o to the ground; K < 0 stands for ∞ (the ray
+// leaves the atmosphere without meeting the ground); 0 from an origin at or below the ground.
+fn ground_distance(o: vec3<f32>, d: vec3<f32>) -> f32 {
     if (d.y < 0.0) {
-        return select(0.0, rp.eye.y / -d.y, rp.eye.y > 0.0);
+        return select(0.0, o.y / -d.y, o.y > 0.0);
     }
     return -1.0;
 }
 
+// The unit ray from the eye through pixel (i, j) of a perspective camera (camera::pixel_ray).
 fn pixel_ray(i: u32, j: u32) -> vec3<f32> {
-    let sx = (2.0 * (f32(i) + 0.5) / f32(rp.sizes.x) - 1.0) * rp.forward.w * rp.right.w;
-    let sy = (1.0 - 2.0 * (f32(j) + 0.5) / f32(rp.sizes.y)) * rp.forward.w;
-    return normalize(rp.forward.xyz + sx * rp.right.xyz + sy * rp.up.xyz);
+    let sx = (2.0 * (f32(i) + 0.5) / f32(rp.sizes.x) - 1.0) * rp.view.tan_half_fov * rp.view.aspect;
+    let sy = (1.0 - 2.0 * (f32(j) + 0.5) / f32(rp.sizes.y)) * rp.view.tan_half_fov;
+    return normalize(rp.view.forward + sx * rp.view.right + sy * rp.view.up);
 }
+
+// Pixel (i, j)'s camera ray (Camera::pixel): from the eye through the pixel, or for an
+// orthographic camera (view.ortho_half_height > 0, m) along `forward` from the pixel's
+// point of the image plane. Without branches: a branch on the camera in the truth's
+// begin_sample made lavapipe's paths 5–10× slower.
+fn camera_origin(i: u32, j: u32) -> vec3<f32> {
+    let sx = (2.0 * (f32(i) + 0.5) / f32(rp.sizes.x) - 1.0) * rp.view.aspect;
+    let sy = 1.0 - 2.0 * (f32(j) + 0.5) / f32(rp.sizes.y);
+    return rp.view.eye + rp.view.ortho_half_height * (sx * rp.view.right + sy * rp.view.up);
+}
+
+fn camera_direction(i: u32, j: u32) -> vec3<f32> {
+    return select(pixel_ray(i, j), rp.view.forward, rp.view.ortho_half_height > 0.0);
+}
+
 
 // e^x − 1 without cancellation for small x.
 fn expm1(x: f32) -> f32 {
@@ -86,13 +101,13 @@ fn expm1(x: f32) -> f32 {
 
 // Sunlight left at height y with the sun at vertical component l_y (Eq. 12).
 fn sunlight(y: f32, l_y: f32) -> vec3<f32> {
-    let g = rp.sky_beta.w;
-    return exp(-rp.sky_beta.rgb / (g * l_y) * exp(-g * y));
+    let g = rp.sky.inv_scale_height;
+    return exp(-rp.sky.beta / (g * l_y) * exp(-g * y));
 }
 
 // (1 − e^{−γ p K})/p for the air's γ; K < 0 means ∞.
 fn path_factor(p_y: f32, k: f32) -> f32 {
-    return path_factor_for(rp.sky_beta.w, p_y, k);
+    return path_factor_for(rp.sky.inv_scale_height, p_y, k);
 }
 
 // (1 − e^{−g p K})/p for an exponential of 1/scale height g; K < 0 means ∞.
@@ -108,8 +123,8 @@ fn path_factor_for(g: f32, p_y: f32, k: f32) -> f32 {
 }
 
 fn air_transparency(y: f32, p_y: f32, k: f32) -> vec3<f32> {
-    let g = rp.sky_beta.w;
-    let beta_eye = rp.sky_beta.rgb * exp(-g * y);
+    let g = rp.sky.inv_scale_height;
+    let beta_eye = rp.sky.beta * exp(-g * y);
     return exp(-beta_eye / g * path_factor(p_y, k));
 }
 
@@ -118,9 +133,9 @@ fn inscatter(y: f32, p_y: f32, k: f32, cos_sun: f32, l_y: f32) -> vec3<f32> {
     if (k == 0.0) {
         return vec3<f32>(0.0);
     }
-    let g = rp.sky_beta.w;
+    let g = rp.sky.inv_scale_height;
     let phase = 3.0 / (16.0 * 3.14159265358979) * (1.0 + cos_sun * cos_sun);
-    let beta_eye = rp.sky_beta.rgb * exp(-g * y);
+    let beta_eye = rp.sky.beta * exp(-g * y);
     let q = beta_eye / g * path_factor(p_y, k) / l_y;
     let e2 = -beta_eye / (g * l_y);
     let eps = p_y - l_y;
@@ -141,14 +156,14 @@ fn box_span(o: vec3<f32>, d: vec3<f32>) -> vec2<f32> {
     var t1 = 3.0e38;
     for (var a = 0; a < 3; a = a + 1) {
         if (d[a] == 0.0) {
-            if (o[a] < rp.grid_min[a] || o[a] > rp.grid_max[a]) {
+            if (o[a] < rp.grid.min[a] || o[a] > rp.grid.max[a]) {
                 return vec2<f32>(-1.0);
             }
             continue;
         }
         let inv = 1.0 / d[a];
-        let lo = (rp.grid_min[a] - o[a]) * inv;
-        let hi = (rp.grid_max[a] - o[a]) * inv;
+        let lo = (rp.grid.min[a] - o[a]) * inv;
+        let hi = (rp.grid.max[a] - o[a]) * inv;
         t0 = max(t0, min(lo, hi));
         t1 = min(t1, max(lo, hi));
     }

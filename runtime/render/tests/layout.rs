@@ -16,6 +16,9 @@ fn every_uniform_mirrors_its_wgsl_struct() {
     check::<runtime::gpu::AmsParams>(runtime::gpu::WGSL);
     check::<render::riley::gpu::RenderParams>(&render::riley::gpu::source());
     check::<render::gpu::SliceParams>(&render::riley::gpu::source());
+    check::<render::gpu::View>(&render::riley::gpu::source());
+    check::<render::gpu::Grid>(&render::riley::gpu::source());
+    check::<render::gpu::Sky>(&render::riley::gpu::source());
     check::<render::miyazaki::gpu::SvsParams>(&render::miyazaki::gpu::source());
     check::<render::gpu::SliceParams>(&render::miyazaki::gpu::source());
     check::<render::max::gpu::MaxParams>(&render::max::gpu::source());
@@ -39,6 +42,12 @@ fn every_uniform_mirrors_its_wgsl_struct() {
     check::<render::lighting::transport_gpu::Ordinate>(&render::lighting::transport_gpu::source());
     check::<render::lighting::transport_gpu::TransportLayerState>(
         &render::lighting::transport_gpu::source(),
+    );
+    check::<render::lighting::diffusion_gpu::Dispatch>(
+        render::lighting::diffusion_gpu::DIFFUSION_WGSL,
+    );
+    check::<render::lighting::diffusion_gpu::StencilRow>(
+        render::lighting::diffusion_gpu::DIFFUSION_WGSL,
     );
     check::<render::biri::gpu::BiriParams>(&render::biri::gpu::source());
     check::<render::truth::gpu::TruthParams>(&render::truth::gpu::source());

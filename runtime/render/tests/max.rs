@@ -259,7 +259,7 @@ fn light_crosses_clear_air_between_parts_and_never_comes_back_to_its_own() {
 /// The final gather on the GPU (`max::gpu`, f32, lavapipe in CI) equals the CPU reference's from
 /// the same lighting: a τ 30 soft ball side-lit over a lit ground with the sky on (the edge and
 /// dense treatments, the Poisson lookups, Ams_1, the composition and the ground's march to the
-/// sun all take part), and the same lighting serves a second camera.
+/// sun all take part), and the same lighting serves a second camera and an orthographic one.
 #[test]
 fn the_gpu_gather_equals_the_cpu_reference() {
     let Some(gpu) = common::gpu() else { return };
@@ -276,8 +276,9 @@ fn the_gpu_gather_equals_the_cpu_reference() {
     let uploaded =
         runtime::gpu::GpuTables::upload(&gpu, &tables, runtime::gpu::TexelFormat::F32).unwrap();
     let renderer = render::max::gpu::Renderer::new(&gpu, &uploaded);
-    for camera in [[0.0, 500.0, -2500.0], [-1800.0, 300.0, -1500.0]] {
+    for (camera, projection) in support::cameras() {
         frame.camera.position_m = glam::DVec3::from_array(camera);
+        frame.camera.projection = projection;
         let (cpu_image, report) = cpu::gather(&tables, &frame, &settings, &lighting).unwrap();
         let (gpu_image, t, largest) = renderer
             .gather(&gpu, &tables, &uploaded, &frame, &settings, &lighting)
@@ -298,7 +299,7 @@ fn the_gpu_gather_equals_the_cpu_reference() {
         );
         let depth = (largest - report.largest_edge_depth).abs() / report.largest_edge_depth;
         eprintln!(
-            "camera {camera:?}: worst |GPU − CPU| {worst:.2} of the tolerance, |ΔT| \
+            "camera {camera:?} {projection:?}: worst |GPU − CPU| {worst:.2} of the tolerance, |ΔT| \
              {worst_t:.1e}; largest edge depth {largest:.4} vs {:.4}; gather {:.1} ms on the \
              GPU, {:.1} ms on the CPU",
             report.largest_edge_depth,
@@ -311,6 +312,28 @@ fn the_gpu_gather_equals_the_cpu_reference() {
             report.largest_edge_depth
         );
     }
+}
+
+/// An orthographic camera (`projection = "orthographic"`): each pixel of the CPU gather is the
+/// radiance along the view direction from its own point of the image plane, the one-pixel
+/// perspective image from there (the GPU's equals the CPU's in the test above).
+#[test]
+fn an_orthographic_pixel_is_the_ray_from_its_point_of_the_image_plane() {
+    let (_tmp, dir) = bake(&fields());
+    let tables = Tables::open(&dir).unwrap();
+    let mut frame = ball(&tables, 30.0);
+    frame.ground_albedo = 0.3;
+    (frame.width, frame.height) = (6, 4);
+    let settings = Settings::default();
+    let lighting = cpu::light(&tables, &frame, &settings).unwrap();
+    let (worst, spread) = support::orthographic_against_single_rays(&frame, |f| {
+        cpu::gather(&tables, f, &settings, &lighting).unwrap().0
+    });
+    eprintln!("orthographic vs single rays: worst {worst:.1e}, the image's spread {spread:.2}");
+    // Measured 0 (bit for bit); the bound allows the one-pixel camera's direction, look_at −
+    // position normalized, to differ from the view direction in its last bits.
+    assert!(worst < 1e-6, "worst relative difference {worst:.2e}");
+    assert!(spread > 0.1, "the image is almost uniform ({spread:.3})");
 }
 
 /// Max's per-sun passes on the GPU (`per_sun = "gpu"`: the reduced sunlight as one direction of

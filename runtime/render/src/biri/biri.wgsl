@@ -8,14 +8,19 @@
 // model's own resources are bind group 1.
 
 struct Params {
-    eye: vec4<f32>,      // xyz, tan(fov_y / 2)
-    forward: vec4<f32>,  // xyz, aspect
-    right: vec4<f32>,    // xyz, ground albedo
-    up: vec4<f32>,       // xyz, 0
-    counts: vec4<u32>,   // width, height, lights, media
-    counts2: vec4<u32>,  // spheres, meshes, kernel (0 exact, 1 polynomial), 0
-    counts3: vec4<u32>,  // 0, 0, 1: surfaces only (stage 2), 0
-    depth_max: vec4<f32>, // last depth, 0, 0, 0
+    view: View,
+    ground_albedo: f32,
+    depth_max: f32,          // the kernel table's last depth
+    polynomial_kernel: u32,  // 1: the polynomial kernel, 0: the exact one
+    surfaces_only: u32,      // 1: the surfaces only (stage 2)
+    width: u32,
+    height: u32,
+    lights: u32,
+    media: u32,
+    spheres: u32,
+    meshes: u32,
+    pad0: u32,
+    pad1: u32,
 }
 
 @group(1) @binding(0) var<uniform> P: Params;
@@ -89,8 +94,8 @@ struct Hit { x: f32, n: vec3<f32>, albedo: f32 }
 // The first surface along o + x d: the ground, a sphere, a mesh triangle.
 fn surface(o: vec3<f32>, d: vec3<f32>) -> Hit {
     var h = Hit(1e30, vec3<f32>(0.0, 1.0, 0.0), 0.0);
-    if (d.y < 0.0) { h = Hit(-o.y / d.y, vec3<f32>(0.0, 1.0, 0.0), P.right.w); }
-    for (var i = 0u; i < P.counts2.x; i++) {
+    if (d.y < 0.0) { h = Hit(-o.y / d.y, vec3<f32>(0.0, 1.0, 0.0), P.ground_albedo); }
+    for (var i = 0u; i < P.spheres; i++) {
         let s = spheres[2u * i];
         let r = ray_sphere(o, d, s);
         var x = r.x;
@@ -101,7 +106,7 @@ fn surface(o: vec3<f32>, d: vec3<f32>) -> Hit {
             h = Hit(x, n, spheres[2u * i + 1u].x);
         }
     }
-    for (var m = 0u; m < P.counts2.y; m++) {
+    for (var m = 0u; m < P.meshes; m++) {
         let lo = meshes[2u * m];
         let hi = meshes[2u * m + 1u];
         let span = box_span(o, d, lo.xyz, hi.xyz);
@@ -128,11 +133,11 @@ fn visible(p: vec3<f32>, q: vec3<f32>) -> bool {
     let dv = q - p;
     let len = length(dv);
     let d = dv / len;
-    for (var i = 0u; i < P.counts2.x; i++) {
+    for (var i = 0u; i < P.spheres; i++) {
         let r = ray_sphere(p, d, spheres[2u * i]);
         if (r.x <= r.y && r.y > EPS && r.x < len - EPS) { return false; }
     }
-    for (var m = 0u; m < P.counts2.y; m++) {
+    for (var m = 0u; m < P.meshes; m++) {
         let lo = meshes[2u * m];
         let hi = meshes[2u * m + 1u];
         let span = box_span(p, d, lo.xyz, hi.xyz);
@@ -164,7 +169,7 @@ fn medium_contains(i: u32, p: vec3<f32>) -> bool {
 // Optical depth per channel along p + x u, x ∈ [0, len], without medium `skip`.
 fn depth(p: vec3<f32>, u: vec3<f32>, len: f32, skip: u32) -> vec3<f32> {
     var tau = vec3<f32>(0.0);
-    for (var i = 0u; i < P.counts.w; i++) {
+    for (var i = 0u; i < P.media; i++) {
         if (i == skip) { continue; }
         let s = medium_span(i, p, u, len);
         if (s.x < s.y) { tau += media[5u * i + 2u].xyz * (s.y - s.x); }
@@ -243,14 +248,14 @@ fn gamma(m: u32, l: u32, o: vec3<f32>, d: vec3<f32>, entry: f32, x0: f32, x1: f3
     let intensity = lights[4u * l + 1u].xyz;
     let taus = beta * h;
     var deltas = vec3<f32>(0.0);
-    if (P.counts2.z == 0u) {
+    if (P.polynomial_kernel == 0u) {
         deltas = biri_primitive(field, taus, th1) - biri_primitive(field, taus, th0);
     } else {
         for (var c = 0u; c < 3u; c++) { deltas[c] = polynomial(field, c, taus[c], th0, th1); }
     }
     var out = vec3<f32>(0.0);
     for (var c = 0u; c < 3u; c++) {
-        if (taus[c] > P.depth_max.x) { continue; }
+        if (taus[c] > P.depth_max) { continue; }
         let delta = deltas[c];
         if (delta == 0.0) { continue; }
         let ex = min(-beta[c] * (t - entry - r0) - front[c] - others[c], 80.0);
@@ -261,13 +266,13 @@ fn gamma(m: u32, l: u32, o: vec3<f32>, d: vec3<f32>, entry: f32, x0: f32, x1: f3
 
 @compute @workgroup_size(8, 8)
 fn render(@builtin(global_invocation_id) id: vec3<u32>) {
-    let w = P.counts.x;
-    let hgt = P.counts.y;
+    let w = P.width;
+    let hgt = P.height;
     if (id.x >= w || id.y >= hgt) { return; }
-    let sx = (2.0 * (f32(id.x) + 0.5) / f32(w) - 1.0) * P.eye.w * P.forward.w;
-    let sy = (1.0 - 2.0 * (f32(id.y) + 0.5) / f32(hgt)) * P.eye.w;
-    let d = normalize(P.forward.xyz + sx * P.right.xyz + sy * P.up.xyz);
-    let o = P.eye.xyz;
+    let sx = (2.0 * (f32(id.x) + 0.5) / f32(w) - 1.0) * P.view.tan_half_fov * P.view.aspect;
+    let sy = (1.0 - 2.0 * (f32(id.y) + 0.5) / f32(hgt)) * P.view.tan_half_fov;
+    let d = normalize(P.view.forward + sx * P.view.right + sy * P.view.up);
+    let o = P.view.eye;
 
     // Stage 2: the surface, shaded and attenuated.
     let hit = surface(o, d);
@@ -275,7 +280,7 @@ fn render(@builtin(global_invocation_id) id: vec3<u32>) {
     if (hit.x < 1e29) {
         let p = o + hit.x * d;
         var lsum = vec3<f32>(0.0);
-        for (var l = 0u; l < P.counts.z; l++) {
+        for (var l = 0u; l < P.lights; l++) {
             let s = lights[4u * l].xyz;
             let to = s - p;
             let r = length(to);
@@ -289,14 +294,14 @@ fn render(@builtin(global_invocation_id) id: vec3<u32>) {
         rgb = lsum * exp(-depth(o, d, hit.x, 0xffffffffu));
     }
     let x_end = hit.x;
-    if (P.counts3.z == 1u) {
+    if (P.surfaces_only == 1u) {
         image[id.y * w + id.x] = vec4<f32>(rgb, 1.0);
         return;
     }
 
     // Stages 3–5: each light's lit pieces and their Γ differences.
     var events: array<vec2<f32>, MAX_EVENTS>;
-    for (var l = 0u; l < P.counts.z; l++) {
+    for (var l = 0u; l < P.lights; l++) {
         let s = lights[4u * l].xyz;
         var count = i32(lights[4u * l].w);
         let rec = lights[4u * l + 3u];
@@ -327,7 +332,7 @@ fn render(@builtin(global_invocation_id) id: vec3<u32>) {
                 n++;
             }
         }
-        for (var i = 0u; i < P.counts2.x; i++) {
+        for (var i = 0u; i < P.spheres; i++) {
             let sp = spheres[2u * i];
             let axis_v = sp.xyz - s;
             let dist = length(axis_v);
@@ -387,7 +392,7 @@ fn render(@builtin(global_invocation_id) id: vec3<u32>) {
             }
             if (closing && start >= 0.0) {
                 // A lit piece [start, x]: each medium's part of it.
-                for (var m = 0u; m < P.counts.w; m++) {
+                for (var m = 0u; m < P.media; m++) {
                     let span = medium_span(m, o, d, x_end);
                     let x0 = max(start, span.x);
                     let x1 = min(x, span.y);
@@ -404,7 +409,7 @@ fn render(@builtin(global_invocation_id) id: vec3<u32>) {
     }
     // The ambient fog, and the media's transparency.
     var tau_all = vec3<f32>(0.0);
-    for (var m = 0u; m < P.counts.w; m++) {
+    for (var m = 0u; m < P.media; m++) {
         let span = medium_span(m, o, d, x_end);
         if (span.x < span.y) {
             let front = depth(o, d, span.x, 0xffffffffu);

@@ -12,7 +12,7 @@ use runtime::Tables;
 use runtime::gpu::{Gpu, GpuTables, WGSL};
 
 use crate::geometry::Sphere;
-use crate::gpu::{RenderError, Timings, a4, check_sizes, entry, filled, v4};
+use crate::gpu::{RenderError, Timings, VIEW_WGSL, View, a4, check_sizes, entry, filled, v4};
 use crate::objects::{OccluderShape, Region};
 use crate::{checks::FrameError, frame::Frame, image::Image};
 
@@ -23,24 +23,34 @@ pub const BIRI_WGSL: &str = include_str!("biri.wgsl");
 pub const MAX_GPU_SPHERES: usize = 32;
 
 runtime::uniform! {
-    /// `Params` of `biri.wgsl` (its comments say what each component holds).
+    /// `Params` of `biri.wgsl`.
     pub struct BiriParams as "Params" {
-        /// Eye (m); w = tan(fov_y / 2).
-        pub eye: [f32; 4],
-        /// View direction; w = aspect.
-        pub forward: [f32; 4],
-        /// Right axis; w = ground albedo.
-        pub right: [f32; 4],
-        /// Up axis.
-        pub up: [f32; 4],
-        /// Width, height, lights, media.
-        pub counts: [u32; 4],
-        /// Spheres, meshes, kernel (0 exact, 1 polynomial).
-        pub counts2: [u32; 4],
-        /// z = 1: surfaces only (stage 2).
-        pub counts3: [u32; 4],
+        /// The camera.
+        pub view: View,
+        /// The ground's albedo.
+        pub ground_albedo: f32,
         /// The kernel table's last depth.
-        pub depth_max: [f32; 4],
+        pub depth_max: f32,
+        /// 1: the polynomial kernel, 0: the exact one.
+        pub polynomial_kernel: u32,
+        /// 1: the surfaces only (stage 2).
+        pub surfaces_only: u32,
+        /// The image's width.
+        pub width: u32,
+        /// Its height.
+        pub height: u32,
+        /// Lights.
+        pub lights: u32,
+        /// Media.
+        pub media: u32,
+        /// Sphere occluders.
+        pub spheres: u32,
+        /// Mesh occluders.
+        pub meshes: u32,
+        /// Padding.
+        pub pad0: u32,
+        /// Padding.
+        pub pad1: u32,
     }
 }
 
@@ -58,7 +68,7 @@ fn with_bits(v: DVec3, bits: u32) -> [f32; 4] {
 
 /// The model's whole shader module, as the renderer compiles it.
 pub fn source() -> String {
-    format!("{WGSL}\n{BIRI_WGSL}")
+    format!("{WGSL}\n{VIEW_WGSL}\n{BIRI_WGSL}")
 }
 
 impl Renderer {
@@ -153,24 +163,24 @@ impl Renderer {
         let (media_rows, polynomials, depth_max) = media_rows(tables, frame)?;
         let (w, h) = (frame.width, frame.height);
         let params = BiriParams {
-            eye: v4(o, frame.camera.tan_half_fov()),
-            forward: v4(forward, w as f64 / h as f64),
-            right: v4(right, frame.ground_albedo),
-            up: v4(up, 0.0),
-            counts: [
-                w as u32,
-                h as u32,
-                frame.lights.len() as u32,
-                frame.media.len() as u32,
-            ],
-            counts2: [
-                spheres.len() as u32,
-                mesh_rows.len() as u32 / 2,
-                u32::from(settings.kernel == super::Kernel::Polynomial),
-                0,
-            ],
-            counts3: [0, 0, u32::from(surfaces_only), 0],
-            depth_max: [depth_max as f32, 0.0, 0.0, 0.0],
+            view: View::new(
+                o,
+                (forward, right, up),
+                (frame.camera.tan_half_fov(), w as f64 / h as f64),
+                None,
+            ),
+            ground_albedo: frame.ground_albedo as f32,
+            depth_max: depth_max as f32,
+            polynomial_kernel: u32::from(settings.kernel == super::Kernel::Polynomial),
+            surfaces_only: u32::from(surfaces_only),
+            width: w as u32,
+            height: h as u32,
+            lights: frame.lights.len() as u32,
+            media: frame.media.len() as u32,
+            spheres: spheres.len() as u32,
+            meshes: mesh_rows.len() as u32 / 2,
+            pad0: 0,
+            pad1: 0,
         };
         let image_bytes = 16 * (w * h) as u64;
         check_sizes(

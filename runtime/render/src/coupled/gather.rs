@@ -36,14 +36,13 @@ pub fn gather(
             .copied()
             .fold(f64::INFINITY, f64::min);
     let axes = frame.camera.axes().expect("checked by check_view");
-    let tan_half = frame.camera.tan_half_fov();
     let (w, hgt) = (frame.width, frame.height);
-    let eye = frame.camera.position_m;
     let sky = SkyLight::of(frame);
     let pixels: Vec<([f32; 3], f32)> = (0..w * hgt)
         .into_par_iter()
         .map(|px| {
-            let d = crate::camera::pixel_ray(axes, tan_half, (px % w, px / w), (w, hgt));
+            // The pixel's ray: from the eye, or an orthographic image's point (`eye`).
+            let (eye, d) = frame.camera.pixel(axes, (px % w, px / w), (w, hgt));
             // The harmonics towards the eye, which the transport's light is scattered into.
             let harmonics = (!lighting.sh.is_empty()).then(|| transport::harmonics(-d));
             let towards = harmonics.as_ref();

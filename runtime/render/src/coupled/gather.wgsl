@@ -6,28 +6,26 @@
 // the sky), compose.wgsl and march.wgsl.
 
 struct CoupledParams {
-    eye: vec4<f32>,          // xyz; w = the march's step (m)
-    forward: vec4<f32>,      // xyz; w = tan(fov_y / 2)
-    right: vec4<f32>,        // xyz; w = aspect
-    up: vec4<f32>,           // xyz, 0
-    grid_min: vec4<f32>,     // xyz; w = ground albedo
-    grid_max: vec4<f32>,     // xyz, 0
-    grid_dims: vec4<u32>,    // nx, ny, nz, field count
-    sizes: vec4<u32>,        // width, height, 0, 0
-    sh_max: vec4<f32>,       // the transport grid's upper corner (its lower is grid_min's)
-    sh_dims: vec4<u32>,      // its voxels along x, y, z, 0
-    // 1 where on, else 0: x the δ-split (f = g², δ-scaled gather), y the P1 radiance (else I_0
-    // alone), z the transport's moments, w the sun's single scattering blurred by the forward
-    // peak (coupled::peak)
-    switches: vec4<u32>,
+    view: View,
+    grid: Grid,
+    sizes: vec2<u32>,        // width, height
+    march_step: f32,         // the march's step (m)
+    pad_step: f32,
+    sh_max: vec3<f32>,       // the transport grid's upper corner (its lower is grid_min's)
+    pad0: f32,
+    sh_dims: vec3<u32>,      // its voxels along x, y, z
+    pad1: u32,
+    // The switches, 1 where on, else 0:
+    delta_split: u32,        // the δ-split (f = g², δ-scaled gather)
+    p1_radiance: u32,        // the P1 radiance (else I_0 alone)
+    transport_moments: u32,  // the transport's moments
+    peak_blur: u32,          // the sun's single scattering blurred by the forward peak (coupled::peak)
     sigma_ext: array<vec4<f32>, 4>,  // per field, m² per channel
     asymmetry: array<vec4<f32>, 4>,  // per field, g per channel
     peak: array<vec4<f32>, 4>,       // per field, the forward peak f per channel; w = the
                                      // blur's peak share s (green; coupled::peak)
     chi: array<array<vec4<f32>, 4>, 5>,  // per Legendre degree l ≤ 4 and field, χ_l per channel
-    sky_beta: vec4<f32>,     // β at sea level per channel (1/m); w = γ (1/m)
-    sun: vec4<f32>,          // unit vector towards the sun; w = cos(disk radius)
-    irradiance: vec4<f32>,   // per channel; w = disk solid angle (sr)
+    sky: Sky,
 }
 
 @group(1) @binding(0) var<uniform> rp: CoupledParams;
@@ -49,7 +47,7 @@ fn moments_at(p: vec3<f32>, row: u32) -> vec4<f32> {
     if (!inside_box(p)) {
         return vec4<f32>(0.0);
     }
-    let tap = taps_in(p, rp.grid_min.xyz, rp.sh_max.xyz, rp.sh_dims.xyz);
+    let tap = taps_in(p, rp.grid.min, rp.sh_max, rp.sh_dims);
     var sum = vec4<f32>(0.0);
     for (var corner = 0u; corner < 8u; corner = corner + 1u) {
         let d = vec3<u32>(corner & 1u, (corner >> 1u) & 1u, (corner >> 2u) & 1u);
@@ -70,7 +68,7 @@ fn peak_blurred(rho: vec4<f32>, depth: f32, cos_theta: f32) -> vec3<f32> {
     let s = v - f32(j0);
     var num = vec3<f32>(0.0);
     var den = vec3<f32>(0.0);
-    for (var i = 0u; i < min(rp.grid_dims.w, 4u); i = i + 1u) {
+    for (var i = 0u; i < min(rp.grid.fields, 4u); i = i + 1u) {
         if (rho[i] > 0.0) {
             var p = vec3<f32>(0.0);
             for (var c = 0u; c < 3u; c = c + 1u) {
@@ -91,7 +89,7 @@ fn peak_blurred(rho: vec4<f32>, depth: f32, cos_theta: f32) -> vec3<f32> {
 // The forward peak's scattering coefficient Σ ρ σ_sca s (green; 1/m).
 fn peak_coefficient(rho: vec4<f32>) -> f32 {
     var sum = 0.0;
-    for (var i = 0u; i < min(rp.grid_dims.w, 4u); i = i + 1u) {
+    for (var i = 0u; i < min(rp.grid.fields, 4u); i = i + 1u) {
         sum = sum + max(rho[i], 0.0) * ams_field_info[i].z * rp.peak[i].w;
     }
     return sum;
@@ -151,7 +149,7 @@ fn harmonics(w: vec3<f32>) -> array<f32, 25> {
 fn mixed(rho: vec4<f32>, values: array<vec4<f32>, 4>) -> vec3<f32> {
     var num = vec3<f32>(0.0);
     var den = vec3<f32>(0.0);
-    for (var i = 0u; i < min(rp.grid_dims.w, 4u); i = i + 1u) {
+    for (var i = 0u; i < min(rp.grid.fields, 4u); i = i + 1u) {
         if (rho[i] > 0.0) {
             let w = rho[i] * ams_field_info[i].yzw;
             num = num + w * values[i].rgb;
@@ -166,11 +164,11 @@ fn gather(@builtin(global_invocation_id) id: vec3<u32>) {
     if (id.x >= rp.sizes.x || id.y >= rp.sizes.y) {
         return;
     }
-    let d = pixel_ray(id.x, id.y);
-    let eye = rp.eye.xyz;
-    let cos_theta = dot(rp.sun.xyz, d);
+    let eye = camera_origin(id.x, id.y);
+    let d = camera_direction(id.x, id.y);
+    let cos_theta = dot(rp.sky.sun, d);
     let toward_eye = -d;
-    let transport = rp.switches.z == 1u;
+    let transport = rp.transport_moments == 1u;
     let y = harmonics(toward_eye);
     var l_vol = vec3<f32>(0.0);
     var tr = vec3<f32>(1.0);
@@ -179,7 +177,7 @@ fn gather(@builtin(global_invocation_id) id: vec3<u32>) {
     var depth_out = 0.0;
     let span = box_span(eye, d);
     if (span.y >= 0.0) {
-        let n = max(u32(ceil((span.y - span.x) / rp.eye.w)), 1u);
+        let n = max(u32(ceil((span.y - span.x) / rp.march_step)), 1u);
         let dt = (span.y - span.x) / f32(n);
         for (var k = 0u; k < n; k = k + 1u) {
             let p = eye + (span.x + (f32(k) + 0.5) * dt) * d;
@@ -194,12 +192,12 @@ fn gather(@builtin(global_invocation_id) id: vec3<u32>) {
             let i0 = light.solved.i0.rgb;
             let i1 = light.solved.i1;
             let sky = vec3<f32>(light.all.i1[0].w, light.all.i1[1].w, light.all.i1[2].w);
-            let sun = rp.irradiance.rgb * sunlight(p.y, rp.sun.y) * beam.rgb;
+            let sun = rp.sky.irradiance * sunlight(p.y, rp.sky.sun.y) * beam.rgb;
             // The beam scattered by Ams_1 blurred by the peak's scatterings in (beam.w) and
             // out to the middle of this step (δ-M's split), or by Ams_{n+1} (beam.w = n; 0
             // with δ-Eddington's).
             var phase: vec3<f32>;
-            if (rp.switches.w == 1u) {
+            if (rp.peak_blur == 1u) {
                 let peak = peak_coefficient(rho) * dt;
                 phase = peak_blurred(rho, beam.w + depth_out + 0.5 * peak, cos_theta);
                 depth_out = depth_out + peak;
@@ -207,7 +205,7 @@ fn gather(@builtin(global_invocation_id) id: vec3<u32>) {
                 phase = ams_mix(rho, beam.w + 1.0, cos_theta);
             }
             let g = mixed(rho, rp.asymmetry);
-            let f = select(vec3<f32>(0.0), mixed(rho, rp.peak), rp.switches.x == 1u);
+            let f = select(vec3<f32>(0.0), mixed(rho, rp.peak), rp.delta_split == 1u);
             // The transport's diffuse light towards the eye, Σ_l χ′_l Σ_m Y_lm φ_lm per channel
             // (render::lighting::transport::scattered), χ′_l = (χ_l − f)/(1 − f) of the mixture.
             var toward = vec3<f32>(0.0);
@@ -242,7 +240,7 @@ fn gather(@builtin(global_invocation_id) id: vec3<u32>) {
                 if (len > limit) {
                     flux = flux * (limit / len);
                 }
-                let along = select(0.0, (g[c] - f[c]) * dot(flux, toward_eye), rp.switches.y == 1u);
+                let along = select(0.0, (g[c] - f[c]) * dot(flux, toward_eye), rp.p1_radiance == 1u);
                 let diffuse = select(max((1.0 - f[c]) * i0[c] + along, 0.0),
                     max((1.0 - f[c]) * toward[c], 0.0), transport);
                 let light = albedo * (phase[c] * sun[c] + diffuse + (1.0 - f[c]) * sky[c]);
@@ -263,10 +261,10 @@ fn gather(@builtin(global_invocation_id) id: vec3<u32>) {
 
     // Composition (render::shading::compose), the ground lit through the volume.
     var ground = vec3<f32>(1.0);
-    let k_end = ground_distance(d);
-    if (rp.grid_min.w > 0.0 && k_end > 0.0) {
+    let k_end = ground_distance(eye, d);
+    if (rp.grid.ground_albedo > 0.0 && k_end > 0.0) {
         ground = sun_left(eye + k_end * d);
     }
-    let v = compose(d, l_vol, tr, seen, ground);
+    let v = compose(eye, d, l_vol, tr, seen, ground);
     image[id.x + rp.sizes.x * id.y] = vec4<f32>(v, tr.g);
 }

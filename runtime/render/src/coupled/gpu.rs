@@ -27,38 +27,40 @@ use runtime::gpu::{Gpu, GpuTables};
 use super::Settings;
 use super::light::{Lighting, check, delta_scaled};
 use crate::gpu::{
-    FieldsAndSky, GatherView, RenderError, Timings, bind, build, fields_and_sky, filled,
-    gather_source, gather_view, sky_light_buffer, storage, timed_frame, v4,
+    FieldsAndSky, GatherView, Grid, RenderError, Sky, Timings, View, bind, build, fields_and_sky,
+    filled, gather_source, gather_view, sky_light_buffer, storage, timed_frame, v3,
 };
 use crate::{frame::Frame, image::Image, volume::MAX_FIELDS};
 
 runtime::uniform! {
-    /// `CoupledParams` of `gather.wgsl` (its comments say what each w holds).
+    /// `CoupledParams` of `gather.wgsl`.
     pub struct CoupledParams as "CoupledParams" {
-        /// Eye (m); w = the march's step (m).
-        pub eye: [f32; 4],
-        /// View direction; w = tan(fov_y / 2).
-        pub forward: [f32; 4],
-        /// Right axis; w = aspect.
-        pub right: [f32; 4],
-        /// Up axis, 0.
-        pub up: [f32; 4],
-        /// Grid box's lower corner; w = ground albedo.
-        pub grid_min: [f32; 4],
-        /// Grid box's upper corner, 0.
-        pub grid_max: [f32; 4],
-        /// nx, ny, nz, field count.
-        pub grid_dims: [u32; 4],
-        /// Width, height, 0, 0.
-        pub sizes: [u32; 4],
+        /// The camera.
+        pub view: View,
+        /// The grid and the ground.
+        pub grid: Grid,
+        /// Width, height.
+        pub sizes: [u32; 2],
+        /// The march's step (m).
+        pub march_step: f32,
+        /// Padding.
+        pub pad_step: f32,
         /// The transport grid's upper corner (its lower is the frame grid's).
-        pub sh_max: [f32; 4],
-        /// The transport grid's voxels along x, y, z, 0.
-        pub sh_dims: [u32; 4],
-        /// 1 where on, else 0: the δ-split (f = g², δ-scaled gather), the P1 radiance (else
-        /// I_0 alone), the transport's moments, the sun's single scattering blurred by the
-        /// forward peak (coupled::peak).
-        pub switches: [u32; 4],
+        pub sh_max: [f32; 3],
+        /// Padding.
+        pub pad0: f32,
+        /// The transport grid's voxels along x, y, z.
+        pub sh_dims: [u32; 3],
+        /// Padding.
+        pub pad1: u32,
+        /// 1: the δ-split (f = g², δ-scaled gather).
+        pub delta_split: u32,
+        /// 1: the P1 radiance (0: I_0 alone).
+        pub p1_radiance: u32,
+        /// 1: the transport's moments.
+        pub transport_moments: u32,
+        /// 1: the sun's single scattering blurred by the forward peak (coupled::peak).
+        pub peak_blur: u32,
         /// Per field, σ_ext per channel (m²).
         pub sigma_ext: [[f32; 4]; MAX_FIELDS],
         /// Per field, g per channel.
@@ -67,12 +69,8 @@ runtime::uniform! {
         pub peak: [[f32; 4]; MAX_FIELDS],
         /// Per Legendre degree l ≤ 4 and field, the phase function's χ_l per channel.
         pub chi: [[[f32; 4]; MAX_FIELDS]; 5],
-        /// β at sea level per channel (1/m); w = γ (1/m).
-        pub sky_beta: [f32; 4],
-        /// Unit vector towards the sun; w = cos(disk radius).
-        pub sun: [f32; 4],
-        /// Irradiance per channel; w = disk solid angle (sr).
-        pub irradiance: [f32; 4],
+        /// The sun and the air.
+        pub sky: Sky,
     }
 }
 
@@ -209,53 +207,30 @@ impl Renderer {
         let grid = &frame.grid;
         let voxels = grid.data.len();
         let transport = !lighting.sh.is_empty();
-        let GatherView {
-            axes: (forward, right, up),
-            step,
-        } = gather_view(device, frame, std::mem::size_of::<LightVoxel>() as u64)?;
-        let FieldsAndSky {
-            sigma_ext,
-            sky_beta,
-            sun,
-            irradiance,
-        } = fields_and_sky(tables, frame);
+        let GatherView { view, step } =
+            gather_view(device, frame, std::mem::size_of::<LightVoxel>() as u64)?;
+        let FieldsAndSky { sigma_ext, sky } = fields_and_sky(tables, frame);
         let params = CoupledParams {
-            eye: v4(frame.camera.position_m, step),
-            forward: v4(forward, frame.camera.tan_half_fov()),
-            right: v4(right, w as f64 / h as f64),
-            up: v4(up, 0.0),
-            grid_min: v4(grid.min_m, frame.ground_albedo),
-            grid_max: v4(grid.max_m, 0.0),
-            grid_dims: [
-                grid.dims[0] as u32,
-                grid.dims[1] as u32,
-                grid.dims[2] as u32,
-                tables.fields.len() as u32,
-            ],
-            sizes: [w as u32, h as u32, 0, 0],
-            sh_max: v4(lighting.sh_grid.max_m, 0.0),
-            sh_dims: [
-                lighting.sh_grid.dims[0] as u32,
-                lighting.sh_grid.dims[1] as u32,
-                lighting.sh_grid.dims[2] as u32,
-                0,
-            ],
-            switches: [
-                delta_scaled(settings),
-                settings.emergent == super::Emergent::P1,
-                transport,
-                lighting.blur.is_some(),
-            ]
-            .map(u32::from),
+            view,
+            grid: Grid::of(frame, tables.fields.len()),
+            sizes: [w as u32, h as u32],
+            march_step: step as f32,
+            pad_step: 0.0,
+            sh_max: v3(lighting.sh_grid.max_m),
+            pad0: 0.0,
+            sh_dims: lighting.sh_grid.dims.map(|n| n as u32),
+            pad1: 0,
+            delta_split: u32::from(delta_scaled(settings)),
+            p1_radiance: u32::from(settings.emergent == super::Emergent::P1),
+            transport_moments: u32::from(transport),
+            peak_blur: u32::from(lighting.blur.is_some()),
             sigma_ext,
             asymmetry: per_field(&lighting.g),
             peak: peaks(lighting),
             chi: std::array::from_fn(|l| {
                 per_field(&lighting.chis.iter().map(|m| m[l]).collect::<Vec<_>>())
             }),
-            sky_beta,
-            sun,
-            irradiance,
+            sky,
         };
         let mut resident = self.resident.lock().expect("not poisoned");
         let kept = resident

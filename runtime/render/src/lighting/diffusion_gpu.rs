@@ -163,15 +163,56 @@ fn groups(n: usize) -> (u32, u32) {
     (wgs.min(ROW) as u32, wgs.div_ceil(ROW) as u32)
 }
 
-/// The parameters of every dispatch the solve records, one block of 16 words each.
+runtime::uniform! {
+    /// `Dispatch` of `diffusion.wgsl`: one dispatch's level, its coarser level and the
+    /// kernel's vector operands (offsets in the vector buffer).
+    pub struct Dispatch as "Dispatch" {
+        /// This level's voxels along x, y, z.
+        pub dims: [u32; 3],
+        /// A smoothing sweep's colour, (x + y + z) mod 2.
+        pub colour: u32,
+        /// The coarser level's voxels along x, y, z (this level's without one).
+        pub coarse_dims: [u32; 3],
+        /// Its voxel count.
+        pub coarse_voxels: u32,
+        /// This level's first row of the operators.
+        pub first_row: u32,
+        /// The coarser level's.
+        pub coarse_first_row: u32,
+        /// This level's voxel count.
+        pub voxels: u32,
+        /// The residual kernel: 1 writes A b alone.
+        pub product_only: u32,
+        /// Operand a.
+        pub a: u32,
+        /// Operand b.
+        pub b: u32,
+        /// The output.
+        pub out: u32,
+        /// A fourth operand: the coarser level's z (prolong), A d (update_xr).
+        pub c: u32,
+    }
+}
+
+runtime::uniform! {
+    /// `Stencil` of `diffusion.wgsl`: a voxel's row of its level's 7-point operator.
+    pub struct StencilRow as "Stencil" {
+        /// A_ii.
+        pub diag: f32,
+        /// The coupling w_a to the next voxel along each axis a (A_{i,i+e_a} = −w_a).
+        pub coupling: [f32; 3],
+    }
+}
+
+/// The parameters of every dispatch the solve records.
 #[derive(Default)]
 struct Plan {
-    params: Vec<[u32; 16]>,
+    params: Vec<Dispatch>,
 }
 
 impl Plan {
-    fn call(&mut self, kernel: Kernel, words: [u32; 16], n: usize) -> Call {
-        self.params.push(words);
+    fn call(&mut self, kernel: Kernel, dispatch: Dispatch, n: usize) -> Call {
+        self.params.push(dispatch);
         Call {
             kernel,
             slot: (self.params.len() - 1) as u32,
@@ -218,9 +259,9 @@ pub struct Uploaded<'a> {
 /// The hierarchy's levels (each one's dims, size and first row) and the operators' rows, every
 /// level's after the finer one's: (diagonal, the three couplings) per voxel (one row of zeros
 /// for a problem without unknowns, so that a buffer can be bound).
-fn levels(stencils: &[Stencil]) -> (Vec<Level>, Vec<[f32; 4]>) {
+fn levels(stencils: &[Stencil]) -> (Vec<Level>, Vec<StencilRow>) {
     let mut levels = Vec::new();
-    let mut rows: Vec<[f32; 4]> = Vec::new();
+    let mut rows: Vec<StencilRow> = Vec::new();
     for s in stencils {
         levels.push(Level {
             dims: s.dims.map(|d| d as u32),
@@ -228,39 +269,37 @@ fn levels(stencils: &[Stencil]) -> (Vec<Level>, Vec<[f32; 4]>) {
             o: rows.len() as u32,
         });
         for i in 0..s.diag.len() {
-            rows.push([s.diag[i], s.w[0][i], s.w[1][i], s.w[2][i]].map(|v| v as f32));
+            rows.push(StencilRow {
+                diag: s.diag[i] as f32,
+                coupling: [s.w[0][i], s.w[1][i], s.w[2][i]].map(|v| v as f32),
+            });
         }
     }
     if rows.is_empty() {
-        rows.push([0.0; 4]);
+        rows.push(StencilRow::default());
     }
     (levels, rows)
 }
 
-/// A dispatch's parameters (`diffusion.wgsl`'s `Params`): level `l`'s dims, the sweep's colour,
-/// the coarser level `c`'s dims and size (`l`'s own without one), both levels' first rows, `l`'s
-/// size, and the four vector offsets `sel` the kernel reads and writes.
-fn words(l: &Level, c: Option<&Level>, colour: u32, sel: [usize; 4]) -> [u32; 16] {
-    let c = c.copied().unwrap_or(*l);
-    let u = |v: usize| v as u32;
-    [
-        l.dims[0],
-        l.dims[1],
-        l.dims[2],
+/// A dispatch's parameters: level `l`, the sweep's colour, the coarser level `c` (`l` without
+/// one), and the vector operands `[a, b, out, c]` the kernel reads and writes.
+fn words(l: &Level, c: Option<&Level>, colour: u32, sel: [usize; 4]) -> Dispatch {
+    let coarse = c.copied().unwrap_or(*l);
+    let [a, b, out, c] = sel.map(|v| v as u32);
+    Dispatch {
+        dims: l.dims,
         colour,
-        c.dims[0],
-        c.dims[1],
-        c.dims[2],
-        c.n,
-        l.o,
-        c.o,
-        l.n,
-        0,
-        u(sel[0]),
-        u(sel[1]),
-        u(sel[2]),
-        u(sel[3]),
-    ]
+        coarse_dims: coarse.dims,
+        coarse_voxels: coarse.n,
+        first_row: l.o,
+        coarse_first_row: coarse.o,
+        voxels: l.n,
+        product_only: 0,
+        a,
+        b,
+        out,
+        c,
+    }
 }
 
 /// The V-cycle from level 0 down and back up (diffusion::Hierarchy::vcycle), z_l from r_l,
@@ -363,7 +402,11 @@ impl<'a> Uploaded<'a> {
             first.push(ud);
             first.push(dots(&mut plan, r, z, 0));
             first.push(dots(&mut plan, r, r, 1));
-            apply.push(plan.call(Kernel::Residual, words(l0, None, 0, [0, d, ad, 1]), n0));
+            let product = Dispatch {
+                product_only: 1,
+                ..words(l0, None, 0, [0, d, ad, 0])
+            };
+            apply.push(plan.call(Kernel::Residual, product, n0));
             apply.push(dots(&mut plan, d, ad, 0));
             update_xr.push(plan.call(Kernel::UpdateXr, words(l0, None, 0, [x, d, r, ad]), n0));
             update_xr.push(dots(&mut plan, r, r, 1));
@@ -374,13 +417,13 @@ impl<'a> Uploaded<'a> {
         use wgpu::BufferUsages as U;
         // A problem without unknowns dispatches nothing, but binds one block.
         if plan.params.is_empty() {
-            plan.params.push([0; 16]);
+            plan.params.push(Dispatch::default());
         }
         let params: Vec<u8> = plan
             .params
             .iter()
             .flat_map(|w| {
-                let mut block = bytemuck::cast_slice::<u32, u8>(w).to_vec();
+                let mut block = bytemuck::bytes_of(w).to_vec();
                 block.resize(ALIGN as usize, 0);
                 block
             })

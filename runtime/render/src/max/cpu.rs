@@ -438,13 +438,12 @@ pub fn gather(
     let mut report = lighting.report.clone();
     let start = Instant::now();
     let axes = frame.camera.axes().expect("checked by check_view");
-    let tan_half = frame.camera.tan_half_fov();
     let (w, hgt) = (frame.width, frame.height);
     let gathered: Vec<([f32; 3], f32, f64)> = (0..w * hgt)
         .into_par_iter()
         .map(|px| {
-            let d = crate::camera::pixel_ray(axes, tan_half, (px % w, px / w), (w, hgt));
-            g.pixel(d)
+            let (origin, d) = frame.camera.pixel(axes, (px % w, px / w), (w, hgt));
+            g.pixel(origin, d)
         })
         .collect();
     report.largest_edge_depth = gathered.iter().map(|g| g.2).fold(0.0, f64::max);
@@ -488,10 +487,10 @@ struct March {
 }
 
 impl Gather<'_> {
-    /// Steps 5–6 for the ray `d` from the eye: the pixel, its T_vol and the largest edge depth.
-    fn pixel(&self, d: DVec3) -> ([f32; 3], f32, f64) {
+    /// Steps 5–6 for the ray `d` from `eye` (the eye, or an orthographic image's point): the
+    /// pixel, its T_vol and the largest edge depth.
+    fn pixel(&self, eye: DVec3, d: DVec3) -> ([f32; 3], f32, f64) {
         let (frame, grid) = (self.frame, &self.frame.grid);
-        let eye = frame.camera.position_m;
         let mut m = March {
             l_vol: [0.0; 3],
             tr: [1.0; 3],

@@ -6,21 +6,18 @@
 // slicing.wgsl (grid sampling, camera rays, the sky), riley's compose.wgsl and march.wgsl.
 
 struct MaxParams {
-    eye: vec4<f32>,          // xyz; w = the march's step (m)
-    forward: vec4<f32>,      // xyz; w = tan(fov_y / 2)
-    right: vec4<f32>,        // xyz; w = aspect
-    up: vec4<f32>,           // xyz, 0
-    grid_min: vec4<f32>,     // xyz; w = ground albedo
-    grid_max: vec4<f32>,     // xyz, 0
-    grid_dims: vec4<u32>,    // nx, ny, nz, field count
-    sizes: vec4<u32>,        // width, height, 0, 0
-    // The edge treatment (MaxSettings::edge_share): x the voxel length (h_x h_y h_z)^{1/3} (m),
-    // y the threshold T (a voxel's optical depth), 0, 0
-    edges: vec4<f32>,
+    view: View,
+    grid: Grid,
+    sizes: vec2<u32>,        // width, height
+    march_step: f32,         // the march's step (m)
+    pad_step: f32,
+    // The edge treatment (MaxSettings::edge_share):
+    voxel_length: f32,       // (h_x h_y h_z)^{1/3} (m)
+    edge_threshold: f32,     // the threshold T (a voxel's optical depth)
+    pad0: f32,
+    pad1: f32,
     sigma_ext: array<vec4<f32>, 4>,  // per field, m² per channel
-    sky_beta: vec4<f32>,     // β at sea level per channel (1/m); w = γ (1/m)
-    sun: vec4<f32>,          // unit vector towards the sun; w = cos(disk radius)
-    irradiance: vec4<f32>,   // per channel; w = disk solid angle (sr)
+    sky: Sky,
 }
 
 @group(1) @binding(0) var<uniform> rp: MaxParams;
@@ -57,7 +54,7 @@ fn in_solve(v: LightVoxel) -> bool {
 fn poisson_mix(rho: vec4<f32>, depth: vec3<f32>, cos_theta: f32) -> vec3<f32> {
     var num = vec3<f32>(0.0);
     var den = vec3<f32>(0.0);
-    for (var i = 0u; i < min(rp.grid_dims.w, 4u); i = i + 1u) {
+    for (var i = 0u; i < min(rp.grid.fields, 4u); i = i + 1u) {
         if (rho[i] > 0.0) {
             let w = rho[i] * ams_field_info[i].yzw;
             num = num + w * poisson(i, depth, cos_theta);
@@ -77,7 +74,7 @@ fn scattered(d: f32, albedo: f32) -> f32 {
 
 // The share of a voxel of optical depth τ the edge treatment takes (MaxSettings::edge_share).
 fn edge_share(tau_voxel: f32) -> f32 {
-    return clamp(1.5 - tau_voxel / rp.edges.y, 0.0, 1.0);
+    return clamp(1.5 - tau_voxel / rp.edge_threshold, 0.0, 1.0);
 }
 
 @compute @workgroup_size(8, 8)
@@ -85,16 +82,16 @@ fn gather(@builtin(global_invocation_id) id: vec3<u32>) {
     if (id.x >= rp.sizes.x || id.y >= rp.sizes.y) {
         return;
     }
-    let d = pixel_ray(id.x, id.y);
-    let eye = rp.eye.xyz;
-    let l_y = rp.sun.y;
-    let cos_theta = dot(rp.sun.xyz, d);
+    let eye = camera_origin(id.x, id.y);
+    let d = camera_direction(id.x, id.y);
+    let l_y = rp.sky.sun.y;
+    let cos_theta = dot(rp.sky.sun, d);
     var l_vol = vec3<f32>(0.0);
     var tr = vec3<f32>(1.0);
     var largest = 0.0;
     let span = box_span(eye, d);
     if (span.y >= 0.0) {
-        let n = max(u32(ceil((span.y - span.x) / rp.eye.w)), 1u);
+        let n = max(u32(ceil((span.y - span.x) / rp.march_step)), 1u);
         let dt = (span.y - span.x) / f32(n);
         var edge = vec3<f32>(0.0);
         for (var k = 0u; k < n; k = k + 1u) {
@@ -105,9 +102,9 @@ fn gather(@builtin(global_invocation_id) id: vec3<u32>) {
                 continue;
             }
             let sca = scattering_of(rho);
-            let w_edge = edge_share(ext.g * rp.edges.x);
+            let w_edge = edge_share(ext.g * rp.voxel_length);
             let light = lighting_at(p);
-            let sun = rp.irradiance.rgb * sunlight(p.y, l_y) * light.all.sun.rgb;
+            let sun = rp.sky.irradiance * sunlight(p.y, l_y) * light.all.sun.rgb;
             // Diffuse light: the diffusion solution (never below zero) and the skylight.
             let diffuse = max(light.solved.i0.rgb, vec3<f32>(0.0)) + light.all.sky.rgb;
             let p1 = ams_mix(rho, 1.0, cos_theta);
@@ -145,10 +142,10 @@ fn gather(@builtin(global_invocation_id) id: vec3<u32>) {
 
     // Composition (render::shading::compose), the ground lit through the volume.
     var lit = vec3<f32>(1.0);
-    let k_end = ground_distance(d);
-    if (rp.grid_min.w > 0.0 && k_end > 0.0) {
+    let k_end = ground_distance(eye, d);
+    if (rp.grid.ground_albedo > 0.0 && k_end > 0.0) {
         lit = sun_left(eye + k_end * d);
     }
-    let v = compose(d, l_vol, tr, tr, lit);
+    let v = compose(eye, d, l_vol, tr, tr, lit);
     image[id.x + rp.sizes.x * id.y] = vec4<f32>(v, tr.g);
 }

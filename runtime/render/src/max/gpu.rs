@@ -18,8 +18,8 @@ use runtime::gpu::{Gpu, GpuTables, read_back};
 use super::Settings;
 use super::cpu::{Lighting, check};
 use crate::gpu::{
-    FieldsAndSky, GatherView, RenderError, Timings, bind, build, fields_and_sky, filled,
-    gather_source, gather_view, sky_light_buffer, storage, timed_frame, v4,
+    FieldsAndSky, GatherView, Grid, RenderError, Sky, Timings, View, bind, build, fields_and_sky,
+    filled, gather_source, gather_view, sky_light_buffer, storage, timed_frame,
 };
 use crate::lighting::lattice::voxel_length;
 use crate::{checks::FrameError, frame::Frame, image::Image, volume::MAX_FIELDS};
@@ -37,35 +37,30 @@ runtime::uniform! {
 }
 
 runtime::uniform! {
-    /// `MaxParams` of `gather.wgsl` (its comments say what each w holds).
+    /// `MaxParams` of `gather.wgsl`.
     pub struct MaxParams as "MaxParams" {
-        /// Eye (m); w = the march's step (m).
-        pub eye: [f32; 4],
-        /// View direction; w = tan(fov_y / 2).
-        pub forward: [f32; 4],
-        /// Right axis; w = aspect.
-        pub right: [f32; 4],
-        /// Up axis, 0.
-        pub up: [f32; 4],
-        /// Grid box's lower corner; w = ground albedo.
-        pub grid_min: [f32; 4],
-        /// Grid box's upper corner, 0.
-        pub grid_max: [f32; 4],
-        /// nx, ny, nz, field count.
-        pub grid_dims: [u32; 4],
-        /// Width, height, 0, 0.
-        pub sizes: [u32; 4],
-        /// The edge treatment: the voxel length (h_x h_y h_z)^{1/3} (m), the threshold T (a
-        /// voxel's optical depth), 0, 0.
-        pub edges: [f32; 4],
+        /// The camera.
+        pub view: View,
+        /// The grid and the ground.
+        pub grid: Grid,
+        /// Width, height.
+        pub sizes: [u32; 2],
+        /// The march's step (m).
+        pub march_step: f32,
+        /// Padding.
+        pub pad_step: f32,
+        /// The edge treatment's voxel length (h_x h_y h_z)^{1/3} (m).
+        pub voxel_length: f32,
+        /// The edge treatment's threshold T (a voxel's optical depth).
+        pub edge_threshold: f32,
+        /// Padding.
+        pub pad0: f32,
+        /// Padding.
+        pub pad1: f32,
         /// Per field, σ_ext per channel (m²).
         pub sigma_ext: [[f32; 4]; MAX_FIELDS],
-        /// β at sea level per channel (1/m); w = γ (1/m).
-        pub sky_beta: [f32; 4],
-        /// Unit vector towards the sun; w = cos(disk radius).
-        pub sun: [f32; 4],
-        /// Irradiance per channel; w = disk solid angle (sr).
-        pub irradiance: [f32; 4],
+        /// The sun and the air.
+        pub sky: Sky,
     }
 }
 
@@ -132,40 +127,21 @@ impl Renderer {
         let (w, h) = (frame.width, frame.height);
         let grid = &frame.grid;
         let voxels = grid.data.len();
-        let GatherView {
-            axes: (forward, right, up),
-            step,
-        } = gather_view(device, frame, std::mem::size_of::<LightVoxel>() as u64)?;
-        let FieldsAndSky {
-            sigma_ext,
-            sky_beta,
-            sun,
-            irradiance,
-        } = fields_and_sky(tables, frame);
+        let GatherView { view, step } =
+            gather_view(device, frame, std::mem::size_of::<LightVoxel>() as u64)?;
+        let FieldsAndSky { sigma_ext, sky } = fields_and_sky(tables, frame);
         let params = MaxParams {
-            eye: v4(frame.camera.position_m, step),
-            forward: v4(forward, frame.camera.tan_half_fov()),
-            right: v4(right, w as f64 / h as f64),
-            up: v4(up, 0.0),
-            grid_min: v4(grid.min_m, frame.ground_albedo),
-            grid_max: v4(grid.max_m, 0.0),
-            grid_dims: [
-                grid.dims[0] as u32,
-                grid.dims[1] as u32,
-                grid.dims[2] as u32,
-                tables.fields.len() as u32,
-            ],
-            sizes: [w as u32, h as u32, 0, 0],
-            edges: [
-                voxel_length(grid) as f32,
-                settings.threshold as f32,
-                0.0,
-                0.0,
-            ],
+            view,
+            grid: Grid::of(frame, tables.fields.len()),
+            sizes: [w as u32, h as u32],
+            march_step: step as f32,
+            pad_step: 0.0,
+            voxel_length: voxel_length(grid) as f32,
+            edge_threshold: settings.threshold as f32,
+            pad0: 0.0,
+            pad1: 0.0,
             sigma_ext,
-            sky_beta,
-            sun,
-            irradiance,
+            sky,
         };
         let rgb = |v: &[f64; 3], w: f32| [v[0] as f32, v[1] as f32, v[2] as f32, w];
         let rows: Vec<LightVoxel> = (0..voxels)

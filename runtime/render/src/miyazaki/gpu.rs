@@ -12,52 +12,66 @@ use runtime::gpu::{Gpu, GpuTables};
 
 use super::{Settings, SvsPhase};
 use crate::gpu::{
-    Dispatch, RenderError, Timings, a4, bind, build, check_sizes, filled, run_slices,
-    slice_uniforms, slicing_source, storage, v4,
+    Dispatch, Grid, RenderError, Sky, Timings, View, a3, a4, bind, build, check_sizes, filled,
+    run_slices, slice_uniforms, slicing_source, storage, v3,
 };
-use crate::{camera::SUN_DIAMETER_DEG, frame::Frame, image::Image, volume::MAX_FIELDS};
+use crate::{frame::Frame, image::Image, volume::MAX_FIELDS};
 
 runtime::uniform! {
-    /// `SvsParams` of `svs.wgsl` (its comments say what each w holds).
+    /// `SvsParams` of `svs.wgsl`.
     pub struct SvsParams as "SvsParams" {
-        /// Eye (m); w = 1 back to front, 0 front to back.
-        pub eye: [f32; 4],
-        /// View direction; w = tan(fov_y / 2).
-        pub forward: [f32; 4],
-        /// Right axis; w = aspect.
-        pub right: [f32; 4],
-        /// Up axis; w = k_multi (1/sr).
-        pub up: [f32; 4],
-        /// Unit vector towards the sun; w = slice spacing Δ (m).
-        pub to_sun: [f32; 4],
-        /// The slices' unit normal; w = Δs, the sun's path per slice (m).
-        pub normal: [f32; 4],
-        /// Shadow-surface axis u; w = its origin along u.
-        pub shadow_u: [f32; 4],
-        /// Shadow-surface axis w; w = its origin along w.
-        pub shadow_w: [f32; 4],
-        /// Texel size u, w (m); z = ground albedo; w = 1: Cornette–Shanks.
-        pub shadow_texel: [f32; 4],
-        /// Grid box's lower corner; w = lower plane value of the slices' range.
-        pub grid_min: [f32; 4],
-        /// Grid box's upper corner; w = upper plane value.
-        pub grid_max: [f32; 4],
-        /// nx, ny, nz, field count.
-        pub grid_dims: [u32; 4],
-        /// Width, height, shadow resolution, haze field + 1 (0: none).
-        pub sizes: [u32; 4],
+        /// The camera.
+        pub view: View,
+        /// k_multi (1/sr).
+        pub k_multi: f32,
+        /// 1: slices back to front, 0: front to back.
+        pub back_to_front: u32,
+        /// The lower plane value of the slices' range (m).
+        pub plane_min: f32,
+        /// The upper plane value (m).
+        pub plane_max: f32,
+        /// Unit vector towards the sun.
+        pub to_sun: [f32; 3],
+        /// The slice spacing Δ (m).
+        pub slice_spacing: f32,
+        /// The slices' unit normal.
+        pub normal: [f32; 3],
+        /// Δs, the sun's path per slice (m).
+        pub sun_path: f32,
+        /// The shadow surface's axis u.
+        pub shadow_u: [f32; 3],
+        /// Its origin along u (m).
+        pub shadow_u_origin: f32,
+        /// The shadow surface's axis w.
+        pub shadow_w: [f32; 3],
+        /// Its origin along w (m).
+        pub shadow_w_origin: f32,
+        /// Texel size along u, w (m).
+        pub shadow_texel: [f32; 2],
+        /// 1: the Cornette–Shanks phase function.
+        pub cornette_shanks: u32,
+        /// Padding.
+        pub pad0: u32,
+        /// The grid and the ground.
+        pub grid: Grid,
+        /// Width, height, shadow resolution.
+        pub sizes: [u32; 3],
+        /// The haze's field + 1 (0: none).
+        pub haze_field: u32,
         /// Per field, σ_ext per channel (m²).
         pub sigma_ext: [[f32; 4]; MAX_FIELDS],
         /// Per field, the Cornette–Shanks asymmetry per channel.
         pub g: [[f32; 4]; MAX_FIELDS],
-        /// Rayleigh β_sl per channel (1/m); w = 1/H.
-        pub sky_beta: [f32; 4],
-        /// Haze N_0 σ_ext per channel (1/m); w = 1/H_haze.
-        pub haze: [f32; 4],
-        /// Haze N_0 σ_sca per channel (1/m); w = cos of the disk radius.
-        pub haze_sca: [f32; 4],
-        /// Irradiance per channel; w = disk solid angle (sr).
-        pub irradiance: [f32; 4],
+        /// The sun and the air (Rayleigh's β_sl).
+        pub sky: Sky,
+        /// Haze N_0 σ_ext per channel (1/m).
+        pub haze: [f32; 3],
+        /// 1/H_haze (1/m).
+        pub inv_haze_height: f32,
+        /// Haze N_0 σ_sca per channel (1/m).
+        pub haze_sca: [f32; 3],
+        /// Padding.
+        pub pad1: f32,
     }
 }
 
@@ -76,63 +90,41 @@ pub struct Renderer {
 /// The model's uniform for `frame` with the slicing geometry `s`.
 fn params(tables: &Tables, frame: &Frame, settings: &Settings, s: &super::SvsSetup) -> SvsParams {
     let (w, h, res) = (frame.width, frame.height, settings.light_resolution);
-    let cos_disk = (SUN_DIAMETER_DEG / 2.0).to_radians().cos();
-    let (forward, right, up) = s.axes;
     let haze = frame.haze.as_ref().map(|h| (&tables.fields[h.field], h));
-    let [nx, ny, nz] = frame.grid.dims;
     let per_field = |f: &dyn Fn(&runtime::FieldTable) -> [f64; 3]| -> [[f32; 4]; MAX_FIELDS] {
         std::array::from_fn(|i| tables.fields.get(i).map_or([0.0; 4], |t| a4(f(t), 0.0)))
     };
     SvsParams {
-        eye: v4(s.eye, if s.back_to_front { 1.0 } else { 0.0 }),
-        forward: v4(forward, s.tan_half_fov_y),
-        right: v4(right, w as f64 / h as f64),
-        up: v4(up, settings.k_multi),
-        to_sun: v4(s.to_sun, s.step),
-        normal: v4(s.normal, s.sun_step),
-        shadow_u: v4(s.shadow_u, s.shadow_origin[0]),
-        shadow_w: v4(s.shadow_w, s.shadow_origin[1]),
-        shadow_texel: [
-            s.shadow_texel[0] as f32,
-            s.shadow_texel[1] as f32,
-            frame.ground_albedo as f32,
-            if settings.phase == SvsPhase::CornetteShanks {
-                1.0
-            } else {
-                0.0
-            },
-        ],
-        grid_min: v4(frame.grid.min_m, s.range.0),
-        grid_max: v4(frame.grid.max_m, s.range.1),
-        grid_dims: [nx as u32, ny as u32, nz as u32, tables.fields.len() as u32],
-        sizes: [
-            w as u32,
-            h as u32,
-            res as u32,
-            frame.haze.as_ref().map_or(0, |h| h.field as u32 + 1),
-        ],
+        view: View::new(s.eye, s.axes, (s.tan_half_fov_y, w as f64 / h as f64), None),
+        k_multi: settings.k_multi as f32,
+        back_to_front: u32::from(s.back_to_front),
+        plane_min: s.range.0 as f32,
+        plane_max: s.range.1 as f32,
+        to_sun: v3(s.to_sun),
+        slice_spacing: s.step as f32,
+        normal: v3(s.normal),
+        sun_path: s.sun_step as f32,
+        shadow_u: v3(s.shadow_u),
+        shadow_u_origin: s.shadow_origin[0] as f32,
+        shadow_w: v3(s.shadow_w),
+        shadow_w_origin: s.shadow_origin[1] as f32,
+        shadow_texel: [s.shadow_texel[0] as f32, s.shadow_texel[1] as f32],
+        cornette_shanks: u32::from(settings.phase == SvsPhase::CornetteShanks),
+        pad0: 0,
+        grid: Grid::of(frame, tables.fields.len()),
+        sizes: [w as u32, h as u32, res as u32],
+        haze_field: frame.haze.as_ref().map_or(0, |h| h.field as u32 + 1),
         sigma_ext: per_field(&|f| f.sigma_ext_m2),
         g: per_field(&|f| super::cpu::asymmetry(f, tables.theta_step_deg)),
-        sky_beta: a4(
-            frame.atmosphere.beta_sea_level_per_m,
-            1.0 / frame.atmosphere.scale_height_m,
-        ),
-        haze: haze.map_or([0.0; 4], |(f, h)| {
-            a4(
-                f.sigma_ext_m2.map(|e| e * h.number_density_per_m3),
-                1.0 / h.scale_height_m,
-            )
-        }),
-        haze_sca: a4(
-            haze.map_or([0.0; 3], |(f, h)| {
-                f.sigma_sca_m2.map(|e| e * h.number_density_per_m3)
-            }),
-            cos_disk,
-        ),
-        irradiance: a4(
-            frame.sun.irradiance,
-            std::f64::consts::TAU * (1.0 - cos_disk),
-        ),
+        sky: Sky::of(frame),
+        haze: a3(haze.map_or([0.0; 3], |(f, h)| {
+            f.sigma_ext_m2.map(|e| e * h.number_density_per_m3)
+        })),
+        inv_haze_height: haze.map_or(0.0, |(_, h)| (1.0 / h.scale_height_m) as f32),
+        haze_sca: a3(haze.map_or([0.0; 3], |(f, h)| {
+            f.sigma_sca_m2.map(|e| e * h.number_density_per_m3)
+        })),
+        pad1: 0.0,
     }
 }
 

@@ -5,25 +5,32 @@
 // render::miyazaki::cpu; this follows it step for step.
 
 struct SvsParams {
-    eye: vec4<f32>,          // xyz; w = 1 back to front, 0 front to back
-    forward: vec4<f32>,      // xyz; w = tan(fov_y / 2)
-    right: vec4<f32>,        // xyz; w = aspect
-    up: vec4<f32>,           // xyz; w = k_multi (1/sr)
-    to_sun: vec4<f32>,       // unit vector towards the sun; w = slice spacing Δ (m)
-    normal: vec4<f32>,       // the slices' unit normal; w = Δs, the sun's path per slice (m)
-    shadow_u: vec4<f32>,     // xyz; w = shadow-surface origin along u
-    shadow_w: vec4<f32>,     // xyz; w = shadow-surface origin along w
-    shadow_texel: vec4<f32>, // texel size u, w (m); z = ground albedo; w = 1: Cornette–Shanks
-    grid_min: vec4<f32>,     // xyz; w = lower plane value of the slices' range
-    grid_max: vec4<f32>,     // xyz; w = upper plane value
-    grid_dims: vec4<u32>,    // nx, ny, nz, field count
-    sizes: vec4<u32>,        // width, height, shadow resolution, haze field + 1 (0: none)
+    view: View,
+    k_multi: f32,            // 1/sr
+    back_to_front: u32,      // 1: slices back to front, 0: front to back
+    plane_min: f32,          // the lower plane value of the slices' range (m)
+    plane_max: f32,          // the upper plane value (m)
+    to_sun: vec3<f32>,       // unit vector towards the sun
+    slice_spacing: f32,      // Δ (m)
+    normal: vec3<f32>,       // the slices' unit normal
+    sun_path: f32,           // Δs, the sun's path per slice (m)
+    shadow_u: vec3<f32>,     // the shadow surface's axis u
+    shadow_u_origin: f32,    // its origin along u (m)
+    shadow_w: vec3<f32>,     // the shadow surface's axis w
+    shadow_w_origin: f32,    // its origin along w (m)
+    shadow_texel: vec2<f32>, // texel size along u, w (m)
+    cornette_shanks: u32,    // 1: the Cornette–Shanks phase function
+    pad0: u32,
+    grid: Grid,
+    sizes: vec3<u32>,        // width, height, shadow resolution
+    haze_field: u32,         // the haze's field + 1 (0: none)
     sigma_ext: array<vec4<f32>, 4>,  // per field, m² per channel
     g: array<vec4<f32>, 4>,          // per field, Cornette–Shanks asymmetry per channel
-    sky_beta: vec4<f32>,     // Rayleigh β_sl per channel (1/m); w = 1/H
-    haze: vec4<f32>,         // haze N_0 σ_ext per channel (1/m); w = 1/H_haze
-    haze_sca: vec4<f32>,     // haze N_0 σ_sca per channel (1/m); w = cos of the disk radius
-    irradiance: vec4<f32>,   // per channel; w = disk solid angle (sr)
+    sky: Sky,
+    haze: vec3<f32>,         // haze N_0 σ_ext per channel (1/m)
+    inv_haze_height: f32,    // 1/H_haze (1/m)
+    haze_sca: vec3<f32>,     // haze N_0 σ_sca per channel (1/m)
+    pad1: f32,
 }
 
 struct SliceParams {
@@ -50,7 +57,7 @@ const SHADOWED_AIR_POINTS: u32 = 64u;
 const SHADOWED_AIR_MAX_M: f32 = 200000.0;
 
 fn haze_on() -> bool {
-    return rp.sizes.w > 0u;
+    return rp.haze_field > 0u;
 }
 
 fn cornette_shanks(g: vec3<f32>, c: f32) -> vec3<f32> {
@@ -59,7 +66,7 @@ fn cornette_shanks(g: vec3<f32>, c: f32) -> vec3<f32> {
 }
 
 fn phase_of(field: u32, c: f32) -> vec3<f32> {
-    if (rp.shadow_texel.w > 0.5) {
+    if (rp.cornette_shanks != 0u) {
         return cornette_shanks(rp.g[field].rgb, c);
     }
     return ams(field, 1.0, c);
@@ -67,8 +74,8 @@ fn phase_of(field: u32, c: f32) -> vec3<f32> {
 
 // Rayleigh β and the haze's N/N_0 at height y.
 fn air_at(y: f32) -> vec4<f32> {
-    let r = rp.sky_beta.rgb * exp(-y * rp.sky_beta.w);
-    let n = select(0.0, exp(-rp.haze.w * y), haze_on());
+    let r = rp.sky.beta * exp(-y * rp.sky.inv_scale_height);
+    let n = select(0.0, exp(-rp.inv_haze_height * y), haze_on());
     return vec4<f32>(r, n);
 }
 
@@ -76,7 +83,7 @@ fn air_at(y: f32) -> vec4<f32> {
 fn sun_through_air(y: f32) -> vec3<f32> {
     var s = sunlight(y, rp.to_sun.y);
     if (haze_on()) {
-        s = s * exp(-rp.haze.rgb * (exp(-rp.haze.w * y) / rp.haze.w / rp.to_sun.y));
+        s = s * exp(-rp.haze * (exp(-rp.inv_haze_height * y) / rp.inv_haze_height / rp.to_sun.y));
     }
     return s;
 }
@@ -85,16 +92,16 @@ fn sun_through_air(y: f32) -> vec3<f32> {
 fn air_haze_transparency(y: f32, p_y: f32, k: f32) -> vec3<f32> {
     var t = air_transparency(y, p_y, k);
     if (haze_on()) {
-        let depth = exp(-rp.haze.w * y) * path_factor_for(rp.haze.w, p_y, k) / rp.haze.w;
-        t = t * exp(-rp.haze.rgb * depth);
+        let depth = exp(-rp.inv_haze_height * y) * path_factor_for(rp.inv_haze_height, p_y, k) / rp.inv_haze_height;
+        t = t * exp(-rp.haze * depth);
     }
     return t;
 }
 
 fn shadow_coords(p: vec3<f32>) -> vec2<f32> {
     return vec2<f32>(
-        (dot(rp.shadow_u.xyz, p) - rp.shadow_u.w) / rp.shadow_texel.x - 0.5,
-        (dot(rp.shadow_w.xyz, p) - rp.shadow_w.w) / rp.shadow_texel.y - 0.5);
+        (dot(rp.shadow_u, p) - rp.shadow_u_origin) / rp.shadow_texel.x - 0.5,
+        (dot(rp.shadow_w, p) - rp.shadow_w_origin) / rp.shadow_texel.y - 0.5);
 }
 
 // Bilinear in the shadow surface; 1 outside its footprint.
@@ -119,11 +126,11 @@ fn shadow_at(p: vec3<f32>) -> vec3<f32> {
 }
 
 fn sunward_of_slices(p: vec3<f32>) -> bool {
-    let c = dot(rp.normal.xyz, p);
-    if (dot(rp.normal.xyz, rp.to_sun.xyz) > 0.0) {
-        return c >= rp.grid_max.w;
+    let c = dot(rp.normal, p);
+    if (dot(rp.normal, rp.to_sun) > 0.0) {
+        return c >= rp.plane_max;
     }
-    return c <= rp.grid_min.w;
+    return c <= rp.plane_min;
 }
 
 @compute @workgroup_size(8, 8)
@@ -138,18 +145,18 @@ fn clear(@builtin(global_invocation_id) id: vec3<u32>) {
         eye_buffer[3u * i + 1u] = vec4<f32>(1.0);
         eye_buffer[3u * i + 2u] = vec4<f32>(1.0);
         // The Mie scattering texture.
-        let c = dot(pixel_ray(id.x, id.y), rp.to_sun.xyz);
-        let haze = i32(rp.sizes.w) - 1;
+        let c = dot(pixel_ray(id.x, id.y), rp.to_sun);
+        let haze = i32(rp.haze_field) - 1;
         for (var f = 0u; f < 4u; f = f + 1u) {
             var b = vec3<f32>(0.0);
-            if (f < rp.grid_dims.w && i32(f) != haze) {
-                b = (phase_of(f, c) + rp.up.w) * ams_field_info[f].yzw;
+            if (f < rp.grid.fields && i32(f) != haze) {
+                b = (phase_of(f, c) + rp.k_multi) * ams_field_info[f].yzw;
             }
             pixel_tex[5u * i + f] = vec4<f32>(b, 0.0);
         }
         var hb = vec3<f32>(0.0);
         if (haze_on()) {
-            hb = phase_of(u32(haze), c) * rp.haze_sca.rgb;
+            hb = phase_of(u32(haze), c) * rp.haze_sca;
         }
         pixel_tex[5u * i + 4u] = vec4<f32>(hb, 3.0 / (16.0 * PI) * (1.0 + c * c));
     }
@@ -161,13 +168,13 @@ fn shadow_slice(@builtin(global_invocation_id) id: vec3<u32>) {
     if (id.x >= res || id.y >= res) {
         return;
     }
-    let q = rp.shadow_u.xyz * (rp.shadow_u.w + (f32(id.x) + 0.5) * rp.shadow_texel.x)
-        + rp.shadow_w.xyz * (rp.shadow_w.w + (f32(id.y) + 0.5) * rp.shadow_texel.y);
-    let p = q + (slice.plane - dot(rp.normal.xyz, q)) / dot(rp.normal.xyz, rp.to_sun.xyz)
-        * rp.to_sun.xyz;
+    let q = rp.shadow_u * (rp.shadow_u_origin + (f32(id.x) + 0.5) * rp.shadow_texel.x)
+        + rp.shadow_w * (rp.shadow_w_origin + (f32(id.y) + 0.5) * rp.shadow_texel.y);
+    let p = q + (slice.plane - dot(rp.normal, q)) / dot(rp.normal, rp.to_sun)
+        * rp.to_sun;
     let ext = extinction(densities(p));
     let i = id.x + res * id.y;
-    shadow[i] = vec4<f32>(shadow[i].rgb * exp(-ext * rp.normal.w), 1.0);
+    shadow[i] = vec4<f32>(shadow[i].rgb * exp(-ext * rp.sun_path), 1.0);
 }
 
 @compute @workgroup_size(8, 8)
@@ -176,37 +183,37 @@ fn eye_slice(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     let d = pixel_ray(id.x, id.y);
-    let nd = dot(rp.normal.xyz, d);
+    let nd = dot(rp.normal, d);
     if (abs(nd) < 1e-9) {
         return;
     }
-    let t = (slice.plane - dot(rp.normal.xyz, rp.eye.xyz)) / nd;
-    let tg = ground_distance(d);
+    let t = (slice.plane - dot(rp.normal, rp.view.eye)) / nd;
+    let tg = ground_distance(rp.view.eye, d);
     if (t <= 0.0 || (tg >= 0.0 && t > tg)) {
         return;
     }
-    let p = rp.eye.xyz + t * d;
+    let p = rp.view.eye + t * d;
     let rho = densities(p);
     let ext = extinction(rho);
     let air = air_at(p.y);
-    let air_ext = air.rgb + air.w * rp.haze.rgb;
+    let air_ext = air.rgb + air.w * rp.haze;
     if (all(ext <= vec3<f32>(0.0)) && all(air_ext <= vec3<f32>(0.0))) {
         return;
     }
     let i = id.x + rp.sizes.x * id.y;
-    let dt = rp.to_sun.w / abs(nd);
+    let dt = rp.slice_spacing / abs(nd);
     let g_cl = shadow_at(p);
     let g_atm = sun_through_air(p.y);
     let tex_haze = pixel_tex[5u * i + 4u];
     var b = air.rgb * tex_haze.w + air.w * tex_haze.rgb;
-    for (var f = 0u; f < rp.grid_dims.w; f = f + 1u) {
+    for (var f = 0u; f < rp.grid.fields; f = f + 1u) {
         b = b + rho[f] * pixel_tex[5u * i + f].rgb;
     }
-    let contribution = rp.irradiance.rgb * dt * b * g_atm * g_cl;   // Eq. 8 × I_sun
+    let contribution = rp.sky.irradiance * dt * b * g_atm * g_cl;   // Eq. 8 × I_sun
     let slab = exp(-(ext + air_ext) * dt);                           // Eq. 9
     var sum = eye_buffer[3u * i].rgb;
     let alpha_star = eye_buffer[3u * i + 1u].rgb;
-    if (rp.eye.w > 0.5) {
+    if (rp.back_to_front != 0u) {
         sum = contribution + slab * sum;
     } else {
         sum = sum + alpha_star * contribution;
@@ -223,15 +230,17 @@ fn prism_span(d: vec3<f32>, t0: f32, t1: f32) -> vec2<f32> {
     let res = f32(rp.sizes.z);
     for (var k = 0; k < 2; k = k + 1) {
         var axis = rp.shadow_u;
+        var origin = rp.shadow_u_origin;
         var texel = rp.shadow_texel.x;
         if (k == 1) {
             axis = rp.shadow_w;
+            origin = rp.shadow_w_origin;
             texel = rp.shadow_texel.y;
         }
-        let a = axis.w;
-        let b = axis.w + texel * res;
-        let p = dot(axis.xyz, rp.eye.xyz);
-        let v = dot(axis.xyz, d);
+        let a = origin;
+        let b = origin + texel * res;
+        let p = dot(axis, rp.view.eye);
+        let v = dot(axis, d);
         if (abs(v) < 1e-15) {
             if (p < a || p > b) {
                 return vec2<f32>(t0, t0);
@@ -249,16 +258,16 @@ fn prism_span(d: vec3<f32>, t0: f32, t1: f32) -> vec2<f32> {
 // In-scattering by the air over [t0, t1] (t1 < 0: ∞) per unit irradiance (cpu::render's
 // air_segment).
 fn air_segment(d: vec3<f32>, t0: f32, t1_in: f32, tex: vec4<f32>) -> vec3<f32> {
-    let air_on = any(rp.sky_beta.rgb > vec3<f32>(0.0)) || haze_on();
+    let air_on = any(rp.sky.beta > vec3<f32>(0.0)) || haze_on();
     let infinite = t1_in < 0.0;
     if (!air_on || (!infinite && t1_in <= t0)) {
         return vec3<f32>(0.0);
     }
-    let y = rp.eye.y;
-    let cos_sun = dot(d, rp.to_sun.xyz);
+    let y = rp.view.eye.y;
+    let cos_sun = dot(d, rp.to_sun);
     // The segment lies on one side of the slices: ask at a point well inside it.
     let probe_t = select(0.5 * (t0 + t1_in), t0 + max(t0, 1.0), infinite);
-    let probe = rp.eye.xyz + probe_t * d;
+    let probe = rp.view.eye + probe_t * d;
     let sunward = sunward_of_slices(probe);
     var out = vec3<f32>(0.0);
     var lo = t0;
@@ -298,7 +307,7 @@ fn air_segment(d: vec3<f32>, t0: f32, t1_in: f32, tex: vec4<f32>) -> vec3<f32> {
         let ahead = air_at(y + (t + 0.5 * uniform_step) * d.y);
         var dt = uniform_step;
         if (!shadow_only) {
-            let e = ahead.rgb + ahead.w * rp.haze.rgb;
+            let e = ahead.rgb + ahead.w * rp.haze;
             let ext = max(e.r, max(e.g, e.b));
             dt = min(min(HAZY_AIR_STEP_TAU / max(ext, 1e-30), HAZY_AIR_MAX_STEP_M), hi - t);
             // Over the shadow's prism the steps resolve its edges (cpu::render).
@@ -312,7 +321,7 @@ fn air_segment(d: vec3<f32>, t0: f32, t1_in: f32, tex: vec4<f32>) -> vec3<f32> {
         }
         let tm = t + 0.5 * dt;
         t = t + dt;
-        let p = rp.eye.xyz + tm * d;
+        let p = rp.view.eye + tm * d;
         var g_cl = vec3<f32>(1.0);
         if (!sunward) {
             g_cl = shadow_at(p);
@@ -343,20 +352,20 @@ fn composite(@builtin(global_invocation_id) id: vec3<u32>) {
     let sum = eye_buffer[3u * i].rgb;
     let t_cl = eye_buffer[3u * i + 2u].rgb;
     let tex = pixel_tex[5u * i + 4u];
-    let t_end = ground_distance(d); // < 0: ∞
-    let n_dot_e = dot(rp.normal.xyz, rp.eye.xyz);
-    let nd = dot(rp.normal.xyz, d);
+    let t_end = ground_distance(rp.view.eye, d); // < 0: ∞
+    let n_dot_e = dot(rp.normal, rp.view.eye);
+    let nd = dot(rp.normal, d);
     let big = 3.0e38;
     let end = select(t_end, big, t_end < 0.0);
     var ta = 0.0;
     var tb = 0.0;
     if (abs(nd) < 1e-12) {
-        if (n_dot_e >= rp.grid_min.w && n_dot_e <= rp.grid_max.w) {
+        if (n_dot_e >= rp.plane_min && n_dot_e <= rp.plane_max) {
             tb = end;
         }
     } else {
-        let x = (rp.grid_min.w - n_dot_e) / nd;
-        let y = (rp.grid_max.w - n_dot_e) / nd;
+        let x = (rp.plane_min - n_dot_e) / nd;
+        let y = (rp.plane_max - n_dot_e) / nd;
         ta = clamp(min(x, y), 0.0, end);
         tb = clamp(max(x, y), 0.0, end);
     }
@@ -366,16 +375,16 @@ fn composite(@builtin(global_invocation_id) id: vec3<u32>) {
     if (tb < end) {
         back = air_segment(d, tb, t_end, tex);
     }
-    let t_front = air_haze_transparency(rp.eye.y, d.y, ta);
-    let t_all = air_haze_transparency(rp.eye.y, d.y, t_end);
+    let t_front = air_haze_transparency(rp.view.eye.y, d.y, ta);
+    let t_all = air_haze_transparency(rp.view.eye.y, d.y, t_end);
     var beyond = vec3<f32>(0.0);
     if (t_end >= 0.0) {
-        let g_cl = shadow_at(rp.eye.xyz + t_end * d);
-        beyond = rp.shadow_texel.z / PI * rp.to_sun.y * sun_through_air(0.0) * g_cl * t_all;
-    } else if (dot(d, rp.to_sun.xyz) >= rp.haze_sca.w) {
-        beyond = t_all / rp.irradiance.w;
+        let g_cl = shadow_at(rp.view.eye + t_end * d);
+        beyond = rp.grid.ground_albedo / PI * rp.to_sun.y * sun_through_air(0.0) * g_cl * t_all;
+    } else if (dot(d, rp.to_sun) >= rp.sky.cos_disk) {
+        beyond = t_all / rp.sky.disk_sr;
     }
-    let i_s = rp.irradiance.rgb;
+    let i_s = rp.sky.irradiance;
     let v = i_s * front + t_front * sum + t_cl * i_s * (back + beyond);
     image[i] = vec4<f32>(v, t_cl.g);
 }

@@ -11,9 +11,9 @@ use runtime::Tables;
 use runtime::gpu::{Gpu, GpuTables};
 
 use crate::gpu::{
-    COMPOSE_WGSL, Dispatch, FieldsAndSky, RenderError, Timings, bind, build, check_sizes,
-    fields_and_sky, filled, run_slices, sky_light_buffer, slice_uniforms, slicing_source, storage,
-    v4,
+    COMPOSE_WGSL, Dispatch, FieldsAndSky, Grid, RenderError, Sky, Timings, View, bind, build,
+    check_sizes, fields_and_sky, filled, run_slices, sky_light_buffer, slice_uniforms,
+    slicing_source, storage, v3,
 };
 use crate::{frame::Frame, image::Image, volume::MAX_FIELDS};
 
@@ -22,42 +22,40 @@ use crate::{frame::Frame, image::Image, volume::MAX_FIELDS};
 pub const RENDER_WGSL: &str = include_str!("render.wgsl");
 
 runtime::uniform! {
-    /// `RenderParams` of `render.wgsl` (its comments say what each w holds).
+    /// `RenderParams` of `render.wgsl`.
     pub struct RenderParams as "RenderParams" {
-        /// Eye (m); w = 1 front to back, 0 back to front.
-        pub eye: [f32; 4],
-        /// View direction; w = tan(fov_y / 2).
-        pub forward: [f32; 4],
-        /// Right axis; w = aspect.
-        pub right: [f32; 4],
-        /// Up axis; w = ξ (1/sr).
-        pub up: [f32; 4],
-        /// The sunlight's direction of travel; w = slice spacing Δ (m).
-        pub light: [f32; 4],
-        /// The half-angle vector; w = 1: continuum light update, 0: Eq. 25 as printed.
-        pub half_vector: [f32; 4],
-        /// Light-buffer axis u; w = its origin along u.
-        pub light_u: [f32; 4],
-        /// Light-buffer axis w; w = its origin along w.
-        pub light_w: [f32; 4],
-        /// Texel size u, w (m); z = the sun's y component.
-        pub light_texel: [f32; 4],
-        /// Grid box's lower corner; w = ground albedo.
-        pub grid_min: [f32; 4],
-        /// Grid box's upper corner.
-        pub grid_max: [f32; 4],
-        /// nx, ny, nz, field count.
-        pub grid_dims: [u32; 4],
+        /// The camera.
+        pub view: View,
+        /// The sunlight's direction of travel.
+        pub light: [f32; 3],
+        /// The slice spacing Δ (m).
+        pub slice_spacing: f32,
+        /// The half-angle vector.
+        pub half_vector: [f32; 3],
+        /// 1: the continuum light update, 0: Eq. 25 as printed.
+        pub continuum: u32,
+        /// The light buffer's axis u.
+        pub light_u: [f32; 3],
+        /// Its origin along u (m).
+        pub light_u_origin: f32,
+        /// The light buffer's axis w.
+        pub light_w: [f32; 3],
+        /// Its origin along w (m).
+        pub light_w_origin: f32,
+        /// Texel size along u, w (m).
+        pub light_texel: [f32; 2],
+        /// ξ (1/sr).
+        pub xi: f32,
+        /// 1: slices front to back, 0: back to front.
+        pub front_to_back: u32,
+        /// The grid and the ground.
+        pub grid: Grid,
         /// Width, height, light resolution, 0.
         pub sizes: [u32; 4],
         /// Per field, σ_ext per channel (m²).
         pub sigma_ext: [[f32; 4]; MAX_FIELDS],
-        /// β at sea level per channel (1/m); w = γ (1/m).
-        pub sky_beta: [f32; 4],
-        /// Unit vector towards the sun; w = cos(disk radius).
-        pub sun: [f32; 4],
-        /// Irradiance per channel; w = disk solid angle (sr).
-        pub irradiance: [f32; 4],
+        /// The sun and the air.
+        pub sky: Sky,
     }
 }
 
@@ -122,40 +120,33 @@ impl Renderer {
             ],
         )?;
 
-        let [nx, ny, nz] = frame.grid.dims;
-        let FieldsAndSky {
-            sigma_ext,
-            sky_beta,
-            sun,
-            irradiance,
-        } = fields_and_sky(tables, frame);
+        let FieldsAndSky { sigma_ext, sky } = fields_and_sky(tables, frame);
         let continuum = match settings.light_update {
-            super::LightUpdate::Continuum => 1.0,
-            super::LightUpdate::Riley2004 => 0.0,
+            super::LightUpdate::Continuum => 1,
+            super::LightUpdate::Riley2004 => 0,
         };
         let params = RenderParams {
-            eye: v4(setup.eye, if setup.front_to_back { 1.0 } else { 0.0 }),
-            forward: v4(setup.forward, setup.tan_half_fov_y),
-            right: v4(setup.right, setup.aspect),
-            up: v4(setup.up, settings.xi),
-            light: v4(setup.light, setup.slice_step),
-            half_vector: v4(setup.half, continuum),
-            light_u: v4(setup.light_u, setup.light_origin[0]),
-            light_w: v4(setup.light_w, setup.light_origin[1]),
-            light_texel: [
-                setup.light_texel[0] as f32,
-                setup.light_texel[1] as f32,
-                frame.sun.direction()[1] as f32,
-                0.0,
-            ],
-            grid_min: v4(frame.grid.min_m, frame.ground_albedo),
-            grid_max: v4(frame.grid.max_m, 0.0),
-            grid_dims: [nx as u32, ny as u32, nz as u32, tables.fields.len() as u32],
+            view: View::new(
+                setup.eye,
+                (setup.forward, setup.right, setup.up),
+                (setup.tan_half_fov_y, setup.aspect),
+                None,
+            ),
+            light: v3(setup.light),
+            slice_spacing: setup.slice_step as f32,
+            half_vector: v3(setup.half),
+            continuum,
+            light_u: v3(setup.light_u),
+            light_u_origin: setup.light_origin[0] as f32,
+            light_w: v3(setup.light_w),
+            light_w_origin: setup.light_origin[1] as f32,
+            light_texel: [setup.light_texel[0] as f32, setup.light_texel[1] as f32],
+            xi: settings.xi as f32,
+            front_to_back: u32::from(setup.front_to_back),
+            grid: Grid::of(frame, tables.fields.len()),
             sizes: [w as u32, h as u32, res as u32, 0],
             sigma_ext,
-            sky_beta,
-            sun,
-            irradiance,
+            sky,
         };
         let params = filled(
             device,

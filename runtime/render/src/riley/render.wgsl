@@ -4,23 +4,22 @@
 // render::riley::cpu.
 
 struct RenderParams {
-    eye: vec4<f32>,          // xyz; w = 1 front to back, 0 back to front
-    forward: vec4<f32>,      // xyz; w = tan(fov_y / 2)
-    right: vec4<f32>,        // xyz; w = aspect
-    up: vec4<f32>,           // xyz; w = ξ (1/sr)
-    light: vec4<f32>,        // direction of travel; w = slice spacing Δ (m)
-    half_vector: vec4<f32>,  // xyz; w = 1: continuum light update, 0: Eq. 25 as printed
-    light_u: vec4<f32>,      // xyz; w = light-buffer origin along u
-    light_w: vec4<f32>,      // xyz; w = light-buffer origin along w
-    light_texel: vec4<f32>,  // texel size u, w (m); z = sun's y component; w unused
-    grid_min: vec4<f32>,     // xyz; w = ground albedo (Lambertian, 0: black)
-    grid_max: vec4<f32>,
-    grid_dims: vec4<u32>,    // nx, ny, nz, field count
+    view: View,
+    light: vec3<f32>,        // the sunlight's direction of travel
+    slice_spacing: f32,      // Δ (m)
+    half_vector: vec3<f32>,
+    continuum: u32,          // 1: the continuum light update, 0: Eq. 25 as printed
+    light_u: vec3<f32>,      // the light buffer's axis u
+    light_u_origin: f32,     // its origin along u (m)
+    light_w: vec3<f32>,      // the light buffer's axis w
+    light_w_origin: f32,     // its origin along w (m)
+    light_texel: vec2<f32>,  // texel size along u, w (m)
+    xi: f32,                 // ξ (1/sr)
+    front_to_back: u32,      // 1: slices front to back, 0: back to front
+    grid: Grid,
     sizes: vec4<u32>,        // width, height, light resolution, 0
     sigma_ext: array<vec4<f32>, 4>,  // per field, m² per channel
-    sky_beta: vec4<f32>,     // β at sea level per channel (1/m); w = γ (1/m)
-    sun: vec4<f32>,          // unit vector towards the sun; w = cos(disk radius)
-    irradiance: vec4<f32>,   // per channel; w = disk solid angle (sr)
+    sky: Sky,
 }
 
 struct SliceParams {
@@ -39,7 +38,7 @@ struct SliceParams {
 
 fn scattering(rho: vec4<f32>) -> vec3<f32> {
     var s = vec3<f32>(0.0);
-    for (var i = 0u; i < rp.grid_dims.w; i = i + 1u) {
+    for (var i = 0u; i < rp.grid.fields; i = i + 1u) {
         s = s + rho[i] * ams_field_info[i].yzw;
     }
     return s;
@@ -49,7 +48,7 @@ fn scattering(rho: vec4<f32>) -> vec3<f32> {
 fn forward_fraction_mix(rho: vec4<f32>, n: f32) -> vec3<f32> {
     var num = vec3<f32>(0.0);
     var den = vec3<f32>(0.0);
-    for (var i = 0u; i < rp.grid_dims.w; i = i + 1u) {
+    for (var i = 0u; i < rp.grid.fields; i = i + 1u) {
         if (rho[i] > 0.0) {
             let w = rho[i] * ams_field_info[i].yzw;
             num = num + w * forward_fraction(i, n);
@@ -62,8 +61,8 @@ fn forward_fraction_mix(rho: vec4<f32>, n: f32) -> vec3<f32> {
 fn light_at(p: vec3<f32>) -> vec4<f32> {
     let res = rp.sizes.z;
     let top = f32(res - 1u);
-    let u = clamp((dot(rp.light_u.xyz, p) - rp.light_u.w) / rp.light_texel.x - 0.5, 0.0, top);
-    let v = clamp((dot(rp.light_w.xyz, p) - rp.light_w.w) / rp.light_texel.y - 0.5, 0.0, top);
+    let u = clamp((dot(rp.light_u, p) - rp.light_u_origin) / rp.light_texel.x - 0.5, 0.0, top);
+    let v = clamp((dot(rp.light_w, p) - rp.light_w_origin) / rp.light_texel.y - 0.5, 0.0, top);
     let a0 = min(u32(floor(u)), res - 2u);
     let b0 = min(u32(floor(v)), res - 2u);
     let s = u - f32(a0);
@@ -94,15 +93,15 @@ fn eye_slice(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     let d = pixel_ray(id.x, id.y);
-    let hd = dot(rp.half_vector.xyz, d);
+    let hd = dot(rp.half_vector, d);
     if (abs(hd) < 1e-9) {
         return;
     }
-    let t = (slice.plane - dot(rp.half_vector.xyz, rp.eye.xyz)) / hd;
+    let t = (slice.plane - dot(rp.half_vector, rp.view.eye)) / hd;
     if (t <= 0.0) {
         return;
     }
-    let p = rp.eye.xyz + t * d;
+    let p = rp.view.eye + t * d;
     let rho = densities(p);
     let ext = extinction(rho);
     if (all(ext <= vec3<f32>(0.0))) {
@@ -111,9 +110,9 @@ fn eye_slice(@builtin(global_invocation_id) id: vec3<u32>) {
     let sca = scattering(rho);
     let albedo = select(vec3<f32>(0.0), sca / ext, ext > vec3<f32>(0.0));
     var lit = light_at(p);
-    if (rp.half_vector.w > 0.5) {
+    if (rp.continuum != 0u) {
         // The light at the slab's middle (cpu::cross_slab over half the light's path).
-        let tau_h = ext * (0.5 * rp.light.w / dot(rp.half_vector.xyz, rp.light.xyz));
+        let tau_h = ext * (0.5 * rp.slice_spacing / dot(rp.half_vector, rp.light));
         let f_h = forward_fraction_mix(rho, lit.w + 1.0 + tau_h.g);
         let kept = select(vec3<f32>(1.0), exp(-tau_h * (1.0 - albedo * f_h)), ext > vec3<f32>(0.0));
         var n_h = lit.w;
@@ -122,15 +121,15 @@ fn eye_slice(@builtin(global_invocation_id) id: vec3<u32>) {
         }
         lit = vec4<f32>(lit.rgb * kept, n_h);
     }
-    let phase = ams_mix(rho, lit.w + 1.0, -dot(rp.light.xyz, d));
-    let thickness = rp.light.w / abs(hd);
+    let phase = ams_mix(rho, lit.w + 1.0, -dot(rp.light, d));
+    let thickness = rp.slice_spacing / abs(hd);
     let slab = exp(-ext * thickness);
-    let scattered = lit.rgb * sunlight(p.y, rp.light_texel.z) * rp.irradiance.rgb * (phase + rp.up.w) * albedo
+    let scattered = lit.rgb * sunlight(p.y, rp.sky.sun.y) * rp.sky.irradiance * (phase + rp.xi) * albedo
         * (1.0 - slab);
     let i = id.x + rp.sizes.x * id.y;
     let l = eye_buffer[2u * i].rgb;
     let tr = eye_buffer[2u * i + 1u].rgb;
-    if (rp.eye.w > 0.5) {
+    if (rp.front_to_back != 0u) {
         eye_buffer[2u * i] = vec4<f32>(l + tr * scattered, 0.0);
     } else {
         eye_buffer[2u * i] = vec4<f32>(scattered + slab * l, 0.0);
@@ -144,24 +143,24 @@ fn light_slice(@builtin(global_invocation_id) id: vec3<u32>) {
     if (id.x >= res || id.y >= res) {
         return;
     }
-    let q = rp.light_u.xyz * (rp.light_u.w + (f32(id.x) + 0.5) * rp.light_texel.x)
-        + rp.light_w.xyz * (rp.light_w.w + (f32(id.y) + 0.5) * rp.light_texel.y);
-    let h_dot_l = dot(rp.half_vector.xyz, rp.light.xyz);
-    let t = (slice.plane - dot(rp.half_vector.xyz, q)) / h_dot_l;
-    let p = q + t * rp.light.xyz;
+    let q = rp.light_u * (rp.light_u_origin + (f32(id.x) + 0.5) * rp.light_texel.x)
+        + rp.light_w * (rp.light_w_origin + (f32(id.y) + 0.5) * rp.light_texel.y);
+    let h_dot_l = dot(rp.half_vector, rp.light);
+    let t = (slice.plane - dot(rp.half_vector, q)) / h_dot_l;
+    let p = q + t * rp.light;
     let rho = densities(p);
     let ext = extinction(rho);
     if (all(ext <= vec3<f32>(0.0))) {
         return;
     }
     let sca = scattering(rho);
-    let tau = ext * (rp.light.w / h_dot_l);
+    let tau = ext * (rp.slice_spacing / h_dot_l);
     let texel = light_buffer[id.x + res * id.y];
     let f = forward_fraction_mix(rho, texel.w + 1.0 + tau.g);
     let albedo = select(vec3<f32>(0.0), sca / ext, ext > vec3<f32>(0.0));
     // render::LightUpdate::keep.
     var kept: vec3<f32>;
-    if (rp.half_vector.w > 0.5) {
+    if (rp.continuum != 0u) {
         kept = exp(-tau * (1.0 - albedo * f));
     } else {
         let through = exp(-tau);
@@ -180,8 +179,8 @@ fn light_slice(@builtin(global_invocation_id) id: vec3<u32>) {
 // outside its footprint (the ground's and the air's below the grid, compose.wgsl).
 fn sun_left(g: vec3<f32>) -> vec3<f32> {
     let res = f32(rp.sizes.z);
-    let u = (dot(rp.light_u.xyz, g) - rp.light_u.w) / rp.light_texel.x - 0.5;
-    let w = (dot(rp.light_w.xyz, g) - rp.light_w.w) / rp.light_texel.y - 0.5;
+    let u = (dot(rp.light_u, g) - rp.light_u_origin) / rp.light_texel.x - 0.5;
+    let w = (dot(rp.light_w, g) - rp.light_w_origin) / rp.light_texel.y - 0.5;
     if (u >= -0.5 && u <= res - 0.5 && w >= -0.5 && w <= res - 0.5) {
         return light_at(g).rgb;
     }
@@ -199,10 +198,10 @@ fn composite(@builtin(global_invocation_id) id: vec3<u32>) {
     let t_vol = eye_buffer[2u * i + 1u].rgb;
     // The ground lit through the final light buffer (1 outside it).
     var lit = vec3<f32>(1.0);
-    let k_end = ground_distance(d);
-    if (rp.grid_min.w > 0.0 && k_end > 0.0) {
-        lit = sun_left(rp.eye.xyz + k_end * d);
+    let k_end = ground_distance(rp.view.eye, d);
+    if (rp.grid.ground_albedo > 0.0 && k_end > 0.0) {
+        lit = sun_left(rp.view.eye + k_end * d);
     }
-    let v = compose(d, l_vol, t_vol, t_vol, lit);
+    let v = compose(rp.view.eye, d, l_vol, t_vol, t_vol, lit);
     image[i] = vec4<f32>(v, t_vol.g);
 }

@@ -49,7 +49,8 @@ use super::{Passes, Settings, Tracer, TruthImage};
 use crate::checks::FrameError;
 use crate::frame::Frame;
 use crate::gpu::{
-    RenderError, SLICING_WGSL, a4, check_sizes, entry, filled, storage, submit_pass, v4,
+    Grid, RenderError, SLICING_WGSL, Sky, View, a3, a4, check_sizes, entry, filled, storage,
+    submit_pass, v3, v4,
 };
 use crate::model::Progress;
 use crate::volume::{DensityGrid, MAX_FIELDS};
@@ -143,46 +144,74 @@ pub fn source() -> String {
 }
 
 runtime::uniform! {
-    /// `Params` of `truth.wgsl` (its comments say what each component holds).
+    /// `Params` of `truth.wgsl`.
     pub struct TruthParams as "Params" {
-        /// View direction; w = tan(fov_y / 2).
-        pub forward: [f32; 4],
-        /// Right axis; w = aspect.
-        pub right: [f32; 4],
-        /// Up axis; w = an orthographic camera's half image height (m), 0 for a perspective one.
-        pub up: [f32; 4],
-        /// Width, height, first sample of the pass, samples in the pass.
-        pub sizes: [u32; 4],
-        /// Eye (m).
-        pub eye: [f32; 4],
-        /// The grid's box (m).
-        pub grid_min: [f32; 4],
-        /// The grid's box (m).
-        pub grid_max: [f32; 4],
-        /// Voxels per axis; w = fields.
-        pub grid_dims: [u32; 4],
-        /// σ_ext per field (m², per channel).
+        /// The camera (photons: their source as the eye, their direction as forward).
+        pub view: View,
+        /// Width, height.
+        pub sizes: [u32; 2],
+        /// The pass's first sample.
+        pub first_sample: u32,
+        /// The pass's samples.
+        pub samples: u32,
+        /// The grid and the ground.
+        pub grid: Grid,
+        /// σ_ext per field (m², per channel; the transparency uses green).
         pub sigma_ext: [[f32; 4]; MAX_FIELDS],
-        /// w = the air's 1/H.
-        pub sky_beta: [f32; 4],
-        /// Towards the sun; w = cos of the disk's radius.
-        pub sun: [f32; 4],
-        /// Sun irradiance; w = the disk's solid angle.
-        pub irradiance: [f32; 4],
-        /// Background radiance; w = ground albedo.
-        pub background: [f32; 4],
-        /// Majorant, guide share, haze 1/H, transparency step.
-        pub track: [f32; 4],
-        /// Bands, carried wavelengths, max scatterings, lights.
-        pub counts: [u32; 4],
-        /// θ bins, haze field (u32::MAX: none), air on, blocks.
-        pub counts2: [u32; 4],
-        /// Seed low and high words, splitting on.
-        pub seed: [u32; 4],
-        /// θ step (rad); loop steps per dispatch.
-        pub theta: [f32; 4],
-        /// The tile's first pixel and its pixel count.
-        pub tile: [u32; 4],
+        /// The sun and the air (its β unused here).
+        pub sky: Sky,
+        /// The radiance of what paths leave into.
+        pub background: [f32; 3],
+        /// Padding.
+        pub pad0: f32,
+        /// The majorant (1/m).
+        pub majorant: f32,
+        /// The guide share ε.
+        pub guide_share: f32,
+        /// The haze's 1/H (1/m).
+        pub inv_haze_height: f32,
+        /// T_vol's step (m).
+        pub transparency_step: f32,
+        /// Bands.
+        pub bands: u32,
+        /// Wavelengths carried per path.
+        pub carried: u32,
+        /// Max scatterings.
+        pub max_scatterings: u32,
+        /// Lights.
+        pub lights: u32,
+        /// θ bins.
+        pub theta_bins: u32,
+        /// The haze's field (u32::MAX: none).
+        pub haze_field: u32,
+        /// 1: the air on.
+        pub air_on: u32,
+        /// Blocks.
+        pub blocks: u32,
+        /// The seed's low word.
+        pub seed_low: u32,
+        /// The seed's high word.
+        pub seed_high: u32,
+        /// 1: splitting on.
+        pub splitting: u32,
+        /// Padding.
+        pub pad2: u32,
+        /// The θ bins' step (rad).
+        pub theta_step: f32,
+        /// Loop steps per dispatch.
+        pub loop_budget: f32,
+        /// Padding.
+        pub pad3: f32,
+        /// Padding.
+        pub pad4: f32,
+        /// The tile's first pixel.
+        pub tile_first: u32,
+        /// The tile's pixel count.
+        pub tile_pixels: u32,
+        /// Padding.
+        pub pad5: u32,
+        /// Padding.
+        pub pad6: u32,
     }
 }
 
@@ -470,57 +499,58 @@ fn params(
     let voxel = (0..3)
         .map(|a| (grid.max_m[a] - grid.min_m[a]) / grid.dims[a] as f64)
         .fold(f64::INFINITY, f64::min);
-    let mut params = TruthParams {
-        forward: v4(forward, frame.camera.tan_half_fov()),
-        right: v4(right, w as f64 / h as f64),
-        up: v4(up, frame.camera.ortho_half_height_m((w, h)).unwrap_or(0.0)),
-        sizes: [w as u32, h as u32, 0, 0],
-        eye: v4(frame.camera.position_m, 0.0),
-        grid_min: v4(grid.min_m, 0.0),
-        grid_max: v4(grid.max_m, 0.0),
-        grid_dims: [
-            grid.dims[0] as u32,
-            grid.dims[1] as u32,
-            grid.dims[2] as u32,
-            tracer.n_fields as u32,
-        ],
+    let size_px = (w, h);
+    let (eye, forward) = photon.unwrap_or((frame.camera.position_m, forward));
+    Ok(TruthParams {
+        view: View::new(
+            eye,
+            (forward, right, up),
+            (frame.camera.tan_half_fov(), w as f64 / h as f64),
+            frame.camera.ortho_half_height_m(size_px),
+        ),
+        sizes: [w as u32, h as u32],
+        first_sample: 0,
+        samples: 0,
+        grid: Grid {
+            ground_albedo: tracer.ground_albedo as f32,
+            ..Grid::of(frame, tracer.n_fields)
+        },
         sigma_ext: std::array::from_fn(|f| [0.0, tracer.sigma_ext_g[f] as f32, 0.0, 0.0]),
-        sky_beta: [0.0, 0.0, 0.0, tracer.gamma as f32],
-        sun: v4(tracer.sun, tracer.cos_disk),
-        irradiance: a4(tracer.sun_irradiance, tracer.disk_sr),
-        background: a4(tracer.background, tracer.ground_albedo),
-        track: [
-            tracer.majorant as f32,
-            tracer.guide as f32,
-            tracer.haze.map_or(0.0, |h| h.1) as f32,
-            (0.25 * voxel) as f32,
-        ],
-        counts: [
-            tracer.bands.len() as u32,
-            tracer.wavelengths_per_path.clamp(1, super::MAX_CARRIED) as u32,
-            tracer.max_scatterings.min(u32::MAX as usize) as u32,
-            tracer.lights.len() as u32,
-        ],
-        counts2: [
-            o.bins as u32,
-            tracer.haze.map_or(u32::MAX, |h| h.0 as u32),
-            u32::from(tracer.air_on),
-            o.blocks as u32,
-        ],
-        seed: [settings.seed as u32, (settings.seed >> 32) as u32, 1, 0],
-        theta: [
-            tracer.bands[0].fields[0].phase.step() as f32,
-            STEPS_PER_DISPATCH as f32,
-            0.0,
-            0.0,
-        ],
-        tile: [0; 4],
-    };
-    if let Some((origin, beam)) = photon {
-        params.eye = v4(origin, 0.0);
-        params.forward = v4(beam, params.forward[3] as f64);
-    }
-    Ok(params)
+        sky: Sky {
+            beta: [0.0; 3],
+            inv_scale_height: tracer.gamma as f32,
+            sun: v3(tracer.sun),
+            cos_disk: tracer.cos_disk as f32,
+            irradiance: a3(tracer.sun_irradiance),
+            disk_sr: tracer.disk_sr as f32,
+        },
+        background: a3(tracer.background),
+        pad0: 0.0,
+        majorant: tracer.majorant as f32,
+        guide_share: tracer.guide as f32,
+        inv_haze_height: tracer.haze.map_or(0.0, |h| h.1) as f32,
+        transparency_step: (0.25 * voxel) as f32,
+        bands: tracer.bands.len() as u32,
+        carried: tracer.wavelengths_per_path.clamp(1, super::MAX_CARRIED) as u32,
+        max_scatterings: tracer.max_scatterings.min(u32::MAX as usize) as u32,
+        lights: tracer.lights.len() as u32,
+        theta_bins: o.bins as u32,
+        haze_field: tracer.haze.map_or(u32::MAX, |h| h.0 as u32),
+        air_on: u32::from(tracer.air_on),
+        blocks: o.blocks as u32,
+        seed_low: settings.seed as u32,
+        seed_high: (settings.seed >> 32) as u32,
+        splitting: 1,
+        pad2: 0,
+        theta_step: tracer.bands[0].fields[0].phase.step() as f32,
+        loop_budget: STEPS_PER_DISPATCH as f32,
+        pad3: 0.0,
+        pad4: 0.0,
+        tile_first: 0,
+        tile_pixels: 0,
+        pad5: 0,
+        pad6: 0,
+    })
 }
 
 /// The tracer's lights as the shader's [`Light`]s.
@@ -754,9 +784,10 @@ fn trace(
         let pass_start = Instant::now();
         for first in (0..pixels as usize).step_by(TILE_PIXELS) {
             let len = TILE_PIXELS.min(pixels as usize - first);
-            params.tile = [first as u32, len as u32, 0, 0];
-            params.sizes[2] = done as u32;
-            params.sizes[3] = batch as u32;
+            params.tile_first = first as u32;
+            params.tile_pixels = len as u32;
+            params.first_sample = done as u32;
+            params.samples = batch as u32;
             gpu.queue
                 .write_buffer(&bound.params, 0, bytemuck::bytes_of(&params));
             let mut begin = true;

@@ -4,25 +4,39 @@
 // render::truth give the equations and their sources.
 
 struct Params {
-    forward: vec4<f32>,      // w = tan(fov_y / 2)
-    right: vec4<f32>,        // w = aspect
-    up: vec4<f32>,           // w = an orthographic camera's half image height (m); 0: perspective
-    sizes: vec4<u32>,        // width, height, first sample of this pass, samples in this pass
-    eye: vec4<f32>,
-    grid_min: vec4<f32>,
-    grid_max: vec4<f32>,
-    grid_dims: vec4<u32>,    // w = field count
+    view: View,
+    sizes: vec2<u32>,        // width, height
+    first_sample: u32,       // the first sample of this pass
+    samples: u32,            // the samples in this pass
+    grid: Grid,
     sigma_ext: array<vec4<f32>, 4>, // per field, m² per channel (the transparency uses green)
-    sky_beta: vec4<f32>,     // rgb unused here; w = γ = 1/H of the air
-    sun: vec4<f32>,          // unit direction towards the sun; w = cos of the disk's radius
-    irradiance: vec4<f32>,   // per channel; w = the disk's solid angle (sr)
-    background: vec4<f32>,   // radiance of what paths leave into; w = ground albedo
-    track: vec4<f32>,        // majorant (1/m), guide share ε, the haze's 1/H, T_vol step (m)
-    counts: vec4<u32>,       // bands, wavelengths carried, max scatterings, lights
-    counts2: vec4<u32>,      // θ bins, haze field (0xffffffff: none), air on, blocks
-    seed: vec4<u32>,         // seed's low and high words, splitting on
-    theta: vec4<f32>,        // θ step (rad); y = loop steps per dispatch (the budget)
-    tile: vec4<u32>,         // the tile's first pixel and its pixel count
+    sky: Sky,                // (beta unused here)
+    background: vec3<f32>,   // radiance of what paths leave into
+    pad0: f32,
+    majorant: f32,           // 1/m
+    guide_share: f32,        // the guide share ε
+    inv_haze_height: f32,    // the haze's 1/H (1/m)
+    transparency_step: f32,  // T_vol's step (m)
+    bands: u32,
+    carried: u32,            // wavelengths carried
+    max_scatterings: u32,
+    lights: u32,
+    theta_bins: u32,
+    haze_field: u32,         // 0xffffffff: none
+    air_on: u32,
+    blocks: u32,
+    seed_low: u32,           // the seed's low word
+    seed_high: u32,          // its high word
+    splitting: u32,          // 1: splitting on
+    pad2: u32,
+    theta_step: f32,         // the θ bins' step (rad)
+    loop_budget: f32,        // loop steps per dispatch
+    pad3: f32,
+    pad4: f32,
+    tile_first: u32,         // the tile's first pixel
+    tile_pixels: u32,        // its pixel count
+    pad5: u32,
+    pad6: u32,
 }
 
 @group(0) @binding(0) var<uniform> rp: Params;
@@ -122,7 +136,7 @@ fn hash(v: u32) -> u32 {
 }
 
 fn stream(pixel: u32, smp: u32) {
-    let s = hash(hash(rp.seed.x) ^ rp.seed.y);
+    let s = hash(hash(rp.seed_low) ^ rp.seed_high);
     key0 = hash(s ^ hash(pixel + 0x9e3779b9u) ^ hash(smp * 0x85ebca6bu + 1u));
     key1 = hash(key0 ^ hash(smp + 0x27d4eb2fu) ^ pixel * 0xc2b2ae35u);
     counter = 0u;
@@ -196,7 +210,7 @@ fn carry(n: u32) -> Carried {
             um = um - 1.0;
         }
         var j = 0u;
-        while (j + 1u < rp.counts.x && bands[j].air.w <= um) {
+        while (j + 1u < rp.bands && bands[j].air.w <= um) {
             j = j + 1u;
         }
         c.band[m] = j;
@@ -207,8 +221,8 @@ fn carry(n: u32) -> Carried {
 // ---- the phase functions (render::truth::phase::PhaseSampler) ----
 
 fn phase_base(b: u32, field: u32) -> u32 {
-    let bins = rp.counts2.x;
-    return (b * 4u + field) * (2u * bins + rp.counts2.w);
+    let bins = rp.theta_bins;
+    return (b * 4u + field) * (2u * bins + rp.blocks);
 }
 
 fn phase_value(b: u32, field: u32, k: u32) -> f32 {
@@ -218,15 +232,15 @@ fn phase_value(b: u32, field: u32, k: u32) -> f32 {
 // The bin of the angle between unit d and w.
 fn phase_bin(d: vec3<f32>, w: vec3<f32>) -> u32 {
     let theta = atan2(length(cross(d, w)), dot(d, w));
-    return min(u32(round(theta / rp.theta.x)), rp.counts2.x - 1u);
+    return min(u32(round(theta / rp.theta_step)), rp.theta_bins - 1u);
 }
 
 // A bin of the smooth part drawn by its probability (u picks the block, v the bin in it: each
 // level's CDF is relative, so a bin of probability 10⁻⁸ is drawn as often as it should be in
 // f32), then (1 − cos θ, sin θ) uniform in cos θ inside the bin (w).
 fn phase_sample_smooth(b: u32, field: u32, u: f32, v: f32, w: f32) -> vec2<f32> {
-    let bins = rp.counts2.x;
-    let blocks = rp.counts2.w;
+    let bins = rp.theta_bins;
+    let blocks = rp.blocks;
     let base = phase_base(b, field);
     var lo = 0u;
     var hi = blocks - 1u;
@@ -313,22 +327,22 @@ fn exp_path(gamma: f32, p: vec3<f32>, d: vec3<f32>, s: f32) -> f32 {
 }
 
 fn air_path(p: vec3<f32>, d: vec3<f32>, s: f32) -> f32 {
-    if (rp.counts2.z == 0u) {
+    if (rp.air_on == 0u) {
         return 0.0;
     }
-    return exp_path(rp.sky_beta.w, p, d, s);
+    return exp_path(rp.sky.inv_scale_height, p, d, s);
 }
 
 fn haze_path(p: vec3<f32>, d: vec3<f32>, s: f32) -> f32 {
-    if (rp.counts2.y == 0xffffffffu) {
+    if (rp.haze_field == 0xffffffffu) {
         return 0.0;
     }
-    return exp_path(rp.track.z, p, d, s);
+    return exp_path(rp.inv_haze_height, p, d, s);
 }
 
 // Tracer::air_ratios.
 fn air_ratios(c: ptr<function, Carried>, p: vec3<f32>, d: vec3<f32>, s: f32, collided: bool) {
-    if ((*c).n == 1u || rp.counts2.z == 0u) {
+    if ((*c).n == 1u || rp.air_on == 0u) {
         return;
     }
     let path = air_path(p, d, s);
@@ -346,7 +360,7 @@ fn air_ratios(c: ptr<function, Carried>, p: vec3<f32>, d: vec3<f32>, s: f32, col
 
 // Tracer::haze_ratios.
 fn haze_ratios(c: ptr<function, Carried>, p: vec3<f32>, d: vec3<f32>, s: f32, collided: bool) {
-    if (rp.counts2.y == 0xffffffffu) {
+    if (rp.haze_field == 0xffffffffu) {
         return;
     }
     let path = haze_path(p, d, s);
@@ -386,7 +400,7 @@ fn sigma_matrix(c: Carried) -> mat4x4<f32> {
 fn extinctions(c: Carried, rho: vec4<f32>) -> vec4<f32> {
     var e = vec4<f32>(0.0);
     for (var m = 0u; m < c.n; m = m + 1u) {
-        for (var f = 0u; f < rp.grid_dims.w; f = f + 1u) {
+        for (var f = 0u; f < rp.grid.fields; f = f + 1u) {
             e[m] = e[m] + rho[f] * field_optics(c.band[m], f).x;
         }
     }
@@ -409,16 +423,16 @@ fn grid_span(o: vec3<f32>, d: vec3<f32>) -> vec2<f32> {
     var t0 = 0.0;
     var t1 = 3.0e38;
     if (d.y == 0.0) {
-        if (o.y < rp.grid_min.y || o.y > rp.grid_max.y) {
+        if (o.y < rp.grid.min.y || o.y > rp.grid.max.y) {
             return vec2<f32>(-1.0);
         }
     } else {
-        let lo = (rp.grid_min.y - o.y) / d.y;
-        let hi = (rp.grid_max.y - o.y) / d.y;
+        let lo = (rp.grid.min.y - o.y) / d.y;
+        let hi = (rp.grid.max.y - o.y) / d.y;
         t0 = max(0.0, min(lo, hi));
         t1 = max(lo, hi);
     }
-    let size = rp.grid_max.xyz - rp.grid_min.xyz;
+    let size = rp.grid.max - rp.grid.min;
     t1 = min(t1, t0 + 1000.0 * max(size.x, size.z));
     return select(vec2<f32>(-1.0), vec2<f32>(t0, t1), t0 < t1);
 }
@@ -429,12 +443,12 @@ fn grid_densities(p: vec3<f32>) -> vec4<f32> {
     if (!periodic) {
         return densities(p);
     }
-    if (p.y < rp.grid_min.y || p.y > rp.grid_max.y) {
+    if (p.y < rp.grid.min.y || p.y > rp.grid.max.y) {
         return vec4<f32>(0.0);
     }
-    let n = rp.grid_dims.xyz;
+    let n = rp.grid.dims;
     let nf = vec3<f32>(n);
-    let u = (p - rp.grid_min.xyz) / (rp.grid_max.xyz - rp.grid_min.xyz) * nf - 0.5;
+    let u = (p - rp.grid.min) / (rp.grid.max - rp.grid.min) * nf - 0.5;
     let ux = u.x - floor(u.x / nf.x) * nf.x;
     let uz = u.z - floor(u.z / nf.z) * nf.z;
     let uy = clamp(u.y, 0.0, nf.y - 1.0);
@@ -461,7 +475,7 @@ fn track(c: ptr<function, Carried>, p: vec3<f32>, d: vec3<f32>, limit: f32) -> H
         return out;
     }
     let end = min(span.y, limit);
-    let mu = rp.track.x;
+    let mu = rp.majorant;
     let sig = sigma_matrix(*c);
     var t = span.x;
     loop {
@@ -495,7 +509,7 @@ fn volume_transmittance(c: Carried, p: vec3<f32>, d: vec3<f32>, limit: f32) -> v
         return tr;
     }
     let end = min(span.y, limit);
-    let mu = rp.track.x;
+    let mu = rp.majorant;
     let sig = sigma_matrix(c);
     var t = span.x;
     loop {
@@ -565,8 +579,8 @@ fn add_source(c: Carried, v: Vertex, p: vec3<f32>, dir: vec3<f32>, limit: f32, s
 }
 
 fn direct(c: Carried, v: Vertex, p: vec3<f32>, coef_w: vec4<f32>) -> vec3<f32> {
-    var sum = add_source(c, v, p, rp.sun.xyz, INF, rp.irradiance.xyz, coef_w);
-    for (var i = 0u; i < rp.counts.w; i = i + 1u) {
+    var sum = add_source(c, v, p, rp.sky.sun, INF, rp.sky.irradiance, coef_w);
+    for (var i = 0u; i < rp.lights; i = i + 1u) {
         let light = lights[i];
         let to = light.position.xyz - p;
         let r2 = dot(to, to);
@@ -602,16 +616,16 @@ fn next_event(c: ptr<function, Carried>, p0: vec3<f32>, d: vec3<f32>) -> Event {
     ev.field = 0u;
     let t_ground = select(INF, max(p0.y / -d.y, 0.0), d.y < 0.0);
     let hero = bands[(*c).band[0]].air;
-    let t_air = select(INF, sample_exponential(hero.x, rp.sky_beta.w, p0, d), rp.counts2.z != 0u);
-    let t_haze = select(INF, sample_exponential(hero.y, rp.track.z, p0, d),
-        rp.counts2.y != 0xffffffffu);
+    let t_air = select(INF, sample_exponential(hero.x, rp.sky.inv_scale_height, p0, d), rp.air_on != 0u);
+    let t_haze = select(INF, sample_exponential(hero.y, rp.inv_haze_height, p0, d),
+        rp.haze_field != 0xffffffffu);
     let hit = track(c, p0, d, min(t_ground, min(t_air, t_haze)));
     if (hit.hit) {
         air_ratios(c, p0, d, hit.t, false);
         haze_ratios(c, p0, d, hit.t, false);
         ev.p = p0 + hit.t * d;
         let e = extinctions(*c, hit.rho);
-        let nf = rp.grid_dims.w;
+        let nf = rp.grid.fields;
         var total = vec4<f32>(0.0);
         for (var m = 0u; m < (*c).n; m = m + 1u) {
             for (var f = 0u; f < nf; f = f + 1u) {
@@ -652,7 +666,7 @@ fn next_event(c: ptr<function, Carried>, p0: vec3<f32>, d: vec3<f32>) -> Event {
         haze_ratios(c, p0, d, t_haze, true);
         ev.p = p0 + t_haze * d;
         ev.kind = EV_VOLUME;
-        ev.field = rp.counts2.y;
+        ev.field = rp.haze_field;
     } else if (t_air < t_ground) {
         air_ratios(c, p0, d, t_air, true);
         haze_ratios(c, p0, d, t_air, false);
@@ -680,7 +694,7 @@ fn continue_volume(c: ptr<function, Carried>, field: u32, d: vec3<f32>, eps: f32
     var next: vec3<f32>;
     if (eps > 0.0 && rand() < eps) {
         let s = phase_sample_smooth(b0, field, rand(), rand(), rand());
-        next = rotate(rp.sun.xyz, s.x, s.y, rand());
+        next = rotate(rp.sky.sun, s.x, s.y, rand());
     } else {
         let u = rand();
         if (u < delta0) {
@@ -700,7 +714,7 @@ fn continue_volume(c: ptr<function, Carried>, field: u32, d: vec3<f32>, eps: f32
         return next;
     }
     let kd = phase_bin(d, next);
-    let ks = select(0u, phase_bin(rp.sun.xyz, next), eps > 0.0);
+    let ks = select(0u, phase_bin(rp.sky.sun, next), eps > 0.0);
     var q0 = 0.0;
     var pm = vec4<f32>(0.0);
     var qm = vec4<f32>(0.0);
@@ -729,12 +743,12 @@ fn continue_volume(c: ptr<function, Carried>, field: u32, d: vec3<f32>, eps: f32
 // the cosine about the normal n (ground, albedo a), weighted by value/q.
 fn continue_guided(c: ptr<function, Carried>, ground: bool, d: vec3<f32>, n: vec3<f32>, a: f32,
                    eps: f32) -> vec3<f32> {
-    let fields = rp.grid_dims.w;
+    let fields = rp.grid.fields;
     var next: vec3<f32>;
     if (eps > 0.0 && rand() < eps) {
         let field = min(u32(rand() * f32(fields)), fields - 1u);
         let s = phase_sample_smooth((*c).band[0], field, rand(), rand(), rand());
-        next = rotate(rp.sun.xyz, s.x, s.y, rand());
+        next = rotate(rp.sky.sun, s.x, s.y, rand());
     } else if (ground) {
         let r = sqrt(rand());
         let phi = 2.0 * PI * rand();
@@ -756,7 +770,7 @@ fn continue_guided(c: ptr<function, Carried>, ground: bool, d: vec3<f32>, n: vec
         (*c).f = (*c).f * select(0.0, value / pdf, pdf > 0.0);
         return next;
     }
-    let ks = phase_bin(rp.sun.xyz, next);
+    let ks = phase_bin(rp.sky.sun, next);
     var q = vec4<f32>(0.0);
     for (var m = 0u; m < (*c).n; m = m + 1u) {
         let b = (*c).band[m];
@@ -788,7 +802,7 @@ fn weight_window(c: ptr<function, Carried>, room: u32) -> u32 {
         kept = ROULETTE_WEIGHT;
     }
     var k = 1u;
-    if (rp.seed.z != 0u && kept > SPLIT_WEIGHT) {
+    if (rp.splitting != 0u && kept > SPLIT_WEIGHT) {
         k = min(min(u32(ceil(kept)), MAX_SPLIT), room + 1u);
     }
     if (kept != largest) {
@@ -815,31 +829,17 @@ struct Path {
     k: u32,
 }
 
-// Pixel (i, j)'s camera ray (Camera::pixel): from the eye through the pixel, or for an
-// orthographic camera (up.w > 0: half the image's height, m) along `forward` from the pixel's
-// point of the image plane. Without branches: a branch on the camera in begin_sample made
-// lavapipe's paths 5–10× slower.
-fn camera_origin(i: u32, j: u32) -> vec3<f32> {
-    let sx = (2.0 * (f32(i) + 0.5) / f32(rp.sizes.x) - 1.0) * rp.right.w;
-    let sy = 1.0 - 2.0 * (f32(j) + 0.5) / f32(rp.sizes.y);
-    return rp.eye.xyz + rp.up.w * (sx * rp.right.xyz + sy * rp.up.xyz);
-}
-
-fn camera_direction(i: u32, j: u32) -> vec3<f32> {
-    return select(pixel_ray(i, j), rp.forward.xyz, rp.up.w > 0.0);
-}
-
 // Sample k of the pass at `pixel`: its random stream and its camera ray (in photon mode, a
 // photon of one wavelength from the eye along `forward`).
 fn begin_sample(pixel: u32, k: u32) -> Path {
     var path: Path;
-    stream(pixel, rp.sizes.z + k);
-    path.p = rp.eye.xyz;
+    stream(pixel, rp.first_sample + k);
+    path.p = rp.view.eye;
     if (photon_mode) {
         path.c = carry(1u);
-        path.d = rp.forward.xyz;
+        path.d = rp.view.forward;
     } else {
-        path.c = carry(rp.counts.y);
+        path.c = carry(rp.carried);
         path.p = camera_origin(pixel % rp.sizes.x, pixel / rp.sizes.x);
         path.d = camera_direction(pixel % rp.sizes.x, pixel / rp.sizes.x);
     }
@@ -905,7 +905,7 @@ fn load(slot: u32) -> Path {
 // upwards, y if downwards off the beam's direction (the slabs' R and diffuse T).
 fn photon_event(path: ptr<function, Path>) -> bool {
     (*path).sum = vec3<f32>(0.0);
-    if ((*path).bounce >= rp.counts.z) {
+    if ((*path).bounce >= rp.max_scatterings) {
         return true;
     }
     var c = (*path).c;
@@ -916,7 +916,7 @@ fn photon_event(path: ptr<function, Path>) -> bool {
         let w = c.f[0];
         if (d.y > 0.0) {
             (*path).sum = vec3<f32>(w, 0.0, 0.0);
-        } else if (any(d != rp.forward.xyz)) {
+        } else if (any(d != rp.view.forward)) {
             (*path).sum = vec3<f32>(0.0, w, 0.0);
         }
         return true;
@@ -939,7 +939,7 @@ fn event(slot: u32, path: ptr<function, Path>) -> bool {
     if (photon_mode) {
         return photon_event(path);
     }
-    let max_scatterings = rp.counts.z;
+    let max_scatterings = rp.max_scatterings;
     if ((*path).bounce >= max_scatterings) {
         return true;
     }
@@ -955,10 +955,10 @@ fn event(slot: u32, path: ptr<function, Path>) -> bool {
     v.field = ev.field;
     v.d = d;
     v.n = vec3<f32>(0.0, 1.0, 0.0);
-    v.a = rp.background.w;
+    v.a = rp.grid.ground_albedo;
     if (ev.kind == EV_ESCAPE) {
-        let disk = (*path).bounce == 0u && dot(d, rp.sun.xyz) >= rp.sun.w;
-        let l = rp.background.xyz + select(vec3<f32>(0.0), rp.irradiance.xyz / rp.irradiance.w, disk);
+        let disk = (*path).bounce == 0u && dot(d, rp.sky.sun) >= rp.sky.cos_disk;
+        let l = rp.background + select(vec3<f32>(0.0), rp.sky.irradiance / rp.sky.disk_sr, disk);
         var add = vec3<f32>(0.0);
         for (var m = 0u; m < c.n; m = m + 1u) {
             add = add + w[m] * bands[c.band[m]].to_rgb.xyz * l;
@@ -972,9 +972,9 @@ fn event(slot: u32, path: ptr<function, Path>) -> bool {
     (*path).sum = (*path).sum + direct(c, v, p, w);
     var next: vec3<f32>;
     if (ev.kind == EV_VOLUME) {
-        next = continue_volume(&c, ev.field, d, rp.track.y);
+        next = continue_volume(&c, ev.field, d, rp.guide_share);
     } else {
-        next = continue_guided(&c, ev.kind == EV_SURFACE, d, v.n, v.a, rp.track.y);
+        next = continue_guided(&c, ev.kind == EV_SURFACE, d, v.n, v.a, rp.guide_share);
     }
     (*path).d = next;
     (*path).bounce = (*path).bounce + 1u;
@@ -994,18 +994,18 @@ fn event(slot: u32, path: ptr<function, Path>) -> bool {
     return false;
 }
 
-// Advances one pixel's path of the current sample by at most about `rp.theta.y` loop steps:
+// Advances one pixel's path of the current sample by at most about `rp.loop_budget` loop steps:
 // a dispatch stops between events once it has taken that many, and the next one goes on from
 // the saved state. Bounded work per dispatch keeps every invocation inside llvmpipe's loop
 // limit and every dispatch short on a desktop GPU (whose driver resets a device busy for
 // seconds); the path is the same whichever dispatch takes which part of it.
 @compute @workgroup_size(64)
 fn step(@builtin(global_invocation_id) id: vec3<u32>) {
-    if (id.x >= rp.tile.y) {
+    if (id.x >= rp.tile_pixels) {
         return;
     }
     let slot = id.x;
-    let pixel = rp.tile.x + slot;
+    let pixel = rp.tile_first + slot;
     var path: Path;
     if (stp.begin == 1u) {
         path = begin_sample(pixel, 0u);
@@ -1014,7 +1014,7 @@ fn step(@builtin(global_invocation_id) id: vec3<u32>) {
     }
     if (path.alive == 1u) {
         work = 0u;
-        let budget = u32(rp.theta.y);
+        let budget = u32(rp.loop_budget);
         loop {
             if (work >= budget) {
                 break;
@@ -1040,7 +1040,7 @@ fn step(@builtin(global_invocation_id) id: vec3<u32>) {
                     sums[2u * pixel] = sums[2u * pixel] + vec4<f32>(l, dropped);
                     sums[2u * pixel + 1u] = sums[2u * pixel + 1u] + vec4<f32>(l * l, 0.0);
                 }
-                if (path.k + 1u < rp.sizes.w) {
+                if (path.k + 1u < rp.samples) {
                     path = begin_sample(pixel, path.k + 1u);
                 } else {
                     path.alive = 0u;
@@ -1055,10 +1055,10 @@ fn step(@builtin(global_invocation_id) id: vec3<u32>) {
     // iterations in all, silently cutting a path short; then this loop runs fewer times, and
     // the pass reports the cut path.
     var probe = 0u;
-    for (var i = 0u; i < min(rp.counts2.x, 2u); i = i + 1u) {
+    for (var i = 0u; i < min(rp.theta_bins, 2u); i = i + 1u) {
         probe = probe + 1u;
     }
-    if (probe != min(rp.counts2.x, 2u)) {
+    if (probe != min(rp.theta_bins, 2u)) {
         atomicAdd(&counters[0], 1u);
     }
     if (stp.count == 1u && path.alive == 1u) {
@@ -1081,12 +1081,12 @@ fn transparency(@builtin(global_invocation_id) id: vec3<u32>) {
         transparency_out[pixel] = 1.0;
         return;
     }
-    let steps = u32(clamp(ceil((span.y - span.x) / rp.track.w), 1.0, 65536.0));
+    let steps = u32(clamp(ceil((span.y - span.x) / rp.transparency_step), 1.0, 65536.0));
     let dt = (span.y - span.x) / f32(steps);
     var tau = 0.0;
     for (var i = 0u; i < steps; i = i + 1u) {
         let rho = grid_densities(o + (span.x + (f32(i) + 0.5) * dt) * d);
-        for (var f = 0u; f < rp.grid_dims.w; f = f + 1u) {
+        for (var f = 0u; f < rp.grid.fields; f = f + 1u) {
             tau = tau + rho[f] * rp.sigma_ext[f].g * dt;
         }
     }

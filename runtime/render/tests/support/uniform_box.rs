@@ -1,5 +1,6 @@
-//! The uniform box of cloud the grid models' tests light (`max.rs`, `coupled.rs`), and how far
-//! a render of it is from single scattering.
+//! The uniform box of cloud the grid models' tests light (`max.rs`, `coupled.rs`), how far a
+//! render of it is from single scattering, and the cameras their GPU = CPU gathers are seen
+//! from.
 
 use std::path::Path;
 
@@ -125,4 +126,62 @@ pub fn single_scatter_error(tables: &Tables, frame: &Frame, image: &Image) -> (f
         }
     }
     (worst, checked)
+}
+
+/// The soft ball's cameras for a gather's GPU = CPU check: its own, one from the side, and an
+/// orthographic one (each pixel its own origin) 1.4 km wide at its own place.
+#[allow(dead_code)]
+pub fn cameras() -> [([f64; 3], render::camera::Projection); 3] {
+    use render::camera::Projection;
+    [
+        ([0.0, 500.0, -2500.0], Projection::Perspective),
+        ([-1800.0, 300.0, -1500.0], Projection::Perspective),
+        (
+            [0.0, 500.0, -2500.0],
+            Projection::Orthographic { width_m: 1400.0 },
+        ),
+    ]
+}
+
+/// The largest relative difference between each pixel of `frame` seen by an orthographic
+/// camera 1.4 km wide (`gather` renders a frame) and a one-pixel perspective image from that
+/// pixel's point of the image plane looking along the view direction: each orthographic pixel
+/// is the radiance along one direction at one place. Also the largest relative spread of the
+/// orthographic image's green (so a camera that ignored each pixel's origin would show).
+#[allow(dead_code)]
+pub fn orthographic_against_single_rays(
+    frame: &Frame,
+    gather: impl Fn(&Frame) -> Image,
+) -> (f64, f64) {
+    use render::camera::{Camera, Projection};
+    let mut ortho = frame.clone();
+    ortho.camera.projection = Projection::Orthographic { width_m: 1400.0 };
+    let (w, h) = (ortho.width, ortho.height);
+    let image = gather(&ortho);
+    let axes = ortho.camera.axes().unwrap();
+    let mut worst: f64 = 0.0;
+    for j in 0..h {
+        for i in 0..w {
+            let (origin, d) = ortho.camera.pixel(axes, (i, j), (w, h));
+            assert_eq!(d, axes.0, "one direction for every pixel");
+            let mut one = ortho.clone();
+            one.camera = Camera {
+                position_m: origin,
+                look_at_m: origin + d,
+                fov_deg: 30.0,
+                projection: Projection::Perspective,
+            };
+            (one.width, one.height) = (1, 1);
+            let ray = gather(&one);
+            for c in 0..3 {
+                let (a, b) = (image.rgb[i + w * j][c] as f64, ray.rgb[0][c] as f64);
+                worst = worst.max((a - b).abs() / b.abs().max(1e-30));
+            }
+        }
+    }
+    let green: Vec<f64> = image.rgb.iter().map(|p| p[1] as f64).collect();
+    let (lo, hi) = green.iter().fold((f64::INFINITY, 0.0f64), |(lo, hi), &g| {
+        (lo.min(g), hi.max(g))
+    });
+    (worst, (hi - lo) / hi)
 }
