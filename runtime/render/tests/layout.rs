@@ -24,6 +24,8 @@ fn every_uniform_mirrors_its_wgsl_struct() {
     check::<render::max::gpu::MaxParams>(&render::max::gpu::source());
     check::<render::coupled::gpu::CoupledParams>(&render::coupled::gpu::source());
     check::<render::coupled::gpu::LightVoxel>(&render::coupled::gpu::source());
+    check::<render::coupled::gpu::Channel>(&render::coupled::gpu::source());
+    check::<render::coupled::gpu::Moments>(&render::coupled::gpu::source());
     check::<render::max::gpu::LightVoxel>(&render::max::gpu::source());
     check::<render::lighting::transport_gpu::SweepParams>(
         &render::lighting::transport_gpu::source(),

@@ -36,9 +36,13 @@ struct CoupledParams {
 // p^(D_j)(θ_k) at ((field · PEAK_DEPTHS + j) · 3 + channel) · K + k, D_j = j · PEAK_DEPTH_STEP
 // (both constants put before this file by coupled::gpu::source).
 @group(1) @binding(4) var<storage, read> blurred: array<f32>;
-// With the transport, per voxel of its grid (sh_dims, the frame's grid or its blocks) 19 rows:
-// the 75 spherical-harmonic moments φ_lm (25 per channel, R then G then B), 4 a row.
-@group(1) @binding(5) var<storage, read> moments: array<vec4<f32>>;
+// With the transport, a voxel's 75 spherical-harmonic moments φ_lm (25 per channel, R then G
+// then B), four a row so that the gather loads them four at a time.
+struct Moments {
+    rows: array<vec4<f32>, 19>,
+}
+// Per voxel of the transport's grid (sh_dims, the frame's grid or its blocks).
+@group(1) @binding(5) var<storage, read> moments: array<Moments>;
 
 // Row `row` of the transport's moments at p, trilinear between its grid's voxel centres,
 // clamped to the edge voxels (as slicing.wgsl's `taps` on the frame's grid); zero outside the
@@ -54,7 +58,7 @@ fn moments_at(p: vec3<f32>, row: u32) -> vec4<f32> {
         let w3 = select(1.0 - tap.t, tap.t, d == vec3<u32>(1u));
         let at = tap.lo + d * tap.s;
         let i = at.x + rp.sh_dims.x * (at.y + rp.sh_dims.y * at.z);
-        sum = sum + w3.x * w3.y * w3.z * moments[19u * i + row];
+        sum = sum + w3.x * w3.y * w3.z * moments[i].rows[row];
     }
     return sum;
 }
@@ -97,26 +101,47 @@ fn peak_coefficient(rho: vec4<f32>) -> f32 {
 
 // A voxel's lighting (render::coupled's Lighting, in f32), read by march.wgsl's lighting_at.
 struct LightVoxel {
-    beam: vec4<f32>,         // the beam I rgb; w = the peak's depth n
-    i0: vec4<f32>,           // the diffusion's I_0 rgb; w = 1 if in the diffusion solve
-    i1: array<vec4<f32>, 3>, // per channel the diffusion's I_1 (xyz); w = the skylight's mean
+    beam: vec3<f32>,         // the beam I per channel
+    peak_depth: f32,         // the peak's depth n
+    i0: vec3<f32>,           // the diffusion's I_0 per channel
+    in_solve: f32,           // 1 if in the diffusion solve, else 0
+    channel: array<Channel, 3>,
+}
+
+// One channel's diffusion flux I_1 and skylight mean.
+struct Channel {
+    i1: vec3<f32>,
+    sky_mean: f32,
+}
+
+fn channel_add(sum: Channel, w: f32, v: Channel) -> Channel {
+    return Channel(sum.i1 + w * v.i1, sum.sky_mean + w * v.sky_mean);
 }
 
 // sum + w · v, field by field.
 fn weighted_add(sum: LightVoxel, w: f32, v: LightVoxel) -> LightVoxel {
-    return LightVoxel(sum.beam + w * v.beam, sum.i0 + w * v.i0, array<vec4<f32>, 3>(
-        sum.i1[0] + w * v.i1[0], sum.i1[1] + w * v.i1[1], sum.i1[2] + w * v.i1[2]));
+    return LightVoxel(sum.beam + w * v.beam, sum.peak_depth + w * v.peak_depth,
+        sum.i0 + w * v.i0, sum.in_solve + w * v.in_solve, array<Channel, 3>(
+        channel_add(sum.channel[0], w, v.channel[0]), channel_add(sum.channel[1], w, v.channel[1]),
+        channel_add(sum.channel[2], w, v.channel[2])));
 }
 
 // v / t, field by field.
 fn divided(v: LightVoxel, t: f32) -> LightVoxel {
-    return LightVoxel(v.beam / t, v.i0 / t, array<vec4<f32>, 3>(v.i1[0] / t, v.i1[1] / t,
-        v.i1[2] / t));
+    var out = v;
+    out.beam = v.beam / t;
+    out.peak_depth = v.peak_depth / t;
+    out.i0 = v.i0 / t;
+    out.in_solve = v.in_solve / t;
+    for (var c = 0u; c < 3u; c = c + 1u) {
+        out.channel[c] = Channel(v.channel[c].i1 / t, v.channel[c].sky_mean / t);
+    }
+    return out;
 }
 
 // Whether the voxel is in the diffusion solve.
 fn in_solve(v: LightVoxel) -> bool {
-    return v.i0.w != 0.0;
+    return v.in_solve != 0.0;
 }
 
 // The real, orthonormal spherical harmonics to degree 4 (render::lighting::transport::harmonics).
@@ -189,20 +214,21 @@ fn gather(@builtin(global_invocation_id) id: vec3<u32>) {
             let sca = scattering_of(rho);
             let light = lighting_at(p);
             let beam = light.all.beam;
-            let i0 = light.solved.i0.rgb;
-            let i1 = light.solved.i1;
-            let sky = vec3<f32>(light.all.i1[0].w, light.all.i1[1].w, light.all.i1[2].w);
-            let sun = rp.sky.irradiance * sunlight(p.y, rp.sky.sun.y) * beam.rgb;
-            // The beam scattered by Ams_1 blurred by the peak's scatterings in (beam.w) and
-            // out to the middle of this step (δ-M's split), or by Ams_{n+1} (beam.w = n; 0
-            // with δ-Eddington's).
+            let n = light.all.peak_depth;
+            let i0 = light.solved.i0;
+            let channel = light.solved.channel;
+            let sky = vec3<f32>(light.all.channel[0].sky_mean, light.all.channel[1].sky_mean,
+                light.all.channel[2].sky_mean);
+            let sun = rp.sky.irradiance * sunlight(p.y, rp.sky.sun.y) * beam;
+            // The beam scattered by Ams_1 blurred by the peak's scatterings in (n) and out to
+            // the middle of this step (δ-M's split), or by Ams_{n+1} (0 with δ-Eddington's).
             var phase: vec3<f32>;
             if (rp.peak_blur == 1u) {
                 let peak = peak_coefficient(rho) * dt;
-                phase = peak_blurred(rho, beam.w + depth_out + 0.5 * peak, cos_theta);
+                phase = peak_blurred(rho, n + depth_out + 0.5 * peak, cos_theta);
                 depth_out = depth_out + peak;
             } else {
-                phase = ams_mix(rho, beam.w + 1.0, cos_theta);
+                phase = ams_mix(rho, n + 1.0, cos_theta);
             }
             let g = mixed(rho, rp.asymmetry);
             let f = select(vec3<f32>(0.0), mixed(rho, rp.peak), rp.delta_split == 1u);
@@ -234,7 +260,7 @@ fn gather(@builtin(global_invocation_id) id: vec3<u32>) {
                 }
                 let albedo = sca[c] / ext[c];
                 // The P1 radiance, |I_1| ≤ I_0 so that it is nowhere negative.
-                var flux = i1[c].xyz;
+                var flux = channel[c].i1;
                 let limit = max(i0[c], 0.0);
                 let len = length(flux);
                 if (len > limit) {

@@ -7,8 +7,8 @@
 //!
 //! Bind group 0: the tables ([`GpuTables`]: `ams_mix`). Bind group 1: the params uniform, the
 //! densities, the lighting (a [`LightVoxel`] per voxel), the image (rgb, T_vol), the phase functions
-//! blurred by the forward peak ([`super::peak`]), the transport's moments (19 rows per voxel of
-//! its grid, the frame's or its blocks').
+//! blurred by the forward peak ([`super::peak`]), the transport's moments (a [`Moments`] per
+//! voxel of its grid, the frame's or its blocks').
 //!
 //! The lighting, the blurred phase functions and the moments are uploaded once per lighting
 //! and kept on the GPU while views of it are gathered (the viewer's camera moves): a view then
@@ -27,8 +27,8 @@ use runtime::gpu::{Gpu, GpuTables};
 use super::Settings;
 use super::light::{Lighting, check, delta_scaled};
 use crate::gpu::{
-    FieldsAndSky, GatherView, Grid, RenderError, Sky, Timings, View, bind, build, fields_and_sky,
-    filled, gather_source, gather_view, sky_light_buffer, storage, timed_frame, v3,
+    FieldsAndSky, GatherView, Grid, RenderError, Sky, Timings, View, a3, bind, build,
+    fields_and_sky, filled, gather_source, gather_view, sky_light_buffer, storage, timed_frame, v3,
 };
 use crate::{frame::Frame, image::Image, volume::MAX_FIELDS};
 
@@ -74,18 +74,41 @@ runtime::uniform! {
     }
 }
 
+runtime::uniform! {
+    /// `Channel` of `gather.wgsl`: one channel's diffusion flux and skylight.
+    pub struct Channel as "Channel" {
+        /// The diffusion's I_1 (x, y, z).
+        pub i1: [f32; 3],
+        /// The skylight's mean.
+        pub sky_mean: f32,
+    }
+}
+
 /// Rows of four the transport's 75 moments take per voxel of its grid.
 const SH_ROWS: usize = crate::lighting::transport::PER_VOXEL.div_ceil(4);
 
 runtime::uniform! {
+    /// `Moments` of `gather.wgsl`: a voxel's 75 moments of the transport (25 per channel, R
+    /// then G then B), four a row, zero past the last.
+    pub struct Moments as "Moments" {
+        /// The rows.
+        pub rows: [[f32; 4]; SH_ROWS],
+    }
+}
+
+runtime::uniform! {
     /// `LightVoxel` of `gather.wgsl`: a voxel's [`Lighting`] in f32.
     pub struct LightVoxel as "LightVoxel" {
-        /// The beam I per channel; w: the peak's depth n.
-        pub beam: [f32; 4],
-        /// The diffusion's I_0 per channel; w: 1 if in the diffusion solve.
-        pub i0: [f32; 4],
-        /// Per channel the diffusion's I_1 (x, y, z); w: the skylight's mean.
-        pub i1: [[f32; 4]; 3],
+        /// The beam I per channel.
+        pub beam: [f32; 3],
+        /// The peak's depth n.
+        pub peak_depth: f32,
+        /// The diffusion's I_0 per channel.
+        pub i0: [f32; 3],
+        /// 1 if in the diffusion solve, else 0.
+        pub in_solve: f32,
+        /// Per channel, its flux and skylight.
+        pub channel: [Channel; 3],
     }
 }
 
@@ -98,7 +121,10 @@ pub fn binding_sizes(voxels: usize, moments: usize) -> [(&'static str, u64); 2] 
             "the lighting",
             (std::mem::size_of::<LightVoxel>() * voxels) as u64,
         ),
-        ("the transport's moments", (16 * SH_ROWS * moments) as u64),
+        (
+            "the transport's moments",
+            (std::mem::size_of::<Moments>() * moments) as u64,
+        ),
     ]
 }
 
@@ -304,29 +330,33 @@ fn upload(device: &wgpu::Device, lighting: &Arc<Lighting>, voxels: usize) -> Res
     let rows: Vec<LightVoxel> = (0..voxels)
         .into_par_iter()
         .map(|i| {
-            let i0 = lighting.i0[i];
-            let active = f64::from(u8::from(lighting.active[i]));
+            let [r, g, b, n] = lighting.buffer[i];
             LightVoxel {
-                beam: lighting.buffer[i].map(|v| v as f32),
-                i0: [i0[0], i0[1], i0[2], active].map(|v| v as f32),
-                i1: std::array::from_fn(|c| {
+                beam: a3([r, g, b]),
+                peak_depth: n as f32,
+                i0: a3(lighting.i0[i]),
+                in_solve: f32::from(u8::from(lighting.active[i])),
+                channel: std::array::from_fn(|c| {
                     let i1 = &lighting.p1[i][3 * c..3 * c + 3];
-                    [i1[0], i1[1], i1[2], lighting.sky_mean[i][c]].map(|v| v as f32)
+                    Channel {
+                        i1: a3([i1[0], i1[1], i1[2]]),
+                        sky_mean: lighting.sky_mean[i][c] as f32,
+                    }
                 }),
             }
         })
         .collect();
-    let mut moments = vec![[0.0f32; 4]; SH_ROWS * lighting.sh.len()];
-    moments
-        .par_chunks_mut(SH_ROWS)
-        .zip(&lighting.sh)
-        .for_each(|(out, m)| {
-            for (r, row) in out.iter_mut().enumerate() {
-                *row = std::array::from_fn(|j| m.get(4 * r + j).map_or(0.0, |&v| v as f32));
-            }
-        });
+    let mut moments: Vec<Moments> = lighting
+        .sh
+        .par_iter()
+        .map(|m| Moments {
+            rows: std::array::from_fn(|r| {
+                std::array::from_fn(|j| m.get(4 * r + j).map_or(0.0, |&v| v as f32))
+            }),
+        })
+        .collect();
     if moments.is_empty() {
-        moments.push([0.0; 4]);
+        moments.push(Moments::default());
     }
     let blurred = lighting.blur.as_ref().map_or(vec![0.0f32], |b| b.rows());
     let storage =

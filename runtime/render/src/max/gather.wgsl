@@ -30,24 +30,28 @@ struct MaxParams {
 
 // A voxel's lighting (render::max's Lighting, in f32), read by march.wgsl's lighting_at.
 struct LightVoxel {
-    sun: vec4<f32>,          // the reduced sunlight T_sun rgb; w = 1 if in the diffusion solve
-    i0: vec4<f32>,           // the diffusion's I_0 rgb, 0
-    sky: vec4<f32>,          // the skylight's mean rgb, 0
+    sun: vec3<f32>,          // the reduced sunlight T_sun per channel
+    in_solve: f32,           // 1 if in the diffusion solve, else 0
+    i0: vec3<f32>,           // the diffusion's I_0 per channel
+    pad0: f32,
+    sky: vec3<f32>,          // the skylight's mean per channel
+    pad1: f32,
 }
 
 // sum + w · v, field by field.
 fn weighted_add(sum: LightVoxel, w: f32, v: LightVoxel) -> LightVoxel {
-    return LightVoxel(sum.sun + w * v.sun, sum.i0 + w * v.i0, sum.sky + w * v.sky);
+    return LightVoxel(sum.sun + w * v.sun, sum.in_solve + w * v.in_solve, sum.i0 + w * v.i0, 0.0,
+        sum.sky + w * v.sky, 0.0);
 }
 
 // v / t, field by field.
 fn divided(v: LightVoxel, t: f32) -> LightVoxel {
-    return LightVoxel(v.sun / t, v.i0 / t, v.sky / t);
+    return LightVoxel(v.sun / t, v.in_solve / t, v.i0 / t, 0.0, v.sky / t, 0.0);
 }
 
 // Whether the voxel is in the diffusion solve.
 fn in_solve(v: LightVoxel) -> bool {
-    return v.sun.w != 0.0;
+    return v.in_solve != 0.0;
 }
 
 // M(D, θ) of the mixture, weighted by ρ σ_sca like Eq. 6 (runtime::sample::poisson_mix).
@@ -104,9 +108,9 @@ fn gather(@builtin(global_invocation_id) id: vec3<u32>) {
             let sca = scattering_of(rho);
             let w_edge = edge_share(ext.g * rp.voxel_length);
             let light = lighting_at(p);
-            let sun = rp.sky.irradiance * sunlight(p.y, l_y) * light.all.sun.rgb;
+            let sun = rp.sky.irradiance * sunlight(p.y, l_y) * light.all.sun;
             // Diffuse light: the diffusion solution (never below zero) and the skylight.
-            let diffuse = max(light.solved.i0.rgb, vec3<f32>(0.0)) + light.all.sky.rgb;
+            let diffuse = max(light.solved.i0, vec3<f32>(0.0)) + light.all.sky;
             let p1 = ams_mix(rho, 1.0, cos_theta);
             let before = edge * w_edge;
             let after = before + w_edge * ext * dt;

@@ -18,8 +18,8 @@ use runtime::gpu::{Gpu, GpuTables, read_back};
 use super::Settings;
 use super::cpu::{Lighting, check};
 use crate::gpu::{
-    FieldsAndSky, GatherView, Grid, RenderError, Sky, Timings, View, bind, build, fields_and_sky,
-    filled, gather_source, gather_view, sky_light_buffer, storage, timed_frame,
+    FieldsAndSky, GatherView, Grid, RenderError, Sky, Timings, View, a3, bind, build,
+    fields_and_sky, filled, gather_source, gather_view, sky_light_buffer, storage, timed_frame,
 };
 use crate::lighting::lattice::voxel_length;
 use crate::{checks::FrameError, frame::Frame, image::Image, volume::MAX_FIELDS};
@@ -27,12 +27,18 @@ use crate::{checks::FrameError, frame::Frame, image::Image, volume::MAX_FIELDS};
 runtime::uniform! {
     /// `LightVoxel` of `gather.wgsl`: a voxel's [`Lighting`] in f32.
     pub struct LightVoxel as "LightVoxel" {
-        /// The reduced sunlight T_sun per channel; w: 1 if in the diffusion solve.
-        pub sun: [f32; 4],
-        /// The diffusion's I_0 per channel, 0.
-        pub i0: [f32; 4],
-        /// The skylight's mean per channel, 0.
-        pub sky: [f32; 4],
+        /// The reduced sunlight T_sun per channel.
+        pub sun: [f32; 3],
+        /// 1 if in the diffusion solve, else 0.
+        pub in_solve: f32,
+        /// The diffusion's I_0 per channel.
+        pub i0: [f32; 3],
+        /// Padding.
+        pub pad0: f32,
+        /// The skylight's mean per channel.
+        pub sky: [f32; 3],
+        /// Padding.
+        pub pad1: f32,
     }
 }
 
@@ -143,12 +149,14 @@ impl Renderer {
             sigma_ext,
             sky,
         };
-        let rgb = |v: &[f64; 3], w: f32| [v[0] as f32, v[1] as f32, v[2] as f32, w];
         let rows: Vec<LightVoxel> = (0..voxels)
             .map(|i| LightVoxel {
-                sun: rgb(&lighting.t_sun[i], f32::from(u8::from(lighting.active[i]))),
-                i0: rgb(&lighting.i0[i], 0.0),
-                sky: rgb(&lighting.sky_mean[i], 0.0),
+                sun: a3(lighting.t_sun[i]),
+                in_solve: f32::from(u8::from(lighting.active[i])),
+                i0: a3(lighting.i0[i]),
+                pad0: 0.0,
+                sky: a3(lighting.sky_mean[i]),
+                pad1: 0.0,
             })
             .collect();
         let params = filled(
