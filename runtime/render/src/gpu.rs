@@ -244,6 +244,46 @@ impl Sky {
 }
 
 runtime::uniform! {
+    /// A texture on a plane across the sunlight (`TexturePlane` in `view.wgsl`: riley's light
+    /// buffer, miyazaki's shadow surface).
+    pub struct TexturePlane as "TexturePlane" {
+        /// The unit axis u.
+        pub u: [f32; 3],
+        /// The texture's origin along u (m).
+        pub u_origin: f32,
+        /// The unit axis w.
+        pub w: [f32; 3],
+        /// Its origin along w (m).
+        pub w_origin: f32,
+        /// Texel size along u, w (m).
+        pub texel: [f32; 2],
+        /// Padding.
+        pub pad0: f32,
+        /// Padding.
+        pub pad1: f32,
+    }
+}
+
+impl TexturePlane {
+    /// The plane of axes `u`, `w`, origins `origin` and texel sizes `texel` (m).
+    pub(crate) fn new(
+        (u, w): (glam::DVec3, glam::DVec3),
+        origin: [f64; 2],
+        texel: [f64; 2],
+    ) -> Self {
+        Self {
+            u: v3(u),
+            u_origin: origin[0] as f32,
+            w: v3(w),
+            w_origin: origin[1] as f32,
+            texel: texel.map(|t| t as f32),
+            pad0: 0.0,
+            pad1: 0.0,
+        }
+    }
+}
+
+runtime::uniform! {
     /// The camera of a view (`View` in `slicing.wgsl`; [`crate::camera::Camera`]).
     pub struct View as "View" {
         /// The eye, or an orthographic image's centre (m).

@@ -1,5 +1,8 @@
 // The records every renderer's uniform holds (included before slicing.wgsl and biri.wgsl):
-// the camera, and for the grid models the grid and the sun and sky.
+// the camera, and for the grid models the grid, the sun and sky, and the plane of a texture
+// that looks along the sunlight. Scalars sit in records rather than as fields of a uniform of
+// their own: as separate fields, lavapipe ran the truth's paths 5.7× and miyazaki's frame 1.2×
+// slower (docs/log.md).
 
 // The camera of a view (render::camera::Camera; mirrored by render::gpu::View).
 struct View {
@@ -32,4 +35,17 @@ struct Sky {
     cos_disk: f32,                 // cos of the disk's radius
     irradiance: vec3<f32>,         // the sun's, per channel
     disk_sr: f32,                  // the disk's solid angle (sr)
+}
+
+// A texture on a plane across the sunlight (riley's light buffer, miyazaki's shadow surface;
+// mirrored by render::gpu::TexturePlane): texel (i, j) is centred at
+// u (u_origin + (i + ½) texel.x) + w (w_origin + (j + ½) texel.y).
+struct TexturePlane {
+    u: vec3<f32>,                  // the unit axis u
+    u_origin: f32,                 // the texture's origin along u (m)
+    w: vec3<f32>,                  // the unit axis w
+    w_origin: f32,                 // its origin along w (m)
+    texel: vec2<f32>,              // texel size along u, w (m)
+    pad0: f32,
+    pad1: f32,
 }

@@ -19,6 +19,11 @@ fn every_uniform_mirrors_its_wgsl_struct() {
     check::<render::gpu::View>(&render::riley::gpu::source());
     check::<render::gpu::Grid>(&render::riley::gpu::source());
     check::<render::gpu::Sky>(&render::riley::gpu::source());
+    check::<render::gpu::TexturePlane>(&render::riley::gpu::source());
+    check::<render::riley::gpu::Slices>(&render::riley::gpu::source());
+    check::<render::miyazaki::gpu::Slices>(&render::miyazaki::gpu::source());
+    check::<render::miyazaki::gpu::Shading>(&render::miyazaki::gpu::source());
+    check::<render::miyazaki::gpu::Haze>(&render::miyazaki::gpu::source());
     check::<render::miyazaki::gpu::SvsParams>(&render::miyazaki::gpu::source());
     check::<render::gpu::SliceParams>(&render::miyazaki::gpu::source());
     check::<render::max::gpu::MaxParams>(&render::max::gpu::source());
@@ -54,6 +59,12 @@ fn every_uniform_mirrors_its_wgsl_struct() {
     check::<render::biri::gpu::BiriParams>(&render::biri::gpu::source());
     check::<render::truth::gpu::TruthParams>(&render::truth::gpu::source());
     check::<render::truth::gpu::StepParams>(&render::truth::gpu::source());
+    check::<render::truth::gpu::Track>(&render::truth::gpu::source());
+    check::<render::truth::gpu::Counts>(&render::truth::gpu::source());
+    check::<render::truth::gpu::TableSizes>(&render::truth::gpu::source());
+    check::<render::truth::gpu::Stream>(&render::truth::gpu::source());
+    check::<render::truth::gpu::Stepping>(&render::truth::gpu::source());
+    check::<render::truth::gpu::Tile>(&render::truth::gpu::source());
     check::<render::truth::gpu::Band>(&render::truth::gpu::source());
     check::<render::truth::gpu::Light>(&render::truth::gpu::source());
     check::<render::truth::gpu::SavedBranch>(&render::truth::gpu::source());

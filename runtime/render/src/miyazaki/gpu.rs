@@ -12,66 +12,84 @@ use runtime::gpu::{Gpu, GpuTables};
 
 use super::{Settings, SvsPhase};
 use crate::gpu::{
-    Dispatch, Grid, RenderError, Sky, Timings, View, a3, a4, bind, build, check_sizes, filled,
-    run_slices, slice_uniforms, slicing_source, storage, v3,
+    Dispatch, Grid, RenderError, Sky, TexturePlane, Timings, View, a3, a4, bind, build,
+    check_sizes, filled, run_slices, slice_uniforms, slicing_source, storage, v3,
 };
 use crate::{frame::Frame, image::Image, volume::MAX_FIELDS};
+
+runtime::uniform! {
+    /// `Slices` of `svs.wgsl`: the shadow-view slices.
+    pub struct Slices as "Slices" {
+        /// Unit vector towards the sun.
+        pub to_sun: [f32; 3],
+        /// The slice spacing Δ (m).
+        pub spacing: f32,
+        /// The slices' unit normal.
+        pub normal: [f32; 3],
+        /// Δs, the sun's path per slice (m).
+        pub sun_path: f32,
+        /// The lower plane value of the slices' range (m).
+        pub plane_min: f32,
+        /// The upper plane value (m).
+        pub plane_max: f32,
+        /// 1: slices back to front, 0: front to back.
+        pub back_to_front: u32,
+        /// Padding.
+        pub pad: u32,
+    }
+}
+
+runtime::uniform! {
+    /// `Shading` of `svs.wgsl`.
+    pub struct Shading as "Shading" {
+        /// k_multi (1/sr).
+        pub k_multi: f32,
+        /// 1: the Cornette–Shanks phase function.
+        pub cornette_shanks: u32,
+        /// The haze's field + 1 (0: none).
+        pub haze_field: u32,
+        /// Padding.
+        pub pad: u32,
+    }
+}
+
+runtime::uniform! {
+    /// `Haze` of `svs.wgsl`: the haze layer.
+    pub struct Haze as "Haze" {
+        /// N_0 σ_ext per channel (1/m).
+        pub ext: [f32; 3],
+        /// 1/H_haze (1/m).
+        pub inv_height: f32,
+        /// N_0 σ_sca per channel (1/m).
+        pub sca: [f32; 3],
+        /// Padding.
+        pub pad: f32,
+    }
+}
 
 runtime::uniform! {
     /// `SvsParams` of `svs.wgsl`.
     pub struct SvsParams as "SvsParams" {
         /// The camera.
         pub view: View,
-        /// k_multi (1/sr).
-        pub k_multi: f32,
-        /// 1: slices back to front, 0: front to back.
-        pub back_to_front: u32,
-        /// The lower plane value of the slices' range (m).
-        pub plane_min: f32,
-        /// The upper plane value (m).
-        pub plane_max: f32,
-        /// Unit vector towards the sun.
-        pub to_sun: [f32; 3],
-        /// The slice spacing Δ (m).
-        pub slice_spacing: f32,
-        /// The slices' unit normal.
-        pub normal: [f32; 3],
-        /// Δs, the sun's path per slice (m).
-        pub sun_path: f32,
-        /// The shadow surface's axis u.
-        pub shadow_u: [f32; 3],
-        /// Its origin along u (m).
-        pub shadow_u_origin: f32,
-        /// The shadow surface's axis w.
-        pub shadow_w: [f32; 3],
-        /// Its origin along w (m).
-        pub shadow_w_origin: f32,
-        /// Texel size along u, w (m).
-        pub shadow_texel: [f32; 2],
-        /// 1: the Cornette–Shanks phase function.
-        pub cornette_shanks: u32,
-        /// Padding.
-        pub pad0: u32,
+        /// The shadow-view slices.
+        pub slices: Slices,
+        /// The shadow surface.
+        pub shadow: TexturePlane,
+        /// k_multi, the phase function, the haze's field.
+        pub shading: Shading,
         /// The grid and the ground.
         pub grid: Grid,
-        /// Width, height, shadow resolution.
-        pub sizes: [u32; 3],
-        /// The haze's field + 1 (0: none).
-        pub haze_field: u32,
+        /// Width, height, shadow resolution, 0.
+        pub sizes: [u32; 4],
         /// Per field, σ_ext per channel (m²).
         pub sigma_ext: [[f32; 4]; MAX_FIELDS],
         /// Per field, the Cornette–Shanks asymmetry per channel.
         pub g: [[f32; 4]; MAX_FIELDS],
         /// The sun and the air (Rayleigh's β_sl).
         pub sky: Sky,
-        /// Haze N_0 σ_ext per channel (1/m).
-        pub haze: [f32; 3],
-        /// 1/H_haze (1/m).
-        pub inv_haze_height: f32,
-        /// Haze N_0 σ_sca per channel (1/m).
-        pub haze_sca: [f32; 3],
-        /// Padding.
-        pub pad1: f32,
+        /// The haze layer.
+        pub haze: Haze,
     }
 }
 
@@ -96,35 +114,38 @@ fn params(tables: &Tables, frame: &Frame, settings: &Settings, s: &super::SvsSet
     };
     SvsParams {
         view: View::new(s.eye, s.axes, (s.tan_half_fov_y, w as f64 / h as f64), None),
-        k_multi: settings.k_multi as f32,
-        back_to_front: u32::from(s.back_to_front),
-        plane_min: s.range.0 as f32,
-        plane_max: s.range.1 as f32,
-        to_sun: v3(s.to_sun),
-        slice_spacing: s.step as f32,
-        normal: v3(s.normal),
-        sun_path: s.sun_step as f32,
-        shadow_u: v3(s.shadow_u),
-        shadow_u_origin: s.shadow_origin[0] as f32,
-        shadow_w: v3(s.shadow_w),
-        shadow_w_origin: s.shadow_origin[1] as f32,
-        shadow_texel: [s.shadow_texel[0] as f32, s.shadow_texel[1] as f32],
-        cornette_shanks: u32::from(settings.phase == SvsPhase::CornetteShanks),
-        pad0: 0,
+        slices: Slices {
+            to_sun: v3(s.to_sun),
+            spacing: s.step as f32,
+            normal: v3(s.normal),
+            sun_path: s.sun_step as f32,
+            plane_min: s.range.0 as f32,
+            plane_max: s.range.1 as f32,
+            back_to_front: u32::from(s.back_to_front),
+            pad: 0,
+        },
+        shadow: TexturePlane::new((s.shadow_u, s.shadow_w), s.shadow_origin, s.shadow_texel),
+        shading: Shading {
+            k_multi: settings.k_multi as f32,
+            cornette_shanks: u32::from(settings.phase == SvsPhase::CornetteShanks),
+            haze_field: frame.haze.as_ref().map_or(0, |h| h.field as u32 + 1),
+            pad: 0,
+        },
         grid: Grid::of(frame, tables.fields.len()),
-        sizes: [w as u32, h as u32, res as u32],
-        haze_field: frame.haze.as_ref().map_or(0, |h| h.field as u32 + 1),
+        sizes: [w as u32, h as u32, res as u32, 0],
         sigma_ext: per_field(&|f| f.sigma_ext_m2),
         g: per_field(&|f| super::cpu::asymmetry(f, tables.theta_step_deg)),
         sky: Sky::of(frame),
-        haze: a3(haze.map_or([0.0; 3], |(f, h)| {
-            f.sigma_ext_m2.map(|e| e * h.number_density_per_m3)
-        })),
-        inv_haze_height: haze.map_or(0.0, |(_, h)| (1.0 / h.scale_height_m) as f32),
-        haze_sca: a3(haze.map_or([0.0; 3], |(f, h)| {
-            f.sigma_sca_m2.map(|e| e * h.number_density_per_m3)
-        })),
-        pad1: 0.0,
+        haze: Haze {
+            ext: a3(haze.map_or([0.0; 3], |(f, h)| {
+                f.sigma_ext_m2.map(|e| e * h.number_density_per_m3)
+            })),
+            inv_height: haze.map_or(0.0, |(_, h)| (1.0 / h.scale_height_m) as f32),
+            sca: a3(haze.map_or([0.0; 3], |(f, h)| {
+                f.sigma_sca_m2.map(|e| e * h.number_density_per_m3)
+            })),
+            pad: 0.0,
+        },
     }
 }
 

@@ -4,33 +4,44 @@
 // tables.wgsl (bind group 0) and slicing.wgsl. The CPU reference is
 // render::miyazaki::cpu; this follows it step for step.
 
-struct SvsParams {
-    view: View,
-    k_multi: f32,            // 1/sr
-    back_to_front: u32,      // 1: slices back to front, 0: front to back
-    plane_min: f32,          // the lower plane value of the slices' range (m)
-    plane_max: f32,          // the upper plane value (m)
+// The shadow-view slices.
+struct Slices {
     to_sun: vec3<f32>,       // unit vector towards the sun
-    slice_spacing: f32,      // Δ (m)
+    spacing: f32,            // Δ (m)
     normal: vec3<f32>,       // the slices' unit normal
     sun_path: f32,           // Δs, the sun's path per slice (m)
-    shadow_u: vec3<f32>,     // the shadow surface's axis u
-    shadow_u_origin: f32,    // its origin along u (m)
-    shadow_w: vec3<f32>,     // the shadow surface's axis w
-    shadow_w_origin: f32,    // its origin along w (m)
-    shadow_texel: vec2<f32>, // texel size along u, w (m)
+    plane_min: f32,          // the lower plane value of the slices' range (m)
+    plane_max: f32,          // the upper plane value (m)
+    back_to_front: u32,      // 1: slices back to front, 0: front to back
+    pad: u32,
+}
+
+struct Shading {
+    k_multi: f32,            // 1/sr
     cornette_shanks: u32,    // 1: the Cornette–Shanks phase function
-    pad0: u32,
-    grid: Grid,
-    sizes: vec3<u32>,        // width, height, shadow resolution
     haze_field: u32,         // the haze's field + 1 (0: none)
+    pad: u32,
+}
+
+// The haze layer (Miyazaki et al.'s aerosol).
+struct Haze {
+    ext: vec3<f32>,          // N_0 σ_ext per channel (1/m)
+    inv_height: f32,         // 1/H_haze (1/m)
+    sca: vec3<f32>,          // N_0 σ_sca per channel (1/m)
+    pad: f32,
+}
+
+struct SvsParams {
+    view: View,
+    slices: Slices,
+    shadow: TexturePlane,    // the shadow surface
+    shading: Shading,
+    grid: Grid,
+    sizes: vec4<u32>,        // width, height, shadow resolution, 0
     sigma_ext: array<vec4<f32>, 4>,  // per field, m² per channel
     g: array<vec4<f32>, 4>,          // per field, Cornette–Shanks asymmetry per channel
     sky: Sky,
-    haze: vec3<f32>,         // haze N_0 σ_ext per channel (1/m)
-    inv_haze_height: f32,    // 1/H_haze (1/m)
-    haze_sca: vec3<f32>,     // haze N_0 σ_sca per channel (1/m)
-    pad1: f32,
+    haze: Haze,
 }
 
 struct SliceParams {
@@ -57,7 +68,7 @@ const SHADOWED_AIR_POINTS: u32 = 64u;
 const SHADOWED_AIR_MAX_M: f32 = 200000.0;
 
 fn haze_on() -> bool {
-    return rp.haze_field > 0u;
+    return rp.shading.haze_field > 0u;
 }
 
 fn cornette_shanks(g: vec3<f32>, c: f32) -> vec3<f32> {
@@ -66,7 +77,7 @@ fn cornette_shanks(g: vec3<f32>, c: f32) -> vec3<f32> {
 }
 
 fn phase_of(field: u32, c: f32) -> vec3<f32> {
-    if (rp.cornette_shanks != 0u) {
+    if (rp.shading.cornette_shanks != 0u) {
         return cornette_shanks(rp.g[field].rgb, c);
     }
     return ams(field, 1.0, c);
@@ -75,15 +86,15 @@ fn phase_of(field: u32, c: f32) -> vec3<f32> {
 // Rayleigh β and the haze's N/N_0 at height y.
 fn air_at(y: f32) -> vec4<f32> {
     let r = rp.sky.beta * exp(-y * rp.sky.inv_scale_height);
-    let n = select(0.0, exp(-rp.inv_haze_height * y), haze_on());
+    let n = select(0.0, exp(-rp.haze.inv_height * y), haze_on());
     return vec4<f32>(r, n);
 }
 
 // Sunlight reaching height y through the air and the haze.
 fn sun_through_air(y: f32) -> vec3<f32> {
-    var s = sunlight(y, rp.to_sun.y);
+    var s = sunlight(y, rp.slices.to_sun.y);
     if (haze_on()) {
-        s = s * exp(-rp.haze * (exp(-rp.inv_haze_height * y) / rp.inv_haze_height / rp.to_sun.y));
+        s = s * exp(-rp.haze.ext * (exp(-rp.haze.inv_height * y) / rp.haze.inv_height / rp.slices.to_sun.y));
     }
     return s;
 }
@@ -92,16 +103,16 @@ fn sun_through_air(y: f32) -> vec3<f32> {
 fn air_haze_transparency(y: f32, p_y: f32, k: f32) -> vec3<f32> {
     var t = air_transparency(y, p_y, k);
     if (haze_on()) {
-        let depth = exp(-rp.inv_haze_height * y) * path_factor_for(rp.inv_haze_height, p_y, k) / rp.inv_haze_height;
-        t = t * exp(-rp.haze * depth);
+        let depth = exp(-rp.haze.inv_height * y) * path_factor_for(rp.haze.inv_height, p_y, k) / rp.haze.inv_height;
+        t = t * exp(-rp.haze.ext * depth);
     }
     return t;
 }
 
 fn shadow_coords(p: vec3<f32>) -> vec2<f32> {
     return vec2<f32>(
-        (dot(rp.shadow_u, p) - rp.shadow_u_origin) / rp.shadow_texel.x - 0.5,
-        (dot(rp.shadow_w, p) - rp.shadow_w_origin) / rp.shadow_texel.y - 0.5);
+        (dot(rp.shadow.u, p) - rp.shadow.u_origin) / rp.shadow.texel.x - 0.5,
+        (dot(rp.shadow.w, p) - rp.shadow.w_origin) / rp.shadow.texel.y - 0.5);
 }
 
 // Bilinear in the shadow surface; 1 outside its footprint.
@@ -126,11 +137,11 @@ fn shadow_at(p: vec3<f32>) -> vec3<f32> {
 }
 
 fn sunward_of_slices(p: vec3<f32>) -> bool {
-    let c = dot(rp.normal, p);
-    if (dot(rp.normal, rp.to_sun) > 0.0) {
-        return c >= rp.plane_max;
+    let c = dot(rp.slices.normal, p);
+    if (dot(rp.slices.normal, rp.slices.to_sun) > 0.0) {
+        return c >= rp.slices.plane_max;
     }
-    return c <= rp.plane_min;
+    return c <= rp.slices.plane_min;
 }
 
 @compute @workgroup_size(8, 8)
@@ -145,18 +156,18 @@ fn clear(@builtin(global_invocation_id) id: vec3<u32>) {
         eye_buffer[3u * i + 1u] = vec4<f32>(1.0);
         eye_buffer[3u * i + 2u] = vec4<f32>(1.0);
         // The Mie scattering texture.
-        let c = dot(pixel_ray(id.x, id.y), rp.to_sun);
-        let haze = i32(rp.haze_field) - 1;
+        let c = dot(pixel_ray(id.x, id.y), rp.slices.to_sun);
+        let haze = i32(rp.shading.haze_field) - 1;
         for (var f = 0u; f < 4u; f = f + 1u) {
             var b = vec3<f32>(0.0);
             if (f < rp.grid.fields && i32(f) != haze) {
-                b = (phase_of(f, c) + rp.k_multi) * ams_field_info[f].yzw;
+                b = (phase_of(f, c) + rp.shading.k_multi) * ams_field_info[f].yzw;
             }
             pixel_tex[5u * i + f] = vec4<f32>(b, 0.0);
         }
         var hb = vec3<f32>(0.0);
         if (haze_on()) {
-            hb = phase_of(u32(haze), c) * rp.haze_sca;
+            hb = phase_of(u32(haze), c) * rp.haze.sca;
         }
         pixel_tex[5u * i + 4u] = vec4<f32>(hb, 3.0 / (16.0 * PI) * (1.0 + c * c));
     }
@@ -168,13 +179,13 @@ fn shadow_slice(@builtin(global_invocation_id) id: vec3<u32>) {
     if (id.x >= res || id.y >= res) {
         return;
     }
-    let q = rp.shadow_u * (rp.shadow_u_origin + (f32(id.x) + 0.5) * rp.shadow_texel.x)
-        + rp.shadow_w * (rp.shadow_w_origin + (f32(id.y) + 0.5) * rp.shadow_texel.y);
-    let p = q + (slice.plane - dot(rp.normal, q)) / dot(rp.normal, rp.to_sun)
-        * rp.to_sun;
+    let q = rp.shadow.u * (rp.shadow.u_origin + (f32(id.x) + 0.5) * rp.shadow.texel.x)
+        + rp.shadow.w * (rp.shadow.w_origin + (f32(id.y) + 0.5) * rp.shadow.texel.y);
+    let p = q + (slice.plane - dot(rp.slices.normal, q)) / dot(rp.slices.normal, rp.slices.to_sun)
+        * rp.slices.to_sun;
     let ext = extinction(densities(p));
     let i = id.x + res * id.y;
-    shadow[i] = vec4<f32>(shadow[i].rgb * exp(-ext * rp.sun_path), 1.0);
+    shadow[i] = vec4<f32>(shadow[i].rgb * exp(-ext * rp.slices.sun_path), 1.0);
 }
 
 @compute @workgroup_size(8, 8)
@@ -183,11 +194,11 @@ fn eye_slice(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     let d = pixel_ray(id.x, id.y);
-    let nd = dot(rp.normal, d);
+    let nd = dot(rp.slices.normal, d);
     if (abs(nd) < 1e-9) {
         return;
     }
-    let t = (slice.plane - dot(rp.normal, rp.view.eye)) / nd;
+    let t = (slice.plane - dot(rp.slices.normal, rp.view.eye)) / nd;
     let tg = ground_distance(rp.view.eye, d);
     if (t <= 0.0 || (tg >= 0.0 && t > tg)) {
         return;
@@ -196,12 +207,12 @@ fn eye_slice(@builtin(global_invocation_id) id: vec3<u32>) {
     let rho = densities(p);
     let ext = extinction(rho);
     let air = air_at(p.y);
-    let air_ext = air.rgb + air.w * rp.haze;
+    let air_ext = air.rgb + air.w * rp.haze.ext;
     if (all(ext <= vec3<f32>(0.0)) && all(air_ext <= vec3<f32>(0.0))) {
         return;
     }
     let i = id.x + rp.sizes.x * id.y;
-    let dt = rp.slice_spacing / abs(nd);
+    let dt = rp.slices.spacing / abs(nd);
     let g_cl = shadow_at(p);
     let g_atm = sun_through_air(p.y);
     let tex_haze = pixel_tex[5u * i + 4u];
@@ -213,7 +224,7 @@ fn eye_slice(@builtin(global_invocation_id) id: vec3<u32>) {
     let slab = exp(-(ext + air_ext) * dt);                           // Eq. 9
     var sum = eye_buffer[3u * i].rgb;
     let alpha_star = eye_buffer[3u * i + 1u].rgb;
-    if (rp.back_to_front != 0u) {
+    if (rp.slices.back_to_front != 0u) {
         sum = contribution + slab * sum;
     } else {
         sum = sum + alpha_star * contribution;
@@ -229,13 +240,13 @@ fn prism_span(d: vec3<f32>, t0: f32, t1: f32) -> vec2<f32> {
     var hi = t1;
     let res = f32(rp.sizes.z);
     for (var k = 0; k < 2; k = k + 1) {
-        var axis = rp.shadow_u;
-        var origin = rp.shadow_u_origin;
-        var texel = rp.shadow_texel.x;
+        var axis = rp.shadow.u;
+        var origin = rp.shadow.u_origin;
+        var texel = rp.shadow.texel.x;
         if (k == 1) {
-            axis = rp.shadow_w;
-            origin = rp.shadow_w_origin;
-            texel = rp.shadow_texel.y;
+            axis = rp.shadow.w;
+            origin = rp.shadow.w_origin;
+            texel = rp.shadow.texel.y;
         }
         let a = origin;
         let b = origin + texel * res;
@@ -264,7 +275,7 @@ fn air_segment(d: vec3<f32>, t0: f32, t1_in: f32, tex: vec4<f32>) -> vec3<f32> {
         return vec3<f32>(0.0);
     }
     let y = rp.view.eye.y;
-    let cos_sun = dot(d, rp.to_sun);
+    let cos_sun = dot(d, rp.slices.to_sun);
     // The segment lies on one side of the slices: ask at a point well inside it.
     let probe_t = select(0.5 * (t0 + t1_in), t0 + max(t0, 1.0), infinite);
     let probe = rp.view.eye + probe_t * d;
@@ -277,7 +288,7 @@ fn air_segment(d: vec3<f32>, t0: f32, t1_in: f32, tex: vec4<f32>) -> vec3<f32> {
         hi = select(t1_in, t0 + SHADOWED_AIR_MAX_M, infinite);
     } else {
         let k0 = t0;
-        out = inscatter(y, d.y, t1_in, cos_sun, rp.to_sun.y) - inscatter(y, d.y, k0, cos_sun, rp.to_sun.y);
+        out = inscatter(y, d.y, t1_in, cos_sun, rp.slices.to_sun.y) - inscatter(y, d.y, k0, cos_sun, rp.slices.to_sun.y);
         if (sunward) {
             return out;
         }
@@ -295,7 +306,7 @@ fn air_segment(d: vec3<f32>, t0: f32, t1_in: f32, tex: vec4<f32>) -> vec3<f32> {
     }
     let uniform_step = (hi - lo) / f32(SHADOWED_AIR_POINTS);
     let prism = prism_span(d, lo, hi);
-    let prism_step = max(min(rp.shadow_texel.x, rp.shadow_texel.y), (prism.y - prism.x) / 256.0);
+    let prism_step = max(min(rp.shadow.texel.x, rp.shadow.texel.y), (prism.y - prism.x) / 256.0);
     var t = lo;
     for (var n = 0u; n < 100000u; n = n + 1u) {
         if ((shadow_only && n >= SHADOWED_AIR_POINTS) || (!shadow_only && t >= hi)) {
@@ -307,7 +318,7 @@ fn air_segment(d: vec3<f32>, t0: f32, t1_in: f32, tex: vec4<f32>) -> vec3<f32> {
         let ahead = air_at(y + (t + 0.5 * uniform_step) * d.y);
         var dt = uniform_step;
         if (!shadow_only) {
-            let e = ahead.rgb + ahead.w * rp.haze;
+            let e = ahead.rgb + ahead.w * rp.haze.ext;
             let ext = max(e.r, max(e.g, e.b));
             dt = min(min(HAZY_AIR_STEP_TAU / max(ext, 1e-30), HAZY_AIR_MAX_STEP_M), hi - t);
             // Over the shadow's prism the steps resolve its edges (cpu::render).
@@ -353,19 +364,19 @@ fn composite(@builtin(global_invocation_id) id: vec3<u32>) {
     let t_cl = eye_buffer[3u * i + 2u].rgb;
     let tex = pixel_tex[5u * i + 4u];
     let t_end = ground_distance(rp.view.eye, d); // < 0: ∞
-    let n_dot_e = dot(rp.normal, rp.view.eye);
-    let nd = dot(rp.normal, d);
+    let n_dot_e = dot(rp.slices.normal, rp.view.eye);
+    let nd = dot(rp.slices.normal, d);
     let big = 3.0e38;
     let end = select(t_end, big, t_end < 0.0);
     var ta = 0.0;
     var tb = 0.0;
     if (abs(nd) < 1e-12) {
-        if (n_dot_e >= rp.plane_min && n_dot_e <= rp.plane_max) {
+        if (n_dot_e >= rp.slices.plane_min && n_dot_e <= rp.slices.plane_max) {
             tb = end;
         }
     } else {
-        let x = (rp.plane_min - n_dot_e) / nd;
-        let y = (rp.plane_max - n_dot_e) / nd;
+        let x = (rp.slices.plane_min - n_dot_e) / nd;
+        let y = (rp.slices.plane_max - n_dot_e) / nd;
         ta = clamp(min(x, y), 0.0, end);
         tb = clamp(max(x, y), 0.0, end);
     }
@@ -380,8 +391,8 @@ fn composite(@builtin(global_invocation_id) id: vec3<u32>) {
     var beyond = vec3<f32>(0.0);
     if (t_end >= 0.0) {
         let g_cl = shadow_at(rp.view.eye + t_end * d);
-        beyond = rp.grid.ground_albedo / PI * rp.to_sun.y * sun_through_air(0.0) * g_cl * t_all;
-    } else if (dot(d, rp.to_sun) >= rp.sky.cos_disk) {
+        beyond = rp.grid.ground_albedo / PI * rp.slices.to_sun.y * sun_through_air(0.0) * g_cl * t_all;
+    } else if (dot(d, rp.slices.to_sun) >= rp.sky.cos_disk) {
         beyond = t_all / rp.sky.disk_sr;
     }
     let i_s = rp.sky.irradiance;

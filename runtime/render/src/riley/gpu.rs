@@ -11,8 +11,8 @@ use runtime::Tables;
 use runtime::gpu::{Gpu, GpuTables};
 
 use crate::gpu::{
-    COMPOSE_WGSL, Dispatch, FieldsAndSky, Grid, RenderError, Sky, Timings, View, bind, build,
-    check_sizes, fields_and_sky, filled, run_slices, sky_light_buffer, slice_uniforms,
+    COMPOSE_WGSL, Dispatch, FieldsAndSky, Grid, RenderError, Sky, TexturePlane, Timings, View,
+    bind, build, check_sizes, fields_and_sky, filled, run_slices, sky_light_buffer, slice_uniforms,
     slicing_source, storage, v3,
 };
 use crate::{frame::Frame, image::Image, volume::MAX_FIELDS};
@@ -22,32 +22,36 @@ use crate::{frame::Frame, image::Image, volume::MAX_FIELDS};
 pub const RENDER_WGSL: &str = include_str!("render.wgsl");
 
 runtime::uniform! {
-    /// `RenderParams` of `render.wgsl`.
-    pub struct RenderParams as "RenderParams" {
-        /// The camera.
-        pub view: View,
+    /// `Slices` of `render.wgsl`: the half-angle slices and how light crosses them.
+    pub struct Slices as "Slices" {
         /// The sunlight's direction of travel.
         pub light: [f32; 3],
         /// The slice spacing Δ (m).
-        pub slice_spacing: f32,
+        pub spacing: f32,
         /// The half-angle vector.
         pub half_vector: [f32; 3],
         /// 1: the continuum light update, 0: Eq. 25 as printed.
         pub continuum: u32,
-        /// The light buffer's axis u.
-        pub light_u: [f32; 3],
-        /// Its origin along u (m).
-        pub light_u_origin: f32,
-        /// The light buffer's axis w.
-        pub light_w: [f32; 3],
-        /// Its origin along w (m).
-        pub light_w_origin: f32,
-        /// Texel size along u, w (m).
-        pub light_texel: [f32; 2],
         /// ξ (1/sr).
         pub xi: f32,
         /// 1: slices front to back, 0: back to front.
         pub front_to_back: u32,
+        /// Padding.
+        pub pad0: u32,
+        /// Padding.
+        pub pad1: u32,
+    }
+}
+
+runtime::uniform! {
+    /// `RenderParams` of `render.wgsl`.
+    pub struct RenderParams as "RenderParams" {
+        /// The camera.
+        pub view: View,
+        /// The half-angle slices.
+        pub slices: Slices,
+        /// The light buffer.
+        pub light_buffer: TexturePlane,
         /// The grid and the ground.
         pub grid: Grid,
         /// Width, height, light resolution, 0.
@@ -132,17 +136,21 @@ impl Renderer {
                 (setup.tan_half_fov_y, setup.aspect),
                 None,
             ),
-            light: v3(setup.light),
-            slice_spacing: setup.slice_step as f32,
-            half_vector: v3(setup.half),
-            continuum,
-            light_u: v3(setup.light_u),
-            light_u_origin: setup.light_origin[0] as f32,
-            light_w: v3(setup.light_w),
-            light_w_origin: setup.light_origin[1] as f32,
-            light_texel: [setup.light_texel[0] as f32, setup.light_texel[1] as f32],
-            xi: settings.xi as f32,
-            front_to_back: u32::from(setup.front_to_back),
+            slices: Slices {
+                light: v3(setup.light),
+                spacing: setup.slice_step as f32,
+                half_vector: v3(setup.half),
+                continuum,
+                xi: settings.xi as f32,
+                front_to_back: u32::from(setup.front_to_back),
+                pad0: 0,
+                pad1: 0,
+            },
+            light_buffer: TexturePlane::new(
+                (setup.light_u, setup.light_w),
+                setup.light_origin,
+                setup.light_texel,
+            ),
             grid: Grid::of(frame, tables.fields.len()),
             sizes: [w as u32, h as u32, res as u32, 0],
             sigma_ext,

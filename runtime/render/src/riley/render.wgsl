@@ -3,19 +3,22 @@
 // Included after tables.wgsl (bind group 0), slicing.wgsl and compose.wgsl. The CPU reference is
 // render::riley::cpu.
 
-struct RenderParams {
-    view: View,
+// The half-angle slices and how light crosses them.
+struct Slices {
     light: vec3<f32>,        // the sunlight's direction of travel
-    slice_spacing: f32,      // Δ (m)
+    spacing: f32,            // Δ (m)
     half_vector: vec3<f32>,
     continuum: u32,          // 1: the continuum light update, 0: Eq. 25 as printed
-    light_u: vec3<f32>,      // the light buffer's axis u
-    light_u_origin: f32,     // its origin along u (m)
-    light_w: vec3<f32>,      // the light buffer's axis w
-    light_w_origin: f32,     // its origin along w (m)
-    light_texel: vec2<f32>,  // texel size along u, w (m)
     xi: f32,                 // ξ (1/sr)
     front_to_back: u32,      // 1: slices front to back, 0: back to front
+    pad0: u32,
+    pad1: u32,
+}
+
+struct RenderParams {
+    view: View,
+    slices: Slices,
+    light_buffer: TexturePlane,
     grid: Grid,
     sizes: vec4<u32>,        // width, height, light resolution, 0
     sigma_ext: array<vec4<f32>, 4>,  // per field, m² per channel
@@ -61,8 +64,8 @@ fn forward_fraction_mix(rho: vec4<f32>, n: f32) -> vec3<f32> {
 fn light_at(p: vec3<f32>) -> vec4<f32> {
     let res = rp.sizes.z;
     let top = f32(res - 1u);
-    let u = clamp((dot(rp.light_u, p) - rp.light_u_origin) / rp.light_texel.x - 0.5, 0.0, top);
-    let v = clamp((dot(rp.light_w, p) - rp.light_w_origin) / rp.light_texel.y - 0.5, 0.0, top);
+    let u = clamp((dot(rp.light_buffer.u, p) - rp.light_buffer.u_origin) / rp.light_buffer.texel.x - 0.5, 0.0, top);
+    let v = clamp((dot(rp.light_buffer.w, p) - rp.light_buffer.w_origin) / rp.light_buffer.texel.y - 0.5, 0.0, top);
     let a0 = min(u32(floor(u)), res - 2u);
     let b0 = min(u32(floor(v)), res - 2u);
     let s = u - f32(a0);
@@ -93,11 +96,11 @@ fn eye_slice(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     let d = pixel_ray(id.x, id.y);
-    let hd = dot(rp.half_vector, d);
+    let hd = dot(rp.slices.half_vector, d);
     if (abs(hd) < 1e-9) {
         return;
     }
-    let t = (slice.plane - dot(rp.half_vector, rp.view.eye)) / hd;
+    let t = (slice.plane - dot(rp.slices.half_vector, rp.view.eye)) / hd;
     if (t <= 0.0) {
         return;
     }
@@ -110,9 +113,9 @@ fn eye_slice(@builtin(global_invocation_id) id: vec3<u32>) {
     let sca = scattering(rho);
     let albedo = select(vec3<f32>(0.0), sca / ext, ext > vec3<f32>(0.0));
     var lit = light_at(p);
-    if (rp.continuum != 0u) {
+    if (rp.slices.continuum != 0u) {
         // The light at the slab's middle (cpu::cross_slab over half the light's path).
-        let tau_h = ext * (0.5 * rp.slice_spacing / dot(rp.half_vector, rp.light));
+        let tau_h = ext * (0.5 * rp.slices.spacing / dot(rp.slices.half_vector, rp.slices.light));
         let f_h = forward_fraction_mix(rho, lit.w + 1.0 + tau_h.g);
         let kept = select(vec3<f32>(1.0), exp(-tau_h * (1.0 - albedo * f_h)), ext > vec3<f32>(0.0));
         var n_h = lit.w;
@@ -121,15 +124,15 @@ fn eye_slice(@builtin(global_invocation_id) id: vec3<u32>) {
         }
         lit = vec4<f32>(lit.rgb * kept, n_h);
     }
-    let phase = ams_mix(rho, lit.w + 1.0, -dot(rp.light, d));
-    let thickness = rp.slice_spacing / abs(hd);
+    let phase = ams_mix(rho, lit.w + 1.0, -dot(rp.slices.light, d));
+    let thickness = rp.slices.spacing / abs(hd);
     let slab = exp(-ext * thickness);
-    let scattered = lit.rgb * sunlight(p.y, rp.sky.sun.y) * rp.sky.irradiance * (phase + rp.xi) * albedo
+    let scattered = lit.rgb * sunlight(p.y, rp.sky.sun.y) * rp.sky.irradiance * (phase + rp.slices.xi) * albedo
         * (1.0 - slab);
     let i = id.x + rp.sizes.x * id.y;
     let l = eye_buffer[2u * i].rgb;
     let tr = eye_buffer[2u * i + 1u].rgb;
-    if (rp.front_to_back != 0u) {
+    if (rp.slices.front_to_back != 0u) {
         eye_buffer[2u * i] = vec4<f32>(l + tr * scattered, 0.0);
     } else {
         eye_buffer[2u * i] = vec4<f32>(scattered + slab * l, 0.0);
@@ -143,24 +146,24 @@ fn light_slice(@builtin(global_invocation_id) id: vec3<u32>) {
     if (id.x >= res || id.y >= res) {
         return;
     }
-    let q = rp.light_u * (rp.light_u_origin + (f32(id.x) + 0.5) * rp.light_texel.x)
-        + rp.light_w * (rp.light_w_origin + (f32(id.y) + 0.5) * rp.light_texel.y);
-    let h_dot_l = dot(rp.half_vector, rp.light);
-    let t = (slice.plane - dot(rp.half_vector, q)) / h_dot_l;
-    let p = q + t * rp.light;
+    let q = rp.light_buffer.u * (rp.light_buffer.u_origin + (f32(id.x) + 0.5) * rp.light_buffer.texel.x)
+        + rp.light_buffer.w * (rp.light_buffer.w_origin + (f32(id.y) + 0.5) * rp.light_buffer.texel.y);
+    let h_dot_l = dot(rp.slices.half_vector, rp.slices.light);
+    let t = (slice.plane - dot(rp.slices.half_vector, q)) / h_dot_l;
+    let p = q + t * rp.slices.light;
     let rho = densities(p);
     let ext = extinction(rho);
     if (all(ext <= vec3<f32>(0.0))) {
         return;
     }
     let sca = scattering(rho);
-    let tau = ext * (rp.slice_spacing / h_dot_l);
+    let tau = ext * (rp.slices.spacing / h_dot_l);
     let texel = light_buffer[id.x + res * id.y];
     let f = forward_fraction_mix(rho, texel.w + 1.0 + tau.g);
     let albedo = select(vec3<f32>(0.0), sca / ext, ext > vec3<f32>(0.0));
     // render::LightUpdate::keep.
     var kept: vec3<f32>;
-    if (rp.continuum != 0u) {
+    if (rp.slices.continuum != 0u) {
         kept = exp(-tau * (1.0 - albedo * f));
     } else {
         let through = exp(-tau);
@@ -179,8 +182,8 @@ fn light_slice(@builtin(global_invocation_id) id: vec3<u32>) {
 // outside its footprint (the ground's and the air's below the grid, compose.wgsl).
 fn sun_left(g: vec3<f32>) -> vec3<f32> {
     let res = f32(rp.sizes.z);
-    let u = (dot(rp.light_u, g) - rp.light_u_origin) / rp.light_texel.x - 0.5;
-    let w = (dot(rp.light_w, g) - rp.light_w_origin) / rp.light_texel.y - 0.5;
+    let u = (dot(rp.light_buffer.u, g) - rp.light_buffer.u_origin) / rp.light_buffer.texel.x - 0.5;
+    let w = (dot(rp.light_buffer.w, g) - rp.light_buffer.w_origin) / rp.light_buffer.texel.y - 0.5;
     if (u >= -0.5 && u <= res - 0.5 && w >= -0.5 && w <= res - 0.5) {
         return light_at(g).rgb;
     }

@@ -144,6 +144,91 @@ pub fn source() -> String {
 }
 
 runtime::uniform! {
+    /// `Track` of `truth.wgsl`: the tracker's scalars (a record of their own: as separate
+    /// fields of [`TruthParams`], lavapipe's paths ran 5.7× slower on the cumulus at dawn).
+    pub struct Track as "Track" {
+        /// The majorant (1/m).
+        pub majorant: f32,
+        /// The guide share ε.
+        pub guide_share: f32,
+        /// The haze's 1/H (1/m).
+        pub inv_haze_height: f32,
+        /// T_vol's step (m).
+        pub transparency_step: f32,
+    }
+}
+
+runtime::uniform! {
+    /// `Counts` of `truth.wgsl`.
+    pub struct Counts as "Counts" {
+        /// Bands.
+        pub bands: u32,
+        /// Wavelengths carried per path.
+        pub carried: u32,
+        /// Max scatterings.
+        pub max_scatterings: u32,
+        /// Lights.
+        pub lights: u32,
+    }
+}
+
+runtime::uniform! {
+    /// `TableSizes` of `truth.wgsl`.
+    pub struct TableSizes as "TableSizes" {
+        /// θ bins.
+        pub theta_bins: u32,
+        /// The haze's field (u32::MAX: none).
+        pub haze_field: u32,
+        /// 1: the air scatters.
+        pub air_on: u32,
+        /// The phase sampling's blocks.
+        pub blocks: u32,
+    }
+}
+
+runtime::uniform! {
+    /// `Stream` of `truth.wgsl`: the random streams.
+    pub struct Stream as "Stream" {
+        /// The seed's low word.
+        pub seed_low: u32,
+        /// Its high word.
+        pub seed_high: u32,
+        /// 1: splitting on.
+        pub splitting: u32,
+        /// Padding.
+        pub pad: u32,
+    }
+}
+
+runtime::uniform! {
+    /// `Stepping` of `truth.wgsl`.
+    pub struct Stepping as "Stepping" {
+        /// The θ bins' step (rad).
+        pub theta_step: f32,
+        /// Loop steps per dispatch.
+        pub loop_budget: f32,
+        /// Padding.
+        pub pad0: f32,
+        /// Padding.
+        pub pad1: f32,
+    }
+}
+
+runtime::uniform! {
+    /// `Tile` of `truth.wgsl`: the pixels of one dispatch.
+    pub struct Tile as "Tile" {
+        /// The first pixel.
+        pub first: u32,
+        /// The pixel count.
+        pub pixels: u32,
+        /// Padding.
+        pub pad0: u32,
+        /// Padding.
+        pub pad1: u32,
+    }
+}
+
+runtime::uniform! {
     /// `Params` of `truth.wgsl`.
     pub struct TruthParams as "Params" {
         /// The camera (photons: their source as the eye, their direction as forward).
@@ -164,54 +249,18 @@ runtime::uniform! {
         pub background: [f32; 3],
         /// Padding.
         pub pad0: f32,
-        /// The majorant (1/m).
-        pub majorant: f32,
-        /// The guide share ε.
-        pub guide_share: f32,
-        /// The haze's 1/H (1/m).
-        pub inv_haze_height: f32,
-        /// T_vol's step (m).
-        pub transparency_step: f32,
-        /// Bands.
-        pub bands: u32,
-        /// Wavelengths carried per path.
-        pub carried: u32,
-        /// Max scatterings.
-        pub max_scatterings: u32,
-        /// Lights.
-        pub lights: u32,
-        /// θ bins.
-        pub theta_bins: u32,
-        /// The haze's field (u32::MAX: none).
-        pub haze_field: u32,
-        /// 1: the air on.
-        pub air_on: u32,
-        /// Blocks.
-        pub blocks: u32,
-        /// The seed's low word.
-        pub seed_low: u32,
-        /// The seed's high word.
-        pub seed_high: u32,
-        /// 1: splitting on.
-        pub splitting: u32,
-        /// Padding.
-        pub pad2: u32,
-        /// The θ bins' step (rad).
-        pub theta_step: f32,
-        /// Loop steps per dispatch.
-        pub loop_budget: f32,
-        /// Padding.
-        pub pad3: f32,
-        /// Padding.
-        pub pad4: f32,
-        /// The tile's first pixel.
-        pub tile_first: u32,
-        /// The tile's pixel count.
-        pub tile_pixels: u32,
-        /// Padding.
-        pub pad5: u32,
-        /// Padding.
-        pub pad6: u32,
+        /// The tracker's scalars.
+        pub track: Track,
+        /// The counts of bands, wavelengths, scatterings and lights.
+        pub counts: Counts,
+        /// The tables' sizes and switches.
+        pub tables: TableSizes,
+        /// The random streams.
+        pub stream: Stream,
+        /// The θ step and the loop budget.
+        pub stepping: Stepping,
+        /// The tile of this dispatch.
+        pub tile: Tile,
     }
 }
 
@@ -526,30 +575,37 @@ fn params(
         },
         background: a3(tracer.background),
         pad0: 0.0,
-        majorant: tracer.majorant as f32,
-        guide_share: tracer.guide as f32,
-        inv_haze_height: tracer.haze.map_or(0.0, |h| h.1) as f32,
-        transparency_step: (0.25 * voxel) as f32,
-        bands: tracer.bands.len() as u32,
-        carried: tracer.wavelengths_per_path.clamp(1, super::MAX_CARRIED) as u32,
-        max_scatterings: tracer.max_scatterings.min(u32::MAX as usize) as u32,
-        lights: tracer.lights.len() as u32,
-        theta_bins: o.bins as u32,
-        haze_field: tracer.haze.map_or(u32::MAX, |h| h.0 as u32),
-        air_on: u32::from(tracer.air_on),
-        blocks: o.blocks as u32,
-        seed_low: settings.seed as u32,
-        seed_high: (settings.seed >> 32) as u32,
-        splitting: 1,
-        pad2: 0,
-        theta_step: tracer.bands[0].fields[0].phase.step() as f32,
-        loop_budget: STEPS_PER_DISPATCH as f32,
-        pad3: 0.0,
-        pad4: 0.0,
-        tile_first: 0,
-        tile_pixels: 0,
-        pad5: 0,
-        pad6: 0,
+        track: Track {
+            majorant: tracer.majorant as f32,
+            guide_share: tracer.guide as f32,
+            inv_haze_height: tracer.haze.map_or(0.0, |h| h.1) as f32,
+            transparency_step: (0.25 * voxel) as f32,
+        },
+        counts: Counts {
+            bands: tracer.bands.len() as u32,
+            carried: tracer.wavelengths_per_path.clamp(1, super::MAX_CARRIED) as u32,
+            max_scatterings: tracer.max_scatterings.min(u32::MAX as usize) as u32,
+            lights: tracer.lights.len() as u32,
+        },
+        tables: TableSizes {
+            theta_bins: o.bins as u32,
+            haze_field: tracer.haze.map_or(u32::MAX, |h| h.0 as u32),
+            air_on: u32::from(tracer.air_on),
+            blocks: o.blocks as u32,
+        },
+        stream: Stream {
+            seed_low: settings.seed as u32,
+            seed_high: (settings.seed >> 32) as u32,
+            splitting: 1,
+            pad: 0,
+        },
+        stepping: Stepping {
+            theta_step: tracer.bands[0].fields[0].phase.step() as f32,
+            loop_budget: STEPS_PER_DISPATCH as f32,
+            pad0: 0.0,
+            pad1: 0.0,
+        },
+        tile: Tile::default(),
     })
 }
 
@@ -784,8 +840,11 @@ fn trace(
         let pass_start = Instant::now();
         for first in (0..pixels as usize).step_by(TILE_PIXELS) {
             let len = TILE_PIXELS.min(pixels as usize - first);
-            params.tile_first = first as u32;
-            params.tile_pixels = len as u32;
+            params.tile = Tile {
+                first: first as u32,
+                pixels: len as u32,
+                ..Tile::default()
+            };
             params.first_sample = done as u32;
             params.samples = batch as u32;
             gpu.queue

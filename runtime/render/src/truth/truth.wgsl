@@ -3,6 +3,50 @@
 // the air's path factor). Every step names the CPU function it mirrors; the module docs of
 // render::truth give the equations and their sources.
 
+// The tracker's four scalars (a record of its own: as separate fields of Params, lavapipe's
+// paths ran 5.7× slower on the cumulus at dawn).
+struct Track {
+    majorant: f32,           // 1/m
+    guide_share: f32,        // the guide share ε
+    inv_haze_height: f32,    // the haze's 1/H (1/m)
+    transparency_step: f32,  // T_vol's step (m)
+}
+
+struct Counts {
+    bands: u32,
+    carried: u32,            // wavelengths carried per path
+    max_scatterings: u32,
+    lights: u32,
+}
+
+struct TableSizes {
+    theta_bins: u32,
+    haze_field: u32,         // 0xffffffff: none
+    air_on: u32,             // 1: the air scatters
+    blocks: u32,             // the phase sampling's blocks
+}
+
+struct Stream {
+    seed_low: u32,           // the seed's low word
+    seed_high: u32,          // its high word
+    splitting: u32,          // 1: splitting on
+    pad: u32,
+}
+
+struct Stepping {
+    theta_step: f32,         // the θ bins' step (rad)
+    loop_budget: f32,        // loop steps per dispatch
+    pad0: f32,
+    pad1: f32,
+}
+
+struct Tile {
+    first: u32,              // the tile's first pixel
+    pixels: u32,             // its pixel count
+    pad0: u32,
+    pad1: u32,
+}
+
 struct Params {
     view: View,
     sizes: vec2<u32>,        // width, height
@@ -13,30 +57,12 @@ struct Params {
     sky: Sky,                // (beta unused here)
     background: vec3<f32>,   // radiance of what paths leave into
     pad0: f32,
-    majorant: f32,           // 1/m
-    guide_share: f32,        // the guide share ε
-    inv_haze_height: f32,    // the haze's 1/H (1/m)
-    transparency_step: f32,  // T_vol's step (m)
-    bands: u32,
-    carried: u32,            // wavelengths carried
-    max_scatterings: u32,
-    lights: u32,
-    theta_bins: u32,
-    haze_field: u32,         // 0xffffffff: none
-    air_on: u32,
-    blocks: u32,
-    seed_low: u32,           // the seed's low word
-    seed_high: u32,          // its high word
-    splitting: u32,          // 1: splitting on
-    pad2: u32,
-    theta_step: f32,         // the θ bins' step (rad)
-    loop_budget: f32,        // loop steps per dispatch
-    pad3: f32,
-    pad4: f32,
-    tile_first: u32,         // the tile's first pixel
-    tile_pixels: u32,        // its pixel count
-    pad5: u32,
-    pad6: u32,
+    track: Track,
+    counts: Counts,
+    tables: TableSizes,
+    stream: Stream,
+    stepping: Stepping,
+    tile: Tile,
 }
 
 @group(0) @binding(0) var<uniform> rp: Params;
@@ -136,7 +162,7 @@ fn hash(v: u32) -> u32 {
 }
 
 fn stream(pixel: u32, smp: u32) {
-    let s = hash(hash(rp.seed_low) ^ rp.seed_high);
+    let s = hash(hash(rp.stream.seed_low) ^ rp.stream.seed_high);
     key0 = hash(s ^ hash(pixel + 0x9e3779b9u) ^ hash(smp * 0x85ebca6bu + 1u));
     key1 = hash(key0 ^ hash(smp + 0x27d4eb2fu) ^ pixel * 0xc2b2ae35u);
     counter = 0u;
@@ -210,7 +236,7 @@ fn carry(n: u32) -> Carried {
             um = um - 1.0;
         }
         var j = 0u;
-        while (j + 1u < rp.bands && bands[j].air.w <= um) {
+        while (j + 1u < rp.counts.bands && bands[j].air.w <= um) {
             j = j + 1u;
         }
         c.band[m] = j;
@@ -221,8 +247,8 @@ fn carry(n: u32) -> Carried {
 // ---- the phase functions (render::truth::phase::PhaseSampler) ----
 
 fn phase_base(b: u32, field: u32) -> u32 {
-    let bins = rp.theta_bins;
-    return (b * 4u + field) * (2u * bins + rp.blocks);
+    let bins = rp.tables.theta_bins;
+    return (b * 4u + field) * (2u * bins + rp.tables.blocks);
 }
 
 fn phase_value(b: u32, field: u32, k: u32) -> f32 {
@@ -232,15 +258,15 @@ fn phase_value(b: u32, field: u32, k: u32) -> f32 {
 // The bin of the angle between unit d and w.
 fn phase_bin(d: vec3<f32>, w: vec3<f32>) -> u32 {
     let theta = atan2(length(cross(d, w)), dot(d, w));
-    return min(u32(round(theta / rp.theta_step)), rp.theta_bins - 1u);
+    return min(u32(round(theta / rp.stepping.theta_step)), rp.tables.theta_bins - 1u);
 }
 
 // A bin of the smooth part drawn by its probability (u picks the block, v the bin in it: each
 // level's CDF is relative, so a bin of probability 10⁻⁸ is drawn as often as it should be in
 // f32), then (1 − cos θ, sin θ) uniform in cos θ inside the bin (w).
 fn phase_sample_smooth(b: u32, field: u32, u: f32, v: f32, w: f32) -> vec2<f32> {
-    let bins = rp.theta_bins;
-    let blocks = rp.blocks;
+    let bins = rp.tables.theta_bins;
+    let blocks = rp.tables.blocks;
     let base = phase_base(b, field);
     var lo = 0u;
     var hi = blocks - 1u;
@@ -327,22 +353,22 @@ fn exp_path(gamma: f32, p: vec3<f32>, d: vec3<f32>, s: f32) -> f32 {
 }
 
 fn air_path(p: vec3<f32>, d: vec3<f32>, s: f32) -> f32 {
-    if (rp.air_on == 0u) {
+    if (rp.tables.air_on == 0u) {
         return 0.0;
     }
     return exp_path(rp.sky.inv_scale_height, p, d, s);
 }
 
 fn haze_path(p: vec3<f32>, d: vec3<f32>, s: f32) -> f32 {
-    if (rp.haze_field == 0xffffffffu) {
+    if (rp.tables.haze_field == 0xffffffffu) {
         return 0.0;
     }
-    return exp_path(rp.inv_haze_height, p, d, s);
+    return exp_path(rp.track.inv_haze_height, p, d, s);
 }
 
 // Tracer::air_ratios.
 fn air_ratios(c: ptr<function, Carried>, p: vec3<f32>, d: vec3<f32>, s: f32, collided: bool) {
-    if ((*c).n == 1u || rp.air_on == 0u) {
+    if ((*c).n == 1u || rp.tables.air_on == 0u) {
         return;
     }
     let path = air_path(p, d, s);
@@ -360,7 +386,7 @@ fn air_ratios(c: ptr<function, Carried>, p: vec3<f32>, d: vec3<f32>, s: f32, col
 
 // Tracer::haze_ratios.
 fn haze_ratios(c: ptr<function, Carried>, p: vec3<f32>, d: vec3<f32>, s: f32, collided: bool) {
-    if (rp.haze_field == 0xffffffffu) {
+    if (rp.tables.haze_field == 0xffffffffu) {
         return;
     }
     let path = haze_path(p, d, s);
@@ -475,7 +501,7 @@ fn track(c: ptr<function, Carried>, p: vec3<f32>, d: vec3<f32>, limit: f32) -> H
         return out;
     }
     let end = min(span.y, limit);
-    let mu = rp.majorant;
+    let mu = rp.track.majorant;
     let sig = sigma_matrix(*c);
     var t = span.x;
     loop {
@@ -509,7 +535,7 @@ fn volume_transmittance(c: Carried, p: vec3<f32>, d: vec3<f32>, limit: f32) -> v
         return tr;
     }
     let end = min(span.y, limit);
-    let mu = rp.majorant;
+    let mu = rp.track.majorant;
     let sig = sigma_matrix(c);
     var t = span.x;
     loop {
@@ -580,7 +606,7 @@ fn add_source(c: Carried, v: Vertex, p: vec3<f32>, dir: vec3<f32>, limit: f32, s
 
 fn direct(c: Carried, v: Vertex, p: vec3<f32>, coef_w: vec4<f32>) -> vec3<f32> {
     var sum = add_source(c, v, p, rp.sky.sun, INF, rp.sky.irradiance, coef_w);
-    for (var i = 0u; i < rp.lights; i = i + 1u) {
+    for (var i = 0u; i < rp.counts.lights; i = i + 1u) {
         let light = lights[i];
         let to = light.position.xyz - p;
         let r2 = dot(to, to);
@@ -616,9 +642,9 @@ fn next_event(c: ptr<function, Carried>, p0: vec3<f32>, d: vec3<f32>) -> Event {
     ev.field = 0u;
     let t_ground = select(INF, max(p0.y / -d.y, 0.0), d.y < 0.0);
     let hero = bands[(*c).band[0]].air;
-    let t_air = select(INF, sample_exponential(hero.x, rp.sky.inv_scale_height, p0, d), rp.air_on != 0u);
-    let t_haze = select(INF, sample_exponential(hero.y, rp.inv_haze_height, p0, d),
-        rp.haze_field != 0xffffffffu);
+    let t_air = select(INF, sample_exponential(hero.x, rp.sky.inv_scale_height, p0, d), rp.tables.air_on != 0u);
+    let t_haze = select(INF, sample_exponential(hero.y, rp.track.inv_haze_height, p0, d),
+        rp.tables.haze_field != 0xffffffffu);
     let hit = track(c, p0, d, min(t_ground, min(t_air, t_haze)));
     if (hit.hit) {
         air_ratios(c, p0, d, hit.t, false);
@@ -666,7 +692,7 @@ fn next_event(c: ptr<function, Carried>, p0: vec3<f32>, d: vec3<f32>) -> Event {
         haze_ratios(c, p0, d, t_haze, true);
         ev.p = p0 + t_haze * d;
         ev.kind = EV_VOLUME;
-        ev.field = rp.haze_field;
+        ev.field = rp.tables.haze_field;
     } else if (t_air < t_ground) {
         air_ratios(c, p0, d, t_air, true);
         haze_ratios(c, p0, d, t_air, false);
@@ -802,7 +828,7 @@ fn weight_window(c: ptr<function, Carried>, room: u32) -> u32 {
         kept = ROULETTE_WEIGHT;
     }
     var k = 1u;
-    if (rp.splitting != 0u && kept > SPLIT_WEIGHT) {
+    if (rp.stream.splitting != 0u && kept > SPLIT_WEIGHT) {
         k = min(min(u32(ceil(kept)), MAX_SPLIT), room + 1u);
     }
     if (kept != largest) {
@@ -839,7 +865,7 @@ fn begin_sample(pixel: u32, k: u32) -> Path {
         path.c = carry(1u);
         path.d = rp.view.forward;
     } else {
-        path.c = carry(rp.carried);
+        path.c = carry(rp.counts.carried);
         path.p = camera_origin(pixel % rp.sizes.x, pixel / rp.sizes.x);
         path.d = camera_direction(pixel % rp.sizes.x, pixel / rp.sizes.x);
     }
@@ -905,7 +931,7 @@ fn load(slot: u32) -> Path {
 // upwards, y if downwards off the beam's direction (the slabs' R and diffuse T).
 fn photon_event(path: ptr<function, Path>) -> bool {
     (*path).sum = vec3<f32>(0.0);
-    if ((*path).bounce >= rp.max_scatterings) {
+    if ((*path).bounce >= rp.counts.max_scatterings) {
         return true;
     }
     var c = (*path).c;
@@ -939,7 +965,7 @@ fn event(slot: u32, path: ptr<function, Path>) -> bool {
     if (photon_mode) {
         return photon_event(path);
     }
-    let max_scatterings = rp.max_scatterings;
+    let max_scatterings = rp.counts.max_scatterings;
     if ((*path).bounce >= max_scatterings) {
         return true;
     }
@@ -972,9 +998,9 @@ fn event(slot: u32, path: ptr<function, Path>) -> bool {
     (*path).sum = (*path).sum + direct(c, v, p, w);
     var next: vec3<f32>;
     if (ev.kind == EV_VOLUME) {
-        next = continue_volume(&c, ev.field, d, rp.guide_share);
+        next = continue_volume(&c, ev.field, d, rp.track.guide_share);
     } else {
-        next = continue_guided(&c, ev.kind == EV_SURFACE, d, v.n, v.a, rp.guide_share);
+        next = continue_guided(&c, ev.kind == EV_SURFACE, d, v.n, v.a, rp.track.guide_share);
     }
     (*path).d = next;
     (*path).bounce = (*path).bounce + 1u;
@@ -994,18 +1020,18 @@ fn event(slot: u32, path: ptr<function, Path>) -> bool {
     return false;
 }
 
-// Advances one pixel's path of the current sample by at most about `rp.loop_budget` loop steps:
+// Advances one pixel's path of the current sample by at most about `rp.stepping.loop_budget` loop steps:
 // a dispatch stops between events once it has taken that many, and the next one goes on from
 // the saved state. Bounded work per dispatch keeps every invocation inside llvmpipe's loop
 // limit and every dispatch short on a desktop GPU (whose driver resets a device busy for
 // seconds); the path is the same whichever dispatch takes which part of it.
 @compute @workgroup_size(64)
 fn step(@builtin(global_invocation_id) id: vec3<u32>) {
-    if (id.x >= rp.tile_pixels) {
+    if (id.x >= rp.tile.pixels) {
         return;
     }
     let slot = id.x;
-    let pixel = rp.tile_first + slot;
+    let pixel = rp.tile.first + slot;
     var path: Path;
     if (stp.begin == 1u) {
         path = begin_sample(pixel, 0u);
@@ -1014,7 +1040,7 @@ fn step(@builtin(global_invocation_id) id: vec3<u32>) {
     }
     if (path.alive == 1u) {
         work = 0u;
-        let budget = u32(rp.loop_budget);
+        let budget = u32(rp.stepping.loop_budget);
         loop {
             if (work >= budget) {
                 break;
@@ -1055,10 +1081,10 @@ fn step(@builtin(global_invocation_id) id: vec3<u32>) {
     // iterations in all, silently cutting a path short; then this loop runs fewer times, and
     // the pass reports the cut path.
     var probe = 0u;
-    for (var i = 0u; i < min(rp.theta_bins, 2u); i = i + 1u) {
+    for (var i = 0u; i < min(rp.tables.theta_bins, 2u); i = i + 1u) {
         probe = probe + 1u;
     }
-    if (probe != min(rp.theta_bins, 2u)) {
+    if (probe != min(rp.tables.theta_bins, 2u)) {
         atomicAdd(&counters[0], 1u);
     }
     if (stp.count == 1u && path.alive == 1u) {
@@ -1081,7 +1107,7 @@ fn transparency(@builtin(global_invocation_id) id: vec3<u32>) {
         transparency_out[pixel] = 1.0;
         return;
     }
-    let steps = u32(clamp(ceil((span.y - span.x) / rp.transparency_step), 1.0, 65536.0));
+    let steps = u32(clamp(ceil((span.y - span.x) / rp.track.transparency_step), 1.0, 65536.0));
     let dt = (span.y - span.x) / f32(steps);
     var tau = 0.0;
     for (var i = 0u; i < steps; i = i + 1u) {
