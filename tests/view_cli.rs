@@ -330,16 +330,53 @@ fn a_scripted_session_moves_the_sun_switches_the_model_orbits_and_its_still_view
     assert!(json("end.json")["frame_seconds_mean"].as_f64().unwrap() > 0.0);
 }
 
-#[test]
-fn a_scene_edited_into_an_invalid_state_is_reported_with_its_line_and_the_last_good_one_kept() {
-    let cwd = workdir("view-watch");
-    let good = std::fs::read_to_string(rainbow()).unwrap();
-    std::fs::write(cwd.join("scene.toml"), &good).unwrap();
+/// An EXR's R, G, B and A planes.
+type Planes = [Vec<f32>; 4];
+
+/// What a window shows around an edit of its inputs: `view` with `args` (the scene first) and a
+/// script of two shots 4 s apart (`before.png`, `after.png`, with their EXRs) runs in `cwd`;
+/// `edit` runs once the first shot is written. Its stderr and the two shots' planes, once it
+/// has ended successfully; `None` where it was skipped (no xvfb-run, or no adapter where none
+/// is required).
+fn around_an_edit(
+    cwd: &Path,
+    args: &[&str],
+    edit: impl FnOnce(),
+) -> Option<(String, Planes, Planes)> {
     std::fs::write(
         cwd.join("script.toml"),
         "[[step]]\nscreenshot = \"before.png\"\nwait_s = 4\n\n[[step]]\nscreenshot = \"after.png\"\n",
     )
     .unwrap();
+    let mut args = args.to_vec();
+    args.extend(["--script", "script.toml", "--screenshot", "end.png"]);
+    let mut child = view_command(&args, cwd)?
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    if !first_shot(&mut child, &cwd.join("before.json")) {
+        return None;
+    }
+    edit();
+    let out = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(out.status.success(), "view failed:\n{stderr}");
+    let (_, _, before) = read_rgba(&cwd.join("before.exr"));
+    let (_, _, after) = read_rgba(&cwd.join("after.exr"));
+    Some((stderr, before, after))
+}
+
+#[test]
+fn a_scene_edited_into_an_invalid_state_is_reported_with_its_line_and_the_last_good_one_kept() {
+    let cwd = workdir("view-watch");
+    let good = std::fs::read_to_string(rainbow()).unwrap();
+    std::fs::write(cwd.join("scene.toml"), &good).unwrap();
+    let (line, _) = good
+        .lines()
+        .enumerate()
+        .find(|(_, l)| l.trim_start().starts_with("elevation_deg"))
+        .expect("the rainbow scene gives the sun's elevation");
     let args = [
         "scene.toml",
         "--width",
@@ -350,45 +387,24 @@ fn a_scene_edited_into_an_invalid_state_is_reported_with_its_line_and_the_last_g
         "draft",
         "--tables",
         "tables",
-        "--script",
-        "script.toml",
-        "--screenshot",
-        "end.png",
     ];
-    let Some(mut view) = view_command(&args, &cwd) else {
-        return;
-    };
-    let mut child = view
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
     // Once the first shot is written, break the scene: the sun below its range.
-    if !first_shot(&mut child, &cwd.join("before.json")) {
-        return;
-    }
-    let (line, _) = good
-        .lines()
-        .enumerate()
-        .find(|(_, l)| l.trim_start().starts_with("elevation_deg"))
-        .expect("the rainbow scene gives the sun's elevation");
     let broken: String = good
         .lines()
         .enumerate()
         .map(|(i, l)| if i == line { "elevation_deg = 120" } else { l })
         .collect::<Vec<_>>()
         .join("\n");
-    std::fs::write(cwd.join("scene.toml"), broken).unwrap();
-    let out = child.wait_with_output().unwrap();
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(out.status.success(), "view failed:\n{stderr}");
+    let Some((stderr, before, after)) = around_an_edit(&cwd, &args, || {
+        std::fs::write(cwd.join("scene.toml"), broken).unwrap();
+    }) else {
+        return;
+    };
     assert!(
         stderr.contains("elevation_deg") && stderr.contains(&format!("line {}", line + 1)),
         "the invalid edit is not reported with its key and line:\n{stderr}"
     );
     assert!(stderr.contains("keeps the last good scene"), "{stderr}");
-    let (_, _, before) = read_rgba(&cwd.join("before.exr"));
-    let (_, _, after) = read_rgba(&cwd.join("after.exr"));
     assert_eq!(before, after, "the window did not keep the last good scene");
 }
 
@@ -408,11 +424,6 @@ fn a_vdb_cloud_opens_and_a_bad_rewrite_of_its_file_is_refused_with_the_last_good
                  [[volume]]\nfield = \"cloud\"\nshape = \"vdb\"\nfile = \"cloud.vdb\"\n\
                  number_density_per_m3 = 1e7\n";
     std::fs::write(cwd.join("scene.toml"), scene).unwrap();
-    std::fs::write(
-        cwd.join("script.toml"),
-        "[[step]]\nscreenshot = \"before.png\"\nwait_s = 4\n\n[[step]]\nscreenshot = \"after.png\"\n",
-    )
-    .unwrap();
     let args = [
         "scene.toml",
         "--model",
@@ -423,26 +434,12 @@ fn a_vdb_cloud_opens_and_a_bad_rewrite_of_its_file_is_refused_with_the_last_good
         "36",
         "--tables",
         "tables",
-        "--script",
-        "script.toml",
-        "--screenshot",
-        "end.png",
     ];
-    let Some(mut view) = view_command(&args, &cwd) else {
+    let Some((stderr, before, after)) = around_an_edit(&cwd, &args, || {
+        std::fs::copy(cwd.join("library/negative.vdb"), cwd.join("cloud.vdb")).unwrap();
+    }) else {
         return;
     };
-    let mut child = view
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    if !first_shot(&mut child, &cwd.join("before.json")) {
-        return;
-    }
-    std::fs::copy(cwd.join("library/negative.vdb"), cwd.join("cloud.vdb")).unwrap();
-    let out = child.wait_with_output().unwrap();
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(out.status.success(), "view failed:\n{stderr}");
     assert!(
         stderr.contains("1983 active voxels"),
         "the cloud's voxels not printed:\n{stderr}"
@@ -452,8 +449,6 @@ fn a_vdb_cloud_opens_and_a_bad_rewrite_of_its_file_is_refused_with_the_last_good
             && stderr.contains("keeps the last good scene"),
         "the bad rewrite is not refused by name:\n{stderr}"
     );
-    let (_, _, before) = read_rgba(&cwd.join("before.exr"));
-    let (_, _, after) = read_rgba(&cwd.join("after.exr"));
     assert!(before[0].iter().any(|&v| v > 0.0), "a black first view");
     assert_eq!(before, after, "the window did not keep the last good cloud");
 }

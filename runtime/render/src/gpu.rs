@@ -65,17 +65,8 @@ pub(crate) fn gather_view(
         .ok_or_else(|| FrameError("camera look_at_m equals position_m".into()))?;
     let size: [f64; 3] =
         std::array::from_fn(|a| (grid.max_m[a] - grid.min_m[a]) / grid.dims[a] as f64);
-    let size_px = (frame.width, frame.height);
     Ok(GatherView {
-        view: View::new(
-            frame.camera.position_m,
-            axes,
-            (
-                frame.camera.tan_half_fov(),
-                frame.width as f64 / frame.height as f64,
-            ),
-            frame.camera.ortho_half_height_m(size_px),
-        ),
+        view: View::of(frame, axes),
         step: 0.5 * size.iter().copied().fold(f64::INFINITY, f64::min),
     })
 }
@@ -150,7 +141,7 @@ pub(crate) fn a3(v: [f64; 3]) -> [f32; 3] {
 
 /// A vector as a vec3<f32> uniform field.
 pub(crate) fn v3(v: glam::DVec3) -> [f32; 3] {
-    [v[0] as f32, v[1] as f32, v[2] as f32]
+    a3(v.to_array())
 }
 
 /// A vector and a scalar as one vec4<f32> uniform row.
@@ -306,22 +297,22 @@ runtime::uniform! {
 }
 
 impl View {
-    /// The view of a camera at `eye` with `axes` (forward, right, up), tan(fov_y / 2)
-    /// `tan_half_fov`, the image's `aspect` and, for an orthographic camera, its half height
-    /// (m; [`crate::camera::Camera::ortho_half_height_m`]).
-    pub(crate) fn new(
-        eye: glam::DVec3,
+    /// `frame`'s camera and image with the camera's `axes` (forward, right, up;
+    /// [`crate::camera::Camera::axes`]).
+    pub(crate) fn of(
+        frame: &Frame,
         (forward, right, up): (glam::DVec3, glam::DVec3, glam::DVec3),
-        (tan_half_fov, aspect): (f64, f64),
-        ortho_half_height: Option<f64>,
     ) -> Self {
+        let camera = &frame.camera;
         Self {
-            eye: v3(eye),
-            tan_half_fov: tan_half_fov as f32,
+            eye: v3(camera.position_m),
+            tan_half_fov: camera.tan_half_fov() as f32,
             forward: v3(forward),
-            aspect: aspect as f32,
+            aspect: (frame.width as f64 / frame.height as f64) as f32,
             right: v3(right),
-            ortho_half_height: ortho_half_height.unwrap_or(0.0) as f32,
+            ortho_half_height: camera
+                .ortho_half_height_m((frame.width, frame.height))
+                .unwrap_or(0.0) as f32,
             up: v3(up),
             pad: 0.0,
         }

@@ -137,7 +137,6 @@ impl Renderer {
         super::check_scene(frame)?;
         let start = Instant::now();
         let device = &gpu.device;
-        let o = frame.camera.position_m;
         let (forward, right, up) = frame
             .camera
             .axes()
@@ -163,12 +162,7 @@ impl Renderer {
         let (media_rows, polynomials, depth_max) = media_rows(tables, frame)?;
         let (w, h) = (frame.width, frame.height);
         let params = BiriParams {
-            view: View::new(
-                o,
-                (forward, right, up),
-                (frame.camera.tan_half_fov(), w as f64 / h as f64),
-                None,
-            ),
+            view: View::of(frame, (forward, right, up)),
             ground_albedo: frame.ground_albedo as f32,
             depth_max: depth_max as f32,
             polynomial_kernel: u32::from(settings.kernel == super::Kernel::Polynomial),

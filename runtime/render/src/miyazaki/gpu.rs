@@ -113,7 +113,7 @@ fn params(tables: &Tables, frame: &Frame, settings: &Settings, s: &super::SvsSet
         std::array::from_fn(|i| tables.fields.get(i).map_or([0.0; 4], |t| a4(f(t), 0.0)))
     };
     SvsParams {
-        view: View::new(s.eye, s.axes, (s.tan_half_fov_y, w as f64 / h as f64), None),
+        view: View::of(frame, s.axes),
         slices: Slices {
             to_sun: v3(s.to_sun),
             spacing: s.step as f32,

@@ -130,12 +130,7 @@ impl Renderer {
             super::LightUpdate::Riley2004 => 0,
         };
         let params = RenderParams {
-            view: View::new(
-                setup.eye,
-                (setup.forward, setup.right, setup.up),
-                (setup.tan_half_fov_y, setup.aspect),
-                None,
-            ),
+            view: View::of(frame, (setup.forward, setup.right, setup.up)),
             slices: Slices {
                 light: v3(setup.light),
                 spacing: setup.slice_step as f32,

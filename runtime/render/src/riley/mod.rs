@@ -168,8 +168,6 @@ pub struct Setup {
     pub up: DVec3,
     /// tan of half the vertical field of view.
     pub tan_half_fov_y: f64,
-    /// Image width / height.
-    pub aspect: f64,
     /// Direction the sunlight travels (−sun direction).
     pub light: DVec3,
     /// Unit half-angle vector h, the slices' normal: ∝ v + l if front to back, else ∝ l − v.
@@ -225,7 +223,6 @@ impl Setup {
             right,
             up,
             tan_half_fov_y: frame.camera.tan_half_fov(),
-            aspect: frame.width as f64 / frame.height as f64,
             light,
             half,
             front_to_back,

@@ -541,38 +541,25 @@ fn params(
 ) -> Result<TruthParams, RenderError> {
     let (w, h) = (frame.width, frame.height);
     let grid = &frame.grid;
-    let (forward, right, up) = frame
+    let axes = frame
         .camera
         .axes()
         .ok_or_else(|| FrameError("camera look_at_m equals position_m".into()))?;
     let voxel = (0..3)
         .map(|a| (grid.max_m[a] - grid.min_m[a]) / grid.dims[a] as f64)
         .fold(f64::INFINITY, f64::min);
-    let size_px = (w, h);
-    let (eye, forward) = photon.unwrap_or((frame.camera.position_m, forward));
+    let mut view = View::of(frame, axes);
+    if let Some((origin, beam)) = photon {
+        (view.eye, view.forward) = (v3(origin), v3(beam));
+    }
     Ok(TruthParams {
-        view: View::new(
-            eye,
-            (forward, right, up),
-            (frame.camera.tan_half_fov(), w as f64 / h as f64),
-            frame.camera.ortho_half_height_m(size_px),
-        ),
+        view,
         sizes: [w as u32, h as u32],
         first_sample: 0,
         samples: 0,
-        grid: Grid {
-            ground_albedo: tracer.ground_albedo as f32,
-            ..Grid::of(frame, tracer.n_fields)
-        },
+        grid: Grid::of(frame, tracer.n_fields),
         sigma_ext: std::array::from_fn(|f| [0.0, tracer.sigma_ext_g[f] as f32, 0.0, 0.0]),
-        sky: Sky {
-            beta: [0.0; 3],
-            inv_scale_height: tracer.gamma as f32,
-            sun: v3(tracer.sun),
-            cos_disk: tracer.cos_disk as f32,
-            irradiance: a3(tracer.sun_irradiance),
-            disk_sr: tracer.disk_sr as f32,
-        },
+        sky: Sky::of(frame),
         background: a3(tracer.background),
         pad0: 0.0,
         track: Track {
