@@ -97,7 +97,7 @@ fn rainbow_radius_in_the_render_matches_the_tables_primary_peak_red_outside() {
             if planes[3][p] > 0.95 {
                 continue;
             }
-            let d = setup.ray(i, j, w, h);
+            let (_, d) = setup.pixel(i, j, w, h);
             let psi = d.dot(setup.light).clamp(-1.0, 1.0).acos().to_degrees();
             if psi < lo || psi >= hi {
                 continue;

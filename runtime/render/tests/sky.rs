@@ -122,8 +122,8 @@ fn the_composite_sky_matches_the_truth() {
     let mut worst = 0.0f64;
     for j in 0..h {
         for i in 0..w {
-            let d = setup.ray(i, j, w, h);
-            let t = truth(&tracer, frame.camera.position_m, d, 20_000);
+            let (o, d) = setup.pixel(i, j, w, h);
+            let t = truth(&tracer, o, d, 20_000);
             let pixel = image.rgb[i + w * j];
             for c in 0..3 {
                 let z = (pixel[c] as f64 - t[c].0) / t[c].1;

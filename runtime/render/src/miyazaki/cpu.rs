@@ -176,8 +176,6 @@ struct Svs<'a> {
     /// The haze layer's field and layer, if any, and its asymmetry.
     haze: Option<(FieldTable, &'a crate::frame::Haze)>,
     haze_g: Option<[f64; 3]>,
-    /// n·eye: the eye's plane value.
-    n_dot_e: f64,
 }
 
 impl Svs<'_> {
@@ -185,10 +183,10 @@ impl Svs<'_> {
         self.settings.light_resolution
     }
 
-    /// Where the ray `d` from the eye meets the ground (∞ if it does not).
-    fn t_ground(&self, d: DVec3) -> f64 {
+    /// Where the ray from `o` along `d` meets the ground (∞ if it does not).
+    fn t_ground(&self, (o, d): (DVec3, DVec3)) -> f64 {
         if d.y < 0.0 {
-            (self.s.eye.y / -d.y).max(0.0)
+            (o.y / -d.y).max(0.0)
         } else {
             f64::INFINITY
         }
@@ -240,19 +238,27 @@ impl Svs<'_> {
         }
     }
 
-    /// Then the screen: Eqs. 8 and 9 at slice plane `c` along ray `d`, blended as §4.3.
-    fn eye_slab(&self, px: &mut EyeTexel, d: DVec3, tex: &Texture, c: f64, shadow: &[[f64; 3]]) {
+    /// Then the screen: Eqs. 8 and 9 at slice plane `c` along the ray from `o` along `d`,
+    /// blended as §4.3.
+    fn eye_slab(
+        &self,
+        px: &mut EyeTexel,
+        (o, d): (DVec3, DVec3),
+        tex: &Texture,
+        c: f64,
+        shadow: &[[f64; 3]],
+    ) {
         let (s, air) = (&self.s, &self.air);
         let (beta, p_air, haze_b) = tex;
         let nd = s.normal.dot(d);
         if nd.abs() < 1e-9 {
             return;
         }
-        let t = (c - self.n_dot_e) / nd;
-        if t <= 0.0 || t > self.t_ground(d) {
+        let t = (c - s.normal.dot(o)) / nd;
+        if t <= 0.0 || t > self.t_ground((o, d)) {
             return;
         }
-        let p = s.eye + t * d;
+        let p = o + t * d;
         let rho = self.frame.grid.sample(p);
         let (ext, _) = coefficients(&self.fields, &rho);
         let (rayleigh, n_haze) = if self.air_on {
@@ -290,12 +296,13 @@ impl Svs<'_> {
         }
     }
 
-    /// In-scattering by the air along ray `d` over [t0, t1], per unit irradiance: Eq. 14 where
+    /// In-scattering by the air along the ray from `o` along `d` over [t0, t1], per unit
+    /// irradiance: Eq. 14 where
     /// the segment is on the sun's side of the slices, less the final shadow's deficit on the
     /// far side; with haze, both species by the midpoint rule (module docs of [`super`]).
     fn air_segment(
         &self,
-        d: DVec3,
+        (o, d): (DVec3, DVec3),
         tex: &Texture,
         (t0, t1): (f64, f64),
         shadow: &[[f64; 3]],
@@ -311,7 +318,7 @@ impl Svs<'_> {
         } else {
             t0 + t0.max(1.0)
         };
-        let sunward = s.sunward_of_slices(s.eye + probe_t * d);
+        let sunward = s.sunward_of_slices(o + probe_t * d);
         // Without haze: Eq. 14 in closed form, less the final shadow's deficit on the far side
         // (inside the shadow prism). With haze: both species by the midpoint rule along the
         // whole segment.
@@ -325,17 +332,25 @@ impl Svs<'_> {
             (t0, cap, false)
         } else {
             let (atm, l_y, cos_sun) = (self.air.atm, self.air.l_y, d.dot(s.to_sun));
-            let a = atm.inscatter(s.eye.y, d.y, t1, l_y, cos_sun);
-            let b = atm.inscatter(s.eye.y, d.y, t0, l_y, cos_sun);
+            let a = atm.inscatter(o.y, d.y, t1, l_y, cos_sun);
+            let b = atm.inscatter(o.y, d.y, t0, l_y, cos_sun);
             out = std::array::from_fn(|c| a[c] - b[c]);
             if sunward {
                 return out;
             }
-            let (lo, hi) = prism_span(s, self.res(), s.eye, d, t0, t1.min(t0 + SHADOWED_AIR_MAX_M));
+            let (lo, hi) = prism_span(s, self.res(), o, d, t0, t1.min(t0 + SHADOWED_AIR_MAX_M));
             (lo, hi, true)
         };
         if hi > lo {
-            self.air_midpoints(d, tex, (lo, hi), shadow_only, sunward, shadow, &mut out);
+            self.air_midpoints(
+                (o, d),
+                tex,
+                (lo, hi),
+                shadow_only,
+                sunward,
+                shadow,
+                &mut out,
+            );
         }
         out
     }
@@ -346,7 +361,7 @@ impl Svs<'_> {
     /// 1e-7.
     fn air_midpoints(
         &self,
-        d: DVec3,
+        (o, d): (DVec3, DVec3),
         (_, p_air, haze_b): &Texture,
         (lo, hi): (f64, f64),
         shadow_only: bool,
@@ -356,13 +371,13 @@ impl Svs<'_> {
     ) {
         let (s, air, res) = (&self.s, &self.air, self.res());
         let (mut t, uniform) = (lo, (hi - lo) / SHADOWED_AIR_POINTS as f64);
-        let prism = prism_span(s, res, s.eye, d, lo, hi);
+        let prism = prism_span(s, res, o, d, lo, hi);
         let prism_step = s.shadow_texel[0]
             .min(s.shadow_texel[1])
             .max((prism.1 - prism.0) / 256.0);
         let mut n = 0;
         while (shadow_only && n < SHADOWED_AIR_POINTS) || (!shadow_only && t < hi) {
-            let (rayleigh, n_haze) = air.at(s.eye.y + (t + 0.5 * uniform) * d.y);
+            let (rayleigh, n_haze) = air.at(o.y + (t + 0.5 * uniform) * d.y);
             let dt = if shadow_only {
                 // Counted, not accumulated: exactly the 64 midpoints.
                 t = lo + n as f64 * uniform;
@@ -389,14 +404,14 @@ impl Svs<'_> {
             let tm = t + 0.5 * dt;
             t += dt;
             n += 1;
-            let p = s.eye + tm * d;
+            let p = o + tm * d;
             let g_cl = if sunward {
                 [1.0; 3]
             } else {
                 shadow_at(shadow, res, s.shadow_coords(p))
             };
             let sun = air.sunlight(p.y);
-            let tr = air.transparency(s.eye.y, d.y, tm);
+            let tr = air.transparency(o.y, d.y, tm);
             let (rayleigh, n_haze) = air.at(p.y);
             for c in 0..3 {
                 let b = rayleigh[c] * p_air + n_haze * haze_b[c];
@@ -413,38 +428,35 @@ impl Svs<'_> {
         }
     }
 
-    /// Composite: the air before and after the slices, the ground lit through the final
-    /// shadow surface, or the sun's disk.
+    /// Composite of the ray from `o` along `d`: the air before and after the slices, the
+    /// ground lit through the final shadow surface, or the sun's disk.
     fn pixel(
         &self,
         (sum, _, t_cl): EyeTexel,
-        d: DVec3,
+        (o, d): (DVec3, DVec3),
         tex: &Texture,
         shadow: &[[f64; 3]],
     ) -> ([f32; 3], f32) {
         let (s, air) = (&self.s, &self.air);
-        let t_end = self.t_ground(d);
+        let t_end = self.t_ground((o, d));
         // The slices' range along the ray, clipped to [0, t_end].
-        let nd = s.normal.dot(d);
+        let (nd, n_dot_o) = (s.normal.dot(d), s.normal.dot(o));
         let (ta, tb) = if nd.abs() < 1e-12 {
-            let inside = (s.range.0..=s.range.1).contains(&self.n_dot_e);
+            let inside = (s.range.0..=s.range.1).contains(&n_dot_o);
             if inside { (0.0, t_end) } else { (0.0, 0.0) }
         } else {
-            let (x, y) = (
-                (s.range.0 - self.n_dot_e) / nd,
-                (s.range.1 - self.n_dot_e) / nd,
-            );
+            let (x, y) = ((s.range.0 - n_dot_o) / nd, (s.range.1 - n_dot_o) / nd);
             (x.min(y).clamp(0.0, t_end), x.max(y).clamp(0.0, t_end))
         };
-        let front = self.air_segment(d, tex, (0.0, ta), shadow);
-        let back = self.air_segment(d, tex, (tb, t_end), shadow);
-        let t_front = air.transparency(s.eye.y, d.y, ta);
-        let t_all = air.transparency(s.eye.y, d.y, t_end);
+        let front = self.air_segment((o, d), tex, (0.0, ta), shadow);
+        let back = self.air_segment((o, d), tex, (tb, t_end), shadow);
+        let t_front = air.transparency(o.y, d.y, ta);
+        let t_all = air.transparency(o.y, d.y, t_end);
         let cos_disk = (SUN_DIAMETER_DEG / 2.0).to_radians().cos();
         let disk_sr = std::f64::consts::TAU * (1.0 - cos_disk);
         // What lies beyond: the ground, lit through the final shadow surface, or the sun.
         let end: [f64; 3] = if t_end.is_finite() {
-            let ground = s.eye + t_end * d;
+            let ground = o + t_end * d;
             let g_cl = shadow_at(shadow, self.res(), s.shadow_coords(ground));
             let sun_ground = air.sunlight(0.0);
             std::array::from_fn(|c| {
@@ -498,15 +510,12 @@ pub fn render(tables: &Tables, frame: &Frame, settings: &Settings) -> Result<Ima
             .as_ref()
             .map(|(f, _)| asymmetry(f, tables.theta_step_deg)),
         haze,
-        n_dot_e: s.normal.dot(s.eye),
         s,
     };
     let (w, h) = (frame.width, frame.height);
     let res = settings.light_resolution;
-    let rays: Vec<DVec3> = (0..w * h)
-        .map(|p| crate::camera::pixel_ray(s.axes, s.tan_half_fov_y, (p % w, p / w), (w, h)))
-        .collect();
-    let mie: Vec<Texture> = rays.par_iter().map(|&d| svs.texture(d)).collect();
+    let rays: Vec<(DVec3, DVec3)> = (0..w * h).map(|p| s.pixel(p % w, p / w, w, h)).collect();
+    let mie: Vec<Texture> = rays.par_iter().map(|&(_, d)| svs.texture(d)).collect();
     let mut shadow = vec![[1.0f64; 3]; res * res];
     let mut eye: Vec<EyeTexel> = vec![([0.0; 3], [1.0; 3], [1.0; 3]); w * h];
     for k in 0..settings.slices {
@@ -518,13 +527,13 @@ pub fn render(tables: &Tables, frame: &Frame, settings: &Settings) -> Result<Ima
         eye.par_iter_mut()
             .zip(&rays)
             .zip(&mie)
-            .for_each(|((px, &d), tex)| svs.eye_slab(px, d, tex, c, &shadow));
+            .for_each(|((px, &ray), tex)| svs.eye_slab(px, ray, tex, c, &shadow));
     }
     let pixels: Vec<([f32; 3], f32)> = eye
         .par_iter()
         .zip(&rays)
         .zip(&mie)
-        .map(|((&px, &d), tex)| svs.pixel(px, d, tex, &shadow))
+        .map(|((&px, &ray), tex)| svs.pixel(px, ray, tex, &shadow))
         .collect();
     Ok(Image::from_pixels(w, h, &pixels))
 }

@@ -79,6 +79,7 @@ impl Model for Miyazaki {
         scattering plus a constant k_multi, shadows on the ground and in the air, a [haze] layer";
     const TEXELS: TexelFormat = TexelFormat::Auto;
     const GPU: bool = true;
+    const ORTHOGRAPHIC: bool = true;
     type Settings = Settings;
     type Renderer = gpu::Renderer;
 
@@ -197,12 +198,12 @@ impl Default for Settings {
 /// The derived geometry of the slices and the shadow surface.
 #[derive(Debug, Clone, Copy)]
 pub struct SvsSetup {
-    /// Eye position (m).
+    /// The camera: each pixel's ray ([`SvsSetup::pixel`]).
+    pub camera: crate::camera::Camera,
+    /// Eye position (m), the centre of an orthographic image.
     pub eye: DVec3,
     /// Camera axes: view direction, right, up.
     pub axes: (DVec3, DVec3, DVec3),
-    /// tan of half the vertical field of view.
-    pub tan_half_fov_y: f64,
     /// Unit direction towards the sun, V_s.
     pub to_sun: DVec3,
     /// The slices' unit normal n.
@@ -264,7 +265,10 @@ pub fn setup(frame: &Frame, settings: &Settings) -> Result<SvsSetup, FrameError>
     frame.check_view()?;
     check(settings)?;
     let bad = |s: String| Err(FrameError(s));
-    if frame.grid.contains(frame.camera.position_m) {
+    // A pinhole's check: each orthographic pixel starts at its own point of the image plane,
+    // and its ray skips the slabs behind that point (t ≤ 0) wherever it lies.
+    let perspective = frame.camera.ortho_half_height_m((1, 1)).is_none();
+    if perspective && frame.grid.contains(frame.camera.position_m) {
         return bad(format!(
             "the camera at {:?} m is inside the volumes' box {:?}…{:?} m; shadow-view slicing \
              needs it outside",
@@ -282,9 +286,9 @@ pub fn setup(frame: &Frame, settings: &Settings) -> Result<SvsSetup, FrameError>
     let (w_lo, w_hi) = along(shadow_w);
     let res = settings.light_resolution as f64;
     Ok(SvsSetup {
+        camera: frame.camera,
         eye: frame.camera.position_m,
         axes,
-        tan_half_fov_y: frame.camera.tan_half_fov(),
         to_sun,
         normal,
         back_to_front: axes.0.dot(to_sun) >= 0.0,
@@ -299,6 +303,12 @@ pub fn setup(frame: &Frame, settings: &Settings) -> Result<SvsSetup, FrameError>
 }
 
 impl SvsSetup {
+    /// The ray of pixel (i, j), row j = 0 at the top: its origin and unit direction
+    /// ([`crate::camera::Camera::pixel`]).
+    pub fn pixel(&self, i: usize, j: usize, width: usize, height: usize) -> (DVec3, DVec3) {
+        self.camera.pixel(self.axes, (i, j), (width, height))
+    }
+
     /// Plane value of the centre of slice `k` in processing order (from the sun's side).
     pub fn plane(&self, k: usize) -> f64 {
         let offset = (k as f64 + 0.5) * self.step;

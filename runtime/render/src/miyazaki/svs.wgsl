@@ -156,7 +156,7 @@ fn clear(@builtin(global_invocation_id) id: vec3<u32>) {
         eye_buffer[3u * i + 1u] = vec4<f32>(1.0);
         eye_buffer[3u * i + 2u] = vec4<f32>(1.0);
         // The Mie scattering texture.
-        let c = dot(pixel_ray(id.x, id.y), rp.slices.to_sun);
+        let c = dot(camera_direction(id.x, id.y), rp.slices.to_sun);
         let haze = i32(rp.shading.haze_field) - 1;
         for (var f = 0u; f < 4u; f = f + 1u) {
             var b = vec3<f32>(0.0);
@@ -193,17 +193,18 @@ fn eye_slice(@builtin(global_invocation_id) id: vec3<u32>) {
     if (id.x >= rp.sizes.x || id.y >= rp.sizes.y) {
         return;
     }
-    let d = pixel_ray(id.x, id.y);
+    let o = camera_origin(id.x, id.y);
+    let d = camera_direction(id.x, id.y);
     let nd = dot(rp.slices.normal, d);
     if (abs(nd) < 1e-9) {
         return;
     }
-    let t = (slice.plane - dot(rp.slices.normal, rp.view.eye)) / nd;
-    let tg = ground_distance(rp.view.eye, d);
+    let t = (slice.plane - dot(rp.slices.normal, o)) / nd;
+    let tg = ground_distance(o, d);
     if (t <= 0.0 || (tg >= 0.0 && t > tg)) {
         return;
     }
-    let p = rp.view.eye + t * d;
+    let p = o + t * d;
     let rho = densities(p);
     let ext = extinction(rho);
     let air = air_at(p.y);
@@ -234,8 +235,8 @@ fn eye_slice(@builtin(global_invocation_id) id: vec3<u32>) {
     eye_buffer[3u * i + 2u] = vec4<f32>(eye_buffer[3u * i + 2u].rgb * exp(-ext * dt), 0.0);
 }
 
-// Where the ray lies over the shadow surface's footprint, within [t0, t1].
-fn prism_span(d: vec3<f32>, t0: f32, t1: f32) -> vec2<f32> {
+// Where the ray from o along d lies over the shadow surface's footprint, within [t0, t1].
+fn prism_span(o: vec3<f32>, d: vec3<f32>, t0: f32, t1: f32) -> vec2<f32> {
     var lo = t0;
     var hi = t1;
     let res = f32(rp.sizes.z);
@@ -250,7 +251,7 @@ fn prism_span(d: vec3<f32>, t0: f32, t1: f32) -> vec2<f32> {
         }
         let a = origin;
         let b = origin + texel * res;
-        let p = dot(axis, rp.view.eye);
+        let p = dot(axis, o);
         let v = dot(axis, d);
         if (abs(v) < 1e-15) {
             if (p < a || p > b) {
@@ -266,19 +267,19 @@ fn prism_span(d: vec3<f32>, t0: f32, t1: f32) -> vec2<f32> {
     return vec2<f32>(lo, max(hi, lo));
 }
 
-// In-scattering by the air over [t0, t1] (t1 < 0: ∞) per unit irradiance (cpu::render's
-// air_segment).
-fn air_segment(d: vec3<f32>, t0: f32, t1_in: f32, tex: vec4<f32>) -> vec3<f32> {
+// In-scattering by the air along the ray from o along d over [t0, t1] (t1 < 0: ∞) per unit
+// irradiance (cpu::render's air_segment).
+fn air_segment(o: vec3<f32>, d: vec3<f32>, t0: f32, t1_in: f32, tex: vec4<f32>) -> vec3<f32> {
     let air_on = any(rp.sky.beta > vec3<f32>(0.0)) || haze_on();
     let infinite = t1_in < 0.0;
     if (!air_on || (!infinite && t1_in <= t0)) {
         return vec3<f32>(0.0);
     }
-    let y = rp.view.eye.y;
+    let y = o.y;
     let cos_sun = dot(d, rp.slices.to_sun);
     // The segment lies on one side of the slices: ask at a point well inside it.
     let probe_t = select(0.5 * (t0 + t1_in), t0 + max(t0, 1.0), infinite);
-    let probe = rp.view.eye + probe_t * d;
+    let probe = o + probe_t * d;
     let sunward = sunward_of_slices(probe);
     var out = vec3<f32>(0.0);
     var lo = t0;
@@ -296,7 +297,7 @@ fn air_segment(d: vec3<f32>, t0: f32, t1_in: f32, tex: vec4<f32>) -> vec3<f32> {
         if (!infinite) {
             cap = min(t1_in, cap);
         }
-        let s = prism_span(d, t0, cap);
+        let s = prism_span(o, d, t0, cap);
         lo = s.x;
         hi = s.y;
         shadow_only = true;
@@ -305,7 +306,7 @@ fn air_segment(d: vec3<f32>, t0: f32, t1_in: f32, tex: vec4<f32>) -> vec3<f32> {
         return out;
     }
     let uniform_step = (hi - lo) / f32(SHADOWED_AIR_POINTS);
-    let prism = prism_span(d, lo, hi);
+    let prism = prism_span(o, d, lo, hi);
     let prism_step = max(min(rp.shadow.texel.x, rp.shadow.texel.y), (prism.y - prism.x) / 256.0);
     var t = lo;
     for (var n = 0u; n < 100000u; n = n + 1u) {
@@ -332,7 +333,7 @@ fn air_segment(d: vec3<f32>, t0: f32, t1_in: f32, tex: vec4<f32>) -> vec3<f32> {
         }
         let tm = t + 0.5 * dt;
         t = t + dt;
-        let p = rp.view.eye + tm * d;
+        let p = o + tm * d;
         var g_cl = vec3<f32>(1.0);
         if (!sunward) {
             g_cl = shadow_at(p);
@@ -359,38 +360,39 @@ fn composite(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     let i = id.x + rp.sizes.x * id.y;
-    let d = pixel_ray(id.x, id.y);
+    let o = camera_origin(id.x, id.y);
+    let d = camera_direction(id.x, id.y);
     let sum = eye_buffer[3u * i].rgb;
     let t_cl = eye_buffer[3u * i + 2u].rgb;
     let tex = pixel_tex[5u * i + 4u];
-    let t_end = ground_distance(rp.view.eye, d); // < 0: ∞
-    let n_dot_e = dot(rp.slices.normal, rp.view.eye);
+    let t_end = ground_distance(o, d); // < 0: ∞
+    let n_dot_o = dot(rp.slices.normal, o);
     let nd = dot(rp.slices.normal, d);
     let big = 3.0e38;
     let end = select(t_end, big, t_end < 0.0);
     var ta = 0.0;
     var tb = 0.0;
     if (abs(nd) < 1e-12) {
-        if (n_dot_e >= rp.slices.plane_min && n_dot_e <= rp.slices.plane_max) {
+        if (n_dot_o >= rp.slices.plane_min && n_dot_o <= rp.slices.plane_max) {
             tb = end;
         }
     } else {
-        let x = (rp.slices.plane_min - n_dot_e) / nd;
-        let y = (rp.slices.plane_max - n_dot_e) / nd;
+        let x = (rp.slices.plane_min - n_dot_o) / nd;
+        let y = (rp.slices.plane_max - n_dot_o) / nd;
         ta = clamp(min(x, y), 0.0, end);
         tb = clamp(max(x, y), 0.0, end);
     }
-    let front = air_segment(d, 0.0, ta, tex);
+    let front = air_segment(o, d, 0.0, ta, tex);
     // tb = end = ∞ leaves nothing behind the slices.
     var back = vec3<f32>(0.0);
     if (tb < end) {
-        back = air_segment(d, tb, t_end, tex);
+        back = air_segment(o, d, tb, t_end, tex);
     }
-    let t_front = air_haze_transparency(rp.view.eye.y, d.y, ta);
-    let t_all = air_haze_transparency(rp.view.eye.y, d.y, t_end);
+    let t_front = air_haze_transparency(o.y, d.y, ta);
+    let t_all = air_haze_transparency(o.y, d.y, t_end);
     var beyond = vec3<f32>(0.0);
     if (t_end >= 0.0) {
-        let g_cl = shadow_at(rp.view.eye + t_end * d);
+        let g_cl = shadow_at(o + t_end * d);
         beyond = rp.grid.ground_albedo / PI * rp.slices.to_sun.y * sun_through_air(0.0) * g_cl * t_all;
     } else if (dot(d, rp.slices.to_sun) >= rp.sky.cos_disk) {
         beyond = t_all / rp.sky.disk_sr;

@@ -86,8 +86,6 @@ struct Slicer<'a> {
     settings: &'a Settings,
     setup: Setup,
     fields: Vec<&'a FieldTable>,
-    /// h·eye: the eye's plane value.
-    h_dot_e: f64,
     /// Δ_l, the light's path through one slab.
     light_thickness: f64,
     /// The sun direction's y component.
@@ -101,18 +99,18 @@ type EyeTexel = ([f64; 3], [f64; 3]);
 
 impl Slicer<'_> {
     /// Step 1 of the module docs (Eq. 26): the slab of slice plane `c` along the pixel's ray
-    /// `d`, lit by the light buffer, added to the pixel's (L, T).
-    fn eye_slab(&self, px: &mut EyeTexel, d: DVec3, c: f64, light: &[Light]) {
+    /// from `o` along `d`, lit by the light buffer, added to the pixel's (L, T).
+    fn eye_slab(&self, px: &mut EyeTexel, (o, d): (DVec3, DVec3), c: f64, light: &[Light]) {
         let (setup, settings) = (&self.setup, self.settings);
         let hd = setup.half.dot(d);
         if hd.abs() < 1e-9 {
             return;
         }
-        let t = (c - self.h_dot_e) / hd;
+        let t = (c - setup.half.dot(o)) / hd;
         if t <= 0.0 {
             return;
         }
-        let p = setup.eye + t * d;
+        let p = o + t * d;
         let rho = self.frame.grid.sample(p);
         let (ext, sca) = coefficients(&self.fields, &rho);
         if ext.iter().all(|&e| e <= 0.0) {
@@ -181,9 +179,14 @@ impl Slicer<'_> {
         );
     }
 
-    /// The pixel of ray `d` composed around its volume light: the ground is lit through the
-    /// final light buffer (1 outside its footprint, where no volume is).
-    fn pixel(&self, (l_vol, t_vol): EyeTexel, d: DVec3, light: &[Light]) -> ([f32; 3], f32) {
+    /// The pixel of the ray from `o` along `d` composed around its volume light: the ground is
+    /// lit through the final light buffer (1 outside its footprint, where no volume is).
+    fn pixel(
+        &self,
+        (l_vol, t_vol): EyeTexel,
+        (o, d): (DVec3, DVec3),
+        light: &[Light],
+    ) -> ([f32; 3], f32) {
         let res = self.settings.light_resolution;
         let ground_lit = |p: DVec3| {
             let uv = self.setup.light_coords(p);
@@ -197,7 +200,7 @@ impl Slicer<'_> {
             compose(
                 self.frame,
                 &self.sky,
-                self.setup.eye,
+                o,
                 d,
                 l_vol,
                 (t_vol, t_vol),
@@ -217,7 +220,6 @@ pub fn render(tables: &Tables, frame: &Frame, settings: &Settings) -> Result<Ima
         frame,
         settings,
         fields: tables.fields.iter().collect(),
-        h_dot_e: setup.half.dot(setup.eye),
         light_thickness: setup.slice_step / setup.half.dot(setup.light),
         l_y: frame.sun.direction()[1],
         sky: SkyLight::of(frame),
@@ -225,7 +227,9 @@ pub fn render(tables: &Tables, frame: &Frame, settings: &Settings) -> Result<Ima
     };
     let (w, h) = (frame.width, frame.height);
     let res = settings.light_resolution;
-    let rays: Vec<DVec3> = (0..w * h).map(|p| setup.ray(p % w, p / w, w, h)).collect();
+    let rays: Vec<(DVec3, DVec3)> = (0..w * h)
+        .map(|p| setup.pixel(p % w, p / w, w, h))
+        .collect();
     let mut light = vec![
         Light {
             intensity: [1.0; 3],

@@ -90,6 +90,7 @@ impl Model for Riley {
         buffers, the multiple-scattering tables Ams_n and F_n for the angular spread of sunlight";
     const TEXELS: TexelFormat = TexelFormat::Auto;
     const GPU: bool = true;
+    const ORTHOGRAPHIC: bool = true;
     type Settings = Settings;
     type Renderer = gpu::Renderer;
 
@@ -158,7 +159,9 @@ impl Model for Riley {
 /// The derived geometry both renderers use (module docs).
 #[derive(Debug, Clone, Copy)]
 pub struct Setup {
-    /// Eye position (m).
+    /// The camera: each pixel's ray ([`Setup::pixel`]).
+    pub camera: crate::camera::Camera,
+    /// Eye position (m), the centre of an orthographic image.
     pub eye: DVec3,
     /// Unit view direction v.
     pub forward: DVec3,
@@ -166,8 +169,6 @@ pub struct Setup {
     pub right: DVec3,
     /// Unit camera up axis, right × v.
     pub up: DVec3,
-    /// tan of half the vertical field of view.
-    pub tan_half_fov_y: f64,
     /// Direction the sunlight travels (−sun direction).
     pub light: DVec3,
     /// Unit half-angle vector h, the slices' normal: ∝ v + l if front to back, else ∝ l − v.
@@ -193,7 +194,10 @@ impl Setup {
     pub fn new(frame: &Frame, settings: &Settings) -> Result<Self, FrameError> {
         frame.check_view()?;
         Riley::check(settings)?;
-        if frame.grid.contains(frame.camera.position_m) {
+        // A pinhole's check: each orthographic pixel starts at its own point of the image
+        // plane, and its ray skips the slabs behind that point (t ≤ 0) wherever it lies.
+        let perspective = frame.camera.ortho_half_height_m((1, 1)).is_none();
+        if perspective && frame.grid.contains(frame.camera.position_m) {
             return Err(FrameError(format!(
                 "the camera at {:?} m is inside the volumes' box {:?}…{:?} m; half-angle \
                  slicing needs it outside",
@@ -218,11 +222,11 @@ impl Setup {
         let (w_lo, w_hi) = along(light_w);
         let res = settings.light_resolution as f64;
         Ok(Setup {
+            camera: frame.camera,
             eye: frame.camera.position_m,
             forward,
             right,
             up,
-            tan_half_fov_y: frame.camera.tan_half_fov(),
             light,
             half,
             front_to_back,
@@ -235,14 +239,11 @@ impl Setup {
         })
     }
 
-    /// Unit ray direction through the centre of pixel (i, j), row j = 0 at the top.
-    pub fn ray(&self, i: usize, j: usize, width: usize, height: usize) -> DVec3 {
-        crate::camera::pixel_ray(
-            (self.forward, self.right, self.up),
-            self.tan_half_fov_y,
-            (i, j),
-            (width, height),
-        )
+    /// The ray of pixel (i, j), row j = 0 at the top: its origin and unit direction
+    /// ([`crate::camera::Camera::pixel`]).
+    pub fn pixel(&self, i: usize, j: usize, width: usize, height: usize) -> (DVec3, DVec3) {
+        self.camera
+            .pixel((self.forward, self.right, self.up), (i, j), (width, height))
     }
 }
 

@@ -95,16 +95,17 @@ fn eye_slice(@builtin(global_invocation_id) id: vec3<u32>) {
     if (id.x >= rp.sizes.x || id.y >= rp.sizes.y) {
         return;
     }
-    let d = pixel_ray(id.x, id.y);
+    let o = camera_origin(id.x, id.y);
+    let d = camera_direction(id.x, id.y);
     let hd = dot(rp.slices.half_vector, d);
     if (abs(hd) < 1e-9) {
         return;
     }
-    let t = (slice.plane - dot(rp.slices.half_vector, rp.view.eye)) / hd;
+    let t = (slice.plane - dot(rp.slices.half_vector, o)) / hd;
     if (t <= 0.0) {
         return;
     }
-    let p = rp.view.eye + t * d;
+    let p = o + t * d;
     let rho = densities(p);
     let ext = extinction(rho);
     if (all(ext <= vec3<f32>(0.0))) {
@@ -196,15 +197,16 @@ fn composite(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     let i = id.x + rp.sizes.x * id.y;
-    let d = pixel_ray(id.x, id.y);
+    let o = camera_origin(id.x, id.y);
+    let d = camera_direction(id.x, id.y);
     let l_vol = eye_buffer[2u * i].rgb;
     let t_vol = eye_buffer[2u * i + 1u].rgb;
     // The ground lit through the final light buffer (1 outside it).
     var lit = vec3<f32>(1.0);
-    let k_end = ground_distance(rp.view.eye, d);
+    let k_end = ground_distance(o, d);
     if (rp.grid.ground_albedo > 0.0 && k_end > 0.0) {
-        lit = sun_left(rp.view.eye + k_end * d);
+        lit = sun_left(o + k_end * d);
     }
-    let v = compose(rp.view.eye, d, l_vol, t_vol, t_vol, lit);
+    let v = compose(o, d, l_vol, t_vol, t_vol, lit);
     image[i] = vec4<f32>(v, t_vol.g);
 }

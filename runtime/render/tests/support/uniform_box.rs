@@ -11,6 +11,7 @@ use runtime::sample;
 
 /// A uniform 4³ box of the field "cloud" of `fields`' scene, 1 km wide, 5 km ahead, of optical
 /// depth `tau` across (green), the sun at `elevation` degrees, 32² pixels, 32³ voxels.
+#[allow(dead_code)]
 pub fn uniform_box(
     tables: &Tables,
     dir: &Path,
@@ -39,6 +40,7 @@ pub fn uniform_box(
 /// The scene text of a 1 km box of the field "cloud" of `fields`, 5 km ahead of a camera with a
 /// 20° view: its density file `file` of n³ values times `density` (per m³), `size`² pixels on
 /// `grid`³ voxels, the sun at (`elevation`, `azimuth`) degrees, a black ground.
+#[allow(dead_code)]
 pub fn box_scene(
     fields: &str,
     (file, n, density): (&str, usize, f64),
@@ -83,6 +85,7 @@ max_m = [500, 2000, 5500]
 /// Worst relative difference of `image` (a render of `frame`, a [`uniform_box`]) from single
 /// scattering of the sun with the exact phase function, over the pixels whose chord is
 /// ≥ 500 m, and how many pixels that is.
+#[allow(dead_code)]
 pub fn single_scatter_error(tables: &Tables, frame: &Frame, image: &Image) -> (f64, usize) {
     let cloud = tables.field("cloud").unwrap();
     let eye = frame.camera.position_m;
