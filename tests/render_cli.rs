@@ -747,8 +747,8 @@ fn auto_chooses_by_the_scenes_optical_depth_and_says_why() {
         e.contains("--model auto: biri — the only kind of model"),
         "{e}"
     );
-    // An orthographic camera: the fastest model within 10 % that draws it (coupled at this
-    // depth; riley, miyazaki and biri refuse it).
+    // An orthographic camera, which every model draws: chosen by the depth as for a pinhole
+    // (coupled at this one).
     let ortho = scene("1e8").replace(
         "look_at_m = [0, 500, 0]\n",
         "look_at_m = [0, 500, 0]\nprojection = \"orthographic\"\nwidth_m = 1000\n",

@@ -92,17 +92,6 @@ impl Frame {
         Ok(())
     }
 
-    /// Refuses an orthographic camera, which only the truth draws, naming `model`.
-    pub fn perspective_only(&self, model: &str) -> Result<(), FrameError> {
-        match self.camera.projection {
-            crate::camera::Projection::Perspective => Ok(()),
-            crate::camera::Projection::Orthographic { .. } => Err(FrameError(format!(
-                "[camera] projection = \"orthographic\": --model {model} draws a perspective \
-                 camera only; render it with --model coupled, max or truth"
-            ))),
-        }
-    }
-
     /// Refuses a periodic volume, which only the truth draws, naming `model`.
     pub fn bounded_only(&self, model: &str) -> Result<(), FrameError> {
         if self.grid.periodic {

@@ -222,10 +222,8 @@ pub trait Model {
     /// Whether it is the reference the others are measured against (the path tracer), which
     /// the viewer shows beside a model rather than as one.
     const REFERENCE: bool = false;
-    /// Whether it draws an orthographic camera (the registry refuses one by name, before
-    /// anything is baked, for a model that does not).
-    const ORTHOGRAPHIC: bool = false;
-    /// Whether it draws a periodic volume (refused likewise).
+    /// Whether it draws a periodic volume (the registry refuses one by name, before anything
+    /// is baked, for a model that does not).
     const PERIODIC: bool = false;
     /// Its settings: `[render.<NAME>]`, every key optional (defaults in `Default`).
     type Settings: Default + Clone + PartialEq + Debug + Serialize + DeserializeOwned + Send + Sync;

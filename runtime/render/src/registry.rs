@@ -158,14 +158,10 @@ macro_rules! models {
             }
 
             /// What the model needs of `frame` and refuses in it (before anything is baked):
-            /// an orthographic camera and a periodic volume unless it draws them, then its own
-            /// checks.
+            /// a periodic volume unless it draws one, then its own checks.
             pub fn check_frame(&self, frame: &Frame) -> Result<(), FrameError> {
                 match self {
                     $(Self::$variant(s) => {
-                        if !<$model as Model>::ORTHOGRAPHIC {
-                            frame.perspective_only(<$model as Model>::NAME)?;
-                        }
                         if !<$model as Model>::PERIODIC {
                             frame.bounded_only(<$model as Model>::NAME)?;
                         }

@@ -152,6 +152,36 @@ fn visible(p: vec3<f32>, q: vec3<f32>) -> bool {
     return true;
 }
 
+// The shadow state at p towards a light at q (cpu.rs's ShadowState): the count of triangles
+// and spheres the segment p → q crosses, and the spheres that block it as bits.
+fn shadow_state(p: vec3<f32>, q: vec3<f32>) -> vec2<u32> {
+    let dv = q - p;
+    let len = length(dv);
+    let d = dv / len;
+    var count = 0u;
+    var bits = 0u;
+    for (var i = 0u; i < P.spheres; i++) {
+        let r = ray_sphere(p, d, spheres[2u * i]);
+        if (r.x <= r.y && r.y > EPS && r.x < len - EPS) {
+            count++;
+            bits |= 1u << i;
+        }
+    }
+    for (var m = 0u; m < P.meshes; m++) {
+        let lo = meshes[2u * m];
+        let hi = meshes[2u * m + 1u];
+        let span = box_span(p, d, lo.xyz, hi.xyz);
+        if (span.x > span.y || span.y < 0.0 || span.x > len) { continue; }
+        let first = bitcast<u32>(lo.w);
+        let n = bitcast<u32>(hi.w);
+        for (var t = first; t < first + n; t++) {
+            let x = ray_triangle(p, d, tris[3u * t].xyz, tris[3u * t + 1u].xyz, tris[3u * t + 2u].xyz);
+            if (x > EPS && x < len - EPS) { count++; }
+        }
+    }
+    return vec2<u32>(count, bits);
+}
+
 fn medium_span(i: u32, o: vec3<f32>, d: vec3<f32>, x_max: f32) -> vec2<f32> {
     let lo = media[5u * i];
     let hi = media[5u * i + 1u];
@@ -269,10 +299,14 @@ fn render(@builtin(global_invocation_id) id: vec3<u32>) {
     let w = P.width;
     let hgt = P.height;
     if (id.x >= w || id.y >= hgt) { return; }
-    let sx = (2.0 * (f32(id.x) + 0.5) / f32(w) - 1.0) * P.view.tan_half_fov * P.view.aspect;
-    let sy = (1.0 - 2.0 * (f32(id.y) + 0.5) / f32(hgt)) * P.view.tan_half_fov;
-    let d = normalize(P.view.forward + sx * P.view.right + sy * P.view.up);
-    let o = P.view.eye;
+    // The pixel's ray (Camera::pixel): from the eye through the pixel, or for an orthographic
+    // camera along the view direction from the pixel's point of the image plane.
+    let sx = (2.0 * (f32(id.x) + 0.5) / f32(w) - 1.0) * P.view.aspect;
+    let sy = 1.0 - 2.0 * (f32(id.y) + 0.5) / f32(hgt);
+    let ortho = P.view.ortho_half_height > 0.0;
+    let through = normalize(P.view.forward + P.view.tan_half_fov * (sx * P.view.right + sy * P.view.up));
+    let d = select(through, P.view.forward, ortho);
+    let o = P.view.eye + P.view.ortho_half_height * (sx * P.view.right + sy * P.view.up);
 
     // Stage 2: the surface, shaded and attenuated.
     let hit = surface(o, d);
@@ -307,7 +341,14 @@ fn render(@builtin(global_invocation_id) id: vec3<u32>) {
         let rec = lights[4u * l + 3u];
         let first = bitcast<u32>(rec.x);
         let n_planes = bitcast<u32>(rec.y);
-        let blocked = bitcast<u32>(rec.z);
+        var blocked = bitcast<u32>(rec.z);
+        // An orthographic ray's own state, found EPS along it (cpu.rs's ORTHOGRAPHIC_START_M).
+        let x_from = select(0.0, EPS, ortho);
+        if (ortho) {
+            let state = shadow_state(o + x_from * d, s);
+            count = i32(state.x);
+            blocked = state.y;
+        }
         var n = 0u;
         for (var i = first; i < first + n_planes; i++) {
             let a = planes[3u * i];
@@ -316,7 +357,7 @@ fn render(@builtin(global_invocation_id) id: vec3<u32>) {
             let dn = dot(d, nm);
             if (dn == 0.0) { continue; }
             let x = dot(s - o, nm) / dn;
-            if (x <= 0.0 || x >= x_end) { continue; }
+            if (x <= x_from || x >= x_end) { continue; }
             let q = o + x * d - s;
             let uu = dot(a.xyz - s, a.xyz - s);
             let uv = dot(a.xyz - s, b - s);
@@ -343,7 +384,7 @@ fn render(@builtin(global_invocation_id) id: vec3<u32>) {
             var on = ((blocked >> i) & 1u) == 1u;
             for (var k = 0; k < 2; k++) {
                 let x = roots[k];
-                if (x > 0.0 && x < x_end && dot(o + x * d - s, axis) > dist * cos2 && n < MAX_EVENTS) {
+                if (x > x_from && x < x_end && dot(o + x * d - s, axis) > dist * cos2 && n < MAX_EVENTS) {
                     on = !on;
                     events[n] = vec2<f32>(x, select(-1.0, 1.0, on));
                     n++;
@@ -352,7 +393,7 @@ fn render(@builtin(global_invocation_id) id: vec3<u32>) {
         }
         if (lights[4u * l + 1u].w != 0.0) {
             let ax = lights[4u * l + 2u];
-            var inside = in_spot(l, o - s);
+            var inside = in_spot(l, o + x_from * d - s);
             if (!inside) { count += 1; }
             var roots = vec2<f32>(-1.0, -1.0);
             if (abs(ax.w) < 1e-6) {
@@ -363,7 +404,7 @@ fn render(@builtin(global_invocation_id) id: vec3<u32>) {
             }
             for (var k = 0; k < 2; k++) {
                 let x = roots[k];
-                if (x > 0.0 && x < x_end && n < MAX_EVENTS) {
+                if (x > x_from && x < x_end && n < MAX_EVENTS) {
                     inside = !inside;
                     events[n] = vec2<f32>(x, select(1.0, -1.0, inside));
                     n++;

@@ -11,7 +11,6 @@ use rayon::prelude::*;
 use runtime::{Tables, sample};
 
 use super::{Kernel, Settings};
-use crate::camera::pixel_ray;
 use crate::geometry::{ShadowPlane, Sphere, nappe_roots};
 use crate::objects::{Light, Medium, Occluder, OccluderShape, Region};
 use crate::{checks::FrameError, frame::Frame, image::Image};
@@ -36,10 +35,29 @@ struct Prepared {
     light: Light,
     planes: Vec<ShadowPlane>,
     spheres: Vec<Sphere>,
-    /// The shadow count at the eye (triangles and spheres between it and the light), and
-    /// per sphere whether it blocks the eye: the same for every pixel.
-    count_at_eye: i32,
-    sphere_blocks_eye: Vec<bool>,
+    /// The shadow state at the eye: the same for every pixel of a pinhole camera.
+    at_eye: ShadowState,
+}
+
+/// How far along an orthographic pixel's ray its shadow state is found (m): 0.1 mm, as the
+/// GPU's (f32) surface offset.
+pub const ORTHOGRAPHIC_START_M: f64 = 1e-4;
+
+/// Where a ray starts, towards one light: its shadow count (the triangles and spheres between
+/// it and the light) and per sphere whether it blocks the light.
+struct ShadowState {
+    count: i32,
+    sphere_blocks: Vec<bool>,
+}
+
+impl ShadowState {
+    /// The state at `o` towards a light at `s` among `occluders` (`spheres`, theirs).
+    fn at(occluders: &[Occluder], spheres: &[Sphere], o: DVec3, s: DVec3) -> Self {
+        ShadowState {
+            count: occluders.iter().map(|oc| oc.blockers(o, s) as i32).sum(),
+            sphere_blocks: spheres.iter().map(|sp| sp.blocks(o, s)).collect(),
+        }
+    }
 }
 
 /// What a render measured, per stage (the paper's Table 1 on the CPU).
@@ -74,9 +92,9 @@ pub fn render(
         .camera
         .axes()
         .ok_or_else(|| FrameError("camera look_at_m equals position_m".into()))?;
-    let tan_half = frame.camera.tan_half_fov();
     let (w, h) = (frame.width, frame.height);
     let o = frame.camera.position_m;
+    let ray = |p: usize| frame.camera.pixel(axes, (p % w, p / w), (w, h));
     let mut report = BiriReport::default();
 
     let t = Instant::now();
@@ -92,15 +110,9 @@ pub fn render(
                     OccluderShape::Sphere(s) => spheres.push(*s),
                 }
             }
-            let s = l.position_m;
             Prepared {
                 light: *l,
-                count_at_eye: frame
-                    .occluders
-                    .iter()
-                    .map(|oc| oc.blockers(o, s) as i32)
-                    .sum(),
-                sphere_blocks_eye: spheres.iter().map(|sp| sp.blocks(o, s)).collect(),
+                at_eye: ShadowState::at(&frame.occluders, &spheres, o, l.position_m),
                 planes,
                 spheres,
             }
@@ -114,6 +126,7 @@ pub fn render(
         grid: &grid,
         kernel: settings.kernel,
         occluders: &frame.occluders,
+        orthographic: frame.camera.ortho_half_height_m((w, h)).is_some(),
         media: &media,
         ground_albedo: frame.ground_albedo,
     };
@@ -122,7 +135,7 @@ pub fn render(
     let surfaces: Vec<(f64, [f64; 3])> = (0..w * h)
         .into_par_iter()
         .map(|p| {
-            let d = pixel_ray(axes, tan_half, (p % w, p / w), (w, h));
+            let (o, d) = ray(p);
             ctx.surface(o, d, &prepared)
         })
         .collect();
@@ -132,7 +145,7 @@ pub fn render(
     let medium: Vec<([f64; 3], f64, usize)> = (0..w * h)
         .into_par_iter()
         .map(|p| {
-            let d = pixel_ray(axes, tan_half, (p % w, p / w), (w, h));
+            let (o, d) = ray(p);
             ctx.medium(o, d, surfaces[p].0, &prepared)
         })
         .collect();
@@ -188,6 +201,8 @@ struct Context<'a> {
     grid: &'a grid::ThetaGrid,
     kernel: Kernel,
     occluders: &'a [Occluder],
+    /// Each pixel's ray starts at its own point (its shadow state found there), not the eye.
+    orthographic: bool,
     media: &'a [Optics],
     ground_albedo: f64,
 }
@@ -304,7 +319,7 @@ impl Context<'_> {
 
     /// The lit pieces of o + x d, x ∈ [0, x_end], for one light: outside every shadow (the
     /// sorted crossings with the silhouette planes and spheres' cones, summed from the count
-    /// at the eye) and inside a spot's cone; with the number of crossings.
+    /// at the ray's start) and inside a spot's cone; with the number of crossings.
     fn lit_pieces(
         &self,
         pl: &Prepared,
@@ -314,27 +329,38 @@ impl Context<'_> {
     ) -> (Vec<(f64, f64)>, usize) {
         let s = pl.light.position_m;
         let mut events: Vec<(f64, i32)> = Vec::new();
-        let mut count = pl.count_at_eye;
+        // An orthographic ray's state is found at `from` along it, where it has left any
+        // shadow surface its start lies on (a pixel's point on a shadow cone's edge would
+        // otherwise count as lit with no crossing to follow); the events before it are in it.
+        let own;
+        let (start, from) = if self.orthographic {
+            own = ShadowState::at(self.occluders, &pl.spheres, o + ORTHOGRAPHIC_START_M * d, s);
+            (&own, ORTHOGRAPHIC_START_M)
+        } else {
+            (&pl.at_eye, 0.0)
+        };
+        let ahead = |x: f64| x > from && x < x_end;
+        let mut count = start.count;
         for plane in &pl.planes {
             if let Some((x, w)) = plane.crossing(s, o, d)
-                && x < x_end
+                && ahead(x)
             {
                 events.push((x, w));
             }
         }
         let mut roots = Vec::new();
-        for (sphere, &blocks) in pl.spheres.iter().zip(&pl.sphere_blocks_eye) {
+        for (sphere, &blocks) in pl.spheres.iter().zip(&start.sphere_blocks) {
             roots.clear();
             sphere.shadow_crossings(s, o, d, &mut roots);
             let mut on = blocks;
-            for &x in roots.iter().filter(|&&x| x < x_end) {
+            for &x in roots.iter().filter(|&&x| ahead(x)) {
                 on = !on;
                 events.push((x, if on { 1 } else { -1 }));
             }
         }
         if let Some((axis, half_deg)) = pl.light.spot {
             let cos = half_deg.to_radians().cos();
-            let mut inside = in_spot(&pl.light, o - s);
+            let mut inside = in_spot(&pl.light, o + from * d - s);
             count += (!inside) as i32;
             let toggles: Vec<f64> = if cos.abs() < 1e-12 {
                 let (wa, da) = ((o - s).dot(axis), d.dot(axis));
@@ -347,7 +373,7 @@ impl Context<'_> {
             } else {
                 nappe_roots(s, axis, cos * cos, o, d, cos.signum())
             };
-            for x in toggles.into_iter().filter(|&x| x < x_end) {
+            for x in toggles.into_iter().filter(|&x| ahead(x)) {
                 inside = !inside;
                 events.push((x, if inside { -1 } else { 1 }));
             }

@@ -331,7 +331,6 @@ impl Model for Coupled {
         with the exact phase function; lighting per sun, the gather per view";
     const TEXELS: TexelFormat = TexelFormat::F32;
     const GPU: bool = true;
-    const ORTHOGRAPHIC: bool = true;
     type Settings = Settings;
     type Renderer = gpu::Renderer;
 

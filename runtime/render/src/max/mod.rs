@@ -102,7 +102,6 @@ impl Model for Max {
         the lighting on the CPU (all cores), the final gather on the GPU or --cpu";
     const TEXELS: TexelFormat = TexelFormat::F32;
     const GPU: bool = true;
-    const ORTHOGRAPHIC: bool = true;
     type Settings = Settings;
     type Renderer = gpu::Renderer;
 

@@ -79,7 +79,6 @@ impl Model for Miyazaki {
         scattering plus a constant k_multi, shadows on the ground and in the air, a [haze] layer";
     const TEXELS: TexelFormat = TexelFormat::Auto;
     const GPU: bool = true;
-    const ORTHOGRAPHIC: bool = true;
     type Settings = Settings;
     type Renderer = gpu::Renderer;
 

@@ -90,7 +90,6 @@ impl Model for Riley {
         buffers, the multiple-scattering tables Ams_n and F_n for the angular spread of sunlight";
     const TEXELS: TexelFormat = TexelFormat::Auto;
     const GPU: bool = true;
-    const ORTHOGRAPHIC: bool = true;
     type Settings = Settings;
     type Renderer = gpu::Renderer;
 

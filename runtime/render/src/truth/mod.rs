@@ -190,7 +190,6 @@ impl Model for Truth {
     const TEXELS: TexelFormat = TexelFormat::F32;
     const GPU: bool = true;
     const REFERENCE: bool = true;
-    const ORTHOGRAPHIC: bool = true;
     const PERIODIC: bool = true;
     type Settings = Settings;
     type Renderer = gpu::Renderer;
