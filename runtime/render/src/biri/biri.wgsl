@@ -301,12 +301,13 @@ fn render(@builtin(global_invocation_id) id: vec3<u32>) {
     if (id.x >= w || id.y >= hgt) { return; }
     // The pixel's ray (Camera::pixel): from the eye through the pixel, or for an orthographic
     // camera along the view direction from the pixel's point of the image plane.
-    let sx = (2.0 * (f32(id.x) + 0.5) / f32(w) - 1.0) * P.view.aspect;
-    let sy = 1.0 - 2.0 * (f32(id.y) + 0.5) / f32(hgt);
+    let u = 2.0 * (f32(id.x) + 0.5) / f32(w) - 1.0;
+    let v = 1.0 - 2.0 * (f32(id.y) + 0.5) / f32(hgt);
+    let sx = u * P.view.tan_half_fov * P.view.aspect;
+    let sy = v * P.view.tan_half_fov;
     let ortho = P.view.ortho_half_height > 0.0;
-    let through = normalize(P.view.forward + P.view.tan_half_fov * (sx * P.view.right + sy * P.view.up));
-    let d = select(through, P.view.forward, ortho);
-    let o = P.view.eye + P.view.ortho_half_height * (sx * P.view.right + sy * P.view.up);
+    let d = select(normalize(P.view.forward + sx * P.view.right + sy * P.view.up), P.view.forward, ortho);
+    let o = P.view.eye + P.view.ortho_half_height * (u * P.view.aspect * P.view.right + v * P.view.up);
 
     // Stage 2: the surface, shaded and attenuated.
     let hit = surface(o, d);
