@@ -87,7 +87,7 @@
 //! #   (the benchmarks' cyclic boundaries); truth only
 //! # projection = "orthographic" with width_m = 2000 instead of fov_deg: every pixel looks
 //! #   along the view direction from its own point (the image is width_m wide, its height
-//! #   follows the aspect); truth only
+//! #   follows the aspect); every model
 //!
 //! [sun]
 //! elevation_deg = 20        # (0, 90]
