@@ -865,7 +865,7 @@ fn an_orthographic_camera_is_parsed_checked_and_drawn_by_every_model() {
 }
 
 #[test]
-fn a_periodic_volume_is_the_scenes_only_one_and_only_the_truth_draws_it() {
+fn a_periodic_volume_is_the_scenes_only_one_and_the_truth_and_coupled_draw_it() {
     let volume = "[[volume]]\nfield = \"cloud\"\nshape = \"cirrus\"\nnumber_density_per_m3 = 1e8\n\
                   center_m = [0, 1000, 0]\nsize_m = 2000\nthickness_m = 200\n";
     let scene = |volumes: &str| {
@@ -878,11 +878,26 @@ fn a_periodic_volume_is_the_scenes_only_one_and_only_the_truth_draws_it() {
     let s = scene(&format!("{volume}periodic = true\n")).unwrap();
     assert!(s.periodic);
     s.check_for("truth").unwrap();
-    for model in ["riley", "miyazaki", "max", "coupled", "biri"] {
+    s.check_for("coupled").unwrap();
+    for model in ["riley", "miyazaki", "max", "biri"] {
         let e = s.check_for(model).unwrap_err().to_string();
         assert!(
             e.contains("periodic = true") && e.contains(&format!("--model {model}")),
             "{model}: {e}"
+        );
+    }
+    // coupled lights and gathers it on the CPU: the GPU asked for by name is refused.
+    for key in ["per_sun", "per_view"] {
+        let e = scene(&format!(
+            "[render.coupled]\n{key} = \"gpu\"\n{volume}periodic = true\n"
+        ))
+        .unwrap()
+        .check_for("coupled")
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains(&format!("{key} = \"gpu\": a periodic volume")),
+            "{key}: {e}"
         );
     }
     let e = scene(&format!("{volume}periodic = true\n{volume}"))

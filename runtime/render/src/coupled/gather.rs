@@ -49,8 +49,11 @@ pub fn gather(
             let (mut l_vol, mut tr, mut seen) = ([0.0f64; 3], [1.0f64; 3], [1.0f64; 3]);
             // The forward peak's optical depth from the eye ([`super::peak`]).
             let mut depth_out = 0.0;
-            if let Some((t0, t1)) = box_span(grid.min_m, grid.max_m, eye, d) {
+            // A periodic grid's layer unbounded in x and z, followed for 1000 periods at most.
+            let (lo, hi) = grid.bounds();
+            if let Some((t0, t1)) = box_span(lo, hi, eye, d) {
                 let t0 = t0.max(0.0);
+                let t1 = t1.min(t0 + grid.longest_path_m());
                 let n = (((t1 - t0) / step).ceil() as usize).max(1);
                 let dt = (t1 - t0) / n as f64;
                 for k in 0..n {

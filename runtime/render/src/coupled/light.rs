@@ -286,6 +286,8 @@ pub fn light_on(
     on: Option<OnGpu>,
 ) -> Result<Lighting, FrameError> {
     check(tables, frame, settings)?;
+    // A periodic grid's sweeps wrap and repeat, which only the CPU passes do.
+    let on = on.filter(|_| !frame.grid.periodic);
     let fields: Vec<&FieldTable> = tables.fields.iter().collect();
     let grid = &frame.grid;
     let h = voxel_size(grid);
@@ -506,6 +508,7 @@ pub(super) fn diffuse(
     for c in 0..3 {
         let problem = Problem {
             dims: grid.dims,
+            periodic: grid.periodic,
             h,
             kappa_tr: (0..n)
                 .map(|i| if active[i] { v.transport[i][c] } else { 0.0 })
@@ -566,6 +569,8 @@ impl Budget {
         let (h, dims) = (p.h, p.dims);
         let volume = h[0] * h[1] * h[2];
         let [nx, ny, _] = dims;
+        // A periodic grid's x and z faces are no faces: its voxels there are neighbours.
+        let faces = |a: usize| !(p.periodic && a != 1);
         let (mut incident, mut out, mut dropped, mut lost) = (0.0, 0.0, 0.0, 0.0);
         for (i, s) in light.state.iter().enumerate() {
             let e = light.sunlight[i][c];
@@ -576,7 +581,7 @@ impl Budget {
             for (a, ha) in h.iter().enumerate() {
                 for (sign, on_face) in [(-1.0, cc[a] == 0), (1.0, cc[a] + 1 == dims[a])] {
                     let cos = sign * l[a];
-                    if !on_face {
+                    if !on_face || !faces(a) {
                         continue;
                     } else if cos < 0.0 {
                         incident += e * -cos * volume / ha;
@@ -661,6 +666,9 @@ pub(super) fn transport_light(
         .map(|i| std::array::from_fn(|c| (v.ext[i][c] - v.sca[i][c]).max(0.0)))
         .collect();
     let factor = settings.coarsening(grid.dims);
+    // A periodic grid's blocks must tile its period: else the transport runs on its voxels.
+    let tiles = |a: usize| !grid.wraps(a) || grid.dims[a].is_multiple_of(factor);
+    let factor = if (0..3).all(tiles) { factor } else { 1 };
     let coarse = (factor > 1).then(|| transport::Coarse::new(grid, factor));
     let (grid, medium, start, kappa_tr, kappa_a) = match &coarse {
         None => (grid, medium, start, kappa_tr, kappa_a),
@@ -682,6 +690,7 @@ pub(super) fn transport_light(
         .map(|c| {
             diffusion::Operator::of(&Problem {
                 dims: grid.dims,
+                periodic: grid.periodic,
                 h,
                 kappa_tr: kappa_tr.iter().map(|k| k[c]).collect(),
                 kappa_a: kappa_a.iter().map(|k| k[c]).collect(),
@@ -886,7 +895,7 @@ pub(super) fn box_of(grid: &DensityGrid) -> DensityGrid {
         max_m: grid.max_m,
         dims: grid.dims,
         data: Vec::new(),
-        periodic: false,
+        periodic: grid.periodic,
     }
 }
 

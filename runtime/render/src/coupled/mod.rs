@@ -331,6 +331,7 @@ impl Model for Coupled {
         with the exact phase function; lighting per sun, the gather per view";
     const TEXELS: TexelFormat = TexelFormat::F32;
     const GPU: bool = true;
+    const PERIODIC: bool = true;
     type Settings = Settings;
     type Renderer = gpu::Renderer;
 
@@ -340,7 +341,19 @@ impl Model for Coupled {
 
     fn check_frame(s: &Settings, frame: &Frame) -> Result<(), FrameError> {
         frame.sunlight_only(Self::NAME, false)?;
-        frame.check_view().and_then(|()| s.check())
+        frame.check_view().and_then(|()| s.check())?;
+        // A periodic volume's sweeps wrap and repeat, and its gather follows the layer
+        // across periods: on the CPU only.
+        for (key, place) in [("per_sun", s.per_sun), ("per_view", s.per_view)] {
+            if frame.grid.periodic && place == Place::Gpu {
+                return Err(FrameError(format!(
+                    "[render.coupled] {key} = \"gpu\": a periodic volume is lit and gathered \
+                     on the CPU only (its sweeps wrap across the box and repeat until they \
+                     settle); set {key} = \"auto\" or \"cpu\""
+                )));
+            }
+        }
+        Ok(())
     }
 
     fn memory(s: &Settings, pixels: u64, dims: [usize; 3]) -> Vec<Need> {
@@ -423,6 +436,7 @@ impl Model for Coupled {
                 .into());
             }
             (_, Some(over)) => Some(over),
+            _ if job.frame.grid.periodic => Some("a periodic volume".to_string()),
             (place, None) if !place.on_gpu(gpu) => Some(format!(
                 "per_view = \"{}\" on {}",
                 if place == Place::Cpu { "cpu" } else { "auto" },
@@ -431,7 +445,8 @@ impl Model for Coupled {
             _ => None,
         };
         let (lighting, reused) = crate::relight::lit(job.lighting, job.frame, s, || {
-            let on = s.per_sun.on_gpu(gpu).then(|| renderer.per_sun(gpu));
+            let periodic = job.frame.grid.periodic;
+            let on = (s.per_sun.on_gpu(gpu) && !periodic).then(|| renderer.per_sun(gpu));
             light::light_on(job.tables, job.frame, s, job.progress, on)
         })?;
         let (image, gather, on) = if let Some(why) = on_cpu {

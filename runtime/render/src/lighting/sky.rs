@@ -8,7 +8,7 @@ use std::f64::consts::PI;
 use glam::DVec3;
 use rayon::prelude::*;
 
-use super::lattice::{Way, fibonacci_directions, layer_order, upwind};
+use super::lattice::{Way, fibonacci_directions, layer_order, passes, settled, upwind};
 use crate::frame::Frame;
 use crate::skylight::SkyLight;
 use crate::volume::DensityGrid;
@@ -160,51 +160,84 @@ pub fn sky_sweeps(grid: &DensityGrid, ext: &[[f64; 3]], lit: &[(DVec3, [f64; 3])
         let mut prev = vec![[0.0f64; 6]; nb * nc * count];
         let mut cur = prev.clone();
         let layers = layer_order(dims[a], *forward);
-        for (step, &k) in layers.iter().enumerate() {
-            let light: Vec<([f64; 3], [DVec3; 3])> = cur
-                .par_chunks_mut(count)
-                .enumerate()
-                .map(|(m, states)| {
-                    let (ub, vc) = (m % nb, m / nb);
-                    let i = k * stride[a] + ub * stride[b] + vc * stride[c];
-                    let here = ext[i];
-                    let (mut mean, mut flux) = ([0.0; 3], [DVec3::ZERO; 3]);
-                    for (d, (state, way)) in states.iter_mut().zip(ways).enumerate() {
-                        let back = if step == 0 {
-                            [0.0; 6]
-                        } else {
-                            upwind(
-                                |u, v| &prev[(u + v * nb) * count + d],
-                                (nb, nc),
-                                (ub as f64 + way.shift.0, vc as f64 + way.shift.1),
-                                [0.0; 6],
-                            )
-                        };
-                        *state = std::array::from_fn(|n| match n {
-                            0..=2 => back[n] + 0.5 * way.ds * (here[n] + back[n + 3]),
-                            _ => here[n - 3],
-                        });
+        let wrap = (grid.wraps(b), grid.wraps(c));
+        // Across a repeating axis, passes until the last layer settles, then one that counts.
+        let mut counts = !grid.wraps(a);
+        for pass in 0..=passes(grid, a) {
+            let before = (pass > 0).then(|| prev.clone());
+            for (step, &k) in layers.iter().enumerate() {
+                let light = sky_layer(
+                    (grid, ext, ways),
+                    (a, k, step > 0 || pass > 0),
+                    (&prev, &mut cur),
+                    wrap,
+                );
+                if counts {
+                    for (m, (mean, flux)) in light.into_iter().enumerate() {
+                        let (ub, vc) = (m % nb, m / nb);
+                        let i = k * stride[a] + ub * stride[b] + vc * stride[c];
                         for ch in 0..3 {
-                            let w = way.weight[ch] * (-state[ch]).exp();
-                            mean[ch] += w;
-                            flux[ch] -= w * way.s;
+                            sky.mean[i][ch] += mean[ch];
+                            sky.flux[i][ch] += flux[ch];
                         }
                     }
-                    (mean, flux)
-                })
-                .collect();
-            for (m, (mean, flux)) in light.into_iter().enumerate() {
-                let (ub, vc) = (m % nb, m / nb);
-                let i = k * stride[a] + ub * stride[b] + vc * stride[c];
-                for ch in 0..3 {
-                    sky.mean[i][ch] += mean[ch];
-                    sky.flux[i][ch] += flux[ch];
                 }
+                std::mem::swap(&mut prev, &mut cur);
             }
-            std::mem::swap(&mut prev, &mut cur);
+            if counts {
+                break;
+            }
+            counts = pass + 1 == passes(grid, a) || before.is_some_and(|old| settled(&old, &prev));
         }
     }
     sky
+}
+
+/// One layer `k` across axis `a` of the skylight's sweeps ([`sky_sweeps`]) for the
+/// directions `ways`: each direction's state (τ, then β_ext) into `cur` from the layer behind
+/// in `prev` (clear air unless `behind`), and per voxel the mean radiance and flux it adds.
+fn sky_layer(
+    (grid, ext, ways): (&DensityGrid, &[[f64; 3]], &[SkyWay]),
+    (a, k, behind): (usize, usize, bool),
+    (prev, cur): (&[[f64; 6]], &mut [[f64; 6]]),
+    wrap: (bool, bool),
+) -> Vec<([f64; 3], [DVec3; 3])> {
+    let dims = grid.dims;
+    let stride = [1, dims[0], dims[0] * dims[1]];
+    let (b, c) = ((a + 1) % 3, (a + 2) % 3);
+    let (nb, count) = (dims[b], ways.len());
+    cur.par_chunks_mut(count)
+        .enumerate()
+        .map(|(m, states)| {
+            let (ub, vc) = (m % nb, m / nb);
+            let i = k * stride[a] + ub * stride[b] + vc * stride[c];
+            let here = ext[i];
+            let (mut mean, mut flux) = ([0.0; 3], [DVec3::ZERO; 3]);
+            for (d, (state, way)) in states.iter_mut().zip(ways).enumerate() {
+                let back = if behind {
+                    upwind(
+                        |u, v| &prev[(u + v * nb) * count + d],
+                        (nb, dims[c]),
+                        (ub as f64 + way.shift.0, vc as f64 + way.shift.1),
+                        [0.0; 6],
+                        wrap,
+                    )
+                } else {
+                    [0.0; 6]
+                };
+                *state = std::array::from_fn(|n| match n {
+                    0..=2 => back[n] + 0.5 * way.ds * (here[n] + back[n + 3]),
+                    _ => here[n - 3],
+                });
+                for ch in 0..3 {
+                    let w = way.weight[ch] * (-state[ch]).exp();
+                    mean[ch] += w;
+                    flux[ch] -= w * way.s;
+                }
+            }
+            (mean, flux)
+        })
+        .collect()
 }
 
 #[cfg(test)]

@@ -36,6 +36,8 @@ pub struct ShadowMap {
     sun: DVec3,
     /// Per cell (x fastest), the fraction left per channel.
     values: Vec<[f64; 3]>,
+    /// The grid repeats in x and z: the cells are its voxels' columns, repeating likewise.
+    periodic: bool,
 }
 
 impl ShadowMap {
@@ -44,9 +46,14 @@ impl ShadowMap {
     pub fn new(grid: &DensityGrid, sun: DVec3, left: impl Fn(DVec3) -> [f64; 3] + Sync) -> Self {
         let (lo, hi) = (grid.min_m, grid.max_m);
         // From the plane the line to the sun crosses the grid's height over t ≤ height/l_y,
-        // moving sun_h t: the footprint swept back by that.
+        // moving sun_h t: the footprint swept back by that (a periodic grid's shadow repeats
+        // with its box: one period).
         let reach = (hi.y - lo.y) / sun.y.max(1e-6);
-        let shift = [sun.x * reach, sun.z * reach];
+        let shift = if grid.periodic {
+            [0.0; 2]
+        } else {
+            [sun.x * reach, sun.z * reach]
+        };
         let x = [lo.x - shift[0].max(0.0), hi.x - shift[0].min(0.0)];
         let z = [lo.z - shift[1].max(0.0), hi.z - shift[1].min(0.0)];
         let voxel = voxel_size(grid);
@@ -74,6 +81,7 @@ impl ShadowMap {
             bottom: lo.y,
             sun,
             values,
+            periodic: grid.periodic,
         }
     }
 
@@ -92,21 +100,29 @@ impl ShadowMap {
         let u = (q.x - self.origin[0]) / self.cell[0] - 0.5;
         let w = (q.z - self.origin[1]) / self.cell[1] - 0.5;
         let [nx, nz] = self.dims;
-        if u < -0.5 || w < -0.5 || u > nx as f64 - 0.5 || w > nz as f64 - 0.5 {
-            return [1.0; 3];
-        }
-        let (i, j) = (
-            (u.floor().max(0.0) as usize).min(nx - 2),
-            (w.floor().max(0.0) as usize).min(nz - 2),
-        );
-        let (s, t) = (
-            (u - i as f64).clamp(0.0, 1.0),
-            (w - j as f64).clamp(0.0, 1.0),
-        );
+        // The lower cell, the upper one and the upper one's weight along an axis of n cells.
+        let (corners_u, corners_w) = if self.periodic {
+            let wrapped = |u: f64, n: usize| {
+                let u = u.rem_euclid(n as f64);
+                let lo = (u.floor() as usize).min(n - 1);
+                (lo, (lo + 1) % n, u - lo as f64)
+            };
+            (wrapped(u, nx), wrapped(w, nz))
+        } else {
+            if u < -0.5 || w < -0.5 || u > nx as f64 - 0.5 || w > nz as f64 - 0.5 {
+                return [1.0; 3];
+            }
+            let clamped = |u: f64, n: usize| {
+                let lo = (u.floor().max(0.0) as usize).min(n - 2);
+                (lo, lo + 1, (u - lo as f64).clamp(0.0, 1.0))
+            };
+            (clamped(u, nx), clamped(w, nz))
+        };
+        let ((i0, i1, s), (j0, j1, t)) = (corners_u, corners_w);
         let v = |a: usize, b: usize| self.values[a + nx * b];
         std::array::from_fn(|c| {
-            (v(i, j)[c] * (1.0 - s) + v(i + 1, j)[c] * s) * (1.0 - t)
-                + (v(i, j + 1)[c] * (1.0 - s) + v(i + 1, j + 1)[c] * s) * t
+            (v(i0, j0)[c] * (1.0 - s) + v(i1, j0)[c] * s) * (1.0 - t)
+                + (v(i0, j1)[c] * (1.0 - s) + v(i1, j1)[c] * s) * t
         })
     }
 
@@ -148,9 +164,11 @@ pub fn transmittance_to_sun(
     sun: DVec3,
     peaks: Option<&[[f64; 3]]>,
 ) -> [f64; 3] {
-    let Some((t0, t1)) = box_span(grid.min_m, grid.max_m, p, sun) else {
+    let (lo, hi) = grid.bounds();
+    let Some((t0, t1)) = box_span(lo, hi, p, sun) else {
         return [1.0; 3];
     };
+    let t1 = t1.min(t0 + grid.longest_path_m());
     let step = 0.5
         * voxel_size(grid)
             .iter()

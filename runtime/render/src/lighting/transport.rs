@@ -14,6 +14,7 @@ use std::f64::consts::PI;
 use glam::DVec3;
 use rayon::prelude::*;
 
+use crate::lighting::lattice::{passes, settled};
 use crate::volume::DensityGrid;
 
 /// The highest spherical-harmonic degree kept.
@@ -357,93 +358,105 @@ fn sweep_round(
         let mut block = vec![[0.0f64; PER_VOXEL]; nb * nc * LAYER_BLOCK];
         let mut held: Vec<usize> = Vec::with_capacity(LAYER_BLOCK);
         let layers = crate::lighting::lattice::layer_order(dims[a], group.forward);
-        for (step, &k) in layers.iter().enumerate() {
-            let back_of = |d: usize, u: f64, v: f64| -> [f64; 9] {
-                let at = |ub: usize, vc: usize| &prev[(ub + vc * nb) * count + d];
-                crate::lighting::lattice::upwind(at, (nb, nc), (u, v), [0.0; 9])
-            };
-            let slot = held.len() * nb * nc;
-            cur.par_chunks_mut(count)
-                .zip(block[slot..slot + nb * nc].par_iter_mut())
-                .enumerate()
-                .for_each_init(
-                    // weight I_d per channel, then direction.
-                    || vec![0.0f64; 3 * count],
-                    |weighted, (mi, (states, acc))| {
-                        let (ub, vc) = (mi % nb, mi / nb);
-                        let i = k * stride[a] + ub * stride[b] + vc * stride[c];
-                        let s = emission(medium, i, &m[i], &y_sun);
-                        let ext = medium.ext[i];
+        let wrap = (grid.wraps(b), grid.wraps(c));
+        // Across a repeating axis, passes until the last layer settles, then one that counts.
+        let mut counts = !grid.wraps(a);
+        for pass in 0..=passes(grid, a) {
+            let before = (pass > 0).then(|| prev.clone());
+            for (step, &k) in layers.iter().enumerate() {
+                let back_of = |d: usize, u: f64, v: f64| -> [f64; 9] {
+                    let at = |ub: usize, vc: usize| &prev[(ub + vc * nb) * count + d];
+                    crate::lighting::lattice::upwind(at, (nb, nc), (u, v), [0.0; 9], wrap)
+                };
+                let slot = held.len() * nb * nc;
+                cur.par_chunks_mut(count)
+                    .zip(block[slot..slot + nb * nc].par_iter_mut())
+                    .enumerate()
+                    .for_each_init(
+                        // weight I_d per channel, then direction.
+                        || vec![0.0f64; 3 * count],
+                        |weighted, (mi, (states, acc))| {
+                            let (ub, vc) = (mi % nb, mi / nb);
+                            let i = k * stride[a] + ub * stride[b] + vc * stride[c];
+                            let s = emission(medium, i, &m[i], &y_sun);
+                            let ext = medium.ext[i];
 
-                        for (j, chunk) in group.ordinates.chunks(LANES).enumerate() {
-                            let first = j * LANES;
-                            let mut back = [[0.0f64; 9]; LANES];
-                            let mut ds = [1.0f64; LANES];
-                            // The emission towards each direction, S(ω_d) = Σ_k s_k Y_k(ω_d).
-                            let mut s_here = [[0.0f64; LANES]; 3];
-                            for (d, o) in chunk.iter().enumerate() {
-                                if step > 0 {
-                                    back[d] = back_of(
-                                        first + d,
-                                        ub as f64 + o.shift.0,
-                                        vc as f64 + o.shift.1,
-                                    );
+                            for (j, chunk) in group.ordinates.chunks(LANES).enumerate() {
+                                let first = j * LANES;
+                                let mut back = [[0.0f64; 9]; LANES];
+                                let mut ds = [1.0f64; LANES];
+                                // The emission towards each direction, S(ω_d) = Σ_k s_k Y_k(ω_d).
+                                let mut s_here = [[0.0f64; LANES]; 3];
+                                for (d, o) in chunk.iter().enumerate() {
+                                    if step > 0 || pass > 0 {
+                                        back[d] = back_of(
+                                            first + d,
+                                            ub as f64 + o.shift.0,
+                                            vc as f64 + o.shift.1,
+                                        );
+                                    }
+                                    ds[d] = o.ds;
+                                    for ch in 0..3 {
+                                        s_here[ch][d] = dot(&s[ch], &o.y);
+                                    }
                                 }
-                                ds[d] = o.ds;
+                                let mut radiance = [[0.0f64; LANES]; 3];
                                 for ch in 0..3 {
-                                    s_here[ch][d] = dot(&s[ch], &o.y);
+                                    let mean_ext: [f64; LANES] =
+                                        std::array::from_fn(|d| 0.5 * (ext[ch] + back[d][3 + ch]));
+                                    let tau: [f64; LANES] =
+                                        std::array::from_fn(|d| mean_ext[d] * ds[d]);
+                                    let e = exp_neg(tau);
+                                    radiance[ch] = std::array::from_fn(|d| {
+                                        advance(
+                                            back[d][ch],
+                                            ds[d],
+                                            (tau[d], e[d]),
+                                            (s_here[ch][d], ext[ch]),
+                                            back[d][6 + ch],
+                                        )
+                                    });
+                                }
+                                for (d, state) in
+                                    states[first..first + chunk.len()].iter_mut().enumerate()
+                                {
+                                    *state = [
+                                        radiance[0][d],
+                                        radiance[1][d],
+                                        radiance[2][d],
+                                        ext[0],
+                                        ext[1],
+                                        ext[2],
+                                        s_here[0][d],
+                                        s_here[1][d],
+                                        s_here[2][d],
+                                    ];
+                                    for (ch, r) in radiance.iter().enumerate() {
+                                        weighted[ch * count + first + d] = weight * r[d];
+                                    }
                                 }
                             }
-                            let mut radiance = [[0.0f64; LANES]; 3];
-                            for ch in 0..3 {
-                                let mean_ext: [f64; LANES] =
-                                    std::array::from_fn(|d| 0.5 * (ext[ch] + back[d][3 + ch]));
-                                let tau: [f64; LANES] =
-                                    std::array::from_fn(|d| mean_ext[d] * ds[d]);
-                                let e = exp_neg(tau);
-                                radiance[ch] = std::array::from_fn(|d| {
-                                    advance(
-                                        back[d][ch],
-                                        ds[d],
-                                        (tau[d], e[d]),
-                                        (s_here[ch][d], ext[ch]),
-                                        back[d][6 + ch],
-                                    )
-                                });
+                            // Σ_d weight I_d Y_k(ω_d) per channel.
+                            for (ch, w) in weighted.chunks_exact(count).enumerate() {
+                                let sums = project(w, &group.ordinates);
+                                acc[ch * HARMONICS..(ch + 1) * HARMONICS]
+                                    .copy_from_slice(&sums[..HARMONICS]);
                             }
-                            for (d, state) in
-                                states[first..first + chunk.len()].iter_mut().enumerate()
-                            {
-                                *state = [
-                                    radiance[0][d],
-                                    radiance[1][d],
-                                    radiance[2][d],
-                                    ext[0],
-                                    ext[1],
-                                    ext[2],
-                                    s_here[0][d],
-                                    s_here[1][d],
-                                    s_here[2][d],
-                                ];
-                                for (ch, r) in radiance.iter().enumerate() {
-                                    weighted[ch * count + first + d] = weight * r[d];
-                                }
-                            }
-                        }
-                        // Σ_d weight I_d Y_k(ω_d) per channel.
-                        for (ch, w) in weighted.chunks_exact(count).enumerate() {
-                            let sums = project(w, &group.ordinates);
-                            acc[ch * HARMONICS..(ch + 1) * HARMONICS]
-                                .copy_from_slice(&sums[..HARMONICS]);
-                        }
-                    },
-                );
-            held.push(k);
-            if held.len() == LAYER_BLOCK || step + 1 == layers.len() {
-                add_layers(dims, a, &held, &block[..held.len() * nb * nc], &mut next);
-                held.clear();
+                        },
+                    );
+                if counts {
+                    held.push(k);
+                    if held.len() == LAYER_BLOCK || step + 1 == layers.len() {
+                        add_layers(dims, a, &held, &block[..held.len() * nb * nc], &mut next);
+                        held.clear();
+                    }
+                }
+                std::mem::swap(&mut prev, &mut cur);
             }
-            std::mem::swap(&mut prev, &mut cur);
+            if counts {
+                break;
+            }
+            counts = pass + 1 == passes(grid, a) || before.is_some_and(|old| settled(&old, &prev));
         }
     }
     next
@@ -540,7 +553,8 @@ impl Coarse {
                 max_m: fine.min_m + extent,
                 dims,
                 data: vec![[0.0; crate::volume::MAX_FIELDS]; dims[0] * dims[1] * dims[2]],
-                periodic: false,
+                // Its blocks tile a periodic grid's period (the caller's choice of factor).
+                periodic: fine.periodic,
             },
             factor,
             fine: fine.dims,
@@ -666,8 +680,9 @@ pub fn balance(grid: &DensityGrid, medium: &Medium, moments: &[[f64; PER_VOXEL]]
             (i / dims[0]) % dims[1],
             i / (dims[0] * dims[1]),
         ];
-        // The trapezoid's weight along each axis: ½ on the outermost centres.
-        let edge = |a: usize| cell[a] == 0 || cell[a] + 1 == dims[a];
+        // The trapezoid's weight along each axis: ½ on the outermost centres (a periodic
+        // grid's x and z have none: its voxels there are neighbours, and no light leaves).
+        let edge = |a: usize| !grid.wraps(a) && (cell[a] == 0 || cell[a] + 1 == dims[a]);
         let along: [f64; 3] =
             std::array::from_fn(|a| if dims[a] > 1 && edge(a) { 0.5 } else { 1.0 });
         let weight = along[0] * along[1] * along[2];
@@ -681,6 +696,9 @@ pub fn balance(grid: &DensityGrid, medium: &Medium, moments: &[[f64; PER_VOXEL]]
             for a in 0..3 {
                 // The face's area element at this centre: the trapezoid over the other axes.
                 let area = volume / h[a] * weight / along[a];
+                if grid.wraps(a) {
+                    continue;
+                }
                 if cell[a] == 0 {
                     b.out -= flux[a] * area;
                 }

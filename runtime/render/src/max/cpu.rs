@@ -317,6 +317,8 @@ impl Sources<'_> {
         for c in 0..3 {
             let problem = Problem {
                 dims: self.dims,
+                // max refuses a periodic volume (Model::PERIODIC).
+                periodic: false,
                 h: self.h,
                 kappa_tr: v
                     .transport
