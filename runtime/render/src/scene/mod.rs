@@ -84,7 +84,7 @@
 //! look_at_m = [0, 600, 5000]
 //! fov_deg = 60              # vertical
 //! # periodic = true on the scene's only [[volume]]: its box repeats in x and z without end
-//! #   (the benchmarks' cyclic boundaries); truth only
+//! #   (the benchmarks' cyclic boundaries); truth and coupled
 //! # projection = "orthographic" with width_m = 2000 instead of fov_deg: every pixel looks
 //! #   along the view direction from its own point (the image is width_m wide, its height
 //! #   follows the aspect); every model
