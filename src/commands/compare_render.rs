@@ -73,6 +73,11 @@ pub fn run(a: CompareRenderArgs) -> Result<()> {
         report.resolved * 100.0,
         report.truth_noise * 100.0
     );
+    println!(
+        "  noise-debiased rms error {:.2} % (of the mean luminance; the truth's noise taken \
+         out rather than counted as exact)",
+        report.debiased_rms * 100.0
+    );
     Ok(())
 }
 

@@ -28,6 +28,16 @@ pub struct DensityGrid {
     pub periodic: bool,
 }
 
+/// On an axis of `n` centres that repeats (the last centre's next is the first), the centre
+/// at or below coordinate `u` (in centre units), the one after it and the second's weight in
+/// a linear interpolation: the lookups of a periodic grid ([`DensityGrid::taps`], the sweeps'
+/// one layer back, the shadow map).
+pub(crate) fn wrapped_corners(u: f64, n: usize) -> (usize, usize, f64) {
+    let u = u.rem_euclid(n as f64);
+    let lo = (u.floor() as usize).min(n - 1);
+    (lo, (lo + 1) % n, u - lo as f64)
+}
+
 impl DensityGrid {
     /// The bytes its voxels take (16 a voxel: one f32 per field).
     pub fn bytes(&self) -> u64 {
@@ -185,10 +195,9 @@ impl DensityGrid {
             let n = self.dims[a];
             let u = (p[a] - self.min_m[a]) / (self.max_m[a] - self.min_m[a]) * n as f64 - 0.5;
             if self.wraps(a) {
-                let u = u.rem_euclid(n as f64);
-                let lo = (u.floor() as usize).min(n - 1);
-                corner_voxels[a] = [lo, (lo + 1) % n];
-                t[a] = u - lo as f64;
+                let (lo, hi, w) = wrapped_corners(u, n);
+                corner_voxels[a] = [lo, hi];
+                t[a] = w;
             } else {
                 let u = u.clamp(0.0, (n - 1) as f64);
                 let lo = (u.floor() as usize).min(n.saturating_sub(2));

@@ -34,6 +34,43 @@ pub(crate) fn passes(grid: &DensityGrid, a: usize) -> usize {
     if grid.wraps(a) { WRAP_PASSES } else { 1 }
 }
 
+/// The passes of a sweep that adds each layer to its result as it goes ([`passes`]): across a
+/// repeating axis the passes until the last layer settles add nothing, then one more adds.
+pub(crate) struct Passes {
+    counts: bool,
+    cap: usize,
+}
+
+impl Passes {
+    /// The passes of a sweep along axis `a` of `grid`.
+    pub(crate) fn over(grid: &DensityGrid, a: usize) -> Self {
+        Self {
+            counts: !grid.wraps(a),
+            cap: passes(grid, a),
+        }
+    }
+
+    /// Whether this pass adds to the result.
+    pub(crate) fn counts(&self) -> bool {
+        self.counts
+    }
+
+    /// After pass `pass`, whose last layer was `before` it (none before the first) and is
+    /// `after`: whether the sweep is done (the pass counted); else whether the next counts.
+    pub(crate) fn done_after<const N: usize>(
+        &mut self,
+        pass: usize,
+        before: Option<&[[f64; N]]>,
+        after: &[[f64; N]],
+    ) -> bool {
+        if self.counts {
+            return true;
+        }
+        self.counts = pass + 1 == self.cap || before.is_some_and(|old| settled(old, after));
+        false
+    }
+}
+
 /// Whether a repeating sweep's last layer has settled: its states `new` after a pass against
 /// `old` before it ([`WRAP_TOLERANCE`]).
 pub(crate) fn settled<const N: usize>(old: &[[f64; N]], new: &[[f64; N]]) -> bool {
@@ -248,9 +285,7 @@ pub(crate) fn upwind<'a, const N: usize>(
     // The lower centre, the upper one and the upper one's weight along an axis of n centres.
     let corners = |u: f64, n: usize, wraps: bool| {
         if wraps {
-            let u = u.rem_euclid(n as f64);
-            let lo = (u.floor() as usize).min(n - 1);
-            (lo, (lo + 1) % n, u - lo as f64)
+            crate::volume::wrapped_corners(u, n)
         } else {
             let u = u.clamp(0.0, (n - 1) as f64);
             let lo = u.floor() as usize;

@@ -8,7 +8,7 @@ use std::f64::consts::PI;
 use glam::DVec3;
 use rayon::prelude::*;
 
-use super::lattice::{Way, fibonacci_directions, layer_order, passes, settled, upwind};
+use super::lattice::{Passes, Way, fibonacci_directions, layer_order, upwind};
 use crate::frame::Frame;
 use crate::skylight::SkyLight;
 use crate::volume::DensityGrid;
@@ -161,9 +161,8 @@ pub fn sky_sweeps(grid: &DensityGrid, ext: &[[f64; 3]], lit: &[(DVec3, [f64; 3])
         let mut cur = prev.clone();
         let layers = layer_order(dims[a], *forward);
         let wrap = (grid.wraps(b), grid.wraps(c));
-        // Across a repeating axis, passes until the last layer settles, then one that counts.
-        let mut counts = !grid.wraps(a);
-        for pass in 0..=passes(grid, a) {
+        let mut passes = Passes::over(grid, a);
+        for pass in 0.. {
             let before = (pass > 0).then(|| prev.clone());
             for (step, &k) in layers.iter().enumerate() {
                 let light = sky_layer(
@@ -172,7 +171,7 @@ pub fn sky_sweeps(grid: &DensityGrid, ext: &[[f64; 3]], lit: &[(DVec3, [f64; 3])
                     (&prev, &mut cur),
                     wrap,
                 );
-                if counts {
+                if passes.counts() {
                     for (m, (mean, flux)) in light.into_iter().enumerate() {
                         let (ub, vc) = (m % nb, m / nb);
                         let i = k * stride[a] + ub * stride[b] + vc * stride[c];
@@ -184,10 +183,9 @@ pub fn sky_sweeps(grid: &DensityGrid, ext: &[[f64; 3]], lit: &[(DVec3, [f64; 3])
                 }
                 std::mem::swap(&mut prev, &mut cur);
             }
-            if counts {
+            if passes.done_after(pass, before.as_deref(), &prev) {
                 break;
             }
-            counts = pass + 1 == passes(grid, a) || before.is_some_and(|old| settled(&old, &prev));
         }
     }
     sky

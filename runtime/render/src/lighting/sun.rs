@@ -102,12 +102,8 @@ impl ShadowMap {
         let [nx, nz] = self.dims;
         // The lower cell, the upper one and the upper one's weight along an axis of n cells.
         let (corners_u, corners_w) = if self.periodic {
-            let wrapped = |u: f64, n: usize| {
-                let u = u.rem_euclid(n as f64);
-                let lo = (u.floor() as usize).min(n - 1);
-                (lo, (lo + 1) % n, u - lo as f64)
-            };
-            (wrapped(u, nx), wrapped(w, nz))
+            use crate::volume::wrapped_corners;
+            (wrapped_corners(u, nx), wrapped_corners(w, nz))
         } else {
             if u < -0.5 || w < -0.5 || u > nx as f64 - 0.5 || w > nz as f64 - 0.5 {
                 return [1.0; 3];

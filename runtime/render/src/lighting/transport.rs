@@ -14,7 +14,7 @@ use std::f64::consts::PI;
 use glam::DVec3;
 use rayon::prelude::*;
 
-use crate::lighting::lattice::{passes, settled};
+use crate::lighting::lattice::Passes;
 use crate::volume::DensityGrid;
 
 /// The highest spherical-harmonic degree kept.
@@ -343,8 +343,13 @@ fn sweep_round(
     weight: f64,
 ) -> Vec<[f64; PER_VOXEL]> {
     let dims = grid.dims;
-    let stride = [1, dims[0], dims[0] * dims[1]];
-    let y_sun = harmonics(medium.l);
+    let round = Round {
+        grid,
+        medium,
+        m,
+        y_sun: harmonics(medium.l),
+        weight,
+    };
     let mut next = vec![[0.0f64; PER_VOXEL]; m.len()];
     for group in groups {
         let a = group.axis;
@@ -358,93 +363,14 @@ fn sweep_round(
         let mut block = vec![[0.0f64; PER_VOXEL]; nb * nc * LAYER_BLOCK];
         let mut held: Vec<usize> = Vec::with_capacity(LAYER_BLOCK);
         let layers = crate::lighting::lattice::layer_order(dims[a], group.forward);
-        let wrap = (grid.wraps(b), grid.wraps(c));
-        // Across a repeating axis, passes until the last layer settles, then one that counts.
-        let mut counts = !grid.wraps(a);
-        for pass in 0..=passes(grid, a) {
+        let mut passes = Passes::over(grid, a);
+        for pass in 0.. {
             let before = (pass > 0).then(|| prev.clone());
             for (step, &k) in layers.iter().enumerate() {
-                let back_of = |d: usize, u: f64, v: f64| -> [f64; 9] {
-                    let at = |ub: usize, vc: usize| &prev[(ub + vc * nb) * count + d];
-                    crate::lighting::lattice::upwind(at, (nb, nc), (u, v), [0.0; 9], wrap)
-                };
                 let slot = held.len() * nb * nc;
-                cur.par_chunks_mut(count)
-                    .zip(block[slot..slot + nb * nc].par_iter_mut())
-                    .enumerate()
-                    .for_each_init(
-                        // weight I_d per channel, then direction.
-                        || vec![0.0f64; 3 * count],
-                        |weighted, (mi, (states, acc))| {
-                            let (ub, vc) = (mi % nb, mi / nb);
-                            let i = k * stride[a] + ub * stride[b] + vc * stride[c];
-                            let s = emission(medium, i, &m[i], &y_sun);
-                            let ext = medium.ext[i];
-
-                            for (j, chunk) in group.ordinates.chunks(LANES).enumerate() {
-                                let first = j * LANES;
-                                let mut back = [[0.0f64; 9]; LANES];
-                                let mut ds = [1.0f64; LANES];
-                                // The emission towards each direction, S(ω_d) = Σ_k s_k Y_k(ω_d).
-                                let mut s_here = [[0.0f64; LANES]; 3];
-                                for (d, o) in chunk.iter().enumerate() {
-                                    if step > 0 || pass > 0 {
-                                        back[d] = back_of(
-                                            first + d,
-                                            ub as f64 + o.shift.0,
-                                            vc as f64 + o.shift.1,
-                                        );
-                                    }
-                                    ds[d] = o.ds;
-                                    for ch in 0..3 {
-                                        s_here[ch][d] = dot(&s[ch], &o.y);
-                                    }
-                                }
-                                let mut radiance = [[0.0f64; LANES]; 3];
-                                for ch in 0..3 {
-                                    let mean_ext: [f64; LANES] =
-                                        std::array::from_fn(|d| 0.5 * (ext[ch] + back[d][3 + ch]));
-                                    let tau: [f64; LANES] =
-                                        std::array::from_fn(|d| mean_ext[d] * ds[d]);
-                                    let e = exp_neg(tau);
-                                    radiance[ch] = std::array::from_fn(|d| {
-                                        advance(
-                                            back[d][ch],
-                                            ds[d],
-                                            (tau[d], e[d]),
-                                            (s_here[ch][d], ext[ch]),
-                                            back[d][6 + ch],
-                                        )
-                                    });
-                                }
-                                for (d, state) in
-                                    states[first..first + chunk.len()].iter_mut().enumerate()
-                                {
-                                    *state = [
-                                        radiance[0][d],
-                                        radiance[1][d],
-                                        radiance[2][d],
-                                        ext[0],
-                                        ext[1],
-                                        ext[2],
-                                        s_here[0][d],
-                                        s_here[1][d],
-                                        s_here[2][d],
-                                    ];
-                                    for (ch, r) in radiance.iter().enumerate() {
-                                        weighted[ch * count + first + d] = weight * r[d];
-                                    }
-                                }
-                            }
-                            // Σ_d weight I_d Y_k(ω_d) per channel.
-                            for (ch, w) in weighted.chunks_exact(count).enumerate() {
-                                let sums = project(w, &group.ordinates);
-                                acc[ch * HARMONICS..(ch + 1) * HARMONICS]
-                                    .copy_from_slice(&sums[..HARMONICS]);
-                            }
-                        },
-                    );
-                if counts {
+                let acc = &mut block[slot..slot + nb * nc];
+                round.layer(group, (k, step > 0 || pass > 0), (&prev, &mut cur), acc);
+                if passes.counts() {
                     held.push(k);
                     if held.len() == LAYER_BLOCK || step + 1 == layers.len() {
                         add_layers(dims, a, &held, &block[..held.len() * nb * nc], &mut next);
@@ -453,13 +379,120 @@ fn sweep_round(
                 }
                 std::mem::swap(&mut prev, &mut cur);
             }
-            if counts {
+            if passes.done_after(pass, before.as_deref(), &prev) {
                 break;
             }
-            counts = pass + 1 == passes(grid, a) || before.is_some_and(|old| settled(&old, &prev));
         }
     }
     next
+}
+
+/// What every layer of a round of sweeps reads: the grid, the medium and the moments `m`
+/// whose emission it sweeps, the harmonics towards the sun, the directions' weight.
+struct Round<'a> {
+    grid: &'a DensityGrid,
+    medium: &'a Medium,
+    m: &'a [[f64; PER_VOXEL]],
+    y_sun: [f64; HARMONICS],
+    weight: f64,
+}
+
+impl Round<'_> {
+    /// Layer `k` across `group`'s axis: each direction's state into `cur` from the layer behind
+    /// in `prev` (clear air unless `behind`), and per voxel of the layer its directions'
+    /// Σ_d weight I_d Y_k(ω_d) per channel into `acc`.
+    fn layer(
+        &self,
+        group: &Group,
+        (k, behind): (usize, bool),
+        (prev, cur): (&[[f64; 9]], &mut [[f64; 9]]),
+        acc: &mut [[f64; PER_VOXEL]],
+    ) {
+        let (medium, dims, weight) = (self.medium, self.grid.dims, self.weight);
+        let stride = [1, dims[0], dims[0] * dims[1]];
+        let a = group.axis;
+        let (b, c) = layer_axes(a);
+        let (nb, nc) = (dims[b], dims[c]);
+        let count = group.ordinates.len();
+        let wrap = (self.grid.wraps(b), self.grid.wraps(c));
+        let back_of = |d: usize, u: f64, v: f64| -> [f64; 9] {
+            let at = |ub: usize, vc: usize| &prev[(ub + vc * nb) * count + d];
+            crate::lighting::lattice::upwind(at, (nb, nc), (u, v), [0.0; 9], wrap)
+        };
+        cur.par_chunks_mut(count)
+            .zip(acc.par_iter_mut())
+            .enumerate()
+            .for_each_init(
+                // weight I_d per channel, then direction.
+                || vec![0.0f64; 3 * count],
+                |weighted, (mi, (states, acc))| {
+                    let (ub, vc) = (mi % nb, mi / nb);
+                    let i = k * stride[a] + ub * stride[b] + vc * stride[c];
+                    let s = emission(medium, i, &self.m[i], &self.y_sun);
+                    let ext = medium.ext[i];
+
+                    for (j, chunk) in group.ordinates.chunks(LANES).enumerate() {
+                        let first = j * LANES;
+                        let mut back = [[0.0f64; 9]; LANES];
+                        let mut ds = [1.0f64; LANES];
+                        // The emission towards each direction, S(ω_d) = Σ_k s_k Y_k(ω_d).
+                        let mut s_here = [[0.0f64; LANES]; 3];
+                        for (d, o) in chunk.iter().enumerate() {
+                            if behind {
+                                back[d] = back_of(
+                                    first + d,
+                                    ub as f64 + o.shift.0,
+                                    vc as f64 + o.shift.1,
+                                );
+                            }
+                            ds[d] = o.ds;
+                            for ch in 0..3 {
+                                s_here[ch][d] = dot(&s[ch], &o.y);
+                            }
+                        }
+                        let mut radiance = [[0.0f64; LANES]; 3];
+                        for ch in 0..3 {
+                            let mean_ext: [f64; LANES] =
+                                std::array::from_fn(|d| 0.5 * (ext[ch] + back[d][3 + ch]));
+                            let tau: [f64; LANES] = std::array::from_fn(|d| mean_ext[d] * ds[d]);
+                            let e = exp_neg(tau);
+                            radiance[ch] = std::array::from_fn(|d| {
+                                advance(
+                                    back[d][ch],
+                                    ds[d],
+                                    (tau[d], e[d]),
+                                    (s_here[ch][d], ext[ch]),
+                                    back[d][6 + ch],
+                                )
+                            });
+                        }
+                        for (d, state) in states[first..first + chunk.len()].iter_mut().enumerate()
+                        {
+                            *state = [
+                                radiance[0][d],
+                                radiance[1][d],
+                                radiance[2][d],
+                                ext[0],
+                                ext[1],
+                                ext[2],
+                                s_here[0][d],
+                                s_here[1][d],
+                                s_here[2][d],
+                            ];
+                            for (ch, r) in radiance.iter().enumerate() {
+                                weighted[ch * count + first + d] = weight * r[d];
+                            }
+                        }
+                    }
+                    // Σ_d weight I_d Y_k(ω_d) per channel.
+                    for (ch, w) in weighted.chunks_exact(count).enumerate() {
+                        let sums = project(w, &group.ordinates);
+                        acc[ch * HARMONICS..(ch + 1) * HARMONICS]
+                            .copy_from_slice(&sums[..HARMONICS]);
+                    }
+                },
+            );
+    }
 }
 
 /// One round of sweeps over every direction of `dirs` with the emission from moments `m`: the
