@@ -4,7 +4,10 @@
 //! # The statistics
 //! Over the pixels where the volume matters — 1 − T_vol > 1 % in the truth's A channel (the
 //! same ray march of β_ext in both models) — with luminance Y = 0.2126 R + 0.7152 G +
-//! 0.0722 B (Rec. 709) and the truth's standard error σ_Y = (Σ_c w_c² σ_c²)^{1/2}:
+//! 0.0722 B (Rec. 709) and the truth's standard error of it σ_Y (its `stderr.Y`, from the
+//! samples' own luminance; for a truth written before it, (Σ_c w_c² σ_c²)^{1/2}, which
+//! treats the channels as independent and so understates σ_Y where one path carries them
+//! all):
 //! - the pixel's difference d = Y_model − Y_truth counts as 0 when |d| ≤ 3 σ_Y (it cannot be
 //!   told from the truth's own noise), else as d;
 //! - relative error e = |d| / Y_truth: its mean, median and 95th percentile are reported;
@@ -33,6 +36,9 @@ pub struct Frame {
     pub image: Image,
     /// stderr.R/G/B when present (the truth's).
     pub std_error: Option<Vec<[f32; 3]>>,
+    /// stderr.Y when present: the standard error of the luminance from the samples' own
+    /// (the truth's since it writes it; the channels of a path are correlated).
+    pub luma_error: Option<Vec<f32>>,
 }
 
 /// Why a frame could not be read or compared.
@@ -74,6 +80,7 @@ pub fn read_frame(path: &Path) -> Result<Frame, CompareError> {
             transparency: a,
         },
         std_error,
+        luma_error: get("stderr.Y"),
     })
 }
 
@@ -109,7 +116,8 @@ pub struct ErrorReport {
     pub debiased_rms: f64,
 }
 
-const LUMA: [f64; 3] = [0.2126, 0.7152, 0.0722];
+/// Rec. 709 luminance weights of R, G, B.
+pub const LUMA: [f64; 3] = [0.2126, 0.7152, 0.0722];
 
 /// Compares `model` against `truth` (same size; `truth` must carry stderr channels), and
 /// returns the report and the signed relative difference per pixel (`None` outside the mask,
@@ -145,10 +153,17 @@ pub fn compare(
         if yt.is_nan() || yt <= 0.0 {
             continue;
         }
-        let sigma = (0..3)
-            .map(|c| (LUMA[c] * err[i][c] as f64).powi(2))
-            .sum::<f64>()
-            .sqrt();
+        // σ_Y from the samples' luminance where the truth wrote it; else from the channels'
+        // as if they were independent (older truths: an understatement where they are not).
+        let sigma = truth.luma_error.as_ref().map_or_else(
+            || {
+                (0..3)
+                    .map(|c| (LUMA[c] * err[i][c] as f64).powi(2))
+                    .sum::<f64>()
+                    .sqrt()
+            },
+            |e| f64::from(e[i]),
+        );
         let d = ym - yt;
         sum_d += d;
         sum_t += yt;
@@ -236,6 +251,7 @@ mod tests {
                 transparency: t.to_vec(),
             },
             std_error: se.map(|s| vec![[s; 3]; 4]),
+            luma_error: None,
         }
     }
 
@@ -298,6 +314,7 @@ mod tests {
                 transparency: vec![0.5; n],
             },
             std_error: se,
+            luma_error: None,
         };
         let truth = frame_of(
             noisy,

@@ -776,7 +776,7 @@ fn store_the_dense_truth() {
         truth.noise * 100.0,
         truth.seconds
     );
-    let extra = (0..3)
+    let mut extra: Vec<(String, Vec<f32>)> = (0..3)
         .map(|c| {
             (
                 format!("stderr.{}", ["R", "G", "B"][c]),
@@ -784,6 +784,7 @@ fn store_the_dense_truth() {
             )
         })
         .collect();
+    extra.push(("stderr.Y".into(), truth.luma_error.clone()));
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join(DENSE_TRUTH);
     truth.image.write_exr_with(&path, extra).unwrap();
 }
@@ -817,6 +818,7 @@ fn a_dense_ball_agrees_with_its_stored_truth() {
         let model = render::error_map::Frame {
             image,
             std_error: None,
+            luma_error: None,
         };
         let (report, _) =
             render::error_map::compare(&truth, &model, render::error_map::Pixels::Volume).unwrap();

@@ -712,6 +712,31 @@ fn an_orthographic_camera_sees_disorts_radiance_in_every_pixel() {
     eprintln!("worst pixel {worst:.2}σ");
 }
 
+/// The truth's standard error of each pixel's luminance (`stderr.Y`, from the samples' own
+/// luminance) states its noise: through an orthographic camera every pixel of a uniform
+/// periodic slab (g 0.85, τ 4) is the same radiance, and the scatter of the 32 × 32 pixels'
+/// luminance equals the rms of their stated errors within its sampling error (√(1/2N) ≈
+/// 2.2 %); the channels' errors combined as if independent understate it (one path carries
+/// every channel).
+#[test]
+fn the_luminance_s_standard_error_states_its_noise() {
+    let grid = ThetaGrid::new(0.18).unwrap();
+    let tables = tables_of(&slabs::hg_bins(&grid, 0.85), 0.18, 1.0);
+    let mut frame = slabs::orthographic_slab(4.0, slabs::outgoing(1.0, 0.0, true), (32, 32));
+    slabs::periodic_slab(&mut frame, 2.0);
+    let settings = Settings {
+        spp: 64,
+        seed: 5,
+        ..Settings::default()
+    };
+    let image = render::truth::render(&tables, &frame, &settings, &()).unwrap();
+    let (stated, independent) = slabs::luminance_scatter(&image);
+    eprintln!("scatter / stated σ_Y {stated:.3}, / independent channels' {independent:.3}");
+    // Within 3σ of its sampling error (measured 1.015); independent: 1.354.
+    assert!((stated - 1.0).abs() < 0.07, "{stated}");
+    assert!(independent > 1.2, "{independent}");
+}
+
 #[test]
 fn slabs_agree_with_disort() {
     // CI size: a fixed 5·10⁴ photons per slab, every flux held within 4σ and within 0.5 %

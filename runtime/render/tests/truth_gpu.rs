@@ -370,6 +370,25 @@ fn an_orthographic_camera_sees_disorts_radiance_on_the_gpu() {
     eprintln!("worst pixel {worst:.2}σ");
 }
 
+/// The GPU truth's `stderr.Y` states its noise as the CPU's does (truth.rs,
+/// `the_luminance_s_standard_error_states_its_noise`): the scatter of a uniform periodic
+/// slab's 32 × 32 pixels' luminance over the rms of their stated errors is 1 within 3σ of its
+/// sampling error.
+#[test]
+fn the_gpu_luminance_s_standard_error_states_its_noise() {
+    let Some(g) = common::gpu() else { return };
+    let renderer = gpu::Renderer::new(&g);
+    let grid = grid::ThetaGrid::new(0.18).unwrap();
+    let tables = slabs::tables_of(&slabs::hg_bins(&grid, 0.85), 0.18, 1.0);
+    let mut frame = slabs::orthographic_slab(4.0, slabs::outgoing(1.0, 0.0, true), (32, 32));
+    slabs::periodic_slab(&mut frame, 2.0);
+    let image = gpu::render(&renderer, &g, &tables, &frame, &settings(64, 5), &()).unwrap();
+    let (stated, independent) = slabs::luminance_scatter(&image);
+    eprintln!("scatter / stated σ_Y {stated:.3}, / independent channels' {independent:.3}");
+    assert!((stated - 1.0).abs() < 0.07, "{stated}");
+    assert!(independent > 1.2, "{independent}");
+}
+
 /// The DISORT slabs' fluxes by the GPU's photons, as the CPU truth's test takes them at CI
 /// size: R and diffuse T of the 12 slabs from 13 · 64² = 53 248 photons each, within 4σ, and
 /// within 0.5 % where 3σ resolves that.

@@ -396,6 +396,7 @@ impl App {
             let model = error_map::Frame {
                 image: image.clone(),
                 std_error: None,
+                luma_error: None,
             };
             match error_map::compare(truth, &model, Pixels::Volume) {
                 Ok((r, map)) => {

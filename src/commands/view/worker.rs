@@ -279,6 +279,7 @@ impl Progress for Sink {
             frame: error_map::Frame {
                 image: image.clone(),
                 std_error: Some(std_error.to_vec()),
+                luma_error: None,
             },
             spp,
             noise,

@@ -865,6 +865,7 @@ fn trace(
                 a.0[c] += f64::from(s[c]);
                 a.1[c] += f64::from(q[c]);
             }
+            a.2 += f64::from(q[3]);
             passes.dropped += s[3] as u64;
         }
         if passes.end_pass(batch) {

@@ -186,7 +186,8 @@ impl Model for Truth {
     const NAME: &'static str = "truth";
     const ABOUT: &'static str = "an unbiased spectral Monte Carlo path tracer of the same scene \
         on the GPU (the CPU reference, all cores, with --cpu), the reference every fast model is \
-        measured against; its EXR adds stderr.R/G/B, each pixel's standard error";
+        measured against; its EXR adds stderr.R/G/B and stderr.Y, each pixel's standard error \
+        per channel and of its luminance";
     const TEXELS: TexelFormat = TexelFormat::F32;
     const GPU: bool = true;
     const REFERENCE: bool = true;
@@ -265,7 +266,7 @@ fn rendered(truth: TruthImage, on: &str) -> Rendered {
             truth.dropped
         );
     }
-    let extra = (0..3)
+    let mut extra: Vec<(String, Vec<f32>)> = (0..3)
         .map(|c| {
             (
                 format!("stderr.{}", ["R", "G", "B"][c]),
@@ -273,6 +274,7 @@ fn rendered(truth: TruthImage, on: &str) -> Rendered {
             )
         })
         .collect();
+    extra.push(("stderr.Y".into(), truth.luma_error.clone()));
     Rendered {
         summary,
         figures: vec![
@@ -302,6 +304,10 @@ pub struct TruthImage {
     pub image: Image,
     /// Standard error of each pixel's mean, per channel (same unit).
     pub std_error: Vec<[f32; 3]>,
+    /// Standard error of each pixel's mean luminance (Rec. 709), from the samples' own
+    /// luminance: a path carries every channel, so they are correlated, and the channels'
+    /// errors combined as if independent understate it (`stderr.Y` in the EXR).
+    pub luma_error: Vec<f32>,
     /// Samples per pixel taken.
     pub spp: usize,
     /// Median over the pixels where the volume matters (1 − T_vol > 1 %) of the green
@@ -346,6 +352,7 @@ pub fn render(
                     a.0[c] += l[c];
                     a.1[c] += l[c] * l[c];
                 }
+                a.2 += passes::luminance(l).powi(2);
             }
         });
         if passes.end_pass(batch) {

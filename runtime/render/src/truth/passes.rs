@@ -5,11 +5,13 @@
 use super::*;
 
 /// The passes of a traced frame, the CPU's or the GPU's: per pixel Σx and Σx² per channel
-/// over the samples taken, the pass sizes (1, 1, 2, 4, … samples, at most 64, so that progress
+/// and ΣY² of the samples' luminance over the samples taken, the pass sizes (1, 1, 2, 4, … samples, at most 64, so that progress
 /// and noise come early), the progress, and the stopping rules (`spp`, `noise`, `max_seconds`).
 pub(crate) struct Passes<'a> {
-    /// Per pixel: Σx and Σx² per channel.
-    pub acc: Vec<([f64; 3], [f64; 3])>,
+    /// Per pixel: Σx and Σx² per channel, and ΣY² of the samples' luminance Y = Σ_c w_c x_c
+    /// (Rec. 709; the channels of one path are correlated, so Y's variance is not the
+    /// channels' alone: [`TruthImage::luma_error`]).
+    pub acc: Vec<([f64; 3], [f64; 3], f64)>,
     /// Samples per pixel taken.
     pub done: usize,
     /// Samples that were not finite, counted as 0 ([`TruthImage::dropped`]).
@@ -32,7 +34,7 @@ impl<'a> Passes<'a> {
         progress: &'a dyn Progress,
     ) -> Self {
         Self {
-            acc: vec![([0.0; 3], [0.0; 3]); transparency.len()],
+            acc: vec![([0.0; 3], [0.0; 3], 0.0); transparency.len()],
             done: 0,
             dropped: 0,
             width,
@@ -94,14 +96,19 @@ impl<'a> Passes<'a> {
                 rgb: self
                     .acc
                     .iter()
-                    .map(|(s, _)| s.map(|v| (v / n) as f32))
+                    .map(|(s, _, _)| s.map(|v| (v / n) as f32))
                     .collect(),
                 transparency: self.transparency.iter().map(|&t| t as f32).collect(),
             },
             std_error: self
                 .acc
                 .iter()
-                .map(|(s, q)| std::array::from_fn(|c| std_error(s[c], q[c], n) as f32))
+                .map(|(s, q, _)| std::array::from_fn(|c| std_error(s[c], q[c], n) as f32))
+                .collect(),
+            luma_error: self
+                .acc
+                .iter()
+                .map(|(s, _, y2)| std_error(luminance(*s), *y2, n) as f32)
                 .collect(),
             spp: self.done,
             noise: self.noise,
@@ -121,13 +128,18 @@ pub fn std_error(s: f64, q: f64, n: f64) -> f64 {
     ((q / n - mean * mean).max(0.0) / (n - 1.0)).sqrt()
 }
 
-pub(super) fn noise_of(acc: &[([f64; 3], [f64; 3])], n: usize, transparency: &[f64]) -> f64 {
+/// Rec. 709 luminance Σ_c w_c x_c of an RGB triple (what `compare-render` measures).
+pub fn luminance(x: [f64; 3]) -> f64 {
+    (0..3).map(|c| crate::error_map::LUMA[c] * x[c]).sum()
+}
+
+pub(super) fn noise_of(acc: &[([f64; 3], [f64; 3], f64)], n: usize, transparency: &[f64]) -> f64 {
     let n = n as f64;
     let rel = |pick: &dyn Fn(usize) -> bool| -> Vec<f64> {
         acc.iter()
             .enumerate()
-            .filter(|(i, (s, _))| pick(*i) && s[1] > 0.0)
-            .map(|(_, (s, q))| std_error(s[1], q[1], n) / (s[1] / n))
+            .filter(|(i, (s, _, _))| pick(*i) && s[1] > 0.0)
+            .map(|(_, (s, q, _))| std_error(s[1], q[1], n) / (s[1] / n))
             .collect()
     };
     let mut v = rel(&|i| 1.0 - transparency[i] > 0.01);

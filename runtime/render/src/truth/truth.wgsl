@@ -1059,12 +1059,14 @@ fn step(@builtin(global_invocation_id) id: vec3<u32>) {
                 let bad = !(finite3(path.sum) && finite3(path.sum * path.sum));
                 let l = select(path.sum, vec3<f32>(0.0), bad);
                 let dropped = select(0.0, 1.0, bad);
+                // Σ L² per channel and, in w, Σ Y² of the sample's Rec. 709 luminance.
+                let y = dot(l, vec3<f32>(0.2126, 0.7152, 0.0722));
                 if (path.k == 0u) {
                     sums[2u * pixel] = vec4<f32>(l, dropped);
-                    sums[2u * pixel + 1u] = vec4<f32>(l * l, 0.0);
+                    sums[2u * pixel + 1u] = vec4<f32>(l * l, y * y);
                 } else {
                     sums[2u * pixel] = sums[2u * pixel] + vec4<f32>(l, dropped);
-                    sums[2u * pixel + 1u] = sums[2u * pixel + 1u] + vec4<f32>(l * l, 0.0);
+                    sums[2u * pixel + 1u] = sums[2u * pixel + 1u] + vec4<f32>(l * l, y * y);
                 }
                 if (path.k + 1u < rp.samples) {
                     path = begin_sample(pixel, path.k + 1u);

@@ -313,3 +313,30 @@ pub fn disort_case(phase: &str, tau: f64, omega: f64) -> serde_json::Value {
         .find(|c| c["phase"] == phase && c["tau"] == tau && c["omega"] == omega)
         .unwrap_or_else(|| panic!("no DISORT slab {phase} at τ {tau}, ω {omega}"))
 }
+
+/// How the scatter of `image`'s pixels' luminance about their mean (pixels that are all the
+/// same radiance: a uniform slab through an orthographic camera) compares with the truth's
+/// standard error of it: the scatter over the rms of `stderr.Y` (the samples' own luminance),
+/// and over the rms of the channels' errors combined as if independent. Both are 1 for a
+/// standard error that states the noise.
+pub fn luminance_scatter(image: &render::truth::TruthImage) -> (f64, f64) {
+    let luma = [0.2126, 0.7152, 0.0722];
+    let y: Vec<f64> = image
+        .image
+        .rgb
+        .iter()
+        .map(|p| (0..3).map(|c| luma[c] * f64::from(p[c])).sum())
+        .collect();
+    let n = y.len() as f64;
+    let mean = y.iter().sum::<f64>() / n;
+    let scatter = (y.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
+    let rms = |v: &mut dyn Iterator<Item = f64>| (v.map(|e| e * e).sum::<f64>() / n).sqrt();
+    let stated = rms(&mut image.luma_error.iter().map(|&e| f64::from(e)));
+    let independent = rms(&mut image.std_error.iter().map(|e| {
+        (0..3)
+            .map(|c| (luma[c] * f64::from(e[c])).powi(2))
+            .sum::<f64>()
+            .sqrt()
+    }));
+    (scatter / stated, scatter / independent)
+}
