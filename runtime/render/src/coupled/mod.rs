@@ -445,8 +445,8 @@ impl Model for Coupled {
             _ => None,
         };
         let (lighting, reused) = crate::relight::lit(job.lighting, job.frame, s, || {
-            let periodic = job.frame.grid.periodic;
-            let on = (s.per_sun.on_gpu(gpu) && !periodic).then(|| renderer.per_sun(gpu));
+            // (A periodic grid's passes stay on the CPU: light_on drops `on` for it.)
+            let on = s.per_sun.on_gpu(gpu).then(|| renderer.per_sun(gpu));
             light::light_on(job.tables, job.frame, s, job.progress, on)
         })?;
         let (image, gather, on) = if let Some(why) = on_cpu {
