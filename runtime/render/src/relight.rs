@@ -43,28 +43,35 @@ impl LightingCache {
     }
 
     /// The lighting of `frame` with `settings`: the kept one when both light alike (and
-    /// `true`), else `light()`'s, kept in its place (and `false`).
+    /// `true`), else `light(previous)`'s, kept in its place (and `false`). `previous` is the
+    /// kept lighting where it was computed with the same settings on the same grid (another
+    /// sun, sky or ground): a start for a lighting that iterates (held beside the new one
+    /// while it is computed).
     pub(crate) fn get_or_light<S, L, E>(
         &self,
         frame: &Frame,
         settings: &S,
-        light: impl FnOnce() -> Result<L, E>,
+        light: impl FnOnce(Option<&L>) -> Result<L, E>,
     ) -> Result<(Arc<L>, bool), E>
     where
         S: PartialEq + Clone + Send + Sync + 'static,
         L: Send + Sync + 'static,
     {
         let mut last = self.last.lock().expect("not poisoned");
+        let same_settings = |e: &Entry| e.settings.downcast_ref::<S>() == Some(settings);
         if let Some(e) = last.as_ref()
-            && e.settings.downcast_ref::<S>() == Some(settings)
+            && same_settings(e)
             && same_lighting(&e.frame, frame)
             && let Ok(lighting) = e.lighting.clone().downcast::<L>()
         {
             return Ok((lighting, true));
         }
-        // Drop the old lighting before computing the new one: at most one is held.
-        *last = None;
-        let lighting = Arc::new(light()?);
+        let previous = last
+            .take()
+            .filter(|e| same_settings(e) && e.frame.grid == frame.grid)
+            .and_then(|e| e.lighting.downcast::<L>().ok());
+        let lighting = Arc::new(light(previous.as_deref())?);
+        drop(previous);
         *last = Some(Entry {
             frame: frame.clone(),
             settings: Box::new(settings.clone()),
@@ -80,7 +87,7 @@ pub(crate) fn lit<S, L, E>(
     cache: Option<&LightingCache>,
     frame: &Frame,
     settings: &S,
-    light: impl FnOnce() -> Result<L, E>,
+    light: impl FnOnce(Option<&L>) -> Result<L, E>,
 ) -> Result<(Arc<L>, bool), E>
 where
     S: PartialEq + Clone + Send + Sync + 'static,
@@ -88,7 +95,7 @@ where
 {
     match cache {
         Some(cache) => cache.get_or_light(frame, settings, light),
-        None => Ok((Arc::new(light()?), false)),
+        None => Ok((Arc::new(light(None)?), false)),
     }
 }
 
@@ -127,13 +134,41 @@ mod tests {
     /// Lights `frame` through `cache`, counting the calls that computed.
     fn light(cache: &LightingCache, frame: &Frame, settings: u32, calls: &mut u32) -> bool {
         let (lighting, reused) = cache
-            .get_or_light(frame, &settings, || {
+            .get_or_light(frame, &settings, |_| {
                 *calls += 1;
                 Ok::<_, ()>(frame.sun.elevation_deg)
             })
             .unwrap();
         assert_eq!(*lighting, frame.sun.elevation_deg);
         reused
+    }
+
+    /// What `light` is handed as its start: the last lighting where the settings and the
+    /// grid are the same (another sun), none where either changed.
+    #[test]
+    fn a_new_sun_on_the_same_grid_starts_from_the_last_lighting() {
+        let cache = LightingCache::new();
+        let start = |f: &Frame, settings: u32| {
+            let mut seen = None;
+            cache
+                .get_or_light(f, &settings, |previous: Option<&f64>| {
+                    seen = Some(previous.copied());
+                    Ok::<_, ()>(f.sun.elevation_deg)
+                })
+                .unwrap();
+            seen.expect("lit anew")
+        };
+        let mut f = frame();
+        assert_eq!(start(&f, 1), None);
+        f.sun.elevation_deg = 31.0;
+        assert_eq!(start(&f, 1), Some(30.0));
+        f.sun.elevation_deg = 32.0;
+        f.grid.data[0][0] = 1.0;
+        assert_eq!(start(&f, 1), None);
+        f.sun.elevation_deg = 33.0;
+        assert_eq!(start(&f, 2), None);
+        f.sun.elevation_deg = 34.0;
+        assert_eq!(start(&f, 2), Some(33.0));
     }
 
     #[test]
@@ -158,7 +193,7 @@ mod tests {
         assert_eq!(calls, 5);
         // Settings of another type (another model) never take this lighting.
         let (_, reused) = cache
-            .get_or_light(&f, &2u64, || Ok::<_, ()>(0.0f64))
+            .get_or_light(&f, &2u64, |_| Ok::<_, ()>(0.0f64))
             .unwrap();
         assert!(!reused);
     }

@@ -1150,3 +1150,53 @@ fn a_periodic_slab_is_disorts_infinite_slab() {
     eprintln!("worst {:.2} %", worst * 100.0);
     assert!(worst < 0.03, "worst {:.2} %", worst * 100.0);
 }
+
+/// A new sun started from the last sun's moments (`light_from` with the last lighting, what a
+/// viewer's relight does through its lighting cache): the transport converges to the cold
+/// start's light, for a sun moved by 1°, 5° and 30° in azimuth around the soft ball at τ 8
+/// (16³ voxels); at the default tolerance a move of 1° or 5° takes fewer iterations.
+#[test]
+fn a_warm_start_from_the_last_sun_converges_to_the_cold_start() {
+    let (_tmp, dir) = bake(&fields());
+    let tables = Tables::open(&dir).unwrap();
+    let tight = Settings {
+        transport_tolerance: 1e-4,
+        ..Settings::default()
+    };
+    for settings in [Settings::default(), tight] {
+        let last = light::light(&tables, &ball_on(&tables, 8.0, 90.0, 16), &settings).unwrap();
+        for moved in [1.0, 5.0, 30.0] {
+            let frame = ball_on(&tables, 8.0, 90.0 + moved, 16);
+            let cold = light::light(&tables, &frame, &settings).unwrap();
+            let warm =
+                light::light_from(&tables, &frame, &settings, &(), (None, Some(&last))).unwrap();
+            assert!(warm.report.transport_warm && !cold.report.transport_warm);
+            // The mean radiance's moment φ_00 per channel, rms over the grid.
+            let (mut d, mut t) = (0.0, 0.0);
+            for (a, b) in warm.sh.iter().zip(&cold.sh) {
+                for c in 0..3 {
+                    let o = c * render::lighting::transport::HARMONICS;
+                    d += (a[o] - b[o]).powi(2);
+                    t += b[o] * b[o];
+                }
+            }
+            let difference = (d / t).sqrt();
+            eprintln!(
+                "tolerance {:.0e}, sun moved {moved}°: iterations cold {}, warm {}; warm − \
+                 cold {difference:.1e} (rms, relative)",
+                settings.transport_tolerance,
+                cold.report.transport_iterations,
+                warm.report.transport_iterations
+            );
+            if settings.transport_tolerance < 1e-3 {
+                assert!(difference < 1e-4, "moved {moved}°: {difference:e}");
+            } else if moved < 10.0 {
+                let (w, c) = (
+                    warm.report.transport_iterations,
+                    cold.report.transport_iterations,
+                );
+                assert!(w < c, "moved {moved}°: {w} iterations warm, {c} cold");
+            }
+        }
+    }
+}

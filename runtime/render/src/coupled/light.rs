@@ -44,6 +44,9 @@ pub struct CoupledReport {
     pub transport_s: f64,
     /// Its source iterations.
     pub transport_iterations: usize,
+    /// Whether it started from a previous lighting's moments (another sun on the same grid)
+    /// rather than the diffusion's P1 radiance.
+    pub transport_warm: bool,
     /// Where its sweeps ran.
     pub transport_on: String,
     /// The transport's grid (the render's, or coarser by `transport_coarsening`).
@@ -285,6 +288,20 @@ pub fn light_on(
     progress: &dyn crate::model::Progress,
     on: Option<OnGpu>,
 ) -> Result<Lighting, FrameError> {
+    light_from(tables, frame, settings, progress, (on, None))
+}
+
+/// [`light_on`], the transport's source iteration starting from `previous`'s moments where
+/// it is a lighting of the same grid (another sun: a sun that moves little changes the diffuse
+/// light little) instead of the diffusion's P1 radiance; the same converged light either
+/// way, to the transport's tolerance.
+pub fn light_from(
+    tables: &Tables,
+    frame: &Frame,
+    settings: &Settings,
+    progress: &dyn crate::model::Progress,
+    (on, previous): (Option<OnGpu>, Option<&Lighting>),
+) -> Result<Lighting, FrameError> {
     check(tables, frame, settings)?;
     // A periodic grid's sweeps wrap and repeat, which only the CPU passes do.
     let on = on.filter(|_| !frame.grid.periodic);
@@ -363,12 +380,17 @@ pub fn light_on(
         };
         let diffusion = (i0.as_slice(), p1.as_slice());
         let optics = (fields.as_slice(), &v, (chis.as_slice(), peak.as_slice()));
+        // The previous sun's moments, where it lit a grid of these dims (the transport takes
+        // them where they are as many as its own grid's voxels).
+        let warm = previous
+            .filter(|p| p.dims == grid.dims && !p.sh.is_empty())
+            .map(|p| p.sh.as_slice());
         transport_step(
             grid,
             optics,
             &sources,
             l,
-            diffusion,
+            (diffusion, warm),
             (settings, on),
             &mut report,
         )?
@@ -408,6 +430,13 @@ type Swept = (Vec<Harmonics>, transport::Report);
 /// The diffusion's result: I_0 per channel and I_1 = 3J per channel and axis, per voxel.
 type Diffused = (Vec<[f64; 3]>, Vec<[f64; 9]>);
 
+/// What the transport may start from: the diffusion's (I_0, I_1) per voxel, and a previous
+/// sun's moments on the transport's grid.
+type Starts<'a> = (
+    (&'a [[f64; 3]], &'a [[f64; 9]]),
+    Option<&'a [[f64; transport::PER_VOXEL]]>,
+);
+
 /// What the transport's medium is formed from: the fields, their voxels' optics, and their
 /// Legendre moments and forward peaks.
 type Optics<'a> = (
@@ -424,7 +453,7 @@ pub(super) fn transport_step(
     (fields, v, moments): Optics,
     sources: &Sources,
     l: DVec3,
-    diffusion: (&[[f64; 3]], &[[f64; 9]]),
+    (diffusion, warm): Starts,
     (settings, on): (&Settings, Option<OnGpu>),
     report: &mut CoupledReport,
 ) -> Result<(Vec<[f64; transport::PER_VOXEL]>, DensityGrid), FrameError> {
@@ -435,6 +464,7 @@ pub(super) fn transport_step(
         report: t,
         balance,
         grid: on_grid,
+        warm,
     } = transport_light(
         fields,
         grid,
@@ -442,10 +472,11 @@ pub(super) fn transport_step(
         sources,
         moments,
         l,
-        diffusion,
+        (diffusion, warm),
         (settings, on),
     )?;
     report.transport_on = swept_on;
+    report.transport_warm = warm;
     report.transport_balance = balance;
     report.transport_iterations = t.changes.len();
     report.transport_dims = on_grid.dims;
@@ -643,7 +674,7 @@ pub(super) fn transport_light(
     sources: &Sources,
     (chis, peak): (&[Moments], &[[f64; 3]]),
     l: DVec3,
-    (i0, p1): (&[[f64; 3]], &[[f64; 9]]),
+    ((i0, p1), warm): Starts,
     (settings, on): (&Settings, Option<OnGpu>),
 ) -> Result<Transported, FrameError> {
     let n = v.ext.len();
@@ -681,6 +712,9 @@ pub(super) fn transport_light(
         ),
     };
     let (n, h) = (medium.ext.len(), voxel_size(grid));
+    // A previous sun's moments on this transport grid, in place of the diffusion's start.
+    let warm = warm.filter(|w| w.len() == start.len());
+    let start = warm.map_or(start, <[_]>::to_vec);
     // The acceleration: the diffusion of each round's change of the mean radiance, scattered
     // (the error's source), added to φ_00. (Correcting φ_1 by its flux as well diverged.)
     let mut failed = None;
@@ -771,6 +805,7 @@ pub(super) fn transport_light(
         report,
         balance: budget,
         grid: box_of(grid),
+        warm: warm.is_some(),
     })
 }
 
@@ -908,4 +943,6 @@ pub(super) struct Transported {
     report: transport::Report,
     balance: [transport::Balance; 3],
     grid: DensityGrid,
+    /// Whether it started from a previous sun's moments.
+    warm: bool,
 }

@@ -444,10 +444,11 @@ impl Model for Coupled {
             )),
             _ => None,
         };
-        let (lighting, reused) = crate::relight::lit(job.lighting, job.frame, s, || {
-            // (A periodic grid's passes stay on the CPU: light_on drops `on` for it.)
+        // A new sun on the same grid starts the transport from the last sun's moments.
+        let (lighting, reused) = crate::relight::lit(job.lighting, job.frame, s, |previous| {
+            // (A periodic grid's passes stay on the CPU: light_from drops `on` for it.)
             let on = s.per_sun.on_gpu(gpu).then(|| renderer.per_sun(gpu));
-            light::light_on(job.tables, job.frame, s, job.progress, on)
+            light::light_from(job.tables, job.frame, s, job.progress, (on, previous))
         })?;
         let (image, gather, on) = if let Some(why) = on_cpu {
             let start = Instant::now();
@@ -506,13 +507,18 @@ fn rendered(
         if report.transport_iterations > 0 {
             format!(
                 "transport {:.2} s ({} directions on a grid {:?}, swept on {}, {} iterations \
-                 to a change of {:.1e}), ",
+                 to a change of {:.1e}{}), ",
                 report.transport_s,
                 settings.directions,
                 report.transport_dims,
                 report.transport_on,
                 report.transport_iterations,
-                report.transport_change
+                report.transport_change,
+                if report.transport_warm {
+                    " from the last sun's moments"
+                } else {
+                    ""
+                }
             )
         } else {
             String::new()

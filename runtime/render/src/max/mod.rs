@@ -140,7 +140,7 @@ impl Model for Max {
 
     fn render_gpu(s: &Settings, job: &Job, on: Device<gpu::Renderer>) -> RenderResult {
         let (renderer, gpu, tables) = (on.renderer, on.gpu, on.tables);
-        let (lighting, reused) = crate::relight::lit(job.lighting, job.frame, s, || {
+        let (lighting, reused) = crate::relight::lit(job.lighting, job.frame, s, |_| {
             let on = s.per_sun.on_gpu(gpu).then(|| renderer.per_sun(gpu));
             cpu::light_on(job.tables, job.frame, s, job.progress, on)
         })?;
