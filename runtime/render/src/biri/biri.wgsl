@@ -153,7 +153,9 @@ fn visible(p: vec3<f32>, q: vec3<f32>) -> bool {
 }
 
 // The shadow state at p towards a light at q (cpu.rs's ShadowState): the count of triangles
-// and spheres the segment p → q crosses, and the spheres that block it as bits.
+// and spheres the segment p → q crosses, and the spheres that block it as bits. (The loops of
+// `visible` with a count; one function for both, stopping at the first crossing when asked,
+// made lavapipe's beams frame 10 % slower: 315–322 ms against 288 ms at 256².)
 fn shadow_state(p: vec3<f32>, q: vec3<f32>) -> vec2<u32> {
     let dv = q - p;
     let len = length(dv);
