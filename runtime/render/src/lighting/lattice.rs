@@ -23,8 +23,9 @@ pub const MIN_DIFFUSION_VOXEL_DEPTH: f64 = 1e-4;
 pub const WRAP_PASSES: usize = 1000;
 
 /// A sweep over a repeating axis has settled when a pass changed its last layer's state by
-/// at most this share of the state's largest value there.
-pub const WRAP_TOLERANCE: f64 = 1e-9;
+/// at most this share of the state's largest value there: well inside the transport's own
+/// tolerance (docs/log.md, "Periodic volumes in coupled").
+pub const WRAP_TOLERANCE: f64 = 1e-6;
 
 /// The passes of an upwind sweep along axis `a` of `grid`: one where the axis ends at the
 /// box's faces; on a periodic grid's repeating axis, where the layer before the first is the
@@ -397,8 +398,8 @@ mod tests {
     /// A periodic grid of uniform β is lit as the same grid repeated without end: its optical
     /// depth towards the sun at every voxel centre equals that deep inside a bounded grid of 16
     /// × 16 periods (far from the faces the sun enters by), for suns that travel most along x
-    /// or z (the sweep across a repeating axis, in passes; measured 2.2·10⁻¹⁰, the passes'
-    /// tolerance) and along y.
+    /// or z (the sweep across a repeating axis, in passes; measured 8.2·10⁻⁷, within the
+    /// passes' tolerance) and along y.
     #[test]
     fn a_periodic_grid_is_lit_as_its_repeated_box() {
         let mut grid = uneven_grid();
@@ -430,7 +431,7 @@ mod tests {
                 }
             }
             eprintln!("sun {elevation}°/{azimuth}°: worst relative difference {worst:.1e}");
-            assert!(worst < 1e-9, "sun {elevation}°/{azimuth}°: {worst:e}");
+            assert!(worst < 1e-6, "sun {elevation}°/{azimuth}°: {worst:e}");
         }
     }
 }
