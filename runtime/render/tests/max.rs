@@ -393,49 +393,66 @@ fn the_gpu_lighting_equals_the_cpu_reference() {
 /// refinement): 4.24·10⁻⁷, 2.09·10⁻⁷, 9.45·10⁻⁷.
 const GPU_LIGHTING_TOLERANCE: (f64, f64, f64) = (5e-7, 2.5e-7, 1.1e-6);
 
-/// The shadow map below the grid (the ground's and the air's light) against the march to the
-/// sun it replaces, at points on the ground and in the air below a ball lifted 400 m: equal
-/// within the bilinear interpolation between cells of a voxel's size, and 1 outside the shadow.
-#[test]
-fn the_shadow_map_is_the_march_to_the_sun() {
+/// The soft ball of optical depth `tau` lifted 400 m (repeating in x and z if `periodic`):
+/// its shadow map against the march to the sun it replaces at `points`, the march's green
+/// sunlight left at each and the map's largest and mean difference over the channels.
+fn shadow_map_against_march(
+    tau: f64,
+    periodic: bool,
+    points: &[glam::DVec3],
+) -> (Vec<f64>, f64, f64) {
     let (_tmp, dir) = bake(&fields());
     let tables = Tables::open(&dir).unwrap();
-    let mut frame = ball(&tables, 30.0);
+    let mut frame = ball(&tables, tau);
     frame.grid.min_m.y += 400.0;
     frame.grid.max_m.y += 400.0;
+    frame.grid.periodic = periodic;
     let fields: Vec<_> = tables.fields.iter().collect();
     let sun = frame.sun.direction();
     let march = |p: glam::DVec3| {
         render::lighting::sun::transmittance_to_sun(&fields, &frame.grid, p, sun, None)
     };
     let map = render::lighting::sun::ShadowMap::new(&frame.grid, sun, march);
-    let (mut worst, mut mean, mut n, mut shadowed) = (0.0f64, 0.0, 0, 0);
+    let (mut left, mut worst, mut sum) = (Vec::new(), 0.0f64, 0.0);
+    for &p in points {
+        let (a, b) = (map.at(p), march(p));
+        left.push(b[1]);
+        for c in 0..3 {
+            worst = worst.max((a[c] - b[c]).abs());
+            sum += (a[c] - b[c]).abs();
+        }
+    }
+    (left, worst, sum / (3 * points.len()) as f64)
+}
+
+/// Points on a 40 × 40 lattice from (x0, z0) with steps (dx, dz), at the heights `ys`.
+fn lattice_points((x0, z0): (f64, f64), (dx, dz): (f64, f64), ys: &[f64]) -> Vec<glam::DVec3> {
+    let mut points = Vec::new();
     for i in 0..40 {
         for j in 0..40 {
-            for &y in &[0.0, 200.0, 399.0] {
-                let p = glam::DVec3::new(-3000.0 + 150.0 * i as f64, y, -2000.0 + 150.0 * j as f64);
-                let (a, b) = (map.at(p), march(p));
-                shadowed += usize::from(b[1] < 0.99);
-                for c in 0..3 {
-                    worst = worst.max((a[c] - b[c]).abs());
-                    mean += (a[c] - b[c]).abs();
-                    n += 1;
-                }
+            for &y in ys {
+                points.push(glam::DVec3::new(x0 + dx * i as f64, y, z0 + dz * j as f64));
             }
         }
     }
+    points
+}
+
+/// The shadow map below the grid (the ground's and the air's light) against the march to the
+/// sun it replaces, at points on the ground and in the air below a ball lifted 400 m: equal
+/// within the bilinear interpolation between cells of a voxel's size, and 1 outside the shadow.
+#[test]
+fn the_shadow_map_is_the_march_to_the_sun() {
+    let points = lattice_points((-3000.0, -2000.0), (150.0, 150.0), &[0.0, 200.0, 399.0]);
+    let (left, worst, mean) = shadow_map_against_march(30.0, false, &points);
+    let shadowed = left.iter().filter(|&&l| l < 0.99).count();
     println!(
-        "{shadowed} of {} points shadowed; |map − march| worst {worst:.3}, mean {:.2e}",
-        n / 3,
-        mean / n as f64
+        "{shadowed} of {} points shadowed; |map − march| worst {worst:.3}, mean {mean:.2e}",
+        points.len()
     );
     assert!(shadowed > 200, "the test's points miss the shadow");
     // Measured: worst 0.076 (a soft edge between two cells), mean 4.0·10⁻⁴.
-    assert!(
-        worst < 0.08 && mean / (n as f64) < 5e-4,
-        "{worst} {}",
-        mean / n as f64
-    );
+    assert!(worst < 0.08 && mean < 5e-4, "{worst} {mean}");
 }
 
 /// A periodic grid's shadow map (coupled's, which draws periodic volumes) repeats with the
@@ -443,44 +460,15 @@ fn the_shadow_map_is_the_march_to_the_sun() {
 /// the march to the sun through the repeating layer within the same interpolation.
 #[test]
 fn a_periodic_shadow_map_is_the_march_through_the_repeating_layer() {
-    let (_tmp, dir) = bake(&fields());
-    let tables = Tables::open(&dir).unwrap();
     // Thin (τ 1 through a ball's centre): the sun's slanted path crosses several balls.
-    let mut frame = ball(&tables, 1.0);
-    frame.grid.min_m.y += 400.0;
-    frame.grid.max_m.y += 400.0;
-    frame.grid.periodic = true;
-    let fields: Vec<_> = tables.fields.iter().collect();
-    let sun = frame.sun.direction();
-    let march = |p: glam::DVec3| {
-        render::lighting::sun::transmittance_to_sun(&fields, &frame.grid, p, sun, None)
-    };
-    let map = render::lighting::sun::ShadowMap::new(&frame.grid, sun, march);
-    let (mut worst, mut mean, mut n, mut lit, mut dark) = (0.0f64, 0.0, 0, 0.0f64, 1.0f64);
-    for i in 0..40 {
-        for j in 0..40 {
-            for &y in &[0.0, 399.0] {
-                let p = glam::DVec3::new(-3000.0 + 151.0 * i as f64, y, -3000.0 + 149.0 * j as f64);
-                let (a, b) = (map.at(p), march(p));
-                (lit, dark) = (lit.max(b[1]), dark.min(b[1]));
-                for c in 0..3 {
-                    worst = worst.max((a[c] - b[c]).abs());
-                    mean += (a[c] - b[c]).abs();
-                    n += 1;
-                }
-            }
-        }
-    }
-    println!(
-        "sunlight left {dark:.3} … {lit:.3}; |map − march| worst {worst:.3}, mean {:.2e}",
-        mean / n as f64
-    );
+    let points = lattice_points((-3000.0, -3000.0), (151.0, 149.0), &[0.0, 399.0]);
+    let (left, worst, mean) = shadow_map_against_march(1.0, true, &points);
+    let (dark, lit) = left
+        .iter()
+        .fold((1.0f64, 0.0f64), |(d, l), &v| (d.min(v), l.max(v)));
+    println!("sunlight left {dark:.3} … {lit:.3}; |map − march| worst {worst:.3}, mean {mean:.2e}");
     // Measured: the sunlight left 0.237 … 0.511; worst 0.006, mean 6.7·10⁻⁴ (every point
     // under the layer, none in the clear).
     assert!(lit - dark > 0.2, "the points see one shade: {dark} … {lit}");
-    assert!(
-        worst < 0.01 && mean / (n as f64) < 8e-4,
-        "{worst} {}",
-        mean / n as f64
-    );
+    assert!(worst < 0.01 && mean < 8e-4, "{worst} {mean}");
 }

@@ -320,7 +320,7 @@ pub fn disort_case(phase: &str, tau: f64, omega: f64) -> serde_json::Value {
 /// and over the rms of the channels' errors combined as if independent. Both are 1 for a
 /// standard error that states the noise.
 pub fn luminance_scatter(image: &render::truth::TruthImage) -> (f64, f64) {
-    let luma = [0.2126, 0.7152, 0.0722];
+    let luma = render::error_map::LUMA;
     let y: Vec<f64> = image
         .image
         .rgb
