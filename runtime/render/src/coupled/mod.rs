@@ -132,9 +132,10 @@ pub const MEMORY_PER_VOXEL: u64 = 520;
 /// (a few layers of the grid, ≈ 72 at 64 along an axis).
 pub const TRANSPORT_MEMORY_PER_VOXEL: u64 = 1800;
 
-/// The automatic `transport_coarsening` keeps at least this many transport voxels along the
-/// grid's longest side (dense_cumulus, 128 → 64: bias against the truth −12.1 % at 2 against
-/// −12.9 % at 1, the sweeps an eighth of the cost).
+/// The automatic `transport_coarsening` of the `balanced` preset keeps at least this many
+/// transport voxels along the grid's longest side (dense_cumulus, 128 → 64: bias against the
+/// truth −12.1 % at 2 against −12.9 % at 1, the sweeps an eighth of the cost); `realtime`
+/// keeps half as many, `reference` every voxel ([`Preset::auto_transport_voxels`]).
 pub const AUTO_TRANSPORT_VOXELS: usize = 64;
 
 /// The deepest scene (the optical depth of its deepest point, as [`crate::auto`] measures it)
@@ -151,15 +152,85 @@ pub const MAX_DEPTH_PRODUCT: f64 = 3000.0;
 
 impl Settings {
     /// The transport's coarsening on `dims`: the setting, or (0, automatic) the largest of 4,
-    /// 2 that leaves [`AUTO_TRANSPORT_VOXELS`] along the longest side, else 1.
+    /// 2 that leaves the preset's [`Preset::auto_transport_voxels`] along the longest side,
+    /// else 1.
     pub fn coarsening(&self, dims: [usize; 3]) -> usize {
         let longest = dims.into_iter().max().unwrap_or(0);
+        let keep = self.preset.auto_transport_voxels();
         match self.transport_coarsening {
             0 => [4, 2]
                 .into_iter()
-                .find(|f| longest / f >= AUTO_TRANSPORT_VOXELS)
+                .find(|f| longest / f >= keep)
                 .unwrap_or(1),
             set => set,
+        }
+    }
+}
+
+/// Named settings that trade accuracy for time, `preset = "…"` in `[render.coupled]` (or
+/// `--set preset=…`): each sets the transport's directions, tolerances and coarsening, and a
+/// key given beside it overrides the preset's value. Their measured errors against the truth
+/// and their costs: docs/models/coupled.md, "Presets".
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum Preset {
+    /// The fewest directions and the coarsest transport grid that keep the sweep's cases
+    /// within 10 % of the truth: 32 directions, the transport on at least 32 voxels along the
+    /// longest side, transport_tolerance 0.03, diffusion_tolerance 1e-4.
+    Realtime,
+    /// The defaults: 96 directions, at least 64 transport voxels along the longest side,
+    /// transport_tolerance 0.01, diffusion_tolerance 1e-6.
+    #[default]
+    Balanced,
+    /// Converged further, to measure the others by: 192 directions, the transport on every
+    /// voxel, transport_tolerance 1e-3 (at most 200 iterations), diffusion_tolerance 1e-8.
+    Reference,
+}
+
+impl Preset {
+    /// Every preset, cheapest first.
+    pub const ALL: [Preset; 3] = [Preset::Realtime, Preset::Balanced, Preset::Reference];
+
+    /// The name scenes use.
+    pub fn name(self) -> &'static str {
+        match self {
+            Preset::Realtime => "realtime",
+            Preset::Balanced => "balanced",
+            Preset::Reference => "reference",
+        }
+    }
+
+    /// The transport voxels the automatic coarsening keeps along the grid's longest side.
+    pub fn auto_transport_voxels(self) -> usize {
+        match self {
+            Preset::Realtime => AUTO_TRANSPORT_VOXELS / 2,
+            Preset::Balanced => AUTO_TRANSPORT_VOXELS,
+            Preset::Reference => usize::MAX,
+        }
+    }
+
+    /// The preset's settings (where a pass runs is not the preset's: `auto`).
+    pub fn settings(self) -> Settings {
+        let (directions, transport_tolerance, max_transport_iterations, diffusion_tolerance) =
+            match self {
+                Preset::Realtime => (32, 0.03, 40, 1e-4),
+                Preset::Balanced => (96, 0.01, 40, 1e-6),
+                Preset::Reference => (192, 1e-3, 200, 1e-8),
+            };
+        Settings {
+            preset: self,
+            source: Source::Buffer,
+            split: Split::DeltaEddington,
+            emergent: Emergent::P1,
+            diffusion_tolerance,
+            max_diffusion_iterations: 500,
+            diffuse: Diffuse::Transport,
+            directions,
+            transport_tolerance,
+            max_transport_iterations,
+            transport_coarsening: 0,
+            per_sun: Place::Auto,
+            per_view: Place::Auto,
         }
     }
 }
@@ -218,10 +289,13 @@ pub enum Diffuse {
     Diffusion,
 }
 
-/// The model's settings, `[render.coupled]`.
+/// The model's settings, `[render.coupled]`: a [`Preset`]'s, with the keys given beside it
+/// in its place.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
+#[serde(try_from = "Given")]
 pub struct Settings {
+    /// The preset the other keys start from (default "balanced").
+    pub preset: Preset,
     /// What feeds the diffusion (default "buffer").
     pub source: Source,
     /// The share the beam keeps (default "delta-eddington": δ-M's f under the transport,
@@ -230,25 +304,27 @@ pub struct Settings {
     /// The diffusion's light towards the eye (default "p1").
     pub emergent: Emergent,
     /// Relative residual ‖b − A x‖/‖b‖ the diffusion solve must reach, [1e-12, 0.1].
-    /// Default 1e-6.
+    /// The preset's (balanced: 1e-6).
     pub diffusion_tolerance: f64,
     /// Conjugate-gradient iterations allowed, [1, 100000]. Default 500.
     pub max_diffusion_iterations: usize,
     /// What carries the diffuse light (default "transport").
     pub diffuse: Diffuse,
-    /// Directions of the discrete-ordinates transport, [16, 1024]. Default 96.
+    /// Directions of the discrete-ordinates transport, [16, 1024]. The preset's (balanced:
+    /// 96).
     pub directions: usize,
     /// The transport's source iteration stops when an iteration changes the mean radiance
-    /// by less than this (relative, rms over the grid, green), [1e-6, 0.5]. Default 0.01.
+    /// by less than this (relative, rms over the grid, green), [1e-6, 0.5]. The preset's
+    /// (balanced: 0.01).
     pub transport_tolerance: f64,
-    /// Source iterations allowed, [1, 1000]. Default 40.
+    /// Source iterations allowed, [1, 1000]. The preset's (balanced: 40).
     pub max_transport_iterations: usize,
     /// The transport's voxels span this many of the grid's along each axis: 1, 2 or 4 (the
     /// medium and the sources averaged over each block, the radiance's moments kept on the
     /// blocks and looked up there by the gathers; at 2
     /// the sweeps cost an eighth, docs/models/coupled.md gives the error), or 0 (the default):
-    /// the largest that leaves the transport at least [`AUTO_TRANSPORT_VOXELS`] voxels along
-    /// the grid's longest side.
+    /// the largest that leaves the transport at least the preset's
+    /// [`Preset::auto_transport_voxels`] along the grid's longest side.
     pub transport_coarsening: usize,
     /// Where a GPU render's per-sun passes (the beam's, the skylight's and the transport's
     /// sweeps, the diffusion solves) run: "auto" (the default: on the GPU unless the adapter is a CPU emulation such as
@@ -262,20 +338,65 @@ pub struct Settings {
 
 impl Default for Settings {
     fn default() -> Self {
-        Self {
-            source: Source::Buffer,
-            split: Split::DeltaEddington,
-            emergent: Emergent::P1,
-            diffusion_tolerance: 1e-6,
-            max_diffusion_iterations: 500,
-            diffuse: Diffuse::Transport,
-            directions: 96,
-            transport_tolerance: 0.01,
-            max_transport_iterations: 40,
-            transport_coarsening: 0,
-            per_sun: Place::Auto,
-            per_view: Place::Auto,
-        }
+        Preset::default().settings()
+    }
+}
+
+/// `[render.coupled]` as written: the preset and the keys given beside it.
+#[derive(Deserialize, Default)]
+#[serde(default, deny_unknown_fields)]
+struct Given {
+    preset: Option<String>,
+    source: Option<Source>,
+    split: Option<Split>,
+    emergent: Option<Emergent>,
+    diffusion_tolerance: Option<f64>,
+    max_diffusion_iterations: Option<usize>,
+    diffuse: Option<Diffuse>,
+    directions: Option<usize>,
+    transport_tolerance: Option<f64>,
+    max_transport_iterations: Option<usize>,
+    transport_coarsening: Option<usize>,
+    per_sun: Option<Place>,
+    per_view: Option<Place>,
+}
+
+impl TryFrom<Given> for Settings {
+    type Error = String;
+
+    fn try_from(g: Given) -> Result<Self, String> {
+        let preset = match g.preset.as_deref() {
+            None => Preset::default(),
+            Some(name) => Preset::ALL
+                .into_iter()
+                .find(|p| p.name() == name)
+                .ok_or_else(|| {
+                    format!(
+                        "preset = {name:?} is not one of \"realtime\", \"balanced\", \
+                         \"reference\" (the presets, cheapest first)"
+                    )
+                })?,
+        };
+        let p = preset.settings();
+        Ok(Settings {
+            preset,
+            source: g.source.unwrap_or(p.source),
+            split: g.split.unwrap_or(p.split),
+            emergent: g.emergent.unwrap_or(p.emergent),
+            diffusion_tolerance: g.diffusion_tolerance.unwrap_or(p.diffusion_tolerance),
+            max_diffusion_iterations: g
+                .max_diffusion_iterations
+                .unwrap_or(p.max_diffusion_iterations),
+            diffuse: g.diffuse.unwrap_or(p.diffuse),
+            directions: g.directions.unwrap_or(p.directions),
+            transport_tolerance: g.transport_tolerance.unwrap_or(p.transport_tolerance),
+            max_transport_iterations: g
+                .max_transport_iterations
+                .unwrap_or(p.max_transport_iterations),
+            transport_coarsening: g.transport_coarsening.unwrap_or(p.transport_coarsening),
+            per_sun: g.per_sun.unwrap_or(p.per_sun),
+            per_view: g.per_view.unwrap_or(p.per_view),
+        })
     }
 }
 
@@ -560,5 +681,57 @@ fn rendered(
             pass("transport", report.transport_s),
             pass("gather", gather_s),
         ],
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn read(text: &str) -> Result<Settings, String> {
+        toml::from_str::<Settings>(text).map_err(|e| e.message().to_string())
+    }
+
+    #[test]
+    fn a_preset_sets_its_keys_and_a_key_beside_it_wins() {
+        // No preset is the balanced one, whose values are the model's defaults.
+        assert_eq!(read("").unwrap(), Settings::default());
+        assert_eq!(read("preset = \"balanced\"").unwrap(), Settings::default());
+        let realtime = read("preset = \"realtime\"").unwrap();
+        assert_eq!(realtime, Preset::Realtime.settings());
+        assert_eq!(realtime.directions, 32);
+        let reference = read("preset = \"reference\"").unwrap();
+        assert_eq!(
+            (reference.directions, reference.coarsening([128; 3])),
+            (192, 1)
+        );
+        // The automatic coarsening keeps the preset's voxels along the longest side.
+        let dims = [128, 70, 128];
+        assert_eq!(realtime.coarsening(dims), 4);
+        assert_eq!(Settings::default().coarsening(dims), 2);
+        // A key given beside the preset overrides it; the others stay the preset's.
+        let mixed = read("preset = \"realtime\"\ndirections = 64").unwrap();
+        assert_eq!(
+            mixed,
+            Settings {
+                directions: 64,
+                ..Preset::Realtime.settings()
+            }
+        );
+        // Every preset's settings pass the model's own checks.
+        for p in Preset::ALL {
+            p.settings().check().unwrap();
+        }
+    }
+
+    #[test]
+    fn an_unknown_preset_is_refused_by_name_with_the_allowed_ones() {
+        let e = read("preset = \"fast\"").unwrap_err();
+        assert!(
+            e.contains("preset = \"fast\"") && e.contains("\"realtime\", \"balanced\""),
+            "{e}"
+        );
+        let e = read("preset = \"realtime\"\nspeed = 2").unwrap_err();
+        assert!(e.contains("speed"), "{e}");
     }
 }
