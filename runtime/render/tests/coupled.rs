@@ -1200,3 +1200,84 @@ fn a_warm_start_from_the_last_sun_converges_to_the_cold_start() {
         }
     }
 }
+
+/// A relight in steps (`Relight::advance` with a budget of zero: one step a call, what a viewer
+/// does between frames) reaches the lighting one call reaches, bit for bit, on the CPU and on
+/// the GPU (whose passes a call prepares anew); from its second step on, each step's lighting
+/// is a whole one that the gather draws, and its mean radiance moves towards the converged
+/// one's (soft ball at τ 8, 16³ voxels, at a tolerance of 10⁻⁴).
+#[test]
+fn k_amortized_steps_equal_one_full_relight() {
+    let (_tmp, dir) = bake(&fields());
+    let tables = Tables::open(&dir).unwrap();
+    let frame = ball_on(&tables, 8.0, 90.0, 16);
+    let settings = Settings {
+        transport_tolerance: 1e-4,
+        ..Settings::default()
+    };
+    let gpu = common::gpu();
+    let pipelines = render::lighting::Pipelines::default();
+    let gpu_settings = Settings {
+        directions: 32,
+        per_sun: render::lighting::Place::Gpu,
+        ..settings
+    };
+    let mut places = vec![(None, settings)];
+    if let Some(gpu) = &gpu {
+        places.push((Some(gpu), gpu_settings));
+    }
+    for (gpu, settings) in places {
+        let on = || gpu.map(|g| pipelines.on(g));
+        let full = light::light_on(&tables, &frame, &settings, &(), on()).unwrap();
+        let mut relight = light::Relight::new(&tables, &frame, &settings, None).unwrap();
+        let mut errors = Vec::new();
+        let zero = Some(std::time::Duration::ZERO);
+        while !relight.advance(&tables, (on(), &()), zero).unwrap() {
+            let shown = relight.current();
+            assert_eq!(
+                shown.is_some(),
+                relight.steps() >= 2,
+                "step {}",
+                relight.steps()
+            );
+            if let Some(shown) = shown {
+                // What a frame shows meanwhile: a whole lighting the gather draws.
+                let image = gather::gather(&tables, &frame, &settings, &shown).unwrap();
+                assert!(image.rgb.iter().flatten().all(|v| v.is_finite()));
+                errors.push(mean_radiance_error(&shown, &full));
+            }
+        }
+        let steps = relight.steps();
+        let stepped = relight.finish().unwrap();
+        let iterations = full.report.transport_iterations;
+        let shown: Vec<String> = errors.iter().map(|e| format!("{e:.1e}")).collect();
+        eprintln!(
+            "{}: {steps} steps ({iterations} iterations); the mean radiance's error after each \
+             step from the second: {}",
+            if gpu.is_some() { "GPU" } else { "CPU" },
+            shown.join(", ")
+        );
+        assert_eq!(steps, 2 + iterations);
+        assert_eq!(stepped.report.transport_iterations, iterations);
+        assert_eq!(
+            (&stepped.buffer, &stepped.i0, &stepped.p1),
+            (&full.buffer, &full.i0, &full.p1)
+        );
+        assert!(stepped.sh == full.sh, "the moments differ");
+        assert!(errors.last().unwrap() < &errors[0], "{errors:?}");
+    }
+}
+
+/// The rms difference of `a`'s and `b`'s mean radiance φ_00 over the grid and channels,
+/// relative to `b`'s.
+fn mean_radiance_error(a: &light::Lighting, b: &light::Lighting) -> f64 {
+    let (mut d, mut t) = (0.0, 0.0);
+    for (x, y) in a.sh.iter().zip(&b.sh) {
+        for c in 0..3 {
+            let o = c * render::lighting::transport::HARMONICS;
+            d += (x[o] - y[o]).powi(2);
+            t += y[o] * y[o];
+        }
+    }
+    (d / t).sqrt()
+}

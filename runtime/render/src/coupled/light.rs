@@ -294,7 +294,7 @@ pub fn light_on(
 /// [`light_on`], the transport's source iteration starting from `previous`'s moments where
 /// it is a lighting of the same grid (another sun: a sun that moves little changes the diffuse
 /// light little) instead of the diffusion's P1 radiance; the same converged light either
-/// way, to the transport's tolerance.
+/// way, to the transport's tolerance. A [`Relight`] run to its end in one call.
 pub fn light_from(
     tables: &Tables,
     frame: &Frame,
@@ -302,140 +302,13 @@ pub fn light_from(
     progress: &dyn crate::model::Progress,
     (on, previous): (Option<OnGpu>, Option<&Lighting>),
 ) -> Result<Lighting, FrameError> {
-    check(tables, frame, settings)?;
-    // A periodic grid's sweeps wrap and repeat, which only the CPU passes do.
-    let on = on.filter(|_| !frame.grid.periodic);
-    let fields: Vec<&FieldTable> = tables.fields.iter().collect();
-    let grid = &frame.grid;
-    let h = voxel_size(grid);
-    let sun_dir = frame.sun.direction();
-    let l = -sun_dir;
-    let mut report = CoupledReport::default();
-
-    progress.update(0, 3, "light buffer and skylight");
-    let start = Instant::now();
-    let v = voxels(&fields, grid);
-    let chis: Vec<Moments> = fields
-        .iter()
-        .map(|f| legendre_moments(f, tables.theta_step_deg))
-        .collect();
-    let peak = peaks(&fields, &chis, settings);
-    // The peak's blur with δ-M's split (the transport's), whose gather it was measured with;
-    // the diffusion alone keeps the exact Ams_1.
-    let blurred = delta_scaled(settings) && settings.diffuse == Diffuse::Transport;
-    // None where no field's peak is blurred (rain, ice): Ams_1 as it is, without the tables.
-    let blur = blurred
-        .then(|| PeakBlur::of(&fields, tables.theta_step_deg, &peak))
-        .filter(PeakBlur::blurs);
-    let (state, beam_on) = beam(&fields, grid, &v, (&peak, blur.as_ref()), l, (settings, on))?;
-    report.beam_on = beam_on;
-    if let Some(blur) = &blur {
-        report.peaks = blur.report(&fields);
-    }
-    // E S_atm per voxel: the sun's irradiance at each voxel's height, before the volume.
-    let sunlight = reduced_sun(frame, &vec![[0.0; 3]; v.ext.len()]);
-    // The ground lit as the composite lights it (through the δ-scaled extinction).
-    let scaled = delta_scaled(settings).then_some(peak.as_slice());
-    let lit = sky_light(frame, |g| {
-        transmittance_to_sun(&fields, grid, g, sun_dir, scaled)
-    });
-    let (sky, sky_on) = run(
-        on,
-        settings.per_sun,
-        "the skylight",
-        |on| Ok(on.sky().sweep(on.gpu, grid, &v.ext, &lit)?),
-        || Ok(sky_sweeps(grid, &v.ext, &lit)),
-    )?;
-    report.sky_on = sky_on;
-    report.buffer_s = start.elapsed().as_secs_f64();
-
-    progress.update(1, 3, "diffusion solve");
-    let start = Instant::now();
-    let h_voxel = (h[0] * h[1] * h[2]).cbrt();
-    let active: Vec<bool> = v
-        .ext
-        .iter()
-        .map(|e| e[1] * h_voxel >= MIN_DIFFUSION_VOXEL_DEPTH)
-        .collect();
-    let buffer = BufferLight {
-        state: &state,
-        sunlight: &sunlight,
-    };
-    let (i0, p1) = diffuse(
-        grid,
-        (&v, &active),
-        (&buffer, &sky),
-        l,
-        (settings, on),
-        &mut report,
-    )?;
-    report.diffusion_s = start.elapsed().as_secs_f64();
-    let (sh, sh_grid) = if settings.diffuse == Diffuse::Transport {
-        progress.update(2, 3, "discrete-ordinates transport");
-        let sources = Sources {
-            sunlight: &sunlight,
-            state: &state,
-            sky: &sky,
-            active: &active,
-        };
-        let diffusion = (i0.as_slice(), p1.as_slice());
-        let optics = (fields.as_slice(), &v, (chis.as_slice(), peak.as_slice()));
-        // The previous sun's moments, where it lit a grid of these dims (the transport takes
-        // them where they are as many as its own grid's voxels).
-        let warm = previous
-            .filter(|p| p.dims == grid.dims && !p.sh.is_empty())
-            .map(|p| p.sh.as_slice());
-        transport_step(
-            grid,
-            optics,
-            &sources,
-            l,
-            (diffusion, warm),
-            (settings, on),
-            &mut report,
-        )?
-    } else {
-        (Vec::new(), box_of(grid))
-    };
-    progress.update(3, 3, "lighting done");
-    let shadow = ShadowMap::of(&fields, frame, delta_scaled(settings).then_some(&peak));
-    Ok(Lighting {
-        buffer: state
-            .iter()
-            .map(|s| [s.intensity[0], s.intensity[1], s.intensity[2], s.depth])
-            .collect(),
-        i0,
-        p1,
-        sh,
-        sh_grid,
-        chis,
-        active,
-        g: asymmetries(&fields),
-        peak,
-        blur,
-        sky_mean: sky.mean,
-        dims: grid.dims,
-        sun_dir,
-        shadow,
-        report,
-    })
+    let mut relight = Relight::new(tables, frame, settings, previous)?;
+    relight.advance(tables, (on, progress), None)?;
+    Ok(relight.finish().expect("advanced to its end"))
 }
 
 /// The spherical-harmonic moments of the radiance at one voxel, per channel.
 type Harmonics = [f64; transport::PER_VOXEL];
-
-/// The transport's result: the moments per voxel and the rounds' report.
-type Swept = (Vec<Harmonics>, transport::Report);
-
-/// The diffusion's result: I_0 per channel and I_1 = 3J per channel and axis, per voxel.
-type Diffused = (Vec<[f64; 3]>, Vec<[f64; 9]>);
-
-/// What the transport may start from: the diffusion's (I_0, I_1) per voxel, and a previous
-/// sun's moments on the transport's grid.
-type Starts<'a> = (
-    (&'a [[f64; 3]], &'a [[f64; 9]]),
-    Option<&'a [[f64; transport::PER_VOXEL]]>,
-);
 
 /// What the transport's medium is formed from: the fields, their voxels' optics, and their
 /// Legendre moments and forward peaks.
@@ -445,44 +318,566 @@ type Optics<'a> = (
     (&'a [Moments], &'a [[f64; 3]]),
 );
 
-/// Step 3b, the transport over `optics` (the fields, their voxels, moments and peaks) from
-/// `sources` and the diffusion's (I_0, I_1), timed into the report: the moments per voxel of
-/// the (possibly coarser) grid they are on, and that grid.
-pub(super) fn transport_step(
+/// The diffusion's result: I_0 per channel and I_1 = 3J per channel and axis, per voxel.
+type Diffused = (Vec<[f64; 3]>, Vec<[f64; 9]>);
+
+/// A sun's lighting computed in steps, so that a caller with frames to draw can stop between
+/// them ([`Relight::advance`] with a budget) and draw meanwhile from [`Relight::current`]:
+/// 1. the beam and the skylight (steps 1, 2 of the [module docs](super));
+/// 2. the diffusion (step 3), then the transport's medium, its acceleration and its start;
+/// 3. each of the transport's source iterations (step 3b), one a step.
+///
+/// From the end of step 2 on, [`Relight::current`] is a whole lighting (the diffusion's with
+/// the transport's start, then each iteration's moments). The steps reach the same lighting,
+/// bit for bit, however the calls divide them. The GPU's passes (where `on` lets them run) are
+/// prepared once per call of [`Relight::advance`]: a call that runs many iterations uploads
+/// the acceleration's operators and the sweeps' medium once, a call per iteration each time.
+pub struct Relight {
+    frame: Frame,
+    settings: Settings,
+    /// The previous sun's moments (on the transport's grid) to start from.
+    warm: Option<Vec<Harmonics>>,
+    stage: Stage,
+    report: CoupledReport,
+    /// Steps taken.
+    steps: usize,
+}
+
+/// Where a [`Relight`] stands.
+enum Stage {
+    Start,
+    /// The beam and the skylight are lit.
+    Lit(Box<Lit>),
+    /// The lighting without the transport's moments, and the transport's iteration.
+    Transporting(Box<(Lighting, Transporting)>),
+    Done(Box<Lighting>),
+    /// A step failed; the relight cannot go on.
+    Failed,
+}
+
+/// What step 1 leaves for the diffusion and the transport.
+struct Lit {
+    v: Voxels,
+    chis: Vec<Moments>,
+    peak: Vec<[f64; 3]>,
+    blur: Option<PeakBlur>,
+    state: Vec<BeamState>,
+    sunlight: Vec<[f64; 3]>,
+    sky: Sky,
+    active: Vec<bool>,
+}
+
+/// The transport's source iteration between steps: its grid, medium, acceleration and moments.
+struct Transporting {
+    /// The transport's blocks, where it runs on a coarser grid than the frame's.
+    coarse: Option<transport::Coarse>,
+    medium: transport::Medium,
+    /// The acceleration's operators and their multigrid hierarchies, one per channel, built
+    /// once; only their sources change per round.
+    operators: Vec<diffusion::Operator>,
+    dirs: Vec<DVec3>,
+    groups: Vec<transport::Group>,
+    moments: Vec<Harmonics>,
+    report: transport::Report,
+    /// Whether it started from a previous sun's moments.
+    warm: bool,
+    /// Where its last sweeps ran.
+    on: String,
+    /// Seconds spent on it so far.
+    seconds: f64,
+}
+
+impl Relight {
+    /// A relight of `frame`'s sun with `settings`, checked (nothing is computed yet), its
+    /// transport to start from `previous`'s moments where it lit a grid of these dims.
+    pub fn new(
+        tables: &Tables,
+        frame: &Frame,
+        settings: &Settings,
+        previous: Option<&Lighting>,
+    ) -> Result<Self, FrameError> {
+        check(tables, frame, settings)?;
+        let warm = previous
+            .filter(|p| p.dims == frame.grid.dims && !p.sh.is_empty())
+            .map(|p| p.sh.clone());
+        Ok(Self {
+            frame: frame.clone(),
+            settings: *settings,
+            warm,
+            stage: Stage::Start,
+            report: CoupledReport::default(),
+            steps: 0,
+        })
+    }
+
+    /// Steps taken so far.
+    pub fn steps(&self) -> usize {
+        self.steps
+    }
+
+    /// Whether the lighting has converged ([`Relight::finish`] hands it over).
+    pub fn done(&self) -> bool {
+        matches!(self.stage, Stage::Done(_))
+    }
+
+    /// The frame it lights.
+    pub fn frame(&self) -> &Frame {
+        &self.frame
+    }
+
+    /// The settings it lights with.
+    pub fn settings(&self) -> &Settings {
+        &self.settings
+    }
+
+    /// Runs steps until the lighting is done or, with a `budget`, until the call has spent it
+    /// (checked after each step, so a call runs at least one step, and a step may outlast the
+    /// budget); the passes on `on` where the settings let them run, telling `progress`.
+    /// Whether the lighting is done. After an error the relight is spent.
+    pub fn advance(
+        &mut self,
+        tables: &Tables,
+        (on, progress): (Option<OnGpu>, &dyn crate::model::Progress),
+        budget: Option<std::time::Duration>,
+    ) -> Result<bool, FrameError> {
+        // A periodic grid's sweeps wrap and repeat, which only the CPU passes do.
+        let on = on.filter(|_| !self.frame.grid.periodic);
+        let start = Instant::now();
+        let spent = || budget.is_some_and(|b| start.elapsed() >= b);
+        while !self.done() {
+            let stage = std::mem::replace(&mut self.stage, Stage::Failed);
+            self.stage = match stage {
+                Stage::Start => {
+                    progress.update(0, 3, "light buffer and skylight");
+                    self.steps += 1;
+                    Stage::Lit(Box::new(self.light(tables, on)?))
+                }
+                Stage::Lit(lit) => {
+                    progress.update(1, 3, "diffusion solve");
+                    self.steps += 1;
+                    self.diffuse(tables, *lit, on)?
+                }
+                Stage::Transporting(t) => {
+                    let (base, mut run) = *t;
+                    progress.update(2, 3, "discrete-ordinates transport");
+                    if self.transport(&mut run, on, &spent)? {
+                        Stage::Done(Box::new(self.assemble(base, run)))
+                    } else {
+                        Stage::Transporting(Box::new((base, run)))
+                    }
+                }
+                Stage::Done(_) => unreachable!("the loop stops when done"),
+                Stage::Failed => {
+                    return Err(FrameError("the relight failed in an earlier step".into()));
+                }
+            };
+            if spent() {
+                break;
+            }
+        }
+        if self.done() {
+            progress.update(3, 3, "lighting done");
+        }
+        Ok(self.done())
+    }
+
+    /// The lighting as it stands: the converged one when done, else from the end of step 2
+    /// on the diffusion's with the transport's moments so far (a copy); `None` before.
+    pub fn current(&self) -> Option<Lighting> {
+        match &self.stage {
+            Stage::Done(lighting) => Some((**lighting).clone()),
+            Stage::Transporting(t) => {
+                let (base, run) = &**t;
+                let mut lighting = base.clone();
+                lighting.sh = run.moments.clone();
+                lighting.report.transport_iterations = run.report.changes.len();
+                Some(lighting)
+            }
+            _ => None,
+        }
+    }
+
+    /// The converged lighting; `None` before it is done.
+    pub fn finish(self) -> Option<Lighting> {
+        match self.stage {
+            Stage::Done(lighting) => Some(*lighting),
+            _ => None,
+        }
+    }
+
+    /// Step 1: the beam's medium from the fields' peaks, the beam, and the skylight.
+    fn light(&mut self, tables: &Tables, on: Option<OnGpu>) -> Result<Lit, FrameError> {
+        let (frame, settings) = (&self.frame, &self.settings);
+        let fields: Vec<&FieldTable> = tables.fields.iter().collect();
+        let grid = &frame.grid;
+        let sun_dir = frame.sun.direction();
+        let start = Instant::now();
+        let v = voxels(&fields, grid);
+        let chis: Vec<Moments> = fields
+            .iter()
+            .map(|f| legendre_moments(f, tables.theta_step_deg))
+            .collect();
+        let peak = peaks(&fields, &chis, settings);
+        // The peak's blur with δ-M's split (the transport's), whose gather it was measured
+        // with; the diffusion alone keeps the exact Ams_1.
+        let blurred = delta_scaled(settings) && settings.diffuse == Diffuse::Transport;
+        // None where no field's peak is blurred (rain, ice): Ams_1 as it is, without the tables.
+        let blur = blurred
+            .then(|| PeakBlur::of(&fields, tables.theta_step_deg, &peak))
+            .filter(PeakBlur::blurs);
+        let medium = (&peak[..], blur.as_ref());
+        let (state, beam_on) = beam(&fields, grid, &v, medium, -sun_dir, (settings, on))?;
+        self.report.beam_on = beam_on;
+        if let Some(blur) = &blur {
+            self.report.peaks = blur.report(&fields);
+        }
+        // E S_atm per voxel: the sun's irradiance at each voxel's height, before the volume.
+        let sunlight = reduced_sun(frame, &vec![[0.0; 3]; v.ext.len()]);
+        // The ground lit as the composite lights it (through the δ-scaled extinction).
+        let scaled = delta_scaled(settings).then_some(peak.as_slice());
+        let lit = sky_light(frame, |g| {
+            transmittance_to_sun(&fields, grid, g, sun_dir, scaled)
+        });
+        let (sky, sky_on) = run(
+            on,
+            settings.per_sun,
+            "the skylight",
+            |on| Ok(on.sky().sweep(on.gpu, grid, &v.ext, &lit)?),
+            || Ok(sky_sweeps(grid, &v.ext, &lit)),
+        )?;
+        self.report.sky_on = sky_on;
+        self.report.buffer_s = start.elapsed().as_secs_f64();
+        let h = voxel_size(grid);
+        let h_voxel = (h[0] * h[1] * h[2]).cbrt();
+        let active = v
+            .ext
+            .iter()
+            .map(|e| e[1] * h_voxel >= MIN_DIFFUSION_VOXEL_DEPTH)
+            .collect();
+        Ok(Lit {
+            v,
+            chis,
+            peak,
+            blur,
+            state,
+            sunlight,
+            sky,
+            active,
+        })
+    }
+
+    /// Step 2: the diffusion, and the lighting without the transport's moments; with the
+    /// transport, its medium, acceleration and start.
+    fn diffuse(
+        &mut self,
+        tables: &Tables,
+        lit: Lit,
+        on: Option<OnGpu>,
+    ) -> Result<Stage, FrameError> {
+        let (frame, settings) = (&self.frame, &self.settings);
+        let fields: Vec<&FieldTable> = tables.fields.iter().collect();
+        let grid = &frame.grid;
+        let sun_dir = frame.sun.direction();
+        let l = -sun_dir;
+        let start = Instant::now();
+        let buffer = BufferLight {
+            state: &lit.state,
+            sunlight: &lit.sunlight,
+        };
+        let (i0, p1) = diffuse(
+            grid,
+            (&lit.v, &lit.active),
+            (&buffer, &lit.sky),
+            l,
+            (settings, on),
+            &mut self.report,
+        )?;
+        self.report.diffusion_s = start.elapsed().as_secs_f64();
+        let shadow = ShadowMap::of(&fields, frame, delta_scaled(settings).then_some(&lit.peak));
+        let run = (settings.diffuse == Diffuse::Transport).then(|| {
+            let sources = Sources {
+                sunlight: &lit.sunlight,
+                state: &lit.state,
+                sky: &lit.sky,
+                active: &lit.active,
+            };
+            let optics = (&fields[..], &lit.v, (&lit.chis[..], &lit.peak[..]));
+            transporting(
+                grid,
+                optics,
+                &sources,
+                l,
+                (&i0, &p1),
+                self.warm.take(),
+                settings,
+            )
+        });
+        let base = Lighting {
+            buffer: lit
+                .state
+                .iter()
+                .map(|s| [s.intensity[0], s.intensity[1], s.intensity[2], s.depth])
+                .collect(),
+            i0,
+            p1,
+            sh: Vec::new(),
+            sh_grid: box_of(grid),
+            chis: lit.chis,
+            active: lit.active,
+            g: asymmetries(&fields),
+            peak: lit.peak,
+            blur: lit.blur,
+            sky_mean: lit.sky.mean,
+            dims: grid.dims,
+            sun_dir,
+            shadow,
+            report: self.report.clone(),
+        };
+        Ok(match run {
+            None => Stage::Done(Box::new(base)),
+            Some(run) => {
+                let mut base = base;
+                base.sh_grid = run
+                    .coarse
+                    .as_ref()
+                    .map_or_else(|| box_of(grid), |c| box_of(&c.grid));
+                Stage::Transporting(Box::new((base, run)))
+            }
+        })
+    }
+
+    /// Step 3b's source iterations, one a step, until `spent` (at least one) or converged;
+    /// whether it has converged. Fails, naming the change, the tolerance and the cap, when it
+    /// does not converge within `max_transport_iterations`.
+    fn transport(
+        &mut self,
+        run: &mut Transporting,
+        on: Option<OnGpu>,
+        spent: &dyn Fn() -> bool,
+    ) -> Result<bool, FrameError> {
+        let settings = &self.settings;
+        let start = Instant::now();
+        let grid = run.coarse.as_ref().map_or(&self.frame.grid, |c| &c.grid);
+        let Transporting {
+            medium,
+            operators,
+            dirs,
+            groups,
+            moments,
+            report,
+            on: swept_on,
+            ..
+        } = run;
+        // On the GPU, each operator's hierarchy uploaded once a call (`auto` falls back to
+        // the CPU where the adapter cannot hold them).
+        let uploaded = match on.map(|on| {
+            operators
+                .iter()
+                .map(|op| on.solver().upload(on.gpu, op))
+                .collect::<Result<Vec<_>, _>>()
+        }) {
+            None => None,
+            Some(Ok(uploaded)) => Some(uploaded),
+            Some(Err(_)) if settings.per_sun == Place::Auto => None,
+            Some(Err(e)) => {
+                return Err(FrameError(format!(
+                    "the transport's acceleration on the GPU: {e}"
+                )));
+            }
+        };
+        let sweeps = match on {
+            None => None,
+            Some(on) => match on.transport().prepare(on.gpu, grid, medium, dirs) {
+                Ok(sweeps) => Some(Ok(sweeps)),
+                Err(e) if settings.per_sun == Place::Gpu => {
+                    return Err(FrameError(e.to_string()));
+                }
+                Err(e) => Some(Err(e.to_string())),
+            },
+        };
+        *swept_on = match &sweeps {
+            Some(Ok(sweeps)) => sweeps.describe(),
+            Some(Err(refused)) => format!("the CPU ({refused})"),
+            None => "the CPU".into(),
+        };
+        let weight = 4.0 * PI / dirs.len() as f64;
+        let mut failed = None;
+        let converged = loop {
+            let round = |m: &[Harmonics]| match &sweeps {
+                Some(Ok(sweeps)) => sweeps
+                    .round(m)
+                    .map_err(|e| FrameError(format!("the transport's sweeps on the GPU: {e}"))),
+                _ => Ok(transport::sweep_round(grid, medium, m, groups, weight)),
+            };
+            let accelerate = |old: &[Harmonics], new: &mut [Harmonics]| {
+                if let Err(e) =
+                    accelerate(medium, operators, uploaded.as_deref(), (old, new), settings)
+                {
+                    failed = Some(e);
+                }
+            };
+            let change = transport::iterate(moments, report, round, accelerate)?;
+            self.steps += 1;
+            if let Some(e) = failed.take() {
+                return Err(FrameError(format!("the transport's acceleration: {e}")));
+            }
+            if !change.is_finite() {
+                return Err(FrameError(format!(
+                    "the transport broke down: the mean radiance's change is {change} after {} \
+                     iterations (the medium or its sources are not finite in floating point at \
+                     these optical depths; more iterations would not help)",
+                    report.changes.len()
+                )));
+            }
+            if change < settings.transport_tolerance {
+                break true;
+            }
+            if report.changes.len() >= settings.max_transport_iterations {
+                return Err(FrameError(format!(
+                    "the transport did not converge: the mean radiance still changed by \
+                     {change:.3e} (relative) in iteration {} (max_transport_iterations), \
+                     transport_tolerance {}; raise max_transport_iterations or loosen \
+                     transport_tolerance",
+                    settings.max_transport_iterations,
+                    crate::checks::Shown(settings.transport_tolerance)
+                )));
+            }
+            if spent() {
+                break false;
+            }
+        };
+        run.seconds += start.elapsed().as_secs_f64();
+        Ok(converged)
+    }
+
+    /// The converged lighting: `base` with `run`'s moments, its report and energy balance.
+    fn assemble(&mut self, mut base: Lighting, run: Transporting) -> Lighting {
+        let grid = run.coarse.as_ref().map_or(&self.frame.grid, |c| &c.grid);
+        let r = &mut self.report;
+        r.transport_on = run.on;
+        r.transport_warm = run.warm;
+        r.transport_balance = transport::balance(grid, &run.medium, &run.moments);
+        r.transport_iterations = run.report.changes.len();
+        r.transport_dims = grid.dims;
+        r.transport_change = run.report.changes.last().copied().unwrap_or(0.0);
+        r.transport_s = run.seconds;
+        base.sh = run.moments;
+        base.report = r.clone();
+        base
+    }
+}
+
+/// The transport's iteration over `optics` (the fields, their voxels, moments and peaks) from
+/// `sources`, ready to run: the δ-M-scaled medium (f = χ_{L+1} per field), the sunlit source
+/// Q(ω) = q p′(ω·l) with q the diffusion's Q_0 from the beam, the skylit source as the
+/// diffusion has it, on the grid's blocks with `transport_coarsening`, starting from `warm`
+/// (a previous sun's moments on that grid) or else the diffusion's P1 radiance (I_0, I_1).
+fn transporting(
     grid: &DensityGrid,
-    (fields, v, moments): Optics,
+    (fields, v, (chis, peak)): Optics,
     sources: &Sources,
     l: DVec3,
-    (diffusion, warm): Starts,
-    (settings, on): (&Settings, Option<OnGpu>),
-    report: &mut CoupledReport,
-) -> Result<(Vec<[f64; transport::PER_VOXEL]>, DensityGrid), FrameError> {
+    (i0, p1): (&[[f64; 3]], &[[f64; 9]]),
+    warm: Option<Vec<Harmonics>>,
+    settings: &Settings,
+) -> Transporting {
     let start = Instant::now();
-    let Transported {
-        on: swept_on,
-        moments,
-        report: t,
-        balance,
-        grid: on_grid,
-        warm,
-    } = transport_light(
-        fields,
-        grid,
-        v,
-        sources,
-        moments,
-        l,
-        (diffusion, warm),
-        (settings, on),
-    )?;
-    report.transport_on = swept_on;
-    report.transport_warm = warm;
-    report.transport_balance = balance;
-    report.transport_iterations = t.changes.len();
-    report.transport_dims = on_grid.dims;
-    report.transport_change = t.changes.last().copied().unwrap_or(0.0);
-    report.transport_s = start.elapsed().as_secs_f64();
-    Ok((moments, on_grid))
+    let n = v.ext.len();
+    let medium = transport_medium(fields, grid, v, sources, (chis, peak), l);
+    let p1_start = p1_moments(i0, p1);
+    let kappa_tr: Vec<[f64; 3]> = (0..n)
+        .map(|i| {
+            if sources.active[i] {
+                v.transport[i]
+            } else {
+                [0.0; 3]
+            }
+        })
+        .collect();
+    let kappa_a: Vec<[f64; 3]> = (0..n)
+        .map(|i| std::array::from_fn(|c| (v.ext[i][c] - v.sca[i][c]).max(0.0)))
+        .collect();
+    let factor = settings.coarsening(grid.dims);
+    // A periodic grid's blocks must tile its period: else the transport runs on its voxels.
+    let tiles = |a: usize| !grid.wraps(a) || grid.dims[a].is_multiple_of(factor);
+    let factor = if (0..3).all(tiles) { factor } else { 1 };
+    // On a coarser grid when asked: the medium, the sources and the start averaged over
+    // blocks of voxels; the moments stay there (the gathers interpolate them).
+    let coarse = (factor > 1).then(|| transport::Coarse::new(grid, factor));
+    let (medium, p1_start, kappa_tr, kappa_a) = match &coarse {
+        None => (medium, p1_start, kappa_tr, kappa_a),
+        Some(c) => (
+            c.medium(&medium),
+            c.average(&p1_start),
+            c.average(&kappa_tr),
+            c.average(&kappa_a),
+        ),
+    };
+    let on_grid = coarse.as_ref().map_or(grid, |c| &c.grid);
+    let (n, h) = (medium.ext.len(), voxel_size(on_grid));
+    // A previous sun's moments on this transport grid, in place of the diffusion's start.
+    let warm = warm.filter(|w| w.len() == p1_start.len());
+    let operators = (0..3)
+        .map(|c| {
+            diffusion::Operator::of(&Problem {
+                dims: on_grid.dims,
+                periodic: on_grid.periodic,
+                h,
+                kappa_tr: kappa_tr.iter().map(|k| k[c]).collect(),
+                kappa_a: kappa_a.iter().map(|k| k[c]).collect(),
+                q0: vec![0.0; n],
+                q1: vec![[0.0; 3]; n],
+            })
+        })
+        .collect();
+    let dirs = crate::lighting::lattice::fibonacci_directions(settings.directions);
+    let groups = transport::groups(on_grid, &dirs);
+    Transporting {
+        warm: warm.is_some(),
+        moments: warm.unwrap_or(p1_start),
+        coarse,
+        medium,
+        operators,
+        dirs,
+        groups,
+        report: transport::Report::default(),
+        on: "the CPU".into(),
+        seconds: start.elapsed().as_secs_f64(),
+    }
+}
+
+/// The transport's acceleration (diffusion synthetic acceleration, Alcouffe 1977): the
+/// diffusion of a round's change `new − old` of the mean radiance, scattered (the error's
+/// source), added to `new`'s φ_00 per channel, solved by `operators` (on the GPU where
+/// `uploaded`). (Correcting φ_1 by its flux as well diverged.)
+fn accelerate(
+    medium: &transport::Medium,
+    operators: &[diffusion::Operator],
+    uploaded: Option<&[crate::lighting::diffusion_gpu::Uploaded]>,
+    (old, new): (&[Harmonics], &mut [Harmonics]),
+    settings: &Settings,
+) -> Result<(), String> {
+    let root = (4.0 * PI).sqrt();
+    let mut q0 = vec![0.0; old.len()];
+    for (c, operator) in operators.iter().enumerate() {
+        let o = c * transport::HARMONICS;
+        for (i, q) in q0.iter_mut().enumerate() {
+            *q = medium.sca[i][c] * (new[i][o] - old[i][o]) / root;
+        }
+        let (tolerance, cap) = (ACCELERATION_TOLERANCE, settings.max_diffusion_iterations);
+        let s = match uploaded {
+            Some(u) => u[c]
+                .solve(&operator.isotropic(&q0), tolerance, cap)
+                .map_err(|e| e.to_string())?,
+            None => operator
+                .solve_isotropic(&q0, tolerance, cap)
+                .map_err(|e| e.to_string())?,
+        };
+        new.par_iter_mut()
+            .zip(&s.i0)
+            .for_each(|(m, d)| m[o] += root * d);
+    }
+    Ok(())
 }
 
 /// Step 1 and the loss of step 2: the beam through `v`'s medium with the forward `peak`s (and
@@ -660,198 +1055,6 @@ pub(super) struct Sources<'a> {
     active: &'a [bool],
 }
 
-/// The diffuse light by discrete ordinates ([`transport`]), from the diffusion's `(I_0, I_1)`:
-/// the δ-M-scaled medium (f = χ_{L+1} per field, `peaks`), the sunlit source Q(ω) = q p′(ω·l)
-/// with q the diffusion's Q_0 from the beam, the skylit source as the diffusion has it, and the
-/// source iteration accelerated by a diffusion solve of each round's change of the mean
-/// radiance (diffusion synthetic acceleration, Alcouffe 1977). Fails, naming the change, the
-/// tolerance and the cap, when it does not converge within `max_transport_iterations`.
-#[allow(clippy::too_many_arguments)]
-pub(super) fn transport_light(
-    fields: &[&FieldTable],
-    grid: &crate::volume::DensityGrid,
-    v: &Voxels,
-    sources: &Sources,
-    (chis, peak): (&[Moments], &[[f64; 3]]),
-    l: DVec3,
-    ((i0, p1), warm): Starts,
-    (settings, on): (&Settings, Option<OnGpu>),
-) -> Result<Transported, FrameError> {
-    let n = v.ext.len();
-    let medium = transport_medium(fields, grid, v, sources, (chis, peak), l);
-    // φ_00 = √(4π) I_0 and φ_1m = Y_1 (4π/3) I_1 of the P1 radiance I_0 + I_1·ω.
-    let root = (4.0 * PI).sqrt();
-    let start = p1_moments(i0, p1);
-    // On a coarser grid when asked: the medium, the sources and the start averaged over
-    // blocks of voxels; the moments stay there (the gathers interpolate them).
-    let kappa_tr: Vec<[f64; 3]> = (0..n)
-        .map(|i| {
-            if sources.active[i] {
-                v.transport[i]
-            } else {
-                [0.0; 3]
-            }
-        })
-        .collect();
-    let kappa_a: Vec<[f64; 3]> = (0..n)
-        .map(|i| std::array::from_fn(|c| (v.ext[i][c] - v.sca[i][c]).max(0.0)))
-        .collect();
-    let factor = settings.coarsening(grid.dims);
-    // A periodic grid's blocks must tile its period: else the transport runs on its voxels.
-    let tiles = |a: usize| !grid.wraps(a) || grid.dims[a].is_multiple_of(factor);
-    let factor = if (0..3).all(tiles) { factor } else { 1 };
-    let coarse = (factor > 1).then(|| transport::Coarse::new(grid, factor));
-    let (grid, medium, start, kappa_tr, kappa_a) = match &coarse {
-        None => (grid, medium, start, kappa_tr, kappa_a),
-        Some(c) => (
-            &c.grid,
-            c.medium(&medium),
-            c.average(&start),
-            c.average(&kappa_tr),
-            c.average(&kappa_a),
-        ),
-    };
-    let (n, h) = (medium.ext.len(), voxel_size(grid));
-    // A previous sun's moments on this transport grid, in place of the diffusion's start.
-    let warm = warm.filter(|w| w.len() == start.len());
-    let start = warm.map_or(start, <[_]>::to_vec);
-    // The acceleration: the diffusion of each round's change of the mean radiance, scattered
-    // (the error's source), added to φ_00. (Correcting φ_1 by its flux as well diverged.)
-    let mut failed = None;
-    // The acceleration's operators and their multigrid hierarchies, one per channel, built
-    // once; only their sources change per round.
-    let operators: Vec<diffusion::Operator> = (0..3)
-        .map(|c| {
-            diffusion::Operator::of(&Problem {
-                dims: grid.dims,
-                periodic: grid.periodic,
-                h,
-                kappa_tr: kappa_tr.iter().map(|k| k[c]).collect(),
-                kappa_a: kappa_a.iter().map(|k| k[c]).collect(),
-                q0: vec![0.0; n],
-                q1: vec![[0.0; 3]; n],
-            })
-        })
-        .collect();
-    // On the GPU, each operator's hierarchy uploaded once (`auto` falls back to the CPU where
-    // the adapter cannot hold them).
-    let uploaded = match on.map(|on| {
-        operators
-            .iter()
-            .map(|op| on.solver().upload(on.gpu, op))
-            .collect::<Result<Vec<_>, _>>()
-    }) {
-        None => None,
-        Some(Ok(uploaded)) => Some(uploaded),
-        Some(Err(_)) if settings.per_sun == Place::Auto => None,
-        Some(Err(e)) => {
-            return Err(FrameError(format!(
-                "the transport's acceleration on the GPU: {e}"
-            )));
-        }
-    };
-    let mut q0 = vec![0.0; n];
-    let accelerate = |old: &[[f64; transport::PER_VOXEL]],
-                      new: &mut [[f64; transport::PER_VOXEL]]| {
-        for (c, operator) in operators.iter().enumerate() {
-            let o = c * transport::HARMONICS;
-            for (i, q) in q0.iter_mut().enumerate() {
-                *q = medium.sca[i][c] * (new[i][o] - old[i][o]) / root;
-            }
-            let (tolerance, cap) = (ACCELERATION_TOLERANCE, settings.max_diffusion_iterations);
-            let solved = match &uploaded {
-                Some(u) => u[c]
-                    .solve(&operator.isotropic(&q0), tolerance, cap)
-                    .map_err(|e| e.to_string()),
-                None => operator
-                    .solve_isotropic(&q0, tolerance, cap)
-                    .map_err(|e| e.to_string()),
-            };
-            match solved {
-                Ok(s) => new
-                    .par_iter_mut()
-                    .zip(&s.i0)
-                    .for_each(|(m, d)| m[o] += root * d),
-                Err(e) => failed = Some(e),
-            }
-        }
-    };
-    let cap = settings.max_transport_iterations;
-    let (on, (m, report)) = sweep_rounds(grid, &medium, start, accelerate, (settings, on))?;
-    if let Some(e) = failed {
-        return Err(FrameError(format!("the transport's acceleration: {e}")));
-    }
-    let budget = transport::balance(grid, &medium, &m);
-    let change = report.changes.last().copied().unwrap_or(0.0);
-    if !change.is_finite() {
-        return Err(FrameError(format!(
-            "the transport broke down: the mean radiance's change is {change} after {} \
-             iterations (the medium or its sources are not finite in floating point at these \
-             optical depths; more iterations would not help)",
-            report.changes.len()
-        )));
-    }
-    if change >= settings.transport_tolerance {
-        return Err(FrameError(format!(
-            "the transport did not converge: the mean radiance still changed by {change:.3e} \
-             (relative) in iteration {cap} (max_transport_iterations), transport_tolerance \
-             {}; raise max_transport_iterations or loosen transport_tolerance",
-            crate::checks::Shown(settings.transport_tolerance)
-        )));
-    }
-    Ok(Transported {
-        on,
-        moments: m,
-        report,
-        balance: budget,
-        grid: box_of(grid),
-        warm: warm.is_some(),
-    })
-}
-
-/// The transport's source iteration from `start` over `medium` on `grid`, each round's
-/// sweeps on the GPU when `on` is given and the adapter can hold them (`auto` falls back to
-/// the CPU and says why, `gpu` fails naming the limit), `accelerate`d after each round; where
-/// the sweeps ran, the moments and the rounds' report.
-pub(super) fn sweep_rounds(
-    grid: &DensityGrid,
-    medium: &transport::Medium,
-    start: Vec<[f64; transport::PER_VOXEL]>,
-    accelerate: impl FnMut(&[Harmonics], &mut [Harmonics]),
-    (settings, on): (&Settings, Option<OnGpu>),
-) -> Result<(String, Swept), FrameError> {
-    let dirs = crate::lighting::lattice::fibonacci_directions(settings.directions);
-    let limits = (
-        settings.transport_tolerance,
-        settings.max_transport_iterations,
-    );
-    let sweeps = match on {
-        None => None,
-        Some(on) => match on.transport().prepare(on.gpu, grid, medium, &dirs) {
-            Ok(sweeps) => Some(Ok(sweeps)),
-            Err(e) if settings.per_sun == Place::Gpu => {
-                return Err(FrameError(e.to_string()));
-            }
-            Err(e) => Some(Err(e.to_string())),
-        },
-    };
-    Ok(match sweeps {
-        Some(Ok(sweeps)) => (
-            sweeps.describe(),
-            transport::solve_with(start, limits, |m| sweeps.round(m), accelerate)
-                .map_err(|e| FrameError(format!("the transport's sweeps on the GPU: {e}")))?,
-        ),
-        Some(Err(refused)) => (
-            format!("the CPU ({refused})"),
-            transport::solve(grid, medium, start, &dirs, limits, accelerate),
-        ),
-        None => (
-            "the CPU".into(),
-            transport::solve(grid, medium, start, &dirs, limits, accelerate),
-        ),
-    })
-}
-
 /// The δ-M-scaled medium the transport solves (docs/physics.md §7.10): per voxel σ′_t =
 /// β_ext − f β_sca and σ′_s = (1 − f) β_sca, p′'s moments, the sunlit source (the beam's
 /// dropped loss) and the skylit one, for light travelling along `l`.
@@ -932,17 +1135,4 @@ pub(super) fn box_of(grid: &DensityGrid) -> DensityGrid {
         data: Vec::new(),
         periodic: grid.periodic,
     }
-}
-
-/// What [`transport_light`] found: the moments per voxel of the grid it ran on, the
-/// iteration's report, the energy balance per channel and that grid (box and dims).
-pub(super) struct Transported {
-    /// Where the sweeps ran.
-    on: String,
-    moments: Vec<[f64; transport::PER_VOXEL]>,
-    report: transport::Report,
-    balance: [transport::Balance; 3],
-    grid: DensityGrid,
-    /// Whether it started from a previous sun's moments.
-    warm: bool,
 }

@@ -335,7 +335,7 @@ fn add_layers(
 /// layer order, so each voxel's emission harmonics are formed once per group, and only two
 /// layers of each direction's state are kept. Per direction the state one layer back is
 /// [`crate::lighting::lattice::upwind`]'s (clear air outside: zero), and the step is [`advance`]'s.
-fn sweep_round(
+pub(crate) fn sweep_round(
     grid: &DensityGrid,
     medium: &Medium,
     m: &[[f64; PER_VOXEL]],
@@ -547,21 +547,32 @@ pub fn solve_with<E>(
     let mut m = start;
     let mut report = Report::default();
     for _ in 0..max_iterations {
-        let mut next = round(&m)?;
-        accelerate(&m, &mut next);
-        let (mut d, mut t) = (0.0, 0.0);
-        for (a, b) in next.iter().zip(&m) {
-            d += (a[HARMONICS] - b[HARMONICS]).powi(2);
-            t += a[HARMONICS] * a[HARMONICS];
-        }
-        let change = (d / t.max(f64::MIN_POSITIVE)).sqrt();
-        report.changes.push(change);
-        m = next;
-        if change < tolerance {
+        if iterate(&mut m, &mut report, &mut round, &mut accelerate)? < tolerance {
             break;
         }
     }
     Ok((m, report))
+}
+
+/// One round of [`solve_with`]'s source iteration: `m` replaced by the accelerated round from
+/// it, its relative change of φ_00 (rms, green) pushed to `report` and returned.
+pub fn iterate<E>(
+    m: &mut Vec<[f64; PER_VOXEL]>,
+    report: &mut Report,
+    round: impl FnOnce(&[[f64; PER_VOXEL]]) -> Result<Vec<[f64; PER_VOXEL]>, E>,
+    accelerate: impl FnOnce(&[[f64; PER_VOXEL]], &mut [[f64; PER_VOXEL]]),
+) -> Result<f64, E> {
+    let mut next = round(m)?;
+    accelerate(m, &mut next);
+    let (mut d, mut t) = (0.0, 0.0);
+    for (a, b) in next.iter().zip(m.iter()) {
+        d += (a[HARMONICS] - b[HARMONICS]).powi(2);
+        t += a[HARMONICS] * a[HARMONICS];
+    }
+    let change = (d / t.max(f64::MIN_POSITIVE)).sqrt();
+    report.changes.push(change);
+    *m = next;
+    Ok(change)
 }
 
 /// A coarser grid for the transport: blocks of `factor`³ voxels of a fine grid (the last
