@@ -482,6 +482,94 @@ fn no_display_is_one_line_and_exit_2() {
     assert!(!cwd.join("tables").exists(), "{stderr}");
 }
 
+/// coupled in the window relights a moved sun in steps (a budget of 1 ms: a frame per source
+/// iteration of its transport), drawing each frame from the lighting so far; the shot waits for
+/// the converged frame, which is `render`'s of the same view to the transport's tolerance (the
+/// window's relight starts from the last sun's moments, `render`'s from the diffusion's).
+#[test]
+fn coupled_relights_a_moved_sun_in_steps_and_converges_to_renders_frame() {
+    let cwd = workdir("view-coupled-steps");
+    let text = std::fs::read_to_string(rainbow())
+        .unwrap()
+        .replace("grid_resolution = 96", "grid_resolution = 24");
+    std::fs::write(cwd.join("scene.toml"), &text).unwrap();
+    let moved = text.replace("elevation_deg = 12", "elevation_deg = 20");
+    assert_ne!(moved, text);
+    std::fs::write(cwd.join("moved.toml"), moved).unwrap();
+    std::fs::write(
+        cwd.join("script.toml"),
+        "[[step]]\nscreenshot = \"first.png\"\n\n\
+         [[step]]\nsun_elevation_deg = 20\nscreenshot = \"moved.png\"\n",
+    )
+    .unwrap();
+    let size = ["--width", "48", "--height", "36", "--quality", "draft"];
+    let common = ["--tables", "tables", "--model", "coupled"];
+    let mut args = vec!["scene.toml"];
+    args.extend(size);
+    args.extend(common);
+    args.extend(["--step-budget-ms", "1", "--script", "script.toml"]);
+    args.extend(["--screenshot", "end.png"]);
+    let Some(mut view) = view_command(&args, &cwd) else {
+        return;
+    };
+    let out = view.output().unwrap();
+    if skipped_without_adapter(&out) {
+        return;
+    }
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "view failed:\n{stderr}");
+    let json = |name: &str| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(cwd.join(name)).unwrap()).unwrap()
+    };
+    // The moved sun's frames: drawn while the lighting converged, the last one converged.
+    let j = json("moved.json");
+    let frames = j["frames"].as_u64().unwrap();
+    let converging = j["converging_frames"].as_u64().unwrap();
+    eprintln!("after the sun moved: {frames} frames, {converging} of them converging");
+    assert!(converging >= 1 && frames == converging + 1, "{j}");
+    for shot in ["first.json", "moved.json", "end.json"] {
+        let figures = json(shot)["figures"].to_string();
+        assert!(!figures.contains("relight steps"), "{shot}: {figures}");
+    }
+    let mut render_args = vec!["render", "moved.toml"];
+    render_args.extend(size);
+    render_args.extend(common);
+    render_args.extend(["--out", "render.exr", "--quiet"]);
+    let out = photometeor(&render_args, &cwd);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let (_, _, shown) = read_rgba(&cwd.join("moved.exr"));
+    let (_, _, rendered) = read_rgba(&cwd.join("render.exr"));
+    let peak = rendered[1].iter().fold(0f32, |m, v| m.max(v.abs()));
+    let worst = (0..3)
+        .flat_map(|c| (0..shown[c].len()).map(move |i| (c, i)))
+        .map(|(c, i)| (shown[c][i] - rendered[c][i]).abs() / peak)
+        .fold(0f32, f32::max);
+    eprintln!("the converged window frame against render's: worst {worst:.2e} of the peak");
+    assert!(worst < 5e-5, "worst {worst:e} of the peak");
+}
+
+/// A step budget of zero, a negative one, NaN or one past a minute is refused with its range
+/// before anything is baked or opened.
+#[test]
+fn a_step_budget_out_of_range_is_refused_before_any_work() {
+    let cwd = workdir("view-step-budget");
+    for budget in ["0", "-5", "NaN", "inf", "60001"] {
+        let flag = format!("--step-budget-ms={budget}");
+        let out = photometeor(&["view", "--tables", "tables", &flag], &cwd);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{budget}: {stderr}");
+        assert!(
+            stderr.contains("--step-budget-ms") && stderr.contains("outside (0, 60000]"),
+            "{budget}: {stderr}"
+        );
+        assert!(!cwd.join("tables").exists(), "{budget}: {stderr}");
+    }
+}
+
 #[test]
 fn a_bad_script_is_refused_with_its_line_before_anything_opens() {
     let cwd = workdir("view-bad-script");

@@ -151,6 +151,25 @@ impl Rendered {
         );
     }
 
+    /// Marks a frame drawn from a relight that has not converged, `steps` steps in
+    /// ([`crate::relight`]): the figure "relight steps" and the summary say so; the next
+    /// frame of the same view takes it further.
+    pub fn converging(&mut self, steps: usize) {
+        self.figures.push(("relight steps", steps as f64));
+        self.summary = format!(
+            "lighting converging: {steps} steps of the relight so far (the next frame takes it \
+             further); {}",
+            self.summary
+        );
+    }
+
+    /// Whether the frame was drawn from a relight that has not converged.
+    pub fn is_converging(&self) -> bool {
+        self.figures
+            .iter()
+            .any(|(name, _)| *name == "relight steps")
+    }
+
     /// The wall time of pass `name`, if the model reported it.
     pub fn seconds(&self, name: &str) -> Option<f64> {
         self.passes

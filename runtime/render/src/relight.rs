@@ -4,9 +4,18 @@
 //! it. A caller that renders many views of one lighting (the viewer) hands the models a
 //! [`LightingCache`] through [`crate::model::Job::lighting`]; a view that changes only the camera then
 //! costs the gather alone. `render` and `bench render` hand none: every frame is lit anew.
+//!
+//! A cache made with a step budget ([`LightingCache::stepped`], the viewer's) lights a new sun
+//! in steps instead ([`LightingCache::get_or_step`]; `coupled`'s [`crate::coupled::light::Relight`]):
+//! each frame runs the relight's steps for about the budget and is drawn from the lighting as
+//! it stands, until it converges. What a frame shows meanwhile is the new sun's lighting from
+//! its first frame on (never the last sun's, never black): the first frame after a sun change
+//! runs the steps that make a whole lighting (the beam, the skylight, the diffusion and the
+//! transport's start) whatever the budget, each later frame the transport's next iterations.
 
 use std::any::Any;
 use std::sync::{Arc, Mutex};
+use std::time::Duration;
 
 use crate::frame::Frame;
 
@@ -14,6 +23,35 @@ use crate::frame::Frame;
 #[derive(Default)]
 pub struct LightingCache {
     last: Mutex<Option<Entry>>,
+    /// The lighting work a frame may do where a relight goes in steps (module docs).
+    step_budget: Option<Duration>,
+    /// A relight in steps that has not converged, with what it lights.
+    pending: Mutex<Option<Pending>>,
+}
+
+struct Pending {
+    frame: Frame,
+    settings: Box<dyn Any + Send + Sync>,
+    relight: Box<dyn Any + Send>,
+}
+
+/// A relight's state after a frame's steps (module docs).
+pub enum Stepped<L> {
+    /// Converged: the lighting.
+    Done(L),
+    /// Not yet: the lighting as it stands, and the steps taken.
+    Partial(L, usize),
+}
+
+/// Where a stepped frame's lighting came from ([`LightingCache::get_or_step`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Lit {
+    /// The kept lighting: it lit the frame alike.
+    Kept,
+    /// A relight that converged in this frame's steps.
+    Converged,
+    /// A relight that has not converged: the lighting after this many steps.
+    Partial(usize),
 }
 
 struct Entry {
@@ -40,6 +78,92 @@ impl LightingCache {
     /// An empty cache.
     pub fn new() -> Self {
         Self::default()
+    }
+
+    /// An empty cache whose relights go in steps of about `budget` a frame (module docs).
+    pub fn stepped(budget: Duration) -> Self {
+        Self {
+            step_budget: Some(budget),
+            ..Self::default()
+        }
+    }
+
+    /// The lighting work a frame may do, where relights go in steps.
+    pub fn step_budget(&self) -> Option<Duration> {
+        self.step_budget
+    }
+
+    /// Whether a relight in steps is under way (the next frame of the same view takes it
+    /// further).
+    pub fn converging(&self) -> bool {
+        self.pending.lock().expect("not poisoned").is_some()
+    }
+
+    /// The lighting of `frame` with `settings` where relights go in steps: the kept one when it
+    /// lit the frame alike; else the pending relight of this frame and settings (or a new one,
+    /// `start(previous)`, `previous` as in [`LightingCache::get_or_light`]) taken one frame's
+    /// `step`s further, its lighting as it stands, and kept in the last one's place once it has
+    /// converged.
+    pub(crate) fn get_or_step<S, L, R, E>(
+        &self,
+        frame: &Frame,
+        settings: &S,
+        start: impl FnOnce(Option<&L>) -> Result<R, E>,
+        step: impl FnOnce(&mut R) -> Result<Stepped<L>, E>,
+    ) -> Result<(Arc<L>, Lit), E>
+    where
+        S: PartialEq + Clone + Send + Sync + 'static,
+        L: Send + Sync + 'static,
+        R: Send + 'static,
+    {
+        let mut last = self.last.lock().expect("not poisoned");
+        let same_settings = |s: &(dyn Any + Send + Sync)| s.downcast_ref::<S>() == Some(settings);
+        if let Some(e) = last.as_ref()
+            && same_settings(&*e.settings)
+            && same_lighting(&e.frame, frame)
+            && let Ok(lighting) = e.lighting.clone().downcast::<L>()
+        {
+            return Ok((lighting, Lit::Kept));
+        }
+        let mut pending = self.pending.lock().expect("not poisoned");
+        let ours = pending.as_ref().is_some_and(|p| {
+            same_settings(&*p.settings) && same_lighting(&p.frame, frame) && p.relight.is::<R>()
+        });
+        if !ours {
+            // Another sun (or settings): the relight under way is dropped for a new one.
+            *pending = None;
+            let previous = last
+                .as_ref()
+                .filter(|e| same_settings(&*e.settings) && e.frame.grid == frame.grid)
+                .and_then(|e| e.lighting.clone().downcast::<L>().ok());
+            *pending = Some(Pending {
+                frame: frame.clone(),
+                settings: Box::new(settings.clone()),
+                relight: Box::new(start(previous.as_deref())?),
+            });
+        }
+        let relight = pending
+            .as_mut()
+            .and_then(|p| p.relight.downcast_mut::<R>())
+            .expect("a relight of this type was set above");
+        let stepped = step(relight);
+        match stepped {
+            Err(e) => {
+                *pending = None;
+                Err(e)
+            }
+            Ok(Stepped::Partial(lighting, steps)) => Ok((Arc::new(lighting), Lit::Partial(steps))),
+            Ok(Stepped::Done(lighting)) => {
+                let p = pending.take().expect("set above");
+                let lighting = Arc::new(lighting);
+                *last = Some(Entry {
+                    frame: p.frame,
+                    settings: Box::new(settings.clone()),
+                    lighting: lighting.clone(),
+                });
+                Ok((lighting, Lit::Converged))
+            }
+        }
     }
 
     /// The lighting of `frame` with `settings`: the kept one when both light alike (and
@@ -196,5 +320,62 @@ mod tests {
             .get_or_light(&f, &2u64, |_| Ok::<_, ()>(0.0f64))
             .unwrap();
         assert!(!reused);
+    }
+
+    /// A relight in steps through a stepped cache: each frame of the same sun takes the
+    /// pending relight one call further and shows it as it stands; once converged it is kept
+    /// (the next frame reuses it); a new sun mid-relight drops the pending relight and starts
+    /// from the last converged lighting. Here a "relight" counts to 3 from its start.
+    #[test]
+    fn a_stepped_relight_shows_each_frame_its_lighting_so_far_until_it_converges() {
+        let cache = LightingCache::stepped(Duration::from_millis(1));
+        let frame_of = |elevation: f64| {
+            let mut f = frame();
+            f.sun.elevation_deg = elevation;
+            f
+        };
+        // The relight's state: (where it started, steps); its lighting: start + steps.
+        let step = |f: &Frame| {
+            cache.get_or_step(
+                f,
+                &1u32,
+                |previous: Option<&f64>| Ok::<_, ()>((previous.copied().unwrap_or(0.0), 0)),
+                |r: &mut (f64, usize)| {
+                    r.1 += 1;
+                    let lighting = r.0 + r.1 as f64;
+                    Ok(if r.1 == 3 {
+                        Stepped::Done(lighting)
+                    } else {
+                        Stepped::Partial(lighting, r.1)
+                    })
+                },
+            )
+        };
+        let shown = |f: &Frame| {
+            let (lighting, lit) = step(f).unwrap();
+            (*lighting, lit)
+        };
+        let (a, b) = (frame_of(30.0), frame_of(31.0));
+        assert_eq!(shown(&a), (1.0, Lit::Partial(1)));
+        assert!(cache.converging());
+        assert_eq!(shown(&a), (2.0, Lit::Partial(2)));
+        assert_eq!(shown(&a), (3.0, Lit::Converged));
+        assert!(!cache.converging());
+        assert_eq!(shown(&a), (3.0, Lit::Kept));
+        // Another sun starts from the converged lighting (3); moved again mid-relight, the
+        // pending relight is dropped and the new one starts from that same lighting.
+        assert_eq!(shown(&b), (4.0, Lit::Partial(1)));
+        let c = frame_of(32.0);
+        assert_eq!(shown(&c), (4.0, Lit::Partial(1)));
+        assert_eq!(shown(&c), (5.0, Lit::Partial(2)));
+        // A failed step drops the relight: the next frame starts anew.
+        let failed = cache.get_or_step(
+            &c,
+            &1u32,
+            |_: Option<&f64>| Ok::<(f64, usize), ()>((0.0, 0)),
+            |_: &mut (f64, usize)| Err::<Stepped<f64>, ()>(()),
+        );
+        assert!(failed.is_err() && !cache.converging());
+        assert_eq!(shown(&c), (4.0, Lit::Partial(1)));
     }
 }

@@ -166,6 +166,8 @@ struct App {
     on_screen: Option<OnScreen>,
     render_error: Option<String>,
     frame_times: Vec<(f64, f64)>,
+    /// How many of them were drawn from a relight that had not converged.
+    converging_frames: usize,
     adapter: String,
     /// What `--model auto` chose and why.
     chosen: Option<String>,
@@ -251,6 +253,7 @@ impl App {
             on_screen: None,
             render_error: None,
             frame_times: Vec::new(),
+            converging_frames: 0,
             adapter: options.adapter,
             chosen: options.chosen,
             image_rect: egui::Rect::NOTHING,
@@ -309,6 +312,12 @@ impl App {
                     self.render_error = None;
                     let frame = rendered.seconds("frame").unwrap_or(shown.seconds);
                     self.frame_times.push((frame, shown.seconds));
+                    // A relight in steps that has not converged: the next frame of this view
+                    // takes it further (and a screenshot waits for the converged one).
+                    if rendered.is_converging() {
+                        self.dirty = true;
+                        self.converging_frames += 1;
+                    }
                     self.show(ctx, rendered, request, shown.seconds);
                 }
             }
@@ -541,6 +550,7 @@ impl App {
             self.trace(spp);
         }
         self.frame_times.clear();
+        self.converging_frames = 0;
         self.dirty = true;
     }
 
@@ -610,6 +620,7 @@ impl App {
             "exposure": s.exposure,
             "display": format!("{:?}", self.display).to_lowercase(),
             "frames": n,
+            "converging_frames": self.converging_frames,
             "frame_seconds": self.frame_times.iter().map(|t| t.0).collect::<Vec<_>>(),
             "frame_seconds_mean": mean(|t| t.0),
             "wall_seconds_mean": mean(|t| t.1),

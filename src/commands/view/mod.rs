@@ -91,9 +91,30 @@ pub struct ViewArgs {
     /// (the field's size parameter, re-baked before the step's frame).
     #[arg(long, value_name = "TOML")]
     script: Option<PathBuf>,
+    /// Milliseconds of per-sun lighting work a frame may do, (0, 60000]: after a sun change
+    /// `coupled` lights in steps (the first frame runs those to a whole lighting: the beam,
+    /// the skylight, the diffusion; each later frame its transport's next source iterations),
+    /// each frame drawn from the lighting as it stands until it converges. A step is not
+    /// split, so a frame runs at least one (docs/viewer.md). `max` lights a sun whole.
+    #[arg(long, value_name = "MS", default_value_t = 30.0)]
+    step_budget_ms: f64,
     /// No progress output on stderr.
     #[arg(long)]
     quiet: bool,
+}
+
+/// The longest `--step-budget-ms` taken (a minute of lighting work a frame).
+const MAX_STEP_BUDGET_MS: f64 = 60_000.0;
+
+/// `--step-budget-ms` as a duration, or why it is refused.
+fn step_budget(ms: f64) -> Result<std::time::Duration> {
+    if !(ms > 0.0 && ms <= MAX_STEP_BUDGET_MS) {
+        bail!(
+            "--step-budget-ms {ms} is outside (0, {MAX_STEP_BUDGET_MS}] (milliseconds of \
+             per-sun lighting work a frame may do)"
+        );
+    }
+    Ok(std::time::Duration::from_secs_f64(ms / 1000.0))
 }
 
 /// Runs `photometeor view`: everything is checked and baked before the window opens.
@@ -106,6 +127,7 @@ pub fn run(a: ViewArgs) -> Result<()> {
     {
         bail!("--exposure {e} must be finite and > 0");
     }
+    let budget = step_budget(a.step_budget_ms)?;
     let steps = match &a.script {
         Some(path) => script::read(path)?,
         None => Vec::new(),
@@ -162,7 +184,7 @@ pub fn run(a: ViewArgs) -> Result<()> {
         None => None,
     };
     let adapter = gpu.describe();
-    let worker = worker::Worker::start(gpu, p.scene.clone(), p.tables)?;
+    let worker = worker::Worker::start(gpu, p.scene.clone(), p.tables, budget)?;
     let options = app::Options {
         scene_path: a.scene.clone(),
         first_model: p.model,

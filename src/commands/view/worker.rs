@@ -71,9 +71,15 @@ pub struct Worker {
 }
 
 impl Worker {
-    /// Starts the thread with `gpu`, `scene` and its `tables`; fails (before any window opens)
-    /// when the scene's grid cannot be built.
-    pub fn start(gpu: Gpu, scene: RenderScene, tables: Tables) -> Result<Self> {
+    /// Starts the thread with `gpu`, `scene` and its `tables`, a relight going in steps of
+    /// about `budget` a frame; fails (before any window opens) when the scene's grid cannot be
+    /// built.
+    pub fn start(
+        gpu: Gpu,
+        scene: RenderScene,
+        tables: Tables,
+        budget: std::time::Duration,
+    ) -> Result<Self> {
         let base = scene.frame(&tables).context("building the density grid")?;
         let (to, inbox) = channel();
         let (outbox, from) = channel();
@@ -86,7 +92,8 @@ impl Worker {
             base: Ok(base),
             scaled: None,
             prepared: HashMap::new(),
-            lighting: LightingCache::new(),
+            lighting: LightingCache::stepped(budget),
+            budget,
             truths: Vec::new(),
         };
         let thread = std::thread::Builder::new()
@@ -327,6 +334,8 @@ struct State {
     prepared: HashMap<&'static str, Prepared>,
     /// max's and coupled's per-sun lighting, kept while only the camera moves.
     lighting: LightingCache,
+    /// Its step budget.
+    budget: std::time::Duration,
     /// The truth threads started, joined before the render thread ends.
     truths: Vec<JoinHandle<()>>,
 }
@@ -337,7 +346,7 @@ impl State {
             self.tables = tables;
             self.prepared.clear();
             // The lighting was computed from the old tables.
-            self.lighting = LightingCache::new();
+            self.lighting = LightingCache::stepped(self.budget);
         }
         self.base = scene
             .frame(&self.tables)

@@ -22,6 +22,7 @@ use crate::lighting::lattice::{MIN_DIFFUSION_VOXEL_DEPTH, Voxels, voxel_size, vo
 use crate::lighting::sky::{Sky, sky_light, sky_sweeps};
 use crate::lighting::sun::{ShadowMap, reduced_sun, transmittance_to_sun};
 use crate::lighting::{OnGpu, Place, run, transport};
+use crate::relight::Stepped;
 use crate::shading::check_fields;
 use crate::{checks::FrameError, frame::Frame, volume::DensityGrid, volume::MAX_FIELDS};
 
@@ -498,11 +499,38 @@ impl Relight {
     }
 
     /// The converged lighting; `None` before it is done.
-    pub fn finish(self) -> Option<Lighting> {
-        match self.stage {
+    pub fn finish(mut self) -> Option<Lighting> {
+        self.take()
+    }
+
+    /// The converged lighting, taken out (the relight is spent); `None` before it is done.
+    fn take(&mut self) -> Option<Lighting> {
+        match std::mem::replace(&mut self.stage, Stage::Failed) {
             Stage::Done(lighting) => Some(*lighting),
-            _ => None,
+            other => {
+                self.stage = other;
+                None
+            }
         }
+    }
+
+    /// One frame's steps ([`crate::relight`]): [`Relight::advance`] for `budget`, then on
+    /// until the lighting is whole (a new sun's first frame); the converged lighting, or the
+    /// lighting as it stands and the steps taken.
+    pub fn step_for(
+        &mut self,
+        tables: &Tables,
+        (on, progress): (Option<OnGpu>, &dyn crate::model::Progress),
+        budget: std::time::Duration,
+    ) -> Result<Stepped<Lighting>, FrameError> {
+        let mut done = self.advance(tables, (on, progress), Some(budget))?;
+        while !done && !matches!(self.stage, Stage::Transporting(_)) {
+            done = self.advance(tables, (on, progress), Some(std::time::Duration::ZERO))?;
+        }
+        Ok(match self.take() {
+            Some(lighting) => Stepped::Done(lighting),
+            None => Stepped::Partial(self.current().expect("whole"), self.steps),
+        })
     }
 
     /// Step 1: the beam's medium from the fields' peaks, the beam, and the skylight.

@@ -117,6 +117,7 @@ use crate::gpu::RenderError;
 use crate::lighting::Place;
 use crate::lighting::transport;
 use crate::model::{Device, Job, Model, Need, Pass, RenderResult, Rendered, image_need};
+use crate::relight::Lit;
 
 /// `--model coupled`.
 pub struct Coupled;
@@ -566,11 +567,30 @@ impl Model for Coupled {
             _ => None,
         };
         // A new sun on the same grid starts the transport from the last sun's moments.
-        let (lighting, reused) = crate::relight::lit(job.lighting, job.frame, s, |previous| {
-            // (A periodic grid's passes stay on the CPU: light_from drops `on` for it.)
-            let on = s.per_sun.on_gpu(gpu).then(|| renderer.per_sun(gpu));
-            light::light_from(job.tables, job.frame, s, job.progress, (on, previous))
-        })?;
+        // (A periodic grid's passes stay on the CPU: the relight drops `on` for it.)
+        let on = || s.per_sun.on_gpu(gpu).then(|| renderer.per_sun(gpu));
+        let (lighting, lit) = match job.lighting {
+            // A viewer's cache with a step budget: this frame's steps of the relight.
+            Some(cache) if cache.step_budget().is_some() => {
+                let budget = cache.step_budget().expect("matched");
+                cache.get_or_step(
+                    job.frame,
+                    s,
+                    |previous| light::Relight::new(job.tables, job.frame, s, previous),
+                    |relight: &mut light::Relight| {
+                        relight.step_for(job.tables, (on(), job.progress), budget)
+                    },
+                )?
+            }
+            cache => {
+                let (lighting, reused) = crate::relight::lit(cache, job.frame, s, |previous| {
+                    light::light_from(job.tables, job.frame, s, job.progress, (on(), previous))
+                })?;
+                let lit = if reused { Lit::Kept } else { Lit::Converged };
+                (lighting, lit)
+            }
+        };
+        let reused = lit == Lit::Kept;
         let (image, gather, on) = if let Some(why) = on_cpu {
             let start = Instant::now();
             let image = gather::gather(job.tables, job.frame, s, &lighting)?;
@@ -590,6 +610,9 @@ impl Model for Coupled {
         let mut out = rendered(image, &report, gather, &on, (job.frame, s));
         if reused {
             out.reused_lighting();
+        }
+        if let Lit::Partial(steps) = lit {
+            out.converging(steps);
         }
         Ok(out)
     }
