@@ -109,7 +109,9 @@ def table(data):
         md.append(f"| {r['case']} | " + " | ".join(
             f"{r[p]['bias']:+.1%} / {r[p]['debiased_rms']:.1%} / {r[p]['seconds']:.1f}"
             for p in PRESETS) + " |")
-    return "\n".join(md).replace("%", " %").replace("  %", " %") + "\n"
+    # Percentages spaced as the docs write them, and a minus sign for a negative bias.
+    text = "\n".join(md).replace("%", " %").replace("  %", " %")
+    return text.replace("| -", "| −").replace("/ -", "/ −") + "\n"
 
 
 def main():
