@@ -39,9 +39,10 @@ if [ -z "${BIN:-}" ]; then
 fi
 
 if [ "${QUICK:-0}" = 1 ]; then
-    SIZE=64 SIZES=32,64 SLICES=32,64 GRIDS=32,64 REPEAT=1 SPP=4
+    SIZE=64 SIZES=32,64 SLICES=32,64 GRIDS=32,64 REPEAT=1 SPP=4 HD=96x54 RELIGHT_SIZE=16
 else
-    SIZE=512 SIZES=256,512,1024 SLICES=64,128,256,512 GRIDS=64,128 REPEAT=2 SPP=16
+    SIZE=512 SIZES=256,512,1024 SLICES=64,128,256,512 GRIDS=64,128 REPEAT=2 SPP=16 HD=1920x1080
+    RELIGHT_SIZE=64
 fi
 
 {
@@ -78,6 +79,18 @@ REPEAT=1 TAG=lighting bench data/scenes/dense_cumulus.toml max,coupled --sizes "
 # the lighting's buffers kept on the GPU), `camera_move_s` in the JSON.
 REPEAT=1 TAG=transport bench data/scenes/dense_cumulus.toml riley,coupled --grids "$GRIDS" \
     --camera-moves
+# The camera move at 1920 × 1080 (a game's frame) beside riley's frame of the same size.
+REPEAT=1 TAG=1080p bench data/scenes/dense_cumulus.toml riley,coupled --sizes "$HD" \
+    --camera-moves
+# coupled's relight in steps after sun moves of 1°, 5° and 30°, cold and warm, at each preset
+# but reference (each step's time; the per-sun passes where `auto` puts them, on a real GPU the
+# GPU; the gathers that measure each step on the CPU, at a small size).
+for preset in realtime balanced; do
+    echo "== dense_cumulus: relight in steps, $preset" >&2
+    "$BIN" bench relight data/scenes/dense_cumulus.toml --size "$RELIGHT_SIZE" \
+        --moves 1,5,30 --gpu --set "preset=$preset" --json \
+        > "$OUT/dense_cumulus-relight-$preset.json"
+done
 # The same with coupled's per-sun passes on this machine's CPU, for the ratio.
 REPEAT=1 TAG=transport-cpu bench data/scenes/dense_cumulus.toml riley,coupled --grids "$GRIDS" \
     --set 'per_sun="cpu"'

@@ -37,6 +37,9 @@ enum BenchWhat {
     /// Frame time of `photometeor render` on the GPU adapter (and of the CPU reference), at
     /// one base setting and varying slices and resolution one at a time; table upload time.
     Render(super::bench_render::RenderBench),
+    /// coupled's relight in steps after sun moves, cold and warm: each step's time and the
+    /// error of its image against the converged one (and against given truths).
+    Relight(super::bench_relight::RelightBench),
 }
 
 #[derive(Debug, Args)]
@@ -111,6 +114,7 @@ pub fn run(args: BenchArgs) -> Result<()> {
         BenchWhat::Bake(b) => return bench_bake(b),
         BenchWhat::Crystal(c) => return bench_crystal(c),
         BenchWhat::Render(r) => return super::bench_render::run(r),
+        BenchWhat::Relight(r) => return super::bench_relight::run(r),
     };
     let threads = b.threads.unwrap_or_else(rayon::current_num_threads);
     let pool = rayon::ThreadPoolBuilder::new()

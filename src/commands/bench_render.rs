@@ -35,9 +35,10 @@ pub struct RenderBench {
     /// Base slice count of the models that slice (default: each model's setting in the scene).
     #[arg(long)]
     slices: Option<usize>,
-    /// Image sizes (width = height) to time at the base setting, comma-separated.
-    #[arg(long, value_delimiter = ',')]
-    sizes: Vec<usize>,
+    /// Image sizes to time at the base setting, comma-separated: N (N × N pixels) or WxH
+    /// (e.g. 1920x1080), each side 1–8192.
+    #[arg(long, value_delimiter = ',', value_parser = parse_size)]
+    sizes: Vec<(usize, usize)>,
     /// Slice counts to time at the base setting (models that slice), comma-separated.
     #[arg(long, value_delimiter = ',')]
     slice_counts: Vec<usize>,
@@ -67,10 +68,26 @@ pub struct RenderBench {
     json: bool,
 }
 
+/// `--sizes`' N or WxH as (width, height), each side 1–8192.
+fn parse_size(text: &str) -> Result<(usize, usize), String> {
+    let side = |t: &str| {
+        t.trim()
+            .parse::<usize>()
+            .ok()
+            .filter(|n| (1..=8192).contains(n))
+            .ok_or_else(|| format!("{text:?}: expected N or WxH, each side 1–8192 pixels"))
+    };
+    match text.split_once(['x', 'X']) {
+        Some((w, h)) => Ok((side(w)?, side(h)?)),
+        None => side(text).map(|n| (n, n)),
+    }
+}
+
 /// One setting to time: image size, slices (for the models that slice) and grid resolution.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 struct Setting {
-    size: usize,
+    /// Width and height (pixels).
+    size: (usize, usize),
     slices: Option<usize>,
     grid: Option<usize>,
 }
@@ -78,7 +95,7 @@ struct Setting {
 /// The settings in order: the base, then slices, sizes and grids varied one at a time.
 fn settings(b: &RenderBench) -> Vec<Setting> {
     let base = Setting {
-        size: b.size,
+        size: (b.size, b.size),
         slices: b.slices,
         grid: None,
     };
@@ -87,7 +104,7 @@ fn settings(b: &RenderBench) -> Vec<Setting> {
         slices: Some(s),
         ..base
     }));
-    out.extend(b.sizes.iter().map(|&n| Setting { size: n, ..base }));
+    out.extend(b.sizes.iter().map(|&size| Setting { size, ..base }));
     out.extend(b.grids.iter().map(|&g| Setting {
         grid: Some(g),
         ..base
@@ -149,7 +166,7 @@ fn row(
 ) -> serde_json::Value {
     json!({
         "model": m.name(),
-        "width": setting.size, "height": setting.size,
+        "width": setting.size.0, "height": setting.size.1,
         "slices": m.to_table().get("slices").and_then(|v| v.as_integer()),
         "grid": dims,
         "device": device,
@@ -206,8 +223,7 @@ pub fn run(b: RenderBench) -> Result<()> {
         let mut scene = p.scene.clone();
         scene.grid_resolution = setting.grid.unwrap_or(scene.grid_resolution);
         let mut frame = scene.frame(&p.tables)?;
-        frame.width = setting.size;
-        frame.height = setting.size;
+        (frame.width, frame.height) = setting.size;
         let job = Job {
             tables: &p.tables,
             frame: &frame,
@@ -349,9 +365,9 @@ fn print_table(report: &serde_json::Value) {
             None => cpu,
         };
         println!(
-            "{:>9} {:>5}² grid {}{slices}: {:.1} ms (× base {:.2}) [{}]{}{cpu}",
+            "{:>9} {:>9} grid {}{slices}: {:.1} ms (× base {:.2}) [{}]{}{cpu}",
             r["model"].as_str().unwrap_or("?"),
-            r["width"],
+            format!("{}×{}", r["width"], r["height"]),
             r["grid"],
             r["cost_s"].as_f64().unwrap_or(f64::NAN) * 1e3,
             r["cost_over_base"].as_f64().unwrap_or(f64::NAN),

@@ -2,6 +2,7 @@
 
 pub mod bake;
 pub mod bench;
+pub mod bench_relight;
 pub mod bench_render;
 pub mod compare;
 pub mod compare_render;
