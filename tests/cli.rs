@@ -160,6 +160,26 @@ fn bad_input_exits_nonzero_with_one_line_naming_value_and_range() {
             ],
             vec!["1500", "[200, 1100]"],
         ),
+        (
+            vec!["bench", "relight", "--moves", "1,0"],
+            vec!["--moves 0", "(0, 180]"],
+        ),
+        (
+            vec!["bench", "relight", "--moves=-5"],
+            vec!["--moves -5", "(0, 180]"],
+        ),
+        (
+            vec!["bench", "relight", "--size", "0"],
+            vec!["--size 0", "1–4096"],
+        ),
+        (
+            vec!["bench", "relight", "--moves", "1,5", "--truths", "a.exr"],
+            vec!["1 frames for 2 --moves"],
+        ),
+        (
+            vec!["bench", "render", "--sizes", "1920x0"],
+            vec!["1920x0", "1–8192"],
+        ),
     ] {
         let out = photometeor(&args, None);
         assert!(!out.status.success(), "{args:?} should fail");

@@ -37,8 +37,8 @@ pub struct RenderBench {
     slices: Option<usize>,
     /// Image sizes to time at the base setting, comma-separated: N (N × N pixels) or WxH
     /// (e.g. 1920x1080), each side 1–8192.
-    #[arg(long, value_delimiter = ',', value_parser = parse_size)]
-    sizes: Vec<(usize, usize)>,
+    #[arg(long, value_delimiter = ',')]
+    sizes: Vec<String>,
     /// Slice counts to time at the base setting (models that slice), comma-separated.
     #[arg(long, value_delimiter = ',')]
     slice_counts: Vec<usize>,
@@ -92,8 +92,9 @@ struct Setting {
     grid: Option<usize>,
 }
 
-/// The settings in order: the base, then slices, sizes and grids varied one at a time.
-fn settings(b: &RenderBench) -> Vec<Setting> {
+/// The settings in order: the base, then slices, sizes and grids varied one at a time; or why
+/// a size is refused.
+fn settings(b: &RenderBench) -> Result<Vec<Setting>> {
     let base = Setting {
         size: (b.size, b.size),
         slices: b.slices,
@@ -104,14 +105,17 @@ fn settings(b: &RenderBench) -> Vec<Setting> {
         slices: Some(s),
         ..base
     }));
-    out.extend(b.sizes.iter().map(|&size| Setting { size, ..base }));
+    for text in &b.sizes {
+        let size = parse_size(text).map_err(|e| anyhow::anyhow!("--sizes {e}"))?;
+        out.push(Setting { size, ..base });
+    }
     out.extend(b.grids.iter().map(|&g| Setting {
         grid: Some(g),
         ..base
     }));
     let mut seen = std::collections::HashSet::new();
     out.retain(|s| seen.insert(*s));
-    out
+    Ok(out)
 }
 
 /// Model `name`'s settings for `setting`: the scene's, the `--set` keys it has, `spp`, slices.
@@ -185,6 +189,8 @@ pub fn run(b: RenderBench) -> Result<()> {
             bail!("--model {m:?} is not one of {}", MODEL_NAMES.join(", "));
         }
     }
+    // The sizes are checked before anything is baked.
+    let all = settings(&b)?;
     let p = prepare(
         &b.model[0],
         &[],
@@ -196,7 +202,6 @@ pub fn run(b: RenderBench) -> Result<()> {
         None,
         |_| {},
     )?;
-    let all = settings(&b);
     let models: Vec<ModelSettings> = b
         .model
         .iter()

@@ -1202,8 +1202,9 @@ fn a_warm_start_from_the_last_sun_converges_to_the_cold_start() {
 }
 
 /// A relight in steps (`Relight::advance` with a budget of zero: one step a call, what a viewer
-/// does between frames) reaches the lighting one call reaches, bit for bit, on the CPU and on
-/// the GPU (whose passes a call prepares anew); from its second step on, each step's lighting
+/// does between frames) reaches the lighting one call reaches, on the CPU and on the GPU (whose
+/// passes a call prepares anew), to rounding (the solvers' parallel sums: 3.6·10⁻¹⁵ measured
+/// with the other tests running beside it, 0 alone); from its second step on, each step's lighting
 /// is a whole one that the gather draws, and its mean radiance moves towards the converged
 /// one's (soft ball at τ 8, 16³ voxels, at a tolerance of 10⁻⁴).
 #[test]
@@ -1259,13 +1260,35 @@ fn k_amortized_steps_equal_one_full_relight() {
         );
         assert_eq!(steps, 2 + iterations);
         assert_eq!(stepped.report.transport_iterations, iterations);
-        assert_eq!(
-            (&stepped.buffer, &stepped.i0, &stepped.p1),
-            (&full.buffer, &full.i0, &full.p1)
+        // The same arithmetic; only the solvers' parallel sums may associate differently from
+        // one run to the next (rayon splits them as threads steal work).
+        let worst = [
+            largest_difference(&stepped.buffer, &full.buffer),
+            largest_difference(&stepped.i0, &full.i0),
+            largest_difference(&stepped.p1, &full.p1),
+            largest_difference(&stepped.sh, &full.sh),
+        ];
+        let shown: Vec<String> = worst.iter().map(|w| format!("{w:.1e}")).collect();
+        eprintln!(
+            "stepped against one call, largest difference of the buffer, I_0, I_1 and the \
+             moments: {}",
+            shown.join(", ")
         );
-        assert!(stepped.sh == full.sh, "the moments differ");
+        assert!(worst.iter().all(|w| *w <= 1e-12), "{worst:?}");
         assert!(errors.last().unwrap() < &errors[0], "{errors:?}");
     }
+}
+
+/// The largest difference of `a`'s and `b`'s values, relative to `b`'s largest magnitude.
+fn largest_difference<const N: usize>(a: &[[f64; N]], b: &[[f64; N]]) -> f64 {
+    assert_eq!(a.len(), b.len());
+    let scale = b.iter().flatten().fold(0.0f64, |m, v| m.max(v.abs()));
+    let d = a
+        .iter()
+        .flatten()
+        .zip(b.iter().flatten())
+        .fold(0.0f64, |m, (x, y)| m.max((x - y).abs()));
+    d / scale.max(f64::MIN_POSITIVE)
 }
 
 /// The rms difference of `a`'s and `b`'s mean radiance φ_00 over the grid and channels,

@@ -329,8 +329,9 @@ type Diffused = (Vec<[f64; 3]>, Vec<[f64; 9]>);
 /// 3. each of the transport's source iterations (step 3b), one a step.
 ///
 /// From the end of step 2 on, [`Relight::current`] is a whole lighting (the diffusion's with
-/// the transport's start, then each iteration's moments). The steps reach the same lighting,
-/// bit for bit, however the calls divide them. The GPU's passes (where `on` lets them run) are
+/// the transport's start, then each iteration's moments). The steps do the same arithmetic
+/// however the calls divide them (the same lighting but for the solvers' parallel sums, which
+/// may associate differently from run to run). The GPU's passes (where `on` lets them run) are
 /// prepared once per call of [`Relight::advance`]: a call that runs many iterations uploads
 /// the acceleration's operators and the sweeps' medium once, a call per iteration each time.
 pub struct Relight {
