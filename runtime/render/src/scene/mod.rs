@@ -28,8 +28,10 @@
 //! per_sun = "auto"          # the per-sun passes of a GPU render: "auto", "gpu" or "cpu"
 //!
 //! [render.coupled]
+//! preset = "balanced"       # "realtime", "balanced" or "reference": the values of the next
+//!                           # four keys and diffusion_tolerance (a key given here wins)
 //! diffuse = "transport"     # discrete-ordinates transport, or "diffusion" (the P1 solve alone)
-//! directions = 96           # the transport's directions, [16, 1024]
+//! directions = 96           # the transport's directions, [16, 1024] (balanced's)
 //! transport_tolerance = 0.01       # a round's relative change that ends it, [1e-6, 0.5]
 //! max_transport_iterations = 40    # source iterations, [1, 1000]
 //! transport_coarsening = 0  # grid voxels per transport voxel: 1, 2, 4; 0 automatic
