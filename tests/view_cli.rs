@@ -70,6 +70,18 @@ fn skipped_without_adapter(out: &Output) -> bool {
     false
 }
 
+/// `view ARGS` under Xvfb in `cwd`, run to its end and asserted to succeed; `None` where it was
+/// skipped (no Xvfb, or no adapter where none is required).
+fn run_view(args: &[&str], cwd: &Path) -> Option<()> {
+    let out = view_command(args, cwd)?.output().unwrap();
+    if skipped_without_adapter(&out) {
+        return None;
+    }
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "view failed:\n{stderr}");
+    Some(())
+}
+
 /// Waits for `view`'s first shot (`shot` written), for at most 300 s; `false` where it ended
 /// skipped for want of an adapter, a panic where it ended otherwise.
 fn first_shot(child: &mut std::process::Child, shot: &Path) -> bool {
@@ -186,15 +198,9 @@ fn a_scripted_session_moves_the_sun_switches_the_model_orbits_and_its_still_view
     args.extend(size);
     args.extend(tables);
     args.extend(["--script", "script.toml", "--screenshot", "end.png"]);
-    let Some(mut view) = view_command(&args, &cwd) else {
-        return;
-    };
-    let out = view.output().unwrap();
-    if skipped_without_adapter(&out) {
+    if run_view(&args, &cwd).is_none() {
         return;
     }
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(out.status.success(), "view failed:\n{stderr}");
 
     // Every screenshot shows an image, not a flat colour.
     let shots = ["still", "truth", "sun", "model", "orbit", "size", "end"];
@@ -509,15 +515,9 @@ fn coupled_relights_a_moved_sun_in_steps_and_converges_to_renders_frame() {
     args.extend(common);
     args.extend(["--step-budget-ms", "1", "--script", "script.toml"]);
     args.extend(["--screenshot", "end.png"]);
-    let Some(mut view) = view_command(&args, &cwd) else {
-        return;
-    };
-    let out = view.output().unwrap();
-    if skipped_without_adapter(&out) {
+    if run_view(&args, &cwd).is_none() {
         return;
     }
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(out.status.success(), "view failed:\n{stderr}");
     let json = |name: &str| -> serde_json::Value {
         serde_json::from_str(&std::fs::read_to_string(cwd.join(name)).unwrap()).unwrap()
     };

@@ -62,6 +62,30 @@ struct Entry {
     lighting: Arc<dyn Any + Send + Sync>,
 }
 
+/// Whether `stored` (a model's settings, boxed) is `settings` (their type tells the models
+/// apart).
+fn same_settings<S: PartialEq + 'static>(stored: &(dyn Any + Send + Sync), settings: &S) -> bool {
+    stored.downcast_ref::<S>() == Some(settings)
+}
+
+impl Entry {
+    /// Its lighting, where it lit `frame` alike with `settings`.
+    fn kept<S: PartialEq + 'static, L: Send + Sync + 'static>(
+        &self,
+        frame: &Frame,
+        settings: &S,
+    ) -> Option<Arc<L>> {
+        let alike = same_settings(&*self.settings, settings) && same_lighting(&self.frame, frame);
+        alike.then(|| self.lighting.clone().downcast::<L>().ok())?
+    }
+
+    /// Whether its lighting is a start for `frame`'s with `settings`: the same settings on the
+    /// same grid (another sun, sky or ground).
+    fn starts<S: PartialEq + 'static>(&self, frame: &Frame, settings: &S) -> bool {
+        same_settings(&*self.settings, settings) && self.frame.grid == frame.grid
+    }
+}
+
 /// Whether `a` and `b` light the grid alike: everything but the camera and the image size.
 fn same_lighting(a: &Frame, b: &Frame) -> bool {
     a.sun == b.sun
@@ -117,24 +141,21 @@ impl LightingCache {
         R: Send + 'static,
     {
         let mut last = self.last.lock().expect("not poisoned");
-        let same_settings = |s: &(dyn Any + Send + Sync)| s.downcast_ref::<S>() == Some(settings);
-        if let Some(e) = last.as_ref()
-            && same_settings(&*e.settings)
-            && same_lighting(&e.frame, frame)
-            && let Ok(lighting) = e.lighting.clone().downcast::<L>()
-        {
+        if let Some(lighting) = last.as_ref().and_then(|e| e.kept(frame, settings)) {
             return Ok((lighting, Lit::Kept));
         }
         let mut pending = self.pending.lock().expect("not poisoned");
         let ours = pending.as_ref().is_some_and(|p| {
-            same_settings(&*p.settings) && same_lighting(&p.frame, frame) && p.relight.is::<R>()
+            same_settings(&*p.settings, settings)
+                && same_lighting(&p.frame, frame)
+                && p.relight.is::<R>()
         });
         if !ours {
             // Another sun (or settings): the relight under way is dropped for a new one.
             *pending = None;
             let previous = last
                 .as_ref()
-                .filter(|e| same_settings(&*e.settings) && e.frame.grid == frame.grid)
+                .filter(|e| e.starts(frame, settings))
                 .and_then(|e| e.lighting.clone().downcast::<L>().ok());
             *pending = Some(Pending {
                 frame: frame.clone(),
@@ -182,17 +203,12 @@ impl LightingCache {
         L: Send + Sync + 'static,
     {
         let mut last = self.last.lock().expect("not poisoned");
-        let same_settings = |e: &Entry| e.settings.downcast_ref::<S>() == Some(settings);
-        if let Some(e) = last.as_ref()
-            && same_settings(e)
-            && same_lighting(&e.frame, frame)
-            && let Ok(lighting) = e.lighting.clone().downcast::<L>()
-        {
+        if let Some(lighting) = last.as_ref().and_then(|e| e.kept(frame, settings)) {
             return Ok((lighting, true));
         }
         let previous = last
             .take()
-            .filter(|e| same_settings(e) && e.frame.grid == frame.grid)
+            .filter(|e| e.starts(frame, settings))
             .and_then(|e| e.lighting.downcast::<L>().ok());
         let lighting = Arc::new(light(previous.as_deref())?);
         drop(previous);

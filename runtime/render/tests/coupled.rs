@@ -1172,15 +1172,7 @@ fn a_warm_start_from_the_last_sun_converges_to_the_cold_start() {
                 light::light_from(&tables, &frame, &settings, &(), (None, Some(&last))).unwrap();
             assert!(warm.report.transport_warm && !cold.report.transport_warm);
             // The mean radiance's moment φ_00 per channel, rms over the grid.
-            let (mut d, mut t) = (0.0, 0.0);
-            for (a, b) in warm.sh.iter().zip(&cold.sh) {
-                for c in 0..3 {
-                    let o = c * render::lighting::transport::HARMONICS;
-                    d += (a[o] - b[o]).powi(2);
-                    t += b[o] * b[o];
-                }
-            }
-            let difference = (d / t).sqrt();
+            let difference = mean_radiance_error(&warm, &cold);
             eprintln!(
                 "tolerance {:.0e}, sun moved {moved}°: iterations cold {}, warm {}; warm − \
                  cold {difference:.1e} (rms, relative)",
@@ -1282,12 +1274,7 @@ fn k_amortized_steps_equal_one_full_relight() {
 /// The largest difference of `a`'s and `b`'s values, relative to `b`'s largest magnitude.
 fn largest_difference<const N: usize>(a: &[[f64; N]], b: &[[f64; N]]) -> f64 {
     assert_eq!(a.len(), b.len());
-    let scale = b.iter().flatten().fold(0.0f64, |m, v| m.max(v.abs()));
-    let d = a
-        .iter()
-        .flatten()
-        .zip(b.iter().flatten())
-        .fold(0.0f64, |m, (x, y)| m.max((x - y).abs()));
+    let (d, scale) = render::lighting::lattice::largest_difference(a, b);
     d / scale.max(f64::MIN_POSITIVE)
 }
 

@@ -19,7 +19,7 @@ use super::{Diffuse, Settings, Source, Split};
 use crate::lighting::beam::{BeamMedium, BeamState, Depth, PeakFrom, beam_sweep};
 use crate::lighting::diffusion::{self, Problem};
 use crate::lighting::lattice::{MIN_DIFFUSION_VOXEL_DEPTH, Voxels, voxel_size, voxels};
-use crate::lighting::sky::{Sky, sky_light, sky_sweeps};
+use crate::lighting::sky::{self, Sky, sky_light};
 use crate::lighting::sun::{ShadowMap, reduced_sun, transmittance_to_sun};
 use crate::lighting::{OnGpu, Place, run, transport};
 use crate::relight::Stepped;
@@ -567,13 +567,7 @@ impl Relight {
         let lit = sky_light(frame, |g| {
             transmittance_to_sun(&fields, grid, g, sun_dir, scaled)
         });
-        let (sky, sky_on) = run(
-            on,
-            settings.per_sun,
-            "the skylight",
-            |on| Ok(on.sky().sweep(on.gpu, grid, &v.ext, &lit)?),
-            || Ok(sky_sweeps(grid, &v.ext, &lit)),
-        )?;
+        let (sky, sky_on) = sky::sweep_on((on, settings.per_sun), grid, &v.ext, &lit)?;
         self.report.sky_on = sky_on;
         self.report.buffer_s = start.elapsed().as_secs_f64();
         let h = voxel_size(grid);

@@ -75,13 +75,20 @@ impl Passes {
 /// Whether a repeating sweep's last layer has settled: its states `new` after a pass against
 /// `old` before it ([`WRAP_TOLERANCE`]).
 pub(crate) fn settled<const N: usize>(old: &[[f64; N]], new: &[[f64; N]]) -> bool {
-    let scale = new.iter().flatten().fold(0.0f64, |m, v| m.max(v.abs()));
-    let change = old
+    let (change, scale) = largest_difference(old, new);
+    change <= WRAP_TOLERANCE * scale
+}
+
+/// The largest |a − b| over the values of `a` and `b`, and the largest |b|: the scale to judge
+/// that difference by.
+pub fn largest_difference<const N: usize>(a: &[[f64; N]], b: &[[f64; N]]) -> (f64, f64) {
+    let scale = b.iter().flatten().fold(0.0f64, |m, v| m.max(v.abs()));
+    let difference = a
         .iter()
         .flatten()
-        .zip(new.iter().flatten())
-        .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
-    change <= WRAP_TOLERANCE * scale
+        .zip(b.iter().flatten())
+        .fold(0.0f64, |m, (x, y)| m.max((x - y).abs()));
+    (difference, scale)
 }
 
 /// Per-voxel optics of the grid, per channel.

@@ -114,6 +114,23 @@ pub(crate) struct SkyWay {
     pub(crate) shift: (f64, f64),
 }
 
+/// [`sky_sweeps`] where `place` and `on` put it ([`super::run`]: on the GPU, [`super::sky_gpu`],
+/// or the CPU); the skylight and where it ran.
+pub(crate) fn sweep_on(
+    (on, place): (Option<super::OnGpu>, super::Place),
+    grid: &DensityGrid,
+    ext: &[[f64; 3]],
+    lit: &[(DVec3, [f64; 3])],
+) -> Result<(Sky, String), crate::checks::FrameError> {
+    super::run(
+        on,
+        place,
+        "the skylight",
+        |on| Ok(on.sky().sweep(on.gpu, grid, ext, lit)?),
+        || Ok(sky_sweeps(grid, ext, lit)),
+    )
+}
+
 /// The sweep orders of `lit` ([`sky_sweeps`]): per order its axis a (along which the
 /// directions travel most, as [`sweep`] chooses it; the layers' axes are (a + 1) % 3 and
 /// (a + 2) % 3), whether they travel towards +a, and its directions.

@@ -861,12 +861,7 @@ mod tests {
         let dirs = crate::lighting::lattice::fibonacci_directions(40);
         let want = round_by_direction(&grid, &medium, &m, &dirs);
         let got = sweep_round(&grid, &medium, &m, &groups(&grid, &dirs), 4.0 * PI / 40.0);
-        let scale = want.iter().flatten().fold(0.0f64, |a, v| a.max(v.abs()));
-        let worst = want
-            .iter()
-            .flatten()
-            .zip(got.iter().flatten())
-            .fold(0.0f64, |a, (w, g)| a.max((w - g).abs()));
+        let (worst, scale) = crate::lighting::lattice::largest_difference(&got, &want);
         assert!(scale > 1.0, "the round carries light: {scale}");
         assert!(
             worst < 1e-12 * scale,

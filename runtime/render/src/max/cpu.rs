@@ -16,7 +16,7 @@ use crate::lighting::lattice::{
     MIN_DIFFUSION_VOXEL_DEPTH, Voxels, sun_depths, sweep, trilinear, voxel_length, voxel_size,
     voxels,
 };
-use crate::lighting::sky::{Sky, sky_directions, sky_light, sky_sweeps};
+use crate::lighting::sky::{self, Sky, sky_directions, sky_light};
 use crate::lighting::sun::{ShadowMap, reduced_sun, transmittance_to_sun};
 use crate::lighting::{OnGpu, run};
 use crate::shading::{check_fields, coefficients, compose};
@@ -229,13 +229,7 @@ pub fn light_on(
     let lit = sky_light(frame, |g| {
         transmittance_to_sun(&fields, grid, g, sun_dir, None)
     });
-    let (mut sky, sky_on) = run(
-        on,
-        settings.per_sun,
-        "the skylight",
-        |on| Ok(on.sky().sweep(on.gpu, grid, &v.ext, &lit)?),
-        || Ok(sky_sweeps(grid, &v.ext, &lit)),
-    )?;
+    let (mut sky, sky_on) = sky::sweep_on((on, settings.per_sun), grid, &v.ext, &lit)?;
     report.propagation_s = start.elapsed().as_secs_f64();
 
     // 3: diffusion per channel.
