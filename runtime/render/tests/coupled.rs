@@ -1195,7 +1195,7 @@ fn a_warm_start_from_the_last_sun_converges_to_the_cold_start() {
 
 /// A relight in steps (`Relight::advance` with a budget of zero: one step a call, what a viewer
 /// does between frames) reaches the lighting one call reaches, on the CPU and on the GPU (whose
-/// passes a call prepares anew), to rounding (the solvers' parallel sums: 3.6·10⁻¹⁵ measured
+/// iteration stays there between the steps, each step reading its moments back), to rounding (the solvers' parallel sums: 3.6·10⁻¹⁵ measured
 /// with the other tests running beside it, 0 alone); from its second step on, each step's lighting
 /// is a whole one that the gather draws, and its mean radiance moves towards the converged
 /// one's (soft ball at τ 8, 16³ voxels, at a tolerance of 10⁻⁴).

@@ -56,6 +56,7 @@ fn every_uniform_mirrors_its_wgsl_struct() {
     check::<render::lighting::diffusion_gpu::StencilRow>(
         render::lighting::diffusion_gpu::DIFFUSION_WGSL,
     );
+    check::<render::lighting::resident::Glue>(render::lighting::resident::RESIDENT_WGSL);
     check::<render::biri::gpu::BiriParams>(&render::biri::gpu::source());
     check::<render::truth::gpu::TruthParams>(&render::truth::gpu::source());
     check::<render::truth::gpu::StepParams>(&render::truth::gpu::source());

@@ -7,6 +7,7 @@
 //! §7.10.
 
 use std::f64::consts::PI;
+use std::sync::Arc;
 use std::time::Instant;
 
 use glam::DVec3;
@@ -19,6 +20,7 @@ use super::{Diffuse, Settings, Source, Split};
 use crate::lighting::beam::{BeamMedium, BeamState, Depth, PeakFrom, beam_sweep};
 use crate::lighting::diffusion::{self, Problem};
 use crate::lighting::lattice::{MIN_DIFFUSION_VOXEL_DEPTH, Voxels, voxel_size, voxels};
+use crate::lighting::resident::Resident;
 use crate::lighting::sky::{self, Sky, sky_light};
 use crate::lighting::sun::{ShadowMap, reduced_sun, transmittance_to_sun};
 use crate::lighting::{OnGpu, Place, run, transport};
@@ -331,9 +333,10 @@ type Diffused = (Vec<[f64; 3]>, Vec<[f64; 9]>);
 /// From the end of step 2 on, [`Relight::current`] is a whole lighting (the diffusion's with
 /// the transport's start, then each iteration's moments). The steps do the same arithmetic
 /// however the calls divide them (the same lighting but for the solvers' parallel sums, which
-/// may associate differently from run to run). The GPU's passes (where `on` lets them run) are
-/// prepared once per call of [`Relight::advance`]: a call that runs many iterations uploads
-/// the acceleration's operators and the sweeps' medium once, a call per iteration each time.
+/// may associate differently from run to run). The transport's iteration on the GPU (where
+/// `on` lets it run) is prepared on its first step and kept there between steps
+/// ([`crate::lighting::resident`]): the medium, the acceleration's hierarchies and the moments
+/// go up once a relight, and each call reads the moments back once, at its end.
 pub struct Relight {
     frame: Frame,
     settings: Settings,
@@ -376,7 +379,7 @@ struct Transporting {
     medium: transport::Medium,
     /// The acceleration's operators and their multigrid hierarchies, one per channel, built
     /// once; only their sources change per round.
-    operators: Vec<diffusion::Operator>,
+    operators: Vec<Arc<diffusion::Operator>>,
     dirs: Vec<DVec3>,
     groups: Vec<transport::Group>,
     moments: Vec<Harmonics>,
@@ -385,6 +388,8 @@ struct Transporting {
     warm: bool,
     /// Where its last sweeps ran.
     on: String,
+    /// The iteration kept on the GPU between steps, once a step ran there.
+    resident: Option<Resident>,
     /// Seconds spent on it so far.
     seconds: f64,
 }
@@ -678,8 +683,9 @@ impl Relight {
         on: Option<OnGpu>,
         spent: &dyn Fn() -> bool,
     ) -> Result<bool, FrameError> {
-        let settings = &self.settings;
         let start = Instant::now();
+        self.keep_on_gpu(run, on)?;
+        let settings = &self.settings;
         let grid = run.coarse.as_ref().map_or(&self.frame.grid, |c| &c.grid);
         let Transporting {
             medium,
@@ -688,58 +694,32 @@ impl Relight {
             groups,
             moments,
             report,
-            on: swept_on,
+            resident,
             ..
         } = run;
-        // On the GPU, each operator's hierarchy uploaded once a call (`auto` falls back to
-        // the CPU where the adapter cannot hold them).
-        let uploaded = match on.map(|on| {
-            operators
-                .iter()
-                .map(|op| on.solver().upload(on.gpu, op))
-                .collect::<Result<Vec<_>, _>>()
-        }) {
-            None => None,
-            Some(Ok(uploaded)) => Some(uploaded),
-            Some(Err(_)) if settings.per_sun == Place::Auto => None,
-            Some(Err(e)) => {
-                return Err(FrameError(format!(
-                    "the transport's acceleration on the GPU: {e}"
-                )));
-            }
-        };
-        let sweeps = match on {
-            None => None,
-            Some(on) => match on.transport().prepare(on.gpu, grid, medium, dirs) {
-                Ok(sweeps) => Some(Ok(sweeps)),
-                Err(e) if settings.per_sun == Place::Gpu => {
-                    return Err(FrameError(e.to_string()));
-                }
-                Err(e) => Some(Err(e.to_string())),
-            },
-        };
-        *swept_on = match &sweeps {
-            Some(Ok(sweeps)) => sweeps.describe(),
-            Some(Err(refused)) => format!("the CPU ({refused})"),
-            None => "the CPU".into(),
-        };
         let weight = 4.0 * PI / dirs.len() as f64;
         let mut failed = None;
         let converged = loop {
-            let round = |m: &[Harmonics]| match &sweeps {
-                Some(Ok(sweeps)) => sweeps
-                    .round(m)
-                    .map_err(|e| FrameError(format!("the transport's sweeps on the GPU: {e}"))),
-                _ => Ok(transport::sweep_round(grid, medium, m, groups, weight)),
-            };
-            let accelerate = |old: &[Harmonics], new: &mut [Harmonics]| {
-                if let Err(e) =
-                    accelerate(medium, operators, uploaded.as_deref(), (old, new), settings)
-                {
-                    failed = Some(e);
+            let change = match resident.as_mut() {
+                Some(resident) => {
+                    let change = resident
+                        .iterate()
+                        .map_err(|e| FrameError(format!("the transport on the GPU: {e}")))?;
+                    report.changes.push(change);
+                    change
+                }
+                None => {
+                    let round = |m: &[Harmonics]| {
+                        Ok::<_, FrameError>(transport::sweep_round(grid, medium, m, groups, weight))
+                    };
+                    let accelerate = |old: &[Harmonics], new: &mut [Harmonics]| {
+                        if let Err(e) = accelerate(medium, operators, (old, new), settings) {
+                            failed = Some(e);
+                        }
+                    };
+                    transport::iterate(moments, report, round, accelerate)?
                 }
             };
-            let change = transport::iterate(moments, report, round, accelerate)?;
             self.steps += 1;
             if let Some(e) = failed.take() {
                 return Err(FrameError(format!("the transport's acceleration: {e}")));
@@ -769,8 +749,48 @@ impl Relight {
                 break false;
             }
         };
+        // The moments as they stand, for this step's lighting: read back once a call.
+        if let Some(resident) = resident {
+            *moments = resident
+                .moments()
+                .map_err(|e| FrameError(format!("the transport on the GPU: {e}")))?;
+        }
         run.seconds += start.elapsed().as_secs_f64();
         Ok(converged)
+    }
+
+    /// Puts `run`'s iteration on the GPU on its first step there, where `on` is given: the
+    /// sweeps' buffers, the acceleration's hierarchies and the moments uploaded once, kept
+    /// between steps. Where the adapter refuses, `auto` runs the iteration on the CPU (saying
+    /// why) and `gpu` fails naming the refusal.
+    fn keep_on_gpu(&self, run: &mut Transporting, on: Option<OnGpu>) -> Result<(), FrameError> {
+        let Some(on) = on.filter(|_| run.resident.is_none()) else {
+            return Ok(());
+        };
+        let grid = run.coarse.as_ref().map_or(&self.frame.grid, |c| &c.grid);
+        let kept = on
+            .transport()
+            .prepare(on.gpu, grid, &run.medium, &run.dirs)
+            .and_then(|sweeps| {
+                Resident::new(
+                    (on.gpu, on.resident(), on.solver()),
+                    sweeps,
+                    (&run.medium, &run.operators),
+                    &run.moments,
+                    self.settings.max_diffusion_iterations,
+                )
+            });
+        match kept {
+            Ok(resident) => {
+                run.on = resident.describe();
+                run.resident = Some(resident);
+            }
+            Err(e) if self.settings.per_sun == Place::Gpu => {
+                return Err(FrameError(format!("the transport on the GPU: {e}")));
+            }
+            Err(refused) => run.on = format!("the CPU ({refused})"),
+        }
+        Ok(())
     }
 
     /// The converged lighting: `base` with `run`'s moments, its report and energy balance.
@@ -842,7 +862,7 @@ fn transporting(
     let warm = warm.filter(|w| w.len() == p1_start.len());
     let operators = (0..3)
         .map(|c| {
-            diffusion::Operator::of(&Problem {
+            Arc::new(diffusion::Operator::of(&Problem {
                 dims: on_grid.dims,
                 periodic: on_grid.periodic,
                 h,
@@ -850,7 +870,7 @@ fn transporting(
                 kappa_a: kappa_a.iter().map(|k| k[c]).collect(),
                 q0: vec![0.0; n],
                 q1: vec![[0.0; 3]; n],
-            })
+            }))
         })
         .collect();
     let dirs = crate::lighting::lattice::fibonacci_directions(settings.directions);
@@ -865,18 +885,19 @@ fn transporting(
         groups,
         report: transport::Report::default(),
         on: "the CPU".into(),
+        resident: None,
         seconds: start.elapsed().as_secs_f64(),
     }
 }
 
 /// The transport's acceleration (diffusion synthetic acceleration, Alcouffe 1977): the
 /// diffusion of a round's change `new − old` of the mean radiance, scattered (the error's
-/// source), added to `new`'s φ_00 per channel, solved by `operators` (on the GPU where
-/// `uploaded`). (Correcting φ_1 by its flux as well diverged.)
+/// source), added to `new`'s φ_00 per channel, solved by `operators` on the CPU
+/// ([`crate::lighting::resident`] does it on the GPU). (Correcting φ_1 by its flux as well
+/// diverged.)
 fn accelerate(
     medium: &transport::Medium,
-    operators: &[diffusion::Operator],
-    uploaded: Option<&[crate::lighting::diffusion_gpu::Uploaded]>,
+    operators: &[Arc<diffusion::Operator>],
     (old, new): (&[Harmonics], &mut [Harmonics]),
     settings: &Settings,
 ) -> Result<(), String> {
@@ -888,14 +909,9 @@ fn accelerate(
             *q = medium.sca[i][c] * (new[i][o] - old[i][o]) / root;
         }
         let (tolerance, cap) = (ACCELERATION_TOLERANCE, settings.max_diffusion_iterations);
-        let s = match uploaded {
-            Some(u) => u[c]
-                .solve(&operator.isotropic(&q0), tolerance, cap)
-                .map_err(|e| e.to_string())?,
-            None => operator
-                .solve_isotropic(&q0, tolerance, cap)
-                .map_err(|e| e.to_string())?,
-        };
+        let s = operator
+            .solve_isotropic(&q0, tolerance, cap)
+            .map_err(|e| e.to_string())?;
         new.par_iter_mut()
             .zip(&s.i0)
             .for_each(|(m, d)| m[o] += root * d);

@@ -13,6 +13,7 @@
 //! (r·z, d·Ad, r·r) are summed per workgroup on the GPU and the partial sums on the CPU in
 //! f64.
 
+use std::sync::Arc;
 use std::time::Instant;
 
 use runtime::gpu::{Gpu, GpuError, Readback};
@@ -111,10 +112,8 @@ impl Solver {
     ) -> Result<Solution, SolveError> {
         let start = Instant::now();
         let (a, b) = assemble(p);
-        let op = Operator::new(a);
-        let mut s = self
-            .upload(gpu, &op)?
-            .solve(&b, tolerance, max_iterations)?;
+        let op = Arc::new(Operator::new(a));
+        let mut s = self.upload(gpu, op)?.solve(&b, tolerance, max_iterations)?;
         s.seconds = start.elapsed().as_secs_f64();
         Ok(s)
     }
@@ -144,7 +143,7 @@ impl Solver {
     }
 
     /// `op`'s hierarchy on the GPU, ready for [`Uploaded::solve`].
-    pub fn upload<'a>(&'a self, gpu: &'a Gpu, op: &'a Operator) -> Result<Uploaded<'a>, GpuError> {
+    pub fn upload(&self, gpu: &Gpu, op: Arc<Operator>) -> Result<Uploaded, GpuError> {
         Uploaded::new(self, gpu, op)
     }
 }
@@ -230,11 +229,12 @@ struct Level {
     o: u32,
 }
 
-/// An operator's hierarchy and the solve's vectors on the GPU.
-pub struct Uploaded<'a> {
-    gpu: &'a Gpu,
-    solver: &'a Solver,
-    op: &'a Operator,
+/// An operator's hierarchy and the solve's vectors on the GPU. It holds the device and the
+/// solver's pipelines (reference-counted handles), so a relight keeps it between its steps.
+pub struct Uploaded {
+    gpu: Gpu,
+    pipelines: Vec<wgpu::ComputePipeline>,
+    op: Arc<Operator>,
     bind_group: wgpu::BindGroup,
     v: wgpu::Buffer,
     partial: wgpu::Buffer,
@@ -360,8 +360,8 @@ fn vcycle(plan: &mut Plan, levels: &[Level], (z, r, res): (usize, usize, usize))
     vcycle
 }
 
-impl<'a> Uploaded<'a> {
-    fn new(solver: &'a Solver, gpu: &'a Gpu, op: &'a Operator) -> Result<Self, GpuError> {
+impl Uploaded {
+    fn new(solver: &Solver, gpu: &Gpu, op: Arc<Operator>) -> Result<Self, GpuError> {
         let device = &gpu.device;
         let stencils: &[Stencil] = op.levels();
         let (levels, rows) = levels(stencils);
@@ -456,8 +456,8 @@ impl<'a> Uploaded<'a> {
         });
         let bind_group = solver.bind(device, [&params, &stencil, &v, &partial, &coef]);
         Ok(Self {
-            gpu,
-            solver,
+            gpu: gpu.clone(),
+            pipelines: solver.pipelines.clone(),
             op,
             bind_group,
             v,
@@ -480,9 +480,9 @@ impl<'a> Uploaded<'a> {
 
     /// Records `calls` into one compute pass and submits it.
     fn submit(&self, calls: &[Call]) {
-        crate::gpu::submit_pass(self.gpu, "photometeor diffusion", |pass| {
+        crate::gpu::submit_pass(&self.gpu, "photometeor diffusion", |pass| {
             for c in calls {
-                pass.set_pipeline(&self.solver.pipelines[c.kernel as usize]);
+                pass.set_pipeline(&self.pipelines[c.kernel as usize]);
                 pass.set_bind_group(0, &self.bind_group, &[(u64::from(c.slot) * ALIGN) as u32]);
                 pass.dispatch_workgroups(c.groups.0, c.groups.1, 1);
             }
@@ -492,7 +492,7 @@ impl<'a> Uploaded<'a> {
     /// The sums of the partial sums in slots 0 and 1 (f64).
     fn sums(&self) -> Result<[f64; 2], GpuError> {
         let size = self.partial.size();
-        let rows = self.readback.read(self.gpu, &self.partial, 0, size)?;
+        let rows = self.readback.read(&self.gpu, &self.partial, 0, size)?;
         let floats: &[f32] = bytemuck::cast_slice(&rows);
         let sum = |s: usize| {
             floats[s * self.partials..(s + 1) * self.partials]
@@ -516,12 +516,29 @@ impl<'a> Uploaded<'a> {
         self.gpu
             .queue
             .write_buffer(&self.v, self.r0, bytemuck::cast_slice(&data));
+        let (taken, _) = self.inner_on_gpu(cap)?;
+        let rows = self
+            .readback
+            .read(&self.gpu, &self.v, self.x, solution_bytes(self.n0))?;
+        let e: &[f32] = bytemuck::cast_slice(&rows);
+        Ok((e[..self.n0].iter().map(|&v| f64::from(v)).collect(), taken))
+    }
+
+    /// The f32 solve of A e = r with r already in the vectors at [`Uploaded::rhs`], e left at
+    /// [`Uploaded::solution`]: the iterations taken and whether it reached
+    /// [`INNER_TOLERANCE`] (a zero r is solved by e = 0; one whose norm is not finite is not
+    /// solved). Only the iterations' scalars come back.
+    pub(crate) fn inner_on_gpu(&self, cap: usize) -> Result<(usize, bool), GpuError> {
         self.set_coef(1, 0.0);
         self.submit(&self.first);
         let [mut rz, rr0] = self.sums()?;
         let r0 = rr0.sqrt();
+        if !r0.is_finite() {
+            return Ok((0, false));
+        }
         let mut taken = 0;
-        while taken < cap && r0 > 0.0 {
+        let mut converged = r0 == 0.0;
+        while taken < cap && !converged {
             self.submit(&self.apply);
             let [dad, _] = self.sums()?;
             if dad <= 0.0 {
@@ -532,6 +549,7 @@ impl<'a> Uploaded<'a> {
             taken += 1;
             let [_, rr] = self.sums()?;
             if rr.sqrt() <= INNER_TOLERANCE * r0 {
+                converged = true;
                 break;
             }
             self.submit(&self.after_vcycle);
@@ -540,11 +558,27 @@ impl<'a> Uploaded<'a> {
             rz = rz_new;
             self.submit(&self.update_d);
         }
-        let rows = self
-            .readback
-            .read(self.gpu, &self.v, self.x, solution_bytes(self.n0))?;
-        let e: &[f32] = bytemuck::cast_slice(&rows);
-        Ok((e[..self.n0].iter().map(|&v| f64::from(v)).collect(), taken))
+        Ok((taken, converged))
+    }
+
+    /// The vectors' buffer (f32; every level's z, r, res, then x, d, A d of the finest).
+    pub(crate) fn vectors(&self) -> &wgpu::Buffer {
+        &self.v
+    }
+
+    /// The offset (floats) of the right-hand side r in [`Uploaded::vectors`].
+    pub(crate) fn rhs(&self) -> u32 {
+        (self.r0 / 4) as u32
+    }
+
+    /// The offset (floats) of the solution e in [`Uploaded::vectors`].
+    pub(crate) fn solution(&self) -> u32 {
+        (self.x / 4) as u32
+    }
+
+    /// The unknowns of the finest level (0: the operator has none, nothing to solve).
+    pub(crate) fn size(&self) -> usize {
+        self.n0
     }
 
     /// Solves A x = `b` to relative residual `tolerance` within `max_iterations` inner

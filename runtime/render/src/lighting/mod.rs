@@ -9,7 +9,7 @@
 //! | the reduced skylight | [`sky`] | [`sky_gpu`] |
 //! | the reduced sunlight and the volume's shadow map | [`sun`] | (CPU only) |
 //! | the diffusion solve, multigrid-preconditioned | [`diffusion`] | [`diffusion_gpu`] |
-//! | the discrete-ordinates transport | [`transport`] | [`transport_gpu`] |
+//! | the discrete-ordinates transport | [`transport`] | [`transport_gpu`]; its iteration kept on the GPU between rounds and steps: [`resident`] |
 //!
 //! A model's recipe runs each pass through [`run`], which chooses the place: [`Place`]
 //! `auto` (the GPU on a real adapter, the CPU on one that emulates a GPU on the CPU), `gpu` or
@@ -26,6 +26,7 @@ pub mod beam_gpu;
 pub mod diffusion;
 pub mod diffusion_gpu;
 pub mod lattice;
+pub mod resident;
 pub mod sky;
 pub mod sky_gpu;
 pub mod sun;
@@ -73,6 +74,7 @@ pub struct Pipelines {
     sky: std::sync::OnceLock<sky_gpu::SkySweeper>,
     beam: std::sync::OnceLock<beam_gpu::BeamSweeper>,
     solver: std::sync::OnceLock<diffusion_gpu::Solver>,
+    resident: std::sync::OnceLock<resident::Kernels>,
 }
 
 impl Pipelines {
@@ -113,6 +115,13 @@ impl<'a> OnGpu<'a> {
         self.pipelines
             .beam
             .get_or_init(|| beam_gpu::BeamSweeper::new(self.gpu))
+    }
+
+    /// The kernels that keep the transport's iteration on the GPU ([`resident`]).
+    pub fn resident(&self) -> &'a resident::Kernels {
+        self.pipelines
+            .resident
+            .get_or_init(|| resident::Kernels::new(self.gpu))
     }
 
     /// The diffusion solver ([`diffusion_gpu`]).

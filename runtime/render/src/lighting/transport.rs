@@ -538,6 +538,7 @@ pub fn solve(
 
 /// [`solve`]'s iteration with the sweeps of a round done by `round` (the CPU's
 /// [`sweep_round`], or the GPU's [`super::transport_gpu::Sweeps::round`]), which may fail.
+/// (A relight on the GPU keeps the whole iteration there: [`super::resident`].)
 pub fn solve_with<E>(
     start: Vec<[f64; PER_VOXEL]>,
     (tolerance, max_iterations): (f64, usize),

@@ -3,8 +3,9 @@
 //! layer by layer, the radiances projected onto the spherical harmonics — with one dispatch
 //! per layer of each group of directions (one workgroup per voxel of the layer, one
 //! invocation per direction), in f32. The iteration around it (the diffusion synthetic
-//! acceleration, the convergence test) stays on the CPU in f64: each round uploads the
-//! moments and reads the new ones back ([`super::transport::solve_with`]).
+//! acceleration, the convergence test) runs on the GPU too, in [`super::resident`], the
+//! moments kept there between rounds; [`Sweeps::round`] alone (the tests' check of one round
+//! against the CPU's) uploads the moments and reads the new ones back.
 
 use glam::DVec3;
 
@@ -166,7 +167,7 @@ pub(crate) fn buffers_fit(
 }
 
 /// Floats per voxel of the moments on the GPU (75, padded to whole rows of four).
-const STRIDE: usize = PER_VOXEL.div_ceil(4) * 4;
+pub(crate) const STRIDE: usize = PER_VOXEL.div_ceil(4) * 4;
 /// The most directions one group may hold (`sweep.wgsl`'s MAX_GROUP, its workgroup memory).
 pub const MAX_GROUP: usize = 512;
 /// Bytes between two dispatches' [`Step`]s in their uniform buffer (wgpu's largest required
@@ -301,13 +302,13 @@ impl Sweeper {
     /// The buffers of one transport solve: `medium` on `grid` with the directions `dirs`.
     /// Refused, naming the value, when a group of directions exceeds [`MAX_GROUP`], a layer
     /// exceeds the adapter's workgroups per dimension, or a buffer its storage-binding limit.
-    pub fn prepare<'a>(
-        &'a self,
-        gpu: &'a Gpu,
+    pub fn prepare(
+        &self,
+        gpu: &Gpu,
         grid: &DensityGrid,
         medium: &Medium,
         dirs: &[DVec3],
-    ) -> Result<Sweeps<'a>, RenderError> {
+    ) -> Result<Sweeps, RenderError> {
         let device = &gpu.device;
         let limits = device.limits();
         let dims = grid.dims;
@@ -391,7 +392,7 @@ impl Sweeper {
         let moments = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("photometeor sweep moments"),
             size: moments_bytes,
-            usage: U::STORAGE | U::COPY_DST,
+            usage: U::STORAGE | U::COPY_SRC | U::COPY_DST,
             mapped_at_creation: false,
         });
         let next = device.create_buffer(&wgpu::BufferDescriptor {
@@ -409,8 +410,8 @@ impl Sweeper {
             &[&params, &medium_buffer, &moments, &next, &ordinates, &state],
         );
         Ok(Sweeps {
-            gpu,
-            pipeline: &self.pipeline,
+            gpu: gpu.clone(),
+            pipeline: self.pipeline.clone(),
             bind_group,
             moments,
             next,
@@ -426,13 +427,16 @@ fn gpu_refusal(message: String) -> RenderError {
     RenderError::Frame(crate::checks::FrameError(message))
 }
 
-/// One transport solve's buffers on the GPU ([`Sweeper::prepare`]).
-pub struct Sweeps<'a> {
-    gpu: &'a Gpu,
-    pipeline: &'a wgpu::ComputePipeline,
+/// One transport solve's buffers on the GPU ([`Sweeper::prepare`]); they hold the device
+/// (its handles are reference-counted), so a relight keeps them between its steps.
+pub struct Sweeps {
+    gpu: Gpu,
+    pipeline: wgpu::ComputePipeline,
     bind_group: wgpu::BindGroup,
-    moments: wgpu::Buffer,
-    next: wgpu::Buffer,
+    /// The round's moments, read by the sweeps (f32, [`STRIDE`] per voxel).
+    pub(crate) moments: wgpu::Buffer,
+    /// The new moments the sweeps add to.
+    pub(crate) next: wgpu::Buffer,
     /// Per dispatch, the layer's extent (its workgroups).
     layers: Vec<(usize, usize)>,
     voxels: usize,
@@ -440,41 +444,67 @@ pub struct Sweeps<'a> {
     _keep: [wgpu::Buffer; 5],
 }
 
-impl Sweeps<'_> {
+impl Sweeps {
     /// The adapter the sweeps run on.
     pub fn describe(&self) -> String {
         self.gpu.describe()
     }
 
-    /// One round of sweeps from moments `m`: the new moments, as
-    /// [`super::transport::sweep_once`] computes them (in f32).
-    pub fn round(&self, m: &[[f64; PER_VOXEL]]) -> Result<Vec<[f64; PER_VOXEL]>, RenderError> {
-        let (device, queue) = (&self.gpu.device, &self.gpu.queue);
+    /// The transport grid's voxels.
+    pub(crate) fn voxels(&self) -> usize {
+        self.voxels
+    }
+
+    /// Writes the moments `m` the next round sweeps from (f32).
+    pub(crate) fn write_moments(&self, m: &[[f64; PER_VOXEL]]) {
         let mut data = vec![0f32; STRIDE * self.voxels];
         for (to, from) in data.chunks_exact_mut(STRIDE).zip(m) {
             for (t, f) in to.iter_mut().zip(from) {
                 *t = *f as f32;
             }
         }
-        queue.write_buffer(&self.moments, 0, bytemuck::cast_slice(&data));
-        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
-            label: Some("photometeor sweeps"),
-        });
+        self.gpu
+            .queue
+            .write_buffer(&self.moments, 0, bytemuck::cast_slice(&data));
+    }
+
+    /// Records one round of sweeps from the moments on the GPU into `encoder`: the new moments
+    /// in [`Sweeps::next`].
+    pub(crate) fn record(&self, encoder: &mut wgpu::CommandEncoder) {
         encoder.clear_buffer(&self.next, 0, None);
         dispatch_steps(
-            &mut encoder,
+            encoder,
             "photometeor sweeps",
-            self.pipeline,
+            &self.pipeline,
             &self.bind_group,
             &self.layers,
         );
-        queue.submit([encoder.finish()]);
-        let rows = read_back(self.gpu, &self.next, (4 * STRIDE * self.voxels) as u64)
+    }
+
+    /// `buffer`'s moments (the sweeps' layout) in f64.
+    pub(crate) fn read(&self, buffer: &wgpu::Buffer) -> Result<Vec<[f64; PER_VOXEL]>, RenderError> {
+        let rows = read_back(&self.gpu, buffer, (4 * STRIDE * self.voxels) as u64)
             .map_err(RenderError::from)?;
         let floats: &[f32] = bytemuck::cast_slice(&rows);
         Ok(floats
             .chunks_exact(STRIDE)
             .map(|v| std::array::from_fn(|k| f64::from(v[k])))
             .collect())
+    }
+
+    /// One round of sweeps from moments `m`: the new moments, as
+    /// [`super::transport::sweep_once`] computes them (in f32). The moments go up and the new
+    /// ones come back ([`super::resident`] keeps them on the GPU instead).
+    pub fn round(&self, m: &[[f64; PER_VOXEL]]) -> Result<Vec<[f64; PER_VOXEL]>, RenderError> {
+        self.write_moments(m);
+        let mut encoder = self
+            .gpu
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("photometeor sweeps"),
+            });
+        self.record(&mut encoder);
+        self.gpu.queue.submit([encoder.finish()]);
+        self.read(&self.next)
     }
 }
