@@ -52,6 +52,8 @@ pub struct CoupledReport {
     pub transport_warm: bool,
     /// Where its sweeps ran.
     pub transport_on: String,
+    /// What its iteration on the GPU submitted and read back (all zero on the CPU).
+    pub transport_traffic: crate::lighting::resident::Traffic,
     /// The transport's grid (the render's, or coarser by `transport_coarsening`).
     pub transport_dims: [usize; 3],
     /// The relative change of the mean radiance in its last iteration.
@@ -777,7 +779,10 @@ impl Relight {
                     sweeps,
                     (&run.medium, &run.operators),
                     &run.moments,
-                    self.settings.max_diffusion_iterations,
+                    (
+                        ACCELERATION_TOLERANCE,
+                        self.settings.max_diffusion_iterations,
+                    ),
                 )
             });
         match kept {
@@ -797,6 +802,10 @@ impl Relight {
     fn assemble(&mut self, mut base: Lighting, run: Transporting) -> Lighting {
         let grid = run.coarse.as_ref().map_or(&self.frame.grid, |c| &c.grid);
         let r = &mut self.report;
+        r.transport_traffic = run
+            .resident
+            .as_ref()
+            .map_or_else(Default::default, Resident::traffic);
         r.transport_on = run.on;
         r.transport_warm = run.warm;
         r.transport_balance = transport::balance(grid, &run.medium, &run.moments);

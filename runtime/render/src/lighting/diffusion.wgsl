@@ -30,8 +30,23 @@ struct Stencil {
 @group(0) @binding(1) var<storage, read> stencil: array<Stencil>;
 @group(0) @binding(2) var<storage, read_write> v: array<f32>;
 @group(0) @binding(3) var<storage, read_write> partial: array<f32>;
-// α and β of the current iteration.
-@group(0) @binding(4) var<storage, read> coef: array<f32>;
+// The iteration's scalars: α, β, then what the GPU-driven iteration (`scalars`) keeps: 1 once
+// it has finished (every kernel then returns at once), r·z, r_0·r_0, the iterations taken,
+// 1 where it converged, the relative residual to reach, the iteration cap.
+@group(0) @binding(4) var<storage, read_write> coef: array<f32>;
+const ALPHA: u32 = 0u;
+const BETA: u32 = 1u;
+const DONE: u32 = 2u;
+const RZ: u32 = 3u;
+const RR0: u32 = 4u;
+const TAKEN: u32 = 5u;
+const CONVERGED: u32 = 6u;
+const TOLERANCE: u32 = 7u;
+const CAP: u32 = 8u;
+
+fn finished() -> bool {
+    return coef[DONE] != 0.0;
+}
 
 const WG: u32 = 64u;
 // Workgroups along x of a dispatch (the rest along y).
@@ -70,7 +85,7 @@ fn neighbours(o: u32, i: u32, c: vec3<u32>, x: u32) -> f32 {
 @compute @workgroup_size(64)
 fn gauss_seidel(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) t: u32) {
     let i = index(wg, t);
-    if (i >= p.voxels) {
+    if (i >= p.voxels || finished()) {
         return;
     }
     let c = coords(i, p.dims);
@@ -85,7 +100,7 @@ fn gauss_seidel(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_
 @compute @workgroup_size(64)
 fn residual(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) t: u32) {
     let i = index(wg, t);
-    if (i >= p.voxels) {
+    if (i >= p.voxels || finished()) {
         return;
     }
     let diag = stencil[p.first_row + i].diag;
@@ -100,12 +115,46 @@ fn residual(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_inde
     }
 }
 
+// The coarsest level of a V-cycle solved in one workgroup (one invocation per voxel, at most
+// WG of them): z = 0, then COARSEST_SWEEPS times the sweeps of colour 0, 1, 1, 0 as
+// gauss_seidel does them, z at out, b at a; the storage barrier between two colours stands for
+// the dispatches the finer levels take per colour. The same arithmetic as those dispatches.
+const COARSEST_SWEEPS: u32 = 32u;
+var<workgroup> stop: f32;
+@compute @workgroup_size(64)
+fn coarsest(@builtin(local_invocation_index) t: u32) {
+    if (t == 0u) {
+        stop = coef[DONE];
+    }
+    if (workgroupUniformLoad(&stop) != 0.0) {
+        return;
+    }
+    let mine = t < p.voxels;
+    var c = vec3<u32>(0u, 0u, 0u);
+    var diag = 0.0;
+    if (mine) {
+        c = coords(t, p.dims);
+        diag = stencil[p.first_row + t].diag;
+        v[p.out + t] = 0.0;
+    }
+    storageBarrier();
+    let order = array<u32, 4>(0u, 1u, 1u, 0u);
+    for (var s = 0u; s < COARSEST_SWEEPS; s = s + 1u) {
+        for (var k = 0u; k < 4u; k = k + 1u) {
+            if (mine && diag > 0.0 && (c.x + c.y + c.z) % 2u == order[k]) {
+                v[p.out + t] = (v[p.a + t] + neighbours(p.first_row, t, c, p.out)) / diag;
+            }
+            storageBarrier();
+        }
+    }
+}
+
 // The coarser level's right-hand side (at out): each coarse voxel sums its active children's
 // residuals (at a).
 @compute @workgroup_size(64)
 fn restriction(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) t: u32) {
     let ci = index(wg, t);
-    if (ci >= p.coarse_voxels) {
+    if (ci >= p.coarse_voxels || finished()) {
         return;
     }
     let d = p.dims;
@@ -128,7 +177,7 @@ fn restriction(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_i
 @compute @workgroup_size(64)
 fn prolong(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) t: u32) {
     let i = index(wg, t);
-    if (i >= p.voxels || stencil[p.first_row + i].diag <= 0.0) {
+    if (i >= p.voxels || finished() || stencil[p.first_row + i].diag <= 0.0) {
         return;
     }
     let c = coords(i, p.dims) / 2u;
@@ -140,7 +189,7 @@ fn prolong(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index
 @compute @workgroup_size(64)
 fn zero(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) t: u32) {
     let i = index(wg, t);
-    if (i < p.voxels) {
+    if (i < p.voxels && !finished()) {
         v[p.out + i] = 0.0;
     }
 }
@@ -150,7 +199,7 @@ fn zero(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) t
 fn dots(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) t: u32) {
     let i = index(wg, t);
     var s = 0.0;
-    if (i < p.voxels) {
+    if (i < p.voxels && !finished()) {
         s = v[p.a + i] * v[p.b + i];
     }
     sums[t] = s;
@@ -170,7 +219,7 @@ fn dots(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) t
 @compute @workgroup_size(64)
 fn update_xr(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) t: u32) {
     let i = index(wg, t);
-    if (i >= p.voxels) {
+    if (i >= p.voxels || finished()) {
         return;
     }
     let alpha = coef[0];
@@ -182,8 +231,86 @@ fn update_xr(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_ind
 @compute @workgroup_size(64)
 fn update_d(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) t: u32) {
     let i = index(wg, t);
-    if (i >= p.voxels) {
+    if (i >= p.voxels || finished()) {
         return;
     }
     v[p.out + i] = v[p.a + i] + coef[1] * v[p.out + i];
+}
+
+// The sums of the two slots of partial sums (p.voxels each: slot 0 at 0, slot 1 after it).
+var<workgroup> pairs: array<vec2<f32>, 64>;
+
+// The conjugate gradients' control on the GPU (diffusion_gpu's GPU-driven iteration), one
+// workgroup: from the partial sums, step p.colour of the iteration the CPU's loop takes
+// (Uploaded::inner): 0 resets it (β = 0, nothing finished or taken); 1 starts it (r·z, r·r
+// of the first V-cycle; a zero r is solved, one not finite is not); 2 forms α = r·z / d·Ad
+// (d·Ad ≤ 0 stops it) and counts the iteration; 3 tests the residual ‖r‖ ≤ tolerance ‖r_0‖
+// and the cap; 4 forms β = r·z_new / r·z. Once finished, steps 2–4 and every other kernel
+// do nothing.
+@compute @workgroup_size(64)
+fn scalars(@builtin(local_invocation_index) t: u32) {
+    var s = vec2<f32>(0.0, 0.0);
+    for (var k = t; k < p.voxels; k = k + WG) {
+        s = s + vec2<f32>(partial[k], partial[p.voxels + k]);
+    }
+    pairs[t] = s;
+    workgroupBarrier();
+    for (var half = WG / 2u; half > 0u; half = half / 2u) {
+        if (t < half) {
+            pairs[t] = pairs[t] + pairs[t + half];
+        }
+        workgroupBarrier();
+    }
+    if (t != 0u) {
+        return;
+    }
+    let sums = pairs[0];
+    switch p.colour {
+        case 0u: {
+            coef[BETA] = 0.0;
+            coef[DONE] = 0.0;
+            coef[TAKEN] = 0.0;
+            coef[CONVERGED] = 0.0;
+        }
+        case 1u: {
+            coef[RZ] = sums.x;
+            coef[RR0] = sums.y;
+            // r_0 = 0 is solved by e = 0; a norm that is not finite (or a cap of 0) is not.
+            if (sums.y == 0.0) {
+                coef[CONVERGED] = 1.0;
+                coef[DONE] = 1.0;
+            } else if (!(sums.y > 0.0 && sums.y < 3.0e38) || coef[CAP] < 1.0) {
+                coef[DONE] = 1.0;
+            }
+        }
+        case 2u: {
+            if (finished()) {
+                return;
+            }
+            if (!(sums.x > 0.0)) {
+                coef[DONE] = 1.0;
+                return;
+            }
+            coef[ALPHA] = coef[RZ] / sums.x;
+            coef[TAKEN] = coef[TAKEN] + 1.0;
+        }
+        case 3u: {
+            if (finished()) {
+                return;
+            }
+            if (sqrt(sums.y) <= coef[TOLERANCE] * sqrt(coef[RR0])) {
+                coef[CONVERGED] = 1.0;
+                coef[DONE] = 1.0;
+            } else if (coef[TAKEN] >= coef[CAP]) {
+                coef[DONE] = 1.0;
+            }
+        }
+        default: {
+            if (finished()) {
+                return;
+            }
+            coef[BETA] = sums.x / coef[RZ];
+            coef[RZ] = sums.x;
+        }
+    }
 }

@@ -11,7 +11,14 @@
 //! ‖r‖/‖b‖ is below the tolerance. Each refinement gains about three digits. The iterations
 //! reported are the inner ones, the residual the outer f64 one. The scalars of each iteration
 //! (r·z, d·Ad, r·r) are summed per workgroup on the GPU and the partial sums on the CPU in
-//! f64.
+//! f64. The V-cycle's coarsest level (at most 64 voxels) is smoothed in one workgroup, one
+//! dispatch for its 128 sweeps (`coarsest`: the same arithmetic).
+//!
+//! The transport's acceleration ([`super::resident`]) drives the iteration on the GPU instead:
+//! `scalars` sums the partial sums in f32 and forms α and β, tests the residual and the cap,
+//! and flags the iteration finished, after which every kernel returns at once; a chunk of
+//! iterations is recorded into one submission (`Uploaded::record_iterations`) and only the
+//! flags come back. Its tolerance (10⁻²) needs no f64 refinement.
 
 use std::sync::Arc;
 use std::time::Instant;
@@ -22,6 +29,10 @@ use super::diffusion::{
     COARSEST_SWEEPS, NotConverged, Operator, Problem, Solution, Stencil, assemble,
 };
 use crate::gpu::entry;
+
+/// The bytes of the iteration's scalars (`diffusion.wgsl`'s `coef`: α, β, and the GPU-driven
+/// iteration's state).
+pub(crate) const COEF_BYTES: u64 = 48;
 
 /// The inner solve's relative residual on the GPU (f32) per refinement.
 pub const INNER_TOLERANCE: f64 = 1e-3;
@@ -46,9 +57,11 @@ enum Kernel {
     Dots,
     UpdateXr,
     UpdateD,
+    Coarsest,
+    Scalars,
 }
 
-const KERNELS: [&str; 8] = [
+const KERNELS: [&str; 10] = [
     "gauss_seidel",
     "residual",
     "restriction",
@@ -57,6 +70,8 @@ const KERNELS: [&str; 8] = [
     "dots",
     "update_xr",
     "update_d",
+    "coarsest",
+    "scalars",
 ];
 
 /// A solve that failed: it did not converge, or the device did.
@@ -129,7 +144,7 @@ impl Solver {
                 entry(1, Storage { read_only: true }, false),
                 entry(2, Storage { read_only: false }, false),
                 entry(3, Storage { read_only: false }, false),
-                entry(4, Storage { read_only: true }, false),
+                entry(4, Storage { read_only: false }, false),
             ],
         });
         let pipelines = crate::gpu::compute_pipelines(
@@ -254,6 +269,8 @@ pub struct Uploaded {
     update_xr: Vec<Call>,
     after_vcycle: Vec<Call>,
     update_d: Vec<Call>,
+    /// The GPU-driven iteration's control (`scalars`): reset, start, α, the test, β.
+    control: [Call; 5],
 }
 
 /// The hierarchy's levels (each one's dims, size and first row) and the operators' rows, every
@@ -309,6 +326,15 @@ fn vcycle(plan: &mut Plan, levels: &[Level], (z, r, res): (usize, usize, usize))
     for (k, l) in levels.iter().enumerate() {
         let at = |base: usize, l: &Level| base + l.o as usize;
         let n = l.n as usize;
+        if k + 1 == levels.len() && n <= WG {
+            // The coarsest level in one workgroup (`coarsest`): one dispatch, not 129.
+            vcycle.push(plan.call(
+                Kernel::Coarsest,
+                words(l, None, 0, [at(r, l), 0, at(z, l), 0]),
+                n,
+            ));
+            break;
+        }
         vcycle.push(plan.call(Kernel::Zero, words(l, None, 0, [0, 0, at(z, l), 0]), n));
         let gs = |plan: &mut Plan, colour: u32| {
             plan.call(
@@ -414,6 +440,15 @@ impl Uploaded {
             after_vcycle.push(dots(&mut plan, r, z, 0));
             update_d.push(ud);
         }
+        // The control reads the two slots of partial sums of a level-0 vector operation.
+        let control = [0, 1, 2, 3, 4].map(|step| {
+            let words = Dispatch {
+                colour: step,
+                voxels: partials as u32,
+                ..Dispatch::default()
+            };
+            plan.call(Kernel::Scalars, words, 1)
+        });
         use wgpu::BufferUsages as U;
         // A problem without unknowns dispatches nothing, but binds one block.
         if plan.params.is_empty() {
@@ -450,8 +485,8 @@ impl Uploaded {
         });
         let coef = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("photometeor diffusion α β"),
-            size: 16,
-            usage: U::STORAGE | U::COPY_DST,
+            size: COEF_BYTES,
+            usage: U::STORAGE | U::COPY_DST | U::COPY_SRC,
             mapped_at_creation: false,
         });
         let bind_group = solver.bind(device, [&params, &stencil, &v, &partial, &coef]);
@@ -475,18 +510,70 @@ impl Uploaded {
             update_xr,
             after_vcycle,
             update_d,
+            control,
         })
     }
 
     /// Records `calls` into one compute pass and submits it.
     fn submit(&self, calls: &[Call]) {
         crate::gpu::submit_pass(&self.gpu, "photometeor diffusion", |pass| {
-            for c in calls {
-                pass.set_pipeline(&self.pipelines[c.kernel as usize]);
-                pass.set_bind_group(0, &self.bind_group, &[(u64::from(c.slot) * ALIGN) as u32]);
-                pass.dispatch_workgroups(c.groups.0, c.groups.1, 1);
-            }
+            self.record(pass, calls);
         });
+    }
+
+    /// Records `calls` into `pass`.
+    fn record(&self, pass: &mut wgpu::ComputePass, calls: &[Call]) {
+        for c in calls {
+            pass.set_pipeline(&self.pipelines[c.kernel as usize]);
+            pass.set_bind_group(0, &self.bind_group, &[(u64::from(c.slot) * ALIGN) as u32]);
+            pass.dispatch_workgroups(c.groups.0, c.groups.1, 1);
+        }
+    }
+
+    /// Sets the GPU-driven iteration's relative residual and iteration cap.
+    pub(crate) fn set_limits(&self, (tolerance, cap): (f64, usize)) {
+        self.set_coef(7, tolerance);
+        self.set_coef(8, cap as f64);
+    }
+
+    /// Records the GPU-driven iteration (`diffusion.wgsl`'s `scalars` forms α and β and tests
+    /// the residual on the GPU; nothing comes back): with `start`, its start from the
+    /// right-hand side at [`Uploaded::rhs`], then `iterations` iterations of the loop
+    /// [`Uploaded::inner_on_gpu`] drives from the CPU, each one doing nothing once the
+    /// iteration has finished. The dispatches recorded.
+    pub(crate) fn record_iterations(
+        &self,
+        pass: &mut wgpu::ComputePass,
+        start: bool,
+        iterations: usize,
+    ) -> usize {
+        let [reset, begin, alpha, test, beta] = self.control;
+        let mut recorded = 0;
+        let mut record = |calls: &[Call]| {
+            self.record(pass, calls);
+            recorded += calls.len();
+        };
+        if start {
+            record(&[reset]);
+            record(&self.first);
+            record(&[begin]);
+        }
+        for _ in 0..iterations {
+            record(&self.apply);
+            record(&[alpha]);
+            record(&self.update_xr);
+            record(&[test]);
+            record(&self.after_vcycle);
+            record(&[beta]);
+            record(&self.update_d);
+        }
+        recorded
+    }
+
+    /// The buffer of the iteration's scalars ([`COEF_BYTES`]): whether it has finished (2),
+    /// the iterations taken (5), whether it converged (6).
+    pub(crate) fn scalars(&self) -> &wgpu::Buffer {
+        &self.coef
     }
 
     /// The sums of the partial sums in slots 0 and 1 (f64).
@@ -516,7 +603,7 @@ impl Uploaded {
         self.gpu
             .queue
             .write_buffer(&self.v, self.r0, bytemuck::cast_slice(&data));
-        let (taken, _) = self.inner_on_gpu(cap)?;
+        let (taken, _) = self.inner_on_gpu(INNER_TOLERANCE, cap)?;
         let rows = self
             .readback
             .read(&self.gpu, &self.v, self.x, solution_bytes(self.n0))?;
@@ -525,10 +612,16 @@ impl Uploaded {
     }
 
     /// The f32 solve of A e = r with r already in the vectors at [`Uploaded::rhs`], e left at
-    /// [`Uploaded::solution`]: the iterations taken and whether it reached
-    /// [`INNER_TOLERANCE`] (a zero r is solved by e = 0; one whose norm is not finite is not
+    /// [`Uploaded::solution`]: the iterations taken and whether it reached the relative
+    /// residual `tolerance` (a zero r is solved by e = 0; one whose norm is not finite is not
     /// solved). Only the iterations' scalars come back.
-    pub(crate) fn inner_on_gpu(&self, cap: usize) -> Result<(usize, bool), GpuError> {
+    pub(crate) fn inner_on_gpu(
+        &self,
+        tolerance: f64,
+        cap: usize,
+    ) -> Result<(usize, bool), GpuError> {
+        // Not finished (the GPU-driven iteration's flag: every kernel would do nothing).
+        self.set_coef(2, 0.0);
         self.set_coef(1, 0.0);
         self.submit(&self.first);
         let [mut rz, rr0] = self.sums()?;
@@ -548,7 +641,7 @@ impl Uploaded {
             self.submit(&self.update_xr);
             taken += 1;
             let [_, rr] = self.sums()?;
-            if rr.sqrt() <= INNER_TOLERANCE * r0 {
+            if rr.sqrt() <= tolerance * r0 {
                 converged = true;
                 break;
             }
@@ -648,4 +741,19 @@ impl Uploaded {
 /// The bytes a level-0 vector of `n0` f32 is read back in (whole RGBA rows).
 fn solution_bytes(n0: usize) -> u64 {
     (4 * n0.max(1)).div_ceil(16) as u64 * 16
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `coarsest` sweeps the coarsest level as often as the CPU's V-cycle.
+    #[test]
+    fn the_shaders_coarsest_sweeps_are_the_cpus() {
+        let line = format!("const COARSEST_SWEEPS: u32 = {COARSEST_SWEEPS}u;");
+        assert!(
+            DIFFUSION_WGSL.contains(&line),
+            "diffusion.wgsl lacks `{line}`"
+        );
+    }
 }

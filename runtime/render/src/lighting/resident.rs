@@ -1,36 +1,65 @@
 //! The transport's source iteration kept on the GPU: the sweeps' moments, the acceleration's
-//! diffusion solves and the convergence test's sums stay in GPU buffers from round to round,
-//! and a round sends nothing up and reads back only the solves' scalars and the change's
-//! partial sums. The moments come back when the caller asks for them ([`Resident::moments`]:
-//! once at the end of a relight's call, not once a round).
+//! diffusion solves and the convergence test's sums stay in GPU buffers from round to round
+//! and from one step of a relight to the next. A round is two submissions and two readbacks
+//! of a few hundred bytes (the solves' flags, the change's partial sums); the moments come back
+//! when the caller asks for them ([`Resident::moments`]: once at the end of a relight's call,
+//! not once a round). Before, a round sent the moments up and read them back (2 × 304 bytes a
+//! voxel) and each conjugate-gradient iteration of each channel's acceleration waited for three
+//! readbacks of its scalars.
 //!
 //! A round (as [`super::transport::iterate`] with coupled's acceleration, in f32):
 //! 1. the sweeps from the moments into `next` ([`super::transport_gpu`]);
 //! 2. per channel, the acceleration's right-hand side h³ σ′_s Δφ_00 / √(4π) formed in the
-//!    diffusion solver's own vectors (`resident.wgsl`'s `source`), the solve of the round's
-//!    error by conjugate gradients on the GPU ([`super::diffusion_gpu`], f32 to
-//!    [`super::diffusion_gpu::INNER_TOLERANCE`]), and the correction √(4π) e added to the new
-//!    φ_00 (`correct`);
-//! 3. the relative change of the green φ_00 summed per workgroup (`change`), and the new
-//!    moments copied over the old.
+//!    diffusion solver's own vectors (`resident.wgsl`'s `source`) and the solve of the round's
+//!    error by conjugate gradients driven on the GPU ([`super::diffusion_gpu`]'s `scalars`: a
+//!    chunk of iterations recorded, each doing nothing once the solve has finished), its flags
+//!    read back, another chunk where one has not finished;
+//! 3. the correction √(4π) e added to the new φ_00 (`correct`), the relative change of the
+//!    green φ_00 summed per workgroup (`change`), the new moments copied over the old, and the
+//!    sums read back.
 //!
-//! Where it departs from the CPU's iteration: the acceleration's solve stops at the inner
-//! solve's relative residual of 10⁻³ (f32) without the f64 refinement around it, which the
-//! acceleration's tolerance (10⁻², coupled's `ACCELERATION_TOLERANCE`) never needed: one
-//! inner solve already meets it. The moments are f32 throughout, as the GPU sweeps' were.
+//! Where it departs from the CPU's iteration: the moments are f32 throughout, as the GPU
+//! sweeps' were, and the acceleration's conjugate gradients run in f32 to its relative
+//! residual of 10⁻² (coupled's `ACCELERATION_TOLERANCE`) without the f64 refinement that the
+//! diffusion's own solve (10⁻⁶) needs.
 
 use std::sync::Arc;
 
 use runtime::gpu::{Gpu, Readback};
 
 use super::diffusion::Operator;
-use super::diffusion_gpu::Uploaded;
+use super::diffusion_gpu::{COEF_BYTES, Uploaded};
 use super::transport::{HARMONICS, Medium, PER_VOXEL};
 use super::transport_gpu::{STRIDE, Sweeps};
 use crate::gpu::{RenderError, entry, filled};
 
 /// The glue's WGSL.
 pub const RESIDENT_WGSL: &str = include_str!("resident.wgsl");
+
+/// Iterations of an acceleration's solve recorded in a round's first submission: the first
+/// round's [`FIRST_CHUNK`], each later one's what the last round's solve of that channel took
+/// and [`SLACK`] more (the iterations recorded after a solve finishes do nothing, but each
+/// still launches its invocations; a solve not finished gets half as many again). A solve takes
+/// 18–22 at the acceleration's relative residual of 10⁻² on dense_cumulus (realtime,
+/// 64 × 35 × 64 voxels), about as many from round to round.
+pub const FIRST_CHUNK: usize = 8;
+/// See [`FIRST_CHUNK`].
+pub const SLACK: usize = 1;
+
+/// What a [`Resident`] iteration has submitted and read back.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize)]
+pub struct Traffic {
+    /// Rounds (source iterations).
+    pub rounds: usize,
+    /// Command buffers submitted.
+    pub submits: usize,
+    /// Dispatches recorded.
+    pub dispatches: usize,
+    /// Readbacks (each waits for the GPU).
+    pub readbacks: usize,
+    /// Bytes read back.
+    pub bytes_read: u64,
+}
 
 /// Invocations per workgroup and workgroups along x of a dispatch (`resident.wgsl`).
 const WG: usize = 64;
@@ -118,23 +147,28 @@ pub struct Resident {
     /// Per channel, the glue's bindings (the moments, that channel's solver vectors).
     bindings: Vec<wgpu::BindGroup>,
     partial: wgpu::Buffer,
+    /// Each channel's solve's scalars, copied out together.
+    flags: wgpu::Buffer,
     readback: Readback,
+    traffic: Traffic,
+    /// Per channel, the iterations to record in a round's first submission ([`FIRST_CHUNK`]).
+    expected: [usize; 3],
     groups: (u32, u32),
-    /// The inner solves' iteration cap.
-    cap: usize,
+    /// The acceleration's solves' relative residual and iteration cap.
+    limits: (f64, usize),
     _keep: Vec<wgpu::Buffer>,
 }
 
 impl Resident {
     /// The iteration of `medium` on `sweeps`' grid from `start`, with `operators` (one per
-    /// channel) accelerating it, each solve capped at `cap` iterations: the start uploaded
+    /// channel) accelerating it, each solve to `limits` (relative residual, iterations): the start uploaded
     /// once. Refused where the adapter cannot hold an operator's hierarchy.
     pub fn new(
         (gpu, kernels, solver): (&Gpu, &Kernels, &super::diffusion_gpu::Solver),
         sweeps: Sweeps,
         (medium, operators): (&Medium, &[Arc<Operator>]),
         start: &[[f64; PER_VOXEL]],
-        cap: usize,
+        limits: (f64, usize),
     ) -> Result<Self, RenderError> {
         let device = &gpu.device;
         let n = sweeps.voxels();
@@ -228,9 +262,21 @@ impl Resident {
         }
         keep.push(idle);
         sweeps.write_moments(start);
+        for solve in solves.iter().flatten() {
+            solve.set_limits(limits);
+        }
+        let flags = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("photometeor resident solves' scalars"),
+            size: 3 * COEF_BYTES,
+            usage: U::COPY_DST | U::COPY_SRC,
+            mapped_at_creation: false,
+        });
         Ok(Self {
             gpu: gpu.clone(),
-            readback: Readback::new(gpu, partial.size()),
+            readback: Readback::new(gpu, partial.size().max(flags.size())),
+            flags,
+            traffic: Traffic::default(),
+            expected: [FIRST_CHUNK; 3],
             sweeps,
             solves,
             source: kernels.source.clone(),
@@ -239,7 +285,7 @@ impl Resident {
             bindings,
             partial,
             groups,
-            cap,
+            limits,
             _keep: keep,
         })
     }
@@ -271,54 +317,144 @@ impl Resident {
     /// One accelerated round: the new moments replace the old on the GPU; the relative change
     /// of the green φ_00 (rms) is returned. Fails where an acceleration's solve does not
     /// converge within the cap.
+    ///
+    /// Two submissions in the common case: the sweeps, each channel's right-hand side and
+    /// the first [`CHUNK`] iterations of its solve, driven on the GPU, then the solves'
+    /// scalars read back (a channel not yet finished gets another chunk); then the
+    /// corrections, the change's sums and the moments' copy, and the sums read back.
     pub fn iterate(&mut self) -> Result<f64, String> {
-        let queue = &self.gpu.queue;
+        let (tolerance, cap) = self.limits;
         let mut encoder = self.encoder();
         self.sweeps.record(&mut encoder);
-        for (c, solve) in self.solves.iter().enumerate() {
-            if solve.is_some() {
-                self.glue(&mut encoder, &self.source, c);
+        self.traffic.dispatches += self.sweeps.dispatches();
+        let all: Vec<usize> = (0..3).filter(|&c| self.solves[c].is_some()).collect();
+        let mut recorded = self.expected.map(|e| e.clamp(1, cap.max(1)));
+        self.solve_chunk(&mut encoder, &all, true, recorded);
+        loop {
+            self.submit(encoder);
+            let flags = self.read_flags()?;
+            let pending: Vec<usize> = all.iter().copied().filter(|&c| flags[c].0 == 0.0).collect();
+            if pending.is_empty() {
+                for &c in &all {
+                    let (_, taken, converged) = flags[c];
+                    // The next round's solve takes about as many.
+                    self.expected[c] = taken as usize + SLACK;
+                    if converged == 0.0 {
+                        return Err(format!(
+                            "channel {}'s acceleration did not reach its relative residual of \
+                             {tolerance} in {taken} iterations (max_diffusion_iterations {cap})",
+                            ["R", "G", "B"][c]
+                        ));
+                    }
+                }
+                break;
             }
-        }
-        queue.submit([encoder.finish()]);
-        for (c, solve) in self.solves.iter().enumerate() {
-            let Some(solve) = solve else { continue };
-            let (taken, converged) = solve.inner_on_gpu(self.cap).map_err(|e| e.to_string())?;
-            if !converged {
+            if let Some(&c) = pending.iter().find(|&&c| recorded[c] > cap) {
                 return Err(format!(
-                    "channel {}'s solve did not reach its relative residual of {} in {taken} \
-                     iterations (max_diffusion_iterations {})",
+                    "channel {}'s acceleration on the GPU did not finish within {} iterations \
+                     (max_diffusion_iterations {cap})",
                     ["R", "G", "B"][c],
-                    super::diffusion_gpu::INNER_TOLERANCE,
-                    self.cap
+                    recorded[c]
                 ));
             }
+            // More for the solves not finished: half as many again.
+            let more = recorded.map(|r| (r / 2).max(2));
+            for &c in &pending {
+                recorded[c] += more[c];
+            }
+            encoder = self.encoder();
+            self.solve_chunk(&mut encoder, &pending, false, more);
         }
         let mut encoder = self.encoder();
-        for (c, solve) in self.solves.iter().enumerate() {
-            if solve.is_some() {
-                self.glue(&mut encoder, &self.correct, c);
-            }
+        for &c in &all {
+            self.glue(&mut encoder, &self.correct, c);
         }
         // The convergence test's channel: green.
         self.glue(&mut encoder, &self.change, 1);
+        self.traffic.dispatches += all.len() + 1;
         encoder.copy_buffer_to_buffer(&self.sweeps.next, 0, &self.sweeps.moments, 0, None);
-        queue.submit([encoder.finish()]);
-        let rows = self
-            .readback
-            .read(&self.gpu, &self.partial, 0, self.partial.size())
-            .map_err(|e| e.to_string())?;
+        self.submit(encoder);
+        let partial = self.partial.clone();
+        let rows = self.read(&partial)?;
         let floats: &[f32] = bytemuck::cast_slice(&rows);
         let (mut d, mut t) = (0.0, 0.0);
         for pair in floats.chunks_exact(2) {
             d += f64::from(pair[0]);
             t += f64::from(pair[1]);
         }
+        self.traffic.rounds += 1;
         Ok((d / t.max(f64::MIN_POSITIVE)).sqrt())
     }
 
+    /// Records, for each of `channels`, `iterations[c]` iterations of its acceleration's
+    /// solve (with `start`: its right-hand side and its start first), then copies its scalars
+    /// out.
+    fn solve_chunk(
+        &mut self,
+        encoder: &mut wgpu::CommandEncoder,
+        channels: &[usize],
+        start: bool,
+        iterations: [usize; 3],
+    ) {
+        {
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("photometeor resident acceleration"),
+                timestamp_writes: None,
+            });
+            for &c in channels {
+                let solve = self.solves[c].as_ref().expect("a channel with a solve");
+                if start {
+                    pass.set_pipeline(&self.source);
+                    pass.set_bind_group(0, &self.bindings[c], &[]);
+                    pass.dispatch_workgroups(self.groups.0, self.groups.1, 1);
+                    self.traffic.dispatches += 1;
+                }
+                self.traffic.dispatches += solve.record_iterations(&mut pass, start, iterations[c]);
+            }
+        }
+        for &c in channels {
+            let solve = self.solves[c].as_ref().expect("a channel with a solve");
+            let at = c as u64 * COEF_BYTES;
+            encoder.copy_buffer_to_buffer(solve.scalars(), 0, &self.flags, at, COEF_BYTES);
+        }
+    }
+
+    fn submit(&mut self, encoder: wgpu::CommandEncoder) {
+        self.gpu.queue.submit([encoder.finish()]);
+        self.traffic.submits += 1;
+    }
+
+    /// `buffer` read back whole.
+    fn read(&mut self, buffer: &wgpu::Buffer) -> Result<Vec<[f32; 4]>, String> {
+        let size = buffer.size();
+        self.traffic.readbacks += 1;
+        self.traffic.bytes_read += size;
+        self.readback
+            .read(&self.gpu, buffer, 0, size)
+            .map_err(|e| e.to_string())
+    }
+
+    /// Per channel, its solve's state: (finished, iterations taken, converged).
+    fn read_flags(&mut self) -> Result<[(f32, f32, f32); 3], String> {
+        let flags = self.flags.clone();
+        let rows = self.read(&flags)?;
+        let floats: &[f32] = bytemuck::cast_slice(&rows);
+        let per = (COEF_BYTES / 4) as usize;
+        Ok(std::array::from_fn(|c| {
+            let f = &floats[c * per..];
+            (f[2], f[5], f[6])
+        }))
+    }
+
+    /// What it has sent and read back so far.
+    pub fn traffic(&self) -> Traffic {
+        self.traffic
+    }
+
     /// The moments as they stand (read back).
-    pub fn moments(&self) -> Result<Vec<[f64; PER_VOXEL]>, RenderError> {
+    pub fn moments(&mut self) -> Result<Vec<[f64; PER_VOXEL]>, RenderError> {
+        self.traffic.readbacks += 1;
+        self.traffic.bytes_read += self.sweeps.moments.size();
         self.sweeps.read(&self.sweeps.moments)
     }
 }

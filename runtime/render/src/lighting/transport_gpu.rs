@@ -455,6 +455,11 @@ impl Sweeps {
         self.voxels
     }
 
+    /// The dispatches of a round.
+    pub(crate) fn dispatches(&self) -> usize {
+        self.layers.len()
+    }
+
     /// Writes the moments `m` the next round sweeps from (f32).
     pub(crate) fn write_moments(&self, m: &[[f64; PER_VOXEL]]) {
         let mut data = vec![0f32; STRIDE * self.voxels];
