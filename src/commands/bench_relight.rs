@@ -12,6 +12,7 @@ use anyhow::{Context, Result, bail};
 use clap::Args;
 use render::coupled::{gather, light};
 use render::error_map::{self, LUMA, Pixels};
+use render::lighting::resident::Traffic;
 use render::{Image, ModelSettings};
 use serde_json::json;
 
@@ -128,6 +129,7 @@ pub fn run(b: RelightBench) -> Result<()> {
         for (start, previous) in [("cold", None), ("warm", Some(&last))] {
             let mut relight = light::Relight::new(tables, &to, &settings, previous)?;
             let (mut seconds, mut images) = (0.0, Vec::new());
+            let mut traffic = Default::default();
             loop {
                 let t = Instant::now();
                 let done = relight.advance(tables, (on(), &()), Some(Duration::ZERO))?;
@@ -135,6 +137,7 @@ pub fn run(b: RelightBench) -> Result<()> {
                 if let Some(lighting) = relight.current() {
                     if done {
                         swept_on.clone_from(&lighting.report.transport_on);
+                        traffic = lighting.report.transport_traffic;
                     }
                     let image = gather::gather(tables, &to, &settings, &lighting)?;
                     images.push((relight.steps(), seconds, image));
@@ -156,7 +159,7 @@ pub fn run(b: RelightBench) -> Result<()> {
                     })
                 })
                 .collect::<Result<Vec<_>>>()?;
-            runs.push((moved, start, measured));
+            runs.push((moved, start, measured, traffic));
         }
     }
     let device = gpu.as_ref().map(|g| g.describe());
@@ -193,7 +196,9 @@ fn rms_difference(a: &Image, b: &Image) -> f64 {
     (d / n as f64).sqrt() / (y / n as f64)
 }
 
-type Run = (f64, &'static str, Vec<Measured>);
+/// A sun move, its start, each drawn step, and what the transport's iteration on the GPU
+/// submitted and read back (zero on the CPU).
+type Run = (f64, &'static str, Vec<Measured>, Traffic);
 
 /// Prints the runs (JSON with --json): the settings, the adapter (with --gpu) and where the
 /// transport's sweeps ran.
@@ -212,9 +217,10 @@ fn report(
             "adapter": adapter,
             "transport_swept_on": swept_on,
             "threads": rayon::current_num_threads(),
-            "runs": runs.iter().map(|(moved, start, steps)| json!({
+            "runs": runs.iter().map(|(moved, start, steps, traffic)| json!({
                 "moved_deg": moved,
                 "start": start,
+                "transport_traffic": traffic,
                 "steps": steps.iter().map(|m| json!({
                     "step": m.step,
                     "seconds": m.seconds,
@@ -236,8 +242,15 @@ fn report(
         frame.height,
         settings.preset.name()
     );
-    for (moved, start, steps) in runs {
+    for (moved, start, steps, t) in runs {
         println!("sun moved {moved}°, {start} start:");
+        if t.rounds > 0 {
+            println!(
+                "  the transport on the GPU: {} rounds, {} submissions, {} dispatches, {} \
+                 readbacks of {} bytes in all",
+                t.rounds, t.submits, t.dispatches, t.readbacks, t.bytes_read
+            );
+        }
         for m in steps {
             let truth = m.truth.map_or(String::new(), |(bias, rms)| {
                 format!(

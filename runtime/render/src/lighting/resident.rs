@@ -319,7 +319,7 @@ impl Resident {
     /// converge within the cap.
     ///
     /// Two submissions in the common case: the sweeps, each channel's right-hand side and
-    /// the first [`CHUNK`] iterations of its solve, driven on the GPU, then the solves'
+    /// the first iterations of its solve ([`FIRST_CHUNK`]), driven on the GPU, then the solves'
     /// scalars read back (a channel not yet finished gets another chunk); then the
     /// corrections, the change's sums and the moments' copy, and the sums read back.
     pub fn iterate(&mut self) -> Result<f64, String> {
