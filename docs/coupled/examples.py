@@ -45,6 +45,27 @@ def file_stem(name):
     return name.replace(" (sky off)", "-sky-off").replace(" (fogbow)", "-fogbow")
 
 
+def cases():
+    """The cases: (name, scene file, width, height), the variants' scene files written under
+    WORK."""
+    os.makedirs(WORK, exist_ok=True)
+    out = []
+    for name, w, h, sky_off in SCENES:
+        scene = os.path.join(ROOT, "data", "scenes", f"{name}.toml")
+        out.append((name, scene, w, h))
+        if sky_off:
+            # The same scene with `[sky] enabled = false` (these scenes have no [sky] table).
+            path = os.path.join(WORK, f"{name}.toml")
+            open(path, "w").write(open(scene).read() + "\n[sky]\nenabled = false\n")
+            out.append((f"{name} (sky off)", path, w, h))
+        if name == "glory":
+            path = os.path.join(WORK, "glory-fogbow.toml")
+            text = open(scene).read().replace("fov_deg = 36", f"fov_deg = {FOGBOW_FOV:g}")
+            open(path, "w").write(text)
+            out.append(("glory (fogbow)", path, FOGBOW_SIZE, FOGBOW_SIZE))
+    return out
+
+
 def run(args):
     r = subprocess.run([BIN] + args, capture_output=True, text=True)
     if r.returncode != 0:
@@ -89,23 +110,8 @@ def main():
     from pair import read_exr, rings
     only = a.only.split(",") if a.only else None
     models = a.models.split(",")
-    os.makedirs(WORK, exist_ok=True)
     report = {"quality": "draft", "scenes": {}}
-    cases = []
-    for name, w, h, sky_off in SCENES:
-        scene = os.path.join(ROOT, "data", "scenes", f"{name}.toml")
-        cases.append((name, scene, w, h))
-        if sky_off:
-            # The same scene with `[sky] enabled = false` (these scenes have no [sky] table).
-            path = os.path.join(WORK, f"{name}.toml")
-            open(path, "w").write(open(scene).read() + "\n[sky]\nenabled = false\n")
-            cases.append((f"{name} (sky off)", path, w, h))
-        if name == "glory":
-            path = os.path.join(WORK, "glory-fogbow.toml")
-            text = open(scene).read().replace("fov_deg = 36", f"fov_deg = {FOGBOW_FOV:g}")
-            open(path, "w").write(text)
-            cases.append(("glory (fogbow)", path, FOGBOW_SIZE, FOGBOW_SIZE))
-    for name, scene, w, h in cases:
+    for name, scene, w, h in cases():
         if only and name not in only:
             continue
         file = file_stem(name)
