@@ -9,16 +9,16 @@
 //! A e = r, and an outer loop on the CPU in f64 adds it, x ← x + e, and forms the true residual
 //! r = b − A x (mixed-precision iterative refinement, Wilkinson 1963; Moler 1967), until
 //! ‖r‖/‖b‖ is below the tolerance. Each refinement gains about three digits. The iterations
-//! reported are the inner ones, the residual the outer f64 one. The scalars of each iteration
-//! (r·z, d·Ad, r·r) are summed per workgroup on the GPU and the partial sums on the CPU in
-//! f64. The V-cycle's coarsest level (at most 64 voxels) is smoothed in one workgroup, one
+//! reported are the inner ones, the residual the outer f64 one. The V-cycle's coarsest level (at most 64 voxels) is smoothed in one workgroup, one
 //! dispatch for its 128 sweeps (`coarsest`: the same arithmetic).
 //!
-//! The transport's acceleration ([`super::resident`]) drives the iteration on the GPU instead:
-//! `scalars` sums the partial sums in f32 and forms α and β, tests the residual and the cap,
-//! and flags the iteration finished, after which every kernel returns at once; a chunk of
-//! iterations is recorded into one submission (`Uploaded::record_iterations`) and only the
-//! flags come back. Its tolerance (10⁻²) needs no f64 refinement.
+//! The conjugate gradients are driven on the GPU: the scalars of each iteration (r·z, d·Ad, r·r)
+//! are summed per workgroup, and `scalars` sums the partial sums in f32, forms α and β, tests
+//! the residual and the cap, and flags the iteration finished, after which every kernel returns
+//! at once. A chunk of iterations is recorded into one submission and only the flags come back
+//! (`Uploaded::drive`; before, each iteration waited for three readbacks of its partial sums,
+//! summed on the CPU in f64). The transport's acceleration ([`super::resident`]) records its
+//! chunks into the round's own submission; its tolerance (10⁻²) needs no f64 refinement.
 
 use std::sync::Arc;
 use std::time::Instant;
@@ -29,6 +29,9 @@ use super::diffusion::{
     COARSEST_SWEEPS, NotConverged, Operator, Problem, Solution, Stencil, assemble,
 };
 use crate::gpu::entry;
+
+/// Iterations of a GPU-driven solve recorded in its first submission ([`Uploaded::drive`]).
+const FIRST_CHUNK: usize = 8;
 
 /// The bytes of the iteration's scalars (`diffusion.wgsl`'s `coef`: α, β, and the GPU-driven
 /// iteration's state).
@@ -252,13 +255,12 @@ pub struct Uploaded {
     op: Arc<Operator>,
     bind_group: wgpu::BindGroup,
     v: wgpu::Buffer,
-    partial: wgpu::Buffer,
     coef: wgpu::Buffer,
     /// The one mappable buffer the sums and the solution are read through.
     readback: Readback,
-    _keep: [wgpu::Buffer; 2],
-    /// Workgroups of a level-0 vector operation (one partial sum each).
-    partials: usize,
+    /// Buffers the bind group reads: the dispatches' parameters, the operators, the partial
+    /// sums.
+    _keep: [wgpu::Buffer; 3],
     /// Offsets in the vector buffer: x, d, Ad, r_0, z_0.
     x: u64,
     r0: u64,
@@ -496,11 +498,9 @@ impl Uploaded {
             op,
             bind_group,
             v,
-            readback: Readback::new(gpu, partial.size().max(solution_bytes(n0))),
-            partial,
+            readback: Readback::new(gpu, solution_bytes(n0).max(COEF_BYTES)),
             coef,
-            _keep: [params, stencil],
-            partials,
+            _keep: [params, stencil, partial],
             x: (4 * x) as u64,
             r0: (4 * r) as u64,
             n0,
@@ -512,13 +512,6 @@ impl Uploaded {
             update_d,
             control,
         })
-    }
-
-    /// Records `calls` into one compute pass and submits it.
-    fn submit(&self, calls: &[Call]) {
-        crate::gpu::submit_pass(&self.gpu, "photometeor diffusion", |pass| {
-            self.record(pass, calls);
-        });
     }
 
     /// Records `calls` into `pass`.
@@ -576,34 +569,21 @@ impl Uploaded {
         &self.coef
     }
 
-    /// The sums of the partial sums in slots 0 and 1 (f64).
-    fn sums(&self) -> Result<[f64; 2], GpuError> {
-        let size = self.partial.size();
-        let rows = self.readback.read(&self.gpu, &self.partial, 0, size)?;
-        let floats: &[f32] = bytemuck::cast_slice(&rows);
-        let sum = |s: usize| {
-            floats[s * self.partials..(s + 1) * self.partials]
-                .iter()
-                .map(|&v| f64::from(v))
-                .sum::<f64>()
-        };
-        Ok([sum(0), sum(1)])
-    }
-
     fn set_coef(&self, index: u64, value: f64) {
         self.gpu
             .queue
             .write_buffer(&self.coef, 4 * index, bytemuck::bytes_of(&(value as f32)));
     }
 
-    /// One f32 solve of A e = r to [`INNER_TOLERANCE`] within `cap` iterations: e and the
-    /// iterations taken.
+    /// One f32 solve of A e = r to [`INNER_TOLERANCE`] within `cap` iterations, driven on the
+    /// GPU ([`Uploaded::drive`]): e and the iterations taken.
     fn inner(&self, r: &[f64], cap: usize) -> Result<(Vec<f64>, usize), GpuError> {
         let data: Vec<f32> = r.iter().map(|&v| v as f32).collect();
         self.gpu
             .queue
             .write_buffer(&self.v, self.r0, bytemuck::cast_slice(&data));
-        let (taken, _) = self.inner_on_gpu(INNER_TOLERANCE, cap)?;
+        self.set_limits((INNER_TOLERANCE, cap));
+        let (taken, _) = self.drive(cap)?;
         let rows = self
             .readback
             .read(&self.gpu, &self.v, self.x, solution_bytes(self.n0))?;
@@ -611,47 +591,39 @@ impl Uploaded {
         Ok((e[..self.n0].iter().map(|&v| f64::from(v)).collect(), taken))
     }
 
-    /// The f32 solve of A e = r with r already in the vectors at [`Uploaded::rhs`], e left at
-    /// [`Uploaded::solution`]: the iterations taken and whether it reached the relative
-    /// residual `tolerance` (a zero r is solved by e = 0; one whose norm is not finite is not
-    /// solved). Only the iterations' scalars come back.
-    pub(crate) fn inner_on_gpu(
-        &self,
-        tolerance: f64,
-        cap: usize,
-    ) -> Result<(usize, bool), GpuError> {
-        // Not finished (the GPU-driven iteration's flag: every kernel would do nothing).
-        self.set_coef(2, 0.0);
-        self.set_coef(1, 0.0);
-        self.submit(&self.first);
-        let [mut rz, rr0] = self.sums()?;
-        let r0 = rr0.sqrt();
-        if !r0.is_finite() {
-            return Ok((0, false));
-        }
-        let mut taken = 0;
-        let mut converged = r0 == 0.0;
-        while taken < cap && !converged {
-            self.submit(&self.apply);
-            let [dad, _] = self.sums()?;
-            if dad <= 0.0 {
-                break;
+    /// The GPU-driven iteration ([`Uploaded::record_iterations`]) from the right-hand side at
+    /// [`Uploaded::rhs`] to its limits ([`Uploaded::set_limits`]), recorded in chunks of
+    /// [`FIRST_CHUNK`] iterations and then half as many again until it finishes (its flags read
+    /// back after each; at most `cap` iterations): the iterations taken and whether it
+    /// converged (a zero right-hand side is solved by e = 0; one whose norm is not finite is
+    /// not solved).
+    fn drive(&self, cap: usize) -> Result<(usize, bool), GpuError> {
+        let (mut recorded, mut chunk, mut start) = (0, FIRST_CHUNK.min(cap.max(1)), true);
+        loop {
+            let mut encoder =
+                self.gpu
+                    .device
+                    .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                        label: Some("photometeor diffusion"),
+                    });
+            {
+                let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                    label: Some("photometeor diffusion"),
+                    timestamp_writes: None,
+                });
+                self.record_iterations(&mut pass, start, chunk);
             }
-            self.set_coef(0, rz / dad);
-            self.submit(&self.update_xr);
-            taken += 1;
-            let [_, rr] = self.sums()?;
-            if rr.sqrt() <= tolerance * r0 {
-                converged = true;
-                break;
+            self.gpu.queue.submit([encoder.finish()]);
+            recorded += chunk;
+            start = false;
+            let rows = self.readback.read(&self.gpu, &self.coef, 0, COEF_BYTES)?;
+            let flags: &[f32] = bytemuck::cast_slice(&rows);
+            let (done, taken, converged) = (flags[2] != 0.0, flags[5] as usize, flags[6] != 0.0);
+            if done || recorded >= cap {
+                return Ok((taken, converged));
             }
-            self.submit(&self.after_vcycle);
-            let [rz_new, _] = self.sums()?;
-            self.set_coef(1, rz_new / rz);
-            rz = rz_new;
-            self.submit(&self.update_d);
+            chunk = (chunk / 2).max(2).min(cap - recorded);
         }
-        Ok((taken, converged))
     }
 
     /// The vectors' buffer (f32; every level's z, r, res, then x, d, A d of the finest).
