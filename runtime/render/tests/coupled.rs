@@ -349,6 +349,102 @@ fn the_gpu_gather_equals_the_cpu_reference() {
     }
 }
 
+/// A lighting whose transport ran on the GPU carries its moments' buffer, and the GPU gather on
+/// that device reads them there: the image is the one gathered from the moments read back
+/// (bit for bit: the same f32 values), and it does not change when the read-back moments are
+/// zeroed, which changes the image of a lighting without the buffer.
+#[test]
+fn the_gpu_gather_reads_the_transports_moments_in_place() {
+    let Some(gpu) = common::gpu() else { return };
+    let (_tmp, dir) = bake(&fields());
+    let tables = Tables::open(&dir).unwrap();
+    let frame = lit_ball(&tables);
+    let uploaded =
+        runtime::gpu::GpuTables::upload(&gpu, &tables, runtime::gpu::TexelFormat::F32).unwrap();
+    let renderer = render::coupled::gpu::Renderer::new(&gpu, &uploaded);
+    let pipelines = render::lighting::Pipelines::default();
+    let settings = Settings {
+        directions: 32,
+        transport_coarsening: 2,
+        per_sun: render::lighting::Place::Gpu,
+        ..Settings::default()
+    };
+    let lit = light::light_on(&tables, &frame, &settings, &(), Some(pipelines.on(&gpu))).unwrap();
+    assert!(lit.sh_on_gpu.is_some());
+    let draw = |lighting: light::Lighting| {
+        let lighting = std::sync::Arc::new(lighting);
+        let (image, _) = renderer
+            .gather(&gpu, &tables, &uploaded, &frame, &settings, &lighting)
+            .unwrap();
+        image
+    };
+    let zeroed = |mut l: light::Lighting| {
+        l.sh.iter_mut().for_each(|m| m.fill(0.0));
+        l
+    };
+    let uploaded_sh = light::Lighting {
+        sh_on_gpu: None,
+        ..lit.clone()
+    };
+    let in_place = draw(lit.clone());
+    assert_eq!(in_place.rgb, draw(uploaded_sh.clone()).rgb);
+    assert_eq!(in_place.rgb, draw(zeroed(lit)).rgb);
+    assert_ne!(in_place.rgb, draw(zeroed(uploaded_sh)).rgb);
+}
+
+/// Each step of a relight on the GPU drawn by the GPU gather (the lighting's other buffers kept
+/// from the step before, the moments read in place) equals the CPU gather of that step's
+/// read-back lighting, as one lighting's does (`the_gpu_gather_equals_the_cpu_reference`).
+#[test]
+fn the_gpu_gather_draws_each_step_of_a_relight() {
+    let Some(gpu) = common::gpu() else { return };
+    let (_tmp, dir) = bake(&fields());
+    let tables = Tables::open(&dir).unwrap();
+    let frame = ball_on(&tables, 8.0, 90.0, 16);
+    let uploaded =
+        runtime::gpu::GpuTables::upload(&gpu, &tables, runtime::gpu::TexelFormat::F32).unwrap();
+    let renderer = render::coupled::gpu::Renderer::new(&gpu, &uploaded);
+    let pipelines = render::lighting::Pipelines::default();
+    let settings = Settings {
+        directions: 32,
+        transport_tolerance: 1e-3,
+        per_sun: render::lighting::Place::Gpu,
+        ..Settings::default()
+    };
+    let mut relight = light::Relight::new(&tables, &frame, &settings, None).unwrap();
+    let mut drawn = 0;
+    loop {
+        let on = Some(pipelines.on(&gpu));
+        let done = relight
+            .advance(&tables, (on, &()), Some(std::time::Duration::ZERO))
+            .unwrap();
+        if let Some(lighting) = relight.current() {
+            // From the first iteration on (step 3), the moments are on the GPU.
+            assert_eq!(lighting.sh_on_gpu.is_some(), relight.steps() >= 3);
+            let lighting = std::sync::Arc::new(lighting);
+            let cpu_image = gather::gather(&tables, &frame, &settings, &lighting).unwrap();
+            let (gpu_image, _) = renderer
+                .gather(&gpu, &tables, &uploaded, &frame, &settings, &lighting)
+                .unwrap();
+            let worst = common::assert_gpu_matches_cpu(
+                (&gpu_image.rgb, &gpu_image.transparency),
+                (&cpu_image.rgb, &cpu_image.transparency),
+                (1.2e-5, 1.2e-6, 6e-6),
+                "coupled gather of a step",
+            );
+            eprintln!(
+                "step {}: worst |GPU − CPU| {worst:.2} of the tolerance",
+                relight.steps()
+            );
+            drawn += 1;
+        }
+        if done {
+            break;
+        }
+    }
+    assert!(drawn >= 3, "{drawn} steps drawn");
+}
+
 /// An orthographic camera (`projection = "orthographic"`): each pixel of the CPU gather is the
 /// radiance along the view direction from its own point of the image plane, the one-pixel
 /// perspective image from there (the GPU's equals the CPU's in the test above).

@@ -15,6 +15,9 @@
 //! uploads only its parameters, the densities and its image. On dense_cumulus (128 × 70 × 128,
 //! the transport on 64 × 35 × 64 blocks) they take 87.5 + 41.6 MiB in f32; before, every view
 //! converted and uploaded 420 MiB, the moments interpolated to every voxel of the grid.
+//! Between the steps of one relight ([`Lighting::relight`]) only the moments change, and where
+//! the transport ran on this device the gather binds its buffer of them in place
+//! ([`Lighting::sh_on_gpu`]): a step then uploads nothing of the lighting.
 
 use std::sync::{Arc, Mutex, Weak};
 use std::time::Instant;
@@ -133,6 +136,9 @@ struct Resident {
     /// The lighting they hold (weak: the renderer does not keep a lighting alive, and an
     /// allocation a `Weak` points to is not reused, so a live match is the same lighting).
     of: Weak<Lighting>,
+    /// The relight it came from ([`Lighting::relight`]): its other steps' lightings keep
+    /// `lighting` and `blurred` and bring their own moments.
+    relight: Weak<()>,
     lighting: wgpu::Buffer,
     moments: wgpu::Buffer,
     blurred: wgpu::Buffer,
@@ -264,9 +270,22 @@ impl Renderer {
             .and_then(|r| r.of.upgrade())
             .is_some_and(|of| Arc::ptr_eq(&of, lighting));
         if !kept {
-            // The old lighting's buffers go before the new ones are made.
-            *resident = None;
-            *resident = Some(upload(device, lighting, voxels));
+            let same_relight = resident
+                .as_ref()
+                .and_then(|r| r.relight.upgrade())
+                .is_some_and(|of| Arc::ptr_eq(&of, &lighting.relight));
+            match resident.as_mut() {
+                // Another step of the same relight: only its moments are new.
+                Some(held) if same_relight => {
+                    held.moments = moments_buffer(device, lighting);
+                    held.of = Arc::downgrade(lighting);
+                }
+                _ => {
+                    // The old lighting's buffers go before the new ones are made.
+                    *resident = None;
+                    *resident = Some(upload(device, lighting, voxels));
+                }
+            }
         }
         let held = resident.as_ref().expect("uploaded");
         let params = filled(
@@ -323,7 +342,7 @@ impl Renderer {
 
 /// `lighting`'s buffers for the gather (`voxels` of the frame's grid): its [`LightVoxel`]s, the
 /// blurred phase functions (one unread value without the δ-split) and the transport's moments
-/// (one unread row without the transport).
+/// ([`moments_buffer`]).
 fn upload(device: &wgpu::Device, lighting: &Arc<Lighting>, voxels: usize) -> Resident {
     // Converted on every thread (dense_cumulus, 1.1 M voxels, a first view at 64 × 48 on 2
     // cores and lavapipe: 0.45 s with the conversion on one thread, 0.38 s).
@@ -346,6 +365,27 @@ fn upload(device: &wgpu::Device, lighting: &Arc<Lighting>, voxels: usize) -> Res
             }
         })
         .collect();
+    let blurred = lighting.blur.as_ref().map_or(vec![0.0f32], |b| b.rows());
+    let storage =
+        |label: &str, bytes: &[u8]| filled(device, label, bytes, wgpu::BufferUsages::STORAGE);
+    Resident {
+        of: Arc::downgrade(lighting),
+        relight: Arc::downgrade(&lighting.relight),
+        lighting: storage("photometeor coupled lighting", bytemuck::cast_slice(&rows)),
+        moments: moments_buffer(device, lighting),
+        blurred: storage(
+            "photometeor coupled blurred phase functions",
+            bytemuck::cast_slice(&blurred),
+        ),
+    }
+}
+
+/// The transport's moments of `lighting` for the gather (one unread row without the
+/// transport): the buffer they were computed in where that is on this device, else uploaded.
+fn moments_buffer(device: &wgpu::Device, lighting: &Lighting) -> wgpu::Buffer {
+    if let Some(m) = lighting.sh_on_gpu.as_ref().filter(|m| &m.device == device) {
+        return m.buffer.clone();
+    }
     let mut moments: Vec<Moments> = lighting
         .sh
         .par_iter()
@@ -358,19 +398,10 @@ fn upload(device: &wgpu::Device, lighting: &Arc<Lighting>, voxels: usize) -> Res
     if moments.is_empty() {
         moments.push(Moments::default());
     }
-    let blurred = lighting.blur.as_ref().map_or(vec![0.0f32], |b| b.rows());
-    let storage =
-        |label: &str, bytes: &[u8]| filled(device, label, bytes, wgpu::BufferUsages::STORAGE);
-    Resident {
-        of: Arc::downgrade(lighting),
-        lighting: storage("photometeor coupled lighting", bytemuck::cast_slice(&rows)),
-        moments: storage(
-            "photometeor coupled transport moments",
-            bytemuck::cast_slice(&moments),
-        ),
-        blurred: storage(
-            "photometeor coupled blurred phase functions",
-            bytemuck::cast_slice(&blurred),
-        ),
-    }
+    filled(
+        device,
+        "photometeor coupled transport moments",
+        bytemuck::cast_slice(&moments),
+        wgpu::BufferUsages::STORAGE,
+    )
 }

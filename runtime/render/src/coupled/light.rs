@@ -20,7 +20,7 @@ use super::{Diffuse, Settings, Source, Split};
 use crate::lighting::beam::{BeamMedium, BeamState, Depth, PeakFrom, beam_sweep};
 use crate::lighting::diffusion::{self, Problem};
 use crate::lighting::lattice::{MIN_DIFFUSION_VOXEL_DEPTH, Voxels, voxel_size, voxels};
-use crate::lighting::resident::Resident;
+use crate::lighting::resident::{MomentsOnGpu, Resident};
 use crate::lighting::sky::{self, Sky, sky_light};
 use crate::lighting::sun::{ShadowMap, reduced_sun, transmittance_to_sun};
 use crate::lighting::{OnGpu, Place, run, transport};
@@ -144,6 +144,18 @@ pub struct Lighting {
     pub shadow: ShadowMap,
     /// Times, iterations, residuals and the energy budget.
     pub report: CoupledReport,
+    /// [`Lighting::sh`] where the transport's iteration ran on the GPU: that device's buffer
+    /// of them, which a GPU gather on the same device reads in place. They are the relight's
+    /// buffer, not a copy: a lighting drawn between two steps of a relight
+    /// ([`Relight::current`]) reads the moments as they stand when it is drawn, which a later
+    /// step moves on (its `sh` stays those of its own step); once the relight is done they no
+    /// longer change.
+    pub sh_on_gpu: Option<MomentsOnGpu>,
+    /// Shared by every lighting one relight draws (its steps' and its result): all of them but
+    /// [`Lighting::sh`] and [`Lighting::sh_on_gpu`] is the same, so a GPU gather keeps the rest
+    /// on the GPU from one step's lighting to the next. A lighting changed otherwise must take a
+    /// new one.
+    pub relight: Arc<()>,
 }
 
 impl Lighting {
@@ -499,6 +511,7 @@ impl Relight {
                 let (base, run) = &**t;
                 let mut lighting = base.clone();
                 lighting.sh = run.moments.clone();
+                lighting.sh_on_gpu = run.resident.as_ref().map(Resident::moments_on_gpu);
                 lighting.report.transport_iterations = run.report.changes.len();
                 Some(lighting)
             }
@@ -662,6 +675,8 @@ impl Relight {
             sun_dir,
             shadow,
             report: self.report.clone(),
+            sh_on_gpu: None,
+            relight: Arc::new(()),
         };
         Ok(match run {
             None => Stage::Done(Box::new(base)),
@@ -814,6 +829,7 @@ impl Relight {
         r.transport_change = run.report.changes.last().copied().unwrap_or(0.0);
         r.transport_s = run.seconds;
         base.sh = run.moments;
+        base.sh_on_gpu = run.resident.as_ref().map(Resident::moments_on_gpu);
         base.report = r.clone();
         base
     }

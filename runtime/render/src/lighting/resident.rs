@@ -135,6 +135,16 @@ fn groups(n: usize) -> (u32, u32) {
     (wgs.min(ROW) as u32, wgs.div_ceil(ROW) as u32)
 }
 
+/// The transport's moments on the GPU that computed them, in the layout the gathers read
+/// (`STRIDE` floats a voxel, as the sweeps write them): the device and the buffer.
+#[derive(Debug, Clone)]
+pub struct MomentsOnGpu {
+    /// The device the buffer lives on.
+    pub device: wgpu::Device,
+    /// The moments.
+    pub buffer: wgpu::Buffer,
+}
+
 /// One transport solve's state on the GPU between its rounds (and a relight's steps).
 pub struct Resident {
     gpu: Gpu,
@@ -449,6 +459,14 @@ impl Resident {
     /// What it has sent and read back so far.
     pub fn traffic(&self) -> Traffic {
         self.traffic
+    }
+
+    /// The moments' buffer on the GPU and its device (the gather reads it in place).
+    pub fn moments_on_gpu(&self) -> MomentsOnGpu {
+        MomentsOnGpu {
+            device: self.gpu.device.clone(),
+            buffer: self.sweeps.moments.clone(),
+        }
     }
 
     /// The moments as they stand (read back).
