@@ -28,6 +28,8 @@ pub fn gather(
 ) -> Result<Image, FrameError> {
     check(tables, frame, settings)?;
     lighting.check_frame(frame)?;
+    // A relight's step on the GPU leaves its moments there: read back here.
+    let lighting = &*lighting.with_moments()?;
     let fields: Vec<&FieldTable> = tables.fields.iter().collect();
     let grid = &frame.grid;
     let step = 0.5

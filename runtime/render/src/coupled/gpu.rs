@@ -238,7 +238,7 @@ impl Renderer {
         let (w, h) = (frame.width, frame.height);
         let grid = &frame.grid;
         let voxels = grid.data.len();
-        let transport = !lighting.sh.is_empty();
+        let transport = lighting.has_transport();
         let GatherView { view, step } =
             gather_view(device, frame, std::mem::size_of::<LightVoxel>() as u64)?;
         let FieldsAndSky { sigma_ext, sky } = fields_and_sky(tables, frame);
@@ -383,7 +383,11 @@ fn upload(device: &wgpu::Device, lighting: &Arc<Lighting>, voxels: usize) -> Res
 /// The transport's moments of `lighting` for the gather (one unread row without the
 /// transport): the buffer they were computed in where that is on this device, else uploaded.
 fn moments_buffer(device: &wgpu::Device, lighting: &Lighting) -> wgpu::Buffer {
-    if let Some(m) = lighting.sh_on_gpu.as_ref().filter(|m| &m.device == device) {
+    if let Some(m) = lighting
+        .sh_on_gpu
+        .as_ref()
+        .filter(|m| &m.gpu.device == device)
+    {
         return m.buffer.clone();
     }
     let mut moments: Vec<Moments> = lighting

@@ -144,12 +144,12 @@ pub struct Lighting {
     pub shadow: ShadowMap,
     /// Times, iterations, residuals and the energy budget.
     pub report: CoupledReport,
-    /// [`Lighting::sh`] where the transport's iteration ran on the GPU: that device's buffer
-    /// of them, which a GPU gather on the same device reads in place. They are the relight's
-    /// buffer, not a copy: a lighting drawn between two steps of a relight
-    /// ([`Relight::current`]) reads the moments as they stand when it is drawn, which a later
-    /// step moves on (its `sh` stays those of its own step); once the relight is done they no
-    /// longer change.
+    /// The transport's moments where its iteration ran on the GPU: the adapter's buffer of
+    /// them, which a GPU gather on the same device reads in place. They are the relight's
+    /// buffer, not a copy: a lighting of a step ([`Relight::current`]) holds them there only
+    /// (its `sh` empty: [`Lighting::with_moments`] reads them back), as they stand when it is
+    /// drawn, which a later step moves on; the converged lighting holds them in `sh` too,
+    /// and they no longer change.
     pub sh_on_gpu: Option<MomentsOnGpu>,
     /// Shared by every lighting one relight draws (its steps' and its result): all of them but
     /// [`Lighting::sh`] and [`Lighting::sh_on_gpu`] is the same, so a GPU gather keeps the rest
@@ -159,6 +159,26 @@ pub struct Lighting {
 }
 
 impl Lighting {
+    /// Whether it holds the transport's moments (in [`Lighting::sh`] or on the GPU).
+    pub fn has_transport(&self) -> bool {
+        !self.sh.is_empty() || self.sh_on_gpu.is_some()
+    }
+
+    /// This lighting with its [`Lighting::sh`]: itself, or where a relight's step left the
+    /// moments on the GPU only, a copy with them read back from there (as they stand).
+    pub fn with_moments(&self) -> Result<std::borrow::Cow<'_, Self>, FrameError> {
+        use std::borrow::Cow;
+        match &self.sh_on_gpu {
+            Some(on_gpu) if self.sh.is_empty() => {
+                let sh = on_gpu
+                    .read()
+                    .map_err(|e| FrameError(format!("the transport's moments on the GPU: {e}")))?;
+                Ok(Cow::Owned(Self { sh, ..self.clone() }))
+            }
+            _ => Ok(Cow::Borrowed(self)),
+        }
+    }
+
     /// Checks that `frame` has the grid and sun this lighting was computed for.
     pub fn check_frame(&self, frame: &Frame) -> Result<(), FrameError> {
         crate::lighting::check_lit_for("coupled", (self.dims, self.sun_dir), frame)
@@ -418,9 +438,10 @@ impl Relight {
         previous: Option<&Lighting>,
     ) -> Result<Self, FrameError> {
         check(tables, frame, settings)?;
-        let warm = previous
-            .filter(|p| p.dims == frame.grid.dims && !p.sh.is_empty())
-            .map(|p| p.sh.clone());
+        let warm = match previous.filter(|p| p.dims == frame.grid.dims && p.has_transport()) {
+            Some(p) => Some(p.with_moments()?.sh.clone()),
+            None => None,
+        };
         Ok(Self {
             frame: frame.clone(),
             settings: *settings,
@@ -510,8 +531,12 @@ impl Relight {
             Stage::Transporting(t) => {
                 let (base, run) = &**t;
                 let mut lighting = base.clone();
-                lighting.sh = run.moments.clone();
-                lighting.sh_on_gpu = run.resident.as_ref().map(Resident::moments_on_gpu);
+                // On the GPU the moments stay there until the relight converges
+                // (`Lighting::with_moments` reads them back where a caller needs them).
+                match &run.resident {
+                    Some(resident) => lighting.sh_on_gpu = Some(resident.moments_on_gpu()),
+                    None => lighting.sh = run.moments.clone(),
+                }
                 lighting.report.transport_iterations = run.report.changes.len();
                 Some(lighting)
             }
@@ -766,8 +791,9 @@ impl Relight {
                 break false;
             }
         };
-        // The moments as they stand, for this step's lighting: read back once a call.
-        if let Some(resident) = resident {
+        // The converged moments (for the lighting, its report and the next sun's start): read
+        // back once. A step's lighting before that reads them on the GPU.
+        if let Some(resident) = resident.as_mut().filter(|_| converged) {
             *moments = resident
                 .moments()
                 .map_err(|e| FrameError(format!("the transport on the GPU: {e}")))?;

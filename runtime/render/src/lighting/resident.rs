@@ -136,13 +136,30 @@ fn groups(n: usize) -> (u32, u32) {
 }
 
 /// The transport's moments on the GPU that computed them, in the layout the gathers read
-/// (`STRIDE` floats a voxel, as the sweeps write them): the device and the buffer.
-#[derive(Debug, Clone)]
+/// (`STRIDE` floats a voxel, as the sweeps write them): the adapter and the buffer.
+#[derive(Clone)]
 pub struct MomentsOnGpu {
-    /// The device the buffer lives on.
-    pub device: wgpu::Device,
+    /// The adapter the buffer lives on.
+    pub gpu: Gpu,
     /// The moments.
     pub buffer: wgpu::Buffer,
+}
+
+impl std::fmt::Debug for MomentsOnGpu {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("MomentsOnGpu")
+            .field("gpu", &self.gpu.describe())
+            .field("bytes", &self.buffer.size())
+            .finish()
+    }
+}
+
+impl MomentsOnGpu {
+    /// The moments read back, as they stand.
+    pub fn read(&self) -> Result<Vec<[f64; PER_VOXEL]>, RenderError> {
+        let voxels = self.buffer.size() as usize / (4 * STRIDE);
+        super::transport_gpu::read_moments(&self.gpu, &self.buffer, voxels)
+    }
 }
 
 /// One transport solve's state on the GPU between its rounds (and a relight's steps).
@@ -464,7 +481,7 @@ impl Resident {
     /// The moments' buffer on the GPU and its device (the gather reads it in place).
     pub fn moments_on_gpu(&self) -> MomentsOnGpu {
         MomentsOnGpu {
-            device: self.gpu.device.clone(),
+            gpu: self.gpu.clone(),
             buffer: self.sweeps.moments.clone(),
         }
     }

@@ -422,6 +422,21 @@ impl Sweeper {
     }
 }
 
+/// The first `voxels` voxels' moments of `buffer` (the sweeps' layout, [`STRIDE`] floats a
+/// voxel) read back, in f64.
+pub(crate) fn read_moments(
+    gpu: &Gpu,
+    buffer: &wgpu::Buffer,
+    voxels: usize,
+) -> Result<Vec<[f64; PER_VOXEL]>, RenderError> {
+    let rows = read_back(gpu, buffer, (4 * STRIDE * voxels) as u64).map_err(RenderError::from)?;
+    let floats: &[f32] = bytemuck::cast_slice(&rows);
+    Ok(floats
+        .chunks_exact(STRIDE)
+        .map(|v| std::array::from_fn(|k| f64::from(v[k])))
+        .collect())
+}
+
 /// A refusal of the GPU sweeps, naming the value.
 fn gpu_refusal(message: String) -> RenderError {
     RenderError::Frame(crate::checks::FrameError(message))
@@ -488,13 +503,7 @@ impl Sweeps {
 
     /// `buffer`'s moments (the sweeps' layout) in f64.
     pub(crate) fn read(&self, buffer: &wgpu::Buffer) -> Result<Vec<[f64; PER_VOXEL]>, RenderError> {
-        let rows = read_back(&self.gpu, buffer, (4 * STRIDE * self.voxels) as u64)
-            .map_err(RenderError::from)?;
-        let floats: &[f32] = bytemuck::cast_slice(&rows);
-        Ok(floats
-            .chunks_exact(STRIDE)
-            .map(|v| std::array::from_fn(|k| f64::from(v[k])))
-            .collect())
+        read_moments(&self.gpu, buffer, self.voxels)
     }
 
     /// One round of sweeps from moments `m`: the new moments, as
