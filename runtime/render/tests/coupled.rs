@@ -276,9 +276,7 @@ fn the_gpu_gather_equals_the_cpu_reference() {
     // (shading::air_shadow) and the sky light takes part.
     frame.grid.min_m.y += 400.0;
     frame.grid.max_m.y += 400.0;
-    let uploaded =
-        runtime::gpu::GpuTables::upload(&gpu, &tables, runtime::gpu::TexelFormat::F32).unwrap();
-    let renderer = render::coupled::gpu::Renderer::new(&gpu, &uploaded);
+    let on_gpu = GatherOnGpu::new(&gpu, &tables);
     let diffusion = Settings {
         diffuse: Diffuse::Diffusion,
         ..Settings::default()
@@ -325,18 +323,8 @@ fn the_gpu_gather_equals_the_cpu_reference() {
         for (camera, projection) in support::cameras() {
             frame.camera.position_m = glam::DVec3::from_array(camera);
             frame.camera.projection = projection;
-            let cpu_image = gather::gather(&tables, &frame, &settings, &lighting).unwrap();
-            let (gpu_image, t) = renderer
-                .gather(&gpu, &tables, &uploaded, &frame, &settings, &lighting)
-                .unwrap();
-            let worst = common::assert_gpu_matches_cpu(
-                (&gpu_image.rgb, &gpu_image.transparency),
-                (&cpu_image.rgb, &cpu_image.transparency),
-                // Measured on lavapipe: within 1.10 × (10⁻⁵ |CPU| + 10⁻⁶ of the 99th
-                // percentile), T within the max gather's 6·10⁻⁶ (f32 against f64).
-                (1.2e-5, 1.2e-6, 6e-6),
-                "coupled gather",
-            );
+            let gather = (&tables, &frame, &settings);
+            let (worst, t) = on_gpu.matches_cpu(gather, &lighting, "coupled gather");
             eprintln!(
                 "{:?} {:?} transport grid {on:?} camera {camera:?} {projection:?}: worst |GPU − CPU| \
                  {worst:.2} of the tolerance; gather {:.1} ms on the GPU, upload {:.1} ms",
@@ -359,9 +347,7 @@ fn the_gpu_gather_reads_the_transports_moments_in_place() {
     let (_tmp, dir) = bake(&fields());
     let tables = Tables::open(&dir).unwrap();
     let frame = lit_ball(&tables);
-    let uploaded =
-        runtime::gpu::GpuTables::upload(&gpu, &tables, runtime::gpu::TexelFormat::F32).unwrap();
-    let renderer = render::coupled::gpu::Renderer::new(&gpu, &uploaded);
+    let on_gpu = GatherOnGpu::new(&gpu, &tables);
     let pipelines = render::lighting::Pipelines::default();
     let settings = Settings {
         directions: 32,
@@ -373,8 +359,15 @@ fn the_gpu_gather_reads_the_transports_moments_in_place() {
     assert!(lit.sh_on_gpu.is_some());
     let draw = |lighting: light::Lighting| {
         let lighting = std::sync::Arc::new(lighting);
-        let (image, _) = renderer
-            .gather(&gpu, &tables, &uploaded, &frame, &settings, &lighting)
+        let (image, _) = (on_gpu.renderer)
+            .gather(
+                &gpu,
+                &tables,
+                &on_gpu.uploaded,
+                &frame,
+                &settings,
+                &lighting,
+            )
             .unwrap();
         image
     };
@@ -403,9 +396,7 @@ fn the_gpu_gather_draws_each_step_of_a_relight() {
     let (_tmp, dir) = bake(&fields());
     let tables = Tables::open(&dir).unwrap();
     let frame = ball_on(&tables, 8.0, 90.0, 16);
-    let uploaded =
-        runtime::gpu::GpuTables::upload(&gpu, &tables, runtime::gpu::TexelFormat::F32).unwrap();
-    let renderer = render::coupled::gpu::Renderer::new(&gpu, &uploaded);
+    let on_gpu = GatherOnGpu::new(&gpu, &tables);
     let pipelines = render::lighting::Pipelines::default();
     let settings = Settings {
         directions: 32,
@@ -428,22 +419,12 @@ fn the_gpu_gather_draws_each_step_of_a_relight() {
             if done {
                 // Read back once, at the end, though each call ran one step.
                 let t = lighting.report.transport_traffic;
-                let voxels: usize = lighting.report.transport_dims.iter().product();
-                let moments =
-                    (4 * render::lighting::transport::PER_VOXEL.div_ceil(4) * 4 * voxels) as u64;
+                let moments = moments_bytes(&lighting.report);
                 assert!(t.bytes_read < moments + 1024 * t.rounds as u64, "{t:?}");
             }
             let lighting = std::sync::Arc::new(lighting);
-            let cpu_image = gather::gather(&tables, &frame, &settings, &lighting).unwrap();
-            let (gpu_image, _) = renderer
-                .gather(&gpu, &tables, &uploaded, &frame, &settings, &lighting)
-                .unwrap();
-            let worst = common::assert_gpu_matches_cpu(
-                (&gpu_image.rgb, &gpu_image.transparency),
-                (&cpu_image.rgb, &cpu_image.transparency),
-                (1.2e-5, 1.2e-6, 6e-6),
-                "coupled gather of a step",
-            );
+            let gather = (&tables, &frame, &settings);
+            let (worst, _) = on_gpu.matches_cpu(gather, &lighting, "coupled gather of a step");
             eprintln!(
                 "step {}: worst |GPU − CPU| {worst:.2} of the tolerance",
                 relight.steps()
@@ -571,12 +552,61 @@ fn the_gpu_lighting_equals_the_cpu_reference() {
         t.submits <= 3 * t.rounds && t.readbacks <= 3 * t.rounds + 1,
         "{t:?}"
     );
-    let voxels: usize = r.0.transport_dims.iter().product();
-    let moments = (4 * render::lighting::transport::PER_VOXEL.div_ceil(4) * 4 * voxels) as u64;
+    let moments = moments_bytes(r.0);
     assert!(
         t.bytes_read < moments + 1024 * t.rounds as u64,
         "{t:?}, moments {moments} B"
     );
+}
+
+/// The bytes of a lighting's transport moments on the GPU (f32, whole rows of four a voxel).
+fn moments_bytes(report: &light::CoupledReport) -> u64 {
+    let voxels: usize = report.transport_dims.iter().product();
+    (4 * render::lighting::transport::PER_VOXEL.div_ceil(4) * 4 * voxels) as u64
+}
+
+/// The coupled model's GPU gather on an adapter, with the tables uploaded there.
+struct GatherOnGpu<'a> {
+    gpu: &'a runtime::gpu::Gpu,
+    uploaded: runtime::gpu::GpuTables,
+    renderer: render::coupled::gpu::Renderer,
+}
+
+impl<'a> GatherOnGpu<'a> {
+    fn new(gpu: &'a runtime::gpu::Gpu, tables: &Tables) -> Self {
+        let uploaded =
+            runtime::gpu::GpuTables::upload(gpu, tables, runtime::gpu::TexelFormat::F32).unwrap();
+        let renderer = render::coupled::gpu::Renderer::new(gpu, &uploaded);
+        Self {
+            gpu,
+            uploaded,
+            renderer,
+        }
+    }
+
+    /// Gathers `lighting` on the GPU and on the CPU and asserts they agree within the f32
+    /// tolerance (measured on lavapipe: within 1.10 × (10⁻⁵ |CPU| + 10⁻⁶ of the 99th
+    /// percentile), T within the max gather's 6·10⁻⁶, f32 against f64): the worst difference
+    /// as a share of the tolerance, and the GPU's timings.
+    fn matches_cpu(
+        &self,
+        (tables, frame, settings): (&Tables, &Frame, &Settings),
+        lighting: &std::sync::Arc<light::Lighting>,
+        what: &str,
+    ) -> (f64, render::gpu::Timings) {
+        let cpu_image = gather::gather(tables, frame, settings, lighting).unwrap();
+        let (gpu_image, t) = self
+            .renderer
+            .gather(self.gpu, tables, &self.uploaded, frame, settings, lighting)
+            .unwrap();
+        let worst = common::assert_gpu_matches_cpu(
+            (&gpu_image.rgb, &gpu_image.transparency),
+            (&cpu_image.rgb, &cpu_image.transparency),
+            (1.2e-5, 1.2e-6, 6e-6),
+            what,
+        );
+        (worst, t)
+    }
 }
 
 /// The worst differences above, the diffusion's and the transport's (measured on lavapipe:

@@ -174,8 +174,9 @@ struct Call {
     groups: (u32, u32),
 }
 
-/// Workgroups for `n` invocations (x up to [`ROW`], the rest along y).
-fn groups(n: usize) -> (u32, u32) {
+/// Workgroups for `n` invocations (x up to [`ROW`], the rest along y): the layout of every
+/// one-invocation-per-voxel dispatch of `diffusion.wgsl` and `resident.wgsl`.
+pub(crate) fn groups(n: usize) -> (u32, u32) {
     let wgs = n.div_ceil(WG).max(1);
     (wgs.min(ROW) as u32, wgs.div_ceil(ROW) as u32)
 }
@@ -531,9 +532,9 @@ impl Uploaded {
 
     /// Records the GPU-driven iteration (`diffusion.wgsl`'s `scalars` forms α and β and tests
     /// the residual on the GPU; nothing comes back): with `start`, its start from the
-    /// right-hand side at [`Uploaded::rhs`], then `iterations` iterations of the loop
-    /// [`Uploaded::inner_on_gpu`] drives from the CPU, each one doing nothing once the
-    /// iteration has finished. The dispatches recorded.
+    /// right-hand side at [`Uploaded::rhs`], then `iterations` iterations of preconditioned
+    /// conjugate gradients (A d and d·Ad, α, x and r, r·r and the test, the V-cycle and r·z, β,
+    /// d), each one doing nothing once the iteration has finished. The dispatches recorded.
     pub(crate) fn record_iterations(
         &self,
         pass: &mut wgpu::ComputePass,

@@ -28,7 +28,7 @@ use std::sync::Arc;
 use runtime::gpu::{Gpu, Readback};
 
 use super::diffusion::Operator;
-use super::diffusion_gpu::{COEF_BYTES, Uploaded};
+use super::diffusion_gpu::{COEF_BYTES, Uploaded, groups};
 use super::transport::{HARMONICS, Medium, PER_VOXEL};
 use super::transport_gpu::{STRIDE, Sweeps};
 use crate::gpu::{RenderError, entry, filled};
@@ -60,10 +60,6 @@ pub struct Traffic {
     /// Bytes read back.
     pub bytes_read: u64,
 }
-
-/// Invocations per workgroup and workgroups along x of a dispatch (`resident.wgsl`).
-const WG: usize = 64;
-const ROW: usize = 1024;
 
 runtime::uniform! {
     /// `Glue` of `resident.wgsl`: one channel's offsets.
@@ -129,12 +125,6 @@ impl Kernels {
     }
 }
 
-/// Workgroups for `n` invocations (x up to [`ROW`], the rest along y).
-fn groups(n: usize) -> (u32, u32) {
-    let wgs = n.div_ceil(WG).max(1);
-    (wgs.min(ROW) as u32, wgs.div_ceil(ROW) as u32)
-}
-
 /// The transport's moments on the GPU that computed them, in the layout the gathers read
 /// (`STRIDE` floats a voxel, as the sweeps write them): the adapter and the buffer.
 #[derive(Clone)]
@@ -188,8 +178,8 @@ pub struct Resident {
 
 impl Resident {
     /// The iteration of `medium` on `sweeps`' grid from `start`, with `operators` (one per
-    /// channel) accelerating it, each solve to `limits` (relative residual, iterations): the start uploaded
-    /// once. Refused where the adapter cannot hold an operator's hierarchy.
+    /// channel) accelerating it, each solve to `limits` (relative residual, iterations): the
+    /// start uploaded once. Refused where the adapter cannot hold an operator's hierarchy.
     pub fn new(
         (gpu, kernels, solver): (&Gpu, &Kernels, &super::diffusion_gpu::Solver),
         sweeps: Sweeps,
