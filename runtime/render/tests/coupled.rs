@@ -1435,9 +1435,9 @@ fn largest_difference<const N: usize>(a: &[[f64; N]], b: &[[f64; N]]) -> f64 {
 /// The rms difference of `a`'s and `b`'s mean radiance φ_00 over the grid and channels,
 /// relative to `b`'s.
 fn mean_radiance_error(a: &light::Lighting, b: &light::Lighting) -> f64 {
-    let (a, b) = (a.with_moments().unwrap(), b.with_moments().unwrap());
+    let (a, b) = (a.moments().unwrap(), b.moments().unwrap());
     let (mut d, mut t) = (0.0, 0.0);
-    for (x, y) in a.sh.iter().zip(&b.sh) {
+    for (x, y) in a.iter().zip(b.iter()) {
         for c in 0..3 {
             let o = c * render::lighting::transport::HARMONICS;
             d += (x[o] - y[o]).powi(2);

@@ -28,8 +28,8 @@ pub fn gather(
 ) -> Result<Image, FrameError> {
     check(tables, frame, settings)?;
     lighting.check_frame(frame)?;
-    // A relight's step on the GPU leaves its moments there: read back here.
-    let lighting = &*lighting.with_moments()?;
+    // The transport's moments (a relight's step on the GPU leaves them there: read back here).
+    let moments = lighting.moments()?;
     let fields: Vec<&FieldTable> = tables.fields.iter().collect();
     let grid = &frame.grid;
     let step = 0.5
@@ -46,8 +46,8 @@ pub fn gather(
             // The pixel's ray: from the eye, or an orthographic image's point (`eye`).
             let (eye, d) = frame.camera.pixel(axes, (px % w, px / w), (w, hgt));
             // The harmonics towards the eye, which the transport's light is scattered into.
-            let harmonics = (!lighting.sh.is_empty()).then(|| transport::harmonics(-d));
-            let towards = harmonics.as_ref();
+            let harmonics = (!moments.is_empty()).then(|| transport::harmonics(-d));
+            let towards = harmonics.as_ref().map(|y| (y, &moments[..]));
             let (mut l_vol, mut tr, mut seen) = ([0.0f64; 3], [1.0f64; 3], [1.0f64; 3]);
             // The forward peak's optical depth from the eye ([`super::peak`]).
             let mut depth_out = 0.0;
@@ -94,6 +94,12 @@ pub fn gather(
     Ok(Image::from_pixels(w, hgt, &pixels))
 }
 
+/// The harmonics towards the eye and the transport's moments, with the transport.
+type Towards<'a> = Option<(
+    &'a [f64; transport::HARMONICS],
+    &'a [[f64; transport::PER_VOXEL]],
+)>;
+
 /// What one point of a pixel's ray sends towards the eye.
 pub(super) struct Step {
     /// β_ext (1/m).
@@ -117,7 +123,7 @@ pub(super) fn in_scattered(
     lighting: &Lighting,
     settings: &Settings,
     p: DVec3,
-    (d, towards, (depth_out, dt)): (DVec3, Option<&[f64; transport::HARMONICS]>, (f64, f64)),
+    (d, towards, (depth_out, dt)): (DVec3, Towards, (f64, f64)),
 ) -> Option<Step> {
     let grid = &frame.grid;
     let rho: [f64; MAX_FIELDS] = grid.sample(p);
@@ -155,9 +161,9 @@ pub(super) fn in_scattered(
     let sky = trilinear(grid, &lighting.sky_mean, None, p);
     // The transport's radiance moments and p′'s moments here, with the harmonics towards the
     // eye (`towards`, once per ray).
-    let sh = towards.map(|y| {
+    let sh = towards.map(|(y, moments)| {
         (
-            trilinear(&lighting.sh_grid, &lighting.sh, None, p),
+            trilinear(&lighting.sh_grid, moments, None, p),
             y,
             reduced_moments(fields, &rho, &lighting.chis, &lighting.peak),
         )

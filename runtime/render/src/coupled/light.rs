@@ -147,7 +147,7 @@ pub struct Lighting {
     /// The transport's moments where its iteration ran on the GPU: the adapter's buffer of
     /// them, which a GPU gather on the same device reads in place. They are the relight's
     /// buffer, not a copy: a lighting of a step ([`Relight::current`]) holds them there only
-    /// (its `sh` empty: [`Lighting::with_moments`] reads them back), as they stand when it is
+    /// (its `sh` empty: [`Lighting::moments`] reads them back), as they stand when it is
     /// drawn, which a later step moves on; the converged lighting holds them in `sh` too,
     /// and they no longer change.
     pub sh_on_gpu: Option<MomentsOnGpu>,
@@ -164,18 +164,16 @@ impl Lighting {
         !self.sh.is_empty() || self.sh_on_gpu.is_some()
     }
 
-    /// This lighting with its [`Lighting::sh`]: itself, or where a relight's step left the
-    /// moments on the GPU only, a copy with them read back from there (as they stand).
-    pub fn with_moments(&self) -> Result<std::borrow::Cow<'_, Self>, FrameError> {
+    /// The transport's moments: [`Lighting::sh`], or where a relight's step left them on the
+    /// GPU only, read back from there (as they stand).
+    pub fn moments(&self) -> Result<std::borrow::Cow<'_, [Harmonics]>, FrameError> {
         use std::borrow::Cow;
         match &self.sh_on_gpu {
-            Some(on_gpu) if self.sh.is_empty() => {
-                let sh = on_gpu
-                    .read()
-                    .map_err(|e| FrameError(format!("the transport's moments on the GPU: {e}")))?;
-                Ok(Cow::Owned(Self { sh, ..self.clone() }))
-            }
-            _ => Ok(Cow::Borrowed(self)),
+            Some(on_gpu) if self.sh.is_empty() => on_gpu
+                .read()
+                .map(Cow::Owned)
+                .map_err(|e| FrameError(format!("the transport's moments on the GPU: {e}"))),
+            _ => Ok(Cow::Borrowed(&self.sh)),
         }
     }
 
@@ -439,7 +437,7 @@ impl Relight {
     ) -> Result<Self, FrameError> {
         check(tables, frame, settings)?;
         let warm = match previous.filter(|p| p.dims == frame.grid.dims && p.has_transport()) {
-            Some(p) => Some(p.with_moments()?.sh.clone()),
+            Some(p) => Some(p.moments()?.into_owned()),
             None => None,
         };
         Ok(Self {
@@ -532,7 +530,7 @@ impl Relight {
                 let (base, run) = &**t;
                 let mut lighting = base.clone();
                 // On the GPU the moments stay there until the relight converges
-                // (`Lighting::with_moments` reads them back where a caller needs them).
+                // (`Lighting::moments` reads them back where a caller needs them).
                 match &run.resident {
                     Some(resident) => lighting.sh_on_gpu = Some(resident.moments_on_gpu()),
                     None => lighting.sh = run.moments.clone(),

@@ -33,6 +33,41 @@ use crate::gpu::entry;
 /// Iterations of a GPU-driven solve recorded in its first submission ([`Uploaded::drive`]).
 const FIRST_CHUNK: usize = 8;
 
+/// A GPU-driven solve's state, read from its scalars (`diffusion.wgsl`'s `coef`).
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Flags {
+    /// It has finished (converged, stopped at its cap, or broken down).
+    pub done: bool,
+    /// The iterations taken.
+    pub taken: usize,
+    /// It reached its relative residual.
+    pub converged: bool,
+}
+
+impl Flags {
+    /// The scalars' indices, as `diffusion.wgsl` names them.
+    const DONE: usize = 2;
+    const TAKEN: usize = 5;
+    const CONVERGED: usize = 6;
+    const TOLERANCE: u64 = 7;
+    const CAP: u64 = 8;
+
+    /// The state the scalars `coef` hold.
+    pub(crate) fn of(coef: &[f32]) -> Self {
+        Self {
+            done: coef[Self::DONE] != 0.0,
+            taken: coef[Self::TAKEN] as usize,
+            converged: coef[Self::CONVERGED] != 0.0,
+        }
+    }
+}
+
+/// The iterations to record for a GPU-driven solve not finished after `recorded`: half as
+/// many again, at least two.
+pub(crate) fn more_iterations(recorded: usize) -> usize {
+    (recorded / 2).max(2)
+}
+
 /// The bytes of the iteration's scalars (`diffusion.wgsl`'s `coef`: α, β, and the GPU-driven
 /// iteration's state).
 pub(crate) const COEF_BYTES: u64 = 48;
@@ -526,8 +561,8 @@ impl Uploaded {
 
     /// Sets the GPU-driven iteration's relative residual and iteration cap.
     pub(crate) fn set_limits(&self, (tolerance, cap): (f64, usize)) {
-        self.set_coef(7, tolerance);
-        self.set_coef(8, cap as f64);
+        self.set_coef(Flags::TOLERANCE, tolerance);
+        self.set_coef(Flags::CAP, cap as f64);
     }
 
     /// Records the GPU-driven iteration (`diffusion.wgsl`'s `scalars` forms α and β and tests
@@ -618,12 +653,11 @@ impl Uploaded {
             recorded += chunk;
             start = false;
             let rows = self.readback.read(&self.gpu, &self.coef, 0, COEF_BYTES)?;
-            let flags: &[f32] = bytemuck::cast_slice(&rows);
-            let (done, taken, converged) = (flags[2] != 0.0, flags[5] as usize, flags[6] != 0.0);
-            if done || recorded >= cap {
-                return Ok((taken, converged));
+            let flags = Flags::of(bytemuck::cast_slice(&rows));
+            if flags.done || recorded >= cap {
+                return Ok((flags.taken, flags.converged));
             }
-            chunk = (chunk / 2).max(2).min(cap - recorded);
+            chunk = more_iterations(chunk).min(cap - recorded);
         }
     }
 

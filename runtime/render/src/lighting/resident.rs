@@ -28,10 +28,10 @@ use std::sync::Arc;
 use runtime::gpu::{Gpu, Readback};
 
 use super::diffusion::Operator;
-use super::diffusion_gpu::{COEF_BYTES, Uploaded, groups};
+use super::diffusion_gpu::{COEF_BYTES, Flags, Uploaded, groups, more_iterations};
 use super::transport::{HARMONICS, Medium, PER_VOXEL};
 use super::transport_gpu::{STRIDE, Sweeps};
-use crate::gpu::{RenderError, entry, filled};
+use crate::gpu::{RenderError, bind, entry, filled};
 
 /// The glue's WGSL.
 pub const RESIDENT_WGSL: &str = include_str!("resident.wgsl");
@@ -261,20 +261,8 @@ impl Resident {
                 vectors,
                 &partial,
             ];
-            bindings.push(
-                device.create_bind_group(&wgpu::BindGroupDescriptor {
-                    label: Some("photometeor resident bindings"),
-                    layout: &kernels.layout,
-                    entries: &buffers
-                        .iter()
-                        .enumerate()
-                        .map(|(b, buffer)| wgpu::BindGroupEntry {
-                            binding: b as u32,
-                            resource: buffer.as_entire_binding(),
-                        })
-                        .collect::<Vec<_>>(),
-                }),
-            );
+            let label = "photometeor resident bindings";
+            bindings.push(bind(device, &kernels.layout, label, &buffers, None));
             keep.push(params);
         }
         keep.push(idle);
@@ -350,13 +338,15 @@ impl Resident {
         loop {
             self.submit(encoder);
             let flags = self.read_flags()?;
-            let pending: Vec<usize> = all.iter().copied().filter(|&c| flags[c].0 == 0.0).collect();
+            let pending: Vec<usize> = all.iter().copied().filter(|&c| !flags[c].done).collect();
             if pending.is_empty() {
                 for &c in &all {
-                    let (_, taken, converged) = flags[c];
+                    let Flags {
+                        taken, converged, ..
+                    } = flags[c];
                     // The next round's solve takes about as many.
-                    self.expected[c] = taken as usize + SLACK;
-                    if converged == 0.0 {
+                    self.expected[c] = taken + SLACK;
+                    if !converged {
                         return Err(format!(
                             "channel {}'s acceleration did not reach its relative residual of \
                              {tolerance} in {taken} iterations (max_diffusion_iterations {cap})",
@@ -374,8 +364,7 @@ impl Resident {
                     recorded[c]
                 ));
             }
-            // More for the solves not finished: half as many again.
-            let more = recorded.map(|r| (r / 2).max(2));
+            let more = recorded.map(more_iterations);
             for &c in &pending {
                 recorded[c] += more[c];
             }
@@ -451,16 +440,13 @@ impl Resident {
             .map_err(|e| e.to_string())
     }
 
-    /// Per channel, its solve's state: (finished, iterations taken, converged).
-    fn read_flags(&mut self) -> Result<[(f32, f32, f32); 3], String> {
+    /// Per channel, its solve's state.
+    fn read_flags(&mut self) -> Result<[Flags; 3], String> {
         let flags = self.flags.clone();
         let rows = self.read(&flags)?;
         let floats: &[f32] = bytemuck::cast_slice(&rows);
         let per = (COEF_BYTES / 4) as usize;
-        Ok(std::array::from_fn(|c| {
-            let f = &floats[c * per..];
-            (f[2], f[5], f[6])
-        }))
+        Ok(std::array::from_fn(|c| Flags::of(&floats[c * per..])))
     }
 
     /// What it has sent and read back so far.
