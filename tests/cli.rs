@@ -173,6 +173,10 @@ fn bad_input_exits_nonzero_with_one_line_naming_value_and_range() {
             vec!["--size 0", "1–4096"],
         ),
         (
+            vec!["bench", "relight", "--step-budget-ms", "NaN"],
+            vec!["--step-budget-ms NaN", "0–10000"],
+        ),
+        (
             vec!["bench", "relight", "--moves", "1,5", "--truths", "a.exr"],
             vec!["1 frames for 2 --moves"],
         ),

@@ -10,10 +10,13 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, bail};
 use clap::Args;
-use render::coupled::{gather, light};
+use render::coupled::light::Lighting;
+use render::coupled::{Settings, gather, light};
 use render::error_map::{self, LUMA, Pixels};
+use render::lighting::OnGpu;
 use render::lighting::resident::Traffic;
 use render::{Image, ModelSettings};
+use runtime::Tables;
 use serde_json::json;
 
 use super::render::{parse_setting, prepare};
@@ -46,6 +49,11 @@ pub struct RelightBench {
     /// them (`auto`: a real GPU, not lavapipe), as the viewer does; the gathers stay on the CPU.
     #[arg(long)]
     gpu: bool,
+    /// Each call's budget (milliseconds, 0–10000; 0: one step a call, the smallest): on the
+    /// GPU a round of the transport goes in parts sized to it, as in the viewer's
+    /// `--step-budget-ms`. Only the steps that end a round (or the start) are drawn.
+    #[arg(long, default_value_t = 0.0)]
+    step_budget_ms: f64,
     /// Print JSON.
     #[arg(long)]
     json: bool,
@@ -72,6 +80,13 @@ pub fn run(b: RelightBench) -> Result<()> {
     {
         bail!("--size {s} is outside 1–4096 pixels");
     }
+    if !(0.0..=10_000.0).contains(&b.step_budget_ms) {
+        bail!(
+            "--step-budget-ms {} is outside 0–10000 (milliseconds a call)",
+            b.step_budget_ms
+        );
+    }
+    let budget = Some(Duration::from_secs_f64(b.step_budget_ms / 1000.0));
     if !b.truths.is_empty() && b.truths.len() != b.moves.len() {
         bail!(
             "--truths names {} frames for {} --moves: one per move, in order",
@@ -127,43 +142,82 @@ pub fn run(b: RelightBench) -> Result<()> {
         let mut to = frame.clone();
         to.sun.azimuth_deg += moved;
         for (start, previous) in [("cold", None), ("warm", Some(&last))] {
-            let mut relight = light::Relight::new(tables, &to, &settings, previous)?;
-            let (mut seconds, mut images) = (0.0, Vec::new());
-            let mut traffic = Default::default();
-            loop {
-                let t = Instant::now();
-                let done = relight.advance(tables, (on(), &()), Some(Duration::ZERO))?;
-                seconds += t.elapsed().as_secs_f64();
-                if let Some(lighting) = relight.current() {
-                    if done {
-                        swept_on.clone_from(&lighting.report.transport_on);
-                        traffic = lighting.report.transport_traffic;
-                    }
-                    let image = gather::gather(tables, &to, &settings, &lighting)?;
-                    images.push((relight.steps(), seconds, image));
-                }
-                if done {
-                    break;
-                }
+            let (run, on_what) = relight(
+                (tables, &to, &settings, previous),
+                (on(), budget),
+                truths.get(k),
+                (moved, start),
+            )?;
+            if let Some(on_what) = on_what {
+                swept_on = on_what;
             }
-            let converged = &images.last().expect("a step drew").2;
-            let measured = images
-                .iter()
-                .map(|(step, seconds, image)| {
-                    let truth = truths.get(k).map(|t| against_truth(t, image)).transpose()?;
-                    Ok(Measured {
-                        step: *step,
-                        seconds: *seconds,
-                        to_converged: rms_difference(image, converged),
-                        truth,
-                    })
-                })
-                .collect::<Result<Vec<_>>>()?;
-            runs.push((moved, start, measured, traffic));
+            runs.push(run);
         }
     }
     let device = gpu.as_ref().map(|g| g.describe());
     report(&b, (&settings, device, &swept_on), &frame, &runs)
+}
+
+/// One sun move's relight from `previous` (or cold), a call at a time with `budget`, each
+/// step that shows a new lighting drawn and measured (against `truth` where given); also
+/// where the transport's sweeps ran.
+fn relight(
+    (tables, to, settings, previous): (&Tables, &render::Frame, &Settings, Option<&Lighting>),
+    (on, budget): (Option<OnGpu<'_>>, Option<Duration>),
+    truth: Option<&error_map::Frame>,
+    (moved, start): (f64, &'static str),
+) -> Result<(Run, Option<String>)> {
+    let mut relight = light::Relight::new(tables, to, settings, previous)?;
+    let (mut seconds, mut images) = (0.0, Vec::new());
+    let (mut traffic, mut rounds, mut swept_on) = (Default::default(), None, None);
+    // The calls once the lighting was whole (the transport's), and the longest.
+    let (mut calls, mut longest) = (0, 0.0f64);
+    loop {
+        let t = Instant::now();
+        let whole = relight.rounds().is_some();
+        let done = relight.advance(tables, (on, &()), budget)?;
+        let call = t.elapsed().as_secs_f64();
+        seconds += call;
+        if whole {
+            calls += 1;
+            longest = longest.max(call);
+        }
+        // A step mid-round shows the lighting of the step that ended the last round.
+        let new_round = rounds != relight.rounds();
+        rounds = relight.rounds();
+        if let Some(lighting) = relight.current().filter(|_| new_round) {
+            if done {
+                swept_on = Some(lighting.report.transport_on.clone());
+                traffic = lighting.report.transport_traffic;
+            }
+            let image = gather::gather(tables, to, settings, &lighting)?;
+            images.push((relight.steps(), seconds, image));
+        }
+        if done {
+            break;
+        }
+    }
+    let converged = &images.last().expect("a step drew").2;
+    let steps = images
+        .iter()
+        .map(|(step, seconds, image)| {
+            Ok(Measured {
+                step: *step,
+                seconds: *seconds,
+                to_converged: rms_difference(image, converged),
+                truth: truth.map(|t| against_truth(t, image)).transpose()?,
+            })
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let run = Run {
+        moved,
+        start,
+        steps,
+        traffic,
+        calls,
+        longest,
+    };
+    Ok((run, swept_on))
 }
 
 /// The error of `image` against the truth `t`: bias and noise-debiased rms over the volume.
@@ -196,9 +250,20 @@ fn rms_difference(a: &Image, b: &Image) -> f64 {
     (d / n as f64).sqrt() / (y / n as f64)
 }
 
-/// A sun move, its start, each drawn step, and what the transport's iteration on the GPU
-/// submitted and read back (zero on the CPU).
-type Run = (f64, &'static str, Vec<Measured>, Traffic);
+/// A sun move measured.
+struct Run {
+    /// The move (degrees of azimuth).
+    moved: f64,
+    /// "cold" or "warm".
+    start: &'static str,
+    /// Each drawn step.
+    steps: Vec<Measured>,
+    /// What the transport's iteration on the GPU submitted and read back (zero on the CPU).
+    traffic: Traffic,
+    /// The calls once the lighting was whole (the transport's steps), and the longest (s).
+    calls: usize,
+    longest: f64,
+}
 
 /// Prints the runs (JSON with --json): the settings, the adapter (with --gpu) and where the
 /// transport's sweeps ran.
@@ -217,11 +282,14 @@ fn report(
             "adapter": adapter,
             "transport_swept_on": swept_on,
             "threads": rayon::current_num_threads(),
-            "runs": runs.iter().map(|(moved, start, steps, traffic)| json!({
-                "moved_deg": moved,
-                "start": start,
-                "transport_traffic": traffic,
-                "steps": steps.iter().map(|m| json!({
+            "step_budget_ms": b.step_budget_ms,
+            "runs": runs.iter().map(|r| json!({
+                "moved_deg": r.moved,
+                "start": r.start,
+                "transport_traffic": r.traffic,
+                "transport_calls": r.calls,
+                "longest_transport_call_s": r.longest,
+                "steps": r.steps.iter().map(|m| json!({
                     "step": m.step,
                     "seconds": m.seconds,
                     "rms_to_converged": m.to_converged,
@@ -234,16 +302,18 @@ fn report(
         return Ok(());
     }
     println!(
-        "coupled's relight in steps ({} threads; the transport swept on {swept_on}), grid \
-         {:?}, image {}×{}, preset {}",
+        "coupled's relight in steps of {} ms ({} threads; the transport swept on {swept_on}), \
+         grid {:?}, image {}×{}, preset {}",
+        b.step_budget_ms,
         rayon::current_num_threads(),
         frame.grid.dims,
         frame.width,
         frame.height,
         settings.preset.name()
     );
-    for (moved, start, steps, t) in runs {
-        println!("sun moved {moved}°, {start} start:");
+    for r in runs {
+        println!("sun moved {}°, {} start:", r.moved, r.start);
+        let t = r.traffic;
         if t.rounds > 0 {
             println!(
                 "  the transport on the GPU: {} rounds, {} submissions, {} dispatches, {} \
@@ -251,7 +321,12 @@ fn report(
                 t.rounds, t.submits, t.dispatches, t.readbacks, t.bytes_read
             );
         }
-        for m in steps {
+        println!(
+            "  {} calls once the lighting was whole, the longest {:.1} ms",
+            r.calls,
+            r.longest * 1e3
+        );
+        for m in &r.steps {
             let truth = m.truth.map_or(String::new(), |(bias, rms)| {
                 format!(
                     "; against the truth: bias {:+.2} %, debiased rms {:.2} %",

@@ -360,7 +360,10 @@ type Diffused = (Vec<[f64; 3]>, Vec<[f64; 9]>);
 /// them ([`Relight::advance`] with a budget) and draw meanwhile from [`Relight::current`]:
 /// 1. the beam and the skylight (steps 1, 2 of the [module docs](super));
 /// 2. the diffusion (step 3), then the transport's medium, its acceleration and its start;
-/// 3. each of the transport's source iterations (step 3b), one a step.
+/// 3. each of the transport's source iterations (step 3b), one a step; on the GPU, in a call
+///    with a budget, a round in parts sized to what is left of it ([`Resident::part`]: each
+///    a step, at least one of the sweeps' dispatches or one iteration of the acceleration's
+///    solves), the lighting meanwhile the last whole round's.
 ///
 /// From the end of step 2 on, [`Relight::current`] is a whole lighting (the diffusion's with
 /// the transport's start, then each iteration's moments). The steps do the same arithmetic
@@ -455,6 +458,16 @@ impl Relight {
         self.steps
     }
 
+    /// The transport's rounds (source iterations) ended so far, from the step that made the
+    /// lighting whole on (`None` before): [`Relight::current`] changes only when this does.
+    pub fn rounds(&self) -> Option<usize> {
+        match &self.stage {
+            Stage::Transporting(t) => Some(t.1.report.changes.len()),
+            Stage::Done(lighting) => Some(lighting.report.transport_iterations),
+            _ => None,
+        }
+    }
+
     /// Whether the lighting has converged ([`Relight::finish`] hands it over).
     pub fn done(&self) -> bool {
         matches!(self.stage, Stage::Done(_))
@@ -482,8 +495,8 @@ impl Relight {
     ) -> Result<bool, FrameError> {
         // A periodic grid's sweeps wrap and repeat, which only the CPU passes do.
         let on = on.filter(|_| !self.frame.grid.periodic);
-        let start = Instant::now();
-        let spent = || budget.is_some_and(|b| start.elapsed() >= b);
+        let deadline = budget.map(|b| Instant::now() + b);
+        let spent = || deadline.is_some_and(|d| Instant::now() >= d);
         while !self.done() {
             let stage = std::mem::replace(&mut self.stage, Stage::Failed);
             self.stage = match stage {
@@ -500,7 +513,7 @@ impl Relight {
                 Stage::Transporting(t) => {
                     let (base, mut run) = *t;
                     progress.update(2, 3, "discrete-ordinates transport");
-                    if self.transport(&mut run, on, &spent)? {
+                    if self.transport(&mut run, on, deadline)? {
                         Stage::Done(Box::new(self.assemble(base, run)))
                     } else {
                         Stage::Transporting(Box::new((base, run)))
@@ -721,9 +734,10 @@ impl Relight {
         &mut self,
         run: &mut Transporting,
         on: Option<OnGpu>,
-        spent: &dyn Fn() -> bool,
+        deadline: Option<Instant>,
     ) -> Result<bool, FrameError> {
         let start = Instant::now();
+        let spent = || deadline.is_some_and(|d| Instant::now() >= d);
         self.keep_on_gpu(run, on)?;
         let settings = &self.settings;
         let grid = run.coarse.as_ref().map_or(&self.frame.grid, |c| &c.grid);
@@ -742,9 +756,19 @@ impl Relight {
         let converged = loop {
             let change = match resident.as_mut() {
                 Some(resident) => {
-                    let change = resident
-                        .iterate()
+                    // With a deadline, a round in parts sized to it (each a step).
+                    let units = deadline.map_or(usize::MAX, |d| resident.units_before(d));
+                    let part = resident
+                        .part(units)
                         .map_err(|e| FrameError(format!("the transport on the GPU: {e}")))?;
+                    let Some(change) = part else {
+                        // Without a deadline the part was a round's further chunk, no step.
+                        self.steps += usize::from(deadline.is_some());
+                        if spent() {
+                            break false;
+                        }
+                        continue;
+                    };
                     report.changes.push(change);
                     change
                 }

@@ -24,6 +24,7 @@
 //! diffusion's own solve (10⁻⁶) needs.
 
 use std::sync::Arc;
+use std::time::Instant;
 
 use runtime::gpu::{Gpu, Readback};
 
@@ -152,6 +153,27 @@ impl MomentsOnGpu {
     }
 }
 
+/// Where a round stands between its parts ([`Resident::part`]).
+enum Phase {
+    /// The sweeps' dispatches before `next` have run.
+    Sweeping { next: usize },
+    /// The sweeps have run; the acceleration's solves: per channel the iterations recorded
+    /// (none: not begun), and the channels whose solves have not finished.
+    Solving {
+        recorded: [usize; 3],
+        pending: Vec<usize>,
+    },
+}
+
+/// Seconds a unit of a part took, the last time one was timed (0: never).
+#[derive(Default)]
+struct Pace {
+    /// One of the sweeps' dispatches.
+    sweeps: f64,
+    /// One iteration of one channel's solve.
+    solves: f64,
+}
+
 /// One transport solve's state on the GPU between its rounds (and a relight's steps).
 pub struct Resident {
     gpu: Gpu,
@@ -173,6 +195,10 @@ pub struct Resident {
     groups: (u32, u32),
     /// The acceleration's solves' relative residual and iteration cap.
     limits: (f64, usize),
+    /// Where the round under way stands (`None`: between rounds).
+    phase: Option<Phase>,
+    /// The time a unit of each part took ([`Resident::units_before`]).
+    pace: Pace,
     _keep: Vec<wgpu::Buffer>,
 }
 
@@ -291,6 +317,8 @@ impl Resident {
             partial,
             groups,
             limits,
+            phase: None,
+            pace: Pace::default(),
             _keep: keep,
         })
     }
@@ -321,57 +349,159 @@ impl Resident {
 
     /// One accelerated round: the new moments replace the old on the GPU; the relative change
     /// of the green φ_00 (rms) is returned. Fails where an acceleration's solve does not
-    /// converge within the cap.
+    /// converge within the cap. A round begun in parts ([`Resident::part`]) is finished.
     ///
     /// Two submissions in the common case: the sweeps, each channel's right-hand side and
     /// the first iterations of its solve ([`FIRST_CHUNK`]), driven on the GPU, then the solves'
     /// scalars read back (a channel not yet finished gets another chunk); then the
     /// corrections, the change's sums and the moments' copy, and the sums read back.
     pub fn iterate(&mut self) -> Result<f64, String> {
-        let (tolerance, cap) = self.limits;
-        let mut encoder = self.encoder();
-        self.sweeps.record(&mut encoder);
-        self.traffic.dispatches += self.sweeps.dispatches();
-        let all: Vec<usize> = (0..3).filter(|&c| self.solves[c].is_some()).collect();
-        let mut recorded = self.expected.map(|e| e.clamp(1, cap.max(1)));
-        self.solve_chunk(&mut encoder, &all, true, recorded);
         loop {
-            self.submit(encoder);
-            let flags = self.read_flags()?;
-            let pending: Vec<usize> = all.iter().copied().filter(|&c| !flags[c].done).collect();
-            if pending.is_empty() {
-                for &c in &all {
-                    let Flags {
-                        taken, converged, ..
-                    } = flags[c];
-                    // The next round's solve takes about as many.
-                    self.expected[c] = taken + SLACK;
-                    if !converged {
-                        return Err(format!(
-                            "channel {}'s acceleration did not reach its relative residual of \
-                             {tolerance} in {taken} iterations (max_diffusion_iterations {cap})",
-                            ["R", "G", "B"][c]
-                        ));
-                    }
-                }
-                break;
+            if let Some(change) = self.part(usize::MAX)? {
+                return Ok(change);
             }
-            if let Some(&c) = pending.iter().find(|&&c| recorded[c] > cap) {
+        }
+    }
+
+    /// Runs the next part of the round, of at most `units` units of work (at least one): a
+    /// unit is one of the sweeps' dispatches (a layer of a group of directions) or one
+    /// iteration of the acceleration's unfinished solves, and a part of fewer than
+    /// `usize::MAX` units does work of one kind; the part is submitted and waited for.
+    /// The change (as [`Resident::iterate`]) where the part ends the round, else `None`.
+    /// The parts of a round record the same dispatches in the same order as one call of
+    /// [`Resident::iterate`]; the iterations recorded after a solve has finished do nothing,
+    /// so however a round is cut, its moments are the same. Meanwhile the moments read by the
+    /// gather ([`Resident::moments_on_gpu`]) are the last whole round's.
+    pub fn part(&mut self, units: usize) -> Result<Option<f64>, String> {
+        let start = Instant::now();
+        let mut left = units.max(1);
+        let mut encoder = self.encoder();
+        let mut phase = self.phase.take().unwrap_or(Phase::Sweeping { next: 0 });
+        let mut swept = 0;
+        if let Phase::Sweeping { next } = phase {
+            let total = self.sweeps.dispatches();
+            let end = total.min(next.saturating_add(left));
+            self.sweeps.record_range(&mut encoder, next..end);
+            swept = end - next;
+            self.traffic.dispatches += swept;
+            // A bounded part is of one kind: its units are timed as one.
+            left = if units == usize::MAX { left - swept } else { 0 };
+            phase = if end < total {
+                Phase::Sweeping { next: end }
+            } else {
+                Phase::Solving {
+                    recorded: [0; 3],
+                    pending: (0..3).filter(|&c| self.solves[c].is_some()).collect(),
+                }
+            };
+        }
+        let Phase::Solving {
+            mut recorded,
+            pending,
+        } = phase
+        else {
+            self.submit(encoder);
+            self.wait()?;
+            self.pace.sweeps = start.elapsed().as_secs_f64() / swept as f64;
+            self.phase = Some(phase);
+            return Ok(None);
+        };
+        if pending.is_empty() {
+            return self.close(encoder).map(Some);
+        }
+        if left == 0 {
+            self.submit(encoder);
+            self.wait()?;
+            self.pace.sweeps = start.elapsed().as_secs_f64() / swept as f64;
+            self.phase = Some(Phase::Solving { recorded, pending });
+            return Ok(None);
+        }
+        let (tolerance, cap) = self.limits;
+        if let Some(&c) = pending.iter().find(|&&c| recorded[c] > cap) {
+            return Err(format!(
+                "channel {}'s acceleration on the GPU did not finish within {} iterations \
+                 (max_diffusion_iterations {cap})",
+                ["R", "G", "B"][c],
+                recorded[c]
+            ));
+        }
+        // Each unfinished channel in turn, while units are left: its first iterations (after
+        // its right-hand side and start) or half as many again as it has had.
+        let mut chunk = [0; 3];
+        for &c in &pending {
+            let more = if recorded[c] == 0 {
+                self.expected[c].clamp(1, cap.max(1))
+            } else {
+                more_iterations(recorded[c])
+            };
+            chunk[c] = more.min(left);
+            left -= chunk[c];
+        }
+        let begin = recorded.map(|n| n == 0);
+        self.solve_chunk(&mut encoder, &pending, begin, chunk);
+        for &c in &pending {
+            recorded[c] += chunk[c];
+        }
+        self.submit(encoder);
+        let flags = self.read_flags()?;
+        if swept == 0 {
+            let iterations: usize = chunk.iter().sum();
+            self.pace.solves = start.elapsed().as_secs_f64() / iterations as f64;
+        }
+        let all: Vec<usize> = (0..3).filter(|&c| self.solves[c].is_some()).collect();
+        // (A channel that had no iterations in this part holds its last round's flags.)
+        let pending: Vec<usize> = pending
+            .into_iter()
+            .filter(|&c| chunk[c] == 0 || !flags[c].done)
+            .collect();
+        if !pending.is_empty() {
+            self.phase = Some(Phase::Solving { recorded, pending });
+            return Ok(None);
+        }
+        for &c in &all {
+            let Flags {
+                taken, converged, ..
+            } = flags[c];
+            // The next round's solve takes about as many.
+            self.expected[c] = taken + SLACK;
+            if !converged {
                 return Err(format!(
-                    "channel {}'s acceleration on the GPU did not finish within {} iterations \
-                     (max_diffusion_iterations {cap})",
-                    ["R", "G", "B"][c],
-                    recorded[c]
+                    "channel {}'s acceleration did not reach its relative residual of \
+                     {tolerance} in {taken} iterations (max_diffusion_iterations {cap})",
+                    ["R", "G", "B"][c]
                 ));
             }
-            let more = recorded.map(more_iterations);
-            for &c in &pending {
-                recorded[c] += more[c];
-            }
-            encoder = self.encoder();
-            self.solve_chunk(&mut encoder, &pending, false, more);
         }
-        let mut encoder = self.encoder();
+        self.close(self.encoder()).map(Some)
+    }
+
+    /// The units of work ([`Resident::part`]) the next part can do before `deadline`, from
+    /// the time the last parts of its kind took: at least one; one where none has been timed.
+    pub fn units_before(&self, deadline: Instant) -> usize {
+        let pace = match &self.phase {
+            Some(Phase::Solving { pending, .. }) => self.pace.solves * pending.len() as f64,
+            _ => self.pace.sweeps,
+        };
+        let left = deadline
+            .saturating_duration_since(Instant::now())
+            .as_secs_f64();
+        if pace > 0.0 {
+            ((left / pace) as usize).max(1)
+        } else {
+            1
+        }
+    }
+
+    /// Whether a round has begun and not ended (its sweeps' new moments are not yet the
+    /// moments).
+    pub fn mid_round(&self) -> bool {
+        self.phase.is_some()
+    }
+
+    /// The end of a round, recorded after `encoder`'s work: the corrections, the change's
+    /// sums and the moments' copy, submitted; the change read back.
+    fn close(&mut self, mut encoder: wgpu::CommandEncoder) -> Result<f64, String> {
+        let all: Vec<usize> = (0..3).filter(|&c| self.solves[c].is_some()).collect();
         for &c in &all {
             self.glue(&mut encoder, &self.correct, c);
         }
@@ -392,23 +522,38 @@ impl Resident {
         Ok((d / t.max(f64::MIN_POSITIVE)).sqrt())
     }
 
-    /// Records, for each of `channels`, `iterations[c]` iterations of its acceleration's
-    /// solve (with `start`: its right-hand side and its start first), then copies its scalars
-    /// out.
+    /// Waits for the work submitted.
+    fn wait(&self) -> Result<(), String> {
+        self.gpu
+            .device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map(|_| ())
+            .map_err(|e| e.to_string())
+    }
+
+    /// Records, for each of `channels` given any, `iterations[c]` iterations of its
+    /// acceleration's solve (where `start[c]`: its right-hand side and its start first), then
+    /// copies its scalars out.
     fn solve_chunk(
         &mut self,
         encoder: &mut wgpu::CommandEncoder,
         channels: &[usize],
-        start: bool,
+        start: [bool; 3],
         iterations: [usize; 3],
     ) {
+        let channels: Vec<usize> = channels
+            .iter()
+            .copied()
+            .filter(|&c| iterations[c] > 0)
+            .collect();
         {
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some("photometeor resident acceleration"),
                 timestamp_writes: None,
             });
-            for &c in channels {
+            for &c in &channels {
                 let solve = self.solves[c].as_ref().expect("a channel with a solve");
+                let start = start[c];
                 if start {
                     pass.set_pipeline(&self.source);
                     pass.set_bind_group(0, &self.bindings[c], &[]);
@@ -418,7 +563,7 @@ impl Resident {
                 self.traffic.dispatches += solve.record_iterations(&mut pass, start, iterations[c]);
             }
         }
-        for &c in channels {
+        for &c in &channels {
             let solve = self.solves[c].as_ref().expect("a channel with a solve");
             let at = c as u64 * COEF_BYTES;
             encoder.copy_buffer_to_buffer(solve.scalars(), 0, &self.flags, at, COEF_BYTES);

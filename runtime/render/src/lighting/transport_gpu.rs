@@ -77,12 +77,25 @@ pub(crate) fn dispatch_steps(
     bind_group: &wgpu::BindGroup,
     groups: &[(usize, usize)],
 ) {
+    let steps = 0..groups.len();
+    dispatch_step_range(encoder, label, (pipeline, bind_group), groups, steps);
+}
+
+/// [`dispatch_steps`] for the steps in `range` alone.
+pub(crate) fn dispatch_step_range(
+    encoder: &mut wgpu::CommandEncoder,
+    label: &str,
+    (pipeline, bind_group): (&wgpu::ComputePipeline, &wgpu::BindGroup),
+    groups: &[(usize, usize)],
+    range: std::ops::Range<usize>,
+) {
     let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
         label: Some(label),
         timestamp_writes: None,
     });
     pass.set_pipeline(pipeline);
-    for (s, &(x, y)) in groups.iter().enumerate() {
+    for s in range {
+        let (x, y) = groups[s];
         pass.set_bind_group(0, bind_group, &[(s as u64 * STEP_ALIGN) as u32]);
         pass.dispatch_workgroups(x as u32, y as u32, 1);
     }
@@ -491,14 +504,21 @@ impl Sweeps {
     /// Records one round of sweeps from the moments on the GPU into `encoder`: the new moments
     /// in [`Sweeps::next`].
     pub(crate) fn record(&self, encoder: &mut wgpu::CommandEncoder) {
-        encoder.clear_buffer(&self.next, 0, None);
-        dispatch_steps(
-            encoder,
-            "photometeor sweeps",
-            &self.pipeline,
-            &self.bind_group,
-            &self.layers,
-        );
+        self.record_range(encoder, 0..self.dispatches());
+    }
+
+    /// Records the dispatches in `range` of a round's ([`Sweeps::record`] in parts: the same
+    /// dispatches in the same order); one starting at 0 clears [`Sweeps::next`] first.
+    pub(crate) fn record_range(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        range: std::ops::Range<usize>,
+    ) {
+        if range.start == 0 {
+            encoder.clear_buffer(&self.next, 0, None);
+        }
+        let kernel = (&self.pipeline, &self.bind_group);
+        dispatch_step_range(encoder, "photometeor sweeps", kernel, &self.layers, range);
     }
 
     /// `buffer`'s moments (the sweeps' layout) in f64.
