@@ -37,6 +37,9 @@ pub struct CoupledReport {
     pub buffer_s: f64,
     /// Seconds for the three diffusion solves and the flux (step 3).
     pub diffusion_s: f64,
+    /// Whether the diffusion was not solved: the transport started from a previous sun's
+    /// moments, and the diffusion's only use with the transport is its start.
+    pub diffusion_skipped: bool,
     /// Where the three diffusion solves ran.
     pub diffusion_on: String,
     /// Where the reduced skylight's sweeps ran.
@@ -663,14 +666,27 @@ impl Relight {
             state: &lit.state,
             sunlight: &lit.sunlight,
         };
-        let (i0, p1) = diffuse(
-            grid,
-            (&lit.v, &lit.active),
-            (&buffer, &lit.sky),
-            l,
-            (settings, on),
-            &mut self.report,
-        )?;
+        // With the transport, the diffusion's I_0 and I_1 are its start alone (the gathers
+        // read the transport's moments): a start from the last sun's moments needs no solve.
+        let skip = settings.diffuse == Diffuse::Transport
+            && (self.warm.as_ref()).is_some_and(|w| w.len() == transport_voxels(grid, settings));
+        let (i0, p1) = if skip {
+            let n = lit.v.ext.len();
+            for c in 0..3 {
+                self.report.budget.add_beam(c, grid, &buffer, l);
+            }
+            self.report.diffusion_skipped = true;
+            (vec![[0.0; 3]; n], vec![[0.0; 9]; n])
+        } else {
+            diffuse(
+                grid,
+                (&lit.v, &lit.active),
+                (&buffer, &lit.sky),
+                l,
+                (settings, on),
+                &mut self.report,
+            )?
+        };
         self.report.diffusion_s = start.elapsed().as_secs_f64();
         let shadow = ShadowMap::of(&fields, frame, delta_scaled(settings).then_some(&lit.peak));
         let run = (settings.diffuse == Diffuse::Transport).then(|| {
@@ -883,6 +899,21 @@ impl Relight {
     }
 }
 
+/// The transport's blocks of voxels along each axis with `settings` on `grid` (1: it runs on
+/// the grid's voxels).
+fn transport_factor(grid: &DensityGrid, settings: &Settings) -> usize {
+    let factor = settings.coarsening(grid.dims);
+    // A periodic grid's blocks must tile its period: else the transport runs on its voxels.
+    let tiles = |a: usize| !grid.wraps(a) || grid.dims[a].is_multiple_of(factor);
+    if (0..3).all(tiles) { factor } else { 1 }
+}
+
+/// The transport grid's voxels with `settings` on `grid`.
+fn transport_voxels(grid: &DensityGrid, settings: &Settings) -> usize {
+    let factor = transport_factor(grid, settings);
+    transport::Coarse::dims(grid.dims, factor).iter().product()
+}
+
 /// The transport's iteration over `optics` (the fields, their voxels, moments and peaks) from
 /// `sources`, ready to run: the δ-M-scaled medium (f = χ_{L+1} per field), the sunlit source
 /// Q(ω) = q p′(ω·l) with q the diffusion's Q_0 from the beam, the skylit source as the
@@ -913,10 +944,7 @@ fn transporting(
     let kappa_a: Vec<[f64; 3]> = (0..n)
         .map(|i| std::array::from_fn(|c| (v.ext[i][c] - v.sca[i][c]).max(0.0)))
         .collect();
-    let factor = settings.coarsening(grid.dims);
-    // A periodic grid's blocks must tile its period: else the transport runs on its voxels.
-    let tiles = |a: usize| !grid.wraps(a) || grid.dims[a].is_multiple_of(factor);
-    let factor = if (0..3).all(tiles) { factor } else { 1 };
+    let factor = transport_factor(grid, settings);
     // On a coarser grid when asked: the medium, the sources and the start averaged over
     // blocks of voxels; the moments stay there (the gathers interpolate them).
     let coarse = (factor > 1).then(|| transport::Coarse::new(grid, factor));
@@ -1104,11 +1132,33 @@ impl Budget {
     /// Channel `c`'s budget from its problem and solution, the buffer's `state` and the
     /// `sunlight` E S_atm per voxel (light travelling along `l`).
     fn add(&mut self, c: usize, (p, i0): (&Problem, &[f64]), light: &BufferLight, l: DVec3) {
-        let (h, dims) = (p.h, p.dims);
+        let geometry = (p.h, p.dims, p.periodic);
+        self.add_beam_on(c, geometry, light, l);
+        let solve = diffusion::balance(p, i0);
+        let share = |x: f64| x / self.incident[c].max(f64::MIN_POSITIVE);
+        self.diffusion_source[c] = share(4.0 * PI * solve.source);
+        self.diffusion_out[c] = share(4.0 * PI * solve.out);
+        self.diffusion_absorbed[c] = share(4.0 * PI * solve.absorbed);
+    }
+
+    /// Channel `c`'s budget of the buffer alone on `grid` (the diffusion's shares zero).
+    fn add_beam(&mut self, c: usize, grid: &DensityGrid, light: &BufferLight, l: DVec3) {
+        let geometry = (voxel_size(grid), grid.dims, grid.periodic);
+        self.add_beam_on(c, geometry, light, l);
+    }
+
+    /// The buffer's part of [`Budget::add`] on a grid of `dims` voxels of size `h`.
+    fn add_beam_on(
+        &mut self,
+        c: usize,
+        (h, dims, periodic): ([f64; 3], [usize; 3], bool),
+        light: &BufferLight,
+        l: DVec3,
+    ) {
         let volume = h[0] * h[1] * h[2];
         let [nx, ny, _] = dims;
         // A periodic grid's x and z faces are no faces: its voxels there are neighbours.
-        let faces = |a: usize| !(p.periodic && a != 1);
+        let faces = |a: usize| !(periodic && a != 1);
         let (mut incident, mut out, mut dropped, mut lost) = (0.0, 0.0, 0.0, 0.0);
         for (i, s) in light.state.iter().enumerate() {
             let e = light.sunlight[i][c];
@@ -1129,15 +1179,11 @@ impl Budget {
                 }
             }
         }
-        let solve = diffusion::balance(p, i0);
         let share = |x: f64| x / incident.max(f64::MIN_POSITIVE);
         self.incident[c] = incident;
         self.buffer_out[c] = share(out);
         self.dropped[c] = share(dropped);
         self.buffer_absorbed[c] = share(lost - dropped);
-        self.diffusion_source[c] = share(4.0 * PI * solve.source);
-        self.diffusion_out[c] = share(4.0 * PI * solve.out);
-        self.diffusion_absorbed[c] = share(4.0 * PI * solve.absorbed);
     }
 }
 

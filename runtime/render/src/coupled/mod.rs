@@ -629,10 +629,9 @@ fn rendered(
     let summary = format!(
         "beam + δ-scaled diffusion (lighting on the CPU, {} threads, but where the beam, the \
          skylight, the diffusion and the transport say; gather on {on}): {}×{}, \
-         grid {:?}: beam {:.2} s (swept on {}, skylight on {}), diffusion {:.2} s on {} ({} unknowns, {} levels, {:?} CG iterations to residuals \
-         {:.1e}/{:.1e}/{:.1e}), {}gather {gather_s:.2} s ({}); of the sunlight entering (green): \
-         {:.1} % leaves in the buffer, {:.1} % is absorbed from it, {:.1} % feeds the \
-         diffusion, which sends {:.1} % out and absorbs {:.1} %",
+         grid {:?}: beam {:.2} s (swept on {}, skylight on {}), {}, {}gather {gather_s:.2} s \
+         ({}); of the sunlight entering (green): {:.1} % leaves in the buffer, {:.1} % is \
+         absorbed from it, {:.1} % feeds the diffusion{}",
         rayon::current_num_threads(),
         image.width,
         image.height,
@@ -640,14 +639,22 @@ fn rendered(
         report.buffer_s,
         report.beam_on,
         report.sky_on,
-        report.diffusion_s,
-        report.diffusion_on,
-        report.unknowns,
-        report.levels,
-        report.iterations,
-        report.residual[0],
-        report.residual[1],
-        report.residual[2],
+        if report.diffusion_skipped {
+            "diffusion not solved (the transport starts from the last sun's moments)".to_string()
+        } else {
+            format!(
+                "diffusion {:.2} s on {} ({} unknowns, {} levels, {:?} CG iterations to \
+                 residuals {:.1e}/{:.1e}/{:.1e})",
+                report.diffusion_s,
+                report.diffusion_on,
+                report.unknowns,
+                report.levels,
+                report.iterations,
+                report.residual[0],
+                report.residual[1],
+                report.residual[2],
+            )
+        },
         if report.transport_iterations > 0 {
             format!(
                 "transport {:.2} s ({} directions on a grid {:?}, swept on {}, {} iterations \
@@ -685,8 +692,15 @@ fn rendered(
         100.0 * report.budget.buffer_out[1],
         100.0 * report.budget.buffer_absorbed[1],
         100.0 * report.budget.dropped[1],
-        100.0 * report.budget.diffusion_out[1],
-        100.0 * report.budget.diffusion_absorbed[1],
+        if report.diffusion_skipped {
+            String::new()
+        } else {
+            format!(
+                ", which sends {:.1} % out and absorbs {:.1} %",
+                100.0 * report.budget.diffusion_out[1],
+                100.0 * report.budget.diffusion_absorbed[1],
+            )
+        },
     );
     let pass = |name, seconds| Pass { name, seconds };
     Rendered {
