@@ -14,7 +14,10 @@ Run from the repository root after `cargo build --release`:
     python3 docs/coupled/sweep.py --table-only    # the table again from sweep.json
     python3 docs/coupled/sweep.py --only cloud:64 --merge   # those cases' rows replaced in it
     python3 docs/coupled/sweep.py --models coupled --update  # only these models re-rendered,
-                                                  # the other models' columns kept
+                                                  # the other models' columns kept (new
+                                                  # models' columns added)
+    python3 docs/coupled/sweep.py --models coupled-realtime,coupled-balanced,coupled-reference --update
+                                                  # the presets, side by side in one run
     python3 docs/coupled/sweep.py --seeds 3 --fields rain   # more truths (seeds 2, 3) of
                                                   # these cases; the cached frames measured
                                                   # against each (below), models not re-rendered
@@ -55,6 +58,11 @@ MODELS = {
     "coupled-hemisphere": '[render.coupled]\ndiffuse = "diffusion"\nsplit = "hemisphere"\n',
     "riley": "[render.riley]\nslices = 256\nlight_resolution = 48\n",
     "max": "[render.max]\n",
+    # coupled's presets, rendered side by side in one run (balanced is the default, the
+    # "coupled" column above, rendered again here beside the other two).
+    "coupled-realtime": '[render.coupled]\npreset = "realtime"\n',
+    "coupled-balanced": '[render.coupled]\npreset = "balanced"\n',
+    "coupled-reference": '[render.coupled]\npreset = "reference"\n',
 }
 SIZE = 48
 # Held-out cases (not tuned on): field, tau, azimuth, sun elevation, grid file profile.
@@ -240,6 +248,7 @@ def main():
             for name in models:
                 if key(r) in new:
                     r[name] = new[key(r)][name]
+        data["models"] += [m for m in models if m not in data["models"]]
         json.dump(data, open(out, "w"), indent=1)
         open(out.replace(".json", ".md"), "w").write(table(data["results"], data["models"]))
         return

@@ -18,6 +18,12 @@
 //!    green φ_00 summed per workgroup (`change`), the new moments copied over the old, and the
 //!    sums read back.
 //!
+//! A round can also go in parts ([`Resident::part`]), each submitted and waited for: runs of
+//! the sweeps' dispatches, then runs of the solves' iterations, a channel after another, sized
+//! by the caller (a relight's step with a budget, [`Resident::units_before`]). The parts record
+//! the same dispatches in the same order, so the moments do not depend on where a round is
+//! cut; the moments the gather reads stay the last whole round's until the part that ends it.
+//!
 //! Where it departs from the CPU's iteration: the moments are f32 throughout, as the GPU
 //! sweeps' were, and the acceleration's conjugate gradients run in f32 to its relative
 //! residual of 10⁻² (coupled's `ACCELERATION_TOLERANCE`) without the f64 refinement that the
