@@ -391,7 +391,11 @@ impl Resident {
             swept = end - next;
             self.traffic.dispatches += swept;
             // A bounded part is of one kind: its units are timed as one.
-            left = if units == usize::MAX { left - swept } else { 0 };
+            left = if units == usize::MAX || swept == 0 {
+                left - swept
+            } else {
+                0
+            };
             phase = if end < total {
                 Phase::Sweeping { next: end }
             } else {
