@@ -26,6 +26,9 @@ def summary(model, select):
         "worst_abs_bias": max(bias),
         "within_10": sum(b <= 0.10 for b in bias) / len(bias),
         "median_error": statistics.median(c["median_rel_error"] for c in cases),
+        # The noise-debiased rms, where the run recorded it (the rows rendered since it exists).
+        "debiased": statistics.median(c["debiased_rms"] for c in cases)
+        if all("debiased_rms" in c for c in cases) else None,
         "seconds": statistics.median(c["seconds"] for c in cases),
     }
 
@@ -36,7 +39,8 @@ groups = {
     "dense (τ ≥ 8)": lambda r: r["tau"] >= 8,
 }
 md = ["| model | cases | frame (s, median) | " + " | ".join(
-    f"{g}: median abs. bias / worst / share within 10 % / median per-pixel error" for g in groups) + " |",
+    f"{g}: median abs. bias / worst / share within 10 % / median per-pixel error / median "
+    "noise-debiased rms" for g in groups) + " |",
       "|" + "---|" * (3 + len(groups))]
 points = {}
 for m in models:
@@ -48,7 +52,8 @@ for m in models:
         s = summary(m, sel)
         cells.append("—" if s is None else
                      f"{s['median_abs_bias']*100:.1f} % / {s['worst_abs_bias']*100:.0f} % / "
-                     f"{s['within_10']*100:.0f} % / {s['median_error']*100:.1f} %")
+                     f"{s['within_10']*100:.0f} % / {s['median_error']*100:.1f} % / "
+                     + ("—" if s["debiased"] is None else f"{s['debiased']*100:.1f} %"))
     md.append(f"| {m} | {base['cases']} | {base['seconds']:.2f} | " + " | ".join(cells) + " |")
     points[m] = (base["seconds"], summary(m, groups["dense (τ ≥ 8)"])["median_abs_bias"] * 100)
 PRESETS = ["coupled-realtime", "coupled-balanced", "coupled-reference"]
@@ -56,16 +61,21 @@ if any(p in points for p in PRESETS):
     md += ["", "coupled-realtime, coupled-balanced and coupled-reference are coupled's presets "
            "(`preset = \"…\"`; balanced is the default, the coupled row, rendered again), "
            "timed side by side in one later run than the other rows; compare their frame times "
-           "with each other, and with the other rows only roughly."]
+           "with each other, and with the other rows only roughly. The noise-debiased rms, "
+           "((mean d² − mean σ²)⁺)^½ / mean Y, is in the rows rendered since compare-render "
+           "has given it (a pixel within the truth's noise counts as exact in the median "
+           "per-pixel error, not in it)."]
 open(os.path.join(HERE, "trade.md"), "w").write("\n".join(md) + "\n")
 
 import matplotlib  # noqa: E402
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 fig, ax = plt.subplots(figsize=(6, 4))
-for m, (x, y) in points.items():
+# Labels of the points near each other (coupled's variants) alternate above and below.
+for k, (m, (x, y)) in enumerate(sorted(points.items(), key=lambda p: p[1][0])):
     ax.scatter([x], [y])
-    ax.annotate(m, (x, y), textcoords="offset points", xytext=(5, 4), fontsize=8)
+    ax.annotate(m, (x, y), textcoords="offset points", xytext=(5, 5 if k % 2 else -11),
+                fontsize=8)
 front = [points[p] for p in PRESETS if p in points]
 if len(front) > 1:
     ax.plot([x for x, _ in front], [y for _, y in front], "k--", lw=0.8,
@@ -73,6 +83,7 @@ if len(front) > 1:
     ax.legend(fontsize=8)
 ax.set_xlabel("frame time, CPU reference at 48² (s, median over the sweep)")
 ax.set_ylabel("median |bias| against the truth, τ ≥ 8 (%)")
+ax.set_yscale("log")
 ax.set_title("Error against cost: the soft-ball sweep")
 ax.grid(alpha=0.3)
 fig.tight_layout()
