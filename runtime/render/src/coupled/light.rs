@@ -362,7 +362,8 @@ type Diffused = (Vec<[f64; 3]>, Vec<[f64; 9]>);
 /// A sun's lighting computed in steps, so that a caller with frames to draw can stop between
 /// them ([`Relight::advance`] with a budget) and draw meanwhile from [`Relight::current`]:
 /// 1. the beam and the skylight (steps 1, 2 of the [module docs](super));
-/// 2. the diffusion (step 3), then the transport's medium, its acceleration and its start;
+/// 2. the diffusion (step 3; not solved where the transport starts from the previous sun's
+///    moments), then the transport's medium, its acceleration and its start;
 /// 3. each of the transport's source iterations (step 3b), one a step; on the GPU, in a call
 ///    with a budget, a round in parts sized to what is left of it ([`Resident::part`]: each
 ///    a step, at least one of the sweeps' dispatches or one iteration of the acceleration's
@@ -648,8 +649,9 @@ impl Relight {
         })
     }
 
-    /// Step 2: the diffusion, and the lighting without the transport's moments; with the
-    /// transport, its medium, acceleration and start.
+    /// Step 2: the diffusion (none where the transport starts from the previous sun's
+    /// moments), and the lighting without the transport's moments; with the transport, its
+    /// medium, acceleration and start.
     fn diffuse(
         &mut self,
         tables: &Tables,
@@ -668,8 +670,8 @@ impl Relight {
         };
         // With the transport, the diffusion's I_0 and I_1 are its start alone (the gathers
         // read the transport's moments): a start from the last sun's moments needs no solve.
-        let skip = settings.diffuse == Diffuse::Transport
-            && (self.warm.as_ref()).is_some_and(|w| w.len() == transport_voxels(grid, settings));
+        let fits = |w: &Vec<Harmonics>| w.len() == transport_voxels(grid, settings);
+        let skip = settings.diffuse == Diffuse::Transport && self.warm.as_ref().is_some_and(fits);
         let (i0, p1) = if skip {
             let n = lit.v.ext.len();
             for c in 0..3 {
