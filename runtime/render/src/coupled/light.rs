@@ -1125,7 +1125,7 @@ pub(super) fn diffuse(
                 p1[i][3 * c + a] = 3.0 * flux[i][a];
             }
         }
-        report.budget.add(c, (&problem, &s.i0), buffer, l);
+        report.budget.add(c, grid, (&problem, &s.i0), buffer, l);
     }
     Ok((i0, p1))
 }
@@ -1133,9 +1133,15 @@ pub(super) fn diffuse(
 impl Budget {
     /// Channel `c`'s budget from its problem and solution, the buffer's `state` and the
     /// `sunlight` E S_atm per voxel (light travelling along `l`).
-    fn add(&mut self, c: usize, (p, i0): (&Problem, &[f64]), light: &BufferLight, l: DVec3) {
-        let geometry = (p.h, p.dims, p.periodic);
-        self.add_beam_on(c, geometry, light, l);
+    fn add(
+        &mut self,
+        c: usize,
+        grid: &DensityGrid,
+        (p, i0): (&Problem, &[f64]),
+        light: &BufferLight,
+        l: DVec3,
+    ) {
+        self.add_beam(c, grid, light, l);
         let solve = diffusion::balance(p, i0);
         let share = |x: f64| x / self.incident[c].max(f64::MIN_POSITIVE);
         self.diffusion_source[c] = share(4.0 * PI * solve.source);
@@ -1143,20 +1149,9 @@ impl Budget {
         self.diffusion_absorbed[c] = share(4.0 * PI * solve.absorbed);
     }
 
-    /// Channel `c`'s budget of the buffer alone on `grid` (the diffusion's shares zero).
+    /// Channel `c`'s budget of the buffer alone on `grid` (the diffusion's shares untouched).
     fn add_beam(&mut self, c: usize, grid: &DensityGrid, light: &BufferLight, l: DVec3) {
-        let geometry = (voxel_size(grid), grid.dims, grid.periodic);
-        self.add_beam_on(c, geometry, light, l);
-    }
-
-    /// The buffer's part of [`Budget::add`] on a grid of `dims` voxels of size `h`.
-    fn add_beam_on(
-        &mut self,
-        c: usize,
-        (h, dims, periodic): ([f64; 3], [usize; 3], bool),
-        light: &BufferLight,
-        l: DVec3,
-    ) {
+        let (h, dims, periodic) = (voxel_size(grid), grid.dims, grid.periodic);
         let volume = h[0] * h[1] * h[2];
         let [nx, ny, _] = dims;
         // A periodic grid's x and z faces are no faces: its voxels there are neighbours.

@@ -401,7 +401,7 @@ impl Resident {
             } else {
                 Phase::Solving {
                     recorded: [0; 3],
-                    pending: (0..3).filter(|&c| self.solves[c].is_some()).collect(),
+                    pending: self.channels(),
                 }
             };
         }
@@ -458,7 +458,7 @@ impl Resident {
             let iterations: usize = chunk.iter().sum();
             self.pace.solves = start.elapsed().as_secs_f64() / iterations as f64;
         }
-        let all: Vec<usize> = (0..3).filter(|&c| self.solves[c].is_some()).collect();
+        let all = self.channels();
         // (A channel that had no iterations in this part holds its last round's flags.)
         let pending: Vec<usize> = pending
             .into_iter()
@@ -511,7 +511,7 @@ impl Resident {
     /// The end of a round, recorded after `encoder`'s work: the corrections, the change's
     /// sums and the moments' copy, submitted; the change read back.
     fn close(&mut self, mut encoder: wgpu::CommandEncoder) -> Result<f64, String> {
-        let all: Vec<usize> = (0..3).filter(|&c| self.solves[c].is_some()).collect();
+        let all = self.channels();
         for &c in &all {
             self.glue(&mut encoder, &self.correct, c);
         }
@@ -530,6 +530,11 @@ impl Resident {
         }
         self.traffic.rounds += 1;
         Ok((d / t.max(f64::MIN_POSITIVE)).sqrt())
+    }
+
+    /// The channels whose acceleration has unknowns (a solve).
+    fn channels(&self) -> Vec<usize> {
+        (0..3).filter(|&c| self.solves[c].is_some()).collect()
     }
 
     /// Waits for the work submitted.
